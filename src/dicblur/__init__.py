@@ -1,0 +1,71 @@
+"""dicblur: displacement uncertainty of 2-D digital image correlation under motion blur.
+
+Implements and extends Lavatelli & Zappa, "A Displacement Uncertainty Model for 2-D DIC
+Measurement Under Motion Blur Conditions", IEEE Trans. Instrum. Meas. 66(3), 2017,
+doi:10.1109/TIM.2016.2644898.
+
+Conventions: images are 2-D arrays indexed (row, col); x runs along columns, y along rows;
+displacements and lengths in px, grey levels (GL) for intensities, seconds for time.
+"""
+
+from __future__ import annotations
+
+from .errors import (
+    ConfigError,
+    ConvergenceError,
+    DicblurError,
+    FitError,
+    ImageReadError,
+    InputError,
+    StoreError,
+)
+from .io import file_sha256, load_image, save_image
+from .metrics import (
+    PatternMetrics,
+    estimate_noise,
+    gradient_variance,
+    image_gradients,
+    match_score_sigma,
+    michelson_contrast,
+    mig,
+    pan_sigma,
+    pattern_metrics,
+    rms_contrast,
+    speckle_size,
+    sssig,
+    subset_centres,
+)
+from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ConfigError",
+    "ConvergenceError",
+    "DicblurError",
+    "FitError",
+    "ImageReadError",
+    "InputError",
+    "PatternMetrics",
+    "PatternSettings",
+    "StoreError",
+    "__version__",
+    "estimate_noise",
+    "file_sha256",
+    "gaussian_mask",
+    "gradient_variance",
+    "image_gradients",
+    "load_image",
+    "match_score_sigma",
+    "michelson_contrast",
+    "mig",
+    "pan_sigma",
+    "paper_pattern4",
+    "pattern_metrics",
+    "rms_contrast",
+    "save_image",
+    "speckle_pattern",
+    "speckle_size",
+    "sssig",
+    "subset_centres",
+]

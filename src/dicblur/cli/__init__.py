@@ -1,0 +1,102 @@
+"""Command-line interface of dicblur.
+
+The CLI is thin: each stage registers its commands from its own module; ``main`` is the
+only place that configures logging and turns errors into one line on stderr and exit
+code 2 (``--verbose`` adds the traceback).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import traceback
+import warnings
+from collections.abc import Sequence
+
+import click
+import typer
+
+from ..errors import DicblurError
+
+__all__ = ["app", "main", "run"]
+
+app = typer.Typer(
+    name="dicblur",
+    help="Predict, measure and reduce the displacement uncertainty of 2-D DIC under motion "
+    "blur.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        from .. import __version__
+
+        typer.echo(f"dicblur {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    verbose: bool = typer.Option(
+        False, "--verbose", "-v", help="Show debug logging and full tracebacks on errors."
+    ),
+    version: bool = typer.Option(
+        False, "--version", callback=_version_callback, is_eager=True, help="Print the version."
+    ),
+) -> None:
+    logging.basicConfig(
+        level=logging.DEBUG if verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+        force=True,
+    )
+
+
+# Stage command groups register themselves here (one import per stage).
+from . import pattern as _pattern  # noqa: E402
+
+_pattern.register(app)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI with ``argv`` (default ``sys.argv[1:]``) and return the exit code.
+
+    Exit codes: 0 success, 2 bad input or usage (one line on stderr), 130 interrupted.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    verbose = "--verbose" in args or "-v" in args
+    old_show = warnings.showwarning
+    warnings.showwarning = _show_warning
+    try:
+        rv = app(args=args, prog_name="dicblur", standalone_mode=False)
+        return rv if isinstance(rv, int) else 0
+    except DicblurError as exc:
+        if verbose:
+            traceback.print_exc()
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except click.exceptions.Exit as exc:
+        return int(exc.exit_code)
+    except click.exceptions.Abort:
+        print("aborted", file=sys.stderr)
+        return 130
+    except click.ClickException as exc:
+        exc.show()
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    finally:
+        warnings.showwarning = old_show
+
+
+def run() -> None:
+    """Console-script entry point."""
+    sys.exit(main())

@@ -1,0 +1,70 @@
+"""Small helpers shared by the CLI command modules."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from ..errors import InputError
+
+console = Console(highlight=False, soft_wrap=True)
+
+
+def parse_size(text: str, name: str = "--size") -> tuple[int, int]:
+    """Parse ``"512x256"`` (rows x cols) or ``"512"`` into a (rows, cols) tuple."""
+    parts = text.lower().replace("*", "x").split("x")
+    try:
+        values = [int(p) for p in parts]
+    except ValueError as exc:
+        raise InputError(f"{name}={text!r}: expected ROWSxCOLS, e.g. 512x512") from exc
+    if len(values) == 1:
+        values *= 2
+    if len(values) != 2 or min(values) < 2:
+        raise InputError(f"{name}={text!r}: expected ROWSxCOLS with both >= 2, e.g. 512x512")
+    return values[0], values[1]
+
+
+def fmt(value: Any) -> str:
+    """Readable number formatting for tables."""
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            return str(value)
+        if value != 0 and (abs(value) >= 1e5 or abs(value) < 1e-3):
+            return f"{value:.4g}"
+        return f"{value:.4f}".rstrip("0").rstrip(".") if abs(value) < 1000 else f"{value:.1f}"
+    if isinstance(value, tuple | list):
+        return "x".join(str(v) for v in value)
+    return str(value)
+
+
+def print_mapping(title: str, data: dict[str, Any], units: dict[str, str] | None = None) -> None:
+    """Print a two- or three-column table of name, value (and unit)."""
+    units = units or {}
+    table = Table(title=title, show_header=True)
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_column("unit")
+    for key, value in data.items():
+        table.add_row(key, fmt(value), units.get(key, ""))
+    console.print(table)
+
+
+def print_json(data: Any) -> None:
+    """Print JSON (NaN and inf as null) for scripts."""
+
+    def clean(v: Any) -> Any:
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, list | tuple):
+            return [clean(x) for x in v]
+        return v
+
+    print(json.dumps(clean(data), indent=2))

@@ -18,9 +18,12 @@ Conventions
 - Nyquist bins of even-sized axes. A sub-pixel Fourier shift of the Nyquist component of
   a real image is not real. We use the symmetric band-limited interpolant: the Nyquist
   term is split evenly between +1/2 and -1/2 cycles/px, so its shift multiplier along that
-  axis is ``cos(pi p)`` instead of ``exp(i pi p)``. Every sub-frame is then real, integer
-  shifts equal ``numpy.roll`` exactly, and shifts compose (a shift by ``a`` then by ``b``
-  equals a shift by ``a + b``). Taking the real part of a complex inverse FFT (what a
+  axis is ``cos(pi p)`` instead of ``exp(i pi p)``: the value at the pixels of the
+  band-limited interpolant moved by ``p``. Every sub-frame is then real and integer shifts
+  equal ``numpy.roll`` exactly. At the Nyquist bin no real-valued convention can make
+  sub-pixel shifts compose (the sampled Nyquist component has one real degree of freedom;
+  ``cos(pi a) cos(pi b) != cos(pi (a + b))``); elsewhere they compose exactly. Taking the
+  real part of a complex inverse FFT (what a
   MATLAB transcription of Algorithm 1 does) gives the same image except at the corner bin
   (both axes at Nyquist), where it uses ``cos(pi (p_y + p_x))`` instead of
   ``cos(pi p_y) cos(pi p_x)``; for odd-sized images the two agree exactly.
@@ -237,6 +240,7 @@ def trajectory_positions(
         K; positions at ``t_k = k / K``, k = 0..K, equal weights ``1 / (K + 1)`` (the
         paper's Algorithm 1). None: Gauss-Legendre quadrature nodes of the continuous
         average (for ``"linear"`` too; :func:`motion_blur` uses the closed form there).
+        Not used by array paths, whose rows are the sub-frames.
     trajectory : see :func:`motion_blur`
 
     Returns
@@ -248,12 +252,7 @@ def trajectory_positions(
     """
     kind, obj, vec = _classify(trajectory, motion)
     k = _check_substeps(substeps)
-    if kind == "array":
-        if k is None:
-            raise InputError(
-                "substeps=None: a sampled path has fixed sub-frames and no continuous limit; "
-                "pass a callable p(t) for the continuous limit"
-            )
+    if kind == "array":  # the rows are the sub-frames: substeps is not used
         path = obj
         return path, np.full(path.shape[0], 1.0 / path.shape[0])
 

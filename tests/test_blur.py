@@ -66,6 +66,16 @@ def test_fft_equals_literal_loop(pattern: np.ndarray, motion, shape) -> None:
     assert np.abs(fast - loop).max() <= 1e-12 * rng
 
 
+@pytest.mark.parametrize(("motion", "substeps"), [((12.3, -10.8), 5), ((0.3, 0.45), 1),
+                                                 ((-250.3, 120.9), 100), ((7.0, 0.5), 7)])
+def test_fft_equals_loop_for_few_substeps(pattern: np.ndarray, motion, substeps) -> None:
+    # |dy| + |dx| > K leaves the compiled kernel's range: the range-reduced closed form
+    # is used instead (and at K = 7 with |dy| + |dx| = 7.5, its boundary).
+    fast = motion_blur(pattern, motion, substeps=substeps)
+    loop = motion_blur(pattern, motion, substeps=substeps, method="loop")
+    assert np.abs(fast - loop).max() <= 1e-12 * np.ptp(pattern)
+
+
 def test_odd_size_equals_complex_transcription_of_paper() -> None:
     # Odd sizes have no Nyquist bin: the paper's step 7-8 (complex spectrum times
     # exp(-2 pi i f.p), inverse FFT) is real, and our result must equal it.

@@ -40,6 +40,7 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import fft as sfft
 
 from ._validation import as_image, check_choice, check_finite_number, check_positive, describe
 from .errors import InputError
@@ -290,6 +291,35 @@ def _grid(shape: tuple[int, int]) -> tuple[NDArray, NDArray, int | None, int | N
     return fy, fx, ny, nx
 
 
+def _nyquist_lines(
+    h: Callable[[NDArray, NDArray], NDArray],
+    fy: NDArray[np.float64],
+    fx: NDArray[np.float64],
+    ny: int | None,
+    nx: int | None,
+) -> tuple[NDArray | None, NDArray | None]:
+    """Nyquist row and column of the transfer function, split evenly over +-1/2.
+
+    Averaging exp(-2 pi i f p) over f = +-1/2 gives cos(pi p): the symmetric Nyquist
+    convention of the module docs, applied to a transfer function that is an average of
+    exponentials (the average commutes with the split). The corner (both axes at Nyquist)
+    averages the four sign combinations and is stored in both lines.
+    """
+    half = np.array([[0.5]])
+    row = col = None
+    if ny is not None:
+        row = 0.5 * (h(-half, fx[None, :]) + h(half, fx[None, :]))[0]
+    if nx is not None:
+        col = 0.5 * (h(fy[:, None], half) + h(fy[:, None], -half))[:, 0]
+    if row is not None and col is not None:
+        corner = 0.25 * sum(
+            complex(h(sy * half, sx * half)[0, 0]) for sy in (-1, 1) for sx in (-1, 1)
+        )
+        row[-1] = corner
+        col[ny] = corner
+    return row, col
+
+
 def _symmetrise(
     h: Callable[[NDArray, NDArray], NDArray],
     fy: NDArray[np.float64],
@@ -297,22 +327,13 @@ def _symmetrise(
     ny: int | None,
     nx: int | None,
 ) -> NDArray[np.complex128]:
-    """Evaluate h(fy, fx) on the rfft2 grid and split Nyquist bins evenly over +-1/2.
-
-    Averaging exp(-2 pi i f p) over f = +-1/2 gives cos(pi p): the symmetric Nyquist
-    convention of the module docs, applied to a transfer function that is an average of
-    exponentials (the average commutes with the split).
-    """
+    """Evaluate h(fy, fx) on the rfft2 grid with the symmetric Nyquist convention."""
     H = np.asarray(h(fy[:, None], fx[None, :]), dtype=np.complex128)
-    half = np.array([[0.5]])
-    if ny is not None:
-        H[ny, :] = 0.5 * (h(-half, fx[None, :]) + h(half, fx[None, :]))[0]
-    if nx is not None:
-        H[:, nx] = 0.5 * (h(fy[:, None], half) + h(fy[:, None], -half))[:, 0]
-    if ny is not None and nx is not None:
-        H[ny, nx] = 0.25 * sum(
-            complex(h(sy * half, sx * half)[0, 0]) for sy in (-1, 1) for sx in (-1, 1)
-        )
+    row, col = _nyquist_lines(h, fy, fx, ny, nx)
+    if row is not None:
+        H[ny, :] = row
+    if col is not None:
+        H[:, nx] = col
     return H
 
 
@@ -387,7 +408,7 @@ def _mirror(img: NDArray[np.float64]) -> NDArray[np.float64]:
 def _loop(img: NDArray[np.float64], pos: NDArray[np.float64], w: NDArray[np.float64]):
     """Literal Algorithm 1: complex FFT, one inverse FFT per sub-frame, weighted average."""
     n, m = img.shape
-    spectrum = np.fft.fft2(img)
+    spectrum = sfft.fft2(img)
     fy = np.fft.fftfreq(n)
     fx = np.fft.fftfreq(m)
     ny = n // 2 if n % 2 == 0 else None
@@ -400,7 +421,7 @@ def _loop(img: NDArray[np.float64], pos: NDArray[np.float64], w: NDArray[np.floa
             ey[ny] = math.cos(math.pi * py)
         if nx is not None:
             ex[nx] = math.cos(math.pi * px)
-        frame = np.fft.ifft2(spectrum * np.outer(ey, ex))
+        frame = sfft.ifft2(spectrum * np.outer(ey, ex))
         out += wk * frame.real
     return out
 
@@ -483,11 +504,51 @@ def motion_blur(
         pos, w = trajectory_positions(motion, substeps=substeps, trajectory=trajectory)
         out = _loop(work, pos, w)
     else:
-        H = blur_transfer(work.shape, motion, substeps=substeps, trajectory=trajectory)
-        out = np.fft.irfft2(np.fft.rfft2(work) * H, s=work.shape)
+        spectrum = sfft.rfft2(work)
+        product = _linear_fast(spectrum, work.shape, motion, substeps, trajectory)
+        if product is None:
+            H = blur_transfer(work.shape, motion, substeps=substeps, trajectory=trajectory)
+            product = spectrum * H
+        out = sfft.irfft2(product, s=work.shape, overwrite_x=True)
     if boundary == "reflect":
         out = out[: img.shape[0], : img.shape[1]]
     return np.ascontiguousarray(out)
+
+
+def _linear_fast(
+    spectrum: NDArray[np.complex128],
+    shape: tuple[int, int],
+    motion: Any,
+    substeps: Any,
+    trajectory: Any,
+) -> NDArray[np.complex128] | None:
+    """spectrum * H for linear motion with the compiled kernel, or None if not applicable.
+
+    Applies when the trajectory is ``"linear"``, K is finite and ``|dy| + |dx| <= K`` (then
+    ``|r| <= pi / 2`` on the whole grid and the kernel needs no range reduction).
+    """
+    if not (isinstance(trajectory, str) and trajectory == "linear"):
+        return None
+    k = _check_substeps(substeps)
+    vec = _check_motion(motion)
+    if k is None or abs(vec[0]) + abs(vec[1]) > k:
+        return None
+    from ._blur_kernels import apply_linear_dirichlet
+
+    fy, fx, ny, nx = _grid(shape)
+    dy, dx = float(vec[0]), float(vec[1])
+    out = np.empty_like(spectrum)
+    apply_linear_dirichlet(spectrum, math.pi * fy * dy / k, math.pi * fx * dx / k, k, out)
+
+    def h(gy: NDArray, gx: NDArray) -> NDArray:
+        return _dirichlet(2.0 * math.pi * (gy * dy + gx * dx) / k, k)
+
+    row, col = _nyquist_lines(h, fy, fx, ny, nx)
+    if row is not None:
+        out[ny, :] = spectrum[ny, :] * row
+    if col is not None:
+        out[:, nx] = spectrum[:, nx] * col
+    return out
 
 
 def _is_array_path(trajectory: Any) -> bool:

@@ -628,7 +628,8 @@ def render_blurred(
     """Blurred camera image rendered without interpolation (unbiased reference).
 
     Fourier-shifted test images can make DIC look more accurate than it is (Reu, Exp.
-    Mech. 2011, doi:10.1007/s11340-010-9355-0; Bornert et al., Opt. Lasers Eng. 2017).
+    Mech. 51, 2011, doi:10.1007/s11340-010-9417-4; Bornert et al., Opt. Lasers Eng. 91,
+    2017).
     Here a pattern drawn on a grid ``supersample`` times finer than the camera is moved
     along the path in *whole fine pixels* (``numpy.roll``, periodic), the sub-frames are
     averaged (integration over the exposure), and the result is binned to camera pixels

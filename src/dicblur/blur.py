@@ -568,7 +568,8 @@ def valid_region(
     Output pixel (y, x) averages input pixels (y - p_y, x - p_x) over the path; it is
     trustworthy when every such position lies inside the image. ``guard`` extra px per
     side absorb the decaying ringing of Fourier shifting near the edge (see
-    ``docs/blur.md``).
+    ``docs/blur.md``). Meant for ``boundary="reflect"``; with ``"periodic"`` and an image
+    that is not periodic, the wrapped seam rings through the whole output.
 
     Returns
     -------

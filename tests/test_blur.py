@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 from scipy import special
 
@@ -74,6 +76,22 @@ def test_fft_equals_loop_for_few_substeps(pattern: np.ndarray, motion, substeps)
     fast = motion_blur(pattern, motion, substeps=substeps)
     loop = motion_blur(pattern, motion, substeps=substeps, method="loop")
     assert np.abs(fast - loop).max() <= 1e-12 * np.ptp(pattern)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    rows=st.integers(2, 17),
+    cols=st.integers(2, 17),
+    dy=st.floats(-30, 30),
+    dx=st.floats(-30, 30),
+    substeps=st.integers(1, 60),
+    seed=st.integers(0, 2**16),
+)
+def test_fft_equals_loop_property(rows, cols, dy, dx, substeps, seed) -> None:
+    img = np.random.default_rng(seed).random((rows, cols)) * 255
+    fast = motion_blur(img, (dy, dx), substeps=substeps)
+    loop = motion_blur(img, (dy, dx), substeps=substeps, method="loop")
+    assert np.abs(fast - loop).max() <= 1e-12 * max(np.ptp(img), 1.0)
 
 
 def test_odd_size_equals_complex_transcription_of_paper() -> None:

@@ -468,7 +468,9 @@ def motion_blur(
         the path's extent of each edge (see :func:`valid_region`) the output averages
         mirrored content, not the unseen scene.
     method : {"fft", "loop"}
-        ``"fft"``: one rfft2/irfft2 pair and the transfer function (default).
+        ``"fft"``: one rfft2/irfft2 pair and the transfer function (default; for linear
+        motion with ``|dy| + |dx| <= K`` a compiled kernel fuses the Dirichlet kernel with
+        the spectrum product).
         ``"loop"``: literal Algorithm 1 (one complex inverse FFT per sub-frame, averaged),
         for verification; needs a finite ``substeps``.
 

@@ -12,8 +12,8 @@ When ``|r| <= pi / 2`` everywhere (``|X_y| + |X_x| <= K``), the three phasors
 column factor, so no transcendental function is evaluated per frequency: a few complex
 multiplications per element, fused with the multiplication of the spectrum. Products of
 phasors carry an absolute error of a few 1e-16; near the zero line ``r = 0`` where both sines
-are small that error would be amplified, so there (``|(K + 1) r| < 1``) the sines are
-evaluated directly. The relative error of the ratio stays below ~1e-14.
+are small that error would be amplified, so there (``|(K + 1) r| < BAND``) the sines are
+evaluated directly.
 """
 
 from __future__ import annotations
@@ -22,6 +22,12 @@ import math
 
 import numba
 import numpy as np
+
+# Below this |(K + 1) r| the sines are evaluated directly. Outside, the phasor product
+# gives sin r with an absolute error of ~2e-16, i.e. a relative error of at most
+# ~2e-16 (K + 1) / BAND (8e-14 at K = 100, at the band edge only); measured agreement with
+# the literal loop stays ~1e-15 of the grey range.
+BAND = 0.25
 
 
 @numba.njit(cache=True, nogil=True)
@@ -44,13 +50,11 @@ def apply_linear_dirichlet(
     for i in range(n):
         for j in range(m):
             r = ry[i] + rx[j]
-            if abs(kp1 * r) < 1.0:
+            if abs(kp1 * r) < BAND:
                 if r == 0.0:
                     out[i, j] = spectrum[i, j]
                     continue
                 ratio = math.sin(kp1 * r) / (kp1 * math.sin(r))
-                phase = complex(math.cos(k * r), -math.sin(k * r))
             else:
                 ratio = (ek1y[i] * ek1x[j]).imag / (kp1 * (e1y[i] * e1x[j]).imag)
-                phase = eky[i] * ekx[j]
-            out[i, j] = spectrum[i, j] * phase * ratio
+            out[i, j] = spectrum[i, j] * (eky[i] * ekx[j]) * ratio

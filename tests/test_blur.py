@@ -207,14 +207,16 @@ def test_discrete_converges_to_continuous(pattern: np.ndarray) -> None:
     assert e1000 < e100 / 8  # O(1/K)
 
 
-def test_sine_full_cycle_equals_bessel_j0() -> None:
-    # mean over one cycle of cos(a - b sin(2 pi t)) = J0(b) cos(a).
+@pytest.mark.parametrize(("amp", "cycles"), [((1.2, 2.5), 1.0), ((20.0, -35.0), 3.0)])
+def test_sine_full_cycles_equal_bessel_j0(amp, cycles) -> None:
+    # mean over whole cycles of cos(a - b sin(2 pi c t + phase)) = J0(b) cos(a).
     shape = (32, 48)
-    amp = np.array([1.2, 2.5])
+    amp = np.array(amp)
     ky, kx = 3, 4
     b = 2 * np.pi * (ky / shape[0] * amp[0] + kx / shape[1] * amp[1])
     img = _cosine(shape, ky, kx)
-    out = motion_blur(img, amp, substeps=None, trajectory=SineMotion(cycles=1.0, phase=0.4))
+    out = motion_blur(img, amp, substeps=None,
+                      trajectory=SineMotion(cycles=cycles, phase=0.4))
     assert_allclose(out, special.j0(b) * img, rtol=0, atol=1e-12)
 
 

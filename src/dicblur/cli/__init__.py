@@ -59,6 +59,9 @@ def _root(
 from . import pattern as _pattern  # noqa: E402
 
 _pattern.register(app)
+from . import pulse as _pulse  # noqa: E402
+
+_pulse.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 
@@ -42,14 +42,16 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 
 
 def pulse_command(
-    out: Path = typer.Option(..., "-o", "--out", help="Output directory (created)."),
-    trials: int = typer.Option(10000, "--trials", help="Noise realisations per w."),
-    seed: int = typer.Option(1, "--seed", help="Random seed (same seed, same numbers)."),
-    n_periods: int = typer.Option(10, "--n-periods", help="Periods in the signal (N)."),
-    dependence_trials: int = typer.Option(
-        2000, "--dependence-trials", help="Trials per w of the dependence study (0 skips)."
-    ),
-    figures: bool = typer.Option(True, "--figures/--no-figures", help="Write PNG figures."),
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output directory (created).")],
+    trials: Annotated[int, typer.Option("--trials", help="Noise realisations per w.")] = 10000,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same numbers).")]
+    = 1,
+    n_periods: Annotated[int, typer.Option("--n-periods", help="Periods in the signal (N).")]
+    = 10,
+    dependence_trials: Annotated[int, typer.Option(
+        "--dependence-trials", help="Trials per w of the dependence study (0 skips).")] = 2000,
+    figures: Annotated[bool, typer.Option("--figures/--no-figures",
+                                          help="Write PNG figures.")] = True,
 ) -> None:
     """Section V of the paper: Table II, Fig. 4-6, the Monte Carlo and verdict.md in OUT."""
     from ..pulse.study import run_pulse_study

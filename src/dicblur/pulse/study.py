@@ -191,13 +191,17 @@ def fit_loglog(
     predictions: tuple[str, ...] = ("u_first_principles", "u_paper_linear",
                                     "u_interpolated_noise", "u_pixel_linearised"),
 ) -> LogLogFit:
-    """Fit ``log u_e`` against ``log w`` over ``w_min <= w <= w_max`` (see :class:`LogLogFit`)."""
+    """Fit ``log u_e`` against ``log w`` over ``w_min <= w <= w_max`` (see :class:`LogLogFit`).
+
+    Widths where ``u_e == 0`` (an estimator locked to the pixel grid) are left out.
+    """
     sel = ds.sel(w=slice(w_min, w_max))
+    sel = sel.isel(w=np.flatnonzero(sel[var].values > 0))  # locked estimators give u_e = 0
     w = sel["w"].values
     u = sel[var].values
-    if w.size < 2 or np.any(u <= 0):
+    if w.size < 2:
         raise InputError(
-            f"w_min={w_min}, w_max={w_max}: need >= 2 widths with u_e > 0 to fit a slope"
+            f"w_min={w_min}, w_max={w_max}: need >= 2 widths with {var} > 0 to fit a slope"
         )
     x, y = np.log(w), np.log(u)
     if f"{var}_ci_low" in sel:
@@ -296,11 +300,15 @@ def _dependence(trials: int, seed: SeedLike, sigma: float) -> tuple[DependenceRo
         ds = simulate(train, widths=widths, sigma=sigma, n_periods=n, trials=trials,
                       seed=seed, interpolation=interp, shifted=shifted)  # type: ignore[arg-type]
         wa = min(train.dp, train.g)
-        fa = fit_loglog(ds, 1.0, float(np.max(widths[widths < wa])))
+        try:
+            fa = fit_loglog(ds, 1.0, float(np.max(widths[widths < wa])))
+            slope, ci = fa.slope, fa.slope_ci
+        except InputError:
+            slope, ci = math.nan, (math.nan, math.nan)
         u5 = float(ds["u_e"].sel(w=5.0))
         rows.append(DependenceRow(
             name=name, interpolation=interp, shifted=shifted, n_periods=n, dp=train.dp,
-            du=train.du, x0=train.x0, slope_a=fa.slope, slope_a_ci=fa.slope_ci,
+            du=train.du, x0=train.x0, slope_a=slope, slope_a_ci=ci,
             u_e_w1=float(ds["u_e"].sel(w=1.0)), u_e_w5=u5,
             ratio_first_principles_w5=u5 / float(ds["u_first_principles"].sel(w=5.0)),
             ratio_derived_pixel_w5=u5 / float(ds["u_pixel_linearised"].sel(w=5.0)),

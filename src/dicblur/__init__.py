@@ -36,6 +36,8 @@ from .metrics import (
     subset_centres,
 )
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
+from .pulse import PulseTrain
+from .pulse.study import PulseStudy, run_pulse_study
 
 __version__ = "0.1.0"
 
@@ -48,6 +50,8 @@ __all__ = [
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "PulseStudy",
+    "PulseTrain",
     "StoreError",
     "__version__",
     "estimate_noise",
@@ -63,6 +67,7 @@ __all__ = [
     "paper_pattern4",
     "pattern_metrics",
     "rms_contrast",
+    "run_pulse_study",
     "save_image",
     "speckle_pattern",
     "speckle_size",

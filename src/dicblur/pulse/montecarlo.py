@@ -39,7 +39,6 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from .. import __version__
 from .._validation import check_choice, check_finite_number, check_positive, describe
 from ..errors import InputError
 from ..patterns import SeedLike
@@ -408,6 +407,8 @@ def simulate(
         )
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     children = ss.spawn(wa.size)
+
+    from .. import __version__  # late: dicblur/__init__ imports this module
 
     ref_clean = train.sample(length, w_ref)
     names = ("u_e", "u_e_ci_low", "u_e_ci_high", "mean", "mean_ci_low", "mean_ci_high",

@@ -16,7 +16,6 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from .. import __version__
 from .._validation import describe
 from ..errors import InputError
 from ..patterns import SeedLike
@@ -344,6 +343,8 @@ def run_pulse_study(
     """
     if not isinstance(trials, int | np.integer) or trials < 2:
         raise InputError(f"trials={describe(trials)}: expected an int >= 2 (default 10000)")
+    from .. import __version__  # late: dicblur/__init__ imports this module
+
     t0 = time.perf_counter()
     ds = simulate(PAPER_TRAIN, widths=PAPER_WIDTHS, sigma=sigma, n_periods=n_periods,
                   trials=trials, seed=seed, keep_samples=True)

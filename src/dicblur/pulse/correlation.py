@@ -117,7 +117,7 @@ def min_chi2(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Minimum over xi (|xi| <= du/2) of the continuous SSD, and its minimiser (paper Fig. 5).
 
-    A grid search (0.05 px) is refined by bounded Brent minimisation.
+    A grid search (0.1 px) is refined by bounded Brent minimisation.
 
     Returns
     -------
@@ -126,7 +126,7 @@ def min_chi2(
     wa = np.atleast_1d(_widths(w))
     vals = np.empty(wa.shape)
     locs = np.empty(wa.shape)
-    grid = np.arange(-train.du / 2, train.du / 2 + 1e-9, 0.05)
+    grid = np.arange(-train.du / 2, train.du / 2 + 1e-9, 0.1)
     for i, wi in enumerate(wa):
         c = chi2_continuous(train, grid, float(wi), w_ref=w_ref, n_periods=n_periods)
         j = int(np.argmin(c))

@@ -27,6 +27,7 @@ from .signal import (
     closed_form_metrics,
     numeric_metrics,
     pixel_metrics,
+    regime,
 )
 
 __all__ = [
@@ -179,8 +180,6 @@ def segments(train: PulseTrain, w: NDArray[np.float64], w_ref: float = 1.0) -> l
     """Segment label per width: the regime letter, with ``'`` appended where the blurred
     ramps no longer cover the reference edges (``w > 2 min(dp, g) - w_ref``: the noise-free
     SSD curvature at zero shift has dropped, the minimum turns flat)."""
-    from .signal import regime
-
     lim = 2 * min(train.dp, train.g) - w_ref
     return [regime(train, float(x)) + ("'" if x > lim + 1e-9 else "") for x in w]
 

@@ -290,3 +290,17 @@ def test_cli_writes_all_outputs(tmp_path, capsys) -> None:  # type: ignore[no-un
 def test_cli_bad_trials(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
     assert main(["pulse", "--trials", "1", "-o", str(tmp_path)]) == 2
     assert "--trials=1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("length", [22, 21])
+def test_noise_drawn_as_spectra_is_white_gaussian(length: int) -> None:
+    from dicblur.pulse.montecarlo import _white_noise_spectrum
+
+    sigma = 0.3
+    spec = _white_noise_spectrum(np.random.default_rng(0), 40_000, length, sigma)
+    x = np.fft.irfft(spec, length, axis=-1)  # back to samples: must be iid N(0, sigma^2)
+    cov = np.cov(x, rowvar=False)
+    assert_allclose(np.diag(cov), sigma**2, rtol=0.04)
+    assert np.max(np.abs(cov - np.diag(np.diag(cov)))) < 0.03 * sigma**2
+    kurt = np.mean(x**4) / np.mean(x**2) ** 2
+    assert kurt == pytest.approx(3.0, abs=0.1)

@@ -280,6 +280,8 @@ def _dependence(trials: int, seed: SeedLike, sigma: float) -> tuple[DependenceRo
     variants = [
         ("main: Fourier, shift blurred, N = 10", "fourier", "blurred", 10, PAPER_TRAIN),
         ("Fourier, shift reference", "fourier", "reference", 10, PAPER_TRAIN),
+        ("Fourier, edges at 1/4 px (sampling phase)", "fourier", "blurred", 10,
+         PulseTrain(a=1.0, dp=6.0, du=22.0, x0=-0.25)),
         ("Fourier, N = 1", "fourier", "blurred", 1, PAPER_TRAIN),
         ("Fourier, N = 3", "fourier", "blurred", 3, PAPER_TRAIN),
         ("Fourier, N = 30", "fourier", "blurred", 30, PAPER_TRAIN),

@@ -116,6 +116,21 @@ def test_chi2_continuous_against_riemann_sum() -> None:
         assert chi2_continuous(train, [xi], w, w_ref=wr)[0] == pytest.approx(brute, rel=1e-6)
 
 
+@pytest.mark.parametrize("w", [1.0, 3.0, 5.0])
+def test_chi2_sampled_odd_width_closed_form(w: float) -> None:
+    # Pixel SSD at xi = 0, regime (a), odd w, edges on pixel boundaries: per edge the residuals
+    # are +-a s / w for s = 0 .. n, n = (w - 1) / 2, on both sides of the edge.
+    from dicblur.pulse import chi2_sampled
+
+    n = (w - 1) / 2
+    per_edge = 2 * n * (n + 1) * (2 * n + 1) / 6 / w**2
+    got = chi2_sampled(PulseTrain(), [0.0], w, w_ref=1.0, n_periods=3)[0]
+    assert got == pytest.approx(3 * 2 * per_edge, abs=1e-12)
+    # even in xi (symmetric pulse)
+    a, b = chi2_sampled(PulseTrain(), [0.3, -0.3], w, n_periods=3)
+    assert a == pytest.approx(b, rel=1e-12)
+
+
 def test_min_chi2_fig5() -> None:
     train = PulseTrain(a=1.0, dp=10.0, du=20.0)
     w = np.array([1.0, 4.0, 9.5, 20.0])

@@ -58,6 +58,8 @@ def pulse_command(
 
     if trials < 2:
         raise InputError(f"--trials={trials}: expected an int >= 2 (default 10000)")
+    if n_periods < 1:
+        raise InputError(f"--n-periods={n_periods}: expected an int >= 1 (default 10)")
     if dependence_trials < 0:
         raise InputError(f"--dependence-trials={dependence_trials}: expected >= 0")
     out.mkdir(parents=True, exist_ok=True)
@@ -78,7 +80,9 @@ def pulse_command(
         {**study.settings, "seed": seed, "montecarlo_seconds": study.elapsed_s,
          "knee": study.knee, "knee_predicted": study.knee_predicted}, indent=2))
     written = ["table_ii.csv", "table_ii.md", "montecarlo.csv", "montecarlo.nc",
-               "fits.csv", "verdict.md", "settings.json"]
+               "fig5_min_chi2.csv", "fits.csv", "verdict.md", "settings.json"]
+    if study.dependence:
+        written.append("dependence.csv")
     if figures:
         from ..pulse.figures import write_figures
 

@@ -62,6 +62,9 @@ _pattern.register(app)
 from . import blur as _blur  # noqa: E402
 
 _blur.register(app)
+from . import pulse as _pulse  # noqa: E402
+
+_pulse.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

@@ -1,0 +1,52 @@
+"""``dicblur design`` CLI: outputs and exit codes."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from dicblur.cli import main
+
+FAST = ["--image-size", "128", "--grid", "2x1x2", "--density-range", "0.5..0.5",
+        "--max-refine", "2", "--confirm", "2", "--realisations", "1"]
+
+
+def test_design_cli_writes_everything(tmp_path, capsys):
+    out = tmp_path / "d"
+    rc = main(["design", "--blur", "2", "--scale", "0.05", "--print-size", "20x30",
+               "--dpi", "300", "-o", str(out), "--json", *FAST])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["n_campaigns"] >= 4 + 3 and summary["n_points"] > 0
+    assert summary["speckle_size_mm"] == pytest.approx(summary["best"]["speckle_size"] * 0.05)
+    for name in ("design.json", "evaluations.csv", "best_pattern.png", "pattern.png",
+                 "pattern.pdf", "pattern.json", "report.html"):
+        assert (out / name).is_file(), name
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64") >= 6
+    doc = json.loads((out / "design.json").read_text())
+    assert doc["problem"]["blurs"] == [2.0] and len(doc["evaluations"]) >= 4
+    rows = (out / "evaluations.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + len(doc["evaluations"])
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--blur-range", "5..1"], "inverted"),
+    (["--blur", "-2"], ">= 0"),
+    (["--blur", "2", "--dpi", "0"], "dpi"),
+    (["--blur", "2", "--print-size", "0x10"], "print-size"),
+    (["--blur-range", "1-5"], "LO..HI"),
+    (["--blur", "2", "--subset", "30"], "subset"),
+    (["--blur", "2", "--grid", "3x3"], "grid"),
+])
+def test_design_cli_bad_input_exit_2(tmp_path, capsys, args, match):
+    rc = main(["design", "-o", str(tmp_path / "x"), *FAST, *args])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and match in err
+
+
+def test_design_cli_usage_error(capsys):
+    assert main(["design", "--blur", "2"]) == 2  # missing -o
+    assert "--out" in capsys.readouterr().err

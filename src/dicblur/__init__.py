@@ -21,6 +21,13 @@ from .blur import (
     valid_region,
 )
 from .camera import Camera, add_gaussian_noise
+from .design import (
+    DesignResult,
+    PatternFamily,
+    design_pattern,
+    design_problem,
+    export_pattern,
+)
 from .errors import (
     ConfigError,
     ConvergenceError,
@@ -57,10 +64,12 @@ __all__ = [
     "Camera",
     "ConfigError",
     "ConvergenceError",
+    "DesignResult",
     "DicblurError",
     "FitError",
     "ImageReadError",
     "InputError",
+    "PatternFamily",
     "PatternMetrics",
     "PatternSettings",
     "PulseStudy",
@@ -71,7 +80,10 @@ __all__ = [
     "add_gaussian_noise",
     "blur_length",
     "blur_transfer",
+    "design_pattern",
+    "design_problem",
     "estimate_noise",
+    "export_pattern",
     "file_sha256",
     "gaussian_mask",
     "gradient_variance",

@@ -33,7 +33,7 @@ def _grid(text: str) -> tuple[int, int, int]:
         raise InputError(f"--grid={text!r}: expected NDxNPxNS, e.g. 5x3x3") from exc
     if len(vals) != 3:
         raise InputError(f"--grid={text!r}: expected three counts NDxNPxNS, e.g. 5x3x3")
-    return vals  # type: ignore[return-value]
+    return vals[0], vals[1], vals[2]
 
 
 def _size_mm(text: str) -> tuple[float, float]:

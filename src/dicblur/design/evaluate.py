@@ -184,8 +184,9 @@ def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
     cs = []
     for img in images:
         pts = subset_centres(img.shape, subset=problem.subset, step=problem.step)
-        c = blur_sensitivity(img, subset=problem.subset, points=pts, shape=problem.dic_shape,
-                             boundary="periodic").c  # type: ignore[arg-type]
+        c = blur_sensitivity(img, subset=problem.subset, points=pts,
+                             shape=problem.dic_shape,  # type: ignore[arg-type]
+                             boundary="periodic").c
         cs.append(c)
         for j, wj in enumerate(w):
             b = img if wj == 0 else motion_blur(img, (0.0, float(wj)),

@@ -168,7 +168,7 @@ class PatternFamily:
                 z[i] = (math.log(v / lo) / math.log(hi / lo)) if i == 0 else (v - lo) / (hi - lo)
         return z
 
-    def from_unit(self, z: Sequence[float]) -> Candidate:
+    def from_unit(self, z: Sequence[float] | NDArray[np.float64]) -> Candidate:
         """Candidate at unit coordinates ``z`` (clipped to the bounds)."""
         vals = []
         for i, (lo, hi) in enumerate(self.bounds):

@@ -58,7 +58,7 @@ def _maps(result: DesignResult, attr: str, title: str, *, log: bool) -> Any:
     vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     n = len(p_ax)
     fig, axes = plt.subplots(1, n, figsize=(3.6 * n + 0.8, 3.4), squeeze=False)
-    im = None
+    im: Any = None
     for k, p in enumerate(p_ax):
         ax = axes[0, k]
         im = ax.imshow(vals[:, k, :], origin="lower", aspect="auto", vmin=vmin, vmax=vmax,

@@ -50,3 +50,19 @@ def test_design_cli_bad_input_exit_2(tmp_path, capsys, args, match):
 def test_design_cli_usage_error(capsys):
     assert main(["design", "--blur", "2"]) == 2  # missing -o
     assert "--out" in capsys.readouterr().err
+
+
+def test_design_cli_velocity_and_range(tmp_path, capsys):
+    out = tmp_path / "v"
+    assert main(["design", "--velocity", "100", "--exposure", "1e-3", "--scale", "0.05",
+                 "--dpi", "300", "--print-size", "20", "-o", str(out), "--no-report",
+                 "--json", *FAST]) == 0
+    doc = json.loads((out / "design.json").read_text())
+    assert doc["problem"]["blurs"] == [pytest.approx(2.0)]  # 100 mm/s * 1 ms / 0.05 mm/px
+    assert not (out / "report.html").exists()
+    capsys.readouterr()
+    out2 = tmp_path / "r"
+    assert main(["design", "--blur-range", "1..3", "-o", str(out2), "--no-report", "--json",
+                 *FAST, "--confirm", "0"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["target"].startswith("mean over W = 1..3 px") and "pattern.png" not in s["files"]

@@ -49,6 +49,17 @@ def _size_mm(text: str) -> tuple[float, float]:
     return vals[0], vals[1]
 
 
+def _clean(v: object) -> object:
+    """JSON-safe copy: NaN and inf become null (strict JSON readers reject NaN)."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_clean(x) for x in v]
+    return v
+
+
 def design_command(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     blur: float | None = typer.Option(None, "--blur", help="Design blur length W, px."),
@@ -144,7 +155,7 @@ def design_command(
         written += ["pattern.png", "pattern.pdf", "pattern.json"]
     doc = result.to_dict()
     doc["export"] = None if export is None else export.to_dict()
-    (out / "design.json").write_text(json.dumps(doc, indent=2, default=float))
+    (out / "design.json").write_text(json.dumps(_clean(doc), indent=2, allow_nan=False))
     with open(out / "evaluations.csv", "w", newline="") as fh:
         cols = ["stage", "speckle_size", "density", "softness", "objective", "surrogate",
                 "eta", "alpha", "beta", "mbrf", "c_fit", "c_static", "mig0", "fit_ok",

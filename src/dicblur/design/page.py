@@ -73,8 +73,9 @@ def _maps(result: DesignResult, attr: str, title: str, *, log: bool) -> Any:
             for j in range(len(s_ax)):
                 v = arr[i, k, j]
                 if np.isfinite(v):
+                    frac = (vals[i, k, j] - vmin) / (vmax - vmin) if vmax > vmin else 0.0
                     ax.text(j, i, f"{v:.2g}", ha="center", va="center", fontsize=7,
-                            color="w")
+                            color="k" if frac > 0.6 else "w")
     fig.colorbar(im, ax=axes[0, :].tolist(), label=("log10 " if log else "") + title)
     return fig
 

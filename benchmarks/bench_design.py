@@ -26,25 +26,33 @@ from dicblur.design import design_pattern, design_problem
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="Only the W = 3 px run.")
+    parser.add_argument("--only", default=None,
+                        help="Run only the cases whose name contains this text; rows of "
+                        "other cases already in the JSON file are kept.")
     args = parser.parse_args()
-    cases = [("W = 3 px (default run)", {"blur": 3.0})]
+    cases: list[tuple[str, dict[str, object], dict[str, object]]] = [
+        ("W = 3 px (default run)", {"blur": 3.0}, {})]
     if not args.quick:
-        cases += [("W = 0 px (static)", {"blur": 0.0}),
-                  ("W = 0..5 px (mean)", {"blur_range": (0.0, 5.0)}),
-                  ("W = 6 px", {"blur": 6.0}),
-                  ("W = 3 px, 512 px images", {"blur": 3.0, "image_size": 512})]
+        cases += [("W = 0 px (static)", {"blur": 0.0}, {}),
+                  ("W = 0..5 px (mean)", {"blur_range": (0.0, 5.0)}, {}),
+                  ("W = 6 px", {"blur": 6.0}, {}),
+                  ("W = 3 px, 512 px images", {"blur": 3.0, "image_size": 512}, {}),
+                  ("W = 3 px, surrogate screen 10", {"blur": 3.0}, {"screen": 10})]
+    if args.only:
+        cases = [c for c in cases if args.only in c[0]]
     load_before = os.getloadavg()
     rows = []
-    for name, kw in cases:
+    for name, kw, dkw in cases:
         problem = design_problem(noise=2.0, subset=31, **kw)  # type: ignore[arg-type]
         t0, c0 = time.perf_counter(), time.process_time()
-        r = design_pattern(problem)
+        r = design_pattern(problem, **dkw)  # type: ignore[arg-type]
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         s = r.summary()
         b = r.best.candidate
         rows.append({
             "case": name, "wall_s": wall, "cpu_s": cpu, "campaigns": r.n_campaigns,
             "campaign_points": r.n_points, "grid": s["n_grid"], "refine": s["n_refine"],
+            "screened": s["n_screened"],
             "best_D": b.speckle_size, "best_density": b.density, "best_softness": b.softness,
             "best_pred": s["best_predicted_u_e"], "best_meas": s["best_measured_u_e"],
             "best_meas_se": s["best_measured_stderr"],
@@ -56,6 +64,11 @@ def main() -> int:
         print(f"{name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {r.n_campaigns} campaigns",
               flush=True)
     load_after = os.getloadavg()
+    out = Path(__file__).resolve().parent / "results" / "design.json"
+    if args.only and out.is_file():
+        old = json.loads(out.read_text())["rows"]
+        names = {r_["case"] for r_ in rows}
+        rows = [r_ for r_ in old if r_["case"] not in names] + rows
     hdr = ("| case | wall (s) | CPU (s) | campaigns (grid+refine+ref+confirm) | points | best "
            "D / p / s (px, -, px) | predicted u_e best (px) | measured best (px) | "
            "measured default (px) | measured worst (px) | gain vs default | gain vs worst |")
@@ -74,7 +87,6 @@ def main() -> int:
     result = {"version": __version__, "python": platform.python_version(),
               "cpu_count": os.cpu_count(), "load_before": load_before,
               "load_after": load_after, "target_s": 600, "rows": rows}
-    out = Path(__file__).resolve().parent / "results" / "design.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps(result, indent=2))
     return 0

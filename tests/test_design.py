@@ -234,3 +234,19 @@ def test_export_bad_input(tmp_path, kwargs, match):
     args = {"scale": 0.1, "size_mm": 20.0, "dpi": 300} | kwargs
     with pytest.raises(InputError, match=match):
         export_pattern(Candidate(3.0, 0.5, 0.0), tmp_path, **args)
+
+
+def test_surrogate_screen_measures_only_the_best():
+    p = design_problem(blur=3.0, **SMALL)
+    r = design_pattern(p, small_family(), screen=3, max_refine=0, confirm_realisations=0)
+    assert len(r.screened) == 6 and len(r.grid) == 3
+    ranked = sorted(r.screened, key=lambda cs: cs[1])
+    assert {c.key() for c, _ in ranked[:3]} == {e.candidate.key() for e in r.grid}
+    # the screen (images from make_pattern) and the campaign path agree on the surrogate
+    sur = {c.key(): s for c, s in r.screened}
+    for e in r.grid:
+        assert e.surrogate == pytest.approx(sur[e.candidate.key()], rel=1e-12)
+    # the surrogate's worst member was measured for the comparison
+    assert r.worst.candidate.key() == ranked[-1][0].key() or r.worst.stage == "grid"
+    with pytest.raises(InputError, match="screen"):
+        design_pattern(p, small_family(), screen=0)

@@ -85,6 +85,9 @@ def design_command(
     softness_range: str = typer.Option("0..2", "--softness-range",
                                        help="Softness bounds LO..HI px."),
     max_refine: int = typer.Option(20, "--max-refine", help="Refinement campaigns (0: none)."),
+    screen: int | None = typer.Option(None, "--screen",
+                                      help="Measure only the N grid members with the best "
+                                      "static surrogate (default: all)."),
     confirm: int = typer.Option(8, "--confirm",
                                 help="Fresh realisations of the confirmation (0: none)."),
     seed: int = typer.Option(0, "--seed", help="Base seed."),
@@ -138,7 +141,7 @@ def design_command(
             console.print(f"  {i} campaigns done")
 
     result = design_pattern(problem, family, max_refine=max_refine,
-                            confirm_realisations=confirm, progress=progress)
+                            confirm_realisations=confirm, screen=screen, progress=progress)
     best = result.best.candidate
     written = []
     cam = speckle_pattern(problem.image_size, speckle_size=best.speckle_size,

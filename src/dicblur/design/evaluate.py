@@ -36,7 +36,7 @@ from .family import Candidate
 from .problem import DesignProblem
 
 __all__ = ["Evaluation", "campaign_spec", "evaluate_candidate", "measure_candidate",
-           "pattern_seeds", "surrogate"]
+           "pattern_seeds", "screen_candidate", "surrogate"]
 
 
 @dataclass(frozen=True)
@@ -194,6 +194,17 @@ def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
             s = float(np.mean(directional_sssig(b, pts, subset=problem.subset, angle=0.0)))
             u2[j] += 2.0 * problem.noise**2 / s + (c * wj * wj) ** 2
     return np.sqrt(u2 / len(images)), float(np.mean(cs))
+
+
+def screen_candidate(candidate: Candidate, problem: DesignProblem) -> float:
+    """Static surrogate objective (px) of a candidate, no DIC: the same pattern
+    realisations as its campaign, :func:`surrogate` at the design blurs."""
+    from ..campaign import make_pattern
+
+    spec = campaign_spec(candidate, problem)
+    images = np.stack([make_pattern(spec, p) for p in spec.patterns])
+    u, _ = surrogate(images, problem)
+    return problem.objective(u)
 
 
 def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,

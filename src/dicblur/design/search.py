@@ -2,7 +2,9 @@
 
 1. Coarse sweep: every member of the family's grid gets a campaign and a blur-model fit
    (:func:`~dicblur.design.evaluate_candidate`); these give the maps of eta, MBRF and
-   predicted u_e (the generalisation of the paper's Fig. 11).
+   predicted u_e (the generalisation of the paper's Fig. 11). With ``screen=n`` the grid
+   is first ranked by the static surrogate (no DIC) and only its ``n`` best members get
+   campaigns (the maps then have holes).
 2. Refinement: bounded Nelder-Mead (:func:`scipy.optimize.minimize`) on the logarithm of
    the predicted u_e, in unit coordinates of the family (log speckle size, density,
    softness), started at the best grid member with a simplex of half the grid spacing,
@@ -25,7 +27,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from .evaluate import Evaluation, evaluate_candidate, measure_candidate, pattern_seeds
+from .evaluate import (
+    Evaluation,
+    evaluate_candidate,
+    measure_candidate,
+    pattern_seeds,
+    screen_candidate,
+)
 from .family import DEFAULT_CANDIDATE, Candidate, PatternFamily
 from .problem import DesignProblem
 
@@ -133,6 +141,7 @@ class DesignResult:
     n_points: int
     wall_s: float
     settings: dict[str, Any] = field(default_factory=dict)
+    screened: tuple[tuple[Candidate, float], ...] = ()
 
     @property
     def grid(self) -> tuple[Evaluation, ...]:
@@ -153,6 +162,7 @@ class DesignResult:
             "worst_predicted_u_e": self.worst.objective,
             "n_campaigns": self.n_campaigns, "n_points": self.n_points,
             "n_grid": len(self.grid),
+            "n_screened": len(self.screened),
             "n_refine": sum(e.stage == "refine" for e in self.evaluations),
             "wall_s": self.wall_s,
         }
@@ -182,6 +192,7 @@ class DesignResult:
             "reference": self.reference.to_dict(),
             "evaluations": [e.to_dict() for e in self.evaluations],
             "confirmation": None if self.confirmation is None else self.confirmation.to_dict(),
+            "screened": [{**c.to_dict(), "surrogate": s} for c, s in self.screened],
         }
 
 
@@ -216,6 +227,7 @@ def design_pattern(
     *,
     max_refine: int = 20,
     confirm_realisations: int = 8,
+    screen: int | None = None,
     progress: Progress | None = None,
 ) -> DesignResult:
     """Find the member of ``family`` with the lowest predicted u_e at the design blur.
@@ -230,6 +242,9 @@ def design_pattern(
         Most campaigns of the local refinement (0: grid only).
     confirm_realisations : int
         Fresh realisations of the confirmation run (0: no confirmation).
+    screen : int, optional
+        Run campaigns only for the ``screen`` grid members with the best static surrogate
+        (plus the surrogate's worst member, for the comparison). Default: the whole grid.
     progress : callable, optional
         ``progress(stage, index, evaluation)`` after every campaign.
 
@@ -262,7 +277,16 @@ def design_pattern(
                 progress(stage, len(evaluations), e)
         return cache[key]
 
-    for c in family.grid_candidates():
+    candidates = family.grid_candidates()
+    screened: list[tuple[Candidate, float]] = []
+    if screen is not None:
+        if isinstance(screen, bool) or not isinstance(screen, int) or screen < 1:
+            raise InputError(f"screen={screen!r}: expected an integer >= 1 (grid members "
+                             "to measure) or None (all)")
+        screened = [(c, screen_candidate(c, problem)) for c in candidates]
+        order = sorted(range(len(candidates)), key=lambda i: screened[i][1])
+        candidates = [candidates[i] for i in sorted(order[:screen])]
+    for c in candidates:
         run(c, "grid")
     grid = list(evaluations)
     best_grid = min(grid, key=lambda e: e.objective)
@@ -293,23 +317,32 @@ def design_pattern(
         optimize.minimize(f, x0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * len(free),
                           options={"initial_simplex": np.array(simplex),
                                    "maxfev": 3 * max_refine, "xatol": 0.02, "fatol": 0.005})
-    reference = cache.get(DEFAULT_CANDIDATE.key()) or evaluate_candidate(
-        DEFAULT_CANDIDATE, problem, stage="reference")
+    extra_refs: list[Evaluation] = []
+    reference = cache.get(DEFAULT_CANDIDATE.key())
+    if reference is None:
+        reference = evaluate_candidate(DEFAULT_CANDIDATE, problem, stage="reference")
+        extra_refs.append(reference)
     best = min(evaluations, key=lambda e: e.objective)
     worst = max(grid, key=lambda e: e.objective)
+    if screened:
+        worst_sur = max(screened, key=lambda cs: cs[1])[0]
+        if worst_sur.key() not in cache:
+            worst_eval = evaluate_candidate(worst_sur, problem, stage="reference")
+            extra_refs.append(worst_eval)
+            worst = max(worst, worst_eval, key=lambda e: e.objective)
     confirmation = None
     if confirm_realisations:
         confirmation = confirm({"best": best.candidate, "default": DEFAULT_CANDIDATE,
                                 "worst": worst.candidate}, problem,
                                realisations=confirm_realisations)
-    n_campaigns = len(evaluations) + (reference.stage == "reference") + (
-        3 if confirmation else 0)
-    n_points = sum(e.n_points for e in evaluations) + (
-        reference.n_points if reference.stage == "reference" else 0) + (
-        confirmation.n_points if confirmation else 0)
+    n_campaigns = len(evaluations) + len(extra_refs) + (3 if confirmation else 0)
+    n_points = (sum(e.n_points for e in evaluations) + sum(e.n_points for e in extra_refs)
+                + (confirmation.n_points if confirmation else 0))
     return DesignResult(
         problem=problem, family=family, evaluations=tuple(evaluations), reference=reference,
         best=best, worst=worst, confirmation=confirmation, n_campaigns=n_campaigns,
         n_points=n_points, wall_s=time.perf_counter() - t0,
-        settings={"max_refine": max_refine, "confirm_realisations": confirm_realisations},
+        settings={"max_refine": max_refine, "confirm_realisations": confirm_realisations,
+                  "screen": screen},
+        screened=tuple(screened),
     )

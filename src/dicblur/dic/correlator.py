@@ -17,11 +17,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_image, check_choice, check_odd_subset, check_positive, describe
 from ..errors import InputError
-from ..metrics import subset_centres
+from ..metrics import image_gradients, subset_centres
 from . import kernels
 from .icgn import N_PARAMS, prepare_subsets
 from .initial import global_shift, subset_fftcc
-from .interpolation import bspline_coefficients, bspline_gradients, order_of
+from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
 from .result import DICResult
 from .status import PointStatus
 
@@ -127,6 +127,8 @@ class Correlator:
         self.rows = rows
         self.cols = cols
         coef = bspline_coefficients(ref, order=self.order, dtype=np.float64)
+        # IC-GN uses the exact derivatives of the reference spline (consistent with the
+        # interpolant of the current image: fast, unbiased convergence)
         gy, gx = bspline_gradients(coef, self.order, self.image_shape)
         # out-of-bounds POIs are prepared on a clipped centre and keep their status
         rc = np.clip(rows, half, ref.shape[0] - 1 - half)
@@ -136,20 +138,32 @@ class Correlator:
         self._prep = prep
         self._status0 = status0
         self._ref = ref
-        self._f32 = np.ascontiguousarray(ref, dtype=np.float32)
-        self._gx32 = np.ascontiguousarray(gx, dtype=np.float32)
-        self._gy32 = np.ascontiguousarray(gy, dtype=np.float32)
+        # padded float32 layouts of the kernels (see kernels.icgn_translation)
+        self._tw = 16 * ((self.subset + 15) // 16)
+        rows_img, cols_img = self.image_shape
+        extra = self._tw + 16
+        self._f32 = np.zeros((rows_img, cols_img + self._tw), np.float32)
+        self._f32[:, :cols_img] = ref
+        self._gx32 = np.zeros_like(self._f32)
+        self._gx32[:, :cols_img] = gx
+        self._gy32 = np.zeros_like(self._f32)
+        self._gy32[:, :cols_img] = gy
+        self._coef_buf = np.zeros((rows_img + 2 * PAD, cols_img + 2 * PAD + extra), np.float32)
         self.predicted_sigma_u: NDArray[np.float64] | None = None
         self.predicted_sigma_v: NDArray[np.float64] | None = None
         if self.noise_sigma is not None:
+            # predicted sigma from the project's SSSIG (central differences, as
+            # dicblur.metrics.sssig): see docs/dic.md for why not the spline gradients
+            cgy, cgx = image_gradients(ref)
+            pp = prepare_subsets(ref, cgx, cgy, rc, cc, half, self.shape)
             s2 = self.noise_sigma ** 2
             with np.errstate(divide="ignore", invalid="ignore"):
                 if self.shape == "translation":
-                    pu = np.sqrt(2.0 * s2 / prep.sssig_x)
-                    pv = np.sqrt(2.0 * s2 / prep.sssig_y)
+                    pu = np.sqrt(2.0 * s2 / pp.sssig_x)
+                    pv = np.sqrt(2.0 * s2 / pp.sssig_y)
                 else:
-                    pu = np.sqrt(s2 * prep.cov_unit[:, 0, 0])
-                    pv = np.sqrt(s2 * prep.cov_unit[:, 3, 3])
+                    pu = np.sqrt(s2 * pp.cov_unit[:, 0, 0])
+                    pv = np.sqrt(s2 * pp.cov_unit[:, 3, 3])
             bad = status0 != 0
             self.predicted_sigma_u = np.where(bad, np.nan, pu)
             self.predicted_sigma_v = np.where(bad, np.nan, pv)
@@ -215,9 +229,10 @@ class Correlator:
         out_i = np.empty(n, np.int64)
         out_s = np.empty(n, np.uint8)
         kern = kernels.icgn_translation if self.shape == "translation" else kernels.icgn_affine
-        kern(coef, self.order, self._f32, self._gx32, self._gy32,
+        kern(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
+             self._gx32, self._gy32,
              np.ascontiguousarray(self.rows[sel]), np.ascontiguousarray(self.cols[sel]),
-             self.half, np.ascontiguousarray(prep.hinv[sel]),
+             self.half, self._tw, np.ascontiguousarray(prep.hinv[sel]),
              np.ascontiguousarray(prep.jsum[sel]), np.ascontiguousarray(prep.avec[sel]),
              np.ascontiguousarray(prep.fmean[sel]), np.ascontiguousarray(prep.fnorm[sel]),
              np.ascontiguousarray(p0), np.ascontiguousarray(status_in), self.max_iterations,
@@ -261,7 +276,10 @@ class Correlator:
 
     def _correlate(self, cur: NDArray[np.float64], initial: ArrayLike | None) -> DICResult:
         t0 = time.perf_counter()
-        coef = bspline_coefficients(cur, order=self.order, dtype=np.float32)
+        cols_img = self.image_shape[1]
+        coef = self._coef_buf
+        bspline_coefficients(cur, order=self.order, dtype=np.float32,
+                             out=coef[:, :cols_img + 2 * PAD])
         t1 = time.perf_counter()
         n = self.n_points
         status0 = self._status0

@@ -87,7 +87,8 @@ def prefilter_reference(image: ArrayLike, order: int) -> NDArray[np.float64]:
 
 
 def bspline_coefficients(
-    image: ArrayLike, *, order: int = 3, dtype: type = np.float32
+    image: ArrayLike, *, order: int = 3, dtype: type = np.float32,
+    out: NDArray[np.floating] | None = None,
 ) -> NDArray[np.floating]:
     """Padded B-spline coefficients of ``image`` (compiled recursive prefilter).
 
@@ -99,6 +100,8 @@ def bspline_coefficients(
         Spline degree.
     dtype : {numpy.float32, numpy.float64}
         Working precision.
+    out : ndarray, optional
+        Array (or view) of the right shape and dtype to write into (reused buffers).
 
     Returns
     -------
@@ -109,7 +112,11 @@ def bspline_coefficients(
     if order not in (3, 5):
         raise ValueError(f"order={order}: must be 3 or 5")
     img = np.ascontiguousarray(image, dtype=dtype)
-    out = np.empty((img.shape[0] + 2 * PAD, img.shape[1] + 2 * PAD), dtype=dtype)
+    shape = (img.shape[0] + 2 * PAD, img.shape[1] + 2 * PAD)
+    if out is None:
+        out = np.empty(shape, dtype=dtype)
+    elif out.shape != shape or out.dtype != img.dtype:
+        raise ValueError(f"out: expected shape {shape} and dtype {img.dtype}")
     kernels.prefilter_padded(img, order, out)
     return out
 

@@ -207,9 +207,158 @@ def weights(t, order):  # pragma: no cover - compiled
     return w
 
 
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _beta(x, order):  # pragma: no cover - compiled
+    """Branch-free centred B-spline (truncated-power form), vectorisable."""
+    a = abs(x)
+    if order == 3:
+        p2 = max(np.float32(0.0), np.float32(2.0) - a)
+        p1 = max(np.float32(0.0), np.float32(1.0) - a)
+        return (p2 * p2 * p2 - np.float32(4.0) * p1 * p1 * p1) * np.float32(1.0 / 6.0)
+    p3 = max(np.float32(0.0), np.float32(3.0) - a)
+    p2 = max(np.float32(0.0), np.float32(2.0) - a)
+    p1 = max(np.float32(0.0), np.float32(1.0) - a)
+    q3 = p3 * p3
+    q2 = p2 * p2
+    q1 = p1 * p1
+    return (q3 * q3 * p3 - np.float32(6.0) * q2 * q2 * p2
+            + np.float32(15.0) * q1 * q1 * p1) * np.float32(1.0 / 120.0)
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _sample(coef, order, y, x):  # pragma: no cover - compiled
+    """One spline sample at image position (y, x) (generic path)."""
+    taps = order + 1
+    lo = (order - 1) // 2
+    ix = int(math.floor(x))
+    iy = int(math.floor(y))
+    tx = x - ix
+    ty = y - iy
+    g = 0.0
+    for a in range(taps):
+        wy = _beta5(ty - (a - lo)) if order == 5 else _beta3d(ty - (a - lo))
+        crow = coef[iy - lo + a + PAD]
+        acc = 0.0
+        for b in range(taps):
+            wx = _beta5(tx - (b - lo)) if order == 5 else _beta3d(tx - (b - lo))
+            acc += wx * crow[ix - lo + b + PAD]
+        g += wy * acc
+    return g
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _beta3d(x):  # pragma: no cover - compiled
+    a = abs(x)
+    p2 = max(0.0, 2.0 - a)
+    p1 = max(0.0, 1.0 - a)
+    return (p2 * p2 * p2 - 4.0 * p1 * p1 * p1) / 6.0
+
+
+
+# Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
+# their fixed-width (tw, a multiple of 16) loops; inlined into the parfor body they were not.
+@nb.njit(fastmath=True, cache=True)
+def _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow):  # pragma: no cover
+    tmpw = tmp.shape[0]
+    tw = grow.shape[0]
+    row = coef[rb, cb:cb + tmpw]
+    w0 = wyf[0]
+    for j in range(tmpw):
+        tmp[j] = w0 * row[j]
+    for a in range(1, taps):
+        row = coef[rb + a, cb:cb + tmpw]
+        wa = wyf[a]
+        for j in range(tmpw):
+            tmp[j] += wa * row[j]
+    w0 = wxf[0]
+    for j in range(tw):
+        grow[j] = w0 * tmp[j]
+    for b in range(1, taps):
+        wb = wxf[b]
+        t = tmp[b:b + tw]
+        for j in range(tw):
+            grow[j] += wb * t[j]
+
+
+@nb.njit(fastmath=True, cache=True)
+def _acc5(grow, off, mask, fr, gxr, gyr, acc):  # pragma: no cover
+    tw = grow.shape[0]
+    a0 = acc[0]
+    a1 = acc[1]
+    a2 = acc[2]
+    a3 = acc[3]
+    a4 = acc[4]
+    for j in range(tw):
+        g = (grow[j] - off) * mask[j]
+        a0[j] += g
+        a1[j] += g * g
+        a2[j] += gxr[j] * g
+        a3[j] += gyr[j] * g
+        a4[j] += fr[j] * g
+
+
+@nb.njit(fastmath=True, cache=True)
+def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
+                     grow):  # pragma: no cover
+    tw = grow.shape[0]
+    sten = order + 2
+    lo = (order - 1) // 2
+    for j in range(tw):
+        tx[j] = tx0 + p1 * dxs[j]
+        ty[j] = ty0 + p4 * dxs[j]
+    for b in range(sten):
+        kb = np.float32(b - lo)
+        wxb = wxs[b]
+        wyb = wys[b]
+        for j in range(tw):
+            wxb[j] = _beta(tx[j] - kb, order)
+            wyb[j] = _beta(ty[j] - kb, order)
+    for j in range(tw):
+        grow[j] = 0.0
+    for a in range(sten):
+        for j in range(tw):
+            hrow[j] = 0.0
+        for b in range(sten):
+            row = coef[rb + a, cb + b:cb + b + tw]
+            wxb = wxs[b]
+            for j in range(tw):
+                hrow[j] += wxb[j] * row[j]
+        wya = wys[a]
+        for j in range(tw):
+            grow[j] += wya[j] * hrow[j]
+
+
+@nb.njit(fastmath=True, cache=True)
+def _acc9(grow, off, mask, dxs, fdy, fr, gxr, gyr, acc):  # pragma: no cover
+    tw = grow.shape[0]
+    a0 = acc[0]
+    a1 = acc[1]
+    a2 = acc[2]
+    a3 = acc[3]
+    a4 = acc[4]
+    a5 = acc[5]
+    a6 = acc[6]
+    a7 = acc[7]
+    a8 = acc[8]
+    for j in range(tw):
+        g = (grow[j] - off) * mask[j]
+        gxg = gxr[j] * g
+        gyg = gyr[j] * g
+        a0[j] += g
+        a1[j] += g * g
+        a2[j] += gxg
+        a3[j] += gxg * dxs[j]
+        a4[j] += gxg * fdy
+        a5[j] += gyg
+        a6[j] += gyg * dxs[j]
+        a7[j] += gyg * fdy
+        a8[j] += fr[j] * g
+
+
 @nb.njit(parallel=True, fastmath=True, cache=True)
-def icgn_translation(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec, fmean,
-                     fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
+def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, jsum,
+                     avec, fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
                      out_p, out_zncc, out_iter, out_status):  # pragma: no cover - compiled
     """IC-GN with the zero-order (translation) shape function, ZNSSD criterion.
 
@@ -218,14 +367,21 @@ def icgn_translation(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec,
     (2,) their projections on the normalised reference subset, ``fmean``/``fnorm`` mean and
     norm ``sqrt(sum (f - fmean)^2)`` of the reference subset. See ``icgn.py`` for the
     algebra (the update needs only five running sums per iteration).
+
+    Layout: ``coef`` holds the padded coefficients of the current image (image pixel
+    ``(r, c)`` at ``(r + PAD, c + PAD)``) with at least ``tw + 8 + PAD`` extra zero columns
+    on the right; ``f``, ``gx``, ``gy`` (float32) have ``tw`` extra zero columns. Inner
+    loops run over ``tw`` (a multiple of 16 >= subset) columns with a 0/1 mask, so they
+    have no remainder and vectorise.
     """
     n = rows.shape[0]
     size = 2 * half + 1
     taps = order + 1
     lo = (order - 1) // 2
-    himg = coef.shape[0] - 2 * PAD
-    wimg = coef.shape[1] - 2 * PAD
     npx = size * size
+    tmpw = tw + 8
+    mask = np.zeros(tw, dtype=np.float32)
+    mask[:size] = 1.0
     for k in nb.prange(n):
         if status_in[k] != 0:
             out_status[k] = status_in[k]
@@ -238,8 +394,9 @@ def icgn_translation(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec,
         wy = np.empty(taps, dtype=np.float64)
         wxf = np.empty(taps, dtype=np.float32)
         wyf = np.empty(taps, dtype=np.float32)
-        tmp = np.empty(size + taps - 1, dtype=np.float32)
-        grow = np.empty(size, dtype=np.float32)
+        tmp = np.empty(tmpw, dtype=np.float32)
+        grow = np.empty(tw, dtype=np.float32)
+        acc = np.empty((5, tw), dtype=np.float32)
         u = p0[k, 0]
         v = p0[k, 1]
         u_start = u
@@ -264,52 +421,24 @@ def icgn_translation(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec,
             for a in range(taps):
                 wxf[a] = wx[a]
                 wyf[a] = wy[a]
+            acc[:, :] = 0.0
+            cb = ix - lo + PAD
+            for i in range(size):
+                rb = iy + i - lo + PAD
+                _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow)
+                _acc5(grow, off, mask, f[r0 + i, c0:c0 + tw], gx[r0 + i, c0:c0 + tw],
+                      gy[r0 + i, c0:c0 + tw], acc)
             sg = 0.0
             sgg = 0.0
             sx = 0.0
             sy = 0.0
             sf = 0.0
-            cb = ix - lo + PAD
-            for i in range(size):
-                rb = iy + i - lo + PAD
-                # vertical pass: taps rows -> one row of partial sums (contiguous reads)
-                row = coef[rb]
-                w0 = wyf[0]
-                for j in range(size + taps - 1):
-                    tmp[j] = w0 * row[cb + j]
-                for a in range(1, taps):
-                    row = coef[rb + a]
-                    wa = wyf[a]
-                    for j in range(size + taps - 1):
-                        tmp[j] += wa * row[cb + j]
-                # horizontal pass
-                w0 = wxf[0]
-                for j in range(size):
-                    grow[j] = w0 * tmp[j]
-                for b in range(1, taps):
-                    wb = wxf[b]
-                    for j in range(size):
-                        grow[j] += wb * tmp[j + b]
-                fr = f[r0 + i]
-                gxr = gx[r0 + i]
-                gyr = gy[r0 + i]
-                rs = np.float32(0.0)
-                rss = np.float32(0.0)
-                rx = np.float32(0.0)
-                ry = np.float32(0.0)
-                rf = np.float32(0.0)
-                for j in range(size):
-                    g = grow[j] - off
-                    rs += g
-                    rss += g * g
-                    rx += gxr[c0 + j] * g
-                    ry += gyr[c0 + j] * g
-                    rf += fr[c0 + j] * g
-                sg += rs
-                sgg += rss
-                sx += rx
-                sy += ry
-                sf += rf
+            for j in range(tw):
+                sg += acc[0, j]
+                sgg += acc[1, j]
+                sx += acc[2, j]
+                sy += acc[3, j]
+                sf += acc[4, j]
             gm = sg / npx
             dg2 = sgg - npx * gm * gm
             if not dg2 > 1e-12 * (sgg + 1e-30):
@@ -348,22 +477,32 @@ def icgn_translation(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec,
 
 
 @nb.njit(parallel=True, fastmath=True, cache=True)
-def icgn_affine(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec, fmean,
-                fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
+def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, jsum, avec,
+                fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
                 out_p, out_zncc, out_iter, out_status):  # pragma: no cover - compiled
     """IC-GN with the first-order (affine) shape function, ZNSSD criterion.
 
     Parameters ``p = (u, du/dx, du/dy, v, dv/dx, dv/dy)``; the warp of a subset pixel at
     offset ``(dx, dy)`` from the POI is ``x' = x + u + ux dx + uy dy``,
     ``y' = y + v + vx dx + vy dy`` (Pan et al. 2013, doi:10.1007/s11340-013-9717-6).
+
+    Fast path: when the sub-pixel offsets ``x' - x`` (and ``y' - y``) of all subset pixels
+    span less than one pixel, one integer base covers the subset and every sample reads
+    the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
+    with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
+    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout as in
+    :func:`icgn_translation`.
     """
     n = rows.shape[0]
     size = 2 * half + 1
-    taps = order + 1
     lo = (order - 1) // 2
-    himg = coef.shape[0] - 2 * PAD
-    wimg = coef.shape[1] - 2 * PAD
+    sten = order + 2
     npx = size * size
+    mask = np.zeros(tw, dtype=np.float32)
+    mask[:size] = 1.0
+    dxs = np.zeros(tw, dtype=np.float32)
+    for j in range(tw):
+        dxs[j] = j - half
     for k in nb.prange(n):
         if status_in[k] != 0:
             out_status[k] = status_in[k]
@@ -372,91 +511,84 @@ def icgn_affine(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec, fmea
             out_zncc[k] = np.nan
             out_iter[k] = 0
             continue
-        wx = np.empty(taps, dtype=np.float64)
-        wy = np.empty(taps, dtype=np.float64)
         q = np.empty(6, dtype=np.float64)
         p = np.empty(6, dtype=np.float64)
+        wxs = np.empty((sten, tw), dtype=np.float32)
+        wys = np.empty((sten, tw), dtype=np.float32)
+        tx = np.empty(tw, dtype=np.float32)
+        ty = np.empty(tw, dtype=np.float32)
+        hrow = np.empty(tw, dtype=np.float32)
+        grow = np.empty(tw, dtype=np.float32)
+        acc = np.empty((9, tw), dtype=np.float32)
         for m in range(6):
             p[m] = p0[k, m]
         xc = cols[k]
         yc = rows[k]
         r0 = rows[k] - half
         c0 = cols[k] - half
-        off = fmean[k]
+        off = np.float32(fmean[k])
         st = _MAX_ITERATIONS
         zn = np.nan
         nit = 0
         for it in range(max_iter):
             # bounds: an affine map sends the subset's corners to the warped extremes
             inside = True
+            oxmin = 1e30
+            oxmax = -1e30
+            oymin = 1e30
+            oymax = -1e30
             for cy in (-half, half):
                 for cx in (-half, half):
-                    xx = xc + p[0] + (1.0 + p[1]) * cx + p[2] * cy
-                    yy = yc + p[3] + p[4] * cx + (1.0 + p[5]) * cy
-                    if not (xx >= 0.0 and yy >= 0.0 and xx <= wimg - 1 and yy <= himg - 1):
+                    ox = p[0] + p[1] * cx + p[2] * cy
+                    oy = p[3] + p[4] * cx + p[5] * cy
+                    oxmin = min(oxmin, ox)
+                    oxmax = max(oxmax, ox)
+                    oymin = min(oymin, oy)
+                    oymax = max(oymax, oy)
+                    if not (xc + cx + ox >= 0.0 and yc + cy + oy >= 0.0
+                            and xc + cx + ox <= wimg - 1 and yc + cy + oy <= himg - 1):
                         inside = False
             if not inside:
                 st = _OUT_OF_BOUNDS
                 break
-            sg = 0.0
-            sgg = 0.0
-            s_u = 0.0
-            s_ux = 0.0
-            s_uy = 0.0
-            s_v = 0.0
-            s_vx = 0.0
-            s_vy = 0.0
-            sf = 0.0
+            fast = (oxmax - oxmin) < 0.999 and (oymax - oymin) < 0.999
+            bx = int(math.floor(oxmin))
+            by = int(math.floor(oymin))
+            acc[:, :] = 0.0
+            p1 = np.float32(p[1])
+            p4 = np.float32(p[4])
             for i in range(size):
                 dy = i - half
-                xrow = xc + p[0] + p[2] * dy - half * (1.0 + p[1])
-                yrow = yc + p[3] + (1.0 + p[5]) * dy - half * p[4]
-                fr = f[r0 + i]
-                gxr = gx[r0 + i]
-                gyr = gy[r0 + i]
-                rs = 0.0
-                rss = 0.0
-                rx = 0.0
-                rxd = 0.0
-                ry = 0.0
-                ryd = 0.0
-                rf = 0.0
-                for j in range(size):
-                    dx = j - half
-                    xx = xrow + (1.0 + p[1]) * j
-                    yy = yrow + p[4] * j
-                    ix = int(math.floor(xx))
-                    iy = int(math.floor(yy))
-                    _weights(xx - ix, order, wx)
-                    _weights(yy - iy, order, wy)
-                    g = 0.0
-                    rb = iy - lo + PAD
-                    cb = ix - lo + PAD
-                    for a in range(taps):
-                        crow = coef[rb + a]
-                        acc = 0.0
-                        for b in range(taps):
-                            acc += wx[b] * crow[cb + b]
-                        g += wy[a] * acc
-                    g -= off
-                    gxv = gxr[c0 + j] * g
-                    gyv = gyr[c0 + j] * g
-                    rs += g
-                    rss += g * g
-                    rx += gxv
-                    rxd += gxv * dx
-                    ry += gyv
-                    ryd += gyv * dx
-                    rf += fr[c0 + j] * g
-                sg += rs
-                sgg += rss
-                s_u += rx
-                s_ux += rxd
-                s_uy += rx * dy
-                s_v += ry
-                s_vx += ryd
-                s_vy += ry * dy
-                sf += rf
+                if fast:
+                    # offsets t in [0, 2) from the common integer base (bx, by)
+                    tx0 = np.float32(p[0] + p[2] * dy - bx)
+                    ty0 = np.float32(p[3] + p[5] * dy - by)
+                    _row_affine_fast(coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD, order,
+                                     tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow, grow)
+                else:
+                    for j in range(tw):
+                        grow[j] = 0.0
+                    for j in range(size):
+                        xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
+                        yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
+                        grow[j] = _sample(coef, order, yy, xx)
+                _acc9(grow, off, mask, dxs, np.float32(dy), f[r0 + i, c0:c0 + tw],
+                      gx[r0 + i, c0:c0 + tw], gy[r0 + i, c0:c0 + tw], acc)
+            sg = 0.0
+            sgg = 0.0
+            sf = 0.0
+            for m in range(6):
+                q[m] = 0.0
+            for j in range(tw):
+                sg += acc[0, j]
+                sgg += acc[1, j]
+                q[0] += acc[2, j]
+                q[1] += acc[3, j]
+                q[2] += acc[4, j]
+                q[3] += acc[5, j]
+                q[4] += acc[6, j]
+                q[5] += acc[7, j]
+                sf += acc[8, j]
             gm = sg / npx
             dg2 = sgg - npx * gm * gm
             if not dg2 > 1e-12 * (sgg + 1e-30):
@@ -464,12 +596,6 @@ def icgn_affine(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec, fmea
                 break
             dg = math.sqrt(dg2)
             zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
-            q[0] = s_u
-            q[1] = s_ux
-            q[2] = s_uy
-            q[3] = s_v
-            q[4] = s_vx
-            q[5] = s_vy
             for m in range(6):
                 q[m] = ((q[m] - jsum[k, m] * gm) / dg - avec[k, m] * zn) / fnorm[k]
             du = 0.0
@@ -504,18 +630,12 @@ def icgn_affine(coef, order, f, gx, gy, rows, cols, half, hinv, jsum, avec, fmea
             m12 = p[2]
             m21 = p[4]
             m22 = 1.0 + p[5]
-            n11 = m11 * i11 + m12 * i21
-            n12 = m11 * i12 + m12 * i22
-            n21 = m21 * i11 + m22 * i21
-            n22 = m21 * i12 + m22 * i22
-            nu = m11 * it1 + m12 * it2 + p[0]
-            nv = m21 * it1 + m22 * it2 + p[3]
-            p[0] = nu
-            p[1] = n11 - 1.0
-            p[2] = n12
-            p[3] = nv
-            p[4] = n21
-            p[5] = n22 - 1.0
+            p[0] = m11 * it1 + m12 * it2 + p[0]
+            p[3] = m21 * it1 + m22 * it2 + p[3]
+            p[1] = m11 * i11 + m12 * i21 - 1.0
+            p[2] = m11 * i12 + m12 * i22
+            p[4] = m21 * i11 + m22 * i21
+            p[5] = m21 * i12 + m22 * i22 - 1.0
             nit = it + 1
             finite = True
             for m in range(6):

@@ -10,6 +10,7 @@ displacements and lengths in px, grey levels (GL) for intensities, seconds for t
 
 from __future__ import annotations
 
+from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
     ConvergenceError,
@@ -42,14 +43,18 @@ __version__ = "0.1.0"
 __all__ = [
     "ConfigError",
     "ConvergenceError",
+    "Correlator",
+    "DICResult",
     "DicblurError",
     "FitError",
     "ImageReadError",
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "PointStatus",
     "StoreError",
     "__version__",
+    "correlate",
     "estimate_noise",
     "file_sha256",
     "gaussian_mask",

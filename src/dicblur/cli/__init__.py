@@ -59,6 +59,9 @@ def _root(
 from . import pattern as _pattern  # noqa: E402
 
 _pattern.register(app)
+from . import correlate as _correlate  # noqa: E402
+
+_correlate.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]

@@ -268,7 +268,7 @@ class Correlator:
                              f"{self.image_shape}; both images must have the same size")
         old_threads = numba.get_num_threads()
         if self.workers is not None:
-            numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))
+            numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
         try:
             return self._correlate(cur, initial)
         finally:

@@ -111,7 +111,7 @@ def bspline_coefficients(
     """
     if order not in (3, 5):
         raise ValueError(f"order={order}: must be 3 or 5")
-    img = np.ascontiguousarray(image, dtype=dtype)
+    img: NDArray[np.floating] = np.ascontiguousarray(image, dtype=dtype)
     shape = (img.shape[0] + 2 * PAD, img.shape[1] + 2 * PAD)
     if out is None:
         out = np.empty(shape, dtype=dtype)
@@ -143,14 +143,20 @@ def bspline_gradients(
     rows, cols = shape
     c = np.asarray(coeffs, dtype=np.float64)
     half = (order + 1) // 2
-    gy = np.zeros(shape)
+    ks = range(-half, half + 1)
+    # separable: derivative taps beta'(-k) along one axis, value taps beta(-k) along the other
+    val = {k: float(bspline_kernel(-k, order)) for k in ks}
+    der = {k: float(bspline_kernel_derivative(-k, order)) for k in ks}
+    sm_rows = np.zeros((rows, c.shape[1]))
+    sm_cols = np.zeros((c.shape[0], cols))
+    for k in ks:
+        sm_rows += val[k] * c[PAD + k:PAD + k + rows, :]
+        sm_cols += val[k] * c[:, PAD + k:PAD + k + cols]
     gx = np.zeros(shape)
-    for k in range(-half, half + 1):
-        d = float(bspline_kernel_derivative(-k, order))
-        if d == 0.0:
-            continue
-        gx += d * c[PAD:PAD + rows, PAD + k:PAD + k + cols]
-        gy += d * c[PAD + k:PAD + k + rows, PAD:PAD + cols]
+    gy = np.zeros(shape)
+    for k in ks:
+        gx += der[k] * sm_rows[:, PAD + k:PAD + k + cols]
+        gy += der[k] * sm_cols[PAD + k:PAD + k + rows, :]
     return gy, gx
 
 

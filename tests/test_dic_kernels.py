@@ -7,12 +7,10 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import ndimage
 
-from dicblur.dic import Correlator
-from dicblur.dic import interpolation as itp
-from dicblur.dic import kernels
-from dicblur.dic.icgn import compose_affine, icgn_reference
-
 from _dic_helpers import affine_warp, fourier_shift, pattern
+from dicblur.dic import Correlator, kernels
+from dicblur.dic import interpolation as itp
+from dicblur.dic.icgn import compose_affine, icgn_reference
 
 
 @pytest.mark.parametrize("order", [3, 5])

@@ -282,20 +282,32 @@ def _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow):  # pragma: no cov
 
 
 @nb.njit(fastmath=True, cache=True)
-def _acc5(grow, off, mask, fr, gxr, gyr, acc):  # pragma: no cover
+def _acc5(grow, off, mask, f, gx, gy, r, c0):  # pragma: no cover
+    """Row sums of g, g^2, gx g, gy g, f g (scalar float32 reductions vectorise)."""
     tw = grow.shape[0]
-    a0 = acc[0]
-    a1 = acc[1]
-    a2 = acc[2]
-    a3 = acc[3]
-    a4 = acc[4]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
     for j in range(tw):
         g = (grow[j] - off) * mask[j]
-        a0[j] += g
-        a1[j] += g * g
-        a2[j] += gxr[j] * g
-        a3[j] += gyr[j] * g
-        a4[j] += fr[j] * g
+        s0 += g
+        s1 += g * g
+        s2 += gxr[j] * g
+        s3 += gyr[j] * g
+        s4 += fr[j] * g
+    return s0, s1, s2, s3, s4
+
+
+@nb.njit(fastmath=True, cache=True)
+def _row_sums_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow, off, mask, f, gx, gy, r,
+                          c0):  # pragma: no cover
+    _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow)
+    return _acc5(grow, off, mask, f, gx, gy, r, c0)
 
 
 @nb.njit(fastmath=True, cache=True)
@@ -330,30 +342,31 @@ def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wy
 
 
 @nb.njit(fastmath=True, cache=True)
-def _acc9(grow, off, mask, dxs, fdy, fr, gxr, gyr, acc):  # pragma: no cover
+def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
+    """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
     tw = grow.shape[0]
-    a0 = acc[0]
-    a1 = acc[1]
-    a2 = acc[2]
-    a3 = acc[3]
-    a4 = acc[4]
-    a5 = acc[5]
-    a6 = acc[6]
-    a7 = acc[7]
-    a8 = acc[8]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    s5 = np.float32(0.0)
+    s6 = np.float32(0.0)
     for j in range(tw):
         g = (grow[j] - off) * mask[j]
         gxg = gxr[j] * g
         gyg = gyr[j] * g
-        a0[j] += g
-        a1[j] += g * g
-        a2[j] += gxg
-        a3[j] += gxg * dxs[j]
-        a4[j] += gxg * fdy
-        a5[j] += gyg
-        a6[j] += gyg * dxs[j]
-        a7[j] += gyg * fdy
-        a8[j] += fr[j] * g
+        s0 += g
+        s1 += g * g
+        s2 += gxg
+        s3 += gxg * dxs[j]
+        s4 += gyg
+        s5 += gyg * dxs[j]
+        s6 += fr[j] * g
+    return s0, s1, s2, s3, s4, s5, s6
 
 
 @nb.njit(parallel=True, fastmath=True, cache=True)
@@ -396,7 +409,6 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, h
         wyf = np.empty(taps, dtype=np.float32)
         tmp = np.empty(tmpw, dtype=np.float32)
         grow = np.empty(tw, dtype=np.float32)
-        acc = np.empty((5, tw), dtype=np.float32)
         u = p0[k, 0]
         v = p0[k, 1]
         u_start = u
@@ -421,24 +433,21 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, h
             for a in range(taps):
                 wxf[a] = wx[a]
                 wyf[a] = wy[a]
-            acc[:, :] = 0.0
             cb = ix - lo + PAD
-            for i in range(size):
-                rb = iy + i - lo + PAD
-                _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow)
-                _acc5(grow, off, mask, f[r0 + i, c0:c0 + tw], gx[r0 + i, c0:c0 + tw],
-                      gy[r0 + i, c0:c0 + tw], acc)
             sg = 0.0
             sgg = 0.0
             sx = 0.0
             sy = 0.0
             sf = 0.0
-            for j in range(tw):
-                sg += acc[0, j]
-                sgg += acc[1, j]
-                sx += acc[2, j]
-                sy += acc[3, j]
-                sf += acc[4, j]
+            for i in range(size):
+                r0s, r1s, r2s, r3s, r4s = _row_sums_translation(
+                    coef, iy + i - lo + PAD, cb, taps, wyf, wxf, tmp, grow, off, mask, f, gx,
+                    gy, r0 + i, c0)
+                sg += r0s
+                sgg += r1s
+                sx += r2s
+                sy += r3s
+                sf += r4s
             gm = sg / npx
             dg2 = sgg - npx * gm * gm
             if not dg2 > 1e-12 * (sgg + 1e-30):
@@ -519,7 +528,6 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
         ty = np.empty(tw, dtype=np.float32)
         hrow = np.empty(tw, dtype=np.float32)
         grow = np.empty(tw, dtype=np.float32)
-        acc = np.empty((9, tw), dtype=np.float32)
         for m in range(6):
             p[m] = p0[k, m]
         xc = cols[k]
@@ -554,7 +562,11 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
             fast = (oxmax - oxmin) < 0.999 and (oymax - oymin) < 0.999
             bx = int(math.floor(oxmin))
             by = int(math.floor(oymin))
-            acc[:, :] = 0.0
+            sg = 0.0
+            sgg = 0.0
+            sf = 0.0
+            for m in range(6):
+                q[m] = 0.0
             p1 = np.float32(p[1])
             p4 = np.float32(p[4])
             for i in range(size):
@@ -572,23 +584,17 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                         xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
                         yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
                         grow[j] = _sample(coef, order, yy, xx)
-                _acc9(grow, off, mask, dxs, np.float32(dy), f[r0 + i, c0:c0 + tw],
-                      gx[r0 + i, c0:c0 + tw], gy[r0 + i, c0:c0 + tw], acc)
-            sg = 0.0
-            sgg = 0.0
-            sf = 0.0
-            for m in range(6):
-                q[m] = 0.0
-            for j in range(tw):
-                sg += acc[0, j]
-                sgg += acc[1, j]
-                q[0] += acc[2, j]
-                q[1] += acc[3, j]
-                q[2] += acc[4, j]
-                q[3] += acc[5, j]
-                q[4] += acc[6, j]
-                q[5] += acc[7, j]
-                sf += acc[8, j]
+                t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(grow, off, mask, dxs, f, gx, gy,
+                                                          r0 + i, c0)
+                sg += t0s
+                sgg += t1s
+                q[0] += t2s
+                q[1] += t3s
+                q[2] += t2s * dy
+                q[3] += t4s
+                q[4] += t5s
+                q[5] += t4s * dy
+                sf += t6s
             gm = sg / npx
             dg2 = sgg - npx * gm * gm
             if not dg2 > 1e-12 * (sgg + 1e-30):

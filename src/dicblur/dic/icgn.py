@@ -19,8 +19,8 @@ sums of ``g``, ``g^2``, ``f g`` and ``J^T g`` over the warped current subset.
 
 Predicted random error (noise std ``sigma`` in both images, first order): the estimate
 ``dp`` is linear in the noise with covariance ``2 sigma^2 (Df^2 H)^-1`` (the inverse of the
-Fisher information of the ZNSSD model, Gao, Cheng, Pan & Yang, Opt. Lasers Eng. 67, 2015,
-doi:10.1016/j.optlaseng.2014.11.008). For the translation shape the issue fixes the
+Fisher information of the ZNSSD model; IC-GN random-error analysis: Pan & Wang, Exp. Mech.
+56, 2016, doi:10.1007/s11340-016-0180-z). For the translation shape the issue fixes the
 match-score form ``sqrt(2 sigma^2 / SSSIG)`` per axis (Lavatelli & Zappa eq. 2).
 """
 

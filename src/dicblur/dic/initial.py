@@ -1,7 +1,8 @@
 """Integer initial guesses by FFT cross-correlation (FFT-CC).
 
-Two stages (as in OpenCorr's FFT-CC initialiser, Jiang et al., Opt. Lasers Eng. 2015,
-doi:10.1016/j.optlaseng.2014.07.003, and Pan, Li & Tong 2013):
+Two stages (as in OpenCorr's FFT-CC initialiser, Jiang et al., "Path-independent digital
+image correlation with high accuracy, speed and robustness", Opt. Lasers Eng. 65, 2015,
+and Pan, Li & Tong 2013, doi:10.1007/s11340-013-9717-6):
 
 - :func:`global_shift`: one phase correlation of a central window (Hann-tapered) of the two
   images: finds a large rigid motion (tens of px) for the price of three FFTs;

@@ -148,6 +148,8 @@ class Correlator:
         self._gx32[:, :cols_img] = gx
         self._gy32 = np.zeros_like(self._f32)
         self._gy32[:, :cols_img] = gy
+        self._kernel_args = tuple(np.ascontiguousarray(a) for a in (
+            rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm))
         self._coef_buf = np.zeros((rows_img + 2 * PAD, cols_img + 2 * PAD + extra), np.float32)
         self.predicted_sigma_u: NDArray[np.float64] | None = None
         self.predicted_sigma_v: NDArray[np.float64] | None = None
@@ -221,7 +223,12 @@ class Correlator:
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
                              NDArray[np.uint8]]:
         prep = self._prep
-        sel = slice(None) if idx is None else idx
+        if idx is None:
+            rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
+        else:
+            rows, cols = self.rows[idx], self.cols[idx]
+            hinv, jsum, avec = prep.hinv[idx], prep.jsum[idx], prep.avec[idx]
+            fmean, fnorm = prep.fmean[idx], prep.fnorm[idx]
         n = len(self.rows) if idx is None else len(idx)
         k = N_PARAMS[self.shape]
         out_p = np.empty((n, k))
@@ -231,10 +238,7 @@ class Correlator:
         kern = kernels.icgn_translation if self.shape == "translation" else kernels.icgn_affine
         kern(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
              self._gx32, self._gy32,
-             np.ascontiguousarray(self.rows[sel]), np.ascontiguousarray(self.cols[sel]),
-             self.half, self._tw, np.ascontiguousarray(prep.hinv[sel]),
-             np.ascontiguousarray(prep.jsum[sel]), np.ascontiguousarray(prep.avec[sel]),
-             np.ascontiguousarray(prep.fmean[sel]), np.ascontiguousarray(prep.fnorm[sel]),
+             rows, cols, self.half, self._tw, hinv, jsum, avec, fmean, fnorm,
              np.ascontiguousarray(p0), np.ascontiguousarray(status_in), self.max_iterations,
              self.tolerance, self.min_zncc, float(self.subset), out_p, out_z, out_i, out_s)
         return out_p, out_z, out_i, out_s

@@ -304,6 +304,44 @@ def _acc5(grow, off, mask, f, gx, gy, r, c0):  # pragma: no cover
 
 
 @nb.njit(fastmath=True, cache=True)
+def _row_sums_cubic(coef, rb, cb, wyf, wxf, tmp, off, mask, f, gx, gy, r,
+                    c0):  # pragma: no cover
+    """Cubic fast path of :func:`_row_sums_translation`: explicit 4 taps per pass."""
+    tmpw = tmp.shape[0]
+    tw = mask.shape[0]
+    q0 = coef[rb, cb:cb + tmpw]
+    q1 = coef[rb + 1, cb:cb + tmpw]
+    q2 = coef[rb + 2, cb:cb + tmpw]
+    q3 = coef[rb + 3, cb:cb + tmpw]
+    a0 = wyf[0]
+    a1 = wyf[1]
+    a2 = wyf[2]
+    a3 = wyf[3]
+    for j in range(tmpw):
+        tmp[j] = a0 * q0[j] + a1 * q1[j] + a2 * q2[j] + a3 * q3[j]
+    b0 = wxf[0]
+    b1 = wxf[1]
+    b2 = wxf[2]
+    b3 = wxf[3]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    for j in range(tw):
+        g = (b0 * tmp[j] + b1 * tmp[j + 1] + b2 * tmp[j + 2] + b3 * tmp[j + 3] - off) * mask[j]
+        s0 += g
+        s1 += g * g
+        s2 += gxr[j] * g
+        s3 += gyr[j] * g
+        s4 += fr[j] * g
+    return s0, s1, s2, s3, s4
+
+
+@nb.njit(fastmath=True, cache=True)
 def _row_sums_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow, off, mask, f, gx, gy, r,
                           c0):  # pragma: no cover
     _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow)
@@ -339,6 +377,63 @@ def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wy
         wya = wys[a]
         for j in range(tw):
             grow[j] += wya[j] * hrow[j]
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _w5(t):  # pragma: no cover - compiled
+    """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
+    sh = np.float32(1.0) if t >= np.float32(1.0) else np.float32(0.0)
+    u = t - sh
+    u2 = u * u
+    u3 = u2 * u
+    v = np.float32(1.0) - u
+    w0 = v * v * v * np.float32(1.0 / 6.0)
+    w1 = np.float32(2.0 / 3.0) - u2 + np.float32(0.5) * u3
+    w2 = (np.float32(1.0) + np.float32(3.0) * (u + u2 - u3)) * np.float32(1.0 / 6.0)
+    w3 = u3 * np.float32(1.0 / 6.0)
+    ns = np.float32(1.0) - sh
+    return (ns * w0, ns * w1 + sh * w0, ns * w2 + sh * w1, ns * w3 + sh * w2, sh * w3)
+
+
+@nb.njit(fastmath=True, cache=True)
+def _row_affine_cubic(coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy, r,
+                      c0):  # pragma: no cover
+    """Cubic affine fast path, one row: 5x5 stencil at contiguous memory, fused sums."""
+    tw = mask.shape[0]
+    q0 = coef[rb, cb:cb + tw + 4]
+    q1 = coef[rb + 1, cb:cb + tw + 4]
+    q2 = coef[rb + 2, cb:cb + tw + 4]
+    q3 = coef[rb + 3, cb:cb + tw + 4]
+    q4 = coef[rb + 4, cb:cb + tw + 4]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    s5 = np.float32(0.0)
+    s6 = np.float32(0.0)
+    for j in range(tw):
+        x0, x1, x2, x3, x4 = _w5(tx0 + p1 * dxs[j])
+        y0, y1, y2, y3, y4 = _w5(ty0 + p4 * dxs[j])
+        h0 = x0 * q0[j] + x1 * q0[j + 1] + x2 * q0[j + 2] + x3 * q0[j + 3] + x4 * q0[j + 4]
+        h1 = x0 * q1[j] + x1 * q1[j + 1] + x2 * q1[j + 2] + x3 * q1[j + 3] + x4 * q1[j + 4]
+        h2 = x0 * q2[j] + x1 * q2[j + 1] + x2 * q2[j + 2] + x3 * q2[j + 3] + x4 * q2[j + 4]
+        h3 = x0 * q3[j] + x1 * q3[j + 1] + x2 * q3[j + 2] + x3 * q3[j + 3] + x4 * q3[j + 4]
+        h4 = x0 * q4[j] + x1 * q4[j + 1] + x2 * q4[j + 2] + x3 * q4[j + 3] + x4 * q4[j + 4]
+        g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 + y4 * h4 - off) * mask[j]
+        gxg = gxr[j] * g
+        gyg = gyr[j] * g
+        s0 += g
+        s1 += g * g
+        s2 += gxg
+        s3 += gxg * dxs[j]
+        s4 += gyg
+        s5 += gyg * dxs[j]
+        s6 += fr[j] * g
+    return s0, s1, s2, s3, s4, s5, s6
 
 
 @nb.njit(fastmath=True, cache=True)
@@ -440,9 +535,14 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, h
             sy = 0.0
             sf = 0.0
             for i in range(size):
-                r0s, r1s, r2s, r3s, r4s = _row_sums_translation(
-                    coef, iy + i - lo + PAD, cb, taps, wyf, wxf, tmp, grow, off, mask, f, gx,
-                    gy, r0 + i, c0)
+                if order == 3:
+                    r0s, r1s, r2s, r3s, r4s = _row_sums_cubic(
+                        coef, iy + i - lo + PAD, cb, wyf, wxf, tmp, off, mask, f, gx, gy,
+                        r0 + i, c0)
+                else:
+                    r0s, r1s, r2s, r3s, r4s = _row_sums_translation(
+                        coef, iy + i - lo + PAD, cb, taps, wyf, wxf, tmp, grow, off, mask, f,
+                        gx, gy, r0 + i, c0)
                 sg += r0s
                 sgg += r1s
                 sx += r2s
@@ -571,21 +671,28 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
             p4 = np.float32(p[4])
             for i in range(size):
                 dy = i - half
-                if fast:
-                    # offsets t in [0, 2) from the common integer base (bx, by)
-                    tx0 = np.float32(p[0] + p[2] * dy - bx)
-                    ty0 = np.float32(p[3] + p[5] * dy - by)
-                    _row_affine_fast(coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD, order,
-                                     tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow, grow)
+                if fast and order == 3:
+                    t0s, t1s, t2s, t3s, t4s, t5s, t6s = _row_affine_cubic(
+                        coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
+                        np.float32(p[0] + p[2] * dy - bx), np.float32(p[3] + p[5] * dy - by),
+                        p1, p4, dxs, off, mask, f, gx, gy, r0 + i, c0)
                 else:
-                    for j in range(tw):
-                        grow[j] = 0.0
-                    for j in range(size):
-                        xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
-                        yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
-                        grow[j] = _sample(coef, order, yy, xx)
-                t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(grow, off, mask, dxs, f, gx, gy,
-                                                          r0 + i, c0)
+                    if fast:
+                        # offsets t in [0, 2) from the common integer base (bx, by)
+                        tx0 = np.float32(p[0] + p[2] * dy - bx)
+                        ty0 = np.float32(p[3] + p[5] * dy - by)
+                        _row_affine_fast(coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
+                                         order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
+                                         grow)
+                    else:
+                        for j in range(tw):
+                            grow[j] = 0.0
+                        for j in range(size):
+                            xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
+                            yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
+                            grow[j] = _sample(coef, order, yy, xx)
+                    t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(grow, off, mask, dxs, f, gx, gy,
+                                                              r0 + i, c0)
                 sg += t0s
                 sgg += t1s
                 q[0] += t2s

@@ -23,7 +23,7 @@ __all__ = ["global_shift", "subset_fftcc"]
 
 
 def global_shift(reference: NDArray[np.floating], current: NDArray[np.floating], *,
-                 window: int = 256, workers: int | None = None) -> tuple[int, int, float]:
+                 window: int = 128, workers: int | None = None) -> tuple[int, int, float]:
     """Integer rigid shift ``(u, v)`` of ``current`` against ``reference`` (px).
 
     Phase correlation of the central ``window`` x ``window`` region (clipped to the image,

@@ -66,10 +66,11 @@ def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
         j1 = min(m, j0 + bw)
         w = j1 - j0
         s = np.zeros(w, dtype=np.float64)
-        for r in range(n):
-            for j in range(j0, j1):
-                x[r, j] = x[r, j] * gain
+        first = True
         for z in poles:
+            # the overall gain is folded into the first causal pass (one sweep less)
+            gn = gain if first else 1.0
+            first = False
             horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
             for j in range(w):
                 s[j] = 0.0
@@ -95,10 +96,10 @@ def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
                 for j in range(w):
                     s[j] /= 1.0 - zn * zn
             for j in range(w):
-                x[0, j0 + j] = s[j]
+                x[0, j0 + j] = gn * s[j]
             for r in range(1, n):
                 for j in range(j0, j1):
-                    x[r, j] += z * x[r - 1, j]
+                    x[r, j] = gn * x[r, j] + z * x[r - 1, j]
             c = z / (z * z - 1.0)
             for j in range(j0, j1):
                 x[n - 1, j] = c * (x[n - 1, j] + z * x[n - 2, j])
@@ -156,10 +157,8 @@ def prefilter_padded(image: np.ndarray, order: int, out: np.ndarray) -> None:
     _transpose(image, t)
     _filter_axis0(t, poles, tol)  # along x (columns of the image)
     centre = out[PAD:PAD + rows, PAD:PAD + cols]
-    tmp = np.empty((rows, cols), dtype=image.dtype)
-    _transpose(t, tmp)
-    _filter_axis0(tmp, poles, tol)  # along y (rows)
-    centre[...] = tmp
+    _transpose(t, centre)
+    _filter_axis0(centre, poles, tol)  # along y (rows), in place
     _fill_margin(out, rows, cols, PAD)
 
 

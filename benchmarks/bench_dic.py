@@ -142,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--seed", type=int, default=2024)
     ap.add_argument("--quick", action="store_true", help="skip the bias curves")
+    ap.add_argument("--cold-compile", action="store_true",
+                    help="also time the first call with an empty numba cache")
     ap.add_argument("--pyvale-python", default=None,
                     help="interpreter of a venv with pyvale (it is not a dependency)")
     args = ap.parse_args(argv)
@@ -161,6 +163,22 @@ def main(argv: list[str] | None = None) -> int:
 
     rows_out = []
     results: dict = {}
+    if args.cold_compile:
+        # first-call compile time with an empty numba cache, in a fresh interpreter
+        import subprocess
+        import tempfile
+
+        code = ("import time, numpy as np; t=time.perf_counter(); import dicblur; "
+                "c=dicblur.Correlator(np.random.default_rng(0).normal(128,30,(64,64)), "
+                "shape='{s}'); print(c.warmup())")
+        for shape in ("translation", "affine"):
+            with tempfile.TemporaryDirectory() as tmp:
+                env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
+                out = subprocess.run([sys.executable, "-c", code.format(s=shape)], env=env,
+                                     capture_output=True, text=True, check=True)
+            results[f"cold_compile_s_{shape}"] = float(out.stdout.strip().splitlines()[-1])
+            print(f"cold compile ({shape}, empty numba cache): "
+                  f"{results[f'cold_compile_s_{shape}']:.1f} s")
     for shape in ("translation", "affine"):
         t0 = time.perf_counter()
         corr = Correlator(ref, subset=subset, step=step, shape=shape, noise_sigma=2.0,

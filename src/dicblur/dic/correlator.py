@@ -298,10 +298,16 @@ class Correlator:
         dy = (self.rows[rest[good]] - self.rows[src[good]]).astype(float)
         if k == 2:
             start[good] = q
-        else:  # carry the seed's affine warp to this POI's centre
+        elif good.any():
+            # carry the seed's translation to this POI's centre with the median gradients of
+            # all converged seeds (a single seed's gradients are too noisy to extrapolate)
+            ok_seeds = st[seeds] == PointStatus.CONVERGED
+            grad = np.median(p[seeds[ok_seeds]][:, [1, 2, 4, 5]], axis=0)
             start[good] = q
-            start[good, 0] = q[:, 0] + q[:, 1] * dx + q[:, 2] * dy
-            start[good, 3] = q[:, 3] + q[:, 4] * dx + q[:, 5] * dy
+            start[good, 0] = q[:, 0] + grad[0] * dx + grad[1] * dy
+            start[good, 3] = q[:, 3] + grad[2] * dx + grad[3] * dy
+            start[good, 1], start[good, 2] = grad[0], grad[1]
+            start[good, 4], start[good, 5] = grad[2], grad[3]
         pr, zr, itr, str_ = self._run_icgn(coef, start, status0[rest], rest)
         p[rest], z[rest], it[rest], st[rest] = pr, zr, itr, str_
         return p, z, it, st

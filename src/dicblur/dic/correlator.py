@@ -139,7 +139,7 @@ class Correlator:
         self._status0 = status0
         self._ref = ref
         # padded float32 layouts of the kernels (see kernels.icgn_translation)
-        self._tw = 8 * ((self.subset + 7) // 8)
+        self._tw = 16 * ((self.subset + 15) // 16)
         rows_img, cols_img = self.image_shape
         extra = self._tw + 16
         self._f32 = np.zeros((rows_img, cols_img + self._tw), np.float32)

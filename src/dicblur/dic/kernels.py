@@ -307,7 +307,7 @@ def _beta3d(x):  # pragma: no cover - compiled
 
 
 # Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
-# their fixed-width (tw, a multiple of 8) loops; inlined into the parfor body they were not.
+# their fixed-width (tw, a multiple of 16) loops; inlined into the parfor body they were not.
 @nb.njit(fastmath=True, cache=True)
 def _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow):  # pragma: no cover
     tmpw = tmp.shape[0]
@@ -529,7 +529,7 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, h
     Layout: ``coef`` holds the padded coefficients of the current image (image pixel
     ``(r, c)`` at ``(r + PAD, c + PAD)``) with at least ``tw + 8 + PAD`` extra zero columns
     on the right; ``f``, ``gx``, ``gy`` (float32) have ``tw`` extra zero columns. Inner
-    loops run over ``tw`` (a multiple of 8 >= subset) columns with a 0/1 mask, so they
+    loops run over ``tw`` (a multiple of 16 >= subset) columns with a 0/1 mask, so they
     have no remainder and vectorise.
     """
     n = rows.shape[0]

@@ -10,6 +10,17 @@ displacements and lengths in px, grey levels (GL) for intensities, seconds for t
 
 from __future__ import annotations
 
+from .blur import (
+    AcceleratedMotion,
+    SineMotion,
+    blur_length,
+    blur_transfer,
+    motion_blur,
+    render_blurred,
+    trajectory_positions,
+    valid_region,
+)
+from .camera import Camera, add_gaussian_noise
 from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
@@ -37,10 +48,14 @@ from .metrics import (
     subset_centres,
 )
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
+from .pulse import PulseTrain
+from .pulse.study import PulseStudy, run_pulse_study
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "AcceleratedMotion",
+    "Camera",
     "ConfigError",
     "ConvergenceError",
     "Correlator",
@@ -52,8 +67,14 @@ __all__ = [
     "PatternMetrics",
     "PatternSettings",
     "PointStatus",
+    "PulseStudy",
+    "PulseTrain",
+    "SineMotion",
     "StoreError",
     "__version__",
+    "add_gaussian_noise",
+    "blur_length",
+    "blur_transfer",
     "correlate",
     "estimate_noise",
     "file_sha256",
@@ -64,13 +85,18 @@ __all__ = [
     "match_score_sigma",
     "michelson_contrast",
     "mig",
+    "motion_blur",
     "pan_sigma",
     "paper_pattern4",
     "pattern_metrics",
+    "render_blurred",
     "rms_contrast",
+    "run_pulse_study",
     "save_image",
     "speckle_pattern",
     "speckle_size",
     "sssig",
     "subset_centres",
+    "trajectory_positions",
+    "valid_region",
 ]

@@ -48,7 +48,9 @@ class Correlator:
 
     The reference is prepared once (B-spline coefficients and gradients, per-subset
     ZNSSD Hessians, predicted random errors); :meth:`correlate` then measures any number of
-    current images against it.
+    current images against it. One instance reuses a coefficient buffer between calls:
+    do not call :meth:`correlate` of the same instance from several threads at once
+    (processes, or one instance per thread, are fine).
 
     Parameters
     ----------

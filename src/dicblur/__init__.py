@@ -28,6 +28,7 @@ from .design import (
     design_problem,
     export_pattern,
 )
+from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
     ConvergenceError,
@@ -64,6 +65,8 @@ __all__ = [
     "Camera",
     "ConfigError",
     "ConvergenceError",
+    "Correlator",
+    "DICResult",
     "DesignResult",
     "DicblurError",
     "FitError",
@@ -72,6 +75,7 @@ __all__ = [
     "PatternFamily",
     "PatternMetrics",
     "PatternSettings",
+    "PointStatus",
     "PulseStudy",
     "PulseTrain",
     "SineMotion",
@@ -80,6 +84,7 @@ __all__ = [
     "add_gaussian_noise",
     "blur_length",
     "blur_transfer",
+    "correlate",
     "design_pattern",
     "design_problem",
     "estimate_noise",

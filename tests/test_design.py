@@ -19,6 +19,7 @@ from dicblur.design import (
     evaluate_candidate,
     export_pattern,
     regenerate,
+    sine_blur_distribution,
     surrogate,
 )
 from dicblur.design import search as search_mod
@@ -78,6 +79,21 @@ def test_problem_targets():
     assert v.blurs[0] == pytest.approx(blur_length(100.0, 1e-3, 0.05))
     d = design_problem(blurs=[4.0, 2.0], weights=[1.0, 3.0])
     assert d.blurs == (2.0, 4.0) and d.weights == (0.75, 0.25)
+
+
+def test_sine_blur_distribution_matches_sampled_phases():
+    """Against W = |x(t + T) - x(t)| of the sine motion sampled at random trigger times."""
+    amp, f, t_exp = 5.0, 20.0, 2e-3
+    w, wt = sine_blur_distribution(amp, f, t_exp, points=41)
+    t = np.random.default_rng(0).uniform(0.0, 1.0 / f, 200_000)
+    x = lambda s: amp * np.sin(2 * np.pi * f * s)  # noqa: E731
+    sampled = np.abs(x(t + t_exp) - x(t))
+    assert w.max() == pytest.approx(sampled.max(), rel=1e-3)
+    assert np.dot(wt, w) == pytest.approx(sampled.mean(), rel=0.01)
+    assert np.quantile(sampled, 0.5) == pytest.approx(np.median(w), rel=0.03)
+    assert wt.sum() == pytest.approx(1.0) and np.all(np.diff(w) >= 0)
+    p = design_problem(blurs=w, weights=wt)
+    assert len(p.blurs) == 41 and p.fit_blurs[-1] == pytest.approx(1.25 * w.max(), abs=1e-3)
 
 
 @pytest.mark.parametrize("kwargs, match", [

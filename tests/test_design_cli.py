@@ -39,6 +39,9 @@ def test_design_cli_writes_everything(tmp_path, capsys):
     (["--blur-range", "1-5"], "LO..HI"),
     (["--blur", "2", "--subset", "30"], "subset"),
     (["--blur", "2", "--grid", "3x3"], "grid"),
+    (["--blur-dist", "1-2"], "W:weight"),
+    (["--blur-dist", "1:0,2:0"], "weights"),
+    (["--amplitude", "1", "--frequency", "10"], "--amplitude"),
 ])
 def test_design_cli_bad_input_exit_2(tmp_path, capsys, args, match):
     rc = main(["design", "-o", str(tmp_path / "x"), *FAST, *args])

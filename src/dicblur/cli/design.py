@@ -49,6 +49,20 @@ def _size_mm(text: str) -> tuple[float, float]:
     return vals[0], vals[1]
 
 
+def _distribution(text: str) -> tuple[list[float], list[float]]:
+    """Parse ``"W1:w1,W2:w2,..."`` (px : weight) into two lists."""
+    blurs, weights = [], []
+    try:
+        for item in text.split(","):
+            w, p = item.split(":")
+            blurs.append(float(w))
+            weights.append(float(p))
+    except ValueError as exc:
+        raise InputError(f"--blur-dist={text!r}: expected W:weight pairs, e.g. "
+                         "1:0.2,3:0.5,5:0.3") from exc
+    return blurs, weights
+
+
 def _clean(v: object) -> object:
     """JSON-safe copy: NaN and inf become null (strict JSON readers reject NaN)."""
     if isinstance(v, float) and not math.isfinite(v):
@@ -68,6 +82,14 @@ def design_command(
     velocity: float | None = typer.Option(None, "--velocity",
                                           help="Target speed, mm/s (with --exposure, --scale)."),
     exposure: float | None = typer.Option(None, "--exposure", help="Exposure time, s."),
+    blur_dist: str | None = typer.Option(None, "--blur-dist",
+                                         help="Blur distribution W:weight,... px, e.g. "
+                                         "1:0.2,3:0.5,5:0.3."),
+    amplitude: float | None = typer.Option(None, "--amplitude",
+                                           help="Sine vibration amplitude, mm (with "
+                                           "--frequency, --exposure, --scale)."),
+    frequency: float | None = typer.Option(None, "--frequency",
+                                           help="Sine vibration frequency, Hz."),
     scale: float | None = typer.Option(None, "--scale",
                                        help="Camera scale, mm per px (print export)."),
     noise: float = typer.Option(2.0, "--noise", help="Camera noise std, grey levels."),
@@ -103,7 +125,13 @@ def design_command(
     Writes OUT/design.json, OUT/evaluations.csv, OUT/best_pattern.png (camera px),
     OUT/pattern.png|pdf|json (print-ready, when --scale is given) and OUT/report.html.
     """
-    from ..design import PatternFamily, design_pattern, design_problem, export_pattern
+    from ..design import (
+        PatternFamily,
+        design_pattern,
+        design_problem,
+        export_pattern,
+        sine_blur_distribution,
+    )
     from ..design.page import write_design_report
     from ..io import save_image
     from ..patterns import speckle_pattern
@@ -118,12 +146,25 @@ def design_command(
     size_mm = _size_mm(print_size)
     if min(size_mm) <= 0 or not all(math.isfinite(v) for v in size_mm):
         raise InputError(f"--print-size={print_size!r}: both sides must be > 0 mm")
-    motion = velocity is not None or exposure is not None
+    blurs = weights = None
+    if blur_dist is not None:
+        blurs, weights = _distribution(blur_dist)
+    if amplitude is not None or frequency is not None:
+        if amplitude is None or frequency is None or exposure is None or scale is None:
+            raise InputError("--amplitude, --frequency: a sine vibration needs --amplitude "
+                             "(mm), --frequency (Hz), --exposure (s) and --scale (mm/px)")
+        if velocity is not None or blurs is not None:
+            raise InputError("--amplitude: give either a sine vibration or --velocity / "
+                             "--blur-dist, not both")
+        if scale <= 0:
+            raise InputError(f"--scale={scale!r}: must be > 0 mm/px")
+        bl, wt = sine_blur_distribution(amplitude / scale, frequency, exposure)
+        blurs, weights = list(bl), list(wt)
+        exposure = None
     problem = design_problem(
-        blur=blur, blur_range=rng, velocity=velocity, exposure=exposure,
-        scale=scale if (motion or scale is not None) else None, noise=noise, subset=subset,
-        step=step, image_size=image_size, dic_shape=shape, realisations=realisations,
-        seed=seed)
+        blur=blur, blur_range=rng, blurs=blurs, weights=weights, velocity=velocity,
+        exposure=exposure, scale=scale, noise=noise, subset=subset, step=step,
+        image_size=image_size, dic_shape=shape, realisations=realisations, seed=seed)
     sz = (parse_range(speckle_range, "--speckle-range") if speckle_range is not None
           else (2.0, max(2.0, min(10.0, subset / 3.0))))
     family = PatternFamily(speckle_size=sz, density=parse_range(density_range,

@@ -16,7 +16,7 @@ from __future__ import annotations
 from .evaluate import Evaluation, evaluate_candidate, surrogate
 from .export import PrintExport, export_pattern, regenerate
 from .family import DEFAULT_CANDIDATE, Candidate, PatternFamily
-from .problem import DesignProblem, design_problem
+from .problem import DesignProblem, design_problem, sine_blur_distribution
 from .search import Confirmation, DesignResult, confirm, design_pattern
 
 __all__ = [
@@ -34,5 +34,6 @@ __all__ = [
     "evaluate_candidate",
     "export_pattern",
     "regenerate",
+    "sine_blur_distribution",
     "surrogate",
 ]

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from .._validation import check_finite_number, check_odd_subset, check_positive, describe
 from ..errors import InputError
 
-__all__ = ["DesignProblem", "design_problem"]
+__all__ = ["DesignProblem", "design_problem", "sine_blur_distribution"]
 
 
 @dataclass(frozen=True)
@@ -88,6 +88,45 @@ class DesignProblem:
                 "dic_shape": self.dic_shape, "substeps": self.substeps,
                 "realisations": self.realisations, "fit_blurs": list(self.fit_blurs),
                 "scale": self.scale, "seed": self.seed}
+
+
+def sine_blur_distribution(
+    amplitude: float, frequency: float, exposure: float, *, points: int = 11
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Blur lengths seen by a camera triggered at a random phase of a sine vibration.
+
+    The target moves as ``x(t) = A sin(2 pi f t)`` (px). An exposure of length T starting
+    at phase phi sees the displacement ``W(phi) = |x(t + T) - x(t)| =
+    2 A |sin(pi f T)| |cos(2 pi f t + pi f T)|``: with a uniformly random trigger phase,
+    W follows an arcsine law on [0, 2 A |sin(pi f T)|]. Returned as ``points`` equally
+    weighted quantiles (the mid-point quantiles of the phase). The blur of one exposure is
+    treated as linear of length W, fair while ``f T`` is small (less than about 1/8).
+
+    Parameters
+    ----------
+    amplitude : float
+        Vibration amplitude A, px (> 0).
+    frequency : float
+        Hz (> 0).
+    exposure : float
+        Exposure time T, s (> 0).
+    points : int
+        Number of blur lengths returned.
+
+    Returns
+    -------
+    blurs, weights : ndarray, shape (points,)
+        W (px), ascending, and equal weights summing to 1.
+    """
+    a = check_positive(amplitude, "amplitude")
+    f = check_positive(frequency, "frequency")
+    t = check_positive(exposure, "exposure")
+    if isinstance(points, bool) or not isinstance(points, int) or points < 1:
+        raise InputError(f"points={describe(points)}: expected an integer >= 1")
+    w_max = 2.0 * a * abs(np.sin(np.pi * f * t))
+    phase = (np.arange(points) + 0.5) / points * (np.pi / 2)
+    blurs = np.sort(w_max * np.cos(phase))
+    return blurs, np.full(points, 1.0 / points)
 
 
 def _blur_value(value: Any, name: str) -> float:

@@ -29,6 +29,12 @@ def test_design_cli_writes_everything(tmp_path, capsys):
     assert doc["problem"]["blurs"] == [2.0] and len(doc["evaluations"]) >= 4
     rows = (out / "evaluations.csv").read_text().strip().splitlines()
     assert len(rows) == 1 + len(doc["evaluations"])
+    from dicblur.report import check_in_browser, find_browser
+
+    if find_browser() is None:
+        pytest.skip("no Chromium-family browser on PATH to open the report")
+    check = check_in_browser(out / "report.html")
+    assert check.images_ok and check.image_count >= 6
 
 
 @pytest.mark.parametrize("args, match", [

@@ -35,23 +35,40 @@ from .metrics import (
     sssig,
     subset_centres,
 )
+from .models import (
+    BlurSensitivity,
+    BlurUncertaintyModel,
+    ExposurePlan,
+    PoissonGaussianCamera,
+    blur_sensitivity,
+    compare_models,
+    fit_blur_model,
+    plan_exposure,
+)
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "BlurSensitivity",
+    "BlurUncertaintyModel",
     "ConfigError",
     "ConvergenceError",
     "DicblurError",
+    "ExposurePlan",
     "FitError",
     "ImageReadError",
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "PoissonGaussianCamera",
     "StoreError",
     "__version__",
+    "blur_sensitivity",
+    "compare_models",
     "estimate_noise",
     "file_sha256",
+    "fit_blur_model",
     "gaussian_mask",
     "gradient_variance",
     "image_gradients",
@@ -62,6 +79,7 @@ __all__ = [
     "pan_sigma",
     "paper_pattern4",
     "pattern_metrics",
+    "plan_exposure",
     "rms_contrast",
     "save_image",
     "speckle_pattern",

@@ -250,9 +250,15 @@ def plan_exposure(
         return np.array([model._log_u(kind, np.array([ti * v_px]), float(si), theta)[0]
                          for ti, si in zip(tt, sig, strict=True)])
 
-    t_hi = t_sat if math.isfinite(t_sat) else 1e3 * t_rule
-    t_lo = t_hi * 1e-6
-    grid = np.geomspace(t_lo, t_hi, 400)
+    # search blur lengths 1e-4 .. 1e4 px, capped by saturation
+    t_lo = 1e-4 / v_px
+    t_hi = min(t_sat, 1e4 / v_px)
+    if t_hi <= t_lo:
+        raise InputError(
+            f"camera: the sensor saturates after {t_sat:.3g} s, before the target moves "
+            "1e-4 px; lower the flux (light) or check the camera numbers"
+        )
+    grid = np.geomspace(t_lo, t_hi, 600)
     lg = log_u(grid)
     i = int(np.argmin(lg))
     if 0 < i < grid.size - 1:

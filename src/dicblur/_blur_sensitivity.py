@@ -92,19 +92,21 @@ def directional_derivatives(
             ext = np.pad(image, ((0, rows), (0, cols)), mode="symmetric")
         else:
             ext = image
-        spec = np.fft.fft2(ext)
-        ky = 2j * np.pi * np.fft.fftfreq(ext.shape[0])[:, None]
-        kx = 2j * np.pi * np.fft.fftfreq(ext.shape[1])[None, :]
-        if ext.shape[0] % 2 == 0:  # the Nyquist bin of an odd derivative is not real
-            ky[ext.shape[0] // 2] = 0
-        if ext.shape[1] % 2 == 0:
-            kx[:, ext.shape[1] // 2] = 0
-        fy = np.fft.ifft2(spec * ky).real[:rows, :cols]
-        fx = np.fft.ifft2(spec * kx).real[:rows, :cols]
-        kyy = (2j * np.pi * np.fft.fftfreq(ext.shape[0])[:, None]) ** 2
-        kxx = (2j * np.pi * np.fft.fftfreq(ext.shape[1])[None, :]) ** 2
-        fdd = np.fft.ifft2(spec * (dx * dx * kxx + 2 * dx * dy * ky * kx + dy * dy * kyy))
-        return fy, fx, fdd.real[:rows, :cols]
+        shp = ext.shape
+        spec = np.fft.rfft2(ext)
+        ky = 2j * np.pi * np.fft.fftfreq(shp[0])[:, None]
+        kx = 2j * np.pi * np.fft.rfftfreq(shp[1])[None, :]
+        kyy, kxx = ky * ky, kx * kx
+        ky_odd, kx_odd = ky.copy(), kx.copy()
+        if shp[0] % 2 == 0:  # the Nyquist bin of an odd derivative is not real
+            ky_odd[shp[0] // 2] = 0
+        if shp[1] % 2 == 0:
+            kx_odd[:, -1] = 0
+        fy = np.fft.irfft2(spec * ky_odd, s=shp)[:rows, :cols]
+        fx = np.fft.irfft2(spec * kx_odd, s=shp)[:rows, :cols]
+        fdd = np.fft.irfft2(spec * (dx * dx * kxx + 2 * dx * dy * ky * kx + dy * dy * kyy),
+                            s=shp)
+        return fy, fx, fdd[:rows, :cols]
     if derivative != "central":
         raise InputError(
             f"derivative={derivative!r}: unknown derivative; choose 'spectral' or 'central'"

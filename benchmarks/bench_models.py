@@ -3,6 +3,9 @@
 Prints a table and writes ``benchmarks/results/models.json``.
 
 Part A (always): speed of the static blur sensitivity, of the fits and of planning.
+Part C (always, independent of the DIC code): the same comparison with the SSD minimum of
+each subset found by brute force (exact Fourier box blur and shift, ``least_squares`` over
+the translation (u, v)), i.e. the quantity the expansion approximates.
 Part B (when ``dicblur.dic`` and ``dicblur.blur`` exist): the static prediction of ``c``
 against ``c`` fitted from DIC on noise-free, exactly box-blurred generated patterns over a
 range of speckle sizes, W <= 4 px (acceptance: within 15 %).
@@ -72,6 +75,51 @@ def part_a() -> list[dict]:
     return rows
 
 
+def _fit_c(blurs: np.ndarray, u_e: np.ndarray) -> tuple[float, float]:
+    """c of u = c W^2 (least squares) and the leading c of u = c W^2 + c4 W^4."""
+    c_pure = float(np.sum(u_e * blurs**2) / np.sum(blurs**4))
+    a = np.stack([blurs**2, blurs**4], axis=1)
+    c_lead = float(np.linalg.lstsq(a, u_e, rcond=None)[0][0])
+    return c_pure, c_lead
+
+
+def part_c(quick: bool) -> list[dict]:
+    from scipy import optimize
+
+    n, sub, h = 128, 31, 15
+    sizes = (3.0, 6.0) if quick else (3.0, 4.0, 6.0, 8.0)
+    blurs = np.arange(0.5, 4.01, 0.5) if not quick else np.array([1.0, 2.0, 3.0, 4.0])
+    rows = []
+    for size in sizes:
+        img = dicblur.speckle_pattern((n, n), speckle_size=size, softness=0.5, seed=7)
+        spec = np.fft.fft2(img)
+        ky = np.fft.fftfreq(n)[:, None]
+        kx = np.fft.fftfreq(n)[None, :]
+        cent = np.array([[r, c] for r in range(h + 1, n - h - 1, 10)
+                         for c in range(h + 1, n - h - 1, 10)])
+        pred = blur_sensitivity(img, subset=sub, points=cent, boundary="periodic").c
+        u_e = []
+        for wl in blurs:
+            blurred = spec * np.sinc(wl * kx)
+            xs = []
+            for r, c in cent:
+                sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
+                ref = img[sl]
+
+                def resid(p, sl=sl, ref=ref, blurred=blurred, kx=kx, ky=ky):
+                    shift = np.exp(2j * np.pi * (kx * p[0] + ky * p[1]))
+                    return (np.fft.ifft2(blurred * shift).real[sl] - ref).ravel()
+
+                xs.append(optimize.least_squares(resid, [0.0, 0.0], xtol=1e-10).x[0])
+            u_e.append(float(np.std(xs)))
+        c_pure, c_lead = _fit_c(blurs, np.array(u_e))
+        rows.append({"speckle_size": size, "c_static": pred, "c_fit": c_pure,
+                     "c_fit_leading": c_lead, "ratio": c_pure / pred,
+                     "ratio_leading": c_lead / pred,
+                     "u_e": dict(zip(map(float, blurs), u_e, strict=True))})
+    return rows
+
+
 def part_b(quick: bool) -> list[dict] | None:
     if importlib.util.find_spec("dicblur.dic") is None or \
             importlib.util.find_spec("dicblur.blur") is None:
@@ -80,7 +128,7 @@ def part_b(quick: bool) -> list[dict] | None:
     from dicblur.dic import Correlator
 
     sizes = (3.0, 5.0) if quick else (3.0, 4.0, 6.0, 8.0)
-    blurs = np.array([1.0, 2.0, 3.0, 4.0])
+    blurs = np.arange(0.5, 4.01, 0.5)
     rows = []
     for size in sizes:
         for shape in ("translation", "affine"):
@@ -94,10 +142,10 @@ def part_b(quick: bool) -> list[dict] | None:
                 res = corr.correlate(motion_blur(img, (0.0, float(wl)), substeps=None))
                 ok = res.converged
                 u_e.append(float(np.std(res.u[ok])))
-            u_arr = np.array(u_e)
-            c_fit = float(np.sum(u_arr * blurs**2) / np.sum(blurs**4))
+            c_fit, c_lead = _fit_c(blurs, np.array(u_e))
             rows.append({"speckle_size": size, "shape": shape, "c_static": pred,
-                         "c_fit": c_fit, "ratio": c_fit / pred,
+                         "c_fit": c_fit, "ratio": c_fit / pred, "c_fit_leading": c_lead,
+                         "ratio_leading": c_lead / pred,
                          "u_e": dict(zip(map(float, blurs), u_e, strict=True))})
     return rows
 
@@ -111,20 +159,29 @@ def main() -> None:
     for r in a:
         extra = f"  (x{r['ratio']:.2f})" if "ratio" in r else ""
         print(f"{r['case']:62s} {r['seconds']:9.4f}{extra}")
+    cc = part_c(args.quick)
+    print("\nstatic c vs brute-force SSD minima (translation, exact box blur, W <= 4 px)")
+    print(f"{'speckle px':>10s} {'c static':>10s} {'c fit':>10s} {'ratio':>6s} "
+          f"{'c lead':>10s} {'ratio':>6s}")
+    for r in cc:
+        print(f"{r['speckle_size']:10.1f} {r['c_static']:10.3e} {r['c_fit']:10.3e} "
+              f"{r['ratio']:6.3f} {r['c_fit_leading']:10.3e} {r['ratio_leading']:6.3f}")
     b = part_b(args.quick)
     if b is None:
         print("part B (static c vs DIC-fitted c): pending, dicblur.dic / dicblur.blur absent")
     else:
-        print(f"\n{'speckle px':>10s} {'shape':>12s} {'c static':>10s} {'c fitted':>10s} "
-              f"{'ratio':>6s}")
+        print("\nstatic c vs c fitted from DIC (noise-free, exact box blur, W <= 4 px)")
+        print(f"{'speckle px':>10s} {'shape':>12s} {'c static':>10s} {'c fitted':>10s} "
+              f"{'ratio':>6s} {'c lead':>10s} {'ratio':>6s}")
         for r in b:
             print(f"{r['speckle_size']:10.1f} {r['shape']:>12s} {r['c_static']:10.3e} "
-                  f"{r['c_fit']:10.3e} {r['ratio']:6.3f}")
+                  f"{r['c_fit']:10.3e} {r['ratio']:6.3f} {r['c_fit_leading']:10.3e} "
+                  f"{r['ratio_leading']:6.3f}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps({
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load": os.getloadavg()},
-        "speed": a, "c_validation": b}, indent=1))
+        "speed": a, "c_vs_bruteforce_ssd": cc, "c_vs_dic": b}, indent=1))
     print(f"wrote {OUT}")
 
 

@@ -224,6 +224,17 @@ def test_model_value(model):
         assert word in text
 
 
+def test_prediction_interval_coverage(model):
+    # new measurements drawn like the fitted data fall in the 95 % interval ~95 % of the time
+    rng = np.random.default_rng(9)
+    w = np.arange(0.5, 10.01, 0.5)
+    pred = model.predict(w)
+    truth = mismatch_model(w, sssig_decay(w, S0, BETA), 2.0, c=7e-4)
+    new = truth[None, :] * np.exp(rng.normal(0, 0.02, (200, w.size)))
+    inside = np.mean((new >= pred.low) & (new <= pred.high))
+    assert 0.88 <= inside <= 0.995
+
+
 def test_json_round_trip_bit_exact(model, tmp_path):
     text = model.to_json()
     back = BlurUncertaintyModel.from_json(text)

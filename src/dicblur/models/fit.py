@@ -146,10 +146,8 @@ def fit_blur_model(
             raise InputError(f"fit_range={fit_range!r}: need finite W_lo < W_hi (px)")
         rule = "given"
     else:
-        with warnings.catch_warnings():
-            warnings.simplefilter("always")
-            lo, hi = edge_driven_range(w, contrast_ratio=ratio, sssig=s if ratio is None else None,
-                                       tolerance=range_tolerance)
+        lo, hi = edge_driven_range(w, contrast_ratio=ratio, sssig=s if ratio is None else None,
+                                   tolerance=range_tolerance)
         rule = (f"contrast ratio <= {1 + range_tolerance:g}" if ratio is not None
                 else "beta W^2 <= 1 (SSSIG at most halved)")
     in_range = (w >= lo) & (w <= hi)

@@ -59,6 +59,9 @@ def _root(
 from . import pattern as _pattern  # noqa: E402
 
 _pattern.register(app)
+from . import blur as _blur  # noqa: E402
+
+_blur.register(app)
 from . import models as _models  # noqa: E402
 
 _models.register(app)

@@ -338,6 +338,20 @@ def test_plan_with_read_noise_and_saturation(model):
     assert plan.exposure <= cam.saturation_exposure
 
 
+def test_camera_adapter_matches_camera_noise():
+    # dicblur.Camera: variance = gain * signal + read^2 (GL); the adapter must agree
+    cam = dicblur.Camera(read_noise=1.5, gain=0.02, full_well=None, bit_depth=None)
+    level = 100.0
+    frames = cam.capture(np.full((256, 256), level), seed=4)
+    pg = PoissonGaussianCamera.from_camera(cam, nominal_exposure=2e-3, mean_level=level)
+    expect = float(pg.noise_gl(2e-3, level))
+    assert expect == pytest.approx(math.sqrt(0.02 * level + 1.5**2), rel=1e-12)
+    assert frames.std() == pytest.approx(expect, rel=0.02)
+    with pytest.raises(InputError, match="shot noise"):
+        PoissonGaussianCamera.from_camera(dicblur.Camera(read_noise=1.0, bit_depth=None),
+                                          nominal_exposure=1e-3, mean_level=level)
+
+
 # ----------------------------------------------------------------------------- static c
 
 

@@ -66,6 +66,42 @@ class PoissonGaussianCamera:
         if check_positive(self.peak_to_mean, "peak_to_mean") < 1:
             raise InputError(f"peak_to_mean={self.peak_to_mean!r}: must be >= 1")
 
+    @classmethod
+    def from_camera(cls, camera: Any, *, nominal_exposure: float, mean_level: float,
+                    peak_to_mean: float = 2.0) -> PoissonGaussianCamera:
+        """Build from a :class:`dicblur.Camera` (grey-level units) and its nominal exposure.
+
+        ``Camera`` maps an irradiance image in grey levels at the nominal exposure to
+        electrons with ``gain`` (GL/e-; derived from ``full_well`` and ``bit_depth`` when
+        None), adds read noise in GL and saturates at ``full_well`` (or the ADC top level).
+
+        Parameters
+        ----------
+        camera : dicblur.Camera
+        nominal_exposure : float
+            Exposure (s) at which the camera's input image has its grey levels
+            (``exposure_scale = 1``).
+        mean_level : float
+            Mean grey level of the pattern at the nominal exposure (GL).
+        """
+        t0 = check_positive(nominal_exposure, "nominal_exposure")
+        level = check_positive(mean_level, "mean_level")
+        gain = getattr(camera, "gain", None)
+        full_well = getattr(camera, "full_well", None)
+        bits = getattr(camera, "bit_depth", None)
+        if gain is None and full_well is not None and bits is not None:
+            gain = (2**bits - 1) / full_well
+        if gain is None:
+            raise InputError(
+                "camera: without gain or full_well it has no shot noise, so no optimum "
+                "exposure exists; set gain (GL/e-) or full_well"
+            )
+        if full_well is None:
+            full_well = (2**bits - 1) / gain if bits is not None else 1e30
+        # exposure_scale is the camera's own exposure knob: the plan sets the exposure
+        return cls(full_well=float(full_well), read_noise=float(camera.read_noise) / gain,
+                   flux=level / (gain * t0), peak_to_mean=peak_to_mean)
+
     @property
     def saturation_exposure(self) -> float:
         """Exposure (s) at which the brightest pixels reach the full well."""
@@ -228,7 +264,10 @@ def plan_exposure(
 
     for attr in ("full_well", "read_noise", "flux"):
         if not hasattr(camera, attr):
-            raise InputError(f"camera: needs a {attr!r} attribute (use PoissonGaussianCamera)")
+            raise InputError(
+                f"camera: needs a {attr!r} attribute; use PoissonGaussianCamera (or "
+                "PoissonGaussianCamera.from_camera for a dicblur.Camera)"
+            )
     if sigma is not None:
         raise InputError("sigma: with a camera the noise follows the exposure; omit sigma")
     fit = model._fit(kind)

@@ -6,6 +6,12 @@ Part A (always): speed of the static blur sensitivity, of the fits and of planni
 Part C (always, independent of the DIC code): the same comparison with the SSD minimum of
 each subset found by brute force (exact Fourier box blur and shift, ``least_squares`` over
 the translation (u, v)), i.e. the quantity the expansion approximates.
+Part D (when ``dicblur.dic`` exists): brute-force exposure planning. A model is fitted to a
+calibration sweep (fixed Gaussian noise), the optimal exposure is planned for a
+Poisson-Gaussian ``dicblur.Camera``, and the exposure is then swept with that camera
+(reference and blurred current image captured at the same exposure, DIC run, several
+repetitions); the measured optimum (parabola in log t through the lowest points, its
+spread from a bootstrap over repetitions) is compared with the planned one.
 Part B (when ``dicblur.dic`` and ``dicblur.blur`` exist): the static prediction of ``c``
 against ``c`` fitted from DIC on noise-free, exactly box-blurred generated patterns over a
 range of speckle sizes, W <= 4 px (acceptance: within 15 %).
@@ -160,6 +166,78 @@ def part_b(quick: bool) -> list[dict] | None:
     return rows
 
 
+def part_d(quick: bool) -> dict | None:
+    if importlib.util.find_spec("dicblur.dic") is None:
+        return None
+    from dicblur.blur import motion_blur
+    from dicblur.camera import Camera, add_gaussian_noise
+
+    correlate = importlib.import_module("dicblur.dic").correlate
+    from dicblur.models import PoissonGaussianCamera
+
+    img = dicblur.speckle_pattern((192, 192), speckle_size=4.0, softness=0.5, seed=7)
+    level = float(img.mean())
+    opts = {"subset": 31, "step": 12, "shape": "affine"}
+    reps = 2 if quick else 4
+
+    def u_e_of(ref: np.ndarray, cur: np.ndarray) -> float:
+        res = correlate(ref, cur, **opts)
+        return float(np.std(res.u[res.converged]))
+
+    # calibration sweep at a fixed noise (what a campaign provides)
+    sigma_cal = 2.0
+    w_cal = np.arange(0.0, 6.01, 0.5)
+    u_cal = []
+    for i, wl in enumerate(w_cal):
+        blurred = motion_blur(img, (0.0, float(wl)), substeps=None) if wl > 0 else img
+        v = [u_e_of(add_gaussian_noise(img, sigma_cal, seed=1000 * i + r),
+                    add_gaussian_noise(blurred, sigma_cal, seed=1000 * i + r + 500))
+             for r in range(reps)]
+        u_cal.append(float(np.sqrt(np.mean(np.square(v)))))
+    s_cal = [float(dicblur.sssig(motion_blur(img, (0.0, float(wl)), substeps=None),
+                                 subset=31, step=12).mean()) for wl in w_cal]
+    model = fit_blur_model(w_cal, s_cal, u_cal, noise_sigma=sigma_cal, mean_level=level,
+                           subset=31, default="mismatch")
+    cam = Camera(read_noise=2.0, gain=0.05, full_well=None, bit_depth=None)
+    t0, velocity, scale = 1e-3, 100.0, 0.05
+    pg = PoissonGaussianCamera.from_camera(cam, nominal_exposure=t0, mean_level=level)
+    plan = plan_exposure(model, velocity=velocity, scale=scale, camera=pg)
+    # brute force: sweep the exposure with the camera
+    factors = np.geomspace(0.25, 4.0, 9 if quick else 13)
+    k_px = velocity / scale
+    u_rep = np.empty((factors.size, reps))
+    for i, f in enumerate(factors):
+        t = plan.exposure * f
+        c = Camera(read_noise=2.0, gain=0.05, full_well=None, bit_depth=None,
+                   exposure_scale=t / t0)
+        blurred = motion_blur(img, (0.0, float(k_px * t)), substeps=None)
+        for r in range(reps):
+            u_rep[i, r] = u_e_of(c.capture(img, seed=77 * i + r),
+                                 c.capture(blurred, seed=77 * i + r + 5000))
+    rng = np.random.default_rng(0)
+
+    def t_min(u: np.ndarray) -> float:
+        lu = np.log(np.sqrt(np.mean(u**2, axis=1)))
+        j = int(np.clip(np.argmin(lu), 2, lu.size - 3))
+        x = np.log(plan.exposure * factors[j - 2:j + 3])
+        a, b, _ = np.polyfit(x, lu[j - 2:j + 3], 2)
+        return float(np.exp(-b / (2 * a))) if a > 0 else float(np.exp(x[2]))
+
+    t_bf = t_min(u_rep)
+    boots = [t_min(u_rep[:, rng.integers(0, reps, reps)]) for _ in range(200)]
+    pred_curve = [float(model.predict([k_px * plan.exposure * f],
+                                      float(pg.noise_gl(plan.exposure * f, level))).u_e[0])
+                  for f in factors]
+    return {"planned_exposure": plan.exposure, "planned_blur": plan.blur,
+            "planned_u_e": plan.u_e, "bruteforce_exposure": t_bf,
+            "bruteforce_exposure_p16_p84": [float(np.percentile(boots, 16)),
+                                            float(np.percentile(boots, 84))],
+            "factors": [float(f) for f in factors],
+            "measured_u_e": [float(x) for x in np.sqrt(np.mean(u_rep**2, axis=1))],
+            "predicted_u_e": pred_curve, "model_default": model.default,
+            "model_c": model.c, "model_a": model.mismatch["a"] if model.mismatch else None}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
@@ -188,11 +266,25 @@ def main() -> None:
                   f"{'undone' if r['centred'] else 'kept':>9s} {r['c_static']:10.3e} "
                   f"{r['c_fit']:10.3e} {r['ratio']:6.3f} {r['c_model']:10.3e} "
                   f"{r['ratio_model']:6.3f}")
+    d = part_d(args.quick)
+    if d is None:
+        print("part D (brute-force exposure planning): pending, dicblur.dic absent")
+    else:
+        print("\nbrute-force exposure planning (affine DIC, Poisson-Gaussian camera)")
+        print(f"planned optimum {d['planned_exposure'] * 1e3:.4g} ms (W = "
+              f"{d['planned_blur']:.3g} px, u_e {d['planned_u_e']:.4g} px); brute force "
+              f"{d['bruteforce_exposure'] * 1e3:.4g} ms (16-84 %: "
+              f"{d['bruteforce_exposure_p16_p84'][0] * 1e3:.4g} .. "
+              f"{d['bruteforce_exposure_p16_p84'][1] * 1e3:.4g} ms)")
+        print(f"{'t / t_plan':>10s} {'measured':>10s} {'predicted':>10s}")
+        for f, m, p in zip(d["factors"], d["measured_u_e"], d["predicted_u_e"], strict=True):
+            print(f"{f:10.3f} {m:10.4g} {p:10.4g}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps({
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load": os.getloadavg()},
-        "speed": a, "c_vs_bruteforce_ssd": cc, "c_vs_dic": b}, indent=1))
+        "speed": a, "c_vs_bruteforce_ssd": cc, "c_vs_dic": b,
+        "planning_vs_bruteforce": d}, indent=1))
     print(f"wrote {OUT}")
 
 

@@ -12,6 +12,9 @@ Poisson-Gaussian ``dicblur.Camera``, and the exposure is then swept with that ca
 (reference and blurred current image captured at the same exposure, DIC run, several
 repetitions); the measured optimum (parabola in log t through the lowest points, its
 spread from a bootstrap over repetitions) is compared with the planned one.
+Part E (when ``dicblur.dic`` exists): held-out comparison of the power law and the
+mismatch model on DIC data (W = 0..8 px, noise 1, 2, 4 GL): fit on W <= 5 px and noise
+1, 2 GL, predict the rest.
 Part B (when ``dicblur.dic`` and ``dicblur.blur`` exist): the static prediction of ``c``
 against ``c`` fitted from DIC on noise-free, exactly box-blurred generated patterns over a
 range of speckle sizes, W <= 4 px (acceptance: within 15 %).
@@ -238,6 +241,37 @@ def part_d(quick: bool) -> dict | None:
             "model_c": model.c, "model_a": model.mismatch["a"] if model.mismatch else None}
 
 
+def part_e(quick: bool) -> list[dict] | None:
+    if importlib.util.find_spec("dicblur.dic") is None:
+        return None
+    from dicblur.blur import motion_blur
+    from dicblur.camera import add_gaussian_noise
+
+    correlate = importlib.import_module("dicblur.dic").correlate
+    from dicblur.models import compare_models
+
+    out = []
+    for size in ((4.0,) if quick else (3.0, 6.0)):
+        img = dicblur.speckle_pattern((192, 192), speckle_size=size, softness=0.5, seed=7)
+        w_all, s_all, u_all, n_all = [], [], [], []
+        for noise in (1.0, 2.0, 4.0):
+            for i, wl in enumerate(np.arange(0.0, 8.01, 1.0)):
+                blurred = motion_blur(img, (0.0, float(wl)), substeps=None) if wl else img
+                v = []
+                for r in range(2):
+                    res = correlate(add_gaussian_noise(img, noise, seed=100 * i + r),
+                                    add_gaussian_noise(blurred, noise, seed=100 * i + r + 50),
+                                    subset=31, step=12, shape="affine")
+                    v.append(float(np.std(res.u[res.converged])))
+                w_all.append(float(wl))
+                n_all.append(noise)
+                u_all.append(float(np.sqrt(np.mean(np.square(v)))))
+                s_all.append(float(dicblur.sssig(blurred, subset=31, step=12).mean()))
+        cmp_ = compare_models(w_all, s_all, u_all, noise_sigma=n_all, train_max_blur=5.0)
+        out.append({"speckle_size": size, **cmp_.to_dict()})
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
@@ -279,12 +313,25 @@ def main() -> None:
         print(f"{'t / t_plan':>10s} {'measured':>10s} {'predicted':>10s}")
         for f, m, p in zip(d["factors"], d["measured_u_e"], d["predicted_u_e"], strict=True):
             print(f"{f:10.3f} {m:10.4g} {p:10.4g}")
+    e = part_e(args.quick)
+    if e is None:
+        print("part E (model comparison on DIC data): pending, dicblur.dic absent")
+    else:
+        print("\nheld-out comparison on DIC data (train W <= 5 px, noise 1, 2 GL)")
+        print(f"{'speckle px':>10s} {'n test':>6s} {'rms log pl':>10s} {'rms log mm':>10s} "
+              f"{'max pl':>7s} {'max mm':>7s} better")
+        for r in e:
+            print(f"{r['speckle_size']:10.1f} {r['n_test']:6d} "
+                  f"{r['rms_log_error']['power_law']:10.3f} "
+                  f"{r['rms_log_error']['mismatch']:10.3f} "
+                  f"{r['max_rel_error']['power_law']:7.2f} "
+                  f"{r['max_rel_error']['mismatch']:7.2f} {r['better']}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps({
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load": os.getloadavg()},
         "speed": a, "c_vs_bruteforce_ssd": cc, "c_vs_dic": b,
-        "planning_vs_bruteforce": d}, indent=1))
+        "planning_vs_bruteforce": d, "comparison_on_dic": e}, indent=1))
     print(f"wrote {OUT}")
 
 

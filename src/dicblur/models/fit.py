@@ -54,7 +54,7 @@ def fit_blur_model(
     mean_level: float | None = None,
     c_static: float | None = None,
     default: str = "auto",
-    next_term: bool | str = "auto",
+    next_term: bool | str = False,
     confidence: float = 0.95,
     ci: str = "covariance",
     n_boot: int = 500,
@@ -93,7 +93,10 @@ def fit_blur_model(
         Model used by ``predict``/``plan``; ``"auto"`` picks the better one on held-out
         points (:func:`compare_models`) when there are >= 6 blur levels, else ``mismatch``.
     next_term : bool or "auto"
-        ``c4 W**4`` term of the mismatch model (see :func:`fit_mismatch`).
+        ``c4 W**4`` term of the mismatch model (see :func:`fit_mismatch`). Off by
+        default: a quartic fitted on a limited W range extrapolates badly (on DIC data a
+        negative ``c4`` fitted on W <= 5 px under-predicted W = 8 px by 80 %, the pure
+        ``c W**2`` term over-predicted by about 10 %; docs/models.md s. 6).
     confidence, ci, n_boot, seed
         Interval level and method (``"covariance"`` or ``"bootstrap"``; see
         :mod:`dicblur.models._result`); ``seed`` drives the bootstrap only.
@@ -195,7 +198,8 @@ def fit_blur_model(
     if default == "auto" and mm is not None and compare and levels_w.size >= 6:
         try:
             cmp_ = compare_models(w, s, u, noise_sigma=sig, contrast_ratio=ratio,
-                                  fit_range=fit_range, range_tolerance=range_tolerance)
+                                  fit_range=fit_range, range_tolerance=range_tolerance,
+                                  next_term=next_term)
             comparison = _json_clean(cmp_.to_dict())
             chosen = cmp_.better
         except (FitError, InputError) as exc:
@@ -243,6 +247,7 @@ def compare_models(
     holdout_noise: float | None = None,
     fit_range: tuple[float, float] | None = None,
     range_tolerance: float = 0.05,
+    next_term: bool | str = False,
 ) -> ModelComparison:
     """Fit both models on part of the data and score their predictions on the rest.
 
@@ -281,7 +286,8 @@ def compare_models(
     fitted = fit_blur_model(
         w[train], s[train], u[train], noise_sigma=None if sig is None else sig[train],
         contrast_ratio=None if ratio is None else ratio[train], fit_range=fit_range,
-        range_tolerance=range_tolerance, default="mismatch", compare=False)
+        range_tolerance=range_tolerance, default="mismatch", next_term=next_term,
+        compare=False)
     rms: dict[str, float] = {}
     mx: dict[str, float] = {}
     rel: dict[str, tuple[float, ...]] = {}

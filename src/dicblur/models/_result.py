@@ -5,6 +5,8 @@ Confidence intervals
 ``ci="covariance"`` (default): the asymptotic covariance of the least-squares estimate,
 ``s**2 (J^T J)^-1`` with ``s**2 = SSR / dof``, and Student-t intervals with ``dof`` degrees
 of freedom (exact for the linear power-law fit with Gaussian residuals in log space).
+Positive scale factors (``eta``, the noise factor ``a`` or ``k``) get the interval
+symmetric in their logarithm, ``value * exp(+-t se / value)``.
 ``ci="bootstrap"``: pairs bootstrap over the measured points (resampled with replacement,
 refitted ``n_boot`` times) and percentile intervals; the covariance is then the bootstrap
 covariance.
@@ -169,6 +171,7 @@ def make_result(
     n_boot: int,
     seed: int | np.random.Generator | None,
     extra: dict[str, Any] | None = None,
+    log_params: tuple[str, ...] = (),
 ) -> FitResult:
     """Run ``fit_once`` on all points and build the result with CIs.
 
@@ -197,6 +200,12 @@ def make_result(
         se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         tq = t_quantile(confidence, dof)
         low, high = values - tq * se, values + tq * se
+        # positive scale factors: interval symmetric in log (exact for the power law's
+        # eta, which is fitted as log eta; never below zero for the noise factor a or k)
+        for i, name in enumerate(names):
+            if name in log_params and values[i] > 0:
+                rel = tq * se[i] / values[i]
+                low[i], high[i] = values[i] * np.exp(-rel), values[i] * np.exp(rel)
     else:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         boots = []

@@ -279,4 +279,4 @@ def _fit_one(
     fixed = {} if "gamma" in names or sig is None else {"gamma": 1.0}
     return make_result(model="mismatch", names=names, fit_once=fit_once, n=w.size,
                        data_space=np.log(u), blur=w, fixed=fixed, confidence=confidence,
-                       ci=ci, n_boot=n_boot, seed=seed, extra=extra)
+                       ci=ci, n_boot=n_boot, seed=seed, extra=extra, log_params=("eta", "a", "k"))

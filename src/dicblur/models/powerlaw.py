@@ -171,4 +171,4 @@ def fit_power_law(
              "kappa_rule": "fitted" if fit_kappa else "2*alpha"}
     return make_result(model="power_law", names=names, fit_once=fit_once, n=s.size,
                        data_space=y, blur=w, fixed={}, confidence=confidence, ci=ci,
-                       n_boot=n_boot, seed=seed, extra=extra)
+                       n_boot=n_boot, seed=seed, extra=extra, log_params=("eta", "a", "k"))

@@ -57,6 +57,8 @@ from .models import (
     plan_exposure,
 )
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
+from .pulse import PulseTrain
+from .pulse.study import PulseStudy, run_pulse_study
 
 __version__ = "0.1.0"
 
@@ -75,6 +77,8 @@ __all__ = [
     "PatternMetrics",
     "PatternSettings",
     "PoissonGaussianCamera",
+    "PulseStudy",
+    "PulseTrain",
     "SineMotion",
     "StoreError",
     "__version__",
@@ -100,6 +104,7 @@ __all__ = [
     "plan_exposure",
     "render_blurred",
     "rms_contrast",
+    "run_pulse_study",
     "save_image",
     "speckle_pattern",
     "speckle_size",

@@ -62,6 +62,9 @@ _pattern.register(app)
 from . import blur as _blur  # noqa: E402
 
 _blur.register(app)
+from . import pulse as _pulse  # noqa: E402
+
+_pulse.register(app)
 from . import models as _models  # noqa: E402
 
 _models.register(app)

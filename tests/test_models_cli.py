@@ -76,7 +76,7 @@ def test_fit_from_netcdf(tmp_path, capsys):
     assert model.mismatch["c"] == pytest.approx(5e-4, rel=1e-6)
 
 
-@pytest.mark.filterwarnings("ignore::UserWarning")  # zarr v3 notes on string coords
+@pytest.mark.filterwarnings("ignore::UserWarning", "ignore:The data type")  # zarr v3 notes
 def test_fit_from_campaign_zarr(tmp_path, capsys):
     # the campaign layout: dims (pattern, angle, subset, noise, blur, rep), effective noise
     xr = pytest.importorskip("xarray")

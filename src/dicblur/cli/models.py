@@ -12,6 +12,7 @@ import numpy as np
 import typer
 
 from ..errors import InputError
+from ..io import file_sha256
 from ..models import (
     BlurUncertaintyModel,
     PoissonGaussianCamera,
@@ -163,7 +164,8 @@ def fit_command(
         subset=subset if subset is not None or "subset" not in data else int(data["subset"][0]),
         fit_range=rng, ci=ci,
         default=default, seed=seed,
-        provenance={"results": str(results), "select": list(select)})
+        provenance={"results": str(results), "select": list(select),
+                    "results_sha256": file_sha256(results) if results.is_file() else None})
     model.to_json(str(out))
     if as_json:
         typer.echo(model.to_json())

@@ -21,6 +21,7 @@ from .blur import (
     valid_region,
 )
 from .camera import Camera, add_gaussian_noise
+from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
     ConvergenceError,
@@ -69,6 +70,8 @@ __all__ = [
     "Camera",
     "ConfigError",
     "ConvergenceError",
+    "Correlator",
+    "DICResult",
     "DicblurError",
     "ExposurePlan",
     "FitError",
@@ -76,6 +79,7 @@ __all__ = [
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "PointStatus",
     "PoissonGaussianCamera",
     "PulseStudy",
     "PulseTrain",
@@ -87,6 +91,7 @@ __all__ = [
     "blur_sensitivity",
     "blur_transfer",
     "compare_models",
+    "correlate",
     "estimate_noise",
     "file_sha256",
     "fit_blur_model",

@@ -65,6 +65,9 @@ _blur.register(app)
 from . import pulse as _pulse  # noqa: E402
 
 _pulse.register(app)
+from . import correlate as _correlate  # noqa: E402
+
+_correlate.register(app)
 from . import models as _models  # noqa: E402
 
 _models.register(app)

@@ -54,6 +54,16 @@ from .metrics import (
     sssig,
     subset_centres,
 )
+from .models import (
+    BlurSensitivity,
+    BlurUncertaintyModel,
+    ExposurePlan,
+    PoissonGaussianCamera,
+    blur_sensitivity,
+    compare_models,
+    fit_blur_model,
+    plan_exposure,
+)
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
 from .pulse import PulseTrain
 from .pulse.study import PulseStudy, run_pulse_study
@@ -62,6 +72,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AcceleratedMotion",
+    "BlurSensitivity",
+    "BlurUncertaintyModel",
     "Camera",
     "ConfigError",
     "ConvergenceError",
@@ -69,6 +81,7 @@ __all__ = [
     "DICResult",
     "DesignResult",
     "DicblurError",
+    "ExposurePlan",
     "FitError",
     "ImageReadError",
     "InputError",
@@ -76,6 +89,7 @@ __all__ = [
     "PatternMetrics",
     "PatternSettings",
     "PointStatus",
+    "PoissonGaussianCamera",
     "PulseStudy",
     "PulseTrain",
     "SineMotion",
@@ -83,13 +97,16 @@ __all__ = [
     "__version__",
     "add_gaussian_noise",
     "blur_length",
+    "blur_sensitivity",
     "blur_transfer",
+    "compare_models",
     "correlate",
     "design_pattern",
     "design_problem",
     "estimate_noise",
     "export_pattern",
     "file_sha256",
+    "fit_blur_model",
     "gaussian_mask",
     "gradient_variance",
     "image_gradients",
@@ -101,6 +118,7 @@ __all__ = [
     "pan_sigma",
     "paper_pattern4",
     "pattern_metrics",
+    "plan_exposure",
     "render_blurred",
     "rms_contrast",
     "run_pulse_study",

@@ -143,15 +143,14 @@ def test_evaluation_static_error_follows_match_score():
 
 def test_measurement_is_the_campaign_engines(tmp_path):
     """The in-process candidate campaign stores the same numbers as run_campaign."""
-    from dicblur.campaign import open_results, run_campaign
-
+    from dicblur import campaign
     from dicblur.design.evaluate import campaign_spec, measure_candidate
 
     p = design_problem(blur=2.0, **SMALL)
     cand = Candidate(3.0, 0.45, 0.5)
     m = measure_candidate(cand, p)
-    run_campaign(campaign_spec(cand, p), tmp_path / "c.zarr", serial=True)
-    ds = open_results(tmp_path / "c.zarr")
+    campaign.run_campaign(campaign_spec(cand, p), tmp_path / "c.zarr", serial=True)
+    ds = campaign.open_results(tmp_path / "c.zarr")
     for name in ("u_e", "sssig", "mig_ref"):
         stored = ds[name].squeeze(["angle", "subset", "noise", "rep"]).transpose(
             "pattern", "blur").values

@@ -75,6 +75,7 @@ def _clean(v: object) -> object:
 
 
 def design_command(
+    ctx: typer.Context,
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     blur: float | None = typer.Option(None, "--blur", help="Design blur length W, px."),
     blur_range: str | None = typer.Option(None, "--blur-range",
@@ -210,10 +211,14 @@ def design_command(
             w.writerow(e.to_dict())
     written += ["design.json", "evaluations.csv"]
     if not no_report:
-        cmd = "dicblur design " + " ".join(
-            shlex.quote(a) for a in [f"--blur={blur}" if blur is not None else "",
-                                     f"--blur-range={blur_range}" if blur_range else "",
-                                     f"--noise={noise}", f"--subset={subset}"] if a)
+        # The options as parsed (defaults included), so the page says how to re-run it.
+        parts = []
+        for key, value in ctx.params.items():
+            opt = "--" + key.replace("_", "-")
+            if value is None or value is False:
+                continue
+            parts.append(opt if value is True else f"{opt}={shlex.quote(str(value))}")
+        cmd = "dicblur design " + " ".join(parts)
         page = write_design_report(result, out, export=export, command=cmd)
         written.append(page.name)
         if check_browser:

@@ -21,6 +21,7 @@ from .blur import (
     valid_region,
 )
 from .camera import Camera, add_gaussian_noise
+from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
     ConvergenceError,
@@ -57,12 +58,15 @@ __all__ = [
     "Camera",
     "ConfigError",
     "ConvergenceError",
+    "Correlator",
+    "DICResult",
     "DicblurError",
     "FitError",
     "ImageReadError",
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "PointStatus",
     "PulseStudy",
     "PulseTrain",
     "SineMotion",
@@ -71,6 +75,7 @@ __all__ = [
     "add_gaussian_noise",
     "blur_length",
     "blur_transfer",
+    "correlate",
     "estimate_noise",
     "file_sha256",
     "gaussian_mask",

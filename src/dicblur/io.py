@@ -58,7 +58,7 @@ def _read_pillow(path: Path) -> np.ndarray:
         if im.mode in ("I;16", "I;16B", "I;16L"):
             return np.asarray(im, dtype=np.uint16)
         if im.mode == "P":
-            im = im.convert("RGBA" if "transparency" in im.info else "RGB")
+            return np.asarray(im.convert("RGBA" if "transparency" in im.info else "RGB"))
         return np.asarray(im)
 
 

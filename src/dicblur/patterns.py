@@ -200,7 +200,7 @@ def speckle_pattern(
     noise = rng.standard_normal((rows * ss, cols * ss))
     field = _gaussian_filter_periodic(noise, sigma_fine)
     flat = field.ravel()
-    k = int(round(p * flat.size))
+    k = round(p * flat.size)
     k = min(max(k, 1), flat.size - 1)
     threshold = np.partition(flat, k)[k]
     blackness = (field < threshold).astype(np.float64)

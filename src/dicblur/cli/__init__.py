@@ -61,7 +61,7 @@ from . import pattern as _pattern  # noqa: E402
 _pattern.register(app)
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
+def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"warning: {message}", file=sys.stderr)
 
 
@@ -82,14 +82,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except click.exceptions.Exit as exc:
-        return int(exc.exit_code)
-    except click.exceptions.Abort:
+    except (click.exceptions.Exit, typer.Exit) as exc:
+        return int(getattr(exc, "exit_code", 0))
+    except (click.exceptions.Abort, typer.Abort):
         print("aborted", file=sys.stderr)
         return 130
-    except click.ClickException as exc:
-        exc.show()
-        return 2
+    except (click.ClickException, typer.TyperException) as exc:
+        # Usage errors (bad option, missing argument). typer >= 0.20 vendors its own click,
+        # so both exception families are caught.
+        exc.show()  # type: ignore[union-attr]
+        return int(getattr(exc, "exit_code", 2) or 2)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

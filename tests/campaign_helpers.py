@@ -86,3 +86,13 @@ def small_spec_dict(**over: object) -> dict:
         sec, key = k.split("__")
         d[sec][key] = v
     return d
+
+
+def kill_spec() -> CampaignSpec:
+    """A campaign of about a second (2 patterns x 2 noise x 2 reps x 24 W, 80x80 px)."""
+    from dicblur.campaign import parse_spec
+
+    d = small_spec_dict(blur__lengths={"start": 0.0, "stop": 2.3, "step": 0.1})
+    for p in d["pattern"]:
+        p["shape"] = [80, 80]
+    return parse_spec(d)

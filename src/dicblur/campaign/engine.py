@@ -156,17 +156,18 @@ def run_campaign(
     # A batch partially marked done (impossible with this writer, possible in a store
     # edited by hand) is rerun whole; count its finished tasks as rerun, not skipped.
     n_skipped -= sum(int(mask[b.region].sum()) for b in pending)
-    state = {"done": n_skipped, "task_s": 0.0, "run": 0}
+    counts = {"done": n_skipped, "run": 0}
+    task_s = [0.0]
     if progress is not None:
-        progress(state["done"], n_total)
+        progress(counts["done"], n_total)
 
     def finish(batch: Batch, result: Mapping[str, Any]) -> None:
         store.write_batch(batch, result)
-        state["done"] += len(batch.blur)
-        state["run"] += len(batch.blur)
-        state["task_s"] += float(np.sum(result["time_s"]))
+        counts["done"] += len(batch.blur)
+        counts["run"] += len(batch.blur)
+        task_s[0] += float(np.sum(result["time_s"]))
         if progress is not None:
-            progress(state["done"], n_total)
+            progress(counts["done"], n_total)
 
     interrupted = False
     if serial or not pending:
@@ -181,8 +182,8 @@ def run_campaign(
             spec, images, pending, fn, finish, scheduler=scheduler, workers=workers
         )
     return RunSummary(
-        path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=state["run"],
-        interrupted=interrupted, wall_s=time.perf_counter() - t0, task_s=state["task_s"],
+        path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=counts["run"],
+        interrupted=interrupted, wall_s=time.perf_counter() - t0, task_s=task_s[0],
         workers=n_workers, scheduler=where,
     )
 
@@ -225,7 +226,7 @@ def _run_dask(
         # Each pattern image travels to every worker once, not once per batch.
         remote = {name: client.scatter(img, broadcast=True, hash=False)
                   for name, img in images.items()}
-        by_key: dict[str, Batch] = {}
+        by_key: dict[Any, Batch] = {}
         for b in pending:
             fut = client.submit(fn, remote[b.pattern], b, spec, pure=False,
                                 key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}")
@@ -295,7 +296,7 @@ def campaign_status(results: str | os.PathLike[str]) -> CampaignStatus:
     dims = dict(zip(("pattern", "angle", "subset", "noise", "blur", "rep"), mask.shape,
                     strict=True))
     per_pattern = {n: int(mask[i].sum()) for i, n in enumerate(names)}
-    times = np.asarray(store._arrays["time_s"][...])
+    times = store.read("time_s")
     return CampaignStatus(
         path=str(results), name=spec["campaign"]["name"],
         spec_hash=str(store.attrs["spec_hash"]), n_tasks=int(mask.size),

@@ -103,7 +103,7 @@ class CampaignStore:
     def __init__(self, path: Path, group: zarr.Group) -> None:
         self.path = path
         self._group = group
-        self._arrays = {name: group[name] for name in (*VARIABLES, "done")}
+        self._arrays: dict[str, Any] = {name: group[name] for name in (*VARIABLES, "done")}
         self.attrs: dict[str, Any] = dict(group.attrs)
         self._raw = all(_raw_chunks(path / name) for name in self._arrays)
 
@@ -193,14 +193,14 @@ class CampaignStore:
             raise StoreError(f"results={str(p)!r}: not a dicblur campaign store (layout "
                              f"{attrs.get('dicblur_layout')!r}, expected {LAYOUT_VERSION})")
         try:
-            spec_dict = json.loads(attrs["spec"])
+            spec_dict = json.loads(str(attrs["spec"]))
             dims = _dims_from_spec_dict(spec_dict)
         except (ValueError, KeyError, TypeError) as exc:
             raise StoreError(f"results={str(p)!r}: corrupt spec attribute ({exc})") from exc
         shape = tuple(dims.values())
         for name in (*VARIABLES, "done"):
             try:
-                arr = group[name]
+                arr: Any = group[name]
             except KeyError:
                 raise StoreError(f"results={str(p)!r}: variable {name!r} is missing; the "
                                  "store is damaged (rerun into a new path)") from None
@@ -248,6 +248,10 @@ class CampaignStore:
         except Exception as exc:
             raise StoreError(f"results={str(self.path)!r}: the 'done' flags cannot be read "
                              f"({type(exc).__name__}: {exc}); the store is damaged") from exc
+
+    def read(self, name: str) -> NDArray[Any]:
+        """Values of one stored variable (NaN where no task wrote)."""
+        return np.asarray(self._arrays[name][...])
 
     def batch_done(self, batch: Batch, mask: NDArray[np.bool_] | None = None) -> bool:
         """Whether every task of ``batch`` is stored."""
@@ -389,14 +393,14 @@ def export_csv(path: str | os.PathLike[str], out: str | os.PathLike[str]) -> int
     df_cols = list(DIMS) + list(VARIABLES)
     done = ds["done"].values == 1
     idx = np.argwhere(done)
-    coords = [ds[d].values for d in DIMS]
+    coords = [ds[d].values.tolist() for d in DIMS]
     values = [ds[v].values for v in VARIABLES]
     with open(out, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(df_cols)
         for ix in idx:
             t = tuple(ix)
-            row: list[Any] = [c[i].item() for c, i in zip(coords, t, strict=True)]
+            row: list[Any] = [c[i] for c, i in zip(coords, t, strict=True)]
             row += [repr(float(v[t])) for v in values]
             w.writerow(row)
     return int(idx.shape[0])

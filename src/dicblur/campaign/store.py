@@ -106,6 +106,7 @@ class CampaignStore:
         self._arrays: dict[str, Any] = {name: group[name] for name in (*VARIABLES, "done")}
         self.attrs: dict[str, Any] = dict(group.attrs)
         self._raw = all(_raw_chunks(path / name) for name in self._arrays)
+        self._folders: set[str] = set()
 
     # -- creation and opening -----------------------------------------------------------
     @classmethod
@@ -295,11 +296,17 @@ class CampaignStore:
         chunk = np.full(size, arr.fill_value, dtype=arr.dtype.newbyteorder("<"))
         chunk[: values.size] = values
         key = (ip, ia, isub, inoise, b0 // size, irep)
-        folder = self.path.joinpath(name, "c", *map(str, key[:-1]))
-        folder.mkdir(parents=True, exist_ok=True)
-        target = folder / str(key[-1])
-        tmp = folder / f".{key[-1]}.{os.getpid()}.partial"
-        tmp.write_bytes(chunk.tobytes())
+        folder = os.path.join(self.path, name, "c", *map(str, key[:-1]))
+        if folder not in self._folders:  # file-system calls dominate the cost: skip repeats
+            os.makedirs(folder, exist_ok=True)
+            self._folders.add(folder)
+        target = os.path.join(folder, str(key[-1]))
+        tmp = os.path.join(folder, f".{key[-1]}.{os.getpid()}.partial")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            os.write(fd, chunk.tobytes())
+        finally:
+            os.close(fd)
         os.replace(tmp, target)
 
 

@@ -59,6 +59,9 @@ def _root(
 from . import pattern as _pattern  # noqa: E402
 
 _pattern.register(app)
+from . import campaign as _campaign  # noqa: E402
+
+_campaign.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

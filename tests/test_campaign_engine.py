@@ -155,11 +155,11 @@ def test_spec_pattern_errors(tmp_path):
         parse_spec(d)
     d = small_spec_dict()
     d["pattern"][1]["name"] = "a"
-    with pytest.raises(ConfigError, match="pattern.name"):
+    with pytest.raises(ConfigError, match=r"pattern\.name"):
         parse_spec(d)
     d = small_spec_dict()
     d["blur"]["method"] = "rendered"  # pattern b is paper4: cannot be rendered
-    with pytest.raises(ConfigError, match="blur.method"):
+    with pytest.raises(ConfigError, match=r"blur\.method"):
         parse_spec(d)
     with pytest.raises(ConfigError, match="no such file"):
         load_spec(tmp_path / "missing.toml")
@@ -167,7 +167,7 @@ def test_spec_pattern_errors(tmp_path):
     bad.write_text("[campaign\nseed = 1")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_spec(bad)
-    with pytest.raises(ConfigError, match="campaign.seed"):
+    with pytest.raises(ConfigError, match=r"campaign\.seed"):
         parse_spec({"pattern": small_spec_dict()["pattern"], "blur": {"lengths": [1.0]}})
 
 

@@ -102,6 +102,7 @@ def run_campaign(
     serial: bool = False,
     task: TaskFunction | None = None,
     progress: ProgressCallback | None = None,
+    connect_timeout: float = 10.0,
 ) -> RunSummary:
     """Run (or resume) a campaign and store its results.
 
@@ -125,6 +126,8 @@ def run_campaign(
         :func:`dicblur.campaign.simulate_batch`. Must be importable by the workers.
     progress : callable, optional
         ``progress(done, total)`` in tasks, called at the start and after every batch.
+    connect_timeout : float
+        Seconds to wait for the scheduler given by ``scheduler``.
 
     Returns
     -------
@@ -179,7 +182,8 @@ def run_campaign(
             interrupted = True
     else:
         n_workers, where, interrupted = _run_dask(
-            spec, images, pending, fn, finish, scheduler=scheduler, workers=workers
+            spec, images, pending, fn, finish, scheduler=scheduler, workers=workers,
+            connect_timeout=connect_timeout,
         )
     return RunSummary(
         path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=counts["run"],
@@ -197,6 +201,7 @@ def _run_dask(
     *,
     scheduler: str | None,
     workers: int | None,
+    connect_timeout: float,
 ) -> tuple[int, str, bool]:
     from distributed import Client, LocalCluster, as_completed
 
@@ -213,7 +218,7 @@ def _run_dask(
         where = "local"
     else:
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=f"{connect_timeout}s")
         except (OSError, TimeoutError) as exc:
             raise InputError(f"scheduler={scheduler!r}: cannot connect to a Dask scheduler "
                              f"({exc}); check the address (tcp://HOST:PORT) and that it "

@@ -52,6 +52,9 @@ class RunSummary:
         True if the run was stopped (Ctrl-C) before finishing; what finished is stored.
     wall_s : float
         Wall time of the run (s), cluster start-up and pattern preparation included.
+    setup_s : float
+        Part of ``wall_s`` before the first task could start (patterns, store, cluster
+        start-up, image upload to the workers).
     task_s : float
         Sum of the tasks' own wall times (s) on their workers.
     workers : int
@@ -66,6 +69,7 @@ class RunSummary:
     n_run: int
     interrupted: bool
     wall_s: float
+    setup_s: float
     task_s: float
     workers: int
     scheduler: str
@@ -161,6 +165,7 @@ def run_campaign(
     n_skipped -= sum(int(mask[b.region].sum()) for b in pending)
     counts = {"done": n_skipped, "run": 0}
     task_s = [0.0]
+    started = [time.perf_counter()]
     if progress is not None:
         progress(counts["done"], n_total)
 
@@ -175,6 +180,7 @@ def run_campaign(
     interrupted = False
     if serial or not pending:
         n_workers, where = 1, "serial"
+        started[0] = time.perf_counter()
         try:
             for b in pending:
                 finish(b, fn(images[b.pattern], b, spec))
@@ -183,11 +189,12 @@ def run_campaign(
     else:
         n_workers, where, interrupted = _run_dask(
             spec, images, pending, fn, finish, scheduler=scheduler, workers=workers,
-            connect_timeout=connect_timeout,
+            connect_timeout=connect_timeout, started=started,
         )
     return RunSummary(
         path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=counts["run"],
-        interrupted=interrupted, wall_s=time.perf_counter() - t0, task_s=task_s[0],
+        interrupted=interrupted, wall_s=time.perf_counter() - t0,
+        setup_s=started[0] - t0, task_s=task_s[0],
         workers=n_workers, scheduler=where,
     )
 
@@ -202,6 +209,7 @@ def _run_dask(
     scheduler: str | None,
     workers: int | None,
     connect_timeout: float,
+    started: list[float],
 ) -> tuple[int, str, bool]:
     from distributed import Client, LocalCluster, as_completed
 
@@ -231,6 +239,7 @@ def _run_dask(
         # Each pattern image travels to every worker once, not once per batch.
         remote = {name: client.scatter(img, broadcast=True, hash=False)
                   for name, img in images.items()}
+        started[0] = time.perf_counter()
         by_key: dict[Any, Batch] = {}
         for b in pending:
             fut = client.submit(fn, remote[b.pattern], b, spec, pure=False,

@@ -10,6 +10,17 @@ displacements and lengths in px, grey levels (GL) for intensities, seconds for t
 
 from __future__ import annotations
 
+from .blur import (
+    AcceleratedMotion,
+    SineMotion,
+    blur_length,
+    blur_transfer,
+    motion_blur,
+    render_blurred,
+    trajectory_positions,
+    valid_region,
+)
+from .camera import Camera, add_gaussian_noise
 from .errors import (
     ConfigError,
     ConvergenceError,
@@ -40,6 +51,8 @@ from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pa
 __version__ = "0.1.0"
 
 __all__ = [
+    "AcceleratedMotion",
+    "Camera",
     "ConfigError",
     "ConvergenceError",
     "DicblurError",
@@ -48,8 +61,12 @@ __all__ = [
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "SineMotion",
     "StoreError",
     "__version__",
+    "add_gaussian_noise",
+    "blur_length",
+    "blur_transfer",
     "estimate_noise",
     "file_sha256",
     "gaussian_mask",
@@ -59,13 +76,17 @@ __all__ = [
     "match_score_sigma",
     "michelson_contrast",
     "mig",
+    "motion_blur",
     "pan_sigma",
     "paper_pattern4",
     "pattern_metrics",
+    "render_blurred",
     "rms_contrast",
     "save_image",
     "speckle_pattern",
     "speckle_size",
     "sssig",
     "subset_centres",
+    "trajectory_positions",
+    "valid_region",
 ]

@@ -59,6 +59,9 @@ def _root(
 from . import pattern as _pattern  # noqa: E402
 
 _pattern.register(app)
+from . import blur as _blur  # noqa: E402
+
+_blur.register(app)
 from . import campaign as _campaign  # noqa: E402
 
 _campaign.register(app)

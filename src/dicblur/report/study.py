@@ -111,3 +111,33 @@ def numerical_pattern4(size: int, seed: int) -> StudyPattern:
         f"paper_pattern4(size={size}, speckle_size=4, sigma=0.5, seed={seed})",
     )
 
+
+
+def emulated_camera_pattern3(size: int, seed: int, *, supersample: int = 4) -> StudyPattern:
+    """Pattern #3: a camera image of a pattern like #4, emulated.
+
+    Pipeline: the #4 recipe (4 px binary speckles, Gaussian mask of sigma 0.5 px) drawn
+    ``supersample`` times finer (the printed pattern); printed/lit grey levels 25..215 (ink is
+    not black, paper not white); a Gaussian optics PSF of sigma 0.6 camera px; pixel
+    integration by :func:`dicblur.render_blurred` with no motion; one exposure of an 8-bit
+    Poisson-Gaussian camera (20,000 e- full well, 1 GL read noise).
+    """
+    from ..blur import render_blurred
+    from ..camera import Camera
+    from ..patterns import _gaussian_filter_periodic
+
+    ss = supersample
+    ss_seq = np.random.SeedSequence([seed, 3])
+    fine = speckle_pattern(size * ss, speckle_size=4.0 * ss, density=0.5,
+                           seed=np.random.default_rng(ss_seq))
+    fine = _gaussian_filter_periodic(fine, 0.5 * ss)  # the 4x4 mask of pattern #4
+    fine = 25.0 + fine * (190.0 / 255.0)
+    fine = _gaussian_filter_periodic(fine, 0.6 * ss)  # optics PSF
+    irradiance = render_blurred(fine, (0.0, 0.0), supersample=ss)
+    camera = Camera(read_noise=1.0, full_well=20000.0, bit_depth=8)
+    img = camera.capture(irradiance, rng=np.random.default_rng(ss_seq.spawn(1)[0]))
+    return StudyPattern(
+        "p3", "#3 emulated camera", img, True,
+        f"#4 recipe at {ss}x, levels 25..215, PSF sigma 0.6 px, pixel integration, "
+        f"Camera(full_well=20000, read_noise=1, 8-bit), seed={seed}",
+    )

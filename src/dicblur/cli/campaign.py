@@ -10,7 +10,8 @@ import typer
 
 from ..campaign import campaign_status, export_csv, load_spec, run_campaign
 from ..campaign.engine import RunSummary
-from ._common import console, print_json, print_mapping
+from ..errors import InputError
+from ._common import console, parse_size, print_json, print_mapping
 
 campaign_app = typer.Typer(help="Run blur campaigns (Dask), inspect and export their results.",
                            no_args_is_help=True)
@@ -139,6 +140,9 @@ def calibrate_command(
                                     "poisson-gaussian."),
     shape: str = typer.Option("translation", "--shape", help="DIC shape function."),
     seed: int = typer.Option(1, "--seed", help="Base seed (and generator seed)."),
+    blur: str = typer.Option("0.1:10:0.1", "--blur",
+                             help="W grid START:STOP:STEP in px (the paper's by default)."),
+    size: str = typer.Option("512x512", "--size", help="ROWSxCOLS of a generated pattern."),
     scheduler: str | None = typer.Option(None, "--scheduler", help="tcp://HOST:PORT."),
     workers: int | None = typer.Option(None, "--workers", help="Local worker processes."),
     serial: bool = typer.Option(False, "--serial", help="Run in this process, no Dask."),
@@ -150,11 +154,17 @@ def calibrate_command(
     """
     from ..campaign.calibrate import calibrate
 
+    try:
+        start, stop, inc = (float(v) for v in blur.split(":"))
+    except ValueError as exc:
+        raise InputError(f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. "
+                         "0.1:10:0.1") from exc
     with _progress_bar("calibrate", not quiet) as progress:
         res = calibrate(image, out, noise=noise, subset=subset, angle=angle, step=step,
                         noise_model=noise_model, shape=shape, seed=seed,
-                        scheduler=scheduler, workers=workers, serial=serial,
-                        progress=progress)
+                        blur={"start": start, "stop": stop, "step": inc},
+                        size=parse_size(size), scheduler=scheduler, workers=workers,
+                        serial=serial, progress=progress)
     m = res.model
     print_mapping(
         f"calibration: {image}",

@@ -126,6 +126,7 @@ def test_range_grid_is_exact():
         ({"blur__lengths": [1.0, 1.0]}, "blur.lengths"),
         ({"blur__lengths": {"start": 0, "stop": 1}}, "blur.lengths"),
         ({"blur__method": "magic"}, "blur.method"),
+        ({"blur__boundary": "wrap"}, "blur.boundary"),
         ({"blur__trajectory": "zigzag"}, "blur.trajectory"),
         ({"noise__model": "speckle"}, "noise.model"),
         ({"noise__levels": [-2.0]}, "noise.levels"),

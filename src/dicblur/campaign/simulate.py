@@ -125,7 +125,7 @@ def _noisy(image: NDArray[np.float64], spec: CampaignSpec, level: float,
                      full_well=spec.full_well, bit_depth=None)
         return cam.capture(image, seed=seed)
     k = 100 if spec.substeps is None else spec.substeps
-    return add_gaussian_noise(image, level, model=spec.noise_model,
+    return add_gaussian_noise(image, level, model=spec.noise_model,  # type: ignore[arg-type]
                               substeps=k, seed=seed)
 
 
@@ -210,7 +210,8 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
             pos = np.rint(pos * ss) / ss
         else:
             blurred = motion_blur(reference, motion, substeps=spec.substeps,
-                                  trajectory=traj, boundary=spec.boundary)
+                                  trajectory=traj,
+                                  boundary=spec.boundary)  # type: ignore[arg-type]
             pos, w = trajectory_positions(motion, substeps=spec.substeps, trajectory=traj)
         true_dy, true_dx = w @ pos
         seed = task_seed(spec.seed, "current", pattern=batch.pattern, angle=batch.angle,

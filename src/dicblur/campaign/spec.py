@@ -439,9 +439,8 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
     method = _choice(blur.get("method", "transfer"), "blur.method", BLUR_METHODS)
     substeps_raw = _int(blur.get("substeps", 100), "blur.substeps", minimum=0)
     substeps = None if substeps_raw == 0 else substeps_raw
-    boundary = blur.get("boundary", "periodic")
-    if not isinstance(boundary, str):
-        raise _err("blur.boundary", boundary, "expected a boundary mode name")
+    boundary = _choice(blur.get("boundary", "periodic"), "blur.boundary",
+                       ("periodic", "reflect"))
     supersample = _int(blur.get("supersample", 8), "blur.supersample", minimum=1)
     if method == "rendered":
         for p in patterns:

@@ -101,6 +101,26 @@ def test_external_cluster_equals_serial(dask_cluster, tmp_path):
             assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
 
 
+def test_cli_run_through_scheduler_equals_serial(dask_cluster, tmp_path, capsys):
+    # the real task (blur + noise + DIC) on the external worker, through the CLI
+    spec_path = tmp_path / "s.toml"
+    spec_path.write_text(SPEC_TOML)
+    out = tmp_path / "remote.zarr"
+    code = main(["campaign", "run", str(spec_path), "-o", str(out), "--scheduler",
+                 dask_cluster, "-q"])
+    assert code == 0, capsys.readouterr().err
+    text = capsys.readouterr().out
+    assert "tasks" in text and dask_cluster in text
+    from dicblur.campaign import VARIABLES, load_spec
+
+    run_campaign(load_spec(spec_path), tmp_path / "serial.zarr", serial=True)
+    a, b = open_results(out), open_results(tmp_path / "serial.zarr")
+    for name in VARIABLES:
+        if name != "time_s":
+            assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
+    assert np.isfinite(a["u_e"].values).all()
+
+
 def test_unreachable_scheduler_is_a_clear_error(tmp_path):
     from dicblur.errors import InputError
 

@@ -137,3 +137,20 @@ def test_reflect_boundary_uses_trustworthy_points(tmp_path):
     assert out["n_points"][0] == keep.sum() < len(all_points)
     assert (out["converged_fraction"] == 1.0).all()
     assert abs(out["bias"][1]) < 0.05
+
+
+def test_blurred_image_metrics_equal_the_metrics_module(sinusoid_file):
+    # the task computes SSSIG and MIG from one gradient pass: compare with dicblur.metrics
+    # on the blurred image rebuilt independently (continuous sinc blur of each sinusoid)
+    spec = sinusoid_spec(sinusoid_file, angle=0.0, noise=20.0)
+    image = make_pattern(spec, spec.patterns[0])
+    (batch,) = iter_batches(spec)
+    out = simulate_batch(image, batch, spec)
+    w = batch.blur[2]
+    blurred = dicblur.motion_blur(image, (0.0, w), substeps=None)
+    assert out["mig"][2] == pytest.approx(dicblur.mig(blurred), rel=1e-12)
+    assert out["contrast"][2] == pytest.approx(dicblur.michelson_contrast(blurred), rel=1e-12)
+    pts = dicblur.subset_centres(image.shape, subset=21, step=7)
+    assert out["sssig"][2] == pytest.approx(dicblur.sssig(blurred, subset=21,
+                                                          points=pts).mean(), rel=1e-12)
+    assert out["mig_ref"][0] == pytest.approx(dicblur.mig(image), rel=1e-12)

@@ -55,6 +55,8 @@ from .metrics import (
     subset_centres,
 )
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
+from .pulse import PulseTrain
+from .pulse.study import PulseStudy, run_pulse_study
 
 __version__ = "0.1.0"
 
@@ -70,6 +72,8 @@ __all__ = [
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "PulseStudy",
+    "PulseTrain",
     "SineMotion",
     "StoreError",
     "__version__",
@@ -96,6 +100,7 @@ __all__ = [
     "render_blurred",
     "rms_contrast",
     "run_campaign",
+    "run_pulse_study",
     "save_image",
     "speckle_pattern",
     "speckle_size",

@@ -65,6 +65,9 @@ _blur.register(app)
 from . import campaign as _campaign  # noqa: E402
 
 _campaign.register(app)
+from . import pulse as _pulse  # noqa: E402
+
+_pulse.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

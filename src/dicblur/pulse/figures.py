@@ -1,0 +1,114 @@
+"""Figures of the pulse study (paper Fig. 4, 5, 6). matplotlib is imported inside each
+function (Agg backend), so importing :mod:`dicblur.pulse` stays light."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .montecarlo import PAPER_TRAIN
+from .signal import PulseTrain
+from .study import DENSE_TRAIN, PulseStudy
+
+__all__ = ["plot_min_chi2", "plot_regimes", "plot_uncertainty", "write_figures"]
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_regimes(path: str | Path) -> Path:
+    """Fig. 4: the sharp (dashed) and blurred (solid) train in the four regimes (PNG)."""
+    plt = _plt()
+    cases = (("(a) w < dp, w < g", PAPER_TRAIN, 3.0), ("(b) dp <= w < g", PAPER_TRAIN, 10.0),
+             ("(c) w >= dp, w >= g", PAPER_TRAIN, 19.0),
+             ("(d) g <= w < dp (dp = 16)", DENSE_TRAIN, 10.0))
+    fig, axes = plt.subplots(2, 2, figsize=(9, 5.5), sharey=True)
+    for ax, (title, train, w) in zip(axes.ravel(), cases, strict=True):
+        x = np.linspace(-train.du / 2, 1.5 * train.du, 2000)
+        ax.plot(x, train.value(x), "b--", lw=1, label="sharp p(x)")
+        ax.plot(x, train.blurred(x, w), "r-", lw=1.6, label=f"blurred, w = {w:g} px")
+        ax.set_title(f"{title}: w = {w:g}, dp = {train.dp:g}, du = {train.du:g}", fontsize=9)
+        ax.set_xlabel("x (px)")
+        ax.legend(fontsize=7, loc="upper right")
+    axes[0, 0].set_ylabel("grey level")
+    axes[1, 0].set_ylabel("grey level")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_min_chi2(study: PulseStudy, path: str | Path) -> Path:
+    """Fig. 5: minimum of the continuous SSD against w, with the regime-(a) law."""
+    plt = _plt()
+    f5 = study.fig5
+    train = PulseTrain(a=f5.attrs["a"], dp=f5.attrs["dp"], du=f5.attrs["du"])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(f5["w"], f5["min_chi2"], "ko", label="min over xi, exact continuous SSD")
+    ax.plot(f5["w"], f5["chi2_law"], "r-", label="regime (a): N a^2 w / 6")
+    ax.axvline(min(train.dp, train.g), color="grey", ls=":", lw=1)
+    ax.set_xlabel("w (px)")
+    ax.set_ylabel("min chi2 (GL^2 px)")
+    ax.set_title(f"a = {train.a:g}, dp = {train.dp:g}, du = {train.du:g}, N = 1", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
+    """Fig. 6: Monte Carlo u_e(w) with its 95% CI and the three predictions (linear and
+    log-log axes)."""
+    plt = _plt()
+    ds = study.dataset
+    w = ds["w"].values
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.3))
+    for ax, log in zip(axes, (False, True), strict=True):
+        err = np.vstack([ds["u_e"] - ds["u_e_ci_low"], ds["u_e_ci_high"] - ds["u_e"]])
+        ax.errorbar(w, ds["u_e"], yerr=err, fmt="ko", ms=4, capsize=2,
+                    label="Monte Carlo (95% CI)")
+        ax.plot(w, ds["u_first_principles"], "b-", label="sqrt law sigma sqrt(2/S_b)")
+        ax.plot(w, ds["u_paper_linear"], "g--", label="paper: linear, sigma w/(a sqrt N)")
+        # The linearisation is meaningless once the cross-gradient C has vanished.
+        ok = np.isfinite(ds["u_pixel_linearised"]) & (ds["cross_gradient"] > 0)
+        pix = np.where(ok, ds["u_pixel_linearised"], np.nan)
+        ax.plot(w, pix, "r:", lw=2, label="derived sigma sqrt(S_o+S_b)/|C| (pixel)")
+        ax.axvline(study.knee_predicted, color="m", lw=1, label="2 dp (predicted knee)")
+        ax.axvline(study.knee_paper, color="grey", ls="--", lw=1, label="du - dp (paper)")
+        ax.set_xlabel("w = 1 + W (px)")
+        ax.set_ylabel("u_e (px)")
+        if log:
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_title("log-log", fontsize=9)
+        else:
+            ax.set_ylim(0, max(0.5, float(ds["u_e"].sel(w=slice(None, 13)).max()) * 1.3))
+            ax.set_title("linear axes (zoom on w <= 13)", fontsize=9)
+    axes[1].legend(fontsize=7, loc="upper left")
+    fig.suptitle(
+        f"1-D pulse Monte Carlo: a = {ds.attrs['a']:g}, dp = {ds.attrs['dp']:g}, du = "
+        f"{ds.attrs['du']:g}, sigma = {ds.attrs['sigma']:g}, N = {ds.attrs['n_periods']}, "
+        f"{ds.attrs['trials']} trials", fontsize=9)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def write_figures(study: PulseStudy, outdir: str | Path) -> list[Path]:
+    """Write ``fig4_regimes.png``, ``fig5_min_chi2.png``, ``fig6_uncertainty.png``."""
+    d = Path(outdir)
+    return [plot_regimes(d / "fig4_regimes.png"), plot_min_chi2(study, d / "fig5_min_chi2.png"),
+            plot_uncertainty(study, d / "fig6_uncertainty.png")]

@@ -21,7 +21,6 @@ from .blur import (
     valid_region,
 )
 from .camera import Camera, add_gaussian_noise
-from .dic import Correlator, DICResult, PointStatus, correlate
 from .campaign import (
     CampaignSpec,
     campaign_status,
@@ -30,6 +29,7 @@ from .campaign import (
     open_results,
     run_campaign,
 )
+from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
     ConvergenceError,

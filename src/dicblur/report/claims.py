@@ -71,8 +71,13 @@ def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...])
 
 def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[str, Any],
                     fits: dict[str, Any], models: dict[str, Any], family: list[dict[str, Any]],
-                    pulse: Any, settings: Any) -> list[dict[str, Any]]:
-    """Evaluate the claims; returns a list of JSON-ready rows."""
+                    pulse: Any, settings: Any, valid: dict[str, np.ndarray]
+                    ) -> list[dict[str, Any]]:
+    """Evaluate the claims; returns a list of JSON-ready rows.
+
+    ``valid[k]`` marks the blur values where DIC worked (>= 90 % of POIs converged); claims
+    about the random error are judged there only, and say so.
+    """
     s = settings
     n = s.main_noise
     keys = [p.key for p in pats]
@@ -81,21 +86,29 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     rows: list[dict[str, Any]] = []
 
     # C1 / C20: translation by X/2 and negligible bias.
-    bias = {k: _series(ds, "bias", k, n) for k in keys}
-    ue = {k: _series(ds, "u_e", k, n) for k in keys}
+    bias = {k: _series(ds, "bias", k, n)[valid[k]] for k in keys}
+    ue = {k: _series(ds, "u_e", k, n)[valid[k]] for k in keys}
+    Wv = {k: W[valid[k]] for k in keys}
+    span = ", ".join(f"{labels[k].split()[0]} W <= {Wv[k].max():g}" for k in keys)
     worst_bias = max(float(np.nanmax(np.abs(b))) for b in bias.values())
     rows.append(_claim(
         "C1", "III", "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
-        "stated", f"max |mean u - W/2| over all W and patterns = {worst_bias:.4f} px",
+        "stated", f"max |mean u - W/2| = {worst_bias:.4f} px where DIC converges ({span})",
         "agrees" if worst_bias < 0.01 else "differs",
         "criterion: |bias| < 0.01 px everywhere; the DIC mean displacement is W/2."))
-    big = W >= 1.0
-    ratio_bias = max(float(np.nanmax(np.abs(bias[k][big]) / ue[k][big])) for k in keys)
+    def worst(wmin: float) -> float:
+        return max(float(np.nanmax(np.abs(bias[k][Wv[k] >= wmin]) / ue[k][Wv[k] >= wmin]))
+                   for k in keys)
+
+    r1, r3 = worst(1.0), worst(3.0)
     rows.append(_claim(
         "C2", "I, III", "Under blur the bias is negligible against the random error.",
         "stated (refs [5], [6])",
-        f"max |bias| / u_e for W >= 1 px = {ratio_bias:.2f}",
-        "agrees" if ratio_bias < 0.3 else "differs", "criterion: ratio < 0.3."))
+        f"max |bias| / u_e = {r3:.2f} for W >= 3 px, {r1:.2f} for W >= 1 px",
+        "agrees" if r1 < 0.3 else ("partly" if r3 < 0.3 else "differs"),
+        "criterion: ratio < 0.3. At small blur the random error of a sharp, noise-light "
+        "pattern is a few thousandths of a px and the sub-pixel interpolation bias of the "
+        "W/2 shift is of the same size; once blur dominates, the bias is negligible."))
 
     # Extra experiments on pattern #4.
     p4 = next(p for p in pats if p.key == "p4")
@@ -144,16 +157,17 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         "agrees" if ok else "differs", "criterion: both fall and SSSIG falls at >90 % of steps."))
 
     # C7 static match-score fails under blur.
-    ums = {k: _series(ds, "u_match_score", k, n) for k in keys}
+    ums = {k: _series(ds, "u_match_score", k, n)[valid[k]] for k in keys}
     r_end = {k: ue[k][-1] / ums[k][-1] for k in keys}
     r_0 = {k: ue[k][0] / ums[k][0] for k in keys}
     rows.append(_claim(
         "C7", "IV-V", "The static match-score model (eq. 2) does not predict u_e under blur, "
         "even with the blurred image's SSSIG.", "qualitative (Fig. 2)",
         "measured / eq. 2 at W=0: " + ", ".join(f"{r_0[k]:.2f}" for k in keys)
-        + "; at W=10: " + ", ".join(f"{r_end[k]:.2f}" for k in keys),
+        + "; at the largest converged W: " + ", ".join(
+            f"{r_end[k]:.2f} (W={Wv[k].max():g})" for k in keys),
         "agrees" if all(abs(r - 1) > 0.25 for r in r_end.values()) else "differs",
-        "criterion: off by > 25 % at W = 10 px for every pattern, while close at W = 0."))
+        "criterion: off by > 25 % at the largest W where DIC converges, for every pattern."))
 
     # 1-D analysis: Table II.
     tab = {r["regime"]: r for r in pulse.table}
@@ -256,8 +270,8 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     emm = {k: fits[k]["mismatch_max_rel_error"] for k in keys}
     rows.append(_claim(
         "C19", "VI, eq. 19, Fig. 10", "Eq. 19 predicts u_e(W) correctly over the blur range.",
-        "Fig. 10", "max |eq. 19 / measured - 1| over W = 0..10: " + ", ".join(
-            f"{labels[k].split()[0]} {100 * e19[k]:.0f}%" for k in keys)
+        "Fig. 10", "max |eq. 19 / measured - 1| where DIC converges: " + ", ".join(
+            f"{labels[k].split()[0]} {100 * e19[k]:.0f}% (W <= {Wv[k].max():g})" for k in keys)
         + "; noise + blur-mismatch model: " + ", ".join(
             f"{100 * v:.0f}%" if v is not None else "-" for v in emm.values()),
         "agrees" if all(v < 0.2 for v in e19.values()) else "differs",

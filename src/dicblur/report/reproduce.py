@@ -46,6 +46,9 @@ __all__ = ["ReproduceResult", "ReproduceSettings", "reproduce"]
 
 Progress = Callable[[str, int, int], None]
 
+#: Sweep points with a smaller fraction of converged POIs are excluded from fits and claims.
+MIN_CONVERGED = 0.9
+
 
 @dataclass(frozen=True)
 class ReproduceSettings:
@@ -204,7 +207,7 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     """Run the whole study and write the report folder (see the module docs)."""
     from ..metrics import pattern_metrics
     from ..models import blur_sensitivity, fit_blur_model
-    from ..pulse import run_pulse_study
+    from ..pulse.study import run_pulse_study
 
     s = settings
     if s.size < 4 * s.subset:
@@ -267,32 +270,42 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     W = np.asarray(ds["blur"].values, dtype=np.float64)
     fits: dict[str, dict[str, Any]] = {}
     models: dict[str, Any] = {}
+    valid: dict[str, np.ndarray] = {}
     for p in pats:
         k = p.key
-        u = _series(ds, "u_e", k, s.main_noise)
-        sg = _series(ds, "sssig", k, s.main_noise)
-        cref = _series(ds, "contrast_ref", k, s.main_noise)
-        con = _series(ds, "contrast", k, s.main_noise)
+        # Points where DIC broke down (< 90 % of POIs converged) measure failure, not the
+        # random error the models describe: they are shown but not fitted.
+        ok = {lv: _series(ds, "converged_fraction", k, lv) >= MIN_CONVERGED
+              for lv in s.noise_levels}
+        v = ok[s.main_noise]
+        valid[k] = v
+        u = _series(ds, "u_e", k, s.main_noise)[v]
+        sg = _series(ds, "sssig", k, s.main_noise)[v]
+        cref = _series(ds, "contrast_ref", k, s.main_noise)[v]
+        con = _series(ds, "contrast", k, s.main_noise)[v]
         prov = {"pattern": p.source, "sha256": p.sha256, "subset": s.subset,
                 "step": s.poi_step, "dic": "translation IC-GN, ZNSSD, bspline3",
-                "noise": "per-exposure Gaussian"}
-        paper = fit_blur_model(W, sg, u, noise_sigma=s.main_noise, contrast_ref=cref,
+                "noise": "per-exposure Gaussian",
+                "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged"}
+        paper = fit_blur_model(W[v], sg, u, noise_sigma=s.main_noise, contrast_ref=cref,
                                contrast=con, subset=s.subset, c_static=static[k]["c_static"],
                                provenance=prov, mean_level=float(p.image.mean()))
-        allw = np.concatenate([W for _ in s.noise_levels])
-        allu = np.concatenate([_series(ds, "u_e", k, n) for n in s.noise_levels])
-        alls = np.concatenate([_series(ds, "sssig", k, n) for n in s.noise_levels])
-        alln = np.concatenate([np.full(W.size, n) for n in s.noise_levels])
-        allc = np.concatenate([_series(ds, "contrast_ref", k, n) / _series(ds, "contrast", k, n)
-                               for n in s.noise_levels])
+        allw = np.concatenate([W[ok[lv]] for lv in s.noise_levels])
+        allu = np.concatenate([_series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
+        alls = np.concatenate([_series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
+        alln = np.concatenate([np.full(int(ok[lv].sum()), lv) for lv in s.noise_levels])
+        allc = np.concatenate([(_series(ds, "contrast_ref", k, lv)
+                                / _series(ds, "contrast", k, lv))[ok[lv]]
+                               for lv in s.noise_levels])
         full = fit_blur_model(allw, alls, allu, noise_sigma=alln, contrast_ratio=allc,
                               subset=s.subset, c_static=static[k]["c_static"], provenance=prov,
                               mean_level=float(p.image.mean()))
         models[k] = (paper, full)
         paper.to_json(str(out / f"model_{k}.json"))
         full.to_json(str(out / f"model_{k}_all_noise.json"))
-        eq19 = paper.predict(W, s.main_noise, model="power_law").u_e
-        mism = full.predict(W, s.main_noise, model="mismatch").u_e if full.mismatch else None
+        eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
+        mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch
+                else None)
         fits[k] = {
             "eta": _param(paper.power_law, "eta"), "alpha": _param(paper.power_law, "alpha"),
             "beta": _param(paper.decay, "beta"), "sssig0": _param(paper.decay, "sssig0"),
@@ -306,7 +319,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
             "eq19_max_rel_error": float(np.max(np.abs(eq19 / u - 1))),
             "mismatch_max_rel_error": (float(np.max(np.abs(mism / u - 1)))
                                        if mism is not None else None),
-            "bias_max": float(np.nanmax(np.abs(_series(ds, "bias", k, s.main_noise)))),
+            "w_fitted_max": float(W[v].max()),
+            "bias_max": float(np.nanmax(np.abs(_series(ds, "bias", k, s.main_noise)[v]))),
             "converged_min": float(np.nanmin(_series(ds, "converged_fraction", k,
                                                      s.main_noise))),
         }
@@ -314,10 +328,12 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     for spec_row in fam_specs:
         name = spec_row["name"]
         Wf = np.asarray(ds_fam["blur"].values, dtype=np.float64)
-        u = _series(ds_fam, "u_e", name, s.main_noise)
-        sg = _series(ds_fam, "sssig", name, s.main_noise)
+        vf = _series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
+        u = _series(ds_fam, "u_e", name, s.main_noise)[vf]
+        sg = _series(ds_fam, "sssig", name, s.main_noise)[vf]
         ratio = (_series(ds_fam, "contrast_ref", name, s.main_noise)
-                 / _series(ds_fam, "contrast", name, s.main_noise))
+                 / _series(ds_fam, "contrast", name, s.main_noise))[vf]
+        Wf = Wf[vf]
         m = fit_blur_model(Wf, sg, u, noise_sigma=s.main_noise, contrast_ratio=ratio,
                            subset=s.subset, compare=False, default="power_law")
         fam_rows.append({"name": name, "speckle_size": spec_row["speckle_size"],
@@ -333,11 +349,13 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     from .write import write_report
 
     claims = evaluate_claims(ds=ds, ds_family=ds_fam, pats=pats, static=static, fits=fits,
-                             models=models, family=fam_rows, pulse=pulse, settings=s)
+                             models=models, family=fam_rows, pulse=pulse, settings=s,
+                             valid=valid)
     versions = _versions()
     report_path, figures = write_report(
         out=out, settings=s, ds=ds, pats=pats, static=static, fits=fits, models=models,
-        family=fam_rows, pulse=pulse, claims=claims, versions=versions, timings=timings)
+        family=fam_rows, pulse=pulse, claims=claims, versions=versions, timings=timings,
+        valid=valid)
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     results = {

@@ -41,7 +41,8 @@ def _embed_writer(rep: HtmlReport, writer: Any, name: str, caption: str) -> None
 def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: dict[str, Any],
                  fits: dict[str, Any], models: dict[str, Any], family: list[dict[str, Any]],
                  pulse: Any, claims: list[dict[str, Any]], versions: dict[str, str],
-                 timings: dict[str, float]) -> tuple[Path, list[str]]:
+                 timings: dict[str, float], valid: dict[str, np.ndarray]
+                 ) -> tuple[Path, list[str]]:
     """Write figures and ``report.html`` into ``out``; return its path and figure names."""
     from ..pulse.figures import plot_min_chi2, plot_regimes, plot_uncertainty
 
@@ -53,13 +54,14 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
 
     rep.section("Summary")
     agree = sum(1 for c in claims if c["verdict"] == "agrees")
+    partly = sum(1 for c in claims if c["verdict"] == "partly")
     rep.paragraph(
         f"Mode: **{'quick' if s.quick else 'full'}**; {len(pats)} patterns of {s.size}x{s.size} "
         f"px, blur W = 0..10 px in steps of {s.blur_step:g} px along x, per-exposure Gaussian "
         f"noise {', '.join(f'{v:g}' for v in s.noise_levels)} GL (paper-like fits at {n:g} GL), "
         f"subset {s.subset} px, POIs every {s.poi_step} px, translation IC-GN (ZNSSD, cubic "
-        f"B-spline). {agree} of {len(claims)} claims agree with our numbers; the others are "
-        "listed with the reason.")
+        f"B-spline). {agree} of {len(claims)} claims agree with our numbers, {partly} partly; "
+        "the others are listed with the reason.")
     if any(p.synthetic and p.key in ("p1", "p2") for p in pats):
         rep.paragraph(
             "Patterns #1 and #2 are **synthetic stand-ins** (the DIC Challenge images are not "
@@ -69,7 +71,7 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     rep.section("Claims of the paper and our verdicts")
     rep.table(claims, columns=["id", "section", "claim", "paper", "ours", "verdict", "why"],
               left=["id", "section", "claim", "paper", "ours", "verdict", "why"],
-              classes={"verdict": {"agrees": "agrees", "differs": "differs"}})
+              classes={"verdict": {"agrees": "agrees", "differs": "differs", "partly": "partly"}})
 
     rep.section("Patterns (Fig. 1) and static metrics")
     rep.figure(F.fig_patterns({p.label: p.image for p in pats}), "fig01_patterns",
@@ -107,6 +109,11 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     rep.preformatted(pulse.verdict)
 
     rep.section("Section VI: the power-law model")
+    rep.paragraph(
+        "Fits use the sweep points where at least 90 % of the POIs converged; beyond that "
+        "the blurred pattern no longer supports DIC and u_e measures failure, not random "
+        "error. Largest fitted W: " + ", ".join(
+            f"{lab[p.key]} {fits[p.key]['w_fitted_max']:g} px" for p in pats) + ".")
     d7, d8, d9, d10, d12 = {}, {}, {}, {}, {}
     for p in pats:
         k = p.key
@@ -114,9 +121,9 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
         u = _series(ds, "u_e", k, n)
         sg = _series(ds, "sssig", k, n)
         lo, hi = paper.fit_range
-        d7[lab[k]] = {"sssig": sg, "u_e": u, "in_range": (W >= lo) & (W <= hi),
+        d7[lab[k]] = {"sssig": sg, "u_e": u, "in_range": (W >= lo) & (W <= hi) & valid[k],
                       "eta": paper.eta, "alpha": paper.alpha, "w_max": hi}
-        d8[lab[k]] = {"blur": W, "error": np.asarray(paper.data["err_power_law"], float),
+        d8[lab[k]] = {"blur": W[valid[k]], "error": np.asarray(paper.data["err_power_law"], float),
                       "contrast_ratio": np.asarray(paper.data["contrast_ratio"], float)}
         d9[lab[k]] = {"blur": W, "sssig": sg, "fit": paper.sssig(W), "beta": paper.beta,
                       "r2": paper.decay.r2}

@@ -187,9 +187,9 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         f"regime a, w={a['w'] if a else '-'}: MIG {a['mig_numeric']:.4f} (= 2a/du), contrast "
         f"{a['contrast_numeric']:.3f}, SSSIG {a['sssig_numeric']:.3f} (sharp: 2)" if a else "-",
         "agrees" if ok_a else "differs", "closed form m(w) = w; numerical convolution agrees."))
-    b, c = tab.get("b"), tab.get("c")
-    ok_bc = b is not None and c is not None and b["contrast_numeric"] < 1 and c[
-        "contrast_numeric"] < b["contrast_numeric"]
+    b, c = tab.get("b", {}), tab.get("c", {})
+    ok_bc = bool(b and c and b["contrast_numeric"] < 1
+                 and c["contrast_numeric"] < b["contrast_numeric"])
     rows.append(_claim(
         "C10", "V, finding 4", "Larger blur (regimes b, c) lowers the contrast and SSSIG "
         "falls faster (contrast-driven).", "Table II",

@@ -34,6 +34,14 @@ def _plt() -> Any:
     return plt
 
 
+def _layout(fig: Any, *, rows: int = 1, twin: bool = False) -> None:
+    """Fixed margins (tight_layout measures every text and is the slowest step)."""
+    h = fig.get_figheight()
+    fig.subplots_adjust(left=0.09, right=0.88 if twin else 0.97, top=1 - 0.45 / h,
+                        bottom=0.55 / h, hspace=0.75 / max(rows, 1) + 0.25,
+                        wspace=0.45 if twin else 0.3)
+
+
 def _grid(n: int) -> tuple[Any, Any]:
     plt = _plt()
     cols = 2 if n > 1 else 1
@@ -52,7 +60,7 @@ def fig_patterns(images: Mapping[str, np.ndarray], *, crop: int = 128) -> Any:
         ax.imshow(img[:crop, :crop], cmap="gray", interpolation="nearest")
         ax.set_title(label, fontsize=9)
         ax.set_axis_off()
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.01, right=0.99, top=0.9, bottom=0.02, wspace=0.05)
     return fig
 
 
@@ -67,7 +75,7 @@ def fig_sssig_pan(data: Mapping[str, Mapping[str, np.ndarray]], subset: int) -> 
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel(r"SSSIG$_x$ (GL$^2$/px$^2$)")
         ax.legend(fontsize=8)
-    fig.tight_layout()
+    _layout(fig, rows=len(axes) // 2)
     return fig
 
 
@@ -75,7 +83,11 @@ def fig_ue_blur(data: Mapping[str, Mapping[str, np.ndarray]]) -> Any:
     """Fig. 10 (and s. V): measured u_e vs W with eq. 19, the mismatch model, eq. 2."""
     fig, axes = _grid(len(data))
     for ax, (label, d) in zip(axes, data.items(), strict=False):
-        ax.plot(d["blur"], d["u_e"], "o", ms=3, color="k", label="measured (DIC)")
+        ok = d.get("valid", np.ones(d["blur"].size, dtype=bool))
+        ax.plot(d["blur"][ok], d["u_e"][ok], "o", ms=3, color="k", label="measured (DIC)")
+        if not ok.all():
+            ax.plot(d["blur"][~ok], d["u_e"][~ok], "o", ms=4, mfc="none", color="0.4",
+                    label="DIC breakdown (< 90 % converged), not fitted")
         ax.plot(d["blur"], d["eq19"], "-", color=_COLORS[0], label="eq. 19 (power law)")
         if d.get("mismatch") is not None:
             ax.plot(d["blur"], d["mismatch"], "--", color=_COLORS[2],
@@ -86,7 +98,7 @@ def fig_ue_blur(data: Mapping[str, Mapping[str, np.ndarray]]) -> Any:
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel(r"$u_e$ (px)")
         ax.legend(fontsize=7)
-    fig.tight_layout()
+    _layout(fig, rows=len(axes) // 2)
     return fig
 
 
@@ -103,7 +115,7 @@ def fig_loglog(data: Mapping[str, Mapping[str, Any]]) -> Any:
         ax.set_xlabel("SSSIG (GL$^2$/px$^2$)")
         ax.set_ylabel(r"$u_e$ (px)")
         ax.legend(fontsize=8)
-    fig.tight_layout()
+    _layout(fig, rows=len(axes) // 2)
     return fig
 
 
@@ -119,7 +131,7 @@ def fig_contrast_error(data: Mapping[str, Mapping[str, np.ndarray]]) -> Any:
         ax2.plot(d["blur"], d["contrast_ratio"], "-", color=_COLORS[3], label="contrast ratio")
         ax2.set_ylabel("contrast ratio static / blurred", color=_COLORS[3])
         ax.set_title(label, fontsize=10)
-    fig.tight_layout()
+    _layout(fig, rows=len(axes) // 2, twin=True)
     return fig
 
 
@@ -134,7 +146,7 @@ def fig_sssig_decay(data: Mapping[str, Mapping[str, Any]]) -> Any:
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel("SSSIG (GL$^2$/px$^2$)")
         ax.legend(fontsize=8)
-    fig.tight_layout()
+    _layout(fig, rows=len(axes) // 2)
     return fig
 
 
@@ -161,7 +173,7 @@ def fig_mbrf_mig(
         ax.set_ylabel(ylab)
         ax.set_yscale("log")
         ax.legend(fontsize=7)
-    fig.tight_layout()
+    _layout(fig)
     return fig
 
 
@@ -182,5 +194,5 @@ def fig_mismatch(data: Mapping[str, Mapping[str, Any]]) -> Any:
         lowest = float(np.nanmin([np.nanmin(u) for _, u, _ in d["curves"]]))
         ax.set_ylim(bottom=max(1e-4, lowest / 2))
         ax.legend(fontsize=7)
-    fig.tight_layout()
+    _layout(fig, rows=len(axes) // 2)
     return fig

@@ -56,10 +56,12 @@ def fig_to_files(fig: Any, folder: Path, name: str, *, dpi: int = 110) -> bytes:
     """Save a matplotlib figure as ``folder/name.png`` and ``.svg``; return the PNG bytes."""
     folder.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    # Figures are laid out by their builders (tight_layout); bbox_inches="tight" would
+    # redo the text layout on every save, the slowest part of writing a report.
+    fig.savefig(buf, format="png", dpi=dpi)
     png = buf.getvalue()
     (folder / f"{name}.png").write_bytes(png)
-    fig.savefig(folder / f"{name}.svg", format="svg", bbox_inches="tight")
+    fig.savefig(folder / f"{name}.svg", format="svg")
     return png
 
 

@@ -73,6 +73,12 @@ class ReproduceSettings:
         Noise levels of the campaign (GL, per image).
     seed : int
         Base seed of everything random.
+    blur_step_px, family, trials : optional
+        Override the mode's W step (px), the family's speckle sizes (px) and the 1-D
+        Monte Carlo trials.
+    pulse_dependence : bool
+        Run the 1-D study's dependence on the choices the paper leaves open (signal
+        length, shifted signal, interpolation).
     workers, scheduler, serial
         Campaign execution (see :func:`dicblur.campaign.run_campaign`).
     command : str
@@ -88,6 +94,10 @@ class ReproduceSettings:
     main_noise: float = 2.0
     noise_levels: tuple[float, ...] = (0.5, 2.0, 4.0)
     seed: int = 2017
+    blur_step_px: float | None = None
+    family: tuple[float, ...] | None = None
+    trials: int | None = None
+    pulse_dependence: bool = True
     workers: int | None = None
     scheduler: str | None = None
     serial: bool = False
@@ -95,6 +105,8 @@ class ReproduceSettings:
 
     @property
     def blur_step(self) -> float:
+        if self.blur_step_px is not None:
+            return self.blur_step_px
         return 0.5 if self.quick else 0.1
 
     @property
@@ -103,11 +115,15 @@ class ReproduceSettings:
 
     @property
     def family_sizes(self) -> tuple[float, ...]:
+        if self.family is not None:
+            return self.family
         return (2.0, 3.0, 4.0, 6.0, 9.0) if self.quick else (2.0, 2.5, 3.0, 4.0, 5.0, 6.0,
                                                              8.0, 10.0)
 
     @property
     def pulse_trials(self) -> int:
+        if self.trials is not None:
+            return self.trials
         return 2000 if self.quick else 10_000
 
 
@@ -120,6 +136,7 @@ class ReproduceResult:
     figures: tuple[str, ...]
     claims: tuple[dict[str, Any], ...]
     timings: dict[str, float] = field(default_factory=dict)
+    campaign_runs: dict[str, dict[str, int]] = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------
@@ -178,9 +195,10 @@ def _campaign(
         if progress is not None:
             progress(f"campaign {name}", done, total)
 
-    run_campaign(spec, store, scheduler=s.scheduler, workers=s.workers, serial=s.serial,
-                 progress=cb)
-    return open_results(store)
+    summary = run_campaign(spec, store, scheduler=s.scheduler, workers=s.workers,
+                           serial=s.serial, progress=cb)
+    return open_results(store), {"tasks": summary.n_tasks, "run": summary.n_run,
+                                 "skipped": summary.n_skipped}
 
 
 def _series(ds: Any, var: str, pattern: str, noise: float) -> np.ndarray:
@@ -242,8 +260,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     # 2. main campaign -------------------------------------------------------------------
     t = time.perf_counter()
     blur_grid = {"start": 0.0, "stop": 10.0, "step": s.blur_step}
-    ds = _campaign(s, "study", [{"name": p.key, "path": f"patterns/{p.key}.tif"} for p in pats],
-                   blur_grid, s.noise_levels, progress)
+    study_patterns = [{"name": p.key, "path": f"patterns/{p.key}.tif"} for p in pats]
+    ds, run_study = _campaign(s, "study", study_patterns, blur_grid, s.noise_levels, progress)
     timings["campaign_study"] = time.perf_counter() - t
 
     # 3. family for Fig. 11 --------------------------------------------------------------
@@ -254,14 +272,15 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         for i, d in enumerate(s.family_sizes)
     ]
     fam_grid = {"start": 0.0, "stop": 6.0, "step": 1.0 if s.quick else 0.25}
-    ds_fam = _campaign(s, "family", fam_specs, fam_grid, (s.main_noise,), progress)
+    ds_fam, run_family = _campaign(s, "family", fam_specs, fam_grid, (s.main_noise,), progress)
     timings["campaign_family"] = time.perf_counter() - t
 
     # 4. 1-D analysis --------------------------------------------------------------------
     t = time.perf_counter()
     stage("1-D pulse analysis")
     pulse = run_pulse_study(trials=s.pulse_trials, seed=s.seed,
-                            dependence_trials=500 if s.quick else 2000)
+                            dependence_trials=(min(s.pulse_trials, 500 if s.quick else 2000)
+                                               if s.pulse_dependence else None))
     timings["pulse"] = time.perf_counter() - t
 
     # 5. fits ----------------------------------------------------------------------------
@@ -326,7 +345,7 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         }
     fam_rows = []
     for spec_row in fam_specs:
-        name = spec_row["name"]
+        name = str(spec_row["name"])
         Wf = np.asarray(ds_fam["blur"].values, dtype=np.float64)
         vf = _series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
         u = _series(ds_fam, "u_e", name, s.main_noise)[vf]
@@ -334,11 +353,11 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         ratio = (_series(ds_fam, "contrast_ref", name, s.main_noise)
                  / _series(ds_fam, "contrast", name, s.main_noise))[vf]
         Wf = Wf[vf]
-        m = fit_blur_model(Wf, sg, u, noise_sigma=s.main_noise, contrast_ratio=ratio,
+        fm = fit_blur_model(Wf, sg, u, noise_sigma=s.main_noise, contrast_ratio=ratio,
                            subset=s.subset, compare=False, default="power_law")
         fam_rows.append({"name": name, "speckle_size": spec_row["speckle_size"],
                          "mig0": float(_series(ds_fam, "mig_ref", name, s.main_noise)[0]),
-                         "eta": m.eta, "alpha": m.alpha, "beta": m.beta, "mbrf": m.mbrf,
+                         "eta": fm.eta, "alpha": fm.alpha, "beta": fm.beta, "mbrf": fm.mbrf,
                          "u_e0": float(u[0]), "u_e_max": float(u[-1])})
     timings["fits"] = time.perf_counter() - t
 
@@ -370,12 +389,14 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
                            for f in pulse.fits],
                   "verdict": pulse.verdict},
         "claims": claims, "figures": figures, "timings": timings,
+        "campaign_runs": {"study": run_study, "family": run_family},
     }
     rj = out / "results.json"
     rj.write_text(json.dumps(_clean(results), indent=2))
     (out / "command.txt").write_text(
         s.command + "\n\n" + "\n".join(f"{k}: {v}" for k, v in versions.items()) + "\n")
-    return ReproduceResult(report_path, rj, tuple(figures), tuple(claims), timings)
+    return ReproduceResult(report_path, rj, tuple(figures), tuple(claims), timings,
+                           {"study": run_study, "family": run_family})
 
 
 def _clean(obj: Any) -> Any:

@@ -127,7 +127,7 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
                       "contrast_ratio": np.asarray(paper.data["contrast_ratio"], float)}
         d9[lab[k]] = {"blur": W, "sssig": sg, "fit": paper.sssig(W), "beta": paper.beta,
                       "r2": paper.decay.r2}
-        d10[lab[k]] = {"blur": W, "u_e": u,
+        d10[lab[k]] = {"blur": W, "u_e": u, "valid": valid[k],
                        "eq19": paper.predict(W, n, model="power_law").u_e,
                        "mismatch": (full.predict(W, n, model="mismatch").u_e
                                     if full.mismatch is not None else None),

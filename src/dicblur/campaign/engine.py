@@ -242,7 +242,10 @@ def _run_dask(
         started[0] = time.perf_counter()
         by_key: dict[Any, Batch] = {}
         for b in pending:
+            # Larger blur costs more DIC iterations: start the batches of large W first
+            # (longest-first scheduling shortens the idle tail of the last workers).
             fut = client.submit(fn, remote[b.pattern], b, spec, pure=False,
+                                priority=b.loc[5],
                                 key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}")
             by_key[fut.key] = b
             futures.append(fut)

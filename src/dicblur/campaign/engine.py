@@ -57,6 +57,9 @@ class RunSummary:
         start-up, image upload to the workers).
     task_s : float
         Sum of the tasks' own wall times (s) on their workers.
+    task_cpu_s : float
+        Sum of the CPU time (s) of the worker processes inside the task function: against
+        ``task_s`` it shows how much the workers were slowed by sharing the cores.
     workers : int
         Number of worker processes (1 for serial).
     scheduler : str
@@ -71,6 +74,7 @@ class RunSummary:
     wall_s: float
     setup_s: float
     task_s: float
+    task_cpu_s: float
     workers: int
     scheduler: str
 
@@ -78,6 +82,15 @@ class RunSummary:
     def complete(self) -> bool:
         """Whether every task of the campaign is now stored."""
         return self.n_skipped + self.n_run == self.n_tasks
+
+
+def _timed_task(fn: TaskFunction, image: NDArray[np.float64], batch: Batch,
+                spec: CampaignSpec) -> dict[str, Any]:
+    """Call the task function and add its process CPU time (s) as ``"_cpu_s"``."""
+    t = time.process_time()
+    out = dict(fn(image, batch, spec))
+    out["_cpu_s"] = time.process_time() - t
+    return out
 
 
 def _default_task() -> TaskFunction:
@@ -164,7 +177,7 @@ def run_campaign(
     # edited by hand) is rerun whole; count its finished tasks as rerun, not skipped.
     n_skipped -= sum(int(mask[b.region].sum()) for b in pending)
     counts = {"done": n_skipped, "run": 0}
-    task_s = [0.0]
+    task_s = [0.0, 0.0]
     started = [time.perf_counter()]
     if progress is not None:
         progress(counts["done"], n_total)
@@ -174,6 +187,7 @@ def run_campaign(
         counts["done"] += len(batch.blur)
         counts["run"] += len(batch.blur)
         task_s[0] += float(np.sum(result["time_s"]))
+        task_s[1] += float(result.get("_cpu_s", 0.0))
         if progress is not None:
             progress(counts["done"], n_total)
 
@@ -183,7 +197,7 @@ def run_campaign(
         started[0] = time.perf_counter()
         try:
             for b in pending:
-                finish(b, fn(images[b.pattern], b, spec))
+                finish(b, _timed_task(fn, images[b.pattern], b, spec))
         except KeyboardInterrupt:
             interrupted = True
     else:
@@ -194,7 +208,7 @@ def run_campaign(
     return RunSummary(
         path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=counts["run"],
         interrupted=interrupted, wall_s=time.perf_counter() - t0,
-        setup_s=started[0] - t0, task_s=task_s[0],
+        setup_s=started[0] - t0, task_s=task_s[0], task_cpu_s=task_s[1],
         workers=n_workers, scheduler=where,
     )
 
@@ -244,7 +258,7 @@ def _run_dask(
         for b in pending:
             # Larger blur costs more DIC iterations: start the batches of large W first
             # (longest-first scheduling shortens the idle tail of the last workers).
-            fut = client.submit(fn, remote[b.pattern], b, spec, pure=False,
+            fut = client.submit(_timed_task, fn, remote[b.pattern], b, spec, pure=False,
                                 priority=b.loc[5],
                                 key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}")
             by_key[fut.key] = b

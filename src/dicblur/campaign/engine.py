@@ -140,7 +140,9 @@ def run_campaign(
         Run every batch in this process, without Dask (the reference for tests).
     task : callable, optional
         ``task(image, batch, spec) -> {variable: (len(batch.blur),) array}``; default
-        :func:`dicblur.campaign.simulate_batch`. Must be importable by the workers.
+        :func:`dicblur.campaign.simulate_batch`. Must be importable by the workers. If it
+        has a ``warm_up`` attribute (a callable without arguments), Dask workers run it
+        once at start-up (e.g. to load compiled kernels).
     progress : callable, optional
         ``progress(done, total)`` in tasks, called at the start and after every batch.
     connect_timeout : float
@@ -259,6 +261,11 @@ def _run_dask(
     futures: list[Any] = []
     try:
         n_workers = max(1, len(client.scheduler_info(n_workers=-1).get("workers", {})))
+        # Load the task's compiled code (numba cache) on every worker at once, as part of
+        # the start-up, rather than inside each worker's first batch.
+        warm = getattr(fn, "warm_up", None)
+        if callable(warm):
+            client.run(warm)
         # Each pattern image travels to every worker once, not once per batch.
         remote = {name: client.scatter(img, broadcast=True, hash=False)
                   for name, img in images.items()}

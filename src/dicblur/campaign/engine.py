@@ -55,6 +55,9 @@ class RunSummary:
     setup_s : float
         Part of ``wall_s`` before the first task could start (patterns, store, cluster
         start-up, image upload to the workers).
+    compute_s : float
+        Part of ``wall_s`` from the first task's start to the last batch stored (the
+        rest is set-up and the cluster's shutdown).
     task_s : float
         Sum of the tasks' own wall times (s) on their workers.
     task_cpu_s : float
@@ -73,6 +76,7 @@ class RunSummary:
     interrupted: bool
     wall_s: float
     setup_s: float
+    compute_s: float
     task_s: float
     task_cpu_s: float
     workers: int
@@ -181,6 +185,7 @@ def run_campaign(
     counts = {"done": n_skipped, "run": 0}
     task_s = [0.0, 0.0]
     started = [time.perf_counter()]
+    finished = [0.0]
     if progress is not None:
         progress(counts["done"], n_total)
 
@@ -190,6 +195,7 @@ def run_campaign(
         counts["run"] += len(batch.blur)
         task_s[0] += float(np.sum(result["time_s"]))
         task_s[1] += float(result.get("_cpu_s", 0.0))
+        finished[0] = time.perf_counter()
         if progress is not None:
             progress(counts["done"], n_total)
 
@@ -210,7 +216,8 @@ def run_campaign(
     return RunSummary(
         path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=counts["run"],
         interrupted=interrupted, wall_s=time.perf_counter() - t0,
-        setup_s=started[0] - t0, task_s=task_s[0], task_cpu_s=task_s[1],
+        setup_s=started[0] - t0, compute_s=max(0.0, finished[0] - started[0]),
+        task_s=task_s[0], task_cpu_s=task_s[1],
         workers=n_workers, scheduler=where,
     )
 

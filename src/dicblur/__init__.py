@@ -29,6 +29,7 @@ from .campaign import (
     open_results,
     run_campaign,
 )
+from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
     ConvergenceError,
@@ -66,12 +67,15 @@ __all__ = [
     "CampaignSpec",
     "ConfigError",
     "ConvergenceError",
+    "Correlator",
+    "DICResult",
     "DicblurError",
     "FitError",
     "ImageReadError",
     "InputError",
     "PatternMetrics",
     "PatternSettings",
+    "PointStatus",
     "PulseStudy",
     "PulseTrain",
     "SineMotion",
@@ -81,6 +85,7 @@ __all__ = [
     "blur_length",
     "blur_transfer",
     "campaign_status",
+    "correlate",
     "estimate_noise",
     "export_csv",
     "file_sha256",

@@ -68,6 +68,9 @@ _campaign.register(app)
 from . import pulse as _pulse  # noqa: E402
 
 _pulse.register(app)
+from . import correlate as _correlate  # noqa: E402
+
+_correlate.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

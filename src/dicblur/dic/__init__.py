@@ -1,0 +1,15 @@
+"""Subset digital image correlation (issue 4): FFT-CC initial guess, IC-GN with the ZNSSD
+criterion, prefiltered B-spline interpolation, per-point status and predicted sigma.
+
+Stages, one module each (OpenCorr/DICe style): :mod:`.interpolation`, :mod:`.initial`,
+:mod:`.icgn` (+ compiled :mod:`.kernels`), :mod:`.result`, :mod:`.status`,
+:mod:`.correlator`.
+"""
+
+from __future__ import annotations
+
+from .correlator import Correlator, correlate
+from .result import DICResult
+from .status import PointStatus
+
+__all__ = ["Correlator", "DICResult", "PointStatus", "correlate"]

@@ -1,0 +1,456 @@
+"""The subset DIC engine: a prepared reference correlated against current images.
+
+Pipeline per current image (one module per stage): B-spline prefilter
+(:mod:`.interpolation`), integer initial guess (:mod:`.initial`), IC-GN refinement with the
+ZNSSD criterion (:mod:`.icgn`, compiled in :mod:`.kernels`), result (:mod:`.result`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._validation import as_image, check_choice, check_odd_subset, check_positive, describe
+from ..errors import InputError
+from ..metrics import image_gradients, subset_centres
+from . import kernels
+from .icgn import N_PARAMS, prepare_subsets
+from .initial import global_shift, subset_fftcc
+from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
+from .result import DICResult
+from .status import PointStatus
+
+__all__ = ["INITIAL_METHODS", "SHAPES", "Correlator", "correlate"]
+
+Shape = Literal["affine", "translation"]
+SHAPES: tuple[str, ...] = ("affine", "translation")
+#: ``fftcc``: global phase correlation, then per-subset FFT-CC for the POIs that fail;
+#: ``subset``: per-subset FFT-CC for every POI; ``zero``: start every POI at (0, 0).
+INITIAL_METHODS: tuple[str, ...] = ("fftcc", "subset", "zero")
+
+_RETRY = (PointStatus.MAX_ITERATIONS, PointStatus.DIVERGED, PointStatus.LOW_CORRELATION,
+          PointStatus.OUT_OF_BOUNDS)
+
+
+def _check_int(value: Any, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise InputError(f"{name}={describe(value)}: must be an integer >= {minimum}")
+    return int(value)
+
+
+class Correlator:
+    """Subset DIC against one prepared reference image.
+
+    The reference is prepared once (B-spline coefficients and gradients, per-subset
+    ZNSSD Hessians, predicted random errors); :meth:`correlate` then measures any number of
+    current images against it. One instance reuses a coefficient buffer between calls:
+    do not call :meth:`correlate` of the same instance from several threads at once
+    (processes, or one instance per thread, are fine).
+
+    Parameters
+    ----------
+    reference : array_like, shape (rows, cols)
+        Reference image, grey levels (finite).
+    subset : int
+        Odd subset size, px.
+    step : int
+        Grid spacing of the POIs, px (ignored when ``points`` is given).
+    roi : (row_start, row_stop, col_start, col_stop), optional
+        Region (px, half-open) inside which the grid of subsets is laid out.
+    points : array_like of int, shape (n, 2), optional
+        Explicit POI centres ``(row, col)``; subsets that leave the reference get status
+        ``OUT_OF_BOUNDS``.
+    shape : {"affine", "translation"}
+        First-order (6 parameters) or zero-order (2 parameters) shape function.
+    interpolation : {"bspline3", "bspline5"}
+        Prefiltered cubic or quintic B-spline.
+    initial : {"fftcc", "subset", "zero"}
+        Initial-guess method (see :data:`INITIAL_METHODS`).
+    max_iterations : int
+        IC-GN iteration limit.
+    tolerance : float
+        Convergence threshold on the update norm ``sqrt(du^2 + dv^2 + h^2 |grad|^2)``, px
+        (``h`` = subset half-width).
+    noise_sigma : float, optional
+        Image noise std, grey levels (assumed in both images); enables the per-point
+        predicted sigma.
+    min_zncc : float
+        Converged points with a lower ZNCC get status ``LOW_CORRELATION``.
+    workers : int, optional
+        Threads of the compiled kernels (default: all numba threads).
+
+    Examples
+    --------
+    >>> import numpy as np, dicblur
+    >>> ref = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=1)
+    >>> cur = np.roll(ref, 2, axis=1)
+    >>> res = dicblur.Correlator(ref, subset=21, step=20, shape="translation").correlate(cur)
+    >>> bool(np.allclose(res.u[res.converged], 2.0, atol=1e-3))
+    True
+    """
+
+    def __init__(self, reference: ArrayLike, *, subset: int = 21, step: int = 10,
+                 roi: Sequence[int] | None = None, points: ArrayLike | None = None,
+                 shape: Shape = "affine", interpolation: str = "bspline3",
+                 initial: str = "fftcc", max_iterations: int = 50, tolerance: float = 1e-4,
+                 noise_sigma: float | None = None, min_zncc: float = 0.6,
+                 workers: int | None = None) -> None:
+        t0 = time.perf_counter()
+        ref = as_image(reference, "reference", min_size=3)
+        self.subset = check_odd_subset(subset)
+        if self.subset + 2 > min(ref.shape):
+            raise InputError(
+                f"subset={self.subset}: larger than the reference image {ref.shape[0]}x"
+                f"{ref.shape[1]} px allows (a subset plus a 1-px border); use a subset <= "
+                f"{(min(ref.shape) - 3) | 1}")
+        self.step = _check_int(step, "step", 1)
+        self.shape: str = check_choice(shape, "shape", SHAPES)
+        self.interpolation = interpolation
+        self.order = order_of(interpolation)
+        self.initial = check_choice(initial, "initial", INITIAL_METHODS)
+        self.max_iterations = _check_int(max_iterations, "max_iterations", 1)
+        self.tolerance = check_positive(tolerance, "tolerance")
+        self.noise_sigma = (None if noise_sigma is None
+                            else check_positive(noise_sigma, "noise_sigma", allow_zero=True))
+        self.min_zncc = float(min_zncc)
+        if not -1.0 <= self.min_zncc <= 1.0:
+            raise InputError(f"min_zncc={min_zncc!r}: must lie in [-1, 1]")
+        self.workers = None if workers is None else _check_int(workers, "workers", 1)
+        self.image_shape: tuple[int, int] = (int(ref.shape[0]), int(ref.shape[1]))
+        half = self.subset // 2
+        self.half = half
+
+        rows, cols, status0 = self._points(roi, points)
+        self.rows = rows
+        self.cols = cols
+        coef = bspline_coefficients(ref, order=self.order, dtype=np.float64)
+        # IC-GN uses the exact derivatives of the reference spline (consistent with the
+        # interpolant of the current image: fast, unbiased convergence)
+        gy, gx = bspline_gradients(coef, self.order, self.image_shape)
+        # out-of-bounds POIs are prepared on a clipped centre and keep their status
+        rc = np.clip(rows, half, ref.shape[0] - 1 - half)
+        cc = np.clip(cols, half, ref.shape[1] - 1 - half)
+        prep = prepare_subsets(ref, gx, gy, rc, cc, half, self.shape)
+        status0 = np.where(status0 != 0, status0, prep.status).astype(np.uint8)
+        self._prep = prep
+        self._status0 = status0
+        self._ref = ref
+        # padded float32 layouts of the kernels (see kernels.icgn_translation)
+        self._tw = 16 * ((self.subset + 15) // 16)
+        rows_img, cols_img = self.image_shape
+        extra = self._tw + 16
+        self._f32 = np.zeros((rows_img, cols_img + self._tw), np.float32)
+        self._f32[:, :cols_img] = ref
+        self._gx32 = np.zeros_like(self._f32)
+        self._gx32[:, :cols_img] = gx
+        self._gy32 = np.zeros_like(self._f32)
+        self._gy32[:, :cols_img] = gy
+        self._kernel_args = tuple(np.ascontiguousarray(a) for a in (
+            rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm))
+        self._coef_buf = np.zeros((rows_img + 2 * PAD, cols_img + 2 * PAD + extra), np.float32)
+        self._args_cache: dict[int, Any] = {}
+        self._setup_seeds()
+        self.predicted_sigma_u: NDArray[np.float64] | None = None
+        self.predicted_sigma_v: NDArray[np.float64] | None = None
+        if self.noise_sigma is not None:
+            # predicted sigma from the project's SSSIG (central differences, as
+            # dicblur.metrics.sssig): see docs/dic.md for why not the spline gradients
+            cgy, cgx = image_gradients(ref)
+            pp = prepare_subsets(ref, cgx, cgy, rc, cc, half, self.shape)
+            s2 = self.noise_sigma ** 2
+            with np.errstate(divide="ignore", invalid="ignore"):
+                if self.shape == "translation":
+                    pu = np.sqrt(2.0 * s2 / pp.sssig_x)
+                    pv = np.sqrt(2.0 * s2 / pp.sssig_y)
+                else:
+                    pu = np.sqrt(s2 * pp.cov_unit[:, 0, 0])
+                    pv = np.sqrt(s2 * pp.cov_unit[:, 3, 3])
+            bad = status0 != 0
+            self.predicted_sigma_u = np.where(bad, np.nan, pu)
+            self.predicted_sigma_v = np.where(bad, np.nan, pv)
+        self.prepare_time_s = time.perf_counter() - t0
+        #: Timings (s) of the last :meth:`correlate` call: prefilter, initial, icgn, total.
+        self.last_timings: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ setup helpers
+    def _points(self, roi: Sequence[int] | None, points: ArrayLike | None
+                ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]:
+        rows_img, cols_img = self.image_shape
+        half = self.subset // 2
+        if points is not None:
+            pts = np.asarray(points)
+            if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] == 0:
+                raise InputError(f"points={describe(pts)}: expected an (n, 2) array of "
+                                 "(row, col) POI centres, n >= 1")
+            if not np.issubdtype(pts.dtype, np.integer):
+                if not np.all(np.isfinite(pts)) or not np.all(pts == np.round(pts)):
+                    raise InputError(f"points={describe(pts)}: POI centres must be integer "
+                                     "pixel positions (round them first)")
+            pts = pts.astype(np.int64)
+            r, c = pts[:, 0].copy(), pts[:, 1].copy()
+            inside = ((r - half >= 0) & (r + half <= rows_img - 1) & (c - half >= 0)
+                      & (c + half <= cols_img - 1))
+            st = np.where(inside, 0, int(PointStatus.OUT_OF_BOUNDS)).astype(np.uint8)
+            return r, c, st
+        r0, r1, c0, c1 = 0, rows_img, 0, cols_img
+        if roi is not None:
+            try:
+                r0, r1, c0, c1 = (int(x) for x in roi)
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"roi={describe(roi)}: expected (row_start, row_stop, "
+                                 "col_start, col_stop) in px") from exc
+            if not (0 <= r0 < r1 <= rows_img and 0 <= c0 < c1 <= cols_img):
+                raise InputError(f"roi={describe(roi)}: must satisfy 0 <= row_start < "
+                                 f"row_stop <= {rows_img} and 0 <= col_start < col_stop <= "
+                                 f"{cols_img}")
+        if min(r1 - r0, c1 - c0) < self.subset + 2:
+            raise InputError(f"roi={describe(roi)}: region smaller than the subset "
+                             f"({self.subset} px) plus a 1-px border; enlarge it")
+        centres = subset_centres((r1 - r0, c1 - c0), subset=self.subset, step=self.step)
+        r = centres[:, 0].astype(np.int64) + r0
+        c = centres[:, 1].astype(np.int64) + c0
+        return r, c, np.zeros(len(r), np.uint8)
+
+    def _setup_seeds(self) -> None:
+        """Two-pass start: IC-GN first on sparse seed POIs (about 1 in 16), then every other
+        POI starts from its nearest seed's warp carried to its own centre. A start within a
+        few hundredths of a px saves about one IC-GN iteration per POI (Pan et al. 2013 use
+        the same idea along a reliability path)."""
+        n = self.n_points
+        self._seeds: NDArray[np.intp] | None = None
+        self._rest: NDArray[np.intp] | None = None
+        if n < 64:
+            return
+        from scipy.spatial import cKDTree
+
+        spacing = 4 * self.step
+        key = (self.rows // spacing) * 100003 + (self.cols // spacing)
+        _, first = np.unique(key, return_index=True)
+        seeds = np.sort(first)
+        rest = np.setdiff1d(np.arange(n), seeds)
+        if seeds.size == 0 or rest.size == 0:
+            return
+        tree = cKDTree(np.stack([self.rows[seeds], self.cols[seeds]], axis=1))
+        _, near = tree.query(np.stack([self.rows[rest], self.cols[rest]], axis=1))
+        self._seeds = seeds
+        self._rest = rest
+        self._rest_seed = seeds[np.asarray(near, dtype=np.intp)]
+
+    @property
+    def n_points(self) -> int:
+        """Number of POIs."""
+        return int(self.rows.shape[0])
+
+    # ------------------------------------------------------------------ correlation
+    def _run_icgn(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
+                  status_in: NDArray[np.uint8], idx: NDArray[np.intp] | None = None
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
+                             NDArray[np.uint8]]:
+        prep = self._prep
+        if idx is None:
+            rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
+        else:
+            key = id(idx)
+            cached = self._args_cache.get(key)
+            if cached is not None and cached[0] is idx:
+                rows, cols, hinv, jsum, avec, fmean, fnorm = cached[1]
+            else:
+                rows, cols = self.rows[idx], self.cols[idx]
+                hinv, jsum, avec = prep.hinv[idx], prep.jsum[idx], prep.avec[idx]
+                fmean, fnorm = prep.fmean[idx], prep.fnorm[idx]
+                if idx is self._seeds or (self._rest is not None and idx is self._rest):
+                    self._args_cache[key] = (idx, (rows, cols, hinv, jsum, avec, fmean,
+                                                   fnorm))
+        n = len(self.rows) if idx is None else len(idx)
+        k = N_PARAMS[self.shape]
+        out_p = np.empty((n, k))
+        out_z = np.empty(n)
+        out_i = np.empty(n, np.int64)
+        out_s = np.empty(n, np.uint8)
+        kern = kernels.icgn_translation if self.shape == "translation" else kernels.icgn_affine
+        kern(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
+             self._gx32, self._gy32,
+             rows, cols, self.half, self._tw, hinv, jsum, avec, fmean, fnorm,
+             np.ascontiguousarray(p0), np.ascontiguousarray(status_in), self.max_iterations,
+             self.tolerance, self.min_zncc, float(self.subset), out_p, out_z, out_i, out_s)
+        return out_p, out_z, out_i, out_s
+
+    def _seeded_icgn(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
+                     status0: NDArray[np.uint8]) -> tuple[NDArray[np.float64],
+                                                          NDArray[np.float64],
+                                                          NDArray[np.int64], NDArray[np.uint8]]:
+        assert self._seeds is not None and self._rest is not None
+        seeds, rest, src = self._seeds, self._rest, self._rest_seed
+        n, k = p0.shape
+        p = np.empty((n, k))
+        z = np.empty(n)
+        it = np.empty(n, np.int64)
+        st = np.empty(n, np.uint8)
+        ps, zs, its, sts = self._run_icgn(coef, p0[seeds], status0[seeds], seeds)
+        p[seeds], z[seeds], it[seeds], st[seeds] = ps, zs, its, sts
+        start = p0[rest].copy()
+        good = st[src] == PointStatus.CONVERGED
+        q = p[src[good]]
+        dx = (self.cols[rest[good]] - self.cols[src[good]]).astype(float)
+        dy = (self.rows[rest[good]] - self.rows[src[good]]).astype(float)
+        if k == 2:
+            start[good] = q
+        elif good.any():
+            # carry the seed's translation to this POI's centre with the median gradients of
+            # all converged seeds (a single seed's gradients are too noisy to extrapolate)
+            ok_seeds = st[seeds] == PointStatus.CONVERGED
+            grad = np.median(p[seeds[ok_seeds]][:, [1, 2, 4, 5]], axis=0)
+            start[good] = q
+            start[good, 0] = q[:, 0] + grad[0] * dx + grad[1] * dy
+            start[good, 3] = q[:, 3] + grad[2] * dx + grad[3] * dy
+            start[good, 1], start[good, 2] = grad[0], grad[1]
+            start[good, 4], start[good, 5] = grad[2], grad[3]
+        pr, zr, itr, str_ = self._run_icgn(coef, start, status0[rest], rest)
+        p[rest], z[rest], it[rest], st[rest] = pr, zr, itr, str_
+        return p, z, it, st
+
+    def _guess_to_params(self, u: NDArray[np.float64], v: NDArray[np.float64]
+                         ) -> NDArray[np.float64]:
+        k = N_PARAMS[self.shape]
+        p0 = np.zeros((len(u), k))
+        p0[:, 0] = u
+        p0[:, 1 if k == 2 else 3] = v
+        return p0
+
+    def correlate(self, current: ArrayLike, *, initial: ArrayLike | None = None) -> DICResult:
+        """Measure the displacement of every POI in ``current``.
+
+        Parameters
+        ----------
+        current : array_like, shape (rows, cols)
+            Deformed image, same shape as the reference, grey levels.
+        initial : array_like, shape (n, 2) or (2,), optional
+            Initial guess ``(u, v)`` per POI (or one for all), px; overrides the
+            initial-guess method.
+
+        Returns
+        -------
+        DICResult
+        """
+        cur = as_image(current, "current", min_size=3)
+        if cur.shape != self.image_shape:
+            raise InputError(f"current: shape {cur.shape} differs from the reference "
+                             f"{self.image_shape}; both images must have the same size")
+        old_threads = numba.get_num_threads()
+        if self.workers is not None:
+            numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
+        try:
+            return self._correlate(cur, initial)
+        finally:
+            numba.set_num_threads(old_threads)
+
+    def _correlate(self, cur: NDArray[np.float64], initial: ArrayLike | None) -> DICResult:
+        t0 = time.perf_counter()
+        cols_img = self.image_shape[1]
+        coef = self._coef_buf
+        bspline_coefficients(cur, order=self.order, dtype=np.float32,
+                             out=coef[:, :cols_img + 2 * PAD])
+        t1 = time.perf_counter()
+        n = self.n_points
+        status0 = self._status0
+        method = self.initial
+        if initial is not None:
+            guess = np.asarray(initial, dtype=np.float64)
+            if guess.shape == (2,):
+                guess = np.broadcast_to(guess, (n, 2))
+            if guess.shape != (n, 2) or not np.all(np.isfinite(guess)):
+                raise InputError(f"initial={describe(guess)}: expected finite (u, v) px, "
+                                 f"shape (2,) or ({n}, 2)")
+            gu, gv = guess[:, 0].copy(), guess[:, 1].copy()
+            method = "given"
+        elif method == "fftcc":
+            su, sv, _ = global_shift(self._ref, cur, workers=self.workers)
+            gu = np.full(n, float(su))
+            gv = np.full(n, float(sv))
+        elif method == "subset":
+            iu, iv, _ = subset_fftcc(self._ref, cur, self.rows, self.cols, self.half,
+                                     workers=self.workers)
+            gu, gv = iu.astype(float), iv.astype(float)
+        else:
+            gu = np.zeros(n)
+            gv = np.zeros(n)
+        t2 = time.perf_counter()
+        p0 = self._guess_to_params(gu, gv)
+        if method in ("fftcc", "zero") and self._seeds is not None:
+            p, z, it, st = self._seeded_icgn(coef, p0, status0)
+        else:
+            p, z, it, st = self._run_icgn(coef, p0, status0)
+        t3 = time.perf_counter()
+        if method == "fftcc":
+            retry = np.flatnonzero(np.isin(st, _RETRY) & (status0 == 0))
+            if retry.size:
+                iu, iv, _ = subset_fftcc(self._ref, cur, self.rows[retry], self.cols[retry],
+                                         self.half, guess_u=gu[retry], guess_v=gv[retry],
+                                         workers=self.workers)
+                p2, z2, it2, st2 = self._run_icgn(
+                    coef, self._guess_to_params(iu.astype(float), iv.astype(float)),
+                    status0[retry], retry)
+                better = (st2 == PointStatus.CONVERGED) | (st[retry] != PointStatus.CONVERGED)
+                idx = retry[better]
+                p[idx], z[idx], st[idx] = p2[better], z2[better], st2[better]
+                it[idx] = it[idx] + it2[better]
+        t4 = time.perf_counter()
+        self.last_timings = {"prefilter_s": t1 - t0, "initial_s": (t2 - t1) + (t4 - t3),
+                             "icgn_s": t3 - t2, "total_s": t4 - t0}
+        k = p.shape[1]
+        u = p[:, 0].copy()
+        v = p[:, 1 if k == 2 else 3].copy()
+        from .. import __version__
+
+        info = {"subset": self.subset, "step": self.step, "shape": self.shape,
+                "interpolation": self.interpolation, "initial": method,
+                "max_iterations": self.max_iterations, "tolerance": self.tolerance,
+                "noise_sigma": self.noise_sigma, "min_zncc": self.min_zncc,
+                "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
+                "dicblur_version": __version__}
+        return DICResult(
+            rows=self.rows.copy(), cols=self.cols.copy(), u=u, v=v, params=p, zncc=z,
+            iterations=it, status=st,
+            predicted_sigma_u=None if self.predicted_sigma_u is None
+            else self.predicted_sigma_u.copy(),
+            predicted_sigma_v=None if self.predicted_sigma_v is None
+            else self.predicted_sigma_v.copy(),
+            info=info)
+
+    def warmup(self) -> float:
+        """Compile (or load from the numba cache) the kernels of this configuration on a
+        tiny image and return the seconds it took (the first call's compile time)."""
+        t0 = time.perf_counter()
+        rng = np.random.default_rng(0)
+        img = rng.normal(128.0, 30.0, (self.subset + 12, self.subset + 12))
+        c = Correlator(img, subset=self.subset, step=self.step, shape=self.shape,  # type: ignore[arg-type]
+                       interpolation=self.interpolation, initial="zero",
+                       workers=self.workers)
+        c.correlate(img)
+        return time.perf_counter() - t0
+
+
+def correlate(reference: ArrayLike, current: ArrayLike, *, subset: int = 21, step: int = 10,
+              roi: Sequence[int] | None = None, points: ArrayLike | None = None,
+              shape: Shape = "affine", interpolation: str = "bspline3",
+              initial: str | ArrayLike = "fftcc", max_iterations: int = 50,
+              tolerance: float = 1e-4, noise_sigma: float | None = None,
+              min_zncc: float = 0.6, workers: int | None = None) -> DICResult:
+    """One-shot subset DIC of ``current`` against ``reference`` (see :class:`Correlator`).
+
+    ``initial`` is a method name (``"fftcc"``, ``"subset"``, ``"zero"``) or an array of
+    initial guesses ``(u, v)`` px of shape (n, 2) or (2,).
+    """
+    method = initial if isinstance(initial, str) else "fftcc"
+    c = Correlator(reference, subset=subset, step=step, roi=roi, points=points, shape=shape,
+                   interpolation=interpolation, initial=method,
+                   max_iterations=max_iterations, tolerance=tolerance,
+                   noise_sigma=noise_sigma, min_zncc=min_zncc, workers=workers)
+    return c.correlate(current, initial=None if isinstance(initial, str) else initial)
+
+

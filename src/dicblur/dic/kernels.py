@@ -1,0 +1,827 @@
+# ruff: noqa: RUF046  (int(math.floor(x)) gives numba an integer index)
+"""Compiled hot loops of the DIC engine (numba, ``cache=True``).
+
+Each kernel has a plain reference implementation that the tests compare it against:
+
+=========================  ==========================================================
+kernel                     reference
+=========================  ==========================================================
+:func:`prefilter_padded`   :func:`dicblur.dic.interpolation.prefilter_reference`
+                           (:func:`scipy.ndimage.spline_filter`, mirror boundary)
+:func:`weights`            :func:`dicblur.dic.interpolation.bspline_weights`
+:func:`icgn_translation`   :func:`dicblur.dic.icgn.icgn_reference` (translation)
+:func:`icgn_affine`        :func:`dicblur.dic.icgn.icgn_reference` (affine)
+=========================  ==========================================================
+
+Speed notes (measured on the 512x512, subset 21, step 10 benchmark): float32 working
+arrays; the prefilter runs down the rows with the recursion vectorised across columns
+(the other axis through a transpose); IC-GN is parallel over POIs, reads contiguous row
+slices of the coefficient image and of the reference gradients; a rigidly translated
+subset shares one set of tap weights for all its pixels, so the 4x4 (6x6) interpolation
+becomes a vertical then a horizontal 4-tap (6-tap) pass over contiguous rows.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .status import PointStatus
+
+__all__ = ["PAD", "icgn_affine", "icgn_translation", "prefilter_padded", "weights"]
+
+#: Margin (px) of mirrored coefficients around the image (quintic needs 3 taps + 1).
+PAD = 4
+
+_CONVERGED = int(PointStatus.CONVERGED)
+_MAX_ITERATIONS = int(PointStatus.MAX_ITERATIONS)
+_OUT_OF_BOUNDS = int(PointStatus.OUT_OF_BOUNDS)
+_DIVERGED = int(PointStatus.DIVERGED)
+_LOW_CORRELATION = int(PointStatus.LOW_CORRELATION)
+
+# Poles of the B-spline prefilters (Unser 1999, Table I).
+_POLES3 = np.array([math.sqrt(3.0) - 2.0])
+_POLES5 = np.array([
+    math.sqrt(135.0 / 2.0 - math.sqrt(17745.0 / 4.0)) + math.sqrt(105.0 / 4.0) - 13.0 / 2.0,
+    math.sqrt(135.0 / 2.0 + math.sqrt(17745.0 / 4.0)) - math.sqrt(105.0 / 4.0) - 13.0 / 2.0,
+])
+
+
+@nb.njit(parallel=True, fastmath=True, cache=True)
+def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
+    """In-place B-spline prefilter of every column of ``x`` (recursion down the rows,
+    vectorised across a block of columns); mirror (whole-sample symmetric) boundary."""
+    n, m = x.shape
+    if n == 1:
+        return
+    gain = 1.0
+    for z in poles:
+        gain *= (1.0 - z) * (1.0 - 1.0 / z)
+    bw = 64
+    nblk = (m + bw - 1) // bw
+    for blk in nb.prange(nblk):
+        j0 = blk * bw
+        j1 = min(m, j0 + bw)
+        w = j1 - j0
+        s = np.zeros(w, dtype=np.float64)
+        first = True
+        for z in poles:
+            # the overall gain is folded into the first causal pass (one sweep less)
+            gn = gain if first else 1.0
+            first = False
+            horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
+            for j in range(w):
+                s[j] = 0.0
+            if horizon < n:
+                zk = 1.0
+                for k in range(horizon):
+                    for j in range(w):
+                        s[j] += zk * x[k, j0 + j]
+                    zk *= z
+            else:
+                # exact mirror-symmetric initialisation (Unser 1999; Thevenaz's coeff.c)
+                zn = z
+                iz = 1.0 / z
+                z2n = z ** (n - 1)
+                for j in range(w):
+                    s[j] = x[0, j0 + j] + z2n * x[n - 1, j0 + j]
+                z2n = z2n * z2n * iz
+                for k in range(1, n - 1):
+                    for j in range(w):
+                        s[j] += (zn + z2n) * x[k, j0 + j]
+                    zn *= z
+                    z2n *= iz
+                for j in range(w):
+                    s[j] /= 1.0 - zn * zn
+            for j in range(w):
+                x[0, j0 + j] = gn * s[j]
+            for r in range(1, n):
+                for j in range(j0, j1):
+                    x[r, j] = gn * x[r, j] + z * x[r - 1, j]
+            c = z / (z * z - 1.0)
+            for j in range(j0, j1):
+                x[n - 1, j] = c * (x[n - 1, j] + z * x[n - 2, j])
+            for r in range(n - 2, -1, -1):
+                for j in range(j0, j1):
+                    x[r, j] = z * (x[r + 1, j] - x[r, j])
+
+
+@nb.njit(parallel=True, fastmath=True, cache=True)
+def _filter_axis1(src, dst, poles, tol):  # pragma: no cover - compiled
+    """B-spline prefilter of every row of ``src`` into ``dst`` (may differ in dtype):
+    the recursions of 16 rows run interleaved, so no transpose is needed."""
+    n_r, n = src.shape
+    gain = 1.0
+    for z in poles:
+        gain *= (1.0 - z) * (1.0 - 1.0 / z)
+    bh = 16
+    nblk = (n_r + bh - 1) // bh
+    for blk in nb.prange(nblk):
+        r0 = blk * bh
+        r1 = min(n_r, r0 + bh)
+        for r in range(r0, r1):
+            for c in range(n):
+                dst[r, c] = src[r, c]
+        if n == 1:
+            continue
+        first = True
+        for z in poles:
+            gn = gain if first else 1.0
+            first = False
+            horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
+            for r in range(r0, r1):
+                s = 0.0
+                if horizon < n:
+                    zk = 1.0
+                    for k in range(horizon):
+                        s += zk * dst[r, k]
+                        zk *= z
+                else:
+                    zn = z
+                    iz = 1.0 / z
+                    z2n = z ** (n - 1)
+                    s = dst[r, 0] + z2n * dst[r, n - 1]
+                    z2n = z2n * z2n * iz
+                    for k in range(1, n - 1):
+                        s += (zn + z2n) * dst[r, k]
+                        zn *= z
+                        z2n *= iz
+                    s /= 1.0 - zn * zn
+                dst[r, 0] = gn * s
+            for c in range(1, n):
+                for r in range(r0, r1):
+                    dst[r, c] = gn * dst[r, c] + z * dst[r, c - 1]
+            cc = z / (z * z - 1.0)
+            for r in range(r0, r1):
+                dst[r, n - 1] = cc * (dst[r, n - 1] + z * dst[r, n - 2])
+            for c in range(n - 2, -1, -1):
+                for r in range(r0, r1):
+                    dst[r, c] = z * (dst[r, c + 1] - dst[r, c])
+
+
+@nb.njit(parallel=True, cache=True)
+def _transpose(a, out):  # pragma: no cover - compiled
+    n, m = a.shape
+    bs = 32
+    nbr = (n + bs - 1) // bs
+    for bi in nb.prange(nbr):
+        i0 = bi * bs
+        i1 = min(n, i0 + bs)
+        for j0 in range(0, m, bs):
+            j1 = min(m, j0 + bs)
+            for i in range(i0, i1):
+                for j in range(j0, j1):
+                    out[j, i] = a[i, j]
+
+
+@nb.njit(cache=True)
+def _mirror(i, n):  # pragma: no cover - compiled
+    if n == 1:
+        return 0
+    period = 2 * n - 2
+    i = abs(i) % period
+    return period - i if i >= n else i
+
+
+@nb.njit(parallel=True, cache=True)
+def _fill_margin(out, rows, cols, pad):  # pragma: no cover - compiled
+    for r in nb.prange(rows + 2 * pad):
+        sr = _mirror(r - pad, rows) + pad
+        for c in range(pad):
+            out[r, c] = out[sr, _mirror(c - pad, cols) + pad]
+            out[r, cols + pad + c] = out[sr, _mirror(cols + c, cols) + pad]
+        if sr != r:
+            for c in range(pad, cols + pad):
+                out[r, c] = out[sr, c]
+
+
+def prefilter_padded(image: np.ndarray, order: int, out: np.ndarray) -> None:
+    """B-spline coefficients of ``image`` written into the centre of ``out``.
+
+    ``out`` has shape ``(rows + 2*PAD, cols + 2*PAD)`` (float32 or float64, ``image`` may be
+    of another float dtype); its margin receives the mirror continuation of the
+    coefficients.
+    """
+    poles = _POLES3 if order == 3 else _POLES5
+    tol = 1e-7 if out.dtype == np.float32 else 1e-14
+    rows, cols = image.shape
+    centre = out[PAD:PAD + rows, PAD:PAD + cols]
+    _filter_axis1(image, centre, poles, tol)  # along x (columns), no transpose
+    _filter_axis0(centre, poles, tol)  # along y (rows), in place, vectorised across columns
+    _fill_margin(out, rows, cols, PAD)
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _weights3(t, w):  # pragma: no cover - compiled
+    t2 = t * t
+    t3 = t2 * t
+    s = 1.0 - t
+    w[0] = s * s * s / 6.0
+    w[1] = 2.0 / 3.0 - t2 + 0.5 * t3
+    w[2] = (1.0 + 3.0 * t + 3.0 * t2 - 3.0 * t3) / 6.0
+    w[3] = t3 / 6.0
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _beta5(x):  # pragma: no cover - compiled
+    a = abs(x)
+    if a < 1.0:
+        a2 = a * a
+        return 0.55 - 0.5 * a2 + 0.25 * a2 * a2 - a2 * a2 * a / 12.0
+    if a < 2.0:
+        a2 = a * a
+        return (17.0 / 40.0 + 0.625 * a - 1.75 * a2 + 1.25 * a2 * a - 0.375 * a2 * a2
+                + a2 * a2 * a / 24.0)
+    if a < 3.0:
+        b = 3.0 - a
+        return b * b * b * b * b / 120.0
+    return 0.0
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _weights(t, order, w):  # pragma: no cover - compiled
+    if order == 3:
+        _weights3(t, w)
+    else:
+        for k in range(6):
+            w[k] = _beta5(t - (k - 2))
+
+
+@nb.njit(cache=True)
+def weights(t, order):  # pragma: no cover - compiled
+    """Tap weights at fractional offset ``t`` (compiled; see ``bspline_weights``)."""
+    w = np.empty(order + 1, dtype=np.float64)
+    _weights(t, order, w)
+    return w
+
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _beta(x, order):  # pragma: no cover - compiled
+    """Branch-free centred B-spline (truncated-power form), vectorisable."""
+    a = abs(x)
+    if order == 3:
+        p2 = max(np.float32(0.0), np.float32(2.0) - a)
+        p1 = max(np.float32(0.0), np.float32(1.0) - a)
+        return (p2 * p2 * p2 - np.float32(4.0) * p1 * p1 * p1) * np.float32(1.0 / 6.0)
+    p3 = max(np.float32(0.0), np.float32(3.0) - a)
+    p2 = max(np.float32(0.0), np.float32(2.0) - a)
+    p1 = max(np.float32(0.0), np.float32(1.0) - a)
+    q3 = p3 * p3
+    q2 = p2 * p2
+    q1 = p1 * p1
+    return (q3 * q3 * p3 - np.float32(6.0) * q2 * q2 * p2
+            + np.float32(15.0) * q1 * q1 * p1) * np.float32(1.0 / 120.0)
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _sample(coef, order, y, x):  # pragma: no cover - compiled
+    """One spline sample at image position (y, x) (generic path)."""
+    taps = order + 1
+    lo = (order - 1) // 2
+    ix = int(math.floor(x))
+    iy = int(math.floor(y))
+    tx = x - ix
+    ty = y - iy
+    g = 0.0
+    for a in range(taps):
+        wy = _beta5(ty - (a - lo)) if order == 5 else _beta3d(ty - (a - lo))
+        crow = coef[iy - lo + a + PAD]
+        acc = 0.0
+        for b in range(taps):
+            wx = _beta5(tx - (b - lo)) if order == 5 else _beta3d(tx - (b - lo))
+            acc += wx * crow[ix - lo + b + PAD]
+        g += wy * acc
+    return g
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _beta3d(x):  # pragma: no cover - compiled
+    a = abs(x)
+    p2 = max(0.0, 2.0 - a)
+    p1 = max(0.0, 1.0 - a)
+    return (p2 * p2 * p2 - 4.0 * p1 * p1 * p1) / 6.0
+
+
+
+# Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
+# their fixed-width (tw, a multiple of 16) loops; inlined into the parfor body they were not.
+@nb.njit(fastmath=True, cache=True)
+def _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow):  # pragma: no cover
+    tmpw = tmp.shape[0]
+    tw = grow.shape[0]
+    row = coef[rb, cb:cb + tmpw]
+    w0 = wyf[0]
+    for j in range(tmpw):
+        tmp[j] = w0 * row[j]
+    for a in range(1, taps):
+        row = coef[rb + a, cb:cb + tmpw]
+        wa = wyf[a]
+        for j in range(tmpw):
+            tmp[j] += wa * row[j]
+    w0 = wxf[0]
+    for j in range(tw):
+        grow[j] = w0 * tmp[j]
+    for b in range(1, taps):
+        wb = wxf[b]
+        t = tmp[b:b + tw]
+        for j in range(tw):
+            grow[j] += wb * t[j]
+
+
+@nb.njit(fastmath=True, cache=True)
+def _acc5(grow, off, mask, f, gx, gy, r, c0):  # pragma: no cover
+    """Row sums of g, g^2, gx g, gy g, f g (scalar float32 reductions vectorise)."""
+    tw = grow.shape[0]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    for j in range(tw):
+        g = (grow[j] - off) * mask[j]
+        s0 += g
+        s1 += g * g
+        s2 += gxr[j] * g
+        s3 += gyr[j] * g
+        s4 += fr[j] * g
+    return s0, s1, s2, s3, s4
+
+
+@nb.njit(fastmath=True, cache=True)
+def _row_sums_cubic(coef, rb, cb, wyf, wxf, tmp, off, mask, f, gx, gy, r,
+                    c0):  # pragma: no cover
+    """Cubic fast path of :func:`_row_sums_translation`: explicit 4 taps per pass."""
+    tmpw = tmp.shape[0]
+    tw = mask.shape[0]
+    q0 = coef[rb, cb:cb + tmpw]
+    q1 = coef[rb + 1, cb:cb + tmpw]
+    q2 = coef[rb + 2, cb:cb + tmpw]
+    q3 = coef[rb + 3, cb:cb + tmpw]
+    a0 = wyf[0]
+    a1 = wyf[1]
+    a2 = wyf[2]
+    a3 = wyf[3]
+    for j in range(tmpw):
+        tmp[j] = a0 * q0[j] + a1 * q1[j] + a2 * q2[j] + a3 * q3[j]
+    b0 = wxf[0]
+    b1 = wxf[1]
+    b2 = wxf[2]
+    b3 = wxf[3]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    for j in range(tw):
+        g = (b0 * tmp[j] + b1 * tmp[j + 1] + b2 * tmp[j + 2] + b3 * tmp[j + 3] - off) * mask[j]
+        s0 += g
+        s1 += g * g
+        s2 += gxr[j] * g
+        s3 += gyr[j] * g
+        s4 += fr[j] * g
+    return s0, s1, s2, s3, s4
+
+
+@nb.njit(fastmath=True, cache=True)
+def _row_sums_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow, off, mask, f, gx, gy, r,
+                          c0):  # pragma: no cover
+    _row_translation(coef, rb, cb, taps, wyf, wxf, tmp, grow)
+    return _acc5(grow, off, mask, f, gx, gy, r, c0)
+
+
+@nb.njit(fastmath=True, cache=True)
+def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
+                     grow):  # pragma: no cover
+    tw = grow.shape[0]
+    sten = order + 2
+    lo = (order - 1) // 2
+    for j in range(tw):
+        tx[j] = tx0 + p1 * dxs[j]
+        ty[j] = ty0 + p4 * dxs[j]
+    for b in range(sten):
+        kb = np.float32(b - lo)
+        wxb = wxs[b]
+        wyb = wys[b]
+        for j in range(tw):
+            wxb[j] = _beta(tx[j] - kb, order)
+            wyb[j] = _beta(ty[j] - kb, order)
+    for j in range(tw):
+        grow[j] = 0.0
+    for a in range(sten):
+        for j in range(tw):
+            hrow[j] = 0.0
+        for b in range(sten):
+            row = coef[rb + a, cb + b:cb + b + tw]
+            wxb = wxs[b]
+            for j in range(tw):
+                hrow[j] += wxb[j] * row[j]
+        wya = wys[a]
+        for j in range(tw):
+            grow[j] += wya[j] * hrow[j]
+
+
+@nb.njit(inline="always", fastmath=True, cache=True)
+def _w5(t):  # pragma: no cover - compiled
+    """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
+    sh = np.float32(1.0) if t >= np.float32(1.0) else np.float32(0.0)
+    u = t - sh
+    u2 = u * u
+    u3 = u2 * u
+    v = np.float32(1.0) - u
+    w0 = v * v * v * np.float32(1.0 / 6.0)
+    w1 = np.float32(2.0 / 3.0) - u2 + np.float32(0.5) * u3
+    w2 = (np.float32(1.0) + np.float32(3.0) * (u + u2 - u3)) * np.float32(1.0 / 6.0)
+    w3 = u3 * np.float32(1.0 / 6.0)
+    ns = np.float32(1.0) - sh
+    return (ns * w0, ns * w1 + sh * w0, ns * w2 + sh * w1, ns * w3 + sh * w2, sh * w3)
+
+
+@nb.njit(fastmath=True, cache=True)
+def _row_affine_cubic(coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy, r,
+                      c0):  # pragma: no cover
+    """Cubic affine fast path, one row: 5x5 stencil at contiguous memory, fused sums."""
+    tw = mask.shape[0]
+    q0 = coef[rb, cb:cb + tw + 4]
+    q1 = coef[rb + 1, cb:cb + tw + 4]
+    q2 = coef[rb + 2, cb:cb + tw + 4]
+    q3 = coef[rb + 3, cb:cb + tw + 4]
+    q4 = coef[rb + 4, cb:cb + tw + 4]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    s5 = np.float32(0.0)
+    s6 = np.float32(0.0)
+    for j in range(tw):
+        x0, x1, x2, x3, x4 = _w5(tx0 + p1 * dxs[j])
+        y0, y1, y2, y3, y4 = _w5(ty0 + p4 * dxs[j])
+        h0 = x0 * q0[j] + x1 * q0[j + 1] + x2 * q0[j + 2] + x3 * q0[j + 3] + x4 * q0[j + 4]
+        h1 = x0 * q1[j] + x1 * q1[j + 1] + x2 * q1[j + 2] + x3 * q1[j + 3] + x4 * q1[j + 4]
+        h2 = x0 * q2[j] + x1 * q2[j + 1] + x2 * q2[j + 2] + x3 * q2[j + 3] + x4 * q2[j + 4]
+        h3 = x0 * q3[j] + x1 * q3[j + 1] + x2 * q3[j + 2] + x3 * q3[j + 3] + x4 * q3[j + 4]
+        h4 = x0 * q4[j] + x1 * q4[j + 1] + x2 * q4[j + 2] + x3 * q4[j + 3] + x4 * q4[j + 4]
+        g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 + y4 * h4 - off) * mask[j]
+        gxg = gxr[j] * g
+        gyg = gyr[j] * g
+        s0 += g
+        s1 += g * g
+        s2 += gxg
+        s3 += gxg * dxs[j]
+        s4 += gyg
+        s5 += gyg * dxs[j]
+        s6 += fr[j] * g
+    return s0, s1, s2, s3, s4, s5, s6
+
+
+@nb.njit(fastmath=True, cache=True)
+def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
+    """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
+    tw = grow.shape[0]
+    fr = f[r, c0:c0 + tw]
+    gxr = gx[r, c0:c0 + tw]
+    gyr = gy[r, c0:c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    s5 = np.float32(0.0)
+    s6 = np.float32(0.0)
+    for j in range(tw):
+        g = (grow[j] - off) * mask[j]
+        gxg = gxr[j] * g
+        gyg = gyr[j] * g
+        s0 += g
+        s1 += g * g
+        s2 += gxg
+        s3 += gxg * dxs[j]
+        s4 += gyg
+        s5 += gyg * dxs[j]
+        s6 += fr[j] * g
+    return s0, s1, s2, s3, s4, s5, s6
+
+
+@nb.njit(parallel=True, fastmath=True, cache=True)
+def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, jsum,
+                     avec, fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
+                     out_p, out_zncc, out_iter, out_status):  # pragma: no cover - compiled
+    """IC-GN with the zero-order (translation) shape function, ZNSSD criterion.
+
+    Parameters ``(u, v)`` px. Per POI: ``hinv`` (2, 2) inverse exact ZNSSD Gauss-Newton
+    Hessian, ``jsum`` (2,) sums of the raw steepest-descent images ``(gx, gy)``, ``avec``
+    (2,) their projections on the normalised reference subset, ``fmean``/``fnorm`` mean and
+    norm ``sqrt(sum (f - fmean)^2)`` of the reference subset. See ``icgn.py`` for the
+    algebra (the update needs only five running sums per iteration).
+
+    Layout: ``coef`` holds the padded coefficients of the current image (image pixel
+    ``(r, c)`` at ``(r + PAD, c + PAD)``) with at least ``tw + 8 + PAD`` extra zero columns
+    on the right; ``f``, ``gx``, ``gy`` (float32) have ``tw`` extra zero columns. Inner
+    loops run over ``tw`` (a multiple of 16 >= subset) columns with a 0/1 mask, so they
+    have no remainder and vectorise.
+    """
+    n = rows.shape[0]
+    size = 2 * half + 1
+    taps = order + 1
+    lo = (order - 1) // 2
+    npx = size * size
+    tmpw = tw + 8
+    mask = np.zeros(tw, dtype=np.float32)
+    mask[:size] = 1.0
+    for k in nb.prange(n):
+        if status_in[k] != 0:
+            out_status[k] = status_in[k]
+            out_p[k, 0] = np.nan
+            out_p[k, 1] = np.nan
+            out_zncc[k] = np.nan
+            out_iter[k] = 0
+            continue
+        wx = np.empty(taps, dtype=np.float64)
+        wy = np.empty(taps, dtype=np.float64)
+        wxf = np.empty(taps, dtype=np.float32)
+        wyf = np.empty(taps, dtype=np.float32)
+        tmp = np.empty(tmpw, dtype=np.float32)
+        grow = np.empty(tw, dtype=np.float32)
+        u = p0[k, 0]
+        v = p0[k, 1]
+        u_start = u
+        v_start = v
+        r0 = rows[k] - half
+        c0 = cols[k] - half
+        off = np.float32(fmean[k])
+        st = _MAX_ITERATIONS
+        zn = np.nan
+        nit = 0
+        for it in range(max_iter):
+            x0 = c0 + u
+            y0 = r0 + v
+            if not (x0 >= 0.0 and y0 >= 0.0 and x0 + 2 * half <= wimg - 1
+                    and y0 + 2 * half <= himg - 1):
+                st = _OUT_OF_BOUNDS
+                break
+            ix = int(math.floor(x0))
+            iy = int(math.floor(y0))
+            _weights(x0 - ix, order, wx)
+            _weights(y0 - iy, order, wy)
+            for a in range(taps):
+                wxf[a] = wx[a]
+                wyf[a] = wy[a]
+            cb = ix - lo + PAD
+            sg = 0.0
+            sgg = 0.0
+            sx = 0.0
+            sy = 0.0
+            sf = 0.0
+            for i in range(size):
+                if order == 3:
+                    r0s, r1s, r2s, r3s, r4s = _row_sums_cubic(
+                        coef, iy + i - lo + PAD, cb, wyf, wxf, tmp, off, mask, f, gx, gy,
+                        r0 + i, c0)
+                else:
+                    r0s, r1s, r2s, r3s, r4s = _row_sums_translation(
+                        coef, iy + i - lo + PAD, cb, taps, wyf, wxf, tmp, grow, off, mask, f,
+                        gx, gy, r0 + i, c0)
+                sg += r0s
+                sgg += r1s
+                sx += r2s
+                sy += r3s
+                sf += r4s
+            gm = sg / npx
+            dg2 = sgg - npx * gm * gm
+            if not dg2 > 1e-12 * (sgg + 1e-30):
+                st = _DIVERGED
+                break
+            dg = math.sqrt(dg2)
+            zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
+            q0 = ((sx - jsum[k, 0] * gm) / dg - avec[k, 0] * zn) / fnorm[k]
+            q1 = ((sy - jsum[k, 1] * gm) / dg - avec[k, 1] * zn) / fnorm[k]
+            du = hinv[k, 0, 0] * q0 + hinv[k, 0, 1] * q1
+            dv = hinv[k, 1, 0] * q0 + hinv[k, 1, 1] * q1
+            # inverse composition: W(p) <- W(p) o W(dp)^-1
+            u -= du
+            v -= dv
+            nit = it + 1
+            if not (math.isfinite(u) and math.isfinite(v)):
+                st = _DIVERGED
+                break
+            if math.sqrt(du * du + dv * dv) < tol:
+                st = _CONVERGED
+                break
+            if abs(u - u_start) > max_step or abs(v - v_start) > max_step:
+                st = _DIVERGED
+                break
+        if st == _CONVERGED and not zn >= min_zncc:
+            st = _LOW_CORRELATION
+        out_status[k] = st
+        if st == _CONVERGED or st == _MAX_ITERATIONS or st == _LOW_CORRELATION:
+            out_p[k, 0] = u
+            out_p[k, 1] = v
+        else:
+            out_p[k, 0] = np.nan
+            out_p[k, 1] = np.nan
+        out_zncc[k] = zn
+        out_iter[k] = nit
+
+
+@nb.njit(parallel=True, fastmath=True, cache=True)
+def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, jsum, avec,
+                fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
+                out_p, out_zncc, out_iter, out_status):  # pragma: no cover - compiled
+    """IC-GN with the first-order (affine) shape function, ZNSSD criterion.
+
+    Parameters ``p = (u, du/dx, du/dy, v, dv/dx, dv/dy)``; the warp of a subset pixel at
+    offset ``(dx, dy)`` from the POI is ``x' = x + u + ux dx + uy dy``,
+    ``y' = y + v + vx dx + vy dy`` (Pan et al. 2013, doi:10.1007/s11340-013-9717-6).
+
+    Fast path: when the sub-pixel offsets ``x' - x`` (and ``y' - y``) of all subset pixels
+    span less than one pixel, one integer base covers the subset and every sample reads
+    the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
+    with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
+    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout as in
+    :func:`icgn_translation`.
+    """
+    n = rows.shape[0]
+    size = 2 * half + 1
+    lo = (order - 1) // 2
+    sten = order + 2
+    npx = size * size
+    mask = np.zeros(tw, dtype=np.float32)
+    mask[:size] = 1.0
+    dxs = np.zeros(tw, dtype=np.float32)
+    for j in range(tw):
+        dxs[j] = j - half
+    for k in nb.prange(n):
+        if status_in[k] != 0:
+            out_status[k] = status_in[k]
+            for m in range(6):
+                out_p[k, m] = np.nan
+            out_zncc[k] = np.nan
+            out_iter[k] = 0
+            continue
+        q = np.empty(6, dtype=np.float64)
+        p = np.empty(6, dtype=np.float64)
+        wxs = np.empty((sten, tw), dtype=np.float32)
+        wys = np.empty((sten, tw), dtype=np.float32)
+        tx = np.empty(tw, dtype=np.float32)
+        ty = np.empty(tw, dtype=np.float32)
+        hrow = np.empty(tw, dtype=np.float32)
+        grow = np.empty(tw, dtype=np.float32)
+        for m in range(6):
+            p[m] = p0[k, m]
+        xc = cols[k]
+        yc = rows[k]
+        r0 = rows[k] - half
+        c0 = cols[k] - half
+        off = np.float32(fmean[k])
+        st = _MAX_ITERATIONS
+        zn = np.nan
+        nit = 0
+        for it in range(max_iter):
+            # bounds: an affine map sends the subset's corners to the warped extremes
+            inside = True
+            oxmin = 1e30
+            oxmax = -1e30
+            oymin = 1e30
+            oymax = -1e30
+            for cy in (-half, half):
+                for cx in (-half, half):
+                    ox = p[0] + p[1] * cx + p[2] * cy
+                    oy = p[3] + p[4] * cx + p[5] * cy
+                    oxmin = min(oxmin, ox)
+                    oxmax = max(oxmax, ox)
+                    oymin = min(oymin, oy)
+                    oymax = max(oymax, oy)
+                    if not (xc + cx + ox >= 0.0 and yc + cy + oy >= 0.0
+                            and xc + cx + ox <= wimg - 1 and yc + cy + oy <= himg - 1):
+                        inside = False
+            if not inside:
+                st = _OUT_OF_BOUNDS
+                break
+            fast = (oxmax - oxmin) < 0.999 and (oymax - oymin) < 0.999
+            bx = int(math.floor(oxmin))
+            by = int(math.floor(oymin))
+            sg = 0.0
+            sgg = 0.0
+            sf = 0.0
+            for m in range(6):
+                q[m] = 0.0
+            p1 = np.float32(p[1])
+            p4 = np.float32(p[4])
+            for i in range(size):
+                dy = i - half
+                if fast and order == 3:
+                    t0s, t1s, t2s, t3s, t4s, t5s, t6s = _row_affine_cubic(
+                        coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
+                        np.float32(p[0] + p[2] * dy - bx), np.float32(p[3] + p[5] * dy - by),
+                        p1, p4, dxs, off, mask, f, gx, gy, r0 + i, c0)
+                else:
+                    if fast:
+                        # offsets t in [0, 2) from the common integer base (bx, by)
+                        tx0 = np.float32(p[0] + p[2] * dy - bx)
+                        ty0 = np.float32(p[3] + p[5] * dy - by)
+                        _row_affine_fast(coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
+                                         order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
+                                         grow)
+                    else:
+                        for j in range(tw):
+                            grow[j] = 0.0
+                        for j in range(size):
+                            xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
+                            yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
+                            grow[j] = _sample(coef, order, yy, xx)
+                    t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(grow, off, mask, dxs, f, gx, gy,
+                                                              r0 + i, c0)
+                sg += t0s
+                sgg += t1s
+                q[0] += t2s
+                q[1] += t3s
+                q[2] += t2s * dy
+                q[3] += t4s
+                q[4] += t5s
+                q[5] += t4s * dy
+                sf += t6s
+            gm = sg / npx
+            dg2 = sgg - npx * gm * gm
+            if not dg2 > 1e-12 * (sgg + 1e-30):
+                st = _DIVERGED
+                break
+            dg = math.sqrt(dg2)
+            zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
+            for m in range(6):
+                q[m] = ((q[m] - jsum[k, m] * gm) / dg - avec[k, m] * zn) / fnorm[k]
+            du = 0.0
+            dux = 0.0
+            duy = 0.0
+            dv = 0.0
+            dvx = 0.0
+            dvy = 0.0
+            for m in range(6):
+                du += hinv[k, 0, m] * q[m]
+                dux += hinv[k, 1, m] * q[m]
+                duy += hinv[k, 2, m] * q[m]
+                dv += hinv[k, 3, m] * q[m]
+                dvx += hinv[k, 4, m] * q[m]
+                dvy += hinv[k, 5, m] * q[m]
+            # inverse composition W(p) <- W(p) o W(dp)^-1 on 3x3 homogeneous matrices
+            a11 = 1.0 + dux
+            a12 = duy
+            a21 = dvx
+            a22 = 1.0 + dvy
+            det = a11 * a22 - a12 * a21
+            if not abs(det) > 1e-12:
+                st = _DIVERGED
+                break
+            i11 = a22 / det
+            i12 = -a12 / det
+            i21 = -a21 / det
+            i22 = a11 / det
+            it1 = -(i11 * du + i12 * dv)
+            it2 = -(i21 * du + i22 * dv)
+            m11 = 1.0 + p[1]
+            m12 = p[2]
+            m21 = p[4]
+            m22 = 1.0 + p[5]
+            p[0] = m11 * it1 + m12 * it2 + p[0]
+            p[3] = m21 * it1 + m22 * it2 + p[3]
+            p[1] = m11 * i11 + m12 * i21 - 1.0
+            p[2] = m11 * i12 + m12 * i22
+            p[4] = m21 * i11 + m22 * i21
+            p[5] = m21 * i12 + m22 * i22 - 1.0
+            nit = it + 1
+            finite = True
+            for m in range(6):
+                if not math.isfinite(p[m]):
+                    finite = False
+            if not finite:
+                st = _DIVERGED
+                break
+            norm = math.sqrt(du * du + dv * dv + half * half * (dux * dux + duy * duy
+                                                                  + dvx * dvx + dvy * dvy))
+            if norm < tol:
+                st = _CONVERGED
+                break
+            if (abs(p[0] - p0[k, 0]) > max_step or abs(p[3] - p0[k, 3]) > max_step
+                    or abs(p[1]) > 0.5 or abs(p[2]) > 0.5 or abs(p[4]) > 0.5
+                    or abs(p[5]) > 0.5):
+                st = _DIVERGED
+                break
+        if st == _CONVERGED and not zn >= min_zncc:
+            st = _LOW_CORRELATION
+        out_status[k] = st
+        keep = st == _CONVERGED or st == _MAX_ITERATIONS or st == _LOW_CORRELATION
+        for m in range(6):
+            out_p[k, m] = p[m] if keep else np.nan
+        out_zncc[k] = zn
+        out_iter[k] = nit

@@ -1,0 +1,193 @@
+"""The DIC result: a value object with summary, xarray and CSV export."""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InputError, StoreError
+from .status import PointStatus
+
+__all__ = ["PARAM_NAMES", "DICResult"]
+
+#: Names of the shape parameters, by number of parameters.
+PARAM_NAMES = {2: ("u", "v"), 6: ("u", "du_dx", "du_dy", "v", "dv_dx", "dv_dy")}
+
+
+def _nanstat(fn: Any, x: NDArray[np.float64]) -> float:
+    return float(fn(x)) if x.size else float("nan")
+
+
+@dataclass(frozen=True)
+class DICResult:
+    """Displacements of a set of points of interest (POIs).
+
+    Attributes
+    ----------
+    rows, cols : ndarray of int, shape (n,)
+        POI centres in the reference image, px (row, col).
+    u, v : ndarray, shape (n,)
+        Displacement along x (columns) and y (rows), px. NaN where the status is
+        ``LOW_TEXTURE``, ``OUT_OF_BOUNDS`` or ``DIVERGED``.
+    params : ndarray, shape (n, k)
+        Shape parameters: ``(u, v)`` (translation) or ``(u, du/dx, du/dy, v, dv/dx, dv/dy)``
+        (affine; gradients dimensionless).
+    zncc : ndarray, shape (n,)
+        Zero-normalised cross-correlation of the final match (-1..1).
+    iterations : ndarray of int, shape (n,)
+        IC-GN iterations used.
+    status : ndarray of uint8, shape (n,)
+        :class:`~dicblur.dic.PointStatus` codes; 0 is converged.
+    predicted_sigma_u, predicted_sigma_v : ndarray, shape (n,), or None
+        Predicted random error (std, px) per POI when a noise level was given: match score
+        ``sqrt(2 sigma^2 / SSSIG)`` (translation) or the Fisher bound of the affine fit.
+    info : mapping
+        Settings and provenance (subset, step, shape, interpolation, noise_sigma, version).
+    """
+
+    rows: NDArray[np.int64]
+    cols: NDArray[np.int64]
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    params: NDArray[np.float64]
+    zncc: NDArray[np.float64]
+    iterations: NDArray[np.int64]
+    status: NDArray[np.uint8]
+    predicted_sigma_u: NDArray[np.float64] | None = None
+    predicted_sigma_v: NDArray[np.float64] | None = None
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def converged(self) -> NDArray[np.bool_]:
+        """Boolean mask of the POIs with status ``CONVERGED``."""
+        return np.asarray(self.status == PointStatus.CONVERGED)
+
+    def __len__(self) -> int:
+        return int(self.rows.shape[0])
+
+    def status_counts(self) -> dict[str, int]:
+        """Number of POIs per status name."""
+        return {s.name.lower(): int(np.count_nonzero(self.status == s)) for s in PointStatus}
+
+    def summary(self, *, true_u: float | None = None,
+                true_v: float | None = None) -> dict[str, Any]:
+        """Statistics over the converged POIs.
+
+        Parameters
+        ----------
+        true_u, true_v : float, optional
+            Known displacement (px); adds bias, RMS error and, with predicted sigmas, the
+            std of ``error_i / predicted_sigma_i`` (1 at the predicted random error).
+
+        Returns
+        -------
+        dict
+            ``n_points``, ``n_converged``, ``converged_fraction``, ``mean_u``, ``std_u``,
+            ``mean_v``, ``std_v`` (px), ``mean_zncc``, ``mean_iterations``, status counts;
+            with a truth ``bias_u``, ``bias_v``, ``rms_error_u``, ``rms_error_v``; with
+            predictions ``predicted_sigma_u``, ``predicted_sigma_v`` (means, px) and
+            ``normalised_std_u``, ``normalised_std_v``.
+        """
+        ok = self.converged
+        u = self.u[ok]
+        v = self.v[ok]
+        out: dict[str, Any] = {
+            "n_points": len(self),
+            "n_converged": int(ok.sum()),
+            "converged_fraction": float(ok.mean()) if len(self) else float("nan"),
+            "mean_u": _nanstat(np.mean, u),
+            "std_u": _nanstat(lambda a: np.std(a, ddof=1) if a.size > 1 else np.nan, u),
+            "mean_v": _nanstat(np.mean, v),
+            "std_v": _nanstat(lambda a: np.std(a, ddof=1) if a.size > 1 else np.nan, v),
+            "mean_zncc": _nanstat(np.mean, self.zncc[ok]),
+            "mean_iterations": _nanstat(np.mean, self.iterations[ok].astype(float)),
+        }
+        if self.predicted_sigma_u is not None and self.predicted_sigma_v is not None:
+            out["predicted_sigma_u"] = _nanstat(np.mean, self.predicted_sigma_u[ok])
+            out["predicted_sigma_v"] = _nanstat(np.mean, self.predicted_sigma_v[ok])
+        for name, truth, est, pred in (("u", true_u, u, self.predicted_sigma_u),
+                                       ("v", true_v, v, self.predicted_sigma_v)):
+            if truth is None:
+                continue
+            t = float(truth)
+            if not math.isfinite(t):
+                raise InputError(f"true_{name}={truth!r}: must be a finite number (px)")
+            err = est - t
+            out[f"bias_{name}"] = _nanstat(np.mean, err)
+            out[f"rms_error_{name}"] = _nanstat(lambda a: np.sqrt(np.mean(a ** 2)), err)
+            if pred is not None and err.size > 1:
+                out[f"normalised_std_{name}"] = float(np.std(err / pred[ok], ddof=1))
+        out.update({f"n_{k}": c for k, c in self.status_counts().items()
+                    if k != "converged"})
+        return out
+
+    def _param_names(self) -> tuple[str, ...]:
+        return PARAM_NAMES.get(self.params.shape[1],
+                               tuple(f"p{i}" for i in range(self.params.shape[1])))
+
+    def to_xarray(self) -> Any:
+        """The result as an :class:`xarray.Dataset` over dimension ``point``.
+
+        Variables ``u``, ``v``, ``params`` (point, param), ``zncc``, ``iterations``,
+        ``status`` (+ ``predicted_sigma_u/v``); coordinates ``row``, ``col``; attributes
+        hold ``info`` and the status legend. Write with ``.to_netcdf(path)``.
+        """
+        import xarray as xr
+
+        data: dict[str, Any] = {
+            "u": ("point", self.u, {"units": "px", "long_name": "displacement along x"}),
+            "v": ("point", self.v, {"units": "px", "long_name": "displacement along y"}),
+            "params": (("point", "param"), self.params),
+            "zncc": ("point", self.zncc),
+            "iterations": ("point", self.iterations.astype(np.int32)),
+            "status": ("point", self.status, {
+                "legend": ", ".join(f"{s.value}={s.name}" for s in PointStatus)}),
+        }
+        if self.predicted_sigma_u is not None and self.predicted_sigma_v is not None:
+            data["predicted_sigma_u"] = ("point", self.predicted_sigma_u, {"units": "px"})
+            data["predicted_sigma_v"] = ("point", self.predicted_sigma_v, {"units": "px"})
+        attrs = {k: (v if isinstance(v, int | float | str) else str(v))
+                 for k, v in self.info.items() if v is not None}
+        return xr.Dataset(
+            data,
+            coords={"row": ("point", self.rows.astype(np.int32)),
+                    "col": ("point", self.cols.astype(np.int32)),
+                    "param": list(self._param_names())},
+            attrs=attrs)
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write one row per POI (header: row, col, u, v, zncc, iterations, status,
+        status_name, parameters, predicted sigmas) to ``path``."""
+        path = Path(path)
+        names = self._param_names()
+        header = ["row", "col", "u", "v", "zncc", "iterations", "status", "status_name"]
+        header += [f"param_{n}" for n in names]
+        pred = self.predicted_sigma_u is not None and self.predicted_sigma_v is not None
+        if pred:
+            header += ["predicted_sigma_u", "predicted_sigma_v"]
+        try:
+            with path.open("w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(header)
+                for i in range(len(self)):
+                    row: list[Any] = [int(self.rows[i]), int(self.cols[i]),
+                                      repr(float(self.u[i])), repr(float(self.v[i])),
+                                      repr(float(self.zncc[i])), int(self.iterations[i]),
+                                      int(self.status[i]),
+                                      PointStatus(int(self.status[i])).name.lower()]
+                    row += [repr(float(x)) for x in self.params[i]]
+                    if pred:
+                        assert self.predicted_sigma_u is not None
+                        assert self.predicted_sigma_v is not None
+                        row += [repr(float(self.predicted_sigma_u[i])),
+                                repr(float(self.predicted_sigma_v[i]))]
+                    w.writerow(row)
+        except OSError as exc:
+            raise StoreError(f"path={str(path)!r}: cannot write the CSV ({exc})") from exc

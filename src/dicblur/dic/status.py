@@ -1,0 +1,29 @@
+"""Outcome of the correlation of one point of interest (DICe-style status enum)."""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+__all__ = ["PointStatus"]
+
+
+class PointStatus(IntEnum):
+    """Status code of one POI, stored as ``uint8`` in :class:`~dicblur.dic.DICResult`.
+
+    Only ``CONVERGED`` points carry a trusted displacement. ``MAX_ITERATIONS`` and
+    ``LOW_CORRELATION`` points keep their last (finite) estimate for inspection; the others
+    carry NaN displacements.
+    """
+
+    #: IC-GN met the tolerance and the ZNCC is above ``min_zncc``.
+    CONVERGED = 0
+    #: ``max_iterations`` reached before the update fell below ``tolerance``.
+    MAX_ITERATIONS = 1
+    #: The reference subset has (almost) no grey-level variation: the Hessian is singular.
+    LOW_TEXTURE = 2
+    #: The subset, in the reference or warped into the current image, leaves the image.
+    OUT_OF_BOUNDS = 3
+    #: The iteration produced a non-finite or runaway update, or a flat current subset.
+    DIVERGED = 4
+    #: Converged, but to a poor match (ZNCC below ``min_zncc``): not the same texture.
+    LOW_CORRELATION = 5

@@ -1,0 +1,31 @@
+"""Shared synthetic data for the DIC tests (independent of the engine)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from dicblur import speckle_pattern
+
+
+def fourier_shift(image: np.ndarray, dy: float, dx: float) -> np.ndarray:
+    """Exact periodic translation: content moves by (+dy, +dx) px."""
+    ky = np.fft.fftfreq(image.shape[0])[:, None]
+    kx = np.fft.fftfreq(image.shape[1])[None, :]
+    return np.fft.ifft2(np.fft.fft2(image) * np.exp(-2j * np.pi * (ky * dy + kx * dx))).real
+
+
+def pattern(n: int = 128, seed: int = 1) -> np.ndarray:
+    """Band-limited enough speckle (soft edges) for sub-pixel shifts by Fourier shift."""
+    return speckle_pattern((n, n), speckle_size=4, softness=1.0, seed=seed)
+
+
+def affine_warp(image: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Current image of a body deformed by x' = c + A (x - c) (A 2x2 on (x, y))."""
+    n_r, n_c = image.shape
+    cy, cx = (n_r - 1) / 2, (n_c - 1) / 2
+    yy, xx = np.mgrid[0:n_r, 0:n_c].astype(float)
+    inv = np.linalg.inv(a)
+    xs = cx + inv[0, 0] * (xx - cx) + inv[0, 1] * (yy - cy)
+    ys = cy + inv[1, 0] * (xx - cx) + inv[1, 1] * (yy - cy)
+    return ndimage.map_coordinates(image, [ys, xs], order=5, mode="grid-wrap")

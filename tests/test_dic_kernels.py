@@ -1,0 +1,130 @@
+"""Compiled DIC kernels against plain reference implementations (issue 4)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import ndimage
+
+from _dic_helpers import affine_warp, fourier_shift, pattern
+from dicblur.dic import Correlator, kernels
+from dicblur.dic import interpolation as itp
+from dicblur.dic.icgn import compose_affine, icgn_reference
+
+
+@pytest.mark.parametrize("order", [3, 5])
+@pytest.mark.parametrize("shape", [(40, 57), (7, 9)])  # long rows and exact-init rows
+def test_prefilter_matches_scipy(order, shape):
+    img = np.random.default_rng(0).normal(100, 30, shape)
+    c = itp.bspline_coefficients(img, order=order, dtype=np.float64)
+    ref = ndimage.spline_filter(img, order=order, mode="mirror")
+    assert_allclose(c[itp.PAD:-itp.PAD, itp.PAD:-itp.PAD], ref, atol=1e-9 * 100)
+    # the margin is the mirror continuation (whole-sample symmetry)
+    assert_allclose(c[itp.PAD - 2, itp.PAD:-itp.PAD], ref[2])
+    assert_allclose(c[itp.PAD:-itp.PAD, -itp.PAD], ref[:, -2])
+
+
+def test_prefilter_float32_close_to_float64():
+    img = pattern(64)
+    c32 = itp.bspline_coefficients(img, order=3, dtype=np.float32)
+    c64 = itp.bspline_coefficients(img, order=3, dtype=np.float64)
+    assert c32.dtype == np.float32
+    assert_allclose(c32, c64, atol=2e-3)
+
+
+@pytest.mark.parametrize("order", [3, 5])
+def test_weights_match_closed_form(order):
+    for t in (0.0, 0.13, 0.5, 0.99):
+        w = kernels.weights(t, order)
+        assert_allclose(w, itp.bspline_weights(t, order), atol=1e-12)
+        assert w.sum() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("order", [3, 5])
+def test_interpolant_reproduces_pixels_and_scipy(order):
+    img = np.random.default_rng(1).normal(100, 30, (20, 24))
+    c = itp.bspline_coefficients(img, order=order, dtype=np.float64)
+    yy, xx = np.mgrid[2:18, 3:20]
+    assert_allclose(itp.interpolate_reference(c, yy, xx, order), img[2:18, 3:20], atol=1e-8)
+    ys = np.array([3.3, 10.71, 15.5])
+    xs = np.array([4.2, 12.05, 18.9])
+    expect = ndimage.map_coordinates(img, [ys, xs], order=order, mode="mirror")
+    assert_allclose(itp.interpolate_reference(c, ys, xs, order), expect, atol=1e-8)
+
+
+@pytest.mark.parametrize("order", [3, 5])
+def test_spline_gradients_are_derivatives(order):
+    img = pattern(48)
+    c = itp.bspline_coefficients(img, order=order, dtype=np.float64)
+    gy, gx = itp.bspline_gradients(c, order, img.shape)
+    yy, xx = np.mgrid[10:38, 10:38].astype(float)
+    h = 1e-5
+    num_x = (itp.interpolate_reference(c, yy, xx + h, order)
+             - itp.interpolate_reference(c, yy, xx - h, order)) / (2 * h)
+    num_y = (itp.interpolate_reference(c, yy + h, xx, order)
+             - itp.interpolate_reference(c, yy - h, xx, order)) / (2 * h)
+    assert_allclose(gx[10:38, 10:38], num_x, atol=1e-4)
+    assert_allclose(gy[10:38, 10:38], num_y, atol=1e-4)
+
+
+def test_compose_affine_inverse():
+    p = np.array([0.3, 0.01, -0.02, -0.4, 0.015, 0.005])
+    assert_allclose(compose_affine(p, p), np.zeros(6), atol=1e-14)
+
+
+def _spline_setup(ref, cur, order):
+    cr = itp.bspline_coefficients(ref, order=order, dtype=np.float64)
+    gy, gx = itp.bspline_gradients(cr, order, ref.shape)
+    cc = itp.bspline_coefficients(cur, order=order, dtype=np.float64)
+    return gx, gy, cc
+
+
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+@pytest.mark.parametrize("interp", ["bspline3", "bspline5"])
+def test_icgn_kernels_match_reference(shape, interp):
+    ref = pattern(96, seed=3)
+    cur = fourier_shift(ref, -0.37, 0.61)
+    order = int(interp[-1])
+    corr = Correlator(ref, subset=21, step=25, shape=shape, interpolation=interp,
+                      initial="zero")
+    res = corr.correlate(cur)
+    gx, gy, cc = _spline_setup(ref, cur, order)
+    for k in range(0, len(res), 2):
+        p0 = np.zeros(res.params.shape[1])
+        p, z, it, ok = icgn_reference(ref, gx, gy, cc, order, int(res.rows[k]),
+                                      int(res.cols[k]), 10, shape, p0)
+        assert ok and res.status[k] == 0
+        assert_allclose(res.params[k], p, atol=2e-4)  # float32 kernel vs float64 reference
+        assert res.zncc[k] == pytest.approx(z, abs=1e-4)
+        assert abs(int(res.iterations[k]) - it) <= 1
+
+
+def test_affine_generic_path_matches_reference():
+    # 7% strain: the sub-pixel offsets span > 1 px over a 21-px subset, so the kernel
+    # leaves the common-base fast path and samples every pixel on its own taps
+    ref = pattern(96, seed=4)
+    a = np.array([[1.07, 0.0], [0.0, 0.96]])
+    cur = affine_warp(ref, a)
+    corr = Correlator(ref, points=[[48, 48], [40, 56]], subset=21, shape="affine",
+                      initial="zero")
+    gx, gy, cc = _spline_setup(ref, cur, 3)
+    c = 47.5
+    coef = _pad_coef(corr, cur)
+    for k in range(2):
+        r, col = int(corr.rows[k]), int(corr.cols[k])
+        guess = np.array([(a[0, 0] - 1) * (col - c), 0.07, 0.0, (a[1, 1] - 1) * (r - c), 0.0,
+                          -0.04]) * 0.9
+        p_k, _, _, st_k = corr._run_icgn(coef, guess[None], corr._status0[[k]], np.array([k]))
+        p, _, _, ok = icgn_reference(ref, gx, gy, cc, 3, r, col, 10, "affine", guess)
+        assert ok and st_k[0] == 0
+        assert_allclose(p_k[0], p, atol=3e-4)
+        assert_allclose(p_k[0, [1, 5]], [0.07, -0.04], atol=2e-3)
+
+
+def _pad_coef(corr, cur):
+    buf = np.zeros_like(corr._coef_buf)
+    cols = cur.shape[1]
+    itp.bspline_coefficients(cur, order=3, dtype=np.float32,
+                             out=buf[:, :cols + 2 * itp.PAD])
+    return buf

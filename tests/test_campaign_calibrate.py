@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,15 @@ from dicblur.campaign import open_results
 from dicblur.campaign.calibrate import calibrate, calibration_spec
 from dicblur.cli import main
 from dicblur.errors import InputError
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import campaign_helpers
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cached_kernels():
+    campaign_helpers.warm_numba_cache()
+
 
 REAL = (Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
         / "dicchallenge1_sample3" / "Sample3_Reference.tif")

@@ -252,16 +252,3 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
     out["contrast_ref"][:] = contrast_ref
     return out
 
-
-def _warm_up() -> None:
-    """Load the compiled DIC and blur kernels (numba on-disk cache) in this process."""
-    from ..blur import motion_blur
-    from ..dic import Correlator
-
-    img = np.random.default_rng(0).random((48, 48)) * 200.0
-    cur = motion_blur(img, (0.0, 0.5))
-    for shape in ("translation", "affine"):
-        Correlator(img, subset=11, step=12, shape=shape, workers=1).correlate(cur)
-
-
-simulate_batch.warm_up = _warm_up  # type: ignore[attr-defined]

@@ -55,6 +55,16 @@ from .metrics import (
     sssig,
     subset_centres,
 )
+from .models import (
+    BlurSensitivity,
+    BlurUncertaintyModel,
+    ExposurePlan,
+    PoissonGaussianCamera,
+    blur_sensitivity,
+    compare_models,
+    fit_blur_model,
+    plan_exposure,
+)
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
 from .pulse import PulseTrain
 from .pulse.study import PulseStudy, run_pulse_study
@@ -63,6 +73,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AcceleratedMotion",
+    "BlurSensitivity",
+    "BlurUncertaintyModel",
     "Camera",
     "CampaignSpec",
     "ConfigError",
@@ -70,12 +82,14 @@ __all__ = [
     "Correlator",
     "DICResult",
     "DicblurError",
+    "ExposurePlan",
     "FitError",
     "ImageReadError",
     "InputError",
     "PatternMetrics",
     "PatternSettings",
     "PointStatus",
+    "PoissonGaussianCamera",
     "PulseStudy",
     "PulseTrain",
     "SineMotion",
@@ -83,12 +97,15 @@ __all__ = [
     "__version__",
     "add_gaussian_noise",
     "blur_length",
+    "blur_sensitivity",
     "blur_transfer",
     "campaign_status",
+    "compare_models",
     "correlate",
     "estimate_noise",
     "export_csv",
     "file_sha256",
+    "fit_blur_model",
     "gaussian_mask",
     "gradient_variance",
     "image_gradients",
@@ -102,6 +119,7 @@ __all__ = [
     "pan_sigma",
     "paper_pattern4",
     "pattern_metrics",
+    "plan_exposure",
     "render_blurred",
     "rms_contrast",
     "run_campaign",

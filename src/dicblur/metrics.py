@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from ._blur_sensitivity import subset_blur_coefficients
 from ._validation import as_image, check_choice, check_odd_subset, check_positive, describe
 from .errors import InputError
 
@@ -360,6 +361,10 @@ class PatternMetrics:
 
     Gradients in grey levels / px, SSSIG in (grey levels / px)**2 summed over a subset,
     sizes in px, predictions in px. Prediction fields are ``None`` without a noise level.
+    ``blur_sensitivity_c`` (px / px**2) is the predicted blur-mismatch coefficient ``c``
+    for motion along x and a translation shape function: a sharp reference matched to a copy
+    blurred over ``W`` px scatters by about ``c W**2`` px (std over subsets), see
+    :func:`dicblur.models.blur_sensitivity`; ``None`` when not computed.
     """
 
     shape: tuple[int, int]
@@ -382,6 +387,7 @@ class PatternMetrics:
     match_score_y_mean: float | None = None
     pan_u: float | None = None
     pan_over_match_score: float | None = None
+    blur_sensitivity_c: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of every field."""
@@ -397,6 +403,7 @@ def pattern_metrics(
     noise_sigma: float | None = None,
     step: int | None = None,
     gradient: Gradient = "central",
+    blur_sensitivity: bool = True,
 ) -> PatternMetrics:
     """All pattern metrics of an image as one value.
 
@@ -414,6 +421,9 @@ def pattern_metrics(
     step : int, optional
         Grid step of the subsets (default: ``subset``, non-overlapping).
     gradient : {"central", "sobel"}
+    blur_sensitivity : bool
+        Compute ``blur_sensitivity_c`` (spectral derivatives, mirror extension, the same
+        subsets; motion along x, translation shape). ``False`` leaves it ``None``.
 
     Returns
     -------
@@ -445,6 +455,11 @@ def pattern_metrics(
         "sssig_y_std": float(sy.std()),
         "pan_sssig": float(subset**2 * m**2),
     }
+    if blur_sensitivity:
+        pts = _resolve_points(img.shape, subset, step, None)
+        k = subset_blur_coefficients(img, pts, subset, motion=(0.0, 1.0), shape="translation")
+        k = k[np.isfinite(k)]
+        fields["blur_sensitivity_c"] = float(k.std()) if k.size >= 2 else None
     if noise_sigma is not None:
         sigma = check_positive(noise_sigma, "noise_sigma")
         ux = match_score_sigma(sx, sigma)

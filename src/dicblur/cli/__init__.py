@@ -71,6 +71,9 @@ _pulse.register(app)
 from . import correlate as _correlate  # noqa: E402
 
 _correlate.register(app)
+from . import models as _models  # noqa: E402
+
+_models.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

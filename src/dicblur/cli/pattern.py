@@ -31,6 +31,7 @@ _UNITS = {
     "match_score_x_std": "px",
     "match_score_y_mean": "px",
     "pan_u": "px",
+    "blur_sensitivity_c": "px/px^2",
     "subset": "px",
     "shape": "px",
 }

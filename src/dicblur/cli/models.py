@@ -1,0 +1,285 @@
+"""CLI: ``dicblur fit``, ``dicblur predict`` and ``dicblur plan`` (uncertainty models)."""
+
+from __future__ import annotations
+
+import csv
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import typer
+
+from ..errors import InputError
+from ..io import file_sha256
+from ..models import (
+    BlurUncertaintyModel,
+    PoissonGaussianCamera,
+    fit_blur_model,
+    parse_quantity,
+    plan_exposure,
+)
+from ._common import console, print_json
+
+_COLUMNS = ("blur", "sssig", "u_e")
+_OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "contrast_ratio")
+# Coordinates of a campaign (dicblur.campaign.store.DIMS) other than noise, blur and rep:
+# one setting is fitted at a time.
+_SETTINGS = ("pattern", "angle", "subset", "shape", "step", "noise_model")
+
+
+def _read_table(path: Path) -> dict[str, np.ndarray]:
+    """Columns of a flat CSV, or the flattened variables of a netCDF / zarr dataset."""
+    if not path.exists():
+        raise InputError(f"RESULTS={str(path)!r}: no such file or directory")
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        with path.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+        if not rows:
+            raise InputError(f"RESULTS={str(path)!r}: empty CSV (expected a header and rows)")
+        cols: dict[str, np.ndarray] = {}
+        for key in rows[0]:
+            values = [r[key] for r in rows]
+            try:
+                cols[key] = np.array([float(v) if v != "" else math.nan for v in values])
+            except ValueError:
+                cols[key] = np.array(values, dtype=object)
+        return cols
+    if suffix in (".nc", ".netcdf", ".zarr", ".h5") or path.is_dir():
+        import xarray as xr
+
+        try:
+            ds = (xr.open_zarr(path) if suffix == ".zarr" or path.is_dir()
+                  else xr.open_dataset(path))
+        except Exception as exc:  # xarray raises many types for unreadable files
+            raise InputError(f"RESULTS={str(path)!r}: cannot open as netCDF/zarr ({exc})") from exc
+        if "u_e" not in ds:
+            raise InputError(f"RESULTS={str(path)!r}: no 'u_e' variable in the dataset")
+        template = ds["u_e"]
+        out: dict[str, np.ndarray] = {}
+        for name in (*template.dims, *_COLUMNS[1:], *_OPTIONAL):
+            if name in ds.variables:
+                arr = np.asarray(ds[name].broadcast_like(template).values).ravel()
+                out[name] = arr if np.issubdtype(arr.dtype, np.number) else arr.astype(object)
+        return out
+    raise InputError(
+        f"RESULTS={str(path)!r}: unknown format; use .csv, .nc or .zarr"
+    )
+
+
+def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.ndarray]:
+    """Filter by ``--select key=value``, then one row per (noise, blur): SSSIG and contrast
+    averaged, u_e pooled as the root mean square over repetitions."""
+    missing = [c for c in _COLUMNS if c not in cols]
+    if missing:
+        raise InputError(
+            f"RESULTS: missing column(s) {missing}; the table needs blur, sssig and u_e "
+            f"(optional: {', '.join(_OPTIONAL)})"
+        )
+    mask = np.ones(cols["u_e"].size, dtype=bool)
+    for item in select:
+        key, sep, value = item.partition("=")
+        if not sep or key not in cols:
+            raise InputError(f"--select {item!r}: expected COLUMN=VALUE with a column of "
+                             f"RESULTS ({sorted(cols)})")
+        col = cols[key]
+        if col.dtype == object:
+            mask &= col == value
+        else:
+            mask &= np.isclose(col.astype(float), float(value))
+    keep = {k: v[mask] for k, v in cols.items()}
+    if not mask.any():
+        raise InputError(f"--select {select}: no row matches")
+    for key, col in keep.items():
+        if (key in _SETTINGS or col.dtype == object) and np.unique(col.astype(str)).size > 1:
+            raise InputError(
+                f"RESULTS: column {key!r} has several values; fit one setting at a time "
+                f"with --select {key}=VALUE"
+            )
+    ok = np.isfinite(keep["u_e"].astype(float))
+    if not ok.all():
+        warnings.warn(f"{int((~ok).sum())} row(s) without u_e dropped", stacklevel=2)
+    if "noise" in keep:
+        noise = keep["noise"].astype(float)
+    elif "noise_effective" in keep:
+        noise = keep["noise_effective"].astype(float)
+    else:
+        noise = np.zeros(keep["u_e"].size)
+    blur = keep["blur"].astype(float)
+    out: dict[str, list[float]] = {k: [] for k in ("blur", "sssig", "u_e", "noise",
+                                                   "contrast_ratio")}
+    for nz in np.unique(noise[ok]):
+        for w in np.unique(blur[ok & (noise == nz)]):
+            sel = ok & (noise == nz) & (blur == w)
+            out["blur"].append(float(w))
+            # the campaign's effective per-image noise (per-subframe noise is sigma /
+            # sqrt(K + 1)) is what the models need; the nominal level groups the rows
+            eff = keep.get("noise_effective")
+            out["noise"].append(float(np.mean(eff[sel].astype(float))) if eff is not None
+                                else float(nz))
+            out["sssig"].append(float(np.mean(keep["sssig"][sel].astype(float))))
+            out["u_e"].append(float(np.sqrt(np.mean(keep["u_e"][sel].astype(float) ** 2))))
+            if "contrast_ratio" in keep:
+                out["contrast_ratio"].append(float(np.mean(keep["contrast_ratio"][sel])))
+            elif "contrast_ref" in keep and "contrast" in keep:
+                out["contrast_ratio"].append(float(np.mean(
+                    keep["contrast_ref"][sel].astype(float) / keep["contrast"][sel].astype(float))))
+    res = {k: np.array(v) for k, v in out.items() if v}
+    if "noise" not in cols and "noise_effective" not in cols:
+        res.pop("noise")
+    if "subset" in keep and keep["subset"].dtype != object:
+        res["subset"] = np.array([float(keep["subset"][0])])
+    return res
+
+
+def fit_command(
+    results: Path = typer.Argument(..., help="Campaign results: .csv, .nc or .zarr."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output model file (.json)."),
+    select: list[str] = typer.Option([], "--select", help="Keep rows with COLUMN=VALUE."),
+    noise: float | None = typer.Option(None, "--noise", help="Noise std (GL) if no column."),
+    subset: int | None = typer.Option(None, "--subset", help="Subset size (px), recorded."),
+    fit_range: str | None = typer.Option(None, "--fit-range",
+                                         help="Power-law W range 'LO:HI' px (default: auto)."),
+    ci: str = typer.Option("covariance", "--ci", help="covariance or bootstrap."),
+    default: str = typer.Option("auto", "--default", help="auto, mismatch or power_law."),
+    seed: int | None = typer.Option(None, "--seed", help="Bootstrap seed."),
+    as_json: bool = typer.Option(False, "--json", help="Print the model JSON."),
+) -> None:
+    """Fit the uncertainty models to RESULTS and write the model JSON."""
+    data = _aggregate(_read_table(results), select)
+    rng = None
+    if fit_range is not None:
+        lo, _, hi = fit_range.partition(":")
+        try:
+            rng = (float(lo), float(hi))
+        except ValueError as exc:
+            raise InputError(f"--fit-range={fit_range!r}: expected LO:HI in px, e.g. 0:4") \
+                from exc
+    sigma: Any = data.get("noise", noise)
+    model = fit_blur_model(
+        data["blur"], data["sssig"], data["u_e"], noise_sigma=sigma,
+        contrast_ratio=data.get("contrast_ratio"),
+        subset=subset if subset is not None or "subset" not in data else int(data["subset"][0]),
+        fit_range=rng, ci=ci,
+        default=default, seed=seed,
+        provenance={"results": str(results), "select": list(select),
+                    "results_sha256": file_sha256(results) if results.is_file() else None})
+    model.to_json(str(out))
+    if as_json:
+        typer.echo(model.to_json())
+    else:
+        typer.echo(model.report())
+        typer.echo(f"wrote {out}")
+
+
+def predict_command(
+    model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
+    blur: list[float] = typer.Option([], "--blur", help="Blur length W, px (repeatable)."),
+    velocity: str | None = typer.Option(None, "--velocity", help="e.g. 120mm/s."),
+    exposure: str | None = typer.Option(None, "--exposure", help="e.g. 1ms."),
+    scale: str | None = typer.Option(None, "--scale", help="e.g. 0.05mm/px."),
+    noise: float | None = typer.Option(None, "--noise", help="Noise std, GL."),
+    which: str | None = typer.Option(None, "--model", help="mismatch or power_law."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Predict u_e at blur lengths (--blur) or from velocity x exposure / scale."""
+    model = BlurUncertaintyModel.from_json(str(model_path))
+    ws = list(blur)
+    if velocity is not None or exposure is not None or scale is not None:
+        if velocity is None or exposure is None or scale is None:
+            raise InputError("--velocity, --exposure and --scale: give all three (or --blur)")
+        sc = parse_quantity(scale, "scale", name="--scale")
+        if sc <= 0:
+            raise InputError(f"--scale={scale!r}: must be > 0")
+        v = parse_quantity(velocity, "velocity", name="--velocity", scale=sc)
+        t = parse_quantity(exposure, "time", name="--exposure")
+        if t < 0:
+            raise InputError(f"--exposure={exposure!r}: must be >= 0")
+        ws.append(abs(v) * t / sc)
+    if not ws:
+        raise InputError("--blur: give at least one blur length (px) or velocity/exposure/scale")
+    pred = model.predict(ws, noise, model=which)
+    rows = [{"blur_px": float(w), "u_e_px": float(u), "low_px": float(lo), "high_px": float(hi)}
+            for w, u, lo, hi in zip(pred.blur, pred.u_e, pred.low, pred.high, strict=True)]
+    if as_json:
+        print_json({"model": pred.model, "sigma": pred.sigma, "confidence": pred.confidence,
+                    "predictions": rows})
+        return
+    pct = f"{100 * pred.confidence:g}%"
+    for r in rows:
+        typer.echo(f"W = {r['blur_px']:.4g} px: u_e = {r['u_e_px']:.4g} px "
+                   f"({pct} prediction interval {r['low_px']:.4g} .. {r['high_px']:.4g}) "
+                   f"[{pred.model}]")
+
+
+def plan_command(
+    model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
+    velocity: str = typer.Option(..., "--velocity", help="Target speed, e.g. 120mm/s."),
+    scale: str = typer.Option(..., "--scale", help="Image scale, e.g. 0.05mm/px."),
+    target: str | None = typer.Option(None, "--target", help="Largest u_e, e.g. 0.01px."),
+    full_well: float | None = typer.Option(None, "--full-well", help="Full well, e-."),
+    read_noise: float | None = typer.Option(None, "--read-noise", help="Read noise, e-."),
+    flux: float | None = typer.Option(None, "--flux",
+                                      help="e-/s at the pattern's mean grey level."),
+    peak_to_mean: float = typer.Option(2.0, "--peak-to-mean",
+                                       help="Brightest / mean grey level."),
+    noise: float | None = typer.Option(None, "--noise", help="Fixed noise std, GL."),
+    which: str | None = typer.Option(None, "--model", help="mismatch or power_law."),
+    plot: Path | None = typer.Option(None, "--plot", help="Write u_e(exposure) figure."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Plan the exposure: longest under --target, or the optimum with a camera."""
+    model = BlurUncertaintyModel.from_json(str(model_path))
+    camera = None
+    cam_opts = (full_well, read_noise, flux)
+    if any(o is not None for o in cam_opts):
+        if any(o is None for o in cam_opts):
+            raise InputError("--full-well, --read-noise and --flux: give all three for a "
+                             "Poisson-Gaussian camera (or none for fixed noise)")
+        camera = PoissonGaussianCamera(full_well=float(full_well),  # type: ignore[arg-type]
+                                       read_noise=float(read_noise),  # type: ignore[arg-type]
+                                       flux=float(flux),  # type: ignore[arg-type]
+                                       peak_to_mean=peak_to_mean)
+    plan = plan_exposure(model, velocity=velocity, scale=scale, target=target, camera=camera,
+                         sigma=noise, which=which)
+    if as_json:
+        print_json(plan.to_dict())
+    else:
+        console.print(plan.summary())
+    if plot is not None:
+        _plot(plan, plot)
+        typer.echo(f"wrote {plot}")
+
+
+def _plot(plan: Any, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    t = np.asarray(plan.curve_exposure) * 1e3
+    ax.plot(t, plan.curve_u_e, label=f"predicted u_e ({plan.model})")
+    ax.axvline(plan.exposure * 1e3, color="C1", ls="--",
+               label="optimum" if plan.optimal else "longest under target")
+    ax.axvline(plan.rule_of_thumb_exposure * 1e3, color="C2", ls=":", label="0.02 px rule")
+    if plan.target is not None:
+        ax.axhline(plan.target, color="C3", ls="-.", label="target")
+    if plan.optimal:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.set_xlabel("exposure (ms)")
+    ax.set_ylabel("u_e (px)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def register(app: typer.Typer) -> None:
+    """Attach ``fit``, ``predict`` and ``plan`` to the root app."""
+    app.command("fit")(fit_command)
+    app.command("predict")(predict_command)
+    app.command("plan")(plan_command)

@@ -1,0 +1,53 @@
+"""Uncertainty models of DIC under motion blur (Lavatelli & Zappa 2017, Section VI, and
+beyond): static models, the power law, SSSIG decay, the noise + blur-mismatch model, the
+fitted :class:`BlurUncertaintyModel` and exposure planning. See docs/models.md.
+"""
+
+from __future__ import annotations
+
+from ._result import FitResult, ParameterEstimate
+from .decay import (
+    combined_model,
+    combined_pan_model,
+    fit_sssig_decay,
+    mbrf,
+    sssig_decay,
+    taylor_model,
+)
+from .fit import ModelComparison, compare_models, fit_blur_model
+from .mismatch import BlurSensitivity, blur_sensitivity, fit_mismatch, mismatch_model
+from .model import BlurUncertaintyModel, Prediction
+from .plan import RULE_OF_THUMB_BLUR, ExposurePlan, PoissonGaussianCamera, plan_exposure
+from .powerlaw import edge_driven_range, fit_power_law, power_law
+from .static import match_score_uncertainty, pan_uncertainty
+from .units import parse_quantity
+
+__all__ = [
+    "RULE_OF_THUMB_BLUR",
+    "BlurSensitivity",
+    "BlurUncertaintyModel",
+    "ExposurePlan",
+    "FitResult",
+    "ModelComparison",
+    "ParameterEstimate",
+    "PoissonGaussianCamera",
+    "Prediction",
+    "blur_sensitivity",
+    "combined_model",
+    "combined_pan_model",
+    "compare_models",
+    "edge_driven_range",
+    "fit_blur_model",
+    "fit_mismatch",
+    "fit_power_law",
+    "fit_sssig_decay",
+    "match_score_uncertainty",
+    "mbrf",
+    "mismatch_model",
+    "pan_uncertainty",
+    "parse_quantity",
+    "plan_exposure",
+    "power_law",
+    "sssig_decay",
+    "taylor_model",
+]

@@ -1,0 +1,245 @@
+"""The fit-result value shared by the model fits, and the confidence-interval machinery.
+
+Confidence intervals
+--------------------
+``ci="covariance"`` (default): the asymptotic covariance of the least-squares estimate,
+``s**2 (J^T J)^-1`` with ``s**2 = SSR / dof``, and Student-t intervals with ``dof`` degrees
+of freedom (exact for the linear power-law fit with Gaussian residuals in log space).
+Positive scale factors (``eta``, the noise factor ``a`` or ``k``) get the interval
+symmetric in their logarithm, ``value * exp(+-t se / value)``.
+``ci="bootstrap"``: pairs bootstrap over the measured points (resampled with replacement,
+refitted ``n_boot`` times) and percentile intervals; the covariance is then the bootstrap
+covariance.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from ..errors import FitError, InputError
+
+__all__ = ["FitResult", "ParameterEstimate"]
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    """One fitted parameter: value, standard error and confidence interval."""
+
+    name: str
+    value: float
+    stderr: float
+    low: float
+    high: float
+    fixed: bool = False
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Result of one model fit (a value: JSON-ready, compared field by field).
+
+    Attributes
+    ----------
+    model : str
+        ``"power_law"`` (eq. 17), ``"sssig_decay"`` (eq. 18) or ``"mismatch"``.
+    names : tuple of str
+        Free parameter names, in the order of ``values`` and ``covariance``.
+    values : tuple of float
+    covariance : tuple of tuple of float
+        Parameter covariance (see module docstring for the method).
+    low, high : tuple of float
+        Confidence interval of each free parameter at level ``confidence``.
+    fixed : dict
+        Parameters held fixed (name -> value), e.g. a noise exponent at its theoretical value.
+    r2 : float
+        Coefficient of determination in the space the fit minimises (log u_e for the
+        uncertainty models, SSSIG for the decay, as the paper reports it).
+    residual_std : float
+        ``sqrt(SSR / dof)`` in that space.
+    residuals : tuple of float
+        Residuals (data - model) of the fitted points, in that space.
+    dof : int
+        Degrees of freedom ``n_points - len(names)``.
+    n_points : int
+    blur_range : tuple of float
+        Smallest and largest blur length W (px) of the fitted points.
+    confidence : float
+    ci_method : str
+        ``"covariance"`` or ``"bootstrap"``.
+    extra : dict
+        Model-specific constants (e.g. the reference noise level), JSON-ready.
+    """
+
+    model: str
+    names: tuple[str, ...]
+    values: tuple[float, ...]
+    covariance: tuple[tuple[float, ...], ...]
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    fixed: dict[str, float]
+    r2: float
+    residual_std: float
+    residuals: tuple[float, ...]
+    dof: int
+    n_points: int
+    blur_range: tuple[float, float]
+    confidence: float
+    ci_method: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> float:
+        """Value of a free or fixed parameter."""
+        if name in self.names:
+            return self.values[self.names.index(name)]
+        if name in self.fixed:
+            return self.fixed[name]
+        raise KeyError(f"{name!r}: not a parameter of the {self.model} fit ({self.names})")
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.names or name in self.fixed
+
+    def parameter(self, name: str) -> ParameterEstimate:
+        """Value, standard error and CI of one parameter (fixed ones have zero width)."""
+        if name in self.fixed:
+            v = self.fixed[name]
+            return ParameterEstimate(name, v, 0.0, v, v, fixed=True)
+        i = self.names.index(name) if name in self.names else -1
+        if i < 0:
+            raise KeyError(f"{name!r}: not a parameter of the {self.model} fit ({self.names})")
+        se = math.sqrt(max(self.covariance[i][i], 0.0))
+        return ParameterEstimate(name, self.values[i], se, self.low[i], self.high[i])
+
+    @property
+    def parameters(self) -> tuple[ParameterEstimate, ...]:
+        """Every parameter, free then fixed."""
+        return tuple(self.parameter(n) for n in (*self.names, *self.fixed))
+
+    @property
+    def cov_array(self) -> NDArray[np.float64]:
+        return np.array(self.covariance, dtype=np.float64).reshape(len(self.names), -1)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d["covariance"] = [list(r) for r in self.covariance]
+        for k in ("names", "values", "low", "high", "residuals", "blur_range"):
+            d[k] = list(d[k])
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FitResult:
+        kw = dict(d)
+        kw["covariance"] = tuple(tuple(float(x) for x in r) for r in d["covariance"])
+        for k in ("values", "low", "high", "residuals"):
+            kw[k] = tuple(float(x) for x in d[k])
+        kw["names"] = tuple(d["names"])
+        kw["blur_range"] = (float(d["blur_range"][0]), float(d["blur_range"][1]))
+        kw["fixed"] = {k: float(v) for k, v in d["fixed"].items()}
+        return cls(**kw)
+
+
+def t_quantile(confidence: float, dof: int) -> float:
+    """Two-sided Student-t quantile (normal when dof is large)."""
+    return float(stats.t.ppf(0.5 + confidence / 2.0, max(dof, 1)))
+
+
+def check_ci(ci: str, confidence: float, n_boot: int) -> None:
+    if ci not in ("covariance", "bootstrap"):
+        raise InputError(f"ci={ci!r}: choose 'covariance' or 'bootstrap'")
+    if not (isinstance(confidence, float | int) and 0.0 < float(confidence) < 1.0):
+        raise InputError(f"confidence={confidence!r}: must be in (0, 1), e.g. 0.95")
+    if ci == "bootstrap" and (not isinstance(n_boot, int) or n_boot < 20):
+        raise InputError(f"n_boot={n_boot!r}: use an integer >= 20 (e.g. 500)")
+
+
+def make_result(
+    *,
+    model: str,
+    names: tuple[str, ...],
+    fit_once: Callable[[NDArray[np.intp]], tuple[NDArray[np.float64], ...]],
+    n: int,
+    data_space: NDArray[np.float64],
+    blur: NDArray[np.float64],
+    fixed: dict[str, float],
+    confidence: float,
+    ci: str,
+    n_boot: int,
+    seed: int | np.random.Generator | None,
+    extra: dict[str, Any] | None = None,
+    log_params: tuple[str, ...] = (),
+) -> FitResult:
+    """Run ``fit_once`` on all points and build the result with CIs.
+
+    ``fit_once(idx)`` fits the points ``idx`` and returns ``(values, jacobian, residuals)``
+    with the Jacobian of the residual vector at the solution (rows: points).
+    """
+    p = len(names)
+    dof = n - p
+    if dof < 1:
+        raise FitError(
+            f"{model}: {n} point(s) for {p} parameter(s); at least {p + 1} are needed "
+            "(add blur levels or fix a parameter)"
+        )
+    idx_all = np.arange(n)
+    values, jac, res = fit_once(idx_all)
+    ssr = float(res @ res)
+    s2 = ssr / dof
+    ss_tot = float(np.sum((data_space - data_space.mean()) ** 2))
+    r2 = 1.0 - ssr / ss_tot if ss_tot > 0 else math.nan
+    if ci == "covariance":
+        jtj = jac.T @ jac
+        try:
+            cov = np.linalg.pinv(jtj) * s2
+        except np.linalg.LinAlgError as exc:  # pragma: no cover - pinv rarely fails
+            raise FitError(f"{model}: singular fit; the data do not constrain {names}") from exc
+        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        tq = t_quantile(confidence, dof)
+        low, high = values - tq * se, values + tq * se
+        # positive scale factors: interval symmetric in log (exact for the power law's
+        # eta, which is fitted as log eta; never below zero for the noise factor a or k)
+        for i, name in enumerate(names):
+            if name in log_params and values[i] > 0:
+                rel = tq * se[i] / values[i]
+                low[i], high[i] = values[i] * np.exp(-rel), values[i] * np.exp(rel)
+    else:
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        boots = []
+        for _ in range(n_boot):
+            idx = np.sort(rng.integers(0, n, n))
+            if np.unique(blur[idx]).size < p + 1:
+                continue
+            try:
+                boots.append(fit_once(idx)[0])
+            except (FitError, np.linalg.LinAlgError, ValueError):
+                continue
+        if len(boots) < 10:
+            raise FitError(
+                f"{model}: bootstrap failed (too few valid resamples); use ci='covariance'"
+            )
+        b = np.array(boots)
+        cov = np.atleast_2d(np.cov(b, rowvar=False))
+        a = (1.0 - confidence) / 2.0
+        low, high = np.quantile(b, a, axis=0), np.quantile(b, 1.0 - a, axis=0)
+    return FitResult(
+        model=model,
+        names=names,
+        values=tuple(float(v) for v in values),
+        covariance=tuple(tuple(float(x) for x in r) for r in cov),
+        low=tuple(float(v) for v in low),
+        high=tuple(float(v) for v in high),
+        fixed=dict(fixed),
+        r2=float(r2),
+        residual_std=math.sqrt(s2),
+        residuals=tuple(float(r) for r in -res),
+        dof=int(dof),
+        n_points=int(n),
+        blur_range=(float(blur.min()), float(blur.max())),
+        confidence=float(confidence),
+        ci_method=ci,
+        extra=dict(extra or {}),
+    )

@@ -1,0 +1,309 @@
+"""Fit every model to measured u_e(W) data and compare them on held-out points."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import FitError, InputError
+from ._checks import as_blur, as_positive, as_vector
+from .decay import fit_sssig_decay
+from .mismatch import fit_mismatch
+from .model import BlurUncertaintyModel
+from .powerlaw import edge_driven_range, fit_power_law
+
+__all__ = ["ModelComparison", "compare_models", "fit_blur_model"]
+
+
+def _json_clean(obj: Any) -> Any:
+    """JSON-normalise (tuples -> lists, numpy scalars -> Python) so round trips are exact."""
+    try:
+        return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist")
+                                     else str(o)))
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"provenance: not JSON-serialisable ({exc})") from exc
+
+
+def _noise_vector(noise_sigma: ArrayLike | None, n: int) -> NDArray[np.float64] | None:
+    if noise_sigma is None:
+        return None
+    arr = np.asarray(noise_sigma, dtype=np.float64)
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    return as_positive(arr, "noise_sigma", n)
+
+
+def fit_blur_model(
+    blur: ArrayLike,
+    sssig: ArrayLike,
+    u_e: ArrayLike,
+    *,
+    noise_sigma: ArrayLike | None = None,
+    contrast_ratio: ArrayLike | None = None,
+    contrast_ref: ArrayLike | None = None,
+    contrast: ArrayLike | None = None,
+    subset: int | None = None,
+    fit_range: tuple[float, float] | None = None,
+    range_tolerance: float = 0.05,
+    mean_level: float | None = None,
+    c_static: float | None = None,
+    default: str = "auto",
+    next_term: bool | str = False,
+    confidence: float = 0.95,
+    ci: str = "covariance",
+    n_boot: int = 500,
+    seed: int | np.random.Generator | None = None,
+    provenance: dict[str, Any] | None = None,
+    compare: bool = True,
+) -> BlurUncertaintyModel:
+    """Fit the SSSIG decay, the power law and the noise + blur-mismatch model.
+
+    Parameters
+    ----------
+    blur : array_like, shape (n,)
+        Blur lengths W (px), >= 0, strictly increasing within each noise level.
+    sssig : array_like, shape (n,)
+        Mean subset SSSIG of the blurred image along the motion, (GL/px)**2, > 0.
+    u_e : array_like, shape (n,)
+        Measured random error along the motion (px), > 0.
+    noise_sigma : float or array_like, shape (n,), optional
+        Noise std (GL) of each point. Needed to predict at other noise levels and to plan
+        exposures with a camera; with several levels the noise exponents are fitted.
+    contrast_ratio : array_like, shape (n,), optional
+        Static / blurred contrast per point (or give ``contrast_ref`` and ``contrast``).
+        Drives the automatic power-law fit range (:func:`edge_driven_range`).
+    subset : int, optional
+        Subset size (px), recorded.
+    fit_range : (float, float), optional
+        W range (px) of the power-law fit, overriding the automatic rule.
+    range_tolerance : float
+        Contrast loss that ends the edge-driven range (default 0.05).
+    mean_level : float, optional
+        Mean grey level (GL) of the reference images, used by camera planning.
+    c_static : float, optional
+        Blur sensitivity predicted from the static image (:func:`blur_sensitivity`), for
+        comparison with the fitted ``c``.
+    default : {"auto", "mismatch", "power_law"}
+        Model used by ``predict``/``plan``; ``"auto"`` picks the better one on held-out
+        points (:func:`compare_models`) when there are >= 6 blur levels, else ``mismatch``.
+    next_term : bool or "auto"
+        ``c4 W**4`` term of the mismatch model (see :func:`fit_mismatch`). Off by
+        default: a quartic fitted on a limited W range extrapolates badly (on DIC data a
+        negative ``c4`` fitted on W <= 5 px under-predicted W = 8 px by 80 %, the pure
+        ``c W**2`` term over-predicted by about 10 %; docs/models.md s. 6).
+    confidence, ci, n_boot, seed
+        Interval level and method (``"covariance"`` or ``"bootstrap"``; see
+        :mod:`dicblur.models._result`); ``seed`` drives the bootstrap only.
+    provenance : dict, optional
+        JSON-ready record of the inputs (pattern hash or generator settings, DIC settings).
+
+    Returns
+    -------
+    BlurUncertaintyModel
+
+    Raises
+    ------
+    InputError
+        Too few points, NaN / negative values, W not increasing, inconsistent lengths.
+    FitError
+        A fit has no degrees of freedom left or does not converge.
+    """
+    from .. import __version__
+
+    w0 = as_vector(blur, "blur")
+    n = w0.size
+    sig = _noise_vector(noise_sigma, n)
+    w = as_blur(w0, "blur", increasing=True, groups=sig)
+    s = as_positive(sssig, "sssig", n)
+    u = as_positive(u_e, "u_e", n)
+    levels_w = np.unique(w)
+    if levels_w.size < 3:
+        raise InputError(
+            f"blur: {levels_w.size} distinct blur level(s); the models need at least 3 "
+            "(e.g. W = 0, 2, 4, 6 px)"
+        )
+    if default not in ("auto", "mismatch", "power_law"):
+        raise InputError(f"default={default!r}: choose 'auto', 'mismatch' or 'power_law'")
+    ratio: NDArray[np.float64] | None = None
+    if contrast_ratio is not None:
+        ratio = as_positive(contrast_ratio, "contrast_ratio", n)
+    elif contrast_ref is not None and contrast is not None:
+        ratio = as_positive(np.broadcast_to(np.asarray(contrast_ref, dtype=float), (n,)),
+                            "contrast_ref", n) / as_positive(contrast, "contrast", n)
+    # eq. 18 on the mean SSSIG per blur level (noise levels pooled)
+    s_mean = np.array([s[w == lv].mean() for lv in levels_w])
+    decay = fit_sssig_decay(levels_w, s_mean, confidence=confidence, ci=ci, n_boot=n_boot,
+                            seed=seed)
+    if fit_range is not None:
+        try:
+            lo, hi = (float(fit_range[0]), float(fit_range[1]))
+        except (TypeError, ValueError, IndexError) as exc:
+            raise InputError(f"fit_range={fit_range!r}: expected (W_lo, W_hi) in px") from exc
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise InputError(f"fit_range={fit_range!r}: need finite W_lo < W_hi (px)")
+        rule = "given"
+    else:
+        lo, hi = edge_driven_range(w, contrast_ratio=ratio, sssig=s if ratio is None else None,
+                                   tolerance=range_tolerance)
+        rule = (f"contrast ratio <= {1 + range_tolerance:g}" if ratio is not None
+                else "beta W^2 <= 1 (SSSIG at most halved)")
+    in_range = (w >= lo) & (w <= hi)
+    if np.unique(w[in_range]).size < 3:
+        raise InputError(
+            f"fit_range=({lo:g}, {hi:g}): holds {np.unique(w[in_range]).size} blur level(s); "
+            "the power law needs at least 3"
+        )
+    pl = fit_power_law(s[in_range], u[in_range], noise_sigma=None if sig is None else sig[in_range],
+                       blur=w[in_range], confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
+    try:
+        mm = fit_mismatch(w, s, u, noise_sigma=sig, next_term=next_term,  # type: ignore[arg-type]
+                          confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
+    except FitError as exc:
+        warnings.warn(f"mismatch model not fitted: {exc}", stacklevel=2)
+        mm = None
+    levels = tuple(float(v) for v in np.unique(sig)) if sig is not None else ()
+    data: dict[str, tuple[float, ...]] = {"blur": tuple(map(float, w)),
+                                          "sssig": tuple(map(float, s)),
+                                          "u_e": tuple(map(float, u))}
+    if sig is not None:
+        data["noise"] = tuple(map(float, sig))
+    if ratio is not None:
+        data["contrast_ratio"] = tuple(map(float, ratio))
+    # Model errors at the measured SSSIG (the paper's Fig. 8 against the contrast ratio).
+    kappa = pl["kappa"] if "kappa" in pl else 2.0 * pl["alpha"]
+    pl_pred = pl["eta"] * s ** (-pl["alpha"])
+    if sig is not None and pl.extra.get("sigma_ref"):
+        pl_pred = pl_pred * (sig / pl.extra["sigma_ref"]) ** kappa
+    data["err_power_law"] = tuple(map(float, pl_pred / u - 1.0))
+    if mm is not None:
+        data["err_mismatch"] = tuple(float(math.expm1(-r)) for r in mm.residuals)
+    model = BlurUncertaintyModel(
+        default="mismatch" if mm is not None else "power_law",
+        decay=decay, power_law=pl, mismatch=mm, fit_range=(lo, hi), range_rule=rule,
+        noise_sigma=levels[0] if len(levels) == 1 else None, noise_levels=levels,
+        subset=None if subset is None else int(subset),
+        mean_level=None if mean_level is None else float(mean_level),
+        c_static=None if c_static is None else float(c_static), data=data, comparison=None,
+        provenance=_json_clean(provenance or {}), version=__version__,
+        confidence=float(confidence),
+    )
+    chosen = model.default
+    comparison = None
+    if default == "auto" and mm is not None and compare and levels_w.size >= 6:
+        try:
+            cmp_ = compare_models(w, s, u, noise_sigma=sig, contrast_ratio=ratio,
+                                  fit_range=fit_range, range_tolerance=range_tolerance,
+                                  next_term=next_term)
+            comparison = _json_clean(cmp_.to_dict())
+            chosen = cmp_.better
+        except (FitError, InputError) as exc:
+            warnings.warn(f"held-out model comparison skipped: {exc}", stacklevel=2)
+    elif default != "auto":
+        if default == "mismatch" and mm is None:
+            raise FitError("default='mismatch': the mismatch model could not be fitted")
+        chosen = default
+    from dataclasses import replace
+
+    return replace(model, default=chosen, comparison=comparison)
+
+
+@dataclass(frozen=True)
+class ModelComparison:
+    """Held-out comparison of the power law and the mismatch model.
+
+    Errors are of ``log(predicted / measured)`` over the test points (rms) and the largest
+    ``|predicted / measured - 1|``.
+    """
+
+    train_max_blur: float
+    holdout_noise: float | None
+    n_train: int
+    n_test: int
+    rms_log_error: dict[str, float]
+    max_rel_error: dict[str, float]
+    better: str
+    test_blur: tuple[float, ...]
+    test_noise: tuple[float, ...] | None
+    test_rel_error: dict[str, tuple[float, ...]]
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def compare_models(
+    blur: ArrayLike,
+    sssig: ArrayLike,
+    u_e: ArrayLike,
+    *,
+    noise_sigma: ArrayLike | None = None,
+    contrast_ratio: ArrayLike | None = None,
+    train_max_blur: float | None = None,
+    holdout_noise: float | None = None,
+    fit_range: tuple[float, float] | None = None,
+    range_tolerance: float = 0.05,
+    next_term: bool | str = False,
+) -> ModelComparison:
+    """Fit both models on part of the data and score their predictions on the rest.
+
+    Training points: ``W <= train_max_blur`` (default: the blur level at 60 % of the
+    distinct levels) and noise != ``holdout_noise`` (default: the largest level when there
+    are >= 2). Test points: all the others. Both models predict through the eq. 18 fit,
+    i.e. from W and sigma alone, as a user would.
+
+    Returns
+    -------
+    ModelComparison
+    """
+    w = as_vector(blur, "blur")
+    n = w.size
+    s = as_positive(sssig, "sssig", n)
+    u = as_positive(u_e, "u_e", n)
+    sig = _noise_vector(noise_sigma, n)
+    ratio = None if contrast_ratio is None else as_positive(contrast_ratio, "contrast_ratio", n)
+    levels_w = np.unique(w)
+    if train_max_blur is None:
+        train_max_blur = float(levels_w[max(math.ceil(0.6 * levels_w.size) - 1, 2)])
+    nl = np.unique(sig) if sig is not None else np.array([])
+    if holdout_noise is None and nl.size >= 2:
+        holdout_noise = float(nl[-1])
+    train = w <= train_max_blur
+    if holdout_noise is not None:
+        if sig is None:
+            raise InputError("holdout_noise: needs noise_sigma per point")
+        train &= ~np.isclose(sig, holdout_noise)
+    test = ~train
+    if np.unique(w[train]).size < 3 or not test.any():
+        raise InputError(
+            f"train_max_blur={train_max_blur:g}: leaves {np.unique(w[train]).size} training "
+            f"blur level(s) and {int(test.sum())} test point(s); need >= 3 and >= 1"
+        )
+    fitted = fit_blur_model(
+        w[train], s[train], u[train], noise_sigma=None if sig is None else sig[train],
+        contrast_ratio=None if ratio is None else ratio[train], fit_range=fit_range,
+        range_tolerance=range_tolerance, default="mismatch", next_term=next_term,
+        compare=False)
+    rms: dict[str, float] = {}
+    mx: dict[str, float] = {}
+    rel: dict[str, tuple[float, ...]] = {}
+    for kind in ("power_law", "mismatch"):
+        pred = np.empty(int(test.sum()))
+        for j, i in enumerate(np.nonzero(test)[0]):
+            sg = None if sig is None else float(sig[i])
+            pred[j] = fitted.predict([w[i]], sg, model=kind).u_e[0]
+        r = pred / u[test]
+        rms[kind] = float(np.sqrt(np.mean(np.log(r) ** 2)))
+        mx[kind] = float(np.max(np.abs(r - 1.0)))
+        rel[kind] = tuple(float(x) for x in r - 1.0)
+    better = "mismatch" if rms["mismatch"] <= rms["power_law"] else "power_law"
+    return ModelComparison(
+        train_max_blur=float(train_max_blur), holdout_noise=holdout_noise,
+        n_train=int(train.sum()), n_test=int(test.sum()), rms_log_error=rms, max_rel_error=mx,
+        better=better, test_blur=tuple(float(x) for x in w[test]),
+        test_noise=None if sig is None else tuple(float(x) for x in sig[test]),
+        test_rel_error=rel)

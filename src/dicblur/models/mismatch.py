@@ -1,0 +1,282 @@
+"""Noise + blur-mismatch model (beyond the paper; paper-brief s. 10, docs/models.md).
+
+With a sharp reference and a blurred current image the error of a subset has two parts:
+the noise term of the match-score model evaluated at the blurred SSSIG, and a
+deterministic, pattern-dependent shift of the SSD minimum that does not depend on noise:
+
+    u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) + (c W**2 + c4 W**4)**2
+
+Theory gives ``a = 2``, ``gamma = 1`` (eq. 2) and ``c`` from the static image
+(:func:`blur_sensitivity`); ``c4`` is the next term of the expansion, fitted only when the
+data ask for it (AIC). The noise enters only through ``SSSIG / sigma**2``, so the model is
+invariant to scaling the image intensity. Without a known noise level the noise term is
+``k / SSSIG(W)`` with ``k = a sigma**2`` fitted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import optimize
+
+from .._blur_sensitivity import Boundary, Derivative, Shape, subset_blur_coefficients
+from .._validation import as_image, check_odd_subset
+from ..errors import FitError, InputError
+from ..metrics import _resolve_points
+from ._checks import as_blur, as_positive, as_vector
+from ._result import FitResult, check_ci, make_result
+
+__all__ = ["BlurSensitivity", "blur_sensitivity", "fit_mismatch", "mismatch_model"]
+
+
+@dataclass(frozen=True)
+class BlurSensitivity:
+    """Predicted blur sensitivity of a pattern (from the static image alone).
+
+    Attributes
+    ----------
+    c : float
+        Field statistic ``std_i(k_i)`` (px / px**2): ``u_blur(W) ~= c W**2``.
+    mean : float
+        ``mean_i(k_i)``: a common shift, which DIC sees as a rigid offset (~0).
+    k : ndarray, shape (n,)
+        Per-subset coefficients ``xi_i / W**2`` along the motion (NaN: no gradient).
+    centres : ndarray of int, shape (n, 2)
+        Subset centres (row, col).
+    subset : int
+    motion : tuple of float
+        Unit motion direction (dy, dx).
+    shape : str
+        ``"translation"`` or ``"affine"``.
+    """
+
+    c: float
+    mean: float
+    k: NDArray[np.float64]
+    centres: NDArray[np.intp]
+    subset: int
+    motion: tuple[float, float]
+    shape: str
+
+    def u_blur(self, blur: ArrayLike) -> NDArray[np.float64]:
+        """Predicted mismatch uncertainty ``c W**2`` (px) at blur lengths ``blur`` (px)."""
+        w = np.asarray(blur, dtype=np.float64)
+        return self.c * w * w
+
+
+def blur_sensitivity(
+    image: ArrayLike,
+    *,
+    subset: int,
+    step: int | None = None,
+    points: ArrayLike | None = None,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "spectral",
+    boundary: Boundary = "reflect",
+) -> BlurSensitivity:
+    """Predict the blur-mismatch coefficient ``c`` of a pattern from the static image.
+
+    Per subset ``i``, ``k_i = -(1/24) e_d . [(J^T J)^-1 J^T f_dd]_centre`` with ``J`` the
+    steepest-descent images of the shape function and ``f_dd`` the second derivative along
+    the motion (docs/models.md derives both the translation and the affine form). For motion
+    along x and a translation shape without gradient coupling this is
+    ``-sum(f_x f_xx) / (24 sum(f_x**2))`` (paper-brief s. 10).
+
+    Parameters
+    ----------
+    image : array_like, shape (rows, cols)
+        Sharp reference image, grey levels.
+    subset : int
+        Odd subset size, px.
+    step : int, optional
+        Subset grid step (px, default ``subset``); or give ``points`` (n, 2) (row, col).
+    motion : (dy, dx)
+        Motion direction (px; only the direction matters).
+    shape : {"translation", "affine"}
+        Shape function of the DIC matcher.
+    derivative : {"spectral", "central"}
+        Derivative operator; spectral is accurate for speckles down to ~2 px.
+    boundary : {"reflect", "periodic"}
+        Image extension for spectral derivatives (periodic for tiling synthetic patterns).
+
+    Returns
+    -------
+    BlurSensitivity
+    """
+    img = as_image(image, "image", min_size=5)
+    subset = check_odd_subset(subset)
+    if boundary not in ("reflect", "periodic"):
+        raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
+    pts = _resolve_points(img.shape, subset, step, points)
+    k = subset_blur_coefficients(img, pts, subset, motion=motion, shape=shape,
+                                 derivative=derivative, boundary=boundary)
+    good = k[np.isfinite(k)]
+    if good.size < 2:
+        raise InputError(
+            "image: fewer than two subsets have an intensity gradient; the blur sensitivity "
+            "is undefined (use a textured image or a larger area)"
+        )
+    n = math.hypot(float(motion[0]), float(motion[1]))
+    return BlurSensitivity(c=float(good.std()), mean=float(good.mean()), k=k, centres=pts,
+                           subset=subset, motion=(float(motion[0]) / n, float(motion[1]) / n),
+                           shape=str(shape))
+
+
+def mismatch_model(
+    blur: ArrayLike,
+    sssig: ArrayLike,
+    noise_sigma: ArrayLike | None,
+    *,
+    c: float,
+    a: float = 2.0,
+    gamma: float = 1.0,
+    c4: float = 0.0,
+    k: float | None = None,
+) -> NDArray[np.float64]:
+    """``sqrt(a (SSSIG/sigma**2)**(-gamma) + (c W**2 + c4 W**4)**2)`` (px).
+
+    With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required).
+    """
+    w = np.asarray(blur, dtype=np.float64)
+    s = np.asarray(sssig, dtype=np.float64)
+    if noise_sigma is None:
+        if k is None:
+            raise InputError("k: give k (= a sigma**2, GL**2) when noise_sigma is None")
+        noise = k / s
+    else:
+        sig = np.asarray(noise_sigma, dtype=np.float64)
+        noise = a * (s / sig**2) ** (-gamma)
+    ub = c * w * w + c4 * w**4
+    return np.sqrt(noise + ub * ub)
+
+
+def fit_mismatch(
+    blur: ArrayLike,
+    sssig: ArrayLike,
+    u_e: ArrayLike,
+    *,
+    noise_sigma: ArrayLike | None = None,
+    fit_gamma: bool | None = None,
+    next_term: bool | Literal["auto"] = "auto",
+    confidence: float = 0.95,
+    ci: str = "covariance",
+    n_boot: int = 500,
+    seed: int | np.random.Generator | None = None,
+) -> FitResult:
+    """Fit the noise + blur-mismatch model by least squares on ``log u_e``.
+
+    Parameters
+    ----------
+    blur, sssig, u_e : array_like, shape (n,)
+        W (px), SSSIG of the blurred image along the motion ((GL/px)**2), u_e (px).
+    noise_sigma : float or array_like, shape (n,), optional
+        Noise std (GL). ``None``: the noise term is ``k / SSSIG``.
+    fit_gamma : bool, optional
+        Fit the noise exponent ``gamma``; default: only with >= 2 noise levels (else fixed
+        at the theoretical 1).
+    next_term : bool or "auto"
+        Add ``c4 W**4`` to the mismatch term; ``"auto"`` keeps it when the Akaike
+        information criterion drops by more than 2 and there are enough points.
+
+    Returns
+    -------
+    FitResult
+        ``names`` among ``("a" | "k", "gamma", "c", "c4")``; ``fixed`` holds the rest.
+    """
+    w = as_vector(blur, "blur")
+    s = as_positive(sssig, "sssig", w.size)
+    u = as_positive(u_e, "u_e", w.size)
+    as_blur(w, "blur", increasing=False)
+    check_ci(ci, confidence, n_boot)
+    sig: NDArray[np.float64] | None = None
+    if noise_sigma is not None:
+        sig = as_positive(np.broadcast_to(np.asarray(noise_sigma, dtype=np.float64), w.shape)
+                          .copy(), "noise_sigma", w.size)
+    multi = sig is not None and np.unique(sig).size >= 2
+    do_gamma = bool(multi if fit_gamma is None else (fit_gamma and sig is not None))
+    if next_term not in (True, False, "auto"):
+        raise InputError(f"next_term={next_term!r}: use True, False or 'auto'")
+    options = [False, True] if next_term == "auto" else [bool(next_term)]
+    results = []
+    for with_c4 in options:
+        names: list[str] = ["a" if sig is not None else "k"]
+        if do_gamma:
+            names.append("gamma")
+        names.append("c")
+        if with_c4:
+            names.append("c4")
+        if w.size - len(names) < (2 if with_c4 and next_term == "auto" else 1):
+            continue
+        results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci, n_boot, seed))
+    if not results:
+        raise FitError(
+            f"mismatch: {w.size} point(s) are too few for the noise + blur-mismatch model; "
+            "give at least 3 blur levels"
+        )
+    if len(results) == 1:
+        return results[0]
+
+    def aic(r: FitResult) -> float:
+        ssr = r.residual_std**2 * r.dof
+        return r.n_points * math.log(max(ssr, 1e-300) / r.n_points) + 2 * len(r.names)
+
+    return results[1] if aic(results[1]) < aic(results[0]) - 2.0 else results[0]
+
+
+def _fit_one(
+    w: NDArray[np.float64],
+    s: NDArray[np.float64],
+    u: NDArray[np.float64],
+    sig: NDArray[np.float64] | None,
+    names: tuple[str, ...],
+    confidence: float,
+    ci: str,
+    n_boot: int,
+    seed: int | np.random.Generator | None,
+) -> FitResult:
+    def unpack(p: NDArray[np.float64]) -> dict[str, float]:
+        d = dict(zip(names, p, strict=True))
+        d.setdefault("gamma", 1.0)
+        d.setdefault("c4", 0.0)
+        return d
+
+    def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
+        wi, si, ui = w[idx], s[idx], u[idx]
+        sg = None if sig is None else sig[idx]
+        q = si if sg is None else si / sg**2
+        lo = np.argmin(wi)
+        hi = np.argmax(wi)
+        noise0 = float(ui[lo] ** 2 * q[lo])
+        blur_part = ui[hi] ** 2 - noise0 / q[hi]
+        c0 = math.sqrt(max(blur_part, 0.01 * ui[hi] ** 2)) / max(wi[hi] ** 2, 1e-12)
+        start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0}
+        p0 = np.array([start[n] for n in names])
+        scl = np.where(p0 > 0, p0, 1e-3 * c0 if c0 > 0 else 1e-6)
+        lower = np.array([0.0 if n in ("a", "k", "c") else (0.05 if n == "gamma" else -np.inf)
+                          for n in names])
+        upper = np.array([5.0 if n == "gamma" else np.inf for n in names])
+
+        def resid(pn: NDArray[np.float64]) -> NDArray[np.float64]:
+            d = unpack(pn * scl)
+            m = mismatch_model(wi, si, sg, c=d["c"], a=d.get("a", 2.0), gamma=d["gamma"],
+                               c4=d["c4"], k=d.get("k"))
+            return np.log(np.maximum(m, 1e-300)) - np.log(ui)
+
+        r = optimize.least_squares(resid, p0 / scl, bounds=(lower / scl, upper / scl),
+                                   method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
+                                   gtol=1e-12, max_nfev=2000)
+        if not np.all(np.isfinite(r.fun)):
+            raise FitError("mismatch: the fit produced non-finite residuals; check the data")
+        return r.x * scl, r.jac / scl, r.fun
+
+    extra = {"noise_levels": [] if sig is None else [float(v) for v in np.unique(sig)],
+             "noise_term": "k/SSSIG" if sig is None else "a*(SSSIG/sigma^2)^-gamma"}
+    fixed = {} if "gamma" in names or sig is None else {"gamma": 1.0}
+    return make_result(model="mismatch", names=names, fit_once=fit_once, n=w.size,
+                       data_space=np.log(u), blur=w, fixed=fixed, confidence=confidence,
+                       ci=ci, n_boot=n_boot, seed=seed, extra=extra, log_params=("eta", "a", "k"))

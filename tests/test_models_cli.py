@@ -1,0 +1,128 @@
+"""CLI tests of ``dicblur fit``, ``predict`` and ``plan`` (in-process, no subprocess)."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from dicblur.cli import main
+from dicblur.models import BlurUncertaintyModel, mismatch_model, sssig_decay
+
+
+@pytest.fixture
+def results_csv(tmp_path):
+    rng = np.random.default_rng(0)
+    path = tmp_path / "results.csv"
+    w = np.arange(0.0, 10.01, 1.0)
+    with path.open("w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["pattern", "noise", "blur", "rep", "sssig", "u_e", "contrast_ref",
+                      "contrast"])
+        for noise in (1.0, 2.0):
+            for rep in range(2):
+                s = sssig_decay(w, 1.85e5, 0.022)
+                u = mismatch_model(w, s, noise, c=7e-4) * np.exp(rng.normal(0, 0.02, w.size))
+                for row in zip(w, s, u, strict=True):
+                    out.writerow(["p1", noise, row[0], rep, row[1], row[2], 0.9,
+                                  0.9 / (1 + 0.01 * row[0])])
+    return path
+
+
+def test_fit_predict_plan(results_csv, tmp_path, capsys):
+    model_path = tmp_path / "model.json"
+    assert main(["fit", str(results_csv), "-o", str(model_path)]) == 0
+    out = capsys.readouterr().out
+    assert "SSSIG decay" in out and "gamma" in out and "wrote" in out
+    model = BlurUncertaintyModel.from_json(str(model_path))
+    assert model.noise_levels == (1.0, 2.0)
+    assert model.mismatch["c"] == pytest.approx(7e-4, rel=0.05)
+
+    assert main(["predict", str(model_path), "--blur", "3", "--noise", "2", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    expect = model.predict([3.0], 2.0).u_e[0]
+    assert got["predictions"][0]["u_e_px"] == pytest.approx(expect, rel=1e-12)
+    # 120 mm/s x 1 ms / 0.05 mm/px = 2.4 px
+    assert main(["predict", str(model_path), "--velocity", "120mm/s", "--exposure", "1ms",
+                 "--scale", "0.05mm/px", "--noise", "2", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["predictions"][0]["blur_px"] == pytest.approx(2.4)
+
+    assert main(["plan", str(model_path), "--velocity", "120mm/s", "--scale", "0.05mm/px",
+                 "--target", "0.01px", "--noise", "2"]) == 0
+    assert "rule of thumb" in capsys.readouterr().out
+    fig = tmp_path / "plan.png"
+    assert main(["plan", str(model_path), "--velocity", "120mm/s", "--scale", "20px/mm",
+                 "--full-well", "20000", "--read-noise", "5", "--flux", "4e6", "--plot",
+                 str(fig), "--json"]) == 0
+    text = capsys.readouterr().out
+    plan = json.loads(text[: text.rindex("}") + 1])
+    assert plan["optimal"] and plan["exposure"] > 0
+    assert fig.stat().st_size > 1000
+
+
+def test_fit_from_netcdf(tmp_path, capsys):
+    xr = pytest.importorskip("xarray")
+    w = np.arange(0.0, 8.01, 1.0)
+    s = sssig_decay(w, 1e5, 0.03)
+    u = mismatch_model(w, s, 2.0, c=5e-4)
+    ds = xr.Dataset({"u_e": ("blur", u), "sssig": ("blur", s)}, coords={"blur": w})
+    path = tmp_path / "r.nc"
+    ds.to_netcdf(path)
+    assert main(["fit", str(path), "-o", str(tmp_path / "m.json"), "--noise", "2"]) == 0
+    model = BlurUncertaintyModel.from_json(str(tmp_path / "m.json"))
+    assert model.mismatch["c"] == pytest.approx(5e-4, rel=1e-6)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning", "ignore:The data type")  # zarr v3 notes
+def test_fit_from_campaign_zarr(tmp_path, capsys):
+    # the campaign layout: dims (pattern, angle, subset, noise, blur, rep), effective noise
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("zarr")
+    w = np.arange(0.0, 8.01, 1.0)
+    s = sssig_decay(w, 1e5, 0.03)
+    dims = ("pattern", "angle", "subset", "noise", "blur", "rep")
+    shape = (2, 1, 1, 2, w.size, 2)
+    eff = np.array([1.0, 2.0]) / np.sqrt(101)  # per-subframe noise, K = 100
+    u = np.empty(shape)
+    for p in range(2):
+        for j in range(2):
+            u[p, 0, 0, j] = mismatch_model(w, s, eff[j], c=5e-4 * (p + 1))[:, None]
+    ds = xr.Dataset(
+        {"u_e": (dims, u), "sssig": (dims, np.broadcast_to(s[:, None], shape)),
+         "noise_effective": (dims, np.broadcast_to(eff[None, None, None, :, None, None],
+                                                   shape))},
+        coords={"pattern": ["a", "b"], "angle": [0.0], "subset": [31], "noise": [1.0, 2.0],
+                "blur": w, "rep": [0, 1]})
+    path = tmp_path / "results.zarr"
+    ds.to_zarr(path)
+    out = tmp_path / "m.json"
+    assert main(["fit", str(path), "-o", str(out)]) == 2
+    assert "--select pattern=" in capsys.readouterr().err
+    assert main(["fit", str(path), "-o", str(out), "--select", "pattern=b"]) == 0
+    model = BlurUncertaintyModel.from_json(str(out))
+    assert model.subset == 31
+    np.testing.assert_allclose(model.noise_levels, eff, rtol=1e-12)
+    assert model.mismatch["c"] == pytest.approx(1e-3, rel=1e-6)
+
+
+def test_cli_errors(results_csv, tmp_path, capsys):
+    assert main(["fit", str(tmp_path / "none.csv"), "-o", str(tmp_path / "m.json")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    bad = tmp_path / "bad.csv"
+    bad.write_text("blur,u_e\n0,1\n")
+    assert main(["fit", str(bad), "-o", str(tmp_path / "m.json")]) == 2
+    assert "sssig" in capsys.readouterr().err
+    model_path = tmp_path / "model.json"
+    assert main(["fit", str(results_csv), "-o", str(model_path)]) == 0
+    capsys.readouterr()
+    assert main(["plan", str(model_path), "--velocity", "0mm/s", "--scale", "0.05mm/px",
+                 "--target", "0.01px", "--noise", "2"]) == 2
+    assert "velocity" in capsys.readouterr().err
+    assert main(["predict", str(model_path), "--velocity", "1m/s"]) == 2
+    assert "all three" in capsys.readouterr().err
+    assert main(["plan", str(model_path), "--velocity", "1m/s", "--scale", "0.05mm/px",
+                 "--full-well", "1e4"]) == 2
+    assert "--flux" in capsys.readouterr().err

@@ -62,6 +62,9 @@ _pattern.register(app)
 from . import blur as _blur  # noqa: E402
 
 _blur.register(app)
+from . import campaign as _campaign  # noqa: E402
+
+_campaign.register(app)
 from . import pulse as _pulse  # noqa: E402
 
 _pulse.register(app)

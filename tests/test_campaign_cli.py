@@ -20,9 +20,15 @@ from dicblur.cli import main
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+import campaign_helpers  # noqa: E402
 from campaign_helpers import shift_task, small_spec_dict  # noqa: E402
 
 BIN = Path(sys.executable).parent
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cached_kernels():
+    campaign_helpers.warm_numba_cache()
 
 
 def _free_port() -> int:

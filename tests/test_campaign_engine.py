@@ -274,6 +274,28 @@ def test_local_cluster_equals_serial(serial_run, tmp_path):
     assert_same_results(open_results(path), open_results(tmp_path / "dask.zarr"))
 
 
+def test_interrupt_on_local_cluster_keeps_finished_batches(serial_run, tmp_path):
+    # Ctrl-C while the cluster runs: pending tasks cancelled, cluster closed, the finished
+    # batches stored; the rerun completes to the same values.
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(campaign_helpers)
+    path, _ = serial_run
+    spec = parse_spec(small_spec_dict())
+
+    def stop(done, total):
+        if done >= 2:
+            raise KeyboardInterrupt
+
+    out = tmp_path / "int_dask.zarr"
+    first = run_campaign(spec, out, workers=2, task=shift_task, progress=stop)
+    assert first.interrupted and 2 <= first.n_run < 40
+    assert campaign_status(out).n_done == first.n_run
+    second = run_campaign(spec, out, serial=True, task=shift_task)
+    assert second.complete and second.n_skipped == first.n_run
+    assert_same_results(open_results(path), open_results(out))
+
+
 def test_interrupt_keeps_finished_batches_and_resume_completes(serial_run, tmp_path):
     path, _ = serial_run
     spec = parse_spec(small_spec_dict())

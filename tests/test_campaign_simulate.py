@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +19,15 @@ from dicblur.campaign import (
     run_campaign,
     simulate_batch,
 )
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import campaign_helpers
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cached_kernels():
+    campaign_helpers.warm_numba_cache()
+
 
 N = 105
 # Whole periods in the image (periodic, exactly shiftable) and in a 21-px subset (periods

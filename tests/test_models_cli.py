@@ -76,6 +76,38 @@ def test_fit_from_netcdf(tmp_path, capsys):
     assert model.mismatch["c"] == pytest.approx(5e-4, rel=1e-6)
 
 
+@pytest.mark.filterwarnings("ignore::UserWarning", "ignore:The data type")  # zarr v3 notes
+def test_fit_from_campaign_zarr(tmp_path, capsys):
+    # the campaign layout: dims (pattern, angle, subset, noise, blur, rep), effective noise
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("zarr")
+    w = np.arange(0.0, 8.01, 1.0)
+    s = sssig_decay(w, 1e5, 0.03)
+    dims = ("pattern", "angle", "subset", "noise", "blur", "rep")
+    shape = (2, 1, 1, 2, w.size, 2)
+    eff = np.array([1.0, 2.0]) / np.sqrt(101)  # per-subframe noise, K = 100
+    u = np.empty(shape)
+    for p in range(2):
+        for j in range(2):
+            u[p, 0, 0, j] = mismatch_model(w, s, eff[j], c=5e-4 * (p + 1))[:, None]
+    ds = xr.Dataset(
+        {"u_e": (dims, u), "sssig": (dims, np.broadcast_to(s[:, None], shape)),
+         "noise_effective": (dims, np.broadcast_to(eff[None, None, None, :, None, None],
+                                                   shape))},
+        coords={"pattern": ["a", "b"], "angle": [0.0], "subset": [31], "noise": [1.0, 2.0],
+                "blur": w, "rep": [0, 1]})
+    path = tmp_path / "results.zarr"
+    ds.to_zarr(path)
+    out = tmp_path / "m.json"
+    assert main(["fit", str(path), "-o", str(out)]) == 2
+    assert "--select pattern=" in capsys.readouterr().err
+    assert main(["fit", str(path), "-o", str(out), "--select", "pattern=b"]) == 0
+    model = BlurUncertaintyModel.from_json(str(out))
+    assert model.subset == 31
+    np.testing.assert_allclose(model.noise_levels, eff, rtol=1e-12)
+    assert model.mismatch["c"] == pytest.approx(1e-3, rel=1e-6)
+
+
 def test_cli_errors(results_csv, tmp_path, capsys):
     assert main(["fit", str(tmp_path / "none.csv"), "-o", str(tmp_path / "m.json")]) == 2
     assert "no such file" in capsys.readouterr().err

@@ -55,8 +55,14 @@ class RunSummary:
     setup_s : float
         Part of ``wall_s`` before the first task could start (patterns, store, cluster
         start-up, image upload to the workers).
+    compute_s : float
+        Part of ``wall_s`` from the first task's start to the last batch stored (the
+        rest is set-up and the cluster's shutdown).
     task_s : float
         Sum of the tasks' own wall times (s) on their workers.
+    task_cpu_s : float
+        Sum of the CPU time (s) of the worker processes inside the task function: against
+        ``task_s`` it shows how much the workers were slowed by sharing the cores.
     workers : int
         Number of worker processes (1 for serial).
     scheduler : str
@@ -70,7 +76,9 @@ class RunSummary:
     interrupted: bool
     wall_s: float
     setup_s: float
+    compute_s: float
     task_s: float
+    task_cpu_s: float
     workers: int
     scheduler: str
 
@@ -78,6 +86,15 @@ class RunSummary:
     def complete(self) -> bool:
         """Whether every task of the campaign is now stored."""
         return self.n_skipped + self.n_run == self.n_tasks
+
+
+def _timed_task(fn: TaskFunction, image: NDArray[np.float64], batch: Batch,
+                spec: CampaignSpec) -> dict[str, Any]:
+    """Call the task function and add its process CPU time (s) as ``"_cpu_s"``."""
+    t = time.process_time()
+    out = dict(fn(image, batch, spec))
+    out["_cpu_s"] = time.process_time() - t
+    return out
 
 
 def _default_task() -> TaskFunction:
@@ -127,7 +144,9 @@ def run_campaign(
         Run every batch in this process, without Dask (the reference for tests).
     task : callable, optional
         ``task(image, batch, spec) -> {variable: (len(batch.blur),) array}``; default
-        :func:`dicblur.campaign.simulate_batch`. Must be importable by the workers.
+        :func:`dicblur.campaign.simulate_batch`. Must be importable by the workers. If it
+        has a ``warm_up`` attribute (a callable without arguments), Dask workers run it
+        once at start-up (e.g. to load compiled kernels).
     progress : callable, optional
         ``progress(done, total)`` in tasks, called at the start and after every batch.
     connect_timeout : float
@@ -164,8 +183,9 @@ def run_campaign(
     # edited by hand) is rerun whole; count its finished tasks as rerun, not skipped.
     n_skipped -= sum(int(mask[b.region].sum()) for b in pending)
     counts = {"done": n_skipped, "run": 0}
-    task_s = [0.0]
+    task_s = [0.0, 0.0]
     started = [time.perf_counter()]
+    finished = [0.0]
     if progress is not None:
         progress(counts["done"], n_total)
 
@@ -174,6 +194,8 @@ def run_campaign(
         counts["done"] += len(batch.blur)
         counts["run"] += len(batch.blur)
         task_s[0] += float(np.sum(result["time_s"]))
+        task_s[1] += float(result.get("_cpu_s", 0.0))
+        finished[0] = time.perf_counter()
         if progress is not None:
             progress(counts["done"], n_total)
 
@@ -183,7 +205,7 @@ def run_campaign(
         started[0] = time.perf_counter()
         try:
             for b in pending:
-                finish(b, fn(images[b.pattern], b, spec))
+                finish(b, _timed_task(fn, images[b.pattern], b, spec))
         except KeyboardInterrupt:
             interrupted = True
     else:
@@ -194,7 +216,8 @@ def run_campaign(
     return RunSummary(
         path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=counts["run"],
         interrupted=interrupted, wall_s=time.perf_counter() - t0,
-        setup_s=started[0] - t0, task_s=task_s[0],
+        setup_s=started[0] - t0, compute_s=max(0.0, finished[0] - started[0]),
+        task_s=task_s[0], task_cpu_s=task_s[1],
         workers=n_workers, scheduler=where,
     )
 
@@ -211,6 +234,7 @@ def _run_dask(
     connect_timeout: float,
     started: list[float],
 ) -> tuple[int, str, bool]:
+    import dask
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -220,8 +244,16 @@ def _run_dask(
             raise InputError(f"workers={workers!r}: must be >= 1 (or omit it: all cores)")
         # One single-threaded process per core: the tasks are CPU-bound numpy/numba code
         # (the Correlator runs with workers=1 inside a task), so processes avoid the GIL.
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+        # Dask sets MALLOC_TRIM_THRESHOLD_ in its workers, which disables glibc's dynamic
+        # mmap threshold: every large temporary array (a 512^2 image is 2 MiB) is then a
+        # fresh mmap with page faults, ~25% more CPU per task here. Keep the thread limits,
+        # drop that one.
+        env = {k: v for k, v in
+               dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+               if k != "MALLOC_TRIM_THRESHOLD_"}
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
         client = Client(cluster)
         where = "local"
     else:
@@ -236,13 +268,21 @@ def _run_dask(
     futures: list[Any] = []
     try:
         n_workers = max(1, len(client.scheduler_info(n_workers=-1).get("workers", {})))
+        # Load the task's compiled code (numba cache) on every worker at once, as part of
+        # the start-up, rather than inside each worker's first batch.
+        warm = getattr(fn, "warm_up", None)
+        if callable(warm):
+            client.run(warm)
         # Each pattern image travels to every worker once, not once per batch.
         remote = {name: client.scatter(img, broadcast=True, hash=False)
                   for name, img in images.items()}
         started[0] = time.perf_counter()
         by_key: dict[Any, Batch] = {}
         for b in pending:
-            fut = client.submit(fn, remote[b.pattern], b, spec, pure=False,
+            # Larger blur costs more DIC iterations: start the batches of large W first
+            # (longest-first scheduling shortens the idle tail of the last workers).
+            fut = client.submit(_timed_task, fn, remote[b.pattern], b, spec, pure=False,
+                                priority=b.loc[5],
                                 key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}")
             by_key[fut.key] = b
             futures.append(fut)

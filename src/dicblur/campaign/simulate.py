@@ -190,7 +190,8 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
                          rep=batch.rep)
     correlator = Correlator(
         _noisy(reference, spec, batch.noise, ref_seed), subset=batch.subset,
-        points=points, shape=spec.dic_shape, interpolation=spec.interpolation,
+        points=points, shape=spec.dic_shape,  # type: ignore[arg-type]
+        interpolation=spec.interpolation,
         max_iterations=spec.max_iterations, tolerance=spec.tolerance, workers=1,
     )
     sssig_ref = float(np.mean(directional_sssig(reference, points, subset=batch.subset,
@@ -250,3 +251,4 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
     out["mig_ref"][:] = mig_ref
     out["contrast_ref"][:] = contrast_ref
     return out
+

@@ -49,7 +49,7 @@ Example
     tolerance = 1e-4
 
     [run]
-    blur_chunk = 25          # blur values per task batch (one Correlator per batch)
+    blur_chunk = 10          # blur values per task batch (one Correlator per batch)
 """
 
 from __future__ import annotations
@@ -165,7 +165,7 @@ class CampaignSpec:
     max_iterations: int = 50
     tolerance: float = 1e-4
     repetitions: int = 1
-    blur_chunk: int = 25
+    blur_chunk: int = 10
     description: str = ""
     base_dir: str = field(default=".", compare=False)
 
@@ -487,7 +487,7 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
     if tolerance <= 0:
         raise _err("dic.tolerance", tolerance, "must be > 0")
 
-    blur_chunk = _int(sec["run"].get("blur_chunk", 25), "run.blur_chunk", minimum=1)
+    blur_chunk = _int(sec["run"].get("blur_chunk", 10), "run.blur_chunk", minimum=1)
     blur_chunk = min(blur_chunk, len(lengths))
 
     return CampaignSpec(

@@ -12,6 +12,7 @@ import numpy as np
 import typer
 
 from ..errors import InputError
+from ..io import file_sha256
 from ..models import (
     BlurUncertaintyModel,
     PoissonGaussianCamera,
@@ -22,7 +23,10 @@ from ..models import (
 from ._common import console, print_json
 
 _COLUMNS = ("blur", "sssig", "u_e")
-_OPTIONAL = ("noise", "contrast_ref", "contrast", "contrast_ratio")
+_OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "contrast_ratio")
+# Coordinates of a campaign (dicblur.campaign.store.DIMS) other than noise, blur and rep:
+# one setting is fitted at a time.
+_SETTINGS = ("pattern", "angle", "subset", "shape", "step", "noise_model")
 
 
 def _read_table(path: Path) -> dict[str, np.ndarray]:
@@ -57,7 +61,8 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
         for name in (*template.dims, *_COLUMNS[1:], *_OPTIONAL):
             if name in ds.variables:
-                out[name] = np.asarray(ds[name].broadcast_like(template).values).ravel()
+                arr = np.asarray(ds[name].broadcast_like(template).values).ravel()
+                out[name] = arr if np.issubdtype(arr.dtype, np.number) else arr.astype(object)
         return out
     raise InputError(
         f"RESULTS={str(path)!r}: unknown format; use .csv, .nc or .zarr"
@@ -87,12 +92,8 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
     keep = {k: v[mask] for k, v in cols.items()}
     if not mask.any():
         raise InputError(f"--select {select}: no row matches")
-    ignored = {"blur", "noise", "rep", *_COLUMNS, *_OPTIONAL}
     for key, col in keep.items():
-        if key in ignored or key.endswith("_s") or key.startswith(("u_", "mig", "sssig",
-                                                                    "bias", "converged")):
-            continue
-        if np.unique(col.astype(str)).size > 1:
+        if (key in _SETTINGS or col.dtype == object) and np.unique(col.astype(str)).size > 1:
             raise InputError(
                 f"RESULTS: column {key!r} has several values; fit one setting at a time "
                 f"with --select {key}=VALUE"
@@ -100,7 +101,12 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
     ok = np.isfinite(keep["u_e"].astype(float))
     if not ok.all():
         warnings.warn(f"{int((~ok).sum())} row(s) without u_e dropped", stacklevel=2)
-    noise = keep["noise"].astype(float) if "noise" in keep else np.zeros(keep["u_e"].size)
+    if "noise" in keep:
+        noise = keep["noise"].astype(float)
+    elif "noise_effective" in keep:
+        noise = keep["noise_effective"].astype(float)
+    else:
+        noise = np.zeros(keep["u_e"].size)
     blur = keep["blur"].astype(float)
     out: dict[str, list[float]] = {k: [] for k in ("blur", "sssig", "u_e", "noise",
                                                    "contrast_ratio")}
@@ -108,7 +114,11 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
         for w in np.unique(blur[ok & (noise == nz)]):
             sel = ok & (noise == nz) & (blur == w)
             out["blur"].append(float(w))
-            out["noise"].append(float(nz))
+            # the campaign's effective per-image noise (per-subframe noise is sigma /
+            # sqrt(K + 1)) is what the models need; the nominal level groups the rows
+            eff = keep.get("noise_effective")
+            out["noise"].append(float(np.mean(eff[sel].astype(float))) if eff is not None
+                                else float(nz))
             out["sssig"].append(float(np.mean(keep["sssig"][sel].astype(float))))
             out["u_e"].append(float(np.sqrt(np.mean(keep["u_e"][sel].astype(float) ** 2))))
             if "contrast_ratio" in keep:
@@ -117,8 +127,10 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
                 out["contrast_ratio"].append(float(np.mean(
                     keep["contrast_ref"][sel].astype(float) / keep["contrast"][sel].astype(float))))
     res = {k: np.array(v) for k, v in out.items() if v}
-    if "noise" not in cols:
+    if "noise" not in cols and "noise_effective" not in cols:
         res.pop("noise")
+    if "subset" in keep and keep["subset"].dtype != object:
+        res["subset"] = np.array([float(keep["subset"][0])])
     return res
 
 
@@ -148,9 +160,12 @@ def fit_command(
     sigma: Any = data.get("noise", noise)
     model = fit_blur_model(
         data["blur"], data["sssig"], data["u_e"], noise_sigma=sigma,
-        contrast_ratio=data.get("contrast_ratio"), subset=subset, fit_range=rng, ci=ci,
+        contrast_ratio=data.get("contrast_ratio"),
+        subset=subset if subset is not None or "subset" not in data else int(data["subset"][0]),
+        fit_range=rng, ci=ci,
         default=default, seed=seed,
-        provenance={"results": str(results), "select": list(select)})
+        provenance={"results": str(results), "select": list(select),
+                    "results_sha256": file_sha256(results) if results.is_file() else None})
     model.to_json(str(out))
     if as_json:
         typer.echo(model.to_json())

@@ -111,12 +111,15 @@ def bspline_coefficients(
     """
     if order not in (3, 5):
         raise ValueError(f"order={order}: must be 3 or 5")
-    img: NDArray[np.floating] = np.ascontiguousarray(image, dtype=dtype)
+    img: NDArray[np.floating] = np.asarray(image)
+    if img.dtype not in (np.float32, np.float64):
+        img = img.astype(np.float64)
+    img = np.ascontiguousarray(img)
     shape = (img.shape[0] + 2 * PAD, img.shape[1] + 2 * PAD)
     if out is None:
         out = np.empty(shape, dtype=dtype)
-    elif out.shape != shape or out.dtype != img.dtype:
-        raise ValueError(f"out: expected shape {shape} and dtype {img.dtype}")
+    elif out.shape != shape or out.dtype != np.dtype(dtype):
+        raise ValueError(f"out: expected shape {shape} and dtype {np.dtype(dtype)}")
     kernels.prefilter_padded(img, order, out)
     return out
 

@@ -108,6 +108,59 @@ def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
                     x[r, j] = z * (x[r + 1, j] - x[r, j])
 
 
+@nb.njit(parallel=True, fastmath=True, cache=True)
+def _filter_axis1(src, dst, poles, tol):  # pragma: no cover - compiled
+    """B-spline prefilter of every row of ``src`` into ``dst`` (may differ in dtype):
+    the recursions of 16 rows run interleaved, so no transpose is needed."""
+    n_r, n = src.shape
+    gain = 1.0
+    for z in poles:
+        gain *= (1.0 - z) * (1.0 - 1.0 / z)
+    bh = 16
+    nblk = (n_r + bh - 1) // bh
+    for blk in nb.prange(nblk):
+        r0 = blk * bh
+        r1 = min(n_r, r0 + bh)
+        for r in range(r0, r1):
+            for c in range(n):
+                dst[r, c] = src[r, c]
+        if n == 1:
+            continue
+        first = True
+        for z in poles:
+            gn = gain if first else 1.0
+            first = False
+            horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
+            for r in range(r0, r1):
+                s = 0.0
+                if horizon < n:
+                    zk = 1.0
+                    for k in range(horizon):
+                        s += zk * dst[r, k]
+                        zk *= z
+                else:
+                    zn = z
+                    iz = 1.0 / z
+                    z2n = z ** (n - 1)
+                    s = dst[r, 0] + z2n * dst[r, n - 1]
+                    z2n = z2n * z2n * iz
+                    for k in range(1, n - 1):
+                        s += (zn + z2n) * dst[r, k]
+                        zn *= z
+                        z2n *= iz
+                    s /= 1.0 - zn * zn
+                dst[r, 0] = gn * s
+            for c in range(1, n):
+                for r in range(r0, r1):
+                    dst[r, c] = gn * dst[r, c] + z * dst[r, c - 1]
+            cc = z / (z * z - 1.0)
+            for r in range(r0, r1):
+                dst[r, n - 1] = cc * (dst[r, n - 1] + z * dst[r, n - 2])
+            for c in range(n - 2, -1, -1):
+                for r in range(r0, r1):
+                    dst[r, c] = z * (dst[r, c + 1] - dst[r, c])
+
+
 @nb.njit(parallel=True, cache=True)
 def _transpose(a, out):  # pragma: no cover - compiled
     n, m = a.shape
@@ -147,18 +200,16 @@ def _fill_margin(out, rows, cols, pad):  # pragma: no cover - compiled
 def prefilter_padded(image: np.ndarray, order: int, out: np.ndarray) -> None:
     """B-spline coefficients of ``image`` written into the centre of ``out``.
 
-    ``out`` has shape ``(rows + 2*PAD, cols + 2*PAD)`` and the dtype of ``image``; its
-    margin receives the mirror continuation of the coefficients.
+    ``out`` has shape ``(rows + 2*PAD, cols + 2*PAD)`` (float32 or float64, ``image`` may be
+    of another float dtype); its margin receives the mirror continuation of the
+    coefficients.
     """
     poles = _POLES3 if order == 3 else _POLES5
-    tol = 1e-7 if image.dtype == np.float32 else 1e-14
+    tol = 1e-7 if out.dtype == np.float32 else 1e-14
     rows, cols = image.shape
-    t = np.empty((cols, rows), dtype=image.dtype)
-    _transpose(image, t)
-    _filter_axis0(t, poles, tol)  # along x (columns of the image)
     centre = out[PAD:PAD + rows, PAD:PAD + cols]
-    _transpose(t, centre)
-    _filter_axis0(centre, poles, tol)  # along y (rows), in place
+    _filter_axis1(image, centre, poles, tol)  # along x (columns), no transpose
+    _filter_axis0(centre, poles, tol)  # along y (rows), in place, vectorised across columns
     _fill_margin(out, rows, cols, PAD)
 
 

@@ -26,7 +26,7 @@ def reproduce_command(
         False, "--check-browser", help="Open report.html in headless Chromium afterwards."),
 ) -> None:
     """Reproduce Lavatelli & Zappa (2017): figures, tables, claims, report.html."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
     from ..report.reproduce import ReproduceSettings, reproduce
 
@@ -37,7 +37,7 @@ def reproduce_command(
     with Progress(TextColumn("{task.description:<28}"), BarColumn(),
                   TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(),
                   console=console, transient=False, disable=not console.is_terminal) as bar:
-        tasks: dict[str, int] = {}
+        tasks: dict[str, TaskID] = {}
 
         def progress(stage: str, done: int, total: int) -> None:
             if not console.is_terminal and stage not in tasks:

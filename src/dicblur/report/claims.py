@@ -91,11 +91,15 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     Wv = {k: W[valid[k]] for k in keys}
     span = ", ".join(f"{labels[k].split()[0]} W <= {Wv[k].max():g}" for k in keys)
     worst_bias = max(float(np.nanmax(np.abs(b))) for b in bias.values())
+    worst_rel = max(float(np.nanmax(np.abs(bias[k][Wv[k] > 0]) / (Wv[k][Wv[k] > 0] / 2)))
+                    for k in keys)
     rows.append(_claim(
         "C1", "III", "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
-        "stated", f"max |mean u - W/2| = {worst_bias:.4f} px where DIC converges ({span})",
-        "agrees" if worst_bias < 0.01 else "differs",
-        "criterion: |bias| < 0.01 px everywhere; the DIC mean displacement is W/2."))
+        "stated", f"max |mean u - W/2| = {worst_bias:.4f} px, at most {100 * worst_rel:.2f} % "
+        f"of W/2, where DIC converges ({span})",
+        "agrees" if (worst_bias < 0.01 or worst_rel < 0.01) else "differs",
+        "criterion: |bias| < 0.01 px, or < 1 % of the W/2 shift; the DIC mean displacement "
+        "is W/2."))
     def worst(wmin: float) -> float:
         return max(float(np.nanmax(np.abs(bias[k][Wv[k] >= wmin]) / ue[k][Wv[k] >= wmin]))
                    for k in keys)

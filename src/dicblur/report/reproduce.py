@@ -300,8 +300,9 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         valid[k] = v
         u = _series(ds, "u_e", k, s.main_noise)[v]
         sg = _series(ds, "sssig", k, s.main_noise)[v]
-        cref = _series(ds, "contrast_ref", k, s.main_noise)[v]
-        con = _series(ds, "contrast", k, s.main_noise)[v]
+        # RMS contrast: the 2-D analogue of the paper's 1-D contrast (Fig. 8).
+        cref = _series(ds, "rms_contrast_ref", k, s.main_noise)[v]
+        con = _series(ds, "rms_contrast", k, s.main_noise)[v]
         prov = {"pattern": p.source, "sha256": p.sha256, "subset": s.subset,
                 "step": s.poi_step, "dic": "translation IC-GN, ZNSSD, bspline3",
                 "noise": "per-exposure Gaussian",
@@ -313,8 +314,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         allu = np.concatenate([_series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
         alls = np.concatenate([_series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
         alln = np.concatenate([np.full(int(ok[lv].sum()), lv) for lv in s.noise_levels])
-        allc = np.concatenate([(_series(ds, "contrast_ref", k, lv)
-                                / _series(ds, "contrast", k, lv))[ok[lv]]
+        allc = np.concatenate([(_series(ds, "rms_contrast_ref", k, lv)
+                                / _series(ds, "rms_contrast", k, lv))[ok[lv]]
                                for lv in s.noise_levels])
         full = fit_blur_model(allw, alls, allu, noise_sigma=alln, contrast_ratio=allc,
                               subset=s.subset, c_static=static[k]["c_static"], provenance=prov,
@@ -350,8 +351,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         vf = _series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
         u = _series(ds_fam, "u_e", name, s.main_noise)[vf]
         sg = _series(ds_fam, "sssig", name, s.main_noise)[vf]
-        ratio = (_series(ds_fam, "contrast_ref", name, s.main_noise)
-                 / _series(ds_fam, "contrast", name, s.main_noise))[vf]
+        ratio = (_series(ds_fam, "rms_contrast_ref", name, s.main_noise)
+                 / _series(ds_fam, "rms_contrast", name, s.main_noise))[vf]
         Wf = Wf[vf]
         fm = fit_blur_model(Wf, sg, u, noise_sigma=s.main_noise, contrast_ratio=ratio,
                            subset=s.subset, compare=False, default="power_law")

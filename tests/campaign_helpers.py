@@ -15,7 +15,7 @@ import numpy as np
 
 from dicblur.campaign import VARIABLES, Batch, CampaignSpec, directional_sssig, task_seed
 from dicblur.campaign.simulate import task_points
-from dicblur.metrics import image_gradients, michelson_contrast, mig
+from dicblur.metrics import image_gradients, michelson_contrast, mig, rms_contrast
 
 
 def _fourier_shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
@@ -57,6 +57,7 @@ def shift_task(image: np.ndarray, batch: Batch, spec: CampaignSpec) -> dict[str,
         out["sssig_std"][j] = s.std()
         out["mig"][j] = mig(clean)
         out["contrast"][j] = michelson_contrast(clean)
+        out["rms_contrast"][j] = rms_contrast(clean)
         out["u_match_score"][j] = math.sqrt(2.0) * batch.noise / math.sqrt(s.mean())
         out["u_pan"][j] = math.sqrt(2.0) * batch.noise / (batch.subset * out["mig"][j])
         out["noise_effective"][j] = batch.noise
@@ -66,6 +67,7 @@ def shift_task(image: np.ndarray, batch: Batch, spec: CampaignSpec) -> dict[str,
                                             angle=batch.angle).mean()
     out["mig_ref"][:] = mig(image)
     out["contrast_ref"][:] = michelson_contrast(image)
+    out["rms_contrast_ref"][:] = rms_contrast(image)
     return out
 
 

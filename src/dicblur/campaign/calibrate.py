@@ -167,7 +167,8 @@ def calibrate(
     model = fit_blur_model(
         w, mean["sssig"].values, mean["u_e"].values,
         noise_sigma=float(mean["noise_effective"].mean()),
-        contrast_ref=mean["contrast_ref"].values, contrast=mean["contrast"].values,
+        contrast_ref=mean["rms_contrast_ref"].values,
+        contrast=mean["rms_contrast"].values,
         subset=subset,
         provenance={
             "source": "dicblur calibrate",

@@ -166,7 +166,7 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
     """
     from ..blur import motion_blur, render_blurred, trajectory_positions
     from ..dic import Correlator, PointStatus
-    from ..metrics import image_gradients, michelson_contrast, mig
+    from ..metrics import image_gradients, michelson_contrast, mig, rms_contrast
 
     t_start = time.perf_counter()
     ss = spec.supersample
@@ -198,11 +198,13 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
                                                 angle=batch.angle)))
     mig_ref = mig(reference[window])
     contrast_ref = michelson_contrast(reference[window])
+    rms_ref = rms_contrast(reference[window])
 
     n = len(batch.blur)
     out = {name: np.full(n, np.nan) for name in (
         "u_e", "u_e_across", "bias", "converged_fraction", "sssig_ref", "sssig",
-        "sssig_std", "mig_ref", "mig", "contrast_ref", "contrast", "u_match_score",
+        "sssig_std", "mig_ref", "mig", "contrast_ref", "contrast", "rms_contrast_ref",
+        "rms_contrast", "u_match_score",
         "u_pan", "noise_effective", "n_points", "time_s")}
     setup = time.perf_counter() - t_start
     for j, length in enumerate(batch.blur):
@@ -242,6 +244,7 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         # interior of the window: equal to dicblur.mig(blurred[window])
         out["mig"][j] = m = float(np.hypot(gw[1], gw[0]).mean())
         out["contrast"][j] = michelson_contrast(blurred[window])
+        out["rms_contrast"][j] = rms_contrast(blurred[window])
         out["u_match_score"][j] = math.sqrt(2.0) * sigma / math.sqrt(out["sssig"][j])
         out["u_pan"][j] = math.sqrt(2.0) * sigma / (batch.subset * m)
         out["noise_effective"][j] = sigma
@@ -250,5 +253,6 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
     out["sssig_ref"][:] = sssig_ref
     out["mig_ref"][:] = mig_ref
     out["contrast_ref"][:] = contrast_ref
+    out["rms_contrast_ref"][:] = rms_ref
     return out
 

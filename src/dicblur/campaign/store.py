@@ -64,6 +64,10 @@ VARIABLES: dict[str, tuple[str, str]] = {
     "mig": ("GL/px", "mean intensity gradient of the blurred image (noise-free)"),
     "contrast_ref": ("1", "Michelson contrast of the reference image (noise-free)"),
     "contrast": ("1", "Michelson contrast of the blurred image (noise-free)"),
+    # RMS contrast (std / mean) falls smoothly with blur, while the robust Michelson
+    # contrast stays ~1 wherever a speckle interior survives: the contrast-loss measure.
+    "rms_contrast_ref": ("1", "RMS contrast (std / mean) of the reference image (noise-free)"),
+    "rms_contrast": ("1", "RMS contrast (std / mean) of the blurred image (noise-free)"),
     "u_match_score": ("px", "match-score prediction sqrt(2 s^2 / SSSIG) with the blurred "
                       "image's mean SSSIG and the effective noise std s (paper eq. 2)"),
     "u_pan": ("px", "Pan's prediction sqrt(2) s / (N MIG) with the blurred image's MIG "

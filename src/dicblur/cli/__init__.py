@@ -75,6 +75,10 @@ from . import models as _models  # noqa: E402
 
 _models.register(app)
 
+from . import reproduce as _reproduce  # noqa: E402
+
+_reproduce.register(app)
+
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"warning: {message}", file=sys.stderr)

@@ -53,6 +53,10 @@ def _root(
         format="%(levelname)s %(name)s: %(message)s",
         force=True,
     )
+    if not verbose:
+        # Dask logs cluster start-up and shutdown at INFO on its own handlers.
+        for name in ("distributed", "dask"):
+            logging.getLogger(name).setLevel(logging.WARNING)
 
 
 # Stage command groups register themselves here (one import per stage).

@@ -17,16 +17,6 @@ campaign_app = typer.Typer(help="Run blur campaigns (Dask), inspect and export t
                            no_args_is_help=True)
 
 
-def _quiet_dask() -> None:
-    """Dask logs cluster start and shutdown at INFO; the CLI shows only warnings, unless
-    ``--verbose`` lowered the root level (the CLI is the one place that configures logs)."""
-    import logging
-
-    if logging.getLogger().level > logging.DEBUG:
-        for name in ("distributed", "dask"):
-            logging.getLogger(name).setLevel(logging.WARNING)
-
-
 @contextmanager
 def _progress_bar(label: str, enabled: bool = True) -> Iterator[Callable[[int, int], None]]:
     """A rich progress bar with ETA; yields the ``progress(done, total)`` callback."""
@@ -95,7 +85,6 @@ def run_command(
 ) -> int:
     """Run (or resume) the campaign SPEC and store its results in OUT."""
     s = load_spec(spec)
-    _quiet_dask()
     with _progress_bar(f"campaign {s.name}", not quiet) as progress:
         summary = run_campaign(s, out, scheduler=scheduler, workers=workers, serial=serial,
                                progress=progress)
@@ -165,7 +154,6 @@ def calibrate_command(
     """
     from ..campaign.calibrate import calibrate
 
-    _quiet_dask()
     try:
         start, stop, inc = (float(v) for v in blur.split(":"))
     except ValueError as exc:

@@ -53,6 +53,10 @@ def _root(
         format="%(levelname)s %(name)s: %(message)s",
         force=True,
     )
+    if not verbose:
+        # Dask logs cluster start-up and shutdown at INFO on its own handlers.
+        for name in ("distributed", "dask"):
+            logging.getLogger(name).setLevel(logging.WARNING)
 
 
 # Stage command groups register themselves here (one import per stage).
@@ -62,6 +66,9 @@ _pattern.register(app)
 from . import blur as _blur  # noqa: E402
 
 _blur.register(app)
+from . import campaign as _campaign  # noqa: E402
+
+_campaign.register(app)
 from . import pulse as _pulse  # noqa: E402
 
 _pulse.register(app)
@@ -74,6 +81,10 @@ _models.register(app)
 from . import design as _design  # noqa: E402
 
 _design.register(app)
+
+from . import reproduce as _reproduce  # noqa: E402
+
+_reproduce.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

@@ -23,7 +23,8 @@ from ..models import (
 from ._common import console, print_json
 
 _COLUMNS = ("blur", "sssig", "u_e")
-_OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "contrast_ratio")
+_OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "rms_contrast_ref",
+             "rms_contrast", "contrast_ratio")
 # Coordinates of a campaign (dicblur.campaign.store.DIMS) other than noise, blur and rep:
 # one setting is fitted at a time.
 _SETTINGS = ("pattern", "angle", "subset", "shape", "step", "noise_model")
@@ -123,6 +124,11 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
             out["u_e"].append(float(np.sqrt(np.mean(keep["u_e"][sel].astype(float) ** 2))))
             if "contrast_ratio" in keep:
                 out["contrast_ratio"].append(float(np.mean(keep["contrast_ratio"][sel])))
+            elif "rms_contrast_ref" in keep and "rms_contrast" in keep:
+                # RMS contrast tracks blur-induced contrast loss (campaign stores it)
+                out["contrast_ratio"].append(float(np.mean(
+                    keep["rms_contrast_ref"][sel].astype(float)
+                    / keep["rms_contrast"][sel].astype(float))))
             elif "contrast_ref" in keep and "contrast" in keep:
                 out["contrast_ratio"].append(float(np.mean(
                     keep["contrast_ref"][sel].astype(float) / keep["contrast"][sel].astype(float))))

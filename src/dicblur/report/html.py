@@ -30,7 +30,7 @@ th,td{border:1px solid #c9d3dc;padding:.3em .6em;text-align:right}
 th{background:#eef3f7}td.l,th.l{text-align:left}
 figure{margin:1.5em 0;text-align:center}figure img{max-width:100%;height:auto}
 figcaption{font-size:.9em;color:#44515c;margin-top:.4em}
-.agrees{color:#1a7f37;font-weight:600}.differs{color:#b35900;font-weight:600}
+.agrees{color:#1a7f37;font-weight:600}.partly{color:#7d6608;font-weight:600}.differs{color:#b35900;font-weight:600}
 .note{background:#f6f8fa;border-left:4px solid #2a6f97;padding:.6em 1em}
 nav ul{columns:2}code,pre{background:#f6f8fa;padding:.1em .3em}
 pre{padding:.8em;overflow-x:auto}
@@ -56,10 +56,12 @@ def fig_to_files(fig: Any, folder: Path, name: str, *, dpi: int = 110) -> bytes:
     """Save a matplotlib figure as ``folder/name.png`` and ``.svg``; return the PNG bytes."""
     folder.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    # Figures are laid out by their builders (tight_layout); bbox_inches="tight" would
+    # redo the text layout on every save, the slowest part of writing a report.
+    fig.savefig(buf, format="png", dpi=dpi)
     png = buf.getvalue()
     (folder / f"{name}.png").write_bytes(png)
-    fig.savefig(folder / f"{name}.svg", format="svg", bbox_inches="tight")
+    fig.savefig(folder / f"{name}.svg", format="svg")
     return png
 
 

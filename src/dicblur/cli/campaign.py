@@ -1,0 +1,190 @@
+"""CLI: ``dicblur campaign run|status|export`` and ``dicblur calibrate``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import typer
+
+from ..campaign import campaign_status, export_csv, load_spec, run_campaign
+from ..campaign.engine import RunSummary
+from ..errors import InputError
+from ._common import console, parse_size, print_json, print_mapping
+
+campaign_app = typer.Typer(help="Run blur campaigns (Dask), inspect and export their results.",
+                           no_args_is_help=True)
+
+
+@contextmanager
+def _progress_bar(label: str, enabled: bool = True) -> Iterator[Callable[[int, int], None]]:
+    """A rich progress bar with ETA; yields the ``progress(done, total)`` callback."""
+    if not enabled:
+        yield lambda done, total: None
+        return
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                   TextColumn("tasks"), TimeElapsedColumn(), TextColumn("ETA"),
+                   TimeRemainingColumn(), console=console, transient=False)
+    ids: dict[str, int] = {}
+
+    def update(done: int, total: int) -> None:
+        if "t" not in ids:
+            # ETA counts only this run's tasks: start the bar at the resumed count.
+            ids["t"] = bar.add_task(label, total=total, completed=done)
+        else:
+            bar.update(ids["t"], completed=done)  # type: ignore[arg-type]
+
+    with bar:
+        yield update
+
+
+def _print_summary(s: RunSummary) -> None:
+    rate = s.n_run / s.wall_s if s.wall_s > 0 else 0.0
+    print_mapping(
+        "campaign run" + (" (interrupted: finished tasks kept)" if s.interrupted else ""),
+        {
+            "results": s.path,
+            "tasks": s.n_tasks,
+            "run now": s.n_run,
+            "already stored": s.n_skipped,
+            "remaining": s.n_tasks - s.n_run - s.n_skipped,
+            "scheduler": s.scheduler,
+            "workers": s.workers,
+            "wall time": s.wall_s,
+            "task time (sum)": s.task_s,
+            "throughput": rate,
+        },
+        {"wall time": "s", "task time (sum)": "s", "throughput": "tasks/s"},
+    )
+    if s.interrupted:
+        console.print("rerun the same command to finish the remaining tasks")
+
+
+@campaign_app.command("run")
+def run_command(
+    spec: Path = typer.Argument(..., help="Campaign spec (TOML)."),
+    out: Path = typer.Option(..., "-o", "--output", help="Results store (Zarr folder)."),
+    scheduler: str | None = typer.Option(
+        None, "--scheduler", help="Existing Dask scheduler, tcp://HOST:PORT (default: a "
+        "local cluster)."),
+    workers: int | None = typer.Option(
+        None, "--workers", help="Worker processes of the local cluster (default: all "
+        "cores)."),
+    serial: bool = typer.Option(False, "--serial", help="Run in this process, no Dask."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> int:
+    """Run (or resume) the campaign SPEC and store its results in OUT."""
+    s = load_spec(spec)
+    with _progress_bar(f"campaign {s.name}", not quiet) as progress:
+        summary = run_campaign(s, out, scheduler=scheduler, workers=workers, serial=serial,
+                               progress=progress)
+    _print_summary(summary)
+    return 130 if summary.interrupted else 0
+
+
+@campaign_app.command("status")
+def status_command(
+    results: Path = typer.Argument(..., help="Results store (Zarr folder)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """Progress and provenance of a campaign store."""
+    st = campaign_status(results)
+    if as_json:
+        print_json(st.to_dict())
+        return
+    data = {
+        "campaign": st.name,
+        "tasks done": f"{st.n_done} / {st.n_tasks} ({100.0 * st.n_done / st.n_tasks:.1f}%)",
+        "complete": st.complete,
+        "dims": ", ".join(f"{k}={v}" for k, v in st.dims.items()),
+        "spec hash": st.spec_hash[:16],
+        "task time (sum)": st.total_task_s,
+    }
+    for name, done in st.done_by_pattern.items():
+        data[f"pattern {name}"] = f"{done} / {st.tasks_per_pattern}"
+    for name, h in st.input_hashes.items():
+        data[f"input {name}"] = h[:28] + "..."
+    print_mapping(f"campaign store: {results}", data, {"task time (sum)": "s"})
+
+
+@campaign_app.command("export")
+def export_command(
+    results: Path = typer.Argument(..., help="Results store (Zarr folder)."),
+    csv: Path = typer.Option(..., "--csv", help="Output CSV, one row per finished task."),
+) -> None:
+    """Export the finished tasks of a store as a flat CSV."""
+    n = export_csv(results, csv)
+    typer.echo(f"wrote {csv} ({n} rows)")
+
+
+def calibrate_command(
+    image: str = typer.Argument(..., help="Pattern image file, or 'paper4' / 'speckle' "
+                                "to generate one."),
+    out: Path = typer.Option(..., "-o", "--output", help="Output folder."),
+    noise: float = typer.Option(2.0, "--noise", help="Noise std per image, GL."),
+    subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
+    angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
+    step: int = typer.Option(10, "--step", help="POI grid step, px."),
+    noise_model: str = typer.Option("per-exposure", "--noise-model",
+                                    help="per-exposure, per-subframe (the paper's) or "
+                                    "poisson-gaussian."),
+    shape: str = typer.Option("translation", "--shape", help="DIC shape function."),
+    seed: int = typer.Option(1, "--seed", help="Base seed (and generator seed)."),
+    blur: str = typer.Option("0.1:10:0.1", "--blur",
+                             help="W grid START:STOP:STEP in px (the paper's by default)."),
+    size: str = typer.Option("512x512", "--size", help="ROWSxCOLS of a generated pattern."),
+    scheduler: str | None = typer.Option(None, "--scheduler", help="tcp://HOST:PORT."),
+    workers: int | None = typer.Option(None, "--workers", help="Local worker processes."),
+    serial: bool = typer.Option(False, "--serial", help="Run in this process, no Dask."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> int:
+    """The paper's blur sweep (W = 0.1..10 px) on IMAGE, then the model fits.
+
+    Writes OUT/model.json, OUT/results.zarr (+ results.csv) and three figures.
+    """
+    from ..campaign.calibrate import calibrate
+
+    try:
+        start, stop, inc = (float(v) for v in blur.split(":"))
+    except ValueError as exc:
+        raise InputError(f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. "
+                         "0.1:10:0.1") from exc
+    with _progress_bar("calibrate", not quiet) as progress:
+        res = calibrate(image, out, noise=noise, subset=subset, angle=angle, step=step,
+                        noise_model=noise_model, shape=shape, seed=seed,
+                        blur={"start": start, "stop": stop, "step": inc},
+                        size=parse_size(size), scheduler=scheduler, workers=workers,
+                        serial=serial, progress=progress)
+    m = res.model
+    print_mapping(
+        f"calibration: {image}",
+        {
+            "SSSIG_0": m.decay["sssig0"],
+            "beta (eq. 18)": m.decay["beta"],
+            "R^2 of the SSSIG fit": res.sssig_r2,
+            "alpha (eq. 17)": m.alpha,
+            "MBRF = 2 alpha beta": m.mbrf,
+            "default model": m.default,
+            "model": str(res.model_path),
+            "results": str(res.results_path),
+            "figures": ", ".join(p.name for p in res.figures),
+        },
+        {"SSSIG_0": "(GL/px)^2", "beta (eq. 18)": "1/px^2", "MBRF = 2 alpha beta": "1/px^2"},
+    )
+    return 0
+
+
+def register(app: typer.Typer) -> None:
+    """Attach the campaign commands to the root app."""
+    app.add_typer(campaign_app, name="campaign")
+    app.command("calibrate")(calibrate_command)

@@ -1,0 +1,307 @@
+"""The claims table: each claim of Lavatelli & Zappa (2017), our number, and a verdict.
+
+Every verdict follows a stated, numeric criterion; "differs" is reported, not hidden.
+Two small extra experiments (rigid offset, equally blurred reference) are run here on
+pattern #4 because the main campaign cannot answer them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = ["evaluate_claims"]
+
+
+def _claim(cid: str, section: str, claim: str, paper: str, ours: str, verdict: str,
+           why: str) -> dict[str, Any]:
+    return {"id": cid, "section": section, "claim": claim, "paper": paper, "ours": ours,
+            "verdict": verdict, "why": why}
+
+
+def _series(ds: Any, var: str, pattern: str, noise: float) -> np.ndarray:
+    return np.asarray(ds[var].sel(pattern=pattern, noise=noise).squeeze(drop=True).values,
+                      dtype=np.float64)
+
+
+def _spearman(a: Any, b: Any) -> float:
+    from scipy import stats
+
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3:
+        return math.nan
+    return float(stats.spearmanr(a[ok], b[ok]).statistic)
+
+
+def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...]) -> dict[
+    str, Any
+]:
+    """u_e on pattern #4 with (a) a rigid offset of 0.5 px added to the motion and (b) a
+    reference blurred like the current image (independent noise), against (c) the
+    campaign's case (sharp reference, offset 0). Same noise, subset, step."""
+    from ..blur import motion_blur
+    from ..camera import add_gaussian_noise
+    from ..dic import Correlator
+
+    rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 21]))
+    sig = settings.main_noise
+    kw = {"subset": settings.subset, "step": settings.poi_step, "shape": "translation"}
+    sharp_ref = add_gaussian_noise(image, sig, rng=rng)
+    base = Correlator(sharp_ref, **kw)
+    out: dict[str, Any] = {"blur": list(blur), "sharp_ref": [], "offset": [],
+                           "blurred_ref": []}
+    for w in blur:
+        cur = add_gaussian_noise(motion_blur(image, (0.0, w)), sig, rng=rng)
+        shifted = np.fft.irfft2(
+            np.fft.rfft2(image) * np.exp(-2j * np.pi * np.fft.rfftfreq(image.shape[1]) * 0.5)[
+                None, :], s=image.shape)
+        cur_off = add_gaussian_noise(motion_blur(shifted, (0.0, w)), sig, rng=rng)
+        ref_b = add_gaussian_noise(motion_blur(image, (0.0, w)), sig, rng=rng)
+        for key, corr, img in (("sharp_ref", base, cur), ("offset", base, cur_off),
+                               ("blurred_ref", Correlator(ref_b, **kw), cur)):
+            res = corr.correlate(img)
+            u = np.asarray(res.u)[np.asarray(res.converged)]
+            out[key].append(float(np.std(u, ddof=1)))
+    return out
+
+
+def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[str, Any],
+                    fits: dict[str, Any], models: dict[str, Any], family: list[dict[str, Any]],
+                    pulse: Any, settings: Any, valid: dict[str, np.ndarray]
+                    ) -> list[dict[str, Any]]:
+    """Evaluate the claims; returns a list of JSON-ready rows.
+
+    ``valid[k]`` marks the blur values where DIC worked (>= 90 % of POIs converged); claims
+    about the random error are judged there only, and say so.
+    """
+    s = settings
+    n = s.main_noise
+    keys = [p.key for p in pats]
+    labels = {p.key: p.label for p in pats}
+    W = np.asarray(ds["blur"].values, dtype=float)
+    rows: list[dict[str, Any]] = []
+
+    # C1 / C20: translation by X/2 and negligible bias.
+    bias = {k: _series(ds, "bias", k, n)[valid[k]] for k in keys}
+    ue = {k: _series(ds, "u_e", k, n)[valid[k]] for k in keys}
+    Wv = {k: W[valid[k]] for k in keys}
+    span = ", ".join(f"{labels[k].split()[0]} W <= {Wv[k].max():g}" for k in keys)
+    worst_bias = max(float(np.nanmax(np.abs(b))) for b in bias.values())
+    worst_rel = max(float(np.nanmax(np.abs(bias[k][Wv[k] > 0]) / (Wv[k][Wv[k] > 0] / 2)))
+                    for k in keys)
+    rows.append(_claim(
+        "C1", "III", "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
+        "stated", f"max |mean u - W/2| = {worst_bias:.4f} px, at most {100 * worst_rel:.2f} % "
+        f"of W/2, where DIC converges ({span})",
+        "agrees" if (worst_bias < 0.01 or worst_rel < 0.01) else "differs",
+        "criterion: |bias| < 0.01 px, or < 1 % of the W/2 shift; the DIC mean displacement "
+        "is W/2."))
+    def worst(wmin: float) -> float:
+        return max(float(np.nanmax(np.abs(bias[k][Wv[k] >= wmin]) / ue[k][Wv[k] >= wmin]))
+                   for k in keys)
+
+    r1, r3 = worst(1.0), worst(3.0)
+    rows.append(_claim(
+        "C2", "I, III", "Under blur the bias is negligible against the random error.",
+        "stated (refs [5], [6])",
+        f"max |bias| / u_e = {r3:.2f} for W >= 3 px, {r1:.2f} for W >= 1 px",
+        "agrees" if r1 < 0.3 else ("partly" if r3 < 0.3 else "differs"),
+        "criterion: ratio < 0.3. At small blur the random error of a sharp, noise-light "
+        "pattern is a few thousandths of a px and the sub-pixel interpolation bias of the "
+        "W/2 shift is of the same size; once blur dominates, the bias is negligible."))
+
+    # Extra experiments on pattern #4.
+    p4 = next(p for p in pats if p.key == "p4")
+    mini = _mini_experiments(p4.image, s, (3.0, 6.0))
+    off = np.array(mini["offset"]) / np.array(mini["sharp_ref"])
+    rows.append(_claim(
+        "C3", "III", "The rigid part of the motion does not change the blur uncertainty.",
+        "verified in [35]",
+        "u_e(offset 0.5 px) / u_e(offset 0) = " + ", ".join(
+            f"{r:.2f} (W={w:g})" for r, w in zip(off, mini["blur"], strict=True)),
+        "agrees" if np.all(np.abs(off - 1) < 0.15) else "differs",
+        "criterion: within 15 % (one noise realisation each; pattern #4)."))
+    same = np.array(mini["blurred_ref"]) / np.array(mini["sharp_ref"])
+    rows.append(_claim(
+        "C4", "V-A", "Random errors are smaller when both images carry the same blur "
+        "(a sharp reference is the worst case).", "stated (ref [5])",
+        "u_e(blurred ref) / u_e(sharp ref) = " + ", ".join(
+            f"{r:.2f} (W={w:g})" for r, w in zip(same, mini["blur"], strict=True)),
+        "agrees" if np.all(same < 1) else "differs",
+        "criterion: ratio < 1 at every W tested (pattern #4)."))
+
+    # C5 Pan's approximation at W = 0 (Fig. 2).
+    pan = {k: static[k]["metrics"]["sssig_x_mean"] / static[k]["metrics"]["pan_sssig"]
+           for k in keys}
+    closest = min(keys, key=lambda k: abs(math.log(pan[k])))
+    rows.append(_claim(
+        "C5", "IV, Fig. 2", "Pattern #3 lies close to Pan's SSSIG ~ N^2 MIG^2; the others "
+        "depart from it.", "qualitative",
+        "SSSIG / (N^2 MIG^2) = " + ", ".join(f"{labels[k].split()[0]} {pan[k]:.2f}"
+                                              for k in keys),
+        "agrees" if closest == "p3" else "differs",
+        f"criterion: #3 closest to 1; closest here is {labels[closest]}. Depends on the "
+        "camera emulation of #3 and on the stand-ins when no DIC Challenge images are given."))
+
+    # C6 SSSIG and MIG decrease with W.
+    dec = []
+    for k in keys:
+        sg = _series(ds, "sssig", k, n)
+        mg = _series(ds, "mig", k, n)
+        dec.append((k, sg[-1] / sg[0], mg[-1] / mg[0], float(np.mean(np.diff(sg) < 0))))
+    ok = all(r[1] < 1 and r[2] < 1 and r[3] > 0.9 for r in dec)
+    rows.append(_claim(
+        "C6", "IV, Fig. 2", "SSSIG and MIG decrease as the blur W grows.", "qualitative",
+        "; ".join(f"{labels[k].split()[0]}: SSSIG x{a:.2f}, MIG x{b:.2f} at W=10, "
+                  f"{100 * c:.0f}% of steps decreasing" for k, a, b, c in dec),
+        "agrees" if ok else "differs", "criterion: both fall and SSSIG falls at >90 % of steps."))
+
+    # C7 static match-score fails under blur.
+    ums = {k: _series(ds, "u_match_score", k, n)[valid[k]] for k in keys}
+    r_end = {k: ue[k][-1] / ums[k][-1] for k in keys}
+    r_0 = {k: ue[k][0] / ums[k][0] for k in keys}
+    rows.append(_claim(
+        "C7", "IV-V", "The static match-score model (eq. 2) does not predict u_e under blur, "
+        "even with the blurred image's SSSIG.", "qualitative (Fig. 2)",
+        "measured / eq. 2 at W=0: " + ", ".join(f"{r_0[k]:.2f}" for k in keys)
+        + "; at the largest converged W: " + ", ".join(
+            f"{r_end[k]:.2f} (W={Wv[k].max():g})" for k in keys),
+        "agrees" if all(abs(r - 1) > 0.25 for r in r_end.values()) else "differs",
+        "criterion: off by > 25 % at the largest W where DIC converges, for every pattern."))
+
+    # 1-D analysis: Table II.
+    tab = {r["regime"]: r for r in pulse.table}
+    lin = all(abs(r["sssig_numeric"] - r["du"] * r["gradient_variance_numeric"])
+              < 1e-6 * r["sssig_numeric"] for r in pulse.table)
+    rows.append(_claim(
+        "C8", "V, finding 1", "SSSIG depends linearly on the gradient variance, not on MIG "
+        "(SSSIG = N var[p']).", "derived", "SSSIG = du * var[p'] in every Table II row "
+        f"(rel. dev. < 1e-6): {lin}", "agrees" if lin else "differs",
+        "zero-mean gradient of a periodic signal: mean square = variance."))
+    a = tab.get("a")
+    ok_a = a is not None and abs(a["contrast_numeric"] - 1) < 1e-9 and abs(
+        a["mig_numeric"] - 2 / a["du"]) < 1e-9
+    rows.append(_claim(
+        "C9", "V, finding 3", "Small blur (regime a) softens edges only: MIG and contrast "
+        "unchanged, SSSIG falls.", "Table II",
+        f"regime a, w={a['w'] if a else '-'}: MIG {a['mig_numeric']:.4f} (= 2a/du), contrast "
+        f"{a['contrast_numeric']:.3f}, SSSIG {a['sssig_numeric']:.3f} (sharp: 2)" if a else "-",
+        "agrees" if ok_a else "differs", "closed form m(w) = w; numerical convolution agrees."))
+    b, c = tab.get("b", {}), tab.get("c", {})
+    ok_bc = bool(b and c and b["contrast_numeric"] < 1
+                 and c["contrast_numeric"] < b["contrast_numeric"])
+    rows.append(_claim(
+        "C10", "V, finding 4", "Larger blur (regimes b, c) lowers the contrast and SSSIG "
+        "falls faster (contrast-driven).", "Table II",
+        f"contrast {b['contrast_numeric']:.2f} (b, w={b['w']:g}), {c['contrast_numeric']:.2f} "
+        f"(c, w={c['w']:g})" if ok_bc else "-", "agrees" if ok_bc else "differs",
+        "SSSIG ~ 1/w^2 in (b) against 1/w in (a)."))
+    d = tab.get("d")
+    rows.append(_claim(
+        "C11", "V, finding 5", "Dense patterns (regime d) lose edges and contrast together "
+        "at low blur.", "Table II",
+        f"dp={d['dp']:g}, du={d['du']:g}, w={d['w']:g}: contrast {d['contrast_numeric']:.2f}"
+        if d else "-", "agrees" if d and d["contrast_numeric"] < 1 else "differs",
+        "m(w) = g < w."))
+    f5 = pulse.fig5
+    wa = np.asarray(f5["w"].values)
+    sel = wa < float(f5.attrs.get("dp", 10.0))
+    ratio6 = float(np.mean(np.asarray(f5["min_chi2"].values)[sel] / (wa[sel] / 6.0)))
+    rows.append(_claim(
+        "C12", "V-A, eq. 13", "SSD in regime (a): chi2 ~ N a^2 (w/4 + 2 w xi^2).",
+        "w/4 (as extracted)", f"exact continuous minimum / (a^2 w / 6) = {ratio6:.4f}; "
+        f"w/4 would give {ratio6 * 6 / 4:.3f}",
+        "differs", "our derivation (brief s. 6) gives a^2 (w/6 + 2 xi^2 / w) per period and "
+        "the exact integral confirms it; the seed's equation is garbled by extraction."))
+    mins = np.asarray(f5["min_chi2"].values)
+    frac = float(np.mean(np.diff(mins[: int(np.argmax(mins)) + 1]) > 0))
+    rows.append(_claim(
+        "C13", "V-A, Fig. 5", "The minimum of chi2 grows (higher, flatter) as w grows.",
+        "Fig. 5", f"min chi2 rises monotonically up to w = {wa[int(np.argmax(mins))]:g} "
+        f"({100 * frac:.0f}% of steps)", "agrees" if frac == 1.0 else "differs",
+        "then falls as the blurred pulses merge (regime c)."))
+    fit_a = next((f for f in pulse.fits if f.regime == "a"), None)
+    if fit_a is not None:
+        lo, hi = fit_a.slope_ci
+        rows.append(_claim(
+            "C14", "V-A/B, eq. 16, Fig. 6", "1-D uncertainty grows linearly with w "
+            "(edge-driven region).", "linear (eq. 16)",
+            f"log-log slope {fit_a.slope:.2f} [{lo:.2f}, {hi:.2f}] over w = "
+            f"{fit_a.w_min:g}..{fit_a.w_max:g}", "agrees" if lo <= 1 <= hi else "differs",
+            "slope 1 inside the 95% CI, slope 1/2 (first-principles sqrt law) outside; the "
+            "mechanism is not eq. 16's but the noise weighed against the sharp reference's "
+            "gradient (docs/pulse-verdict.md)."))
+    rows.append(_claim(
+        "C15", "V-B, Fig. 6", "u_e rises faster past w = du - dp (contrast-driven region).",
+        f"knee at w = {pulse.knee_paper:g}", f"knee observed at w = {pulse.knee:g} "
+        f"(predicted 2 min(dp, g) = {pulse.knee_predicted:g})",
+        "agrees" if abs(pulse.knee - pulse.knee_paper) <= 1 else "differs",
+        "the steep rise starts where the blurred ramps leave the reference edges."))
+
+    # Section VI fits.
+    r2pl = {k: fits[k]["r2_power_law"] for k in keys}
+    rows.append(_claim(
+        "C16", "VI, eq. 17, Fig. 7", "log u_e is linear in log SSSIG over the edge-driven "
+        "range.", "Fig. 7", "R^2 of eq. 17 in its range: " + ", ".join(
+            f"{labels[k].split()[0]} {r2pl[k]:.3f} (W <= {fits[k]['fit_range'][1]:g})"
+            for k in keys),
+        "agrees" if all(v > 0.9 for v in r2pl.values()) else "differs",
+        "criterion: R^2 > 0.9 (log space) for every pattern."))
+    rho = {}
+    for k in keys:
+        m_paper = models[k][0]
+        err = np.abs(np.asarray(m_paper.data["err_power_law"], dtype=float))
+        ratio = np.asarray(m_paper.data.get("contrast_ratio", [math.nan] * err.size), float)
+        rho[k] = _spearman(err, ratio)
+    n_ok = sum(1 for v in rho.values() if v > 0.5)
+    rows.append(_claim(
+        "C17", "VI, Fig. 8", "The error of eq. 17 grows as the contrast ratio (static / "
+        "blurred) grows.", "Fig. 8", "Spearman(|error|, contrast ratio) = " + ", ".join(
+            f"{labels[k].split()[0]} {rho[k]:.2f}" for k in keys),
+        "agrees" if n_ok >= 3 else "differs", "criterion: > 0.5 for at least 3 patterns."))
+    r2d = {k: fits[k]["r2_decay"] for k in keys}
+    rows.append(_claim(
+        "C18", "VI, eq. 18, Fig. 9", "SSSIG(W) = SSSIG_0 / (beta W^2 + 1) fits with "
+        "R^2 > 0.92 for #2-#4; #1 departs for W > 4.", "R^2 > 0.92",
+        "R^2 = " + ", ".join(f"{labels[k].split()[0]} {r2d[k]:.3f}" for k in keys),
+        "agrees" if all(r2d[k] > 0.92 for k in ("p2", "p3", "p4")) else "differs",
+        "criterion: R^2 > 0.92 for #2-#4."))
+    e19 = {k: fits[k]["eq19_max_rel_error"] for k in keys}
+    emm = {k: fits[k]["mismatch_max_rel_error"] for k in keys}
+    rows.append(_claim(
+        "C19", "VI, eq. 19, Fig. 10", "Eq. 19 predicts u_e(W) correctly over the blur range.",
+        "Fig. 10", "max |eq. 19 / measured - 1| where DIC converges: " + ", ".join(
+            f"{labels[k].split()[0]} {100 * e19[k]:.0f}% (W <= {Wv[k].max():g})" for k in keys)
+        + "; noise + blur-mismatch model: " + ", ".join(
+            f"{100 * v:.0f}%" if v is not None else "-" for v in emm.values()),
+        "agrees" if all(v < 0.2 for v in e19.values()) else "differs",
+        "criterion: within 20 % everywhere. Eq. 17 is fitted on the edge-driven range only."))
+    k4 = "p4"
+    al, be = fits[k4]["alpha"]["value"], fits[k4]["beta"]["value"]
+    w1 = math.sqrt(0.05 / (al * be)) if al * be > 0 else 1.0
+    exact = (be * w1**2 + 1) ** al - 1
+    rows.append(_claim(
+        "C20", "VI, eqs. 21-22", "u_e(W) ~= u_e(0) (1 + 2 alpha beta W^2) = u_e(0) "
+        "(1 + MBRF W^2).", "factor 2 alpha beta",
+        f"pattern #4 at W = {w1:.2f} px: exact eq. 19 rise {exact:.4f}, alpha beta W^2 = "
+        f"{al * be * w1**2:.4f}, 2 alpha beta W^2 = {2 * al * be * w1**2:.4f}", "differs",
+        "the Taylor expansion of eq. 19 is u_e(0)(1 + alpha beta W^2): eq. 22 doubles the "
+        "second-order term. MBRF = 2 alpha beta is kept as the paper defines it (it equals "
+        "u_e''(0) / u_e(0)); predictions use the correct expansion."))
+    fam = sorted(family, key=lambda r: r["mig0"])
+    r_u0 = _spearman([r["mig0"] for r in fam], [r["u_e0"] for r in fam])
+    r_mb = _spearman([r["mig0"] for r in fam], [r["mbrf"] for r in fam])
+    rows.append(_claim(
+        "C21", "VI, Fig. 11", "Raising MIG_0 improves noise rejection but speeds up the "
+        "loss under blur: static and dynamic performance cannot both be maximised.",
+        "Fig. 11 (non-monotonic eta, MBRF)",
+        f"over {len(fam)} generated patterns: Spearman(MIG_0, u_e(0)) = {r_u0:.2f}, "
+        f"Spearman(MIG_0, MBRF) = {r_mb:.2f}",
+        "agrees" if (r_u0 < -0.5 and r_mb > 0.5) else "differs",
+        "criterion: u_e(0) falls (< -0.5) while MBRF rises (> 0.5) with MIG_0. eta alone "
+        "is not comparable across patterns when alpha differs (its units change)."))
+    return rows

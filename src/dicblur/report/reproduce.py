@@ -1,0 +1,421 @@
+"""``dicblur reproduce``: the paper's whole study, end to end, as a report.
+
+Stages (each reported through ``progress``):
+
+1. the four study patterns (:mod:`dicblur.report.study`), written as float64 TIFFs;
+2. the Section III / VI campaign: every pattern blurred along x over a W grid, with
+   per-exposure Gaussian noise at three levels, correlated against its sharp reference
+   (:func:`dicblur.campaign.run_campaign`; a rerun reuses finished tasks);
+3. a family of generated patterns (speckle size swept) for the paper's Fig. 11;
+4. the 1-D analysis of Section V (:func:`dicblur.pulse.run_pulse_study`);
+5. every fit of Section VI and the noise + blur-mismatch model
+   (:func:`dicblur.models.fit_blur_model`);
+6. figures, tables, the claims table, ``results.json`` and ``report.html``.
+
+Noise: the paper adds Gaussian noise of std s to each of the K + 1 sub-frames, which is the
+same in distribution as one draw of std s / sqrt(K + 1) per exposure; we state noise as the
+effective per-image std (the main level is 2 GL, as in the brief's reference sweep).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from .study import (
+    StudyPattern,
+    emulated_camera_pattern3,
+    load_user_pattern,
+    numerical_pattern4,
+    stand_in_pattern1,
+    stand_in_pattern2,
+)
+
+__all__ = ["ReproduceResult", "ReproduceSettings", "reproduce"]
+
+Progress = Callable[[str, int, int], None]
+
+#: Sweep points with a smaller fraction of converged POIs are excluded from fits and claims.
+MIN_CONVERGED = 0.9
+
+
+@dataclass(frozen=True)
+class ReproduceSettings:
+    """Settings of a reproduce run.
+
+    Attributes
+    ----------
+    out : Path
+        Output folder.
+    quick : bool
+        Coarser W grid (0..10 px, step 0.5 instead of 0.1), POIs every 20 px instead of
+        10, a smaller family and fewer 1-D trials: same figures and tables.
+    pattern1, pattern2 : Path or None
+        DIC Challenge Sample 13 and Sample 3 images (central crop); None: stand-ins.
+    size : int
+        Side of the square study images (px).
+    subset : int
+        Subset size (px).
+    main_noise : float
+        Noise std (GL) of the paper-like fits.
+    noise_levels : tuple of float
+        Noise levels of the campaign (GL, per image).
+    seed : int
+        Base seed of everything random.
+    blur_step_px, family, trials : optional
+        Override the mode's W step (px), the family's speckle sizes (px) and the 1-D
+        Monte Carlo trials.
+    pulse_dependence : bool
+        Run the 1-D study's dependence on the choices the paper leaves open (signal
+        length, shifted signal, interpolation).
+    workers, scheduler, serial
+        Campaign execution (see :func:`dicblur.campaign.run_campaign`).
+    command : str
+        The command line, recorded in the outputs.
+    """
+
+    out: Path
+    quick: bool = False
+    pattern1: Path | None = None
+    pattern2: Path | None = None
+    size: int = 512
+    subset: int = 31
+    main_noise: float = 2.0
+    noise_levels: tuple[float, ...] = (0.5, 2.0, 4.0)
+    seed: int = 2017
+    blur_step_px: float | None = None
+    family: tuple[float, ...] | None = None
+    trials: int | None = None
+    pulse_dependence: bool = True
+    workers: int | None = None
+    scheduler: str | None = None
+    serial: bool = False
+    command: str = ""
+
+    @property
+    def blur_step(self) -> float:
+        if self.blur_step_px is not None:
+            return self.blur_step_px
+        return 0.5 if self.quick else 0.1
+
+    @property
+    def poi_step(self) -> int:
+        return 20 if self.quick else 10
+
+    @property
+    def family_sizes(self) -> tuple[float, ...]:
+        if self.family is not None:
+            return self.family
+        return (2.0, 3.0, 4.0, 6.0, 9.0) if self.quick else (2.0, 2.5, 3.0, 4.0, 5.0, 6.0,
+                                                             8.0, 10.0)
+
+    @property
+    def pulse_trials(self) -> int:
+        if self.trials is not None:
+            return self.trials
+        return 2000 if self.quick else 10_000
+
+
+@dataclass(frozen=True)
+class ReproduceResult:
+    """What a reproduce run produced."""
+
+    report: Path
+    results_json: Path
+    figures: tuple[str, ...]
+    claims: tuple[dict[str, Any], ...]
+    timings: dict[str, float] = field(default_factory=dict)
+    campaign_runs: dict[str, dict[str, int]] = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------------------
+def _versions() -> dict[str, str]:
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for pkg in ("dicblur", "numpy", "scipy", "numba", "xarray", "zarr", "dask", "matplotlib"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:  # pragma: no cover
+            out[pkg] = "not installed"
+    return out
+
+
+def _study_patterns(s: ReproduceSettings) -> list[StudyPattern]:
+    if s.pattern1 is not None:
+        p1 = load_user_pattern("p1", "#1 Sample 13", s.pattern1, s.size)
+    else:
+        p1 = StudyPattern("p1", "#1 stand-in (fine, soft)", stand_in_pattern1(s.size, s.seed + 1),
+                          True, "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135")
+    if s.pattern2 is not None:
+        p2 = load_user_pattern("p2", "#2 Sample 3", s.pattern2, s.size)
+    else:
+        p2 = StudyPattern("p2", "#2 stand-in (sharp)", stand_in_pattern2(s.size, s.seed + 2),
+                          True, "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190")
+    return [p1, p2, emulated_camera_pattern3(s.size, s.seed + 3),
+            numerical_pattern4(s.size, s.seed + 4)]
+
+
+def _write_float_tiff(path: Path, image: np.ndarray) -> None:
+    import tifffile
+
+    tifffile.imwrite(path, np.ascontiguousarray(image, dtype=np.float64))
+
+
+def _campaign(
+    s: ReproduceSettings, name: str, patterns: list[dict[str, Any]], blur: dict[str, float],
+    noise: tuple[float, ...], progress: Progress | None,
+) -> Any:
+    from ..campaign import open_results, parse_spec, run_campaign
+
+    spec = parse_spec(
+        {
+            "campaign": {"name": name, "seed": s.seed, "repetitions": 1},
+            "pattern": patterns,
+            "blur": {"lengths": blur, "angles": [0.0], "trajectory": "linear",
+                     "method": "transfer", "substeps": 100, "boundary": "periodic"},
+            "noise": {"model": "per-exposure", "levels": list(noise)},
+            "dic": {"subsets": [s.subset], "step": s.poi_step, "shape": "translation"},
+        },
+        base_dir=s.out,
+    )
+    store = s.out / "campaign" / f"{name}.zarr"
+    store.parent.mkdir(parents=True, exist_ok=True)
+
+    def cb(done: int, total: int) -> None:
+        if progress is not None:
+            progress(f"campaign {name}", done, total)
+
+    summary = run_campaign(spec, store, scheduler=s.scheduler, workers=s.workers,
+                           serial=s.serial, progress=cb)
+    return open_results(store), {"tasks": summary.n_tasks, "run": summary.n_run,
+                                 "skipped": summary.n_skipped}
+
+
+def _series(ds: Any, var: str, pattern: str, noise: float) -> np.ndarray:
+    da = ds[var].sel(pattern=pattern, noise=noise)
+    return np.asarray(da.squeeze(drop=True).values, dtype=np.float64)
+
+
+def _spearman(a: np.ndarray, b: np.ndarray) -> float:
+    from scipy import stats
+
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3:
+        return math.nan
+    return float(stats.spearmanr(a[ok], b[ok]).statistic)
+
+
+def _param(fit: Any, name: str) -> dict[str, float]:
+    p = fit.parameter(name)
+    return {"value": p.value, "low": p.low, "high": p.high}
+
+
+# ---------------------------------------------------------------------------------------
+def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) -> ReproduceResult:
+    """Run the whole study and write the report folder (see the module docs)."""
+    from ..metrics import pattern_metrics
+    from ..models import blur_sensitivity, fit_blur_model
+    from ..pulse.study import run_pulse_study
+
+    s = settings
+    if s.size < 4 * s.subset:
+        raise InputError(f"size={s.size}: the study images need at least 4 subsets a side "
+                         f"(size >= {4 * s.subset})")
+    if s.main_noise not in s.noise_levels:
+        raise InputError(f"main_noise={s.main_noise}: must be one of noise_levels "
+                         f"{s.noise_levels}")
+    out = Path(s.out)
+    out.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+
+    def stage(name: str) -> None:
+        if progress is not None:
+            progress(name, 0, 1)
+
+    # 1. patterns ------------------------------------------------------------------------
+    stage("patterns")
+    pats = _study_patterns(s)
+    pdir = out / "patterns"
+    pdir.mkdir(exist_ok=True)
+    static: dict[str, dict[str, Any]] = {}
+    for p in pats:
+        _write_float_tiff(pdir / f"{p.key}.tif", p.image)
+        m = pattern_metrics(p.image, subset=s.subset, noise_sigma=s.main_noise, step=s.poi_step)
+        c = blur_sensitivity(p.image, subset=s.subset, step=s.poi_step)
+        static[p.key] = {"label": p.label, "synthetic": p.synthetic, "source": p.source,
+                         "sha256": p.sha256, "metrics": m.to_dict(), "c_static": c.c}
+    timings["patterns"] = time.perf_counter() - t0
+
+    # 2. main campaign -------------------------------------------------------------------
+    t = time.perf_counter()
+    blur_grid = {"start": 0.0, "stop": 10.0, "step": s.blur_step}
+    study_patterns = [{"name": p.key, "path": f"patterns/{p.key}.tif"} for p in pats]
+    ds, run_study = _campaign(s, "study", study_patterns, blur_grid, s.noise_levels, progress)
+    timings["campaign_study"] = time.perf_counter() - t
+
+    # 3. family for Fig. 11 --------------------------------------------------------------
+    t = time.perf_counter()
+    fam_specs = [
+        {"name": f"d{d:g}", "generator": "speckle", "shape": [s.size, s.size],
+         "speckle_size": d, "density": 0.5, "softness": 0.5, "seed": s.seed + 100 + i}
+        for i, d in enumerate(s.family_sizes)
+    ]
+    fam_grid = {"start": 0.0, "stop": 6.0, "step": 1.0 if s.quick else 0.25}
+    ds_fam, run_family = _campaign(s, "family", fam_specs, fam_grid, (s.main_noise,), progress)
+    timings["campaign_family"] = time.perf_counter() - t
+
+    # 4. 1-D analysis --------------------------------------------------------------------
+    t = time.perf_counter()
+    stage("1-D pulse analysis")
+    pulse = run_pulse_study(trials=s.pulse_trials, seed=s.seed,
+                            dependence_trials=(min(s.pulse_trials, 500 if s.quick else 2000)
+                                               if s.pulse_dependence else None))
+    timings["pulse"] = time.perf_counter() - t
+
+    # 5. fits ----------------------------------------------------------------------------
+    t = time.perf_counter()
+    stage("fits")
+    W = np.asarray(ds["blur"].values, dtype=np.float64)
+    fits: dict[str, dict[str, Any]] = {}
+    models: dict[str, Any] = {}
+    valid: dict[str, np.ndarray] = {}
+    for p in pats:
+        k = p.key
+        # Points where DIC broke down (< 90 % of POIs converged) measure failure, not the
+        # random error the models describe: they are shown but not fitted.
+        ok = {lv: _series(ds, "converged_fraction", k, lv) >= MIN_CONVERGED
+              for lv in s.noise_levels}
+        v = ok[s.main_noise]
+        valid[k] = v
+        u = _series(ds, "u_e", k, s.main_noise)[v]
+        sg = _series(ds, "sssig", k, s.main_noise)[v]
+        # RMS contrast: the 2-D analogue of the paper's 1-D contrast (Fig. 8).
+        cref = _series(ds, "rms_contrast_ref", k, s.main_noise)[v]
+        con = _series(ds, "rms_contrast", k, s.main_noise)[v]
+        prov = {"pattern": p.source, "sha256": p.sha256, "subset": s.subset,
+                "step": s.poi_step, "dic": "translation IC-GN, ZNSSD, bspline3",
+                "noise": "per-exposure Gaussian",
+                "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged"}
+        paper = fit_blur_model(W[v], sg, u, noise_sigma=s.main_noise, contrast_ref=cref,
+                               contrast=con, subset=s.subset, c_static=static[k]["c_static"],
+                               provenance=prov, mean_level=float(p.image.mean()))
+        allw = np.concatenate([W[ok[lv]] for lv in s.noise_levels])
+        allu = np.concatenate([_series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
+        alls = np.concatenate([_series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
+        alln = np.concatenate([np.full(int(ok[lv].sum()), lv) for lv in s.noise_levels])
+        allc = np.concatenate([(_series(ds, "rms_contrast_ref", k, lv)
+                                / _series(ds, "rms_contrast", k, lv))[ok[lv]]
+                               for lv in s.noise_levels])
+        full = fit_blur_model(allw, alls, allu, noise_sigma=alln, contrast_ratio=allc,
+                              subset=s.subset, c_static=static[k]["c_static"], provenance=prov,
+                              mean_level=float(p.image.mean()))
+        models[k] = (paper, full)
+        paper.to_json(str(out / f"model_{k}.json"))
+        full.to_json(str(out / f"model_{k}_all_noise.json"))
+        eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
+        mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch
+                else None)
+        fits[k] = {
+            "eta": _param(paper.power_law, "eta"), "alpha": _param(paper.power_law, "alpha"),
+            "beta": _param(paper.decay, "beta"), "sssig0": _param(paper.decay, "sssig0"),
+            "mbrf": paper.mbrf, "r2_decay": paper.decay.r2, "r2_power_law": paper.power_law.r2,
+            "fit_range": list(paper.fit_range), "range_rule": paper.range_rule,
+            "mig0": static[k]["metrics"]["mig"],
+            "c_static": static[k]["c_static"], "c_fitted": full.c,
+            "c_fitted_param": _param(full.mismatch, "c") if full.mismatch else None,
+            "comparison": full.comparison,
+            "default_model": full.default,
+            "eq19_max_rel_error": float(np.max(np.abs(eq19 / u - 1))),
+            "mismatch_max_rel_error": (float(np.max(np.abs(mism / u - 1)))
+                                       if mism is not None else None),
+            "w_fitted_max": float(W[v].max()),
+            "bias_max": float(np.nanmax(np.abs(_series(ds, "bias", k, s.main_noise)[v]))),
+            "converged_min": float(np.nanmin(_series(ds, "converged_fraction", k,
+                                                     s.main_noise))),
+        }
+    fam_rows = []
+    for spec_row in fam_specs:
+        name = str(spec_row["name"])
+        Wf = np.asarray(ds_fam["blur"].values, dtype=np.float64)
+        vf = _series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
+        u = _series(ds_fam, "u_e", name, s.main_noise)[vf]
+        sg = _series(ds_fam, "sssig", name, s.main_noise)[vf]
+        ratio = (_series(ds_fam, "rms_contrast_ref", name, s.main_noise)
+                 / _series(ds_fam, "rms_contrast", name, s.main_noise))[vf]
+        Wf = Wf[vf]
+        fm = fit_blur_model(Wf, sg, u, noise_sigma=s.main_noise, contrast_ratio=ratio,
+                           subset=s.subset, compare=False, default="power_law")
+        fam_rows.append({"name": name, "speckle_size": spec_row["speckle_size"],
+                         "mig0": float(_series(ds_fam, "mig_ref", name, s.main_noise)[0]),
+                         "eta": fm.eta, "alpha": fm.alpha, "beta": fm.beta, "mbrf": fm.mbrf,
+                         "u_e0": float(u[0]), "u_e_max": float(u[-1])})
+    timings["fits"] = time.perf_counter() - t
+
+    # 6. report --------------------------------------------------------------------------
+    t = time.perf_counter()
+    stage("figures and report")
+    from .claims import evaluate_claims
+    from .write import write_report
+
+    claims = evaluate_claims(ds=ds, ds_family=ds_fam, pats=pats, static=static, fits=fits,
+                             models=models, family=fam_rows, pulse=pulse, settings=s,
+                             valid=valid)
+    versions = _versions()
+    report_path, figures = write_report(
+        out=out, settings=s, ds=ds, pats=pats, static=static, fits=fits, models=models,
+        family=fam_rows, pulse=pulse, claims=claims, versions=versions, timings=timings,
+        valid=valid)
+    timings["report"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    results = {
+        "command": s.command, "versions": versions, "mode": "quick" if s.quick else "full",
+        "settings": {"size": s.size, "subset": s.subset, "poi_step": s.poi_step,
+                     "blur_step": s.blur_step, "noise_levels": list(s.noise_levels),
+                     "main_noise": s.main_noise, "seed": s.seed},
+        "patterns": static, "fits": fits, "family": fam_rows,
+        "pulse": {"table_ii": list(pulse.table), "knee": pulse.knee,
+                  "knee_predicted": pulse.knee_predicted, "knee_paper": pulse.knee_paper,
+                  "fits": [f.__dict__ if hasattr(f, "__dict__") else str(f)
+                           for f in pulse.fits],
+                  "verdict": pulse.verdict},
+        "claims": claims, "figures": figures, "timings": timings,
+        "campaign_runs": {"study": run_study, "family": run_family},
+    }
+    rj = out / "results.json"
+    rj.write_text(json.dumps(_clean(results), indent=2))
+    (out / "command.txt").write_text(
+        s.command + "\n\n" + "\n".join(f"{k}: {v}" for k, v in versions.items()) + "\n")
+    return ReproduceResult(report_path, rj, tuple(figures), tuple(claims), timings,
+                           {"study": run_study, "family": run_family})
+
+
+def _clean(obj: Any) -> Any:
+    """JSON-ready copy: numpy scalars to Python, NaN/inf to None, tuples to lists."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, str | int | float | bool) or obj is None:
+        return obj
+    if hasattr(obj, "to_dict"):
+        return _clean(obj.to_dict())
+    return str(obj)

@@ -228,8 +228,9 @@ def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
                 warnings.simplefilter("ignore")
                 model = fit_blur_model(
                     w, sssig, u_e, noise_sigma=problem.noise,
-                    contrast_ref=np.nanmean(m["contrast_ref"], axis=0),
-                    contrast=np.nanmean(m["contrast"], axis=0), subset=problem.subset,
+                    # RMS contrast, as dicblur calibrate (Michelson barely moves under blur)
+                    contrast_ref=np.nanmean(m["rms_contrast_ref"], axis=0),
+                    contrast=np.nanmean(m["rms_contrast"], axis=0), subset=problem.subset,
                     fit_range=(0.0, float(w[-1])), c_static=c_static, default="mismatch",
                     compare=False, provenance={"candidate": candidate.to_dict()})
             eta, alpha, beta, mbrf = model.eta, model.alpha, model.beta, model.mbrf

@@ -58,7 +58,7 @@ def _root(
         # Dask logs cluster start-up and shutdown at INFO on its own handlers, configured
         # when distributed is imported (later, by campaign code): set it through Dask's
         # config environment, which that import reads and worker processes inherit.
-        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
+        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
         for name in ("distributed", "dask"):
             logging.getLogger(name).setLevel(logging.WARNING)
 

@@ -8,6 +8,7 @@ code 2 (``--verbose`` adds the traceback).
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import traceback
 import warnings
@@ -54,7 +55,10 @@ def _root(
         force=True,
     )
     if not verbose:
-        # Dask logs cluster start-up and shutdown at INFO on its own handlers.
+        # Dask logs cluster start-up and shutdown at INFO on its own handlers, configured
+        # when distributed is imported (later, by campaign code): set it through Dask's
+        # config environment, which that import reads and worker processes inherit.
+        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
         for name in ("distributed", "dask"):
             logging.getLogger(name).setLevel(logging.WARNING)
 

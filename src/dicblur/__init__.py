@@ -29,6 +29,13 @@ from .campaign import (
     open_results,
     run_campaign,
 )
+from .design import (
+    DesignResult,
+    PatternFamily,
+    design_pattern,
+    design_problem,
+    export_pattern,
+)
 from .dic import Correlator, DICResult, PointStatus, correlate
 from .errors import (
     ConfigError,
@@ -81,11 +88,13 @@ __all__ = [
     "ConvergenceError",
     "Correlator",
     "DICResult",
+    "DesignResult",
     "DicblurError",
     "ExposurePlan",
     "FitError",
     "ImageReadError",
     "InputError",
+    "PatternFamily",
     "PatternMetrics",
     "PatternSettings",
     "PointStatus",
@@ -102,8 +111,11 @@ __all__ = [
     "campaign_status",
     "compare_models",
     "correlate",
+    "design_pattern",
+    "design_problem",
     "estimate_noise",
     "export_csv",
+    "export_pattern",
     "file_sha256",
     "fit_blur_model",
     "gaussian_mask",

@@ -82,6 +82,9 @@ _correlate.register(app)
 from . import models as _models  # noqa: E402
 
 _models.register(app)
+from . import design as _design  # noqa: E402
+
+_design.register(app)
 
 from . import reproduce as _reproduce  # noqa: E402
 

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from ._data import series, spearman
+
 __all__ = ["evaluate_claims"]
 
 
@@ -21,20 +23,8 @@ def _claim(cid: str, section: str, claim: str, paper: str, ours: str, verdict: s
             "verdict": verdict, "why": why}
 
 
-def _series(ds: Any, var: str, pattern: str, noise: float) -> np.ndarray:
-    return np.asarray(ds[var].sel(pattern=pattern, noise=noise).squeeze(drop=True).values,
-                      dtype=np.float64)
 
 
-def _spearman(a: Any, b: Any) -> float:
-    from scipy import stats
-
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    ok = np.isfinite(a) & np.isfinite(b)
-    if ok.sum() < 3:
-        return math.nan
-    return float(stats.spearmanr(a[ok], b[ok]).statistic)
 
 
 def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...]) -> dict[
@@ -86,8 +76,8 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     rows: list[dict[str, Any]] = []
 
     # C1 / C20: translation by X/2 and negligible bias.
-    bias = {k: _series(ds, "bias", k, n)[valid[k]] for k in keys}
-    ue = {k: _series(ds, "u_e", k, n)[valid[k]] for k in keys}
+    bias = {k: series(ds, "bias", k, n)[valid[k]] for k in keys}
+    ue = {k: series(ds, "u_e", k, n)[valid[k]] for k in keys}
     Wv = {k: W[valid[k]] for k in keys}
     span = ", ".join(f"{labels[k].split()[0]} W <= {Wv[k].max():g}" for k in keys)
     worst_bias = max(float(np.nanmax(np.abs(b))) for b in bias.values())
@@ -150,8 +140,8 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     # C6 SSSIG and MIG decrease with W.
     dec = []
     for k in keys:
-        sg = _series(ds, "sssig", k, n)
-        mg = _series(ds, "mig", k, n)
+        sg = series(ds, "sssig", k, n)
+        mg = series(ds, "mig", k, n)
         dec.append((k, sg[-1] / sg[0], mg[-1] / mg[0], float(np.mean(np.diff(sg) < 0))))
     ok = all(r[1] < 1 and r[2] < 1 and r[3] > 0.9 for r in dec)
     rows.append(_claim(
@@ -161,7 +151,7 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         "agrees" if ok else "differs", "criterion: both fall and SSSIG falls at >90 % of steps."))
 
     # C7 static match-score fails under blur.
-    ums = {k: _series(ds, "u_match_score", k, n)[valid[k]] for k in keys}
+    ums = {k: series(ds, "u_match_score", k, n)[valid[k]] for k in keys}
     r_end = {k: ue[k][-1] / ums[k][-1] for k in keys}
     r_0 = {k: ue[k][0] / ums[k][0] for k in keys}
     rows.append(_claim(
@@ -256,7 +246,7 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         m_paper = models[k][0]
         err = np.abs(np.asarray(m_paper.data["err_power_law"], dtype=float))
         ratio = np.asarray(m_paper.data.get("contrast_ratio", [math.nan] * err.size), float)
-        rho[k] = _spearman(err, ratio)
+        rho[k] = spearman(err, ratio)
     n_ok = sum(1 for v in rho.values() if v > 0.5)
     rows.append(_claim(
         "C17", "VI, Fig. 8", "The error of eq. 17 grows as the contrast ratio (static / "
@@ -293,8 +283,8 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         "second-order term. MBRF = 2 alpha beta is kept as the paper defines it (it equals "
         "u_e''(0) / u_e(0)); predictions use the correct expansion."))
     fam = sorted(family, key=lambda r: r["mig0"])
-    r_u0 = _spearman([r["mig0"] for r in fam], [r["u_e0"] for r in fam])
-    r_mb = _spearman([r["mig0"] for r in fam], [r["mbrf"] for r in fam])
+    r_u0 = spearman([r["mig0"] for r in fam], [r["u_e0"] for r in fam])
+    r_mb = spearman([r["mig0"] for r in fam], [r["mbrf"] for r in fam])
     rows.append(_claim(
         "C21", "VI, Fig. 11", "Raising MIG_0 improves noise rejection but speeds up the "
         "loss under blur: static and dynamic performance cannot both be maximised.",

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from ._data import series
 from .study import (
     StudyPattern,
     emulated_camera_pattern3,
@@ -225,18 +226,8 @@ def _warm_kernels(s: ReproduceSettings) -> float:
     return time.perf_counter() - t0
 
 
-def _series(ds: Any, var: str, pattern: str, noise: float) -> np.ndarray:
-    da = ds[var].sel(pattern=pattern, noise=noise)
-    return np.asarray(da.squeeze(drop=True).values, dtype=np.float64)
 
 
-def _spearman(a: np.ndarray, b: np.ndarray) -> float:
-    from scipy import stats
-
-    ok = np.isfinite(a) & np.isfinite(b)
-    if ok.sum() < 3:
-        return math.nan
-    return float(stats.spearmanr(a[ok], b[ok]).statistic)
 
 
 def _param(fit: Any, name: str) -> dict[str, float]:
@@ -320,15 +311,15 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         k = p.key
         # Points where DIC broke down (< 90 % of POIs converged) measure failure, not the
         # random error the models describe: they are shown but not fitted.
-        ok = {lv: _series(ds, "converged_fraction", k, lv) >= MIN_CONVERGED
+        ok = {lv: series(ds, "converged_fraction", k, lv) >= MIN_CONVERGED
               for lv in s.noise_levels}
         v = ok[s.main_noise]
         valid[k] = v
-        u = _series(ds, "u_e", k, s.main_noise)[v]
-        sg = _series(ds, "sssig", k, s.main_noise)[v]
+        u = series(ds, "u_e", k, s.main_noise)[v]
+        sg = series(ds, "sssig", k, s.main_noise)[v]
         # RMS contrast: the 2-D analogue of the paper's 1-D contrast (Fig. 8).
-        cref = _series(ds, "rms_contrast_ref", k, s.main_noise)[v]
-        con = _series(ds, "rms_contrast", k, s.main_noise)[v]
+        cref = series(ds, "rms_contrast_ref", k, s.main_noise)[v]
+        con = series(ds, "rms_contrast", k, s.main_noise)[v]
         prov = {"pattern": p.source, "sha256": p.sha256, "subset": s.subset,
                 "step": s.poi_step, "dic": "translation IC-GN, ZNSSD, bspline3",
                 "noise": "per-exposure Gaussian",
@@ -337,11 +328,11 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
                                contrast=con, subset=s.subset, c_static=static[k]["c_static"],
                                provenance=prov, mean_level=float(p.image.mean()))
         allw = np.concatenate([W[ok[lv]] for lv in s.noise_levels])
-        allu = np.concatenate([_series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
-        alls = np.concatenate([_series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
+        allu = np.concatenate([series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
+        alls = np.concatenate([series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
         alln = np.concatenate([np.full(int(ok[lv].sum()), lv) for lv in s.noise_levels])
-        allc = np.concatenate([(_series(ds, "rms_contrast_ref", k, lv)
-                                / _series(ds, "rms_contrast", k, lv))[ok[lv]]
+        allc = np.concatenate([(series(ds, "rms_contrast_ref", k, lv)
+                                / series(ds, "rms_contrast", k, lv))[ok[lv]]
                                for lv in s.noise_levels])
         full = fit_blur_model(allw, alls, allu, noise_sigma=alln, contrast_ratio=allc,
                               subset=s.subset, c_static=static[k]["c_static"], provenance=prov,
@@ -366,24 +357,24 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
             "mismatch_max_rel_error": (float(np.max(np.abs(mism / u - 1)))
                                        if mism is not None else None),
             "w_fitted_max": float(W[v].max()),
-            "bias_max": float(np.nanmax(np.abs(_series(ds, "bias", k, s.main_noise)[v]))),
-            "converged_min": float(np.nanmin(_series(ds, "converged_fraction", k,
+            "bias_max": float(np.nanmax(np.abs(series(ds, "bias", k, s.main_noise)[v]))),
+            "converged_min": float(np.nanmin(series(ds, "converged_fraction", k,
                                                      s.main_noise))),
         }
     fam_rows = []
     for spec_row in fam_specs:
         name = str(spec_row["name"])
         Wf = np.asarray(ds_fam["blur"].values, dtype=np.float64)
-        vf = _series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
-        u = _series(ds_fam, "u_e", name, s.main_noise)[vf]
-        sg = _series(ds_fam, "sssig", name, s.main_noise)[vf]
-        ratio = (_series(ds_fam, "rms_contrast_ref", name, s.main_noise)
-                 / _series(ds_fam, "rms_contrast", name, s.main_noise))[vf]
+        vf = series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
+        u = series(ds_fam, "u_e", name, s.main_noise)[vf]
+        sg = series(ds_fam, "sssig", name, s.main_noise)[vf]
+        ratio = (series(ds_fam, "rms_contrast_ref", name, s.main_noise)
+                 / series(ds_fam, "rms_contrast", name, s.main_noise))[vf]
         Wf = Wf[vf]
         fm = fit_blur_model(Wf, sg, u, noise_sigma=s.main_noise, contrast_ratio=ratio,
                            subset=s.subset, compare=False, default="power_law")
         fam_rows.append({"name": name, "speckle_size": spec_row["speckle_size"],
-                         "mig0": float(_series(ds_fam, "mig_ref", name, s.main_noise)[0]),
+                         "mig0": float(series(ds_fam, "mig_ref", name, s.main_noise)[0]),
                          "eta": fm.eta, "alpha": fm.alpha, "beta": fm.beta, "mbrf": fm.mbrf,
                          "u_e0": float(u[0]), "u_e_max": float(u[-1])})
     timings["fits"] = time.perf_counter() - t

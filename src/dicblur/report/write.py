@@ -8,14 +8,12 @@ from typing import Any
 import numpy as np
 
 from . import figures as F
+from ._data import series
 from .html import HtmlReport
 
 __all__ = ["write_report"]
 
 
-def _series(ds: Any, var: str, pattern: str, noise: float) -> np.ndarray:
-    return np.asarray(ds[var].sel(pattern=pattern, noise=noise).squeeze(drop=True).values,
-                      dtype=np.float64)
 
 
 def _ci(p: dict[str, float], digits: int = 3) -> str:
@@ -88,8 +86,8 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     rep.table(rows, left=["pattern", "source"],
               caption=f"Static metrics (subset {s.subset}, noise {n:g} GL).")
 
-    d2 = {lab[p.key]: {"blur": W, "sssig": _series(ds, "sssig", p.key, n),
-                       "mig": _series(ds, "mig", p.key, n)} for p in pats}
+    d2 = {lab[p.key]: {"blur": W, "sssig": series(ds, "sssig", p.key, n),
+                       "mig": series(ds, "mig", p.key, n)} for p in pats}
     rep.section("Fig. 2: SSSIG under blur and Pan's approximation")
     rep.figure(F.fig_sssig_pan(d2, s.subset), "fig02_sssig_pan",
                "Fig. 2: subset SSSIG of the blurred image (noise-free) and Pan's N^2 MIG^2.")
@@ -118,8 +116,8 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     for p in pats:
         k = p.key
         paper, full = models[k]
-        u = _series(ds, "u_e", k, n)
-        sg = _series(ds, "sssig", k, n)
+        u = series(ds, "u_e", k, n)
+        sg = series(ds, "sssig", k, n)
         lo, hi = paper.fit_range
         d7[lab[k]] = {"sssig": sg, "u_e": u, "in_range": (W >= lo) & (W <= hi) & valid[k],
                       "eta": paper.eta, "alpha": paper.alpha, "w_max": hi}
@@ -131,8 +129,8 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
                        "eq19": paper.predict(W, n, model="power_law").u_e,
                        "mismatch": (full.predict(W, n, model="mismatch").u_e
                                     if full.mismatch is not None else None),
-                       "match_score": _series(ds, "u_match_score", k, n)}
-        curves = [(lv, _series(ds, "u_e", k, lv),
+                       "match_score": series(ds, "u_match_score", k, n)}
+        curves = [(lv, series(ds, "u_e", k, lv),
                    full.predict(W, lv, model="mismatch").u_e if full.mismatch is not None
                    else np.full(W.size, np.nan)) for lv in s.noise_levels]
         d12[lab[k]] = {"blur": W, "curves": curves, "c_static": static[k]["c_static"]}

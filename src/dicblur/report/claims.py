@@ -23,10 +23,6 @@ def _claim(cid: str, section: str, claim: str, paper: str, ours: str, verdict: s
             "verdict": verdict, "why": why}
 
 
-
-
-
-
 def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...]) -> dict[
     str, Any
 ]:

@@ -226,10 +226,6 @@ def _warm_kernels(s: ReproduceSettings) -> float:
     return time.perf_counter() - t0
 
 
-
-
-
-
 def _param(fit: Any, name: str) -> dict[str, float]:
     p = fit.parameter(name)
     return {"value": p.value, "low": p.low, "high": p.high}

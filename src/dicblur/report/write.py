@@ -14,8 +14,6 @@ from .html import HtmlReport
 __all__ = ["write_report"]
 
 
-
-
 def _ci(p: dict[str, float], digits: int = 3) -> str:
     return f"{p['value']:.{digits}g} [{p['low']:.{digits}g}, {p['high']:.{digits}g}]"
 

@@ -174,6 +174,7 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
     hess = jh.T @ jh
     p = np.array(p0, dtype=np.float64)
     zncc = float("nan")
+    prev = np.zeros(2)
     for it in range(max_iterations):
         if shape == "translation":
             xs, ys = col + dx + p[0], row + dy + p[1]
@@ -185,7 +186,19 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
         gh = gc / np.linalg.norm(gc)
         zncc = float(fh @ gh)
         dp = np.linalg.solve(hess, -jh.T @ (fh - gh))
-        p = p - dp if shape == "translation" else compose_affine(p, dp)
+        if shape == "translation":
+            # Aitken step gain, as the compiled kernel (kernels._aitken_gain)
+            gain = 1.0
+            pp = float(prev @ prev)
+            dot = float(dp @ prev)
+            rho = dot / pp if pp > 0 else 0.0
+            if pp > 0 and 0.3 < rho < 0.97 and dot * dot > 0.9025 * float(dp @ dp) * pp:
+                gain, prev = 1.0 / (1.0 - rho), np.zeros(2)
+            else:
+                prev = dp.copy()
+            p = p - gain * dp
+        else:
+            p = compose_affine(p, dp)
         if shape == "translation":
             norm = float(np.hypot(dp[0], dp[1]))
         else:

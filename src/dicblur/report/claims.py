@@ -40,12 +40,14 @@ def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...])
     base = Correlator(sharp_ref, **kw)
     out: dict[str, Any] = {"blur": list(blur), "sharp_ref": [], "offset": [],
                            "blurred_ref": []}
+    k = 100
+    t = np.linspace(0.0, 1.0, k + 1)
     for w in blur:
         cur = add_gaussian_noise(motion_blur(image, (0.0, w)), sig, rng=rng)
-        shifted = np.fft.irfft2(
-            np.fft.rfft2(image) * np.exp(-2j * np.pi * np.fft.rfftfreq(image.shape[1]) * 0.5)[
-                None, :], s=image.shape)
-        cur_off = add_gaussian_noise(motion_blur(shifted, (0.0, w)), sig, rng=rng)
+        # the same linear motion with a constant 0.5 px added to every position
+        # (paper Section III: "adding a constant to the values of p")
+        path = np.stack([np.zeros_like(t), 0.5 + w * t], axis=1)
+        cur_off = add_gaussian_noise(motion_blur(image, None, trajectory=path), sig, rng=rng)
         ref_b = add_gaussian_noise(motion_blur(image, (0.0, w)), sig, rng=rng)
         for key, corr, img in (("sharp_ref", base, cur), ("offset", base, cur_off),
                                ("blurred_ref", Correlator(ref_b, **kw), cur)):

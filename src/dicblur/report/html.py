@@ -162,6 +162,19 @@ class HtmlReport:
 
         png = fig_to_files(fig, self.folder / "figures", name)
         plt.close(fig)
+        self._embed(png, name, caption)
+
+    def figure_from_writer(self, writer: Any, name: str, caption: str) -> None:
+        """Embed a figure made by ``writer(path)`` (a function that saves one figure to a
+        path, format from the extension); it is called for PNG and for SVG."""
+        folder = self.folder / "figures"
+        folder.mkdir(parents=True, exist_ok=True)
+        png = folder / f"{name}.png"
+        writer(png)
+        writer(folder / f"{name}.svg")
+        self._embed(png.read_bytes(), name, caption)
+
+    def _embed(self, png: bytes, name: str, caption: str) -> None:
         data = base64.b64encode(png).decode("ascii")
         self.figures.append(name)
         self._parts.append(

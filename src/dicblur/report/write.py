@@ -18,22 +18,6 @@ def _ci(p: dict[str, float], digits: int = 3) -> str:
     return f"{p['value']:.{digits}g} [{p['low']:.{digits}g}, {p['high']:.{digits}g}]"
 
 
-def _embed_writer(rep: HtmlReport, writer: Any, name: str, caption: str) -> None:
-    """Embed a figure produced by a ``writer(path)`` function (PNG and SVG)."""
-    import base64
-
-    folder = rep.folder / "figures"
-    folder.mkdir(parents=True, exist_ok=True)
-    png = folder / f"{name}.png"
-    writer(png)
-    writer(folder / f"{name}.svg")
-    data = base64.b64encode(png.read_bytes()).decode("ascii")
-    rep.figures.append(name)
-    rep._parts.append(
-        f'<figure id="fig-{name}"><img alt="{caption}" src="data:image/png;base64,{data}">'
-        f"<figcaption>{caption}</figcaption></figure>")
-
-
 def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: dict[str, Any],
                  fits: dict[str, Any], models: dict[str, Any], family: list[dict[str, Any]],
                  pulse: Any, claims: list[dict[str, Any]], versions: dict[str, str],
@@ -96,11 +80,11 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
                                           "sssig_closed", "sssig_numeric", "sssig_pixel"],
               left=["regime", "condition"],
               caption="Table II: closed forms next to numerical convolution and pixel samples.")
-    _embed_writer(rep, lambda pth: plot_regimes(pth), "fig04_regimes",
+    rep.figure_from_writer(lambda pth: plot_regimes(pth), "fig04_regimes",
                   "Fig. 4: the four regimes of a box-blurred pulse train.")
-    _embed_writer(rep, lambda pth: plot_min_chi2(pulse, pth), "fig05_min_chi2",
+    rep.figure_from_writer(lambda pth: plot_min_chi2(pulse, pth), "fig05_min_chi2",
                   "Fig. 5: minimum of the SSD against w (a = 1, du = 20, dp = 10).")
-    _embed_writer(rep, lambda pth: plot_uncertainty(pulse, pth), "fig06_pulse_ue",
+    rep.figure_from_writer(lambda pth: plot_uncertainty(pulse, pth), "fig06_pulse_ue",
                   "Fig. 6: 1-D Monte Carlo u_e(w) with the paper's and first-principles laws.")
     rep.preformatted(pulse.verdict)
 

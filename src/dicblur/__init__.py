@@ -63,10 +63,12 @@ from .metrics import (
     subset_centres,
 )
 from .models import (
+    BlurMismatchCurve,
     BlurSensitivity,
     BlurUncertaintyModel,
     ExposurePlan,
     PoissonGaussianCamera,
+    blur_mismatch_curve,
     blur_sensitivity,
     compare_models,
     fit_blur_model,
@@ -80,6 +82,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AcceleratedMotion",
+    "BlurMismatchCurve",
     "BlurSensitivity",
     "BlurUncertaintyModel",
     "Camera",
@@ -106,6 +109,7 @@ __all__ = [
     "__version__",
     "add_gaussian_noise",
     "blur_length",
+    "blur_mismatch_curve",
     "blur_sensitivity",
     "blur_transfer",
     "campaign_status",

@@ -15,7 +15,14 @@ from .decay import (
     taylor_model,
 )
 from .fit import ModelComparison, compare_models, fit_blur_model
-from .mismatch import BlurSensitivity, blur_sensitivity, fit_mismatch, mismatch_model
+from .mismatch import (
+    BlurMismatchCurve,
+    BlurSensitivity,
+    blur_mismatch_curve,
+    blur_sensitivity,
+    fit_mismatch,
+    mismatch_model,
+)
 from .model import BlurUncertaintyModel, Prediction
 from .plan import RULE_OF_THUMB_BLUR, ExposurePlan, PoissonGaussianCamera, plan_exposure
 from .powerlaw import edge_driven_range, fit_power_law, power_law
@@ -24,6 +31,7 @@ from .units import parse_quantity
 
 __all__ = [
     "RULE_OF_THUMB_BLUR",
+    "BlurMismatchCurve",
     "BlurSensitivity",
     "BlurUncertaintyModel",
     "ExposurePlan",
@@ -32,6 +40,7 @@ __all__ = [
     "ParameterEstimate",
     "PoissonGaussianCamera",
     "Prediction",
+    "blur_mismatch_curve",
     "blur_sensitivity",
     "combined_model",
     "combined_pan_model",

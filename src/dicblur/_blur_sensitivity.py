@@ -234,7 +234,8 @@ def _project(jac: NDArray[np.float64], hat: NDArray[np.float64]) -> NDArray[np.f
 
 def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Batched ``a^-1 b``; NaN rows where ``a`` is singular (no gradient in the subset)."""
-    ok = np.isfinite(a).all(axis=(1, 2)) & np.isfinite(b).all(axis=1)
+    ok: NDArray[np.bool_] = np.asarray(np.isfinite(a).all(axis=(1, 2))
+                                       & np.isfinite(b).all(axis=1))
     ok[ok] = np.linalg.cond(a[ok]) < 1e12
     sol = np.full(b.shape, np.nan)
     if ok.any():

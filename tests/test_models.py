@@ -489,6 +489,23 @@ def test_mismatch_curve_tends_to_leading_order(derivative, shape, criterion):
     assert curve.motion == pytest.approx((1 / math.sqrt(2), 1 / math.sqrt(2)))
 
 
+
+def test_mismatch_curve_leaves_out_broken_down_subsets():
+    # 3 px speckles blurred over 8 px: along x the texture of some subsets is gone and the
+    # linearised shift runs away (IC-GN stops converging there too)
+    img = dicblur.speckle_pattern((160, 160), speckle_size=3.0, softness=0.5, seed=7)
+    kw = dict(subset=31, step=12, shape="affine", boundary="periodic")
+    cv = blur_mismatch_curve(img, [1.0, 8.0], **kw)
+    assert cv.valid_fraction[0] == 1.0
+    assert 0.3 < cv.valid_fraction[1] < 1.0
+    kept = np.isfinite(cv.shifts[1])
+    assert cv.u_blur[1] == pytest.approx(np.std(cv.shifts[1][kept]))
+    assert np.all(np.abs(cv.shifts[1][kept]) <= 1.0)
+    every = blur_mismatch_curve(img, [1.0, 8.0], max_shift=1e9, **kw)
+    assert every.valid_fraction[1] == 1.0
+    assert every.u_blur[1] > cv.u_blur[1]
+    np.testing.assert_array_equal(every.shifts[0], cv.shifts[0])
+
 def test_blur_sensitivity_options_are_checked():
     img = dicblur.speckle_pattern((64, 64), speckle_size=4.0, seed=5)
     with pytest.raises(InputError, match="derivative='cubic'"):

@@ -31,7 +31,7 @@ from .._blur_sensitivity import (
     subset_blur_coefficients,
     subset_blur_shifts,
 )
-from .._validation import as_image, check_odd_subset
+from .._validation import as_image, check_odd_subset, check_positive
 from ..errors import FitError, InputError
 from ..metrics import _resolve_points
 from ._checks import as_blur, as_positive, as_vector
@@ -162,8 +162,11 @@ class BlurMismatchCurve:
         Field statistic ``std_i(xi_i(W))`` (px): the noise-free part of u_e.
     mean : ndarray, shape (m,)
         ``mean_i(xi_i(W))`` (px): a common shift, which DIC sees as a rigid offset.
+    valid_fraction : ndarray, shape (m,)
+        Fraction of the subsets in the statistics at each W (the others have no gradient
+        or break down, as non-converged DIC points would).
     shifts : ndarray, shape (m, n)
-        Per-subset shift ``xi_i(W)`` along the motion (px; NaN: no gradient).
+        Per-subset shift ``xi_i(W)`` along the motion (px; NaN: no gradient or breakdown).
     centres : ndarray of int, shape (n, 2)
         Subset centres (row, col).
     subset : int
@@ -176,6 +179,7 @@ class BlurMismatchCurve:
     blur: NDArray[np.float64]
     u_blur: NDArray[np.float64]
     mean: NDArray[np.float64]
+    valid_fraction: NDArray[np.float64]
     shifts: NDArray[np.float64]
     centres: NDArray[np.intp]
     subset: int
@@ -195,6 +199,7 @@ def blur_mismatch_curve(
     derivative: Derivative = "bspline3",
     boundary: Boundary = "reflect",
     criterion: Criterion = "znssd",
+    max_shift: float = 1.0,
 ) -> BlurMismatchCurve:
     """Predict the blur-mismatch error ``u_blur(W)`` of a pattern at finite ``W``.
 
@@ -212,6 +217,9 @@ def blur_mismatch_curve(
         Blur lengths W (px, >= 0, any order).
     subset, step, points, motion, shape, derivative, boundary, criterion
         As for :func:`blur_sensitivity`.
+    max_shift : float
+        Breakdown threshold (px): subsets whose linearised shift is longer are left out
+        of the statistics at that W (``valid_fraction`` says how many remain).
 
     Returns
     -------
@@ -223,17 +231,25 @@ def blur_mismatch_curve(
     if boundary not in ("reflect", "periodic"):
         raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
     pts = _resolve_points(img.shape, subset, step, points)
+    max_shift = check_positive(max_shift, "max_shift")
     xi = subset_blur_shifts(img, w, pts, subset, motion=motion, shape=shape,
-                            derivative=derivative, boundary=boundary, criterion=criterion)
-    good = np.isfinite(xi).all(axis=0)
-    if good.sum() < 2:
+                            derivative=derivative, boundary=boundary, criterion=criterion,
+                            max_shift=max_shift)
+    good = np.isfinite(xi)
+    count = good.sum(axis=1)
+    if np.any(count < 2):
+        j = int(np.argmax(count < 2))
         raise InputError(
-            "image: fewer than two subsets have an intensity gradient; the blur mismatch "
-            "is undefined (use a textured image or a larger area)"
+            f"image: fewer than two subsets have an intensity gradient at W = {w[j]:g} px "
+            "(flat, or erased by the blur); the blur mismatch is undefined there (use a "
+            "textured image, a larger area or shorter blur lengths)"
         )
+    with np.errstate(invalid="ignore"):
+        u_blur = np.nanstd(xi, axis=1)
+        mean = np.nanmean(xi, axis=1)
     n = math.hypot(float(motion[0]), float(motion[1]))
-    return BlurMismatchCurve(blur=w, u_blur=xi[:, good].std(axis=1),
-                             mean=xi[:, good].mean(axis=1), shifts=xi, centres=pts,
+    return BlurMismatchCurve(blur=w, u_blur=u_blur, mean=mean,
+                             valid_fraction=count / xi.shape[1], shifts=xi, centres=pts,
                              subset=subset, motion=(float(motion[0]) / n, float(motion[1]) / n),
                              shape=str(shape))
 

@@ -13,6 +13,8 @@ u over POIs) is the blur mismatch alone.
 - fitted ``c``: the mismatch model's leading ``c`` over W = 0.5..4 px (``c4`` kept when the
   AIC asks for it), a plain ``c W^2`` fit in log space, and in linear least squares;
 - the static curve ``blur_mismatch_curve`` against u_e at every W (0.25..8 px);
+- the same on the real DIC Challenge Sample 3 reference (mirror boundary) when
+  ``../shared/data/real`` is present (rows with seed 0, speckle 0.0);
 - speed of ``blur_sensitivity`` and ``blur_mismatch_curve`` on 512x512.
 
 Run: ``.venv/bin/python benchmarks/bench_blur_sensitivity.py [--quick]``
@@ -35,23 +37,31 @@ from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
 OUT = Path(__file__).resolve().parent / "results" / "blur_sensitivity.json"
 
 
-def _centred_blur(img: np.ndarray, wl: float) -> np.ndarray:
-    return dicblur.motion_blur(img, None, substeps=None,
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+
+
+def _centred_blur(img: np.ndarray, wl: float, boundary: str) -> np.ndarray:
+    return dicblur.motion_blur(img, None, substeps=None, boundary=boundary,
                                trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1))
 
 
-def case(size: float, seed: int, shape: str, blurs: np.ndarray) -> dict:
-    img = dicblur.speckle_pattern((192, 192), speckle_size=size, softness=0.5, seed=seed)
+def case(size: float, seed: int, shape: str, blurs: np.ndarray,
+         image: np.ndarray | None = None) -> dict:
+    if image is None:
+        img = dicblur.speckle_pattern((192, 192), speckle_size=size, softness=0.5, seed=seed)
+        boundary = "periodic"
+    else:  # a camera image: mirror extension
+        img, boundary = image, "reflect"
     ref = dicblur.correlate(img, img, subset=31, step=12, shape=shape)
     pts = np.stack([ref.rows, ref.cols], axis=1)
-    kw = dict(subset=31, points=pts, boundary="periodic", shape=shape)
+    kw = dict(subset=31, points=pts, boundary=boundary, shape=shape)
     c = blur_sensitivity(img, **kw).c
     c_old = blur_sensitivity(img, derivative="spectral", criterion="ssd", **kw).c
     cv = blur_mismatch_curve(img, blurs, **kw)
     curve = cv.u_blur
     u_e, s, conv = [], [], []
     for wl in blurs:
-        cur = _centred_blur(img, float(wl))
+        cur = _centred_blur(img, float(wl), boundary)
         res = dicblur.correlate(img, cur, subset=31, step=12, shape=shape)
         u_e.append(float(np.std(res.u[res.converged])))
         conv.append(float(res.converged.mean()))
@@ -100,6 +110,12 @@ def main() -> None:
     seeds = (7,) if args.quick else (7, 11)
     rows = [case(size, seed, shape, blurs) for seed in seeds for size in sizes
             for shape in ("translation", "affine")]
+    sample3 = REAL / "dicchallenge1_sample3" / "Sample3_Reference.tif"
+    if sample3.is_file():  # seed 0 and speckle size 0 in the tables: DIC Challenge Sample 3
+        img = dicblur.load_image(sample3).astype(np.float64)
+        rows += [case(0.0, 0, shape, blurs, image=img) for shape in ("translation", "affine")]
+    else:
+        print(f"(Sample 3 rows skipped: {sample3} absent)")
     print("fitted c / static c over W = 0.5..4 px (static: spline gradients + ZNSSD; "
           "'old': spectral + SSD)")
     print(f"{'seed':>4s} {'speckle':>7s} {'shape':>11s} {'c static':>10s} {'model':>6s} "

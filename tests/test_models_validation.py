@@ -89,3 +89,25 @@ def test_static_c_vs_dic(size, shape):
     assert np.exp(np.mean(np.log(u_e_a / blurs**2))) == pytest.approx(pred, rel=0.15)
     # the curve keeps every order of the blur: within 10 % at every W
     np.testing.assert_allclose(curve, u_e_a, rtol=0.10)
+
+
+@pytest.mark.slow
+def test_static_c_vs_dic_on_the_real_sample3(real_data):
+    """The same check on a camera image (DIC Challenge Sample 3, mirror boundary)."""
+    path = real_data / "dicchallenge1_sample3" / "Sample3_Reference.tif"
+    img = dicblur.load_image(path).astype(np.float64)
+    blurs = np.arange(0.5, 4.01, 0.5)
+    ref = dicblur.correlate(img, img, subset=31, step=12, shape="translation")
+    pts = np.stack([ref.rows, ref.cols], axis=1)
+    pred = blur_sensitivity(img, subset=31, points=pts).c
+    curve = blur_mismatch_curve(img, blurs, subset=31, points=pts).u_blur
+    u_e, s = [], []
+    for wl in blurs:
+        cur = dicblur.motion_blur(img, None, substeps=None, boundary="reflect",
+                                  trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1))
+        res = dicblur.correlate(img, cur, subset=31, step=12, shape="translation")
+        u_e.append(float(np.std(res.u[res.converged])))
+        s.append(float(dicblur.sssig(cur, subset=31, points=pts).mean()))
+    fit = fit_mismatch(blurs, np.array(s), np.array(u_e), next_term="auto")
+    assert fit["c"] == pytest.approx(pred, rel=0.15)  # measured: 1.0006
+    np.testing.assert_allclose(curve, u_e, rtol=0.10)  # measured: within 2.3 %

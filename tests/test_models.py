@@ -26,9 +26,11 @@ from dicblur.models import (
     match_score_uncertainty,
     mbrf,
     mismatch_model,
+    model_from_pattern,
     pan_uncertainty,
     parse_quantity,
     plan_exposure,
+    predict_from_pattern,
     sssig_decay,
     taylor_model,
 )
@@ -594,3 +596,66 @@ def test_bad_input(model):
         fit_sssig_decay(W[:2], s[:2])
     with pytest.raises(InputError, match="full_well"):
         PoissonGaussianCamera(full_well=0, read_noise=1, flux=1)
+
+
+def test_pattern_noise_variance_matches_monte_carlo_of_the_fixed_point():
+    # noise of 2 GL in both images, W = 3 px: the exact IC-GN fixed point (root finding,
+    # band-limited interpolation, true derivatives of the *noisy* reference) over 120
+    # noise draws, against the linear sandwich formula
+    n, sub, h, wlen, sigma = 48, 15, 7, 3.0, 2.0
+    img = dicblur.speckle_pattern((n, n), speckle_size=5.0, softness=1.0, seed=3)
+    kx = np.fft.fftfreq(n)[None, :]
+    ky = np.fft.fftfreq(n)[:, None]
+    blurred = np.fft.ifft2(np.fft.fft2(img) * np.sinc(wlen * kx)).real
+    r, c = 24, 24
+    pred = predict_from_pattern(img, [wlen], noise_sigma=sigma, subset=sub,
+                                points=[[r, c]] * 2, boundary="periodic",
+                                derivative="spectral")
+    oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
+    oy, ox = oy.ravel(), ox.ravel()
+    sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
+    rng = np.random.default_rng(11)
+    us = []
+    for _ in range(120):
+        ref = img + rng.normal(0.0, sigma, img.shape)
+        spec_g = np.fft.fft2(blurred + rng.normal(0.0, sigma, img.shape))
+        spec_f = np.fft.fft2(ref)
+        gx = np.fft.ifft2(spec_f * 2j * np.pi * kx).real[sl].ravel()
+        gy = np.fft.ifft2(spec_f * 2j * np.pi * ky).real[sl].ravel()
+        jac = np.stack([gx, gy], 1)
+        f = ref[sl].ravel()
+
+        def stationarity(p, jac=jac, f=f, spec_g=spec_g):
+            return jac.T @ _znssd_resid(_fourier_eval(spec_g, c + ox + p[0], r + oy + p[1]), f)
+
+        sol = optimize.root(stationarity, np.zeros(2), tol=1e-10)
+        assert np.abs(sol.fun).max() < 1e-9 * np.abs(jac).sum()
+        us.append(sol.x[0])
+    # the two identical points share one subset: u_blur is 0, u_e is the noise term
+    assert pred.u_blur[0] == pytest.approx(0.0, abs=1e-12)
+    # 120 draws: the sample std is within +-20 % of the truth at ~3 sigma
+    assert np.std(us) == pytest.approx(pred.u_noise[0], rel=0.2)
+
+
+def test_model_from_pattern_follows_the_prediction_and_plans():
+    img = dicblur.speckle_pattern((160, 160), speckle_size=4.0, seed=2)
+    w = np.arange(0.0, 6.01, 0.5)
+    pred = predict_from_pattern(img, w, noise_sigma=2.0, subset=21, step=10)
+    assert np.all(np.diff(pred.u_e[2:]) > 0)  # the mismatch takes over
+    np.testing.assert_allclose(pred.u_e, np.hypot(pred.u_noise, pred.u_blur))
+    assert pred.sssig[0] == pytest.approx(
+        dicblur.sssig(img, subset=21, step=10).mean(), rel=1e-9)
+    model = model_from_pattern(img, noise_sigma=2.0, subset=21, step=10, blur=w)
+    assert model.provenance["source"] == "static prediction"
+    assert model.noise_sigma == 2.0
+    np.testing.assert_allclose(model.predict(w).u_e, pred.u_e, rtol=0.1)
+    # noise follows SSSIG / sigma**2: at 4 GL the static noise term doubles
+    pred4 = predict_from_pattern(img, [0.0], noise_sigma=4.0, subset=21, step=10)
+    assert model.predict([0.0], sigma=4.0).u_e[0] == pytest.approx(pred4.u_e[0], rel=0.1)
+    plan = plan_exposure(model, velocity="100mm/s", scale="0.05mm/px", target="0.01px")
+    assert plan.exposure > 0
+    assert float(model.predict([plan.blur]).u_e[0]) == pytest.approx(0.01, rel=1e-3)
+    with pytest.raises(InputError, match="noise_sigma"):
+        predict_from_pattern(img, [1.0], noise_sigma=0.0, subset=21)
+    with pytest.raises(InputError, match="at least 4"):
+        model_from_pattern(img, noise_sigma=2.0, subset=21, blur=[0.0, 1.0, 2.0])

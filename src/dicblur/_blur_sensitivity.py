@@ -42,6 +42,7 @@ ZNSSD projection it agrees within 0.5 % as W -> 0 (BENCHMARKS.md, models section
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Literal
 
 import numpy as np
@@ -49,7 +50,12 @@ from numpy.typing import NDArray
 
 from .errors import InputError
 
-__all__ = ["directional_derivatives", "subset_blur_coefficients", "subset_blur_shifts"]
+__all__ = [
+    "directional_derivatives",
+    "subset_blur_coefficients",
+    "subset_blur_shifts",
+    "subset_noise_variance",
+]
 
 Shape = Literal["translation", "affine"]
 Derivative = Literal["bspline3", "bspline5", "spectral", "central"]
@@ -359,34 +365,100 @@ def subset_blur_shifts(
     _check_criterion(criterion)
     _check_derivative(derivative)
     dy, dx = _unit(motion)
-    fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    blur = np.asarray(blur, dtype=np.float64)
     out = np.zeros((len(blur), len(centres)))
+    for j, start, jf, jg, f, gg in _blurred_subsets(image, blur, centres, subset, motion,
+                                                    shape, derivative, boundary, chunk):
+        if blur[j] == 0:
+            continue
+        if criterion == "znssd":
+            fh, _ = _normalise(f)
+            gh, sg = _normalise(gg)
+            sg = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
+            a = np.einsum("npi,npj->nij", jf, _project(jg, gh)) / sg[:, None, None]
+            b = np.einsum("npi,np->ni", jf, fh - gh)
+        else:
+            a = np.einsum("npi,npj->nij", jf, jg)
+            b = np.einsum("npi,np->ni", jf, f - gg)
+        out[j, start : start + len(f)] = _along(_solve(a, b), shape, dy, dx, max_shift)
+    return out
+
+
+def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
+                     centres: NDArray[np.intp], subset: int, motion: tuple[float, float],
+                     shape: str, derivative: Derivative, boundary: Boundary, chunk: int
+                     ) -> Iterator[tuple[int, int, NDArray[np.float64], NDArray[np.float64],
+                                         NDArray[np.float64], NDArray[np.float64]]]:
+    """``(j, start, J_f, J_g, f, g)`` for every blur length and chunk of subsets: the
+    steepest-descent images of the sharp and of the centred-box-blurred image, and their
+    subset intensities (W = 0: ``g = f``)."""
+    dy, dx = _unit(motion)
+    fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
     for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
         if wl == 0:
-            continue
-        g = _spectral(image, boundary, dy, dx, blur=float(wl))[0]
-        if derivative == "central":
-            gp = np.pad(g, 1, mode="symmetric" if boundary == "reflect" else "wrap")
-            ggx = 0.5 * (gp[1:-1, 2:] - gp[1:-1, :-2])
-            ggy = 0.5 * (gp[2:, 1:-1] - gp[:-2, 1:-1])
-        elif derivative == "spectral":
-            ggy, ggx, _ = _spectral(g, boundary, dy, dx)
+            g, ggy, ggx = image, fy, fx
         else:
-            ggy, ggx = _spline_gradients(g, derivative)
+            g = _spectral(image, boundary, dy, dx, blur=float(wl))[0]
+            if derivative == "central":
+                gp = np.pad(g, 1, mode="symmetric" if boundary == "reflect" else "wrap")
+                ggx = 0.5 * (gp[1:-1, 2:] - gp[1:-1, :-2])
+                ggy = 0.5 * (gp[2:, 1:-1] - gp[:-2, 1:-1])
+            elif derivative == "spectral":
+                ggy, ggx, _ = _spectral(g, boundary, dy, dx)
+            else:
+                ggy, ggx = _spline_gradients(g, derivative)
         win = _Windows(subset, fx, fy, ggx, ggy, image, g)
         for start in range(0, len(centres), chunk):
-            cc = centres[start : start + chunk]
-            ax, ay, bx, by, f, gg = win.take(cc)
-            jf = win.jacobian(ax, ay, shape)
-            jg = win.jacobian(bx, by, shape)
-            if criterion == "znssd":
-                fh, _ = _normalise(f)
-                gh, sg = _normalise(gg)
-                sg = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
-                a = np.einsum("npi,npj->nij", jf, _project(jg, gh)) / sg[:, None, None]
-                b = np.einsum("npi,np->ni", jf, fh - gh)
-            else:
-                a = np.einsum("npi,npj->nij", jf, jg)
-                b = np.einsum("npi,np->ni", jf, f - gg)
-            out[j, start : start + len(cc)] = _along(_solve(a, b), shape, dy, dx, max_shift)
+            ax, ay, bx, by, f, gg = win.take(centres[start : start + chunk])
+            yield j, start, win.jacobian(ax, ay, shape), win.jacobian(bx, by, shape), f, gg
+
+
+def subset_noise_variance(
+    image: NDArray[np.float64],
+    blur: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    *,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "bspline3",
+    boundary: Boundary = "reflect",
+    chunk: int = 256,
+) -> NDArray[np.float64]:
+    """Per-subset variance of the ZNSSD IC-GN shift along ``motion`` per unit noise variance.
+
+    Independent Gaussian noise of std ``sigma`` (GL) in both images moves the fixed point
+    ``p = sigma_g A^-1 J_f^T (f_hat - g_hat)`` (module docstring, ``A = J_f^T P_g J_g``) by a
+    linear response with covariance
+
+        sigma**2 A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f + J_f^T P_g J_f] A^-T,
+
+    the sharp reference's noise weighed down by the blurred subset's lower contrast. At
+    ``W = 0`` it is ``2 sigma**2 (J^T P J)^-1``, the match-score bound (eq. 2) with the ZNSSD
+    projection; with blur, the weaker current gradients in ``A`` raise it.
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+        ``var_i(W_j) / sigma**2`` (px**2 / GL**2); ``nan`` where the subset has no gradient.
+    """
+    _check_shape(shape)
+    _check_derivative(derivative)
+    dy, dx = _unit(motion)
+    e = np.zeros(2 if shape == "translation" else 6)
+    e[0] = dx
+    e[1 if shape == "translation" else 3] = dy
+    out = np.full((len(blur), len(centres)), np.nan)
+    for j, start, jf, jg, f, gg in _blurred_subsets(image, blur, centres, subset, motion,
+                                                    shape, derivative, boundary, chunk):
+        fh, sf = _normalise(f)
+        gh, sg = _normalise(gg)
+        ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
+        a = np.einsum("npi,npj->nij", jf, _project(jg, gh))
+        pf, pg = _project(jf, fh), _project(jf, gh)
+        mid = (ratio2[:, None, None] * np.einsum("npi,npj->nij", pf, pf)
+               + np.einsum("npi,npj->nij", pg, pg))
+        # e^T A^-1 M A^-T e = z^T M z with A^T z = e
+        z = _solve(np.transpose(a, (0, 2, 1)), np.broadcast_to(e, (len(f), e.size)).copy())
+        out[j, start : start + len(f)] = np.einsum("ni,nij,nj->n", z, mid, z)
     return out

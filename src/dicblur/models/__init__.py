@@ -24,6 +24,7 @@ from .mismatch import (
     mismatch_model,
 )
 from .model import BlurUncertaintyModel, Prediction
+from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern
 from .plan import RULE_OF_THUMB_BLUR, ExposurePlan, PoissonGaussianCamera, plan_exposure
 from .powerlaw import edge_driven_range, fit_power_law, power_law
 from .static import match_score_uncertainty, pan_uncertainty
@@ -38,6 +39,7 @@ __all__ = [
     "FitResult",
     "ModelComparison",
     "ParameterEstimate",
+    "PatternPrediction",
     "PoissonGaussianCamera",
     "Prediction",
     "blur_mismatch_curve",
@@ -53,10 +55,12 @@ __all__ = [
     "match_score_uncertainty",
     "mbrf",
     "mismatch_model",
+    "model_from_pattern",
     "pan_uncertainty",
     "parse_quantity",
     "plan_exposure",
     "power_law",
+    "predict_from_pattern",
     "sssig_decay",
     "taylor_model",
 ]

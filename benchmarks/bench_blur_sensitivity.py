@@ -13,6 +13,8 @@ u over POIs) is the blur mismatch alone.
 - fitted ``c``: the mismatch model's leading ``c`` over W = 0.5..4 px (``c4`` kept when the
   AIC asks for it), a plain ``c W^2`` fit in log space, and in linear least squares;
 - the static curve ``blur_mismatch_curve`` against u_e at every W (0.25..8 px);
+- ``predict_from_pattern`` (noise + mismatch, no fitted parameter) against IC-GN with
+  Gaussian noise 2 GL in both images (256x256, subset 21, 6 repetitions);
 - the same on the real DIC Challenge Sample 3 reference (mirror boundary) when
   ``../shared/data/real`` is present (rows with seed 0, speckle 0.0);
 - speed of ``blur_sensitivity`` and ``blur_mismatch_curve`` on 512x512.
@@ -78,6 +80,30 @@ def case(size: float, seed: int, shape: str, blurs: np.ndarray,
             "converged_fraction": conv, "curve_valid_fraction": cv.valid_fraction.tolist()}
 
 
+def noisy_case(size: float, shape: str, sigma: float = 2.0, reps: int = 6) -> dict:
+    """``predict_from_pattern`` (no fitted parameter) against IC-GN with noise in both images."""
+    img = dicblur.speckle_pattern((256, 256), speckle_size=size, softness=0.5, seed=7)
+    ref = dicblur.correlate(img, img, subset=21, step=10, shape=shape)
+    pts = np.stack([ref.rows, ref.cols], axis=1)
+    blurs = np.array([0.0, 0.5, 1.0, 2.0, 3.0, 4.0])
+    pred = dicblur.predict_from_pattern(img, blurs, noise_sigma=sigma, subset=21, points=pts,
+                                        shape=shape, boundary="periodic")
+    rng = np.random.default_rng(1)
+    measured = []
+    for wl in blurs:
+        cur = _centred_blur(img, float(wl), "periodic") if wl > 0 else img
+        u = []
+        for _ in range(reps):
+            res = dicblur.correlate(img + rng.normal(0, sigma, img.shape),
+                                    cur + rng.normal(0, sigma, img.shape),
+                                    subset=21, step=10, shape=shape)
+            u.append(float(np.std(res.u[res.converged])))
+        measured.append(float(np.mean(u)))
+    return {"speckle_size": size, "shape": shape, "noise": sigma, "reps": reps,
+            "blur": blurs.tolist(), "measured_u_e": measured, "predicted_u_e": pred.u_e.tolist(),
+            "predicted_u_noise": pred.u_noise.tolist(), "predicted_u_blur": pred.u_blur.tolist()}
+
+
 def speed() -> list[dict]:
     img = dicblur.speckle_pattern((512, 512), speckle_size=4.0, seed=1)
     rows = []
@@ -88,6 +114,9 @@ def speed() -> list[dict]:
          lambda: blur_sensitivity(img, subset=31, step=10, shape="affine")),
         ("blur_mismatch_curve 512x512, 8 blur lengths, translation",
          lambda: blur_mismatch_curve(img, np.arange(1.0, 9.0), subset=31, step=10)),
+        ("predict_from_pattern 512x512, 8 blur lengths, translation",
+         lambda: dicblur.predict_from_pattern(img, np.arange(1.0, 9.0), noise_sigma=2.0,
+                                              subset=31, step=10)),
     ):
         fn()
         best = min(_timed(fn) for _ in range(3))
@@ -141,6 +170,13 @@ def main() -> None:
         print(f"{r['seed']:4d} {r['speckle_size']:7.1f} {r['shape']:>11s} "
               f"{r['converged_fraction'][-2]:.3f}/{r['curve_valid_fraction'][-2]:.3f} "
               f"{r['converged_fraction'][-1]:.3f}/{r['curve_valid_fraction'][-1]:.3f}")
+    noisy = [noisy_case(size, shape) for size in (3.0, 6.0)
+             for shape in ("translation", "affine")]
+    print("\npredict_from_pattern / noisy IC-GN u_e (noise 2 GL, 256x256, subset 21, 6 reps)")
+    print(f"{'speckle':>7s} {'shape':>11s} " + " ".join(f"{w:6.2f}" for w in noisy[0]["blur"]))
+    for r in noisy:
+        ratio = np.array(r["predicted_u_e"]) / np.array(r["measured_u_e"])
+        print(f"{r['speckle_size']:7.1f} {r['shape']:>11s} " + " ".join(f"{x:6.3f}" for x in ratio))
     sp = speed()
     print(f"\n{'case':60s} {'seconds':>8s}")
     for r in sp:
@@ -149,7 +185,7 @@ def main() -> None:
     OUT.write_text(json.dumps({
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load": os.getloadavg()},
-        "cases": rows, "speed": sp}, indent=1))
+        "cases": rows, "noisy": noisy, "speed": sp}, indent=1))
     print(f"wrote {OUT}")
 
 

@@ -181,13 +181,14 @@ def fig_mismatch(data: Mapping[str, Mapping[str, Any]]) -> Any:
     """Beyond the paper: u_e vs W at each noise level, with the mismatch model."""
     fig, axes = _grid(len(data))
     for ax, (label, d) in zip(axes, data.items(), strict=False):
-        for j, (sigma, u, model) in enumerate(d["curves"]):
+        static = d.get("static") or [None] * len(d["curves"])
+        for j, ((sigma, u, model), st) in enumerate(zip(d["curves"], static, strict=True)):
             c = _COLORS[j % len(_COLORS)]
             ax.semilogy(d["blur"], u, "o", ms=3, color=c, label=f"σ = {sigma:g} GL")
             ax.semilogy(d["blur"], model, "-", color=c)
-        if d.get("c_static") is not None:
-            ax.semilogy(d["blur"], d["c_static"] * d["blur"] ** 2, ":", color="k",
-                        label=r"static $c\,W^2$ (no fit)")
+            if st is not None:
+                ax.semilogy(d["blur"], st, ":", color=c,
+                            label="static image, no fit" if j == 0 else None)
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel(r"$u_e$ (px)")

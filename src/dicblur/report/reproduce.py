@@ -235,7 +235,7 @@ def _param(fit: Any, name: str) -> dict[str, float]:
 def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) -> ReproduceResult:
     """Run the whole study and write the report folder (see the module docs)."""
     from ..metrics import pattern_metrics
-    from ..models import blur_sensitivity, fit_blur_model
+    from ..models import blur_sensitivity, fit_blur_model, predict_from_pattern
     from ..pulse.study import run_pulse_study
 
     s = settings
@@ -336,6 +336,14 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         models[k] = (paper, full)
         paper.to_json(str(out / f"model_{k}.json"))
         full.to_json(str(out / f"model_{k}_all_noise.json"))
+        # the whole u_e(W) from the static image alone, no fit (docs/models.md s. 4); one
+        # call at sigma = 1 GL: the noise term scales with sigma
+        unit = predict_from_pattern(p.image, W, noise_sigma=1.0, subset=s.subset,
+                                    step=s.poi_step, boundary="periodic")
+        static[k]["predicted_u_e"] = {
+            f"{lv:g}": np.hypot(lv * unit.u_noise, unit.u_blur).tolist()
+            for lv in s.noise_levels}
+        st = np.asarray(static[k]["predicted_u_e"][f"{s.main_noise:g}"])[v]
         eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
         mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch
                 else None)
@@ -352,6 +360,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
             "eq19_max_rel_error": float(np.max(np.abs(eq19 / u - 1))),
             "mismatch_max_rel_error": (float(np.max(np.abs(mism / u - 1)))
                                        if mism is not None else None),
+            "static_max_rel_error": float(np.max(np.abs(st / u - 1))),
+            "static_rms_log_error": float(np.sqrt(np.mean(np.log(st / u) ** 2))),
             "w_fitted_max": float(W[v].max()),
             "bias_max": float(np.nanmax(np.abs(series(ds, "bias", k, s.main_noise)[v]))),
             "converged_min": float(np.nanmin(series(ds, "converged_fraction", k,

@@ -70,6 +70,7 @@ from .models import (
     blur_sensitivity,
     compare_models,
     fit_blur_model,
+    gradient_weighted_level,
     plan_exposure,
 )
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
@@ -120,6 +121,7 @@ __all__ = [
     "fit_blur_model",
     "gaussian_mask",
     "gradient_variance",
+    "gradient_weighted_level",
     "image_gradients",
     "load_image",
     "load_spec",

@@ -17,7 +17,13 @@ from .decay import (
 from .fit import ModelComparison, compare_models, fit_blur_model
 from .mismatch import BlurSensitivity, blur_sensitivity, fit_mismatch, mismatch_model
 from .model import BlurUncertaintyModel, Prediction
-from .plan import RULE_OF_THUMB_BLUR, ExposurePlan, PoissonGaussianCamera, plan_exposure
+from .plan import (
+    RULE_OF_THUMB_BLUR,
+    ExposurePlan,
+    PoissonGaussianCamera,
+    gradient_weighted_level,
+    plan_exposure,
+)
 from .powerlaw import edge_driven_range, fit_power_law, power_law
 from .static import match_score_uncertainty, pan_uncertainty
 from .units import parse_quantity
@@ -41,6 +47,7 @@ __all__ = [
     "fit_mismatch",
     "fit_power_law",
     "fit_sssig_decay",
+    "gradient_weighted_level",
     "match_score_uncertainty",
     "mbrf",
     "mismatch_model",

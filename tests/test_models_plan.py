@@ -66,6 +66,38 @@ def test_floor_recovered_from_two_noise_levels():
         "a", "gamma", "c")
 
 
+def test_noise_growth_recovered_from_two_noise_levels():
+    # the noise term grows as (1 + e W^4): separable from c only through the two levels
+    w, s, sig, _ = _two_level_data(0)
+    e = 2e-3
+    rng = np.random.default_rng(6)
+    u = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR, noise_blur=e) * np.exp(
+        rng.normal(0.0, 0.01, w.size))
+    fit = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True)
+    assert fit.names == ("a", "noise_blur", "floor", "c")  # "auto" kept it
+    for name, true in (("c", C_TRUE), ("a", A_TRUE)):
+        p = fit.parameter(name)
+        assert p.low <= true <= p.high, (name, p)
+    # e over repeated seeds: roughly nominal coverage of its 95 % interval, small bias
+    hits, vals = [], []
+    for seed in range(30):
+        ui = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR, noise_blur=e) * np.exp(
+            np.random.default_rng(100 + seed).normal(0.0, 0.01, w.size))
+        pe = fit_mismatch(w, s, ui, noise_sigma=sig, next_term=False, floor=True,
+                          noise_blur=True).parameter("noise_blur")
+        hits.append(pe.low <= e <= pe.high)
+        vals.append(pe.value)
+    assert np.mean(hits) >= 0.8
+    assert np.mean(vals) == pytest.approx(e, rel=0.08)
+    # without it, c absorbs the growth of the 8 GL points and comes out high
+    plain = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True,
+                         noise_blur=False)
+    assert plain["c"] > fit.parameter("c").high
+    with pytest.raises(InputError, match="noise_blur=True"):
+        fit_mismatch(W, sssig_decay(W, S0, BETA), u[:W.size], noise_sigma=2.0,
+                     noise_blur=True)
+
+
 def test_floor_needs_two_noise_levels():
     s = sssig_decay(W, S0, BETA)
     u = mismatch_model(W, s, 2.0, c=C_TRUE, a=A_TRUE, floor=FLOOR)

@@ -4,7 +4,8 @@ With a sharp reference and a blurred current image the error of a subset has two
 the noise term of the match-score model evaluated at the blurred SSSIG, and a
 deterministic, pattern-dependent shift of the SSD minimum that does not depend on noise:
 
-    u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) + u_0**2 + (c W**2 + c4 W**4)**2
+    u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) (1 + e W**4) + u_0**2
+                       + (c W**2 + c4 W**4)**2
 
 Theory gives ``a = 2``, ``gamma = 1`` (eq. 2) and ``c`` from the static image
 (:func:`blur_sensitivity`); ``c4`` is the next term of the expansion, fitted only when the
@@ -13,7 +14,12 @@ sub-pixel interpolation bias at the fractional shift of the blurred image (W/2 f
 trajectory; Schreier, Braasch & Sutton, Opt. Eng. 39(11), 2000,
 doi:10.1117/1.1314593), about 1e-3 px with bicubic B-splines on 4 px speckles. With one
 noise level it cannot be told from the noise term (both are flat in W at small W), so it is
-fitted only with >= 2 noise levels (docs/models.md s. 7). The noise enters only through
+fitted only with >= 2 noise levels (docs/models.md s. 4). ``e`` (``noise_blur``, px**-4)
+is the growth of the noise term with the blur mismatch: with a sharp reference the noise of
+the reference gradients meets the mismatch residual ``(W**2 / 24) f''`` and the Hessian
+``sum g_ref g_cur`` falls below ``sqrt(SSSIG_ref SSSIG(W))``, both O(W**4) relative
+(docs/models.md s. 4). It is separable from ``c`` only with >= 2 noise levels. The noise
+enters only through
 ``SSSIG / sigma**2``, so the model is invariant to scaling the image intensity. Without a
 known noise level the noise term is ``k / SSSIG(W)`` with ``k = a sigma**2`` fitted.
 """
@@ -143,11 +149,13 @@ def mismatch_model(
     c4: float = 0.0,
     k: float | None = None,
     floor: float = 0.0,
+    noise_blur: float = 0.0,
 ) -> NDArray[np.float64]:
-    """``sqrt(a (SSSIG/sigma**2)**(-gamma) + floor**2 + (c W**2 + c4 W**4)**2)`` (px).
+    """``sqrt(a (SSSIG/sigma**2)**(-gamma) (1 + e W**4) + floor**2 + (c W**2 + c4 W**4)**2)``.
 
-    With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required). ``floor``
-    (px) is the noise-independent matcher floor ``u_0``.
+    In px. With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required).
+    ``floor`` (px) is the noise-independent matcher floor ``u_0``; ``noise_blur`` (``e``,
+    px**-4) the growth of the noise term with the blur mismatch.
     """
     w = np.asarray(blur, dtype=np.float64)
     s = np.asarray(sssig, dtype=np.float64)
@@ -158,6 +166,7 @@ def mismatch_model(
     else:
         sig = np.asarray(noise_sigma, dtype=np.float64)
         noise = a * (s / sig**2) ** (-gamma)
+    noise = noise * (1.0 + noise_blur * w**4)
     ub = c * w * w + c4 * w**4
     return np.sqrt(noise + floor * floor + ub * ub)
 
@@ -171,6 +180,7 @@ def fit_mismatch(
     fit_gamma: bool | None = None,
     next_term: bool | Literal["auto"] = "auto",
     floor: bool | Literal["auto"] = "auto",
+    noise_blur: bool | Literal["auto"] = "auto",
     confidence: float = 0.95,
     ci: str = "covariance",
     n_boot: int = 500,
@@ -195,12 +205,15 @@ def fit_mismatch(
         Fit the noise-independent floor ``u_0`` (px, name ``"floor"``). ``"auto"``: tried
         only with >= 2 noise levels (with one level it is confounded with ``a``) and kept
         when the AIC drops by more than 2. ``True`` with one level raises.
+    noise_blur : bool or "auto"
+        Fit ``e`` (name ``"noise_blur"``, px**-4) of the noise term's growth
+        ``(1 + e W**4)``; same rules as ``floor``.
 
     Returns
     -------
     FitResult
-        ``names`` among ``("a" | "k", "gamma", "floor", "c", "c4")``; ``fixed`` holds the
-        rest.
+        ``names`` among ``("a" | "k", "gamma", "noise_blur", "floor", "c", "c4")``;
+        ``fixed`` holds the rest.
     """
     w = as_vector(blur, "blur")
     s = as_positive(sssig, "sssig", w.size)
@@ -216,31 +229,40 @@ def fit_mismatch(
         raise InputError(f"next_term={next_term!r}: use True, False or 'auto'")
     if floor not in (True, False, "auto"):
         raise InputError(f"floor={floor!r}: use True, False or 'auto'")
-    if floor is True and not multi:
-        raise InputError(
-            "floor=True: a noise-independent floor needs data at >= 2 noise levels (with one "
-            "level it is indistinguishable from the noise term); add a noise level or use "
-            "floor=False"
-        )
+    if noise_blur not in (True, False, "auto"):
+        raise InputError(f"noise_blur={noise_blur!r}: use True, False or 'auto'")
+    for opt, val in (("floor", floor), ("noise_blur", noise_blur)):
+        if val is True and not multi:
+            raise InputError(
+                f"{opt}=True: needs data at >= 2 noise levels (with one level it cannot be "
+                f"told from the other terms); add a noise level or use {opt}=False"
+            )
     options = [False, True] if next_term == "auto" else [bool(next_term)]
     floors = ([False, True] if multi else [False]) if floor == "auto" else [bool(floor)]
+    growths = ([False, True] if multi else [False]) if noise_blur == "auto" else [
+        bool(noise_blur)]
     results = []
-    for with_floor in floors:
-        do_gamma = bool((multi and not with_floor) if fit_gamma is None
-                        else (fit_gamma and sig is not None))
-        for with_c4 in options:
-            names: list[str] = ["a" if sig is not None else "k"]
-            if do_gamma:
-                names.append("gamma")
-            if with_floor:
-                names.append("floor")
-            names.append("c")
-            if with_c4:
-                names.append("c4")
-            auto = (with_c4 and next_term == "auto") or (with_floor and floor == "auto")
-            if w.size - len(names) < (2 if auto else 1):
-                continue
-            results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci, n_boot, seed))
+    for with_growth in growths:
+        for with_floor in floors:
+            do_gamma = bool((multi and not with_floor) if fit_gamma is None
+                            else (fit_gamma and sig is not None))
+            for with_c4 in options:
+                names: list[str] = ["a" if sig is not None else "k"]
+                if do_gamma:
+                    names.append("gamma")
+                if with_growth:
+                    names.append("noise_blur")
+                if with_floor:
+                    names.append("floor")
+                names.append("c")
+                if with_c4:
+                    names.append("c4")
+                auto = ((with_c4 and next_term == "auto") or (with_floor and floor == "auto")
+                        or (with_growth and noise_blur == "auto"))
+                if w.size - len(names) < (2 if auto else 1):
+                    continue
+                results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci, n_boot,
+                                        seed))
     if not results:
         raise FitError(
             f"mismatch: {w.size} point(s) are too few for the noise + blur-mismatch model; "
@@ -275,6 +297,7 @@ def _fit_one(
         d.setdefault("gamma", 1.0)
         d.setdefault("c4", 0.0)
         d.setdefault("floor", 0.0)
+        d.setdefault("noise_blur", 0.0)
         return d
 
     def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
@@ -289,17 +312,19 @@ def _fit_one(
         floor0 = 0.3 * float(ui.min())
         if "floor" in names:  # start with part of the low-W variance on the floor
             noise0 *= 0.9
-        start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0, "floor": floor0}
+        start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0, "floor": floor0,
+                 "noise_blur": 1e-3}
         p0 = np.array([start[n] for n in names])
         scl = np.where(p0 > 0, p0, 1e-3 * c0 if c0 > 0 else 1e-6)
-        lower = np.array([0.0 if n in ("a", "k", "c", "floor")
+        lower = np.array([0.0 if n in ("a", "k", "c", "floor", "noise_blur")
                           else (0.05 if n == "gamma" else -np.inf) for n in names])
         upper = np.array([5.0 if n == "gamma" else np.inf for n in names])
 
         def resid(pn: NDArray[np.float64]) -> NDArray[np.float64]:
             d = unpack(pn * scl)
             m = mismatch_model(wi, si, sg, c=d["c"], a=d.get("a", 2.0), gamma=d["gamma"],
-                               c4=d["c4"], k=d.get("k"), floor=d["floor"])
+                               c4=d["c4"], k=d.get("k"), floor=d["floor"],
+                               noise_blur=d["noise_blur"])
             return np.log(np.maximum(m, 1e-300)) - np.log(ui)
 
         r = optimize.least_squares(resid, p0 / scl, bounds=(lower / scl, upper / scl),

@@ -185,6 +185,7 @@ class BlurUncertaintyModel:
             gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch
                           else 1.0)
             noise = p["a"] * (s / sigma**2) ** (-gamma)
+        noise = noise * (1.0 + p.get("noise_blur", 0.0) * w**4)
         ub = p["c"] * w * w + p.get("c4", 0.0) * w**4
         return noise, ub * ub
 

@@ -377,7 +377,7 @@ def plan_exposure(
             f"the noise term is extrapolated from one calibration noise level ({levels[0]:g} "
             f"GL) to {sig_opt:.3g} GL at the optimum; a noise-independent floor (sub-pixel "
             "interpolation bias) cannot be separated at one level and inflates the "
-            "extrapolated noise: calibrate at >= 2 noise levels (docs/models.md s. 7)")
+            "extrapolated noise: calibrate at >= 2 noise levels (docs/models.md s. 4)")
     at = model.predict([t_opt * v_px], sig_opt, model=kind)
     t_curve = np.geomspace(max(t_lo, t_opt / 100), min(t_hi, t_opt * 100), n_curve)
     u_curve = np.exp(log_u(t_curve))

@@ -71,3 +71,24 @@ def test_cli_errors_exit_2_without_traceback(tmp_path, capsys, argv):
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert err.strip()
+
+
+def test_predict_from_the_static_image(tmp_path, capsys):
+    import dicblur
+
+    out = tmp_path / "p.png"
+    img = np.clip(np.rint(speckle_pattern((128, 128), speckle_size=4, softness=0.5, seed=2)),
+                  0, 255)
+    save_image(out, img)
+    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
+                 "--blur", "0", "--blur", "2", "--angle", "90", "--json",
+                 "-o", str(tmp_path / "m.json")]) == 0
+    data = json.loads(capsys.readouterr().out.split("\nwrote")[0])
+    want = dicblur.predict_from_pattern(img, [0.0, 2.0], noise_sigma=2.0, subset=21,
+                                        motion=(1.0, 0.0))
+    np.testing.assert_allclose(data["u_e"], want.u_e, rtol=1e-6)
+    model = dicblur.BlurUncertaintyModel.from_json(str(tmp_path / "m.json"))
+    assert model.provenance["image"] == str(out)
+    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
+                 "--shape", "quadratic"]) == 2
+    assert "--shape='quadratic'" in capsys.readouterr().err

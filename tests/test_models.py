@@ -13,6 +13,7 @@ from dicblur.errors import FitError, InputError
 from dicblur.models import (
     BlurUncertaintyModel,
     PoissonGaussianCamera,
+    blur_mismatch_curve,
     blur_sensitivity,
     combined_model,
     combined_pan_model,
@@ -25,9 +26,11 @@ from dicblur.models import (
     match_score_uncertainty,
     mbrf,
     mismatch_model,
+    model_from_pattern,
     pan_uncertainty,
     parse_quantity,
     plan_exposure,
+    predict_from_pattern,
     sssig_decay,
     taylor_model,
 )
@@ -365,10 +368,22 @@ def _fourier_eval(spec: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarra
     return np.real(np.einsum("pi,ij,pj->p", ey, spec, ex)) / (n0 * n1)
 
 
-@pytest.mark.parametrize(("shape", "motion"), [("translation", (0.0, 1.0)),
-                                               ("translation", (1.0, 1.0)),
-                                               ("affine", (0.0, 1.0))])
-def test_static_c_matches_brute_force_ssd(shape, motion):
+def _znssd_resid(g, ref):
+    a = (g - g.mean()) / np.linalg.norm(g - g.mean())
+    b = (ref - ref.mean()) / np.linalg.norm(ref - ref.mean())
+    return a - b
+
+
+@pytest.mark.parametrize(("shape", "motion", "criterion"),
+                         [("translation", (0.0, 1.0), "ssd"),
+                          ("translation", (1.0, 1.0), "ssd"),
+                          ("affine", (0.0, 1.0), "ssd"),
+                          ("translation", (1.0, 1.0), "znssd"),
+                          ("affine", (0.0, 1.0), "znssd")])
+def test_static_c_matches_brute_force_minimum(shape, motion, criterion):
+    # exact (Fourier) interpolation in the brute force, so the static side uses the true
+    # (spectral) derivatives; the spline-gradient default is checked against IC-GN in
+    # tests/test_models_validation.py
     n = 48
     img = dicblur.speckle_pattern((n, n), speckle_size=5.0, softness=1.0, seed=3)
     wlen = 0.6
@@ -380,7 +395,7 @@ def test_static_c_matches_brute_force_ssd(shape, motion):
     sub, h = 15, 7
     centres = np.array([[12, 12], [12, 34], [34, 20], [30, 34]])
     bs = blur_sensitivity(img, subset=sub, points=centres, motion=motion, shape=shape,
-                          boundary="periodic")
+                          boundary="periodic", derivative="spectral", criterion=criterion)
     oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
     oy, ox = oy.ravel(), ox.ravel()
     for i, (r, c) in enumerate(centres):
@@ -392,7 +407,8 @@ def test_static_c_matches_brute_force_ssd(shape, motion):
             else:
                 xs = c + ox + p[0] + p[1] * ox + p[2] * oy
                 ys = r + oy + p[3] + p[4] * ox + p[5] * oy
-            return _fourier_eval(spec_b, xs, ys) - ref
+            g = _fourier_eval(spec_b, xs, ys)
+            return g - ref if criterion == "ssd" else _znssd_resid(g, ref)
 
         p0 = np.zeros(2 if shape == "translation" else 6)
         sol = optimize.least_squares(resid, p0, xtol=1e-14, ftol=1e-14, gtol=1e-14).x
@@ -400,6 +416,110 @@ def test_static_c_matches_brute_force_ssd(shape, motion):
         along = d[1] * u + d[0] * v
         assert along == pytest.approx(bs.k[i] * wlen**2, rel=0.05, abs=0.03 * bs.c * wlen**2)
 
+
+
+@pytest.mark.parametrize(("shape", "motion", "wlen"), [("translation", (0.0, 1.0), 3.0),
+                                                       ("affine", (1.0, 2.0), 3.0),
+                                                       ("translation", (1.0, 0.0), 5.0)])
+def test_mismatch_curve_matches_the_icgn_fixed_point_at_finite_blur(shape, motion, wlen):
+    # W of the order of the speckle size, where c W**2 is off by 10-40 %. IC-GN stops where
+    # sum J_f^T [f_hat - g_hat(W(x; p))] = 0 (J_f: reference gradients), which is not the
+    # ZNSSD minimum once the images differ by more than a warp: solved here exactly, with
+    # band-limited interpolation and true derivatives, by root finding
+    n = 48
+    img = dicblur.speckle_pattern((n, n), speckle_size=5.0, softness=1.0, seed=3)
+    d = np.array(motion) / np.hypot(*motion)
+    ky = np.fft.fftfreq(n)[:, None]
+    kx = np.fft.fftfreq(n)[None, :]
+    spec = np.fft.fft2(img)
+    spec_b = spec * np.sinc(wlen * (d[0] * ky + d[1] * kx))
+    fx = np.fft.ifft2(spec * 2j * np.pi * kx).real
+    fy = np.fft.ifft2(spec * 2j * np.pi * ky).real
+    sub, h = 15, 7
+    centres = np.array([[12, 12], [12, 34], [34, 20], [30, 34]])
+    curve = blur_mismatch_curve(img, [wlen], subset=sub, points=centres, motion=motion,
+                                shape=shape, boundary="periodic", derivative="spectral")
+    oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
+    oy, ox = oy.ravel(), ox.ravel()
+    for i, (r, c) in enumerate(centres):
+        sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
+        ref = img[sl].ravel()
+        gx, gy = fx[sl].ravel(), fy[sl].ravel()
+        if shape == "translation":
+            jac = np.stack([gx, gy], 1)
+        else:
+            jac = np.stack([gx, gx * ox, gx * oy, gy, gy * ox, gy * oy], 1)
+
+        def stationarity(p, r=r, c=c, ref=ref, jac=jac):
+            if shape == "translation":
+                xs, ys = c + ox + p[0], r + oy + p[1]
+            else:
+                xs = c + ox + p[0] + p[1] * ox + p[2] * oy
+                ys = r + oy + p[3] + p[4] * ox + p[5] * oy
+            return jac.T @ _znssd_resid(_fourier_eval(spec_b, xs, ys), ref)
+
+        sol = optimize.root(stationarity, np.zeros(jac.shape[1]), tol=1e-14)
+        assert sol.success
+        u, v = (sol.x[0], sol.x[1]) if shape == "translation" else (sol.x[0], sol.x[3])
+        along = d[1] * u + d[0] * v
+        # linearised in the shift only: the error grows with the whole shift vector (which
+        # can be 0.07 px across the motion), so it is bounded against the field's spread
+        assert curve.shifts[0, i] == pytest.approx(along, rel=0.03, abs=0.02 * curve.u_blur[0])
+
+
+# "central" is left out: its leading order uses the second difference for f_dd, while the
+# curve blurs the image exactly
+@pytest.mark.parametrize("derivative", ["bspline3", "bspline5", "spectral"])
+@pytest.mark.parametrize(("shape", "criterion"), [("translation", "znssd"),
+                                                  ("affine", "znssd"),
+                                                  ("affine", "ssd")])
+def test_mismatch_curve_tends_to_leading_order(derivative, shape, criterion):
+    img = dicblur.speckle_pattern((96, 96), speckle_size=4.0, seed=5)
+    kw = dict(subset=21, step=15, motion=(1.0, 1.0), shape=shape, derivative=derivative,
+              criterion=criterion)
+    bs = blur_sensitivity(img, **kw)
+    w = np.array([0.0, 0.02, 0.04])
+    curve = blur_mismatch_curve(img, w, **kw)
+    assert curve.shifts.shape == (3, len(bs.k))
+    assert np.all(curve.shifts[0] == 0.0)
+    # xi(W) = k W^2 + O(W^4): the ratio converges to k linearly in W^2
+    r1, r2 = curve.shifts[1] / w[1] ** 2, curve.shifts[2] / w[2] ** 2
+    extrapolated = (4 * r1 - r2) / 3
+    np.testing.assert_allclose(extrapolated, bs.k, rtol=1e-4, atol=1e-6 * bs.c)
+    assert curve.u_blur[1] == pytest.approx(np.std(curve.shifts[1]))
+    assert curve.mean[1] == pytest.approx(np.mean(curve.shifts[1]))
+    assert curve.motion == pytest.approx((1 / math.sqrt(2), 1 / math.sqrt(2)))
+
+
+
+def test_mismatch_curve_leaves_out_broken_down_subsets():
+    # 3 px speckles blurred over 8 px: along x the texture of some subsets is gone and the
+    # linearised shift runs away (IC-GN stops converging there too)
+    img = dicblur.speckle_pattern((160, 160), speckle_size=3.0, softness=0.5, seed=7)
+    kw = dict(subset=31, step=12, shape="affine", boundary="periodic")
+    cv = blur_mismatch_curve(img, [1.0, 8.0], **kw)
+    assert cv.valid_fraction[0] == 1.0
+    assert 0.3 < cv.valid_fraction[1] < 1.0
+    kept = np.isfinite(cv.shifts[1])
+    assert cv.u_blur[1] == pytest.approx(np.std(cv.shifts[1][kept]))
+    assert np.all(np.abs(cv.shifts[1][kept]) <= 1.0)
+    every = blur_mismatch_curve(img, [1.0, 8.0], max_shift=1e9, **kw)
+    assert every.valid_fraction[1] == 1.0
+    assert every.u_blur[1] > cv.u_blur[1]
+    np.testing.assert_array_equal(every.shifts[0], cv.shifts[0])
+
+def test_blur_sensitivity_options_are_checked():
+    img = dicblur.speckle_pattern((64, 64), speckle_size=4.0, seed=5)
+    with pytest.raises(InputError, match="derivative='cubic'"):
+        blur_sensitivity(img, subset=21, derivative="cubic")
+    with pytest.raises(InputError, match="criterion='zncc'"):
+        blur_sensitivity(img, subset=21, criterion="zncc")
+    with pytest.raises(InputError, match="negative blur length"):
+        blur_mismatch_curve(img, [1.0, -2.0], subset=21)
+    with pytest.raises(InputError, match="boundary='wrap'"):
+        blur_mismatch_curve(img, [1.0], subset=21, boundary="wrap")
+    with pytest.raises(InputError, match="fewer than two subsets"):
+        blur_mismatch_curve(np.full((64, 64), 9.0), [1.0], subset=21)
 
 def test_blur_sensitivity_consistency():
     img = dicblur.speckle_pattern((128, 128), speckle_size=4.0, seed=2)
@@ -422,7 +542,7 @@ def test_translation_form_reduces_to_the_1d_formula():
     img = p[None, :] + q[:, None]
     centres = np.array([[16, 20], [32, 31], [48, 45]])
     k = blur_sensitivity(img, subset=15, points=centres, derivative="central",
-                         boundary="periodic").k
+                         boundary="periodic", criterion="ssd").k
     px = 0.5 * (np.roll(p, -1) - np.roll(p, 1))
     pxx = np.roll(p, -1) - 2 * p + np.roll(p, 1)
     for i, (_, c) in enumerate(centres):
@@ -476,3 +596,66 @@ def test_bad_input(model):
         fit_sssig_decay(W[:2], s[:2])
     with pytest.raises(InputError, match="full_well"):
         PoissonGaussianCamera(full_well=0, read_noise=1, flux=1)
+
+
+def test_pattern_noise_variance_matches_monte_carlo_of_the_fixed_point():
+    # noise of 2 GL in both images, W = 3 px: the exact IC-GN fixed point (root finding,
+    # band-limited interpolation, true derivatives of the *noisy* reference) over 120
+    # noise draws, against the linear sandwich formula
+    n, sub, h, wlen, sigma = 48, 15, 7, 3.0, 2.0
+    img = dicblur.speckle_pattern((n, n), speckle_size=5.0, softness=1.0, seed=3)
+    kx = np.fft.fftfreq(n)[None, :]
+    ky = np.fft.fftfreq(n)[:, None]
+    blurred = np.fft.ifft2(np.fft.fft2(img) * np.sinc(wlen * kx)).real
+    r, c = 24, 24
+    pred = predict_from_pattern(img, [wlen], noise_sigma=sigma, subset=sub,
+                                points=[[r, c]] * 2, boundary="periodic",
+                                derivative="spectral")
+    oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
+    oy, ox = oy.ravel(), ox.ravel()
+    sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
+    rng = np.random.default_rng(11)
+    us = []
+    for _ in range(120):
+        ref = img + rng.normal(0.0, sigma, img.shape)
+        spec_g = np.fft.fft2(blurred + rng.normal(0.0, sigma, img.shape))
+        spec_f = np.fft.fft2(ref)
+        gx = np.fft.ifft2(spec_f * 2j * np.pi * kx).real[sl].ravel()
+        gy = np.fft.ifft2(spec_f * 2j * np.pi * ky).real[sl].ravel()
+        jac = np.stack([gx, gy], 1)
+        f = ref[sl].ravel()
+
+        def stationarity(p, jac=jac, f=f, spec_g=spec_g):
+            return jac.T @ _znssd_resid(_fourier_eval(spec_g, c + ox + p[0], r + oy + p[1]), f)
+
+        sol = optimize.root(stationarity, np.zeros(2), tol=1e-10)
+        assert np.abs(sol.fun).max() < 1e-9 * np.abs(jac).sum()
+        us.append(sol.x[0])
+    # the two identical points share one subset: u_blur is 0, u_e is the noise term
+    assert pred.u_blur[0] == pytest.approx(0.0, abs=1e-12)
+    # 120 draws: the sample std is within +-20 % of the truth at ~3 sigma
+    assert np.std(us) == pytest.approx(pred.u_noise[0], rel=0.2)
+
+
+def test_model_from_pattern_follows_the_prediction_and_plans():
+    img = dicblur.speckle_pattern((160, 160), speckle_size=4.0, seed=2)
+    w = np.arange(0.0, 6.01, 0.5)
+    pred = predict_from_pattern(img, w, noise_sigma=2.0, subset=21, step=10)
+    assert np.all(np.diff(pred.u_e[2:]) > 0)  # the mismatch takes over
+    np.testing.assert_allclose(pred.u_e, np.hypot(pred.u_noise, pred.u_blur))
+    assert pred.sssig[0] == pytest.approx(
+        dicblur.sssig(img, subset=21, step=10).mean(), rel=1e-9)
+    model = model_from_pattern(img, noise_sigma=2.0, subset=21, step=10, blur=w)
+    assert model.provenance["source"] == "static prediction"
+    assert model.noise_sigma == 2.0
+    np.testing.assert_allclose(model.predict(w).u_e, pred.u_e, rtol=0.1)
+    # noise follows SSSIG / sigma**2: at 4 GL the static noise term doubles
+    pred4 = predict_from_pattern(img, [0.0], noise_sigma=4.0, subset=21, step=10)
+    assert model.predict([0.0], sigma=4.0).u_e[0] == pytest.approx(pred4.u_e[0], rel=0.1)
+    plan = plan_exposure(model, velocity="100mm/s", scale="0.05mm/px", target="0.01px")
+    assert plan.exposure > 0
+    assert float(model.predict([plan.blur]).u_e[0]) == pytest.approx(0.01, rel=1e-3)
+    with pytest.raises(InputError, match="noise_sigma"):
+        predict_from_pattern(img, [1.0], noise_sigma=0.0, subset=21)
+    with pytest.raises(InputError, match="at least 4"):
+        model_from_pattern(img, noise_sigma=2.0, subset=21, blur=[0.0, 1.0, 2.0])

@@ -63,15 +63,20 @@ from .metrics import (
     subset_centres,
 )
 from .models import (
+    BlurMismatchCurve,
     BlurSensitivity,
     BlurUncertaintyModel,
     ExposurePlan,
+    PatternPrediction,
     PoissonGaussianCamera,
+    blur_mismatch_curve,
     blur_sensitivity,
     compare_models,
     fit_blur_model,
     gradient_weighted_level,
+    model_from_pattern,
     plan_exposure,
+    predict_from_pattern,
 )
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
 from .pulse import PulseTrain
@@ -81,6 +86,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AcceleratedMotion",
+    "BlurMismatchCurve",
     "BlurSensitivity",
     "BlurUncertaintyModel",
     "Camera",
@@ -97,6 +103,7 @@ __all__ = [
     "InputError",
     "PatternFamily",
     "PatternMetrics",
+    "PatternPrediction",
     "PatternSettings",
     "PointStatus",
     "PoissonGaussianCamera",
@@ -107,6 +114,7 @@ __all__ = [
     "__version__",
     "add_gaussian_noise",
     "blur_length",
+    "blur_mismatch_curve",
     "blur_sensitivity",
     "blur_transfer",
     "campaign_status",
@@ -128,12 +136,14 @@ __all__ = [
     "match_score_sigma",
     "michelson_contrast",
     "mig",
+    "model_from_pattern",
     "motion_blur",
     "open_results",
     "pan_sigma",
     "paper_pattern4",
     "pattern_metrics",
     "plan_exposure",
+    "predict_from_pattern",
     "render_blurred",
     "rms_contrast",
     "run_campaign",

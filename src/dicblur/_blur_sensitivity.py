@@ -8,25 +8,41 @@ Derivation (docs/models.md has it in full)
 ------------------------------------------
 A box blur of length ``W`` px along the unit direction ``d`` is, for a smooth image,
 ``g = f + (W**2 / 24) f_dd + O(W**4)`` with ``f_dd = d^T H(f) d`` the second directional
-derivative (the centred box's second moment is ``W**2 / 12``). The SSD matcher of a subset
-minimises ``sum [g(x + p) - f(x)]**2`` over the shape parameters ``p``; linearising in ``p``
-gives ``sum [J p + (W**2 / 24) f_dd]**2`` with ``J`` the steepest-descent images of the
-shape function, hence ``p = -(W**2 / 24) (J^T J)^-1 J^T f_dd``:
+derivative (the centred box's second moment is ``W**2 / 12``).
+
+IC-GN with the ZNSSD criterion stops where ``sum J_f^T [f_hat - g_hat(x + p)] = 0``:
+``J_f`` are the steepest-descent images of the shape function built from the *reference
+gradients the matcher uses* (the derivatives of its B-spline interpolant, not the true
+ones), and ``f_hat``, ``g_hat`` are the subset intensities with mean removed and unit norm.
+Linearised in ``p`` (the mismatch is a few hundredths of a pixel), with ``P_g`` the
+projection off the constant and off ``g_hat`` (the ZNSSD offset and scale)::
+
+    p = sigma_g (J_f^T P_g J_g)^-1 J_f^T (f_hat - g_hat)                      (exact in W)
+    p = -(W**2 / 24) (J_f^T P_f J_f)^-1 J_f^T P_f f_dd + O(W**4)           (leading order)
 
 - translation: ``J = [f_x, f_y]``;
 - affine (first-order): ``J = [f_x, f_x dx, f_x dy, f_y, f_y dx, f_y dy]`` with ``(dx, dy)``
-  the offsets from the subset centre; the centre displacement is ``(p[0], p[3])``, i.e. the
-  blur term projected off the components that the gradient terms explain.
+  the offsets from the subset centre; the centre displacement is ``(p[0], p[3])``.
 
-For subset ``i`` the displacement along the motion is ``xi_i = k_i W**2`` and the spread
-over subsets gives ``u_blur = c W**2`` with ``c = std_i(k_i)``. For motion along x, the
-translation form without the ``f_x f_y`` coupling reduces to the paper-brief's
+The first form keeps every order of the blur (``g`` is the exactly blurred image and
+``J_g`` its spline gradients: the blurred image's weaker gradients enlarge the shift at
+large ``W``); only the shift itself is linearised. For subset ``i`` the leading-order
+displacement along the motion is ``xi_i = k_i W**2`` and the spread over subsets gives
+``u_blur = c W**2`` with ``c = std_i(k_i)``. For motion along x, SSD (no projection),
+spectral derivatives and no ``f_x f_y`` coupling this is the paper-brief's
 ``k_i = -sum(f_x f_xx) / (24 sum(f_x**2))``.
+
+Why the matcher's gradients: the blur difference ``f_dd`` lives at high spatial
+frequencies, where the spline derivative is weaker than the true one, so the weighting
+``J_f^T f_dd`` is the matcher's own. With true (spectral) gradients ``c`` is 8-25 % lower
+than noise-free IC-GN measures on thresholded speckles; with the spline gradients and the
+ZNSSD projection it agrees within 0.5 % as W -> 0 (BENCHMARKS.md, models section).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Literal
 
 import numpy as np
@@ -34,10 +50,16 @@ from numpy.typing import NDArray
 
 from .errors import InputError
 
-__all__ = ["directional_derivatives", "subset_blur_coefficients"]
+__all__ = [
+    "directional_derivatives",
+    "subset_blur_coefficients",
+    "subset_blur_shifts",
+    "subset_noise_variance",
+]
 
 Shape = Literal["translation", "affine"]
-Derivative = Literal["spectral", "central"]
+Derivative = Literal["bspline3", "bspline5", "spectral", "central"]
+Criterion = Literal["znssd", "ssd"]
 Boundary = Literal["reflect", "periodic"]
 
 
@@ -57,11 +79,68 @@ def _unit(motion: tuple[float, float]) -> tuple[float, float]:
     return dy / n, dx / n
 
 
+def _extend(image: NDArray[np.float64], boundary: Boundary) -> NDArray[np.float64]:
+    """The periodic image the spectral operators act on (mirror: even 2x extension)."""
+    if boundary == "reflect":
+        rows, cols = image.shape
+        return np.pad(image, ((0, rows), (0, cols)), mode="symmetric")
+    if boundary == "periodic":
+        return image
+    raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
+
+
+def _spectral(image: NDArray[np.float64], boundary: Boundary, dy: float, dx: float,
+              blur: float | None = None
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Spectral ``(f_y, f_x, f_dd)``; with ``blur`` the centred box blur along ``(dy, dx)``
+    of length ``blur`` px replaces ``f_dd`` (transfer ``sinc(blur * k.d)``, real: no shift).
+    """
+    rows, cols = image.shape
+    ext = _extend(image, boundary)
+    shp = ext.shape
+    spec = np.fft.rfft2(ext)
+    fy_ = np.fft.fftfreq(shp[0])[:, None]
+    fx_ = np.fft.rfftfreq(shp[1])[None, :]
+    if blur is not None:
+        out = np.fft.irfft2(spec * np.sinc(blur * (dy * fy_ + dx * fx_)), s=shp)
+        return out[:rows, :cols], out[:rows, :cols], out[:rows, :cols]
+    ky, kx = 2j * np.pi * fy_, 2j * np.pi * fx_
+    ky_odd, kx_odd = ky.copy(), kx.copy()
+    if shp[0] % 2 == 0:  # the Nyquist bin of an odd derivative is not real
+        ky_odd[shp[0] // 2] = 0
+    if shp[1] % 2 == 0:
+        kx_odd[:, -1] = 0
+    fy = np.fft.irfft2(spec * ky_odd, s=shp)[:rows, :cols]
+    fx = np.fft.irfft2(spec * kx_odd, s=shp)[:rows, :cols]
+    fdd = np.fft.irfft2(spec * (dx * dx * kx * kx + 2 * dx * dy * ky * kx + dy * dy * ky * ky),
+                        s=shp)
+    return fy, fx, fdd[:rows, :cols]
+
+
+def _spline_gradients(image: NDArray[np.float64], derivative: str
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses)."""
+    # imported here: dicblur.dic imports dicblur.metrics, which imports this module
+    from .dic.interpolation import bspline_coefficients, bspline_gradients
+
+    order = 3 if derivative == "bspline3" else 5
+    coef = bspline_coefficients(image, order=order, dtype=np.float64)
+    return bspline_gradients(coef, order, image.shape)
+
+
+def _check_derivative(derivative: str) -> None:
+    if derivative not in ("bspline3", "bspline5", "spectral", "central"):
+        raise InputError(
+            f"derivative={derivative!r}: unknown derivative; choose 'bspline3' (the DIC "
+            "engine's cubic spline, default), 'bspline5', 'spectral' or 'central'"
+        )
+
+
 def directional_derivatives(
     image: NDArray[np.float64],
     motion: tuple[float, float] = (0.0, 1.0),
     *,
-    derivative: Derivative = "spectral",
+    derivative: Derivative = "bspline3",
     boundary: Boundary = "reflect",
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """``(f_y, f_x, f_dd)``: gradients and the second derivative along ``motion``.
@@ -72,11 +151,15 @@ def directional_derivatives(
         Grey levels (float64, finite).
     motion : (dy, dx)
         Motion direction (any length; normalised here).
-    derivative : {"spectral", "central"}
-        Fourier derivatives (exact for band-limited images) or second-order finite
-        differences (``f_x = (f[i+1] - f[i-1]) / 2``, ``f_xx = f[i+1] - 2 f[i] + f[i-1]``).
+    derivative : {"bspline3", "bspline5", "spectral", "central"}
+        Operator for the gradients ``f_y, f_x``: the derivatives of the cubic / quintic
+        B-spline interpolant (what the IC-GN engine with that interpolation uses, default),
+        Fourier derivatives (exact for band-limited images) or central differences
+        (``f_x = (f[i+1] - f[i-1]) / 2``). ``f_dd`` is the action of the blur on the image
+        itself, so it is spectral for the spline and spectral options and the second
+        difference ``f[i+1] - 2 f[i] + f[i-1]`` for ``"central"``.
     boundary : {"reflect", "periodic"}
-        How the spectral derivative extends the image: mirror-symmetric (no intensity jump
+        How the spectral operators extend the image: mirror-symmetric (no intensity jump
         at the border, for camera images) or periodic (exact for tiling synthetic patterns).
         Finite differences use the same extension for the 1-px border.
 
@@ -85,32 +168,15 @@ def directional_derivatives(
     fy, fx, fdd : ndarray, shape (rows, cols)
         Grey levels / px and grey levels / px**2.
     """
+    _check_derivative(derivative)
     dy, dx = _unit(motion)
-    rows, cols = image.shape
-    if derivative == "spectral":
-        if boundary == "reflect":
-            ext = np.pad(image, ((0, rows), (0, cols)), mode="symmetric")
-        else:
-            ext = image
-        shp = ext.shape
-        spec = np.fft.rfft2(ext)
-        ky = 2j * np.pi * np.fft.fftfreq(shp[0])[:, None]
-        kx = 2j * np.pi * np.fft.rfftfreq(shp[1])[None, :]
-        kyy, kxx = ky * ky, kx * kx
-        ky_odd, kx_odd = ky.copy(), kx.copy()
-        if shp[0] % 2 == 0:  # the Nyquist bin of an odd derivative is not real
-            ky_odd[shp[0] // 2] = 0
-        if shp[1] % 2 == 0:
-            kx_odd[:, -1] = 0
-        fy = np.fft.irfft2(spec * ky_odd, s=shp)[:rows, :cols]
-        fx = np.fft.irfft2(spec * kx_odd, s=shp)[:rows, :cols]
-        fdd = np.fft.irfft2(spec * (dx * dx * kxx + 2 * dx * dy * ky * kx + dy * dy * kyy),
-                            s=shp)
-        return fy, fx, fdd[:rows, :cols]
     if derivative != "central":
-        raise InputError(
-            f"derivative={derivative!r}: unknown derivative; choose 'spectral' or 'central'"
-        )
+        fy, fx, fdd = _spectral(image, boundary, dy, dx)
+        if derivative in ("bspline3", "bspline5"):
+            fy, fx = _spline_gradients(image, derivative)
+        return fy, fx, fdd
+    if boundary not in ("reflect", "periodic"):
+        _extend(image, boundary)  # raises the boundary error
     p = np.pad(image, 1, mode="symmetric" if boundary == "reflect" else "wrap")
     c = p[1:-1, 1:-1]
     fx = 0.5 * (p[1:-1, 2:] - p[1:-1, :-2])
@@ -121,6 +187,75 @@ def directional_derivatives(
     return fy, fx, dx * dx * fxx + 2 * dx * dy * fxy + dy * dy * fyy
 
 
+def _check_shape(shape: str) -> None:
+    if shape not in ("translation", "affine"):
+        raise InputError(f"shape={shape!r}: unknown shape function; use 'translation' or 'affine'")
+
+
+def _check_criterion(criterion: str) -> None:
+    if criterion not in ("znssd", "ssd"):
+        raise InputError(
+            f"criterion={criterion!r}: unknown matching criterion; use 'znssd' (the DIC "
+            "engine's, default) or 'ssd'"
+        )
+
+
+class _Windows:
+    """Subset windows of several images, gathered a chunk of centres at a time."""
+
+    def __init__(self, subset: int, *images: NDArray[np.float64]) -> None:
+        self.h = subset // 2
+        self.views = [np.lib.stride_tricks.sliding_window_view(a, (subset, subset))
+                      for a in images]
+        off = np.arange(-self.h, self.h + 1, dtype=np.float64)
+        oy, ox = np.meshgrid(off, off, indexing="ij")
+        self.ex, self.ey = ox.ravel()[None, :], oy.ravel()[None, :]
+
+    def take(self, cc: NDArray[np.intp]) -> list[NDArray[np.float64]]:
+        r0, c0 = cc[:, 0] - self.h, cc[:, 1] - self.h
+        return [v[r0, c0].reshape(len(cc), -1) for v in self.views]
+
+    def jacobian(self, gx: NDArray[np.float64], gy: NDArray[np.float64],
+                 shape: str) -> NDArray[np.float64]:
+        """Steepest-descent images, shape (m, pixels, 2 | 6)."""
+        if shape == "translation":
+            return np.stack([gx, gy], axis=2)
+        ex, ey = self.ex, self.ey
+        return np.stack([gx, gx * ex, gx * ey, gy, gy * ex, gy * ey], axis=2)
+
+
+def _normalise(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Rows with mean removed and unit norm, and their norms (m, pixels), (m,)."""
+    z = a - a.mean(axis=1, keepdims=True)
+    n = np.sqrt(np.einsum("np,np->n", z, z))
+    return z / np.where(n > 0, n, 1.0)[:, None], n
+
+
+def _project(jac: NDArray[np.float64], hat: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``P jac``: remove from each column the constant and the component along ``hat``
+    (zero-mean, unit-norm rows): the ZNSSD offset and scale nuisance parameters."""
+    z = jac - jac.mean(axis=1, keepdims=True)
+    return z - hat[:, :, None] * np.einsum("np,npk->nk", hat, z)[:, None, :]
+
+
+def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Batched ``a^-1 b``; NaN rows where ``a`` is singular (no gradient in the subset)."""
+    ok: NDArray[np.bool_] = np.asarray(np.isfinite(a).all(axis=(1, 2))
+                                       & np.isfinite(b).all(axis=1))
+    ok[ok] = np.linalg.cond(a[ok]) < 1e12
+    sol = np.full(b.shape, np.nan)
+    if ok.any():
+        sol[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
+    return sol
+
+
+def _along(sol: NDArray[np.float64], shape: str, dy: float, dx: float,
+           max_shift: float = np.inf) -> NDArray[np.float64]:
+    u = sol[:, 0]
+    v = sol[:, 1] if shape == "translation" else sol[:, 3]
+    return np.where(np.hypot(u, v) <= max_shift, dx * u + dy * v, np.nan)
+
+
 def subset_blur_coefficients(
     image: NDArray[np.float64],
     centres: NDArray[np.intp],
@@ -128,15 +263,17 @@ def subset_blur_coefficients(
     *,
     motion: tuple[float, float] = (0.0, 1.0),
     shape: Shape = "translation",
-    derivative: Derivative = "spectral",
+    derivative: Derivative = "bspline3",
     boundary: Boundary = "reflect",
+    criterion: Criterion = "znssd",
     chunk: int = 256,
 ) -> NDArray[np.float64]:
     """Per-subset blur-mismatch coefficient ``k_i`` (px / px**2): ``xi_i = k_i W**2``.
 
-    ``xi_i`` is the displacement (px) along ``motion`` that an SSD matcher with the given
-    shape function finds between the sharp reference and the copy blurred by a centred box
-    of length ``W`` along ``motion``, to leading order in ``W`` (module docstring).
+    ``xi_i`` is the displacement (px) along ``motion`` that a matcher with the given shape
+    function and criterion finds between the sharp reference and the copy blurred by a
+    centred box of length ``W`` along ``motion``, to leading order in ``W`` (module
+    docstring).
 
     Parameters
     ----------
@@ -149,39 +286,179 @@ def subset_blur_coefficients(
         See :func:`directional_derivatives`.
     shape : {"translation", "affine"}
         Shape function of the matcher.
+    criterion : {"znssd", "ssd"}
+        Matching criterion: ZNSSD (the engine's; projects off the intensity offset and
+        scale) or plain SSD.
 
     Returns
     -------
     ndarray, shape (n,)
         ``k_i``; ``nan`` where the subset has no gradient (singular normal matrix).
     """
-    if shape not in ("translation", "affine"):
-        raise InputError(f"shape={shape!r}: unknown shape function; use 'translation' or 'affine'")
+    _check_shape(shape)
+    _check_criterion(criterion)
     dy, dx = _unit(motion)
     fy, fx, fdd = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
-    h = subset // 2
-    off = np.arange(-h, h + 1, dtype=np.float64)
-    oy, ox = np.meshgrid(off, off, indexing="ij")
-    wins = [np.lib.stride_tricks.sliding_window_view(a, (subset, subset)) for a in (fx, fy, fdd)]
+    win = _Windows(subset, fx, fy, fdd, image)
     out = np.empty(len(centres))
     for start in range(0, len(centres), chunk):
         cc = centres[start : start + chunk]
-        r0 = cc[:, 0] - h
-        c0 = cc[:, 1] - h
-        gx, gy, e = (w[r0, c0].reshape(len(cc), -1) for w in wins)
-        if shape == "translation":
-            jac = np.stack([gx, gy], axis=2)
+        gx, gy, e, f = win.take(cc)
+        jac = win.jacobian(gx, gy, shape)
+        if criterion == "znssd":
+            jp = _project(jac, _normalise(f)[0])
         else:
-            ex = ox.ravel()[None, :]
-            ey = oy.ravel()[None, :]
-            jac = np.stack([gx, gx * ex, gx * ey, gy, gy * ex, gy * ey], axis=2)
-        jtj = np.einsum("npi,npj->nij", jac, jac)
-        jte = np.einsum("npi,np->ni", jac, e)
-        det_ok = np.linalg.cond(jtj) < 1e12
-        sol = np.full(jte.shape, np.nan)
-        if det_ok.any():
-            sol[det_ok] = np.linalg.solve(jtj[det_ok], jte[det_ok][..., None])[..., 0]
-        u = sol[:, 0]
-        v = sol[:, 1] if shape == "translation" else sol[:, 3]
-        out[start : start + len(cc)] = -(dx * u + dy * v) / 24.0
+            jp = jac
+        # J^T P J and J^T P f_dd (P symmetric and idempotent)
+        sol = _solve(np.einsum("npi,npj->nij", jp, jp), np.einsum("npi,np->ni", jp, e))
+        out[start : start + len(cc)] = -_along(sol, shape, dy, dx) / 24.0
+    return out
+
+
+def subset_blur_shifts(
+    image: NDArray[np.float64],
+    blur: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    *,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "bspline3",
+    boundary: Boundary = "reflect",
+    criterion: Criterion = "znssd",
+    max_shift: float = 1.0,
+    chunk: int = 256,
+) -> NDArray[np.float64]:
+    """Per-subset blur-mismatch shifts at finite blur lengths, every order in ``W``.
+
+    The displacement (px) along ``motion`` at which the matcher's fixed point
+    ``sum J_f^T [f_hat - g_hat(x + p)] = 0`` sits, with ``g`` the image blurred by a centred
+    box of length ``W`` (exact spectral blur), linearised in the shift only (module
+    docstring). As ``W -> 0`` it tends to ``k_i W**2`` of :func:`subset_blur_coefficients`.
+
+    This is where inverse-compositional Gauss-Newton stops (its update uses the reference
+    gradients ``J_f``). Once the images differ by more than a warp, it is not the ZNSSD
+    minimum (stationary in the *current* image's gradients): the two differ at order
+    ``W**4``, and noise-free IC-GN follows this one.
+
+    Parameters
+    ----------
+    image : ndarray, shape (rows, cols)
+        Sharp reference image, grey levels.
+    blur : ndarray, shape (m,)
+        Blur lengths ``W`` (px, >= 0).
+    centres, subset, motion, shape, derivative, boundary, criterion
+        As for :func:`subset_blur_coefficients`.
+    max_shift : float
+        Breakdown threshold (px): a subset whose linearised shift vector is longer is
+        reported ``nan``. The linearisation needs shifts well below a pixel; beyond, the
+        blur has erased the subset's texture along the motion and IC-GN itself stops
+        converging there (a 3 px speckle at W = 8 px: 11 % of POIs converge).
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+        Shift of subset ``i`` at blur ``W_j`` (px, along the motion, relative to the blur's
+        own centre); ``nan`` where the subset has no gradient or breaks down.
+    """
+    _check_shape(shape)
+    _check_criterion(criterion)
+    _check_derivative(derivative)
+    dy, dx = _unit(motion)
+    blur = np.asarray(blur, dtype=np.float64)
+    out = np.zeros((len(blur), len(centres)))
+    for j, start, jf, jg, f, gg in _blurred_subsets(image, blur, centres, subset, motion,
+                                                    shape, derivative, boundary, chunk):
+        if blur[j] == 0:
+            continue
+        if criterion == "znssd":
+            fh, _ = _normalise(f)
+            gh, sg = _normalise(gg)
+            sg = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
+            a = np.einsum("npi,npj->nij", jf, _project(jg, gh)) / sg[:, None, None]
+            b = np.einsum("npi,np->ni", jf, fh - gh)
+        else:
+            a = np.einsum("npi,npj->nij", jf, jg)
+            b = np.einsum("npi,np->ni", jf, f - gg)
+        out[j, start : start + len(f)] = _along(_solve(a, b), shape, dy, dx, max_shift)
+    return out
+
+
+def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
+                     centres: NDArray[np.intp], subset: int, motion: tuple[float, float],
+                     shape: str, derivative: Derivative, boundary: Boundary, chunk: int
+                     ) -> Iterator[tuple[int, int, NDArray[np.float64], NDArray[np.float64],
+                                         NDArray[np.float64], NDArray[np.float64]]]:
+    """``(j, start, J_f, J_g, f, g)`` for every blur length and chunk of subsets: the
+    steepest-descent images of the sharp and of the centred-box-blurred image, and their
+    subset intensities (W = 0: ``g = f``)."""
+    dy, dx = _unit(motion)
+    fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
+        if wl == 0:
+            g, ggy, ggx = image, fy, fx
+        else:
+            g = _spectral(image, boundary, dy, dx, blur=float(wl))[0]
+            if derivative == "central":
+                gp = np.pad(g, 1, mode="symmetric" if boundary == "reflect" else "wrap")
+                ggx = 0.5 * (gp[1:-1, 2:] - gp[1:-1, :-2])
+                ggy = 0.5 * (gp[2:, 1:-1] - gp[:-2, 1:-1])
+            elif derivative == "spectral":
+                ggy, ggx, _ = _spectral(g, boundary, dy, dx)
+            else:
+                ggy, ggx = _spline_gradients(g, derivative)
+        win = _Windows(subset, fx, fy, ggx, ggy, image, g)
+        for start in range(0, len(centres), chunk):
+            ax, ay, bx, by, f, gg = win.take(centres[start : start + chunk])
+            yield j, start, win.jacobian(ax, ay, shape), win.jacobian(bx, by, shape), f, gg
+
+
+def subset_noise_variance(
+    image: NDArray[np.float64],
+    blur: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    *,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "bspline3",
+    boundary: Boundary = "reflect",
+    chunk: int = 256,
+) -> NDArray[np.float64]:
+    """Per-subset variance of the ZNSSD IC-GN shift along ``motion`` per unit noise variance.
+
+    Independent Gaussian noise of std ``sigma`` (GL) in both images moves the fixed point
+    ``p = sigma_g A^-1 J_f^T (f_hat - g_hat)`` (module docstring, ``A = J_f^T P_g J_g``) by a
+    linear response with covariance
+
+        sigma**2 A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f + J_f^T P_g J_f] A^-T,
+
+    the sharp reference's noise weighed down by the blurred subset's lower contrast. At
+    ``W = 0`` it is ``2 sigma**2 (J^T P J)^-1``, the match-score bound (eq. 2) with the ZNSSD
+    projection; with blur, the weaker current gradients in ``A`` raise it.
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+        ``var_i(W_j) / sigma**2`` (px**2 / GL**2); ``nan`` where the subset has no gradient.
+    """
+    _check_shape(shape)
+    _check_derivative(derivative)
+    dy, dx = _unit(motion)
+    e = np.zeros(2 if shape == "translation" else 6)
+    e[0] = dx
+    e[1 if shape == "translation" else 3] = dy
+    out = np.full((len(blur), len(centres)), np.nan)
+    for j, start, jf, jg, f, gg in _blurred_subsets(image, blur, centres, subset, motion,
+                                                    shape, derivative, boundary, chunk):
+        fh, sf = _normalise(f)
+        gh, sg = _normalise(gg)
+        ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
+        a = np.einsum("npi,npj->nij", jf, _project(jg, gh))
+        pf, pg = _project(jf, fh), _project(jf, gh)
+        mid = (ratio2[:, None, None] * np.einsum("npi,npj->nij", pf, pf)
+               + np.einsum("npi,npj->nij", pg, pg))
+        # e^T A^-1 M A^-T e = z^T M z with A^T z = e
+        z = _solve(np.transpose(a, (0, 2, 1)), np.broadcast_to(e, (len(f), e.size)).copy())
+        out[j, start : start + len(f)] = np.einsum("ni,nij,nj->n", z, mid, z)
     return out

@@ -422,8 +422,9 @@ def pattern_metrics(
         Grid step of the subsets (default: ``subset``, non-overlapping).
     gradient : {"central", "sobel"}
     blur_sensitivity : bool
-        Compute ``blur_sensitivity_c`` (spectral derivatives, mirror extension, the same
-        subsets; motion along x, translation shape). ``False`` leaves it ``None``.
+        Compute ``blur_sensitivity_c`` (the DIC engine's cubic-spline gradients, ZNSSD,
+        mirror extension, the same subsets; motion along x, translation shape, as
+        :func:`dicblur.models.blur_sensitivity`). ``False`` leaves it ``None``.
 
     Returns
     -------

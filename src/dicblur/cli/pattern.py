@@ -1,8 +1,9 @@
-"""CLI: ``dicblur pattern generate|metrics`` and ``dicblur noise``."""
+"""CLI: ``dicblur pattern generate|metrics|predict`` and ``dicblur noise``."""
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import typer
@@ -11,7 +12,7 @@ from ..errors import InputError
 from ..io import load_image, save_image
 from ..metrics import estimate_noise, pattern_metrics
 from ..patterns import PatternSettings, paper_pattern4, speckle_pattern
-from ._common import parse_size, print_json, print_mapping
+from ._common import console, parse_size, print_json, print_mapping
 
 pattern_app = typer.Typer(help="Generate speckle patterns and measure their metrics.",
                           no_args_is_help=True)
@@ -94,6 +95,59 @@ def metrics(
     else:
         print_mapping(f"pattern metrics: {image}", data, _UNITS)
 
+
+
+@pattern_app.command("predict")
+def predict(
+    image: Path = typer.Argument(..., help="Sharp image of the pattern (TIFF, PNG, ...)."),
+    noise: float = typer.Option(..., "--noise", help="Noise std in each image, grey levels."),
+    subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
+    step: int | None = typer.Option(None, "--step", help="Subset grid step, px."),
+    blur: list[float] = typer.Option([], "--blur",
+                                     help="Blur length W, px (repeatable; default 0..8)."),
+    angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
+    shape: str = typer.Option("translation", "--shape", help="translation or affine."),
+    out: Path | None = typer.Option(None, "-o", "--out",
+                                    help="Also write a model JSON for dicblur predict/plan."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+) -> None:
+    """Predict u_e(W) of IMAGE from the static image alone (no simulation, no DIC run)."""
+    from rich.table import Table
+
+    from ..models import model_from_pattern, predict_from_pattern
+
+    if shape not in ("translation", "affine"):
+        raise InputError(f"--shape={shape!r}: choose 'translation' or 'affine'")
+    img = load_image(image)
+    a = math.radians(angle)
+    motion = (math.sin(a), math.cos(a))
+    w = list(blur) or [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0]
+    pred = predict_from_pattern(img, w, noise_sigma=noise, subset=subset, step=step,
+                                motion=motion, shape=shape)  # type: ignore[arg-type]
+    if out is not None:
+        model = model_from_pattern(img, noise_sigma=noise, subset=subset, step=step,
+                                   motion=motion, shape=shape,  # type: ignore[arg-type]
+                                   provenance={"image": str(image)})
+        model.to_json(str(out))
+    if as_json:
+        print_json({"blur": pred.blur.tolist(), "u_e": pred.u_e.tolist(),
+                    "u_noise": pred.u_noise.tolist(), "u_blur": pred.u_blur.tolist(),
+                    "sssig": pred.sssig.tolist(),
+                    "valid_fraction": pred.valid_fraction.tolist(), "noise_sigma": noise,
+                    "subset": subset, "shape": shape, "angle": angle})
+    else:
+        table = Table(title=f"predicted from the static image: {image} (noise {noise:g} GL, "
+                            f"subset {subset} px, {shape}, motion at {angle:g} deg)")
+        for col in ("W (px)", "u_e (px)", "noise term (px)", "blur term (px)",
+                    "SSSIG (GL/px)^2", "subsets kept"):
+            table.add_column(col, justify="right")
+        for j in range(pred.blur.size):
+            table.add_row(f"{pred.blur[j]:g}", f"{pred.u_e[j]:.4g}", f"{pred.u_noise[j]:.4g}",
+                          f"{pred.u_blur[j]:.4g}", f"{pred.sssig[j]:.4g}",
+                          f"{100 * pred.valid_fraction[j]:.0f} %")
+        console.print(table)
+    if out is not None:
+        console.print(f"wrote {out}: use it with dicblur predict / dicblur plan")
 
 def noise_command(
     image_a: Path = typer.Argument(..., help="First image of a static scene."),

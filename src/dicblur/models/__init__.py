@@ -15,8 +15,16 @@ from .decay import (
     taylor_model,
 )
 from .fit import ModelComparison, compare_models, fit_blur_model
-from .mismatch import BlurSensitivity, blur_sensitivity, fit_mismatch, mismatch_model
+from .mismatch import (
+    BlurMismatchCurve,
+    BlurSensitivity,
+    blur_mismatch_curve,
+    blur_sensitivity,
+    fit_mismatch,
+    mismatch_model,
+)
 from .model import BlurUncertaintyModel, Prediction
+from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern
 from .plan import (
     RULE_OF_THUMB_BLUR,
     ExposurePlan,
@@ -30,14 +38,17 @@ from .units import parse_quantity
 
 __all__ = [
     "RULE_OF_THUMB_BLUR",
+    "BlurMismatchCurve",
     "BlurSensitivity",
     "BlurUncertaintyModel",
     "ExposurePlan",
     "FitResult",
     "ModelComparison",
     "ParameterEstimate",
+    "PatternPrediction",
     "PoissonGaussianCamera",
     "Prediction",
+    "blur_mismatch_curve",
     "blur_sensitivity",
     "combined_model",
     "combined_pan_model",
@@ -51,10 +62,12 @@ __all__ = [
     "match_score_uncertainty",
     "mbrf",
     "mismatch_model",
+    "model_from_pattern",
     "pan_uncertainty",
     "parse_quantity",
     "plan_exposure",
     "power_law",
+    "predict_from_pattern",
     "sssig_decay",
     "taylor_model",
 ]

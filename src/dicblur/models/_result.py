@@ -204,8 +204,12 @@ def make_result(
         # eta, which is fitted as log eta; never below zero for the noise factor a or k)
         for i, name in enumerate(names):
             if name in log_params and values[i] > 0:
-                rel = tq * se[i] / values[i]
+                # an unconstrained factor (e.g. the noise term of noise-free data) has a
+                # relative error of 1e3 or more: its interval is (0, inf), not an overflow
+                rel = min(tq * se[i] / values[i], 700.0)
                 low[i], high[i] = values[i] * np.exp(-rel), values[i] * np.exp(rel)
+                if rel == 700.0:
+                    low[i], high[i] = 0.0, np.inf
     else:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         boots = []

@@ -1,0 +1,266 @@
+"""Predict u_e(W) of a pattern from its static image alone: no simulation, no DIC run.
+
+Both terms of the noise + blur-mismatch model (docs/models.md s. 4) come from the sharp
+image and its exact box blur, subset by subset, for the ZNSSD IC-GN matcher:
+
+- the mismatch shift ``xi_i(W)``: where IC-GN stops against the blurred image
+  (:func:`~dicblur.models.blur_mismatch_curve`);
+- the noise variance ``var_i(W)``: the linear response of that fixed point to
+  independent Gaussian noise of std ``sigma`` in both images (the sandwich formula of
+  :func:`dicblur._blur_sensitivity.subset_noise_variance`; at W = 0 the match-score
+  bound, eq. 2).
+
+The field statistic DIC reports, the std of the displacement over POIs, then has
+expectation ``u_e(W)**2 = mean_i var_i(W) + var_i(xi_i(W))``. On generated patterns of 3
+and 6 px speckles with noise 2 GL, noisy IC-GN lands within 5 % of it for W = 0..6 px
+(BENCHMARKS.md). :func:`model_from_pattern` turns the prediction into a
+:class:`~dicblur.models.BlurUncertaintyModel`, so ``predict``, ``max_blur`` and
+``plan_exposure`` work before any campaign.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._blur_sensitivity import (
+    Boundary,
+    Derivative,
+    Shape,
+    _spectral,
+    _unit,
+    subset_blur_shifts,
+    subset_noise_variance,
+)
+from .._validation import as_image, check_odd_subset, check_positive
+from ..errors import InputError
+from ..metrics import _resolve_points
+from ._checks import as_blur
+from .model import BlurUncertaintyModel
+
+__all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern"]
+
+
+@dataclass(frozen=True)
+class PatternPrediction:
+    """Uncertainty of a pattern predicted from its static image (see predict_from_pattern).
+
+    Attributes
+    ----------
+    blur : ndarray, shape (m,)
+        Blur lengths W (px).
+    u_e : ndarray, shape (m,)
+        Predicted random error along the motion (px): ``sqrt(u_noise**2 + u_blur**2)``.
+    u_noise : ndarray, shape (m,)
+        Noise term ``sqrt(mean_i var_i)`` (px).
+    u_blur : ndarray, shape (m,)
+        Blur-mismatch term ``std_i(xi_i)`` (px).
+    sssig : ndarray, shape (m,)
+        Mean subset SSSIG of the blurred image along the motion ((GL/px)**2, central
+        differences, as :func:`dicblur.sssig` and the campaigns compute it).
+    valid_fraction : ndarray, shape (m,)
+        Fraction of the subsets in the statistics (the rest break down: no texture left
+        along the motion).
+    noise_sigma : float
+        Noise std (GL) in each image.
+    subset : int
+    shape : str
+    motion : tuple of float
+        Unit motion direction (dy, dx).
+    """
+
+    blur: NDArray[np.float64]
+    u_e: NDArray[np.float64]
+    u_noise: NDArray[np.float64]
+    u_blur: NDArray[np.float64]
+    sssig: NDArray[np.float64]
+    valid_fraction: NDArray[np.float64]
+    noise_sigma: float
+    subset: int
+    shape: str
+    motion: tuple[float, float]
+
+
+def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.intp],
+           subset: int, motion: tuple[float, float], shape: Shape, derivative: Derivative,
+           boundary: Boundary, max_shift: float
+           ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                      NDArray[np.float64]]:
+    """Per W: mean noise variance per GL**2, mismatch variance, SSSIG, valid fraction."""
+    kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative,
+                              boundary=boundary)
+    xi = subset_blur_shifts(img, w, pts, subset, max_shift=max_shift, **kw)
+    var = subset_noise_variance(img, w, pts, subset, **kw)
+    ok = np.isfinite(xi) & np.isfinite(var)
+    count = ok.sum(axis=1)
+    if np.any(count < 2):
+        j = int(np.argmax(count < 2))
+        raise InputError(
+            f"image: fewer than two subsets keep an intensity gradient at W = {w[j]:g} px "
+            "(flat, or erased by the blur); no prediction there (use a textured image, a "
+            "larger area or shorter blur lengths)"
+        )
+    xi_ok = np.where(ok, xi, np.nan)
+    with np.errstate(invalid="ignore"):
+        mean_var = np.nanmean(np.where(ok, var, np.nan), axis=1)
+        mis_var = np.nanvar(xi_ok, axis=1)
+    dy, dx = _unit(motion)
+    h = subset // 2
+    s = np.empty(w.size)
+    for j, wl in enumerate(w):
+        g = img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0]
+        # directional SSSIG with central differences, as dicblur.sssig / the campaigns
+        gp = np.pad(g, 1, mode="symmetric" if boundary == "reflect" else "wrap")
+        gd = dx * 0.5 * (gp[1:-1, 2:] - gp[1:-1, :-2]) + dy * 0.5 * (gp[2:, 1:-1] - gp[:-2, 1:-1])
+        win = np.lib.stride_tricks.sliding_window_view(gd * gd, (subset, subset))
+        s[j] = float(win[pts[:, 0] - h, pts[:, 1] - h].sum(axis=(1, 2)).mean())
+    return mean_var, mis_var, s, count / xi.shape[1]
+
+
+def predict_from_pattern(
+    image: ArrayLike,
+    blur: ArrayLike,
+    *,
+    noise_sigma: float,
+    subset: int,
+    step: int | None = None,
+    points: ArrayLike | None = None,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "bspline3",
+    boundary: Boundary = "reflect",
+    max_shift: float = 1.0,
+) -> PatternPrediction:
+    """Predict the DIC random error u_e(W) of a pattern from its static image alone.
+
+    Parameters
+    ----------
+    image : array_like, shape (rows, cols)
+        Sharp reference image (grey levels), e.g. a camera image of the specimen at rest.
+    blur : array_like, shape (m,)
+        Blur lengths W (px, >= 0) of linear motion along ``motion``.
+    noise_sigma : float
+        Gaussian noise std (GL) in each image (reference and blurred current).
+    subset : int
+        Odd subset size (px).
+    step, points
+        Subset grid step (px, default ``subset``) or explicit (n, 2) (row, col) centres.
+    motion : (dy, dx)
+        Motion direction (only the direction matters).
+    shape : {"translation", "affine"}
+        Shape function of the IC-GN matcher.
+    derivative, boundary, max_shift
+        As for :func:`~dicblur.models.blur_mismatch_curve` (defaults: the DIC engine's
+        cubic spline, mirror extension for camera images, breakdown beyond 1 px).
+
+    Returns
+    -------
+    PatternPrediction
+
+    Notes
+    -----
+    The prediction leaves out DIC's interpolation bias at the sub-pixel offset of the blur
+    (W/2), which is below the noise term in noisy data; it assumes Gaussian noise of the
+    same std in both images (for a Poisson-Gaussian camera give the noise at the mean
+    level, or use :func:`model_from_pattern` with ``plan_exposure``).
+    """
+    img = as_image(image, "image", min_size=5)
+    subset = check_odd_subset(subset)
+    sigma = check_positive(noise_sigma, "noise_sigma")
+    max_shift = check_positive(max_shift, "max_shift")
+    w = as_blur(blur, "blur", increasing=False)
+    if boundary not in ("reflect", "periodic"):
+        raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
+    pts = _resolve_points(img.shape, subset, step, points)
+    mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, derivative,
+                                        boundary, max_shift)
+    u_noise = sigma * np.sqrt(mean_var)
+    u_blur = np.sqrt(mis_var)
+    n = math.hypot(float(motion[0]), float(motion[1]))
+    return PatternPrediction(blur=w, u_e=np.hypot(u_noise, u_blur), u_noise=u_noise,
+                             u_blur=u_blur, sssig=s, valid_fraction=frac, noise_sigma=sigma,
+                             subset=subset, shape=str(shape),
+                             motion=(float(motion[0]) / n, float(motion[1]) / n))
+
+
+def model_from_pattern(
+    image: ArrayLike,
+    *,
+    noise_sigma: float,
+    subset: int,
+    blur: ArrayLike | None = None,
+    step: int | None = None,
+    points: ArrayLike | None = None,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    boundary: Boundary = "reflect",
+    provenance: dict[str, Any] | None = None,
+) -> BlurUncertaintyModel:
+    """A :class:`BlurUncertaintyModel` fitted to the static prediction of a pattern.
+
+    The prediction (:func:`predict_from_pattern`) at noise ``sigma/2``, ``sigma`` and
+    ``2 sigma`` over ``blur`` (default W = 0..8 px in steps of 0.5) is fitted like
+    campaign data (:func:`~dicblur.models.fit_blur_model`, mismatch model with its next
+    term), so ``predict``, ``max_blur`` and ``plan_exposure`` work before any simulation.
+    The intervals describe how well the model form follows the prediction, not the
+    prediction's own error (within 5-10 % of IC-GN, BENCHMARKS.md); ``provenance`` records
+    ``source = "static prediction"``.
+
+    Parameters
+    ----------
+    image : array_like, shape (rows, cols)
+        Sharp reference image, grey levels.
+    noise_sigma : float
+        Noise std (GL) of the images the model is for (its reference noise).
+    subset : int
+        Odd subset size (px).
+    blur : array_like, optional
+        Blur lengths (px) to predict and fit; at least 4 distinct values.
+    step, points, motion, shape, boundary
+        As for :func:`predict_from_pattern`.
+    provenance : dict, optional
+        Extra JSON-ready fields for the model's provenance.
+
+    Returns
+    -------
+    BlurUncertaintyModel
+    """
+    from .fit import fit_blur_model
+
+    img = as_image(image, "image", min_size=5)
+    sigma = check_positive(noise_sigma, "noise_sigma")
+    w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
+    if np.unique(w).size < 4:
+        raise InputError(f"blur: {np.unique(w).size} distinct lengths; give at least 4 "
+                         "(e.g. W = 0, 1, 2, 4 px)")
+    subset = check_odd_subset(subset)
+    pts = _resolve_points(img.shape, subset, step, points)
+    mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, "bspline3",
+                                        boundary, 1.0)
+    keep = frac >= 0.9  # as the campaigns' breakdown rule: >= 90 % of the subsets
+    if keep.sum() < 4:
+        raise InputError(
+            f"blur: only {int(keep.sum())} blur lengths keep >= 90 % of the subsets; the "
+            "pattern's texture is erased along the motion beyond W = "
+            f"{w[keep][-1] if keep.any() else 0:g} px (give shorter blur lengths)"
+        )
+    levels = (0.5 * sigma, sigma, 2.0 * sigma)
+    ww = np.concatenate([w[keep]] * 3)
+    ss = np.concatenate([s[keep]] * 3)
+    uu = np.concatenate([np.sqrt(lv**2 * mean_var[keep] + mis_var[keep]) for lv in levels])
+    nn = np.repeat(levels, int(keep.sum()))
+    prov: dict[str, Any] = {"source": "static prediction", "subset": subset,
+                            "shape": str(shape), "motion": [float(motion[0]), float(motion[1])],
+                            "n_subsets": len(pts), "image_shape": list(img.shape)}
+    prov.update(provenance or {})
+    model = fit_blur_model(ww, ss, uu, noise_sigma=nn, subset=subset,
+                           mean_level=float(img.mean()), next_term=True, default="mismatch",
+                           provenance=prov, compare=False)
+    # fitted on three noise levels: make the model's own noise the one asked for
+    from dataclasses import replace
+
+    return replace(model, noise_sigma=sigma)

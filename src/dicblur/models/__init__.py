@@ -25,7 +25,13 @@ from .mismatch import (
 )
 from .model import BlurUncertaintyModel, Prediction
 from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern
-from .plan import RULE_OF_THUMB_BLUR, ExposurePlan, PoissonGaussianCamera, plan_exposure
+from .plan import (
+    RULE_OF_THUMB_BLUR,
+    ExposurePlan,
+    PoissonGaussianCamera,
+    gradient_weighted_level,
+    plan_exposure,
+)
 from .powerlaw import edge_driven_range, fit_power_law, power_law
 from .static import match_score_uncertainty, pan_uncertainty
 from .units import parse_quantity
@@ -52,6 +58,7 @@ __all__ = [
     "fit_mismatch",
     "fit_power_law",
     "fit_sssig_decay",
+    "gradient_weighted_level",
     "match_score_uncertainty",
     "mbrf",
     "mismatch_model",

@@ -55,6 +55,8 @@ def fit_blur_model(
     c_static: float | None = None,
     default: str = "auto",
     next_term: bool | str = False,
+    floor: bool | str = "auto",
+    noise_blur: bool | str = "auto",
     confidence: float = 0.95,
     ci: str = "covariance",
     n_boot: int = 500,
@@ -97,6 +99,15 @@ def fit_blur_model(
         default: a quartic fitted on a limited W range extrapolates badly (on DIC data a
         negative ``c4`` fitted on W <= 5 px under-predicted W = 8 px by 80 %, the pure
         ``c W**2`` term over-predicted by about 10 %; docs/models.md s. 6).
+    floor : bool or "auto"
+        Noise-independent floor ``u_0`` of the mismatch model (see :func:`fit_mismatch`);
+        ``"auto"`` fits it only with >= 2 noise levels. Calibrate at two or more noise
+        levels when the model will be used at other noise levels (exposure planning): with
+        one level the floor is absorbed in ``a`` and the noise term extrapolates too high
+        (docs/models.md s. 4).
+    noise_blur : bool or "auto"
+        Growth ``(1 + e W**4)`` of the noise term with the blur mismatch (see
+        :func:`fit_mismatch`); ``"auto"`` tries it only with >= 2 noise levels.
     confidence, ci, n_boot, seed
         Interval level and method (``"covariance"`` or ``"bootstrap"``; see
         :mod:`dicblur.models._result`); ``seed`` drives the bootstrap only.
@@ -163,6 +174,7 @@ def fit_blur_model(
                        blur=w[in_range], confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
     try:
         mm = fit_mismatch(w, s, u, noise_sigma=sig, next_term=next_term,  # type: ignore[arg-type]
+                          floor=floor, noise_blur=noise_blur,  # type: ignore[arg-type]
                           confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
     except FitError as exc:
         warnings.warn(f"mismatch model not fitted: {exc}", stacklevel=2)
@@ -199,7 +211,8 @@ def fit_blur_model(
         try:
             cmp_ = compare_models(w, s, u, noise_sigma=sig, contrast_ratio=ratio,
                                   fit_range=fit_range, range_tolerance=range_tolerance,
-                                  next_term=next_term)
+                                  next_term=next_term, floor=floor,
+                                  noise_blur=noise_blur)
             comparison = _json_clean(cmp_.to_dict())
             chosen = cmp_.better
         except (FitError, InputError) as exc:
@@ -248,6 +261,8 @@ def compare_models(
     fit_range: tuple[float, float] | None = None,
     range_tolerance: float = 0.05,
     next_term: bool | str = False,
+    floor: bool | str = "auto",
+    noise_blur: bool | str = "auto",
 ) -> ModelComparison:
     """Fit both models on part of the data and score their predictions on the rest.
 
@@ -287,7 +302,7 @@ def compare_models(
         w[train], s[train], u[train], noise_sigma=None if sig is None else sig[train],
         contrast_ratio=None if ratio is None else ratio[train], fit_range=fit_range,
         range_tolerance=range_tolerance, default="mismatch", next_term=next_term,
-        compare=False)
+        floor=floor, noise_blur=noise_blur, compare=False)
     rms: dict[str, float] = {}
     mx: dict[str, float] = {}
     rel: dict[str, tuple[float, ...]] = {}

@@ -4,13 +4,24 @@ With a sharp reference and a blurred current image the error of a subset has two
 the noise term of the match-score model evaluated at the blurred SSSIG, and a
 deterministic, pattern-dependent shift of the SSD minimum that does not depend on noise:
 
-    u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) + (c W**2 + c4 W**4)**2
+    u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) (1 + e W**4) + u_0**2
+                       + (c W**2 + c4 W**4)**2
 
 Theory gives ``a = 2``, ``gamma = 1`` (eq. 2) and ``c`` from the static image
 (:func:`blur_sensitivity`); ``c4`` is the next term of the expansion, fitted only when the
-data ask for it (AIC). The noise enters only through ``SSSIG / sigma**2``, so the model is
-invariant to scaling the image intensity. Without a known noise level the noise term is
-``k / SSSIG(W)`` with ``k = a sigma**2`` fitted.
+data ask for it (AIC). ``u_0`` (``floor``) is a noise-independent floor of the matcher: the
+sub-pixel interpolation bias at the fractional shift of the blurred image (W/2 for a linear
+trajectory; Schreier, Braasch & Sutton, Opt. Eng. 39(11), 2000,
+doi:10.1117/1.1314593), about 1e-3 px with bicubic B-splines on 4 px speckles. With one
+noise level it cannot be told from the noise term (both are flat in W at small W), so it is
+fitted only with >= 2 noise levels (docs/models.md s. 4). ``e`` (``noise_blur``, px**-4)
+is the growth of the noise term with the blur mismatch: with a sharp reference the noise of
+the reference gradients meets the mismatch residual ``(W**2 / 24) f''`` and the Hessian
+``sum g_ref g_cur`` falls below ``sqrt(SSSIG_ref SSSIG(W))``, both O(W**4) relative
+(docs/models.md s. 4). It is separable from ``c`` only with >= 2 noise levels. The noise
+enters only through
+``SSSIG / sigma**2``, so the model is invariant to scaling the image intensity. Without a
+known noise level the noise term is ``k / SSSIG(W)`` with ``k = a sigma**2`` fitted.
 """
 
 from __future__ import annotations
@@ -263,10 +274,14 @@ def mismatch_model(
     gamma: float = 1.0,
     c4: float = 0.0,
     k: float | None = None,
+    floor: float = 0.0,
+    noise_blur: float = 0.0,
 ) -> NDArray[np.float64]:
-    """``sqrt(a (SSSIG/sigma**2)**(-gamma) + (c W**2 + c4 W**4)**2)`` (px).
+    """``sqrt(a (SSSIG/sigma**2)**(-gamma) (1 + e W**4) + floor**2 + (c W**2 + c4 W**4)**2)``.
 
-    With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required).
+    In px. With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required).
+    ``floor`` (px) is the noise-independent matcher floor ``u_0``; ``noise_blur`` (``e``,
+    px**-4) the growth of the noise term with the blur mismatch.
     """
     w = np.asarray(blur, dtype=np.float64)
     s = np.asarray(sssig, dtype=np.float64)
@@ -277,8 +292,9 @@ def mismatch_model(
     else:
         sig = np.asarray(noise_sigma, dtype=np.float64)
         noise = a * (s / sig**2) ** (-gamma)
+    noise = noise * (1.0 + noise_blur * w**4)
     ub = c * w * w + c4 * w**4
-    return np.sqrt(noise + ub * ub)
+    return np.sqrt(noise + floor * floor + ub * ub)
 
 
 def fit_mismatch(
@@ -289,6 +305,8 @@ def fit_mismatch(
     noise_sigma: ArrayLike | None = None,
     fit_gamma: bool | None = None,
     next_term: bool | Literal["auto"] = "auto",
+    floor: bool | Literal["auto"] = "auto",
+    noise_blur: bool | Literal["auto"] = "auto",
     confidence: float = 0.95,
     ci: str = "covariance",
     n_boot: int = 500,
@@ -303,16 +321,25 @@ def fit_mismatch(
     noise_sigma : float or array_like, shape (n,), optional
         Noise std (GL). ``None``: the noise term is ``k / SSSIG``.
     fit_gamma : bool, optional
-        Fit the noise exponent ``gamma``; default: only with >= 2 noise levels (else fixed
-        at the theoretical 1).
+        Fit the noise exponent ``gamma``; default: only with >= 2 noise levels and no
+        ``floor`` (else fixed at the theoretical 1: a floor is the physical reason a fitted
+        ``gamma`` drops below 1, and the two are barely separable with two levels).
     next_term : bool or "auto"
         Add ``c4 W**4`` to the mismatch term; ``"auto"`` keeps it when the Akaike
         information criterion drops by more than 2 and there are enough points.
+    floor : bool or "auto"
+        Fit the noise-independent floor ``u_0`` (px, name ``"floor"``). ``"auto"``: tried
+        only with >= 2 noise levels (with one level it is confounded with ``a``) and kept
+        when the AIC drops by more than 2. ``True`` with one level raises.
+    noise_blur : bool or "auto"
+        Fit ``e`` (name ``"noise_blur"``, px**-4) of the noise term's growth
+        ``(1 + e W**4)``; same rules as ``floor``.
 
     Returns
     -------
     FitResult
-        ``names`` among ``("a" | "k", "gamma", "c", "c4")``; ``fixed`` holds the rest.
+        ``names`` among ``("a" | "k", "gamma", "noise_blur", "floor", "c", "c4")``;
+        ``fixed`` holds the rest.
     """
     w = as_vector(blur, "blur")
     s = as_positive(sssig, "sssig", w.size)
@@ -324,34 +351,60 @@ def fit_mismatch(
         sig = as_positive(np.broadcast_to(np.asarray(noise_sigma, dtype=np.float64), w.shape)
                           .copy(), "noise_sigma", w.size)
     multi = sig is not None and np.unique(sig).size >= 2
-    do_gamma = bool(multi if fit_gamma is None else (fit_gamma and sig is not None))
     if next_term not in (True, False, "auto"):
         raise InputError(f"next_term={next_term!r}: use True, False or 'auto'")
+    if floor not in (True, False, "auto"):
+        raise InputError(f"floor={floor!r}: use True, False or 'auto'")
+    if noise_blur not in (True, False, "auto"):
+        raise InputError(f"noise_blur={noise_blur!r}: use True, False or 'auto'")
+    for opt, val in (("floor", floor), ("noise_blur", noise_blur)):
+        if val is True and not multi:
+            raise InputError(
+                f"{opt}=True: needs data at >= 2 noise levels (with one level it cannot be "
+                f"told from the other terms); add a noise level or use {opt}=False"
+            )
     options = [False, True] if next_term == "auto" else [bool(next_term)]
+    floors = ([False, True] if multi else [False]) if floor == "auto" else [bool(floor)]
+    growths = ([False, True] if multi else [False]) if noise_blur == "auto" else [
+        bool(noise_blur)]
     results = []
-    for with_c4 in options:
-        names: list[str] = ["a" if sig is not None else "k"]
-        if do_gamma:
-            names.append("gamma")
-        names.append("c")
-        if with_c4:
-            names.append("c4")
-        if w.size - len(names) < (2 if with_c4 and next_term == "auto" else 1):
-            continue
-        results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci, n_boot, seed))
+    for with_growth in growths:
+        for with_floor in floors:
+            do_gamma = bool((multi and not with_floor) if fit_gamma is None
+                            else (fit_gamma and sig is not None))
+            for with_c4 in options:
+                names: list[str] = ["a" if sig is not None else "k"]
+                if do_gamma:
+                    names.append("gamma")
+                if with_growth:
+                    names.append("noise_blur")
+                if with_floor:
+                    names.append("floor")
+                names.append("c")
+                if with_c4:
+                    names.append("c4")
+                auto = ((with_c4 and next_term == "auto") or (with_floor and floor == "auto")
+                        or (with_growth and noise_blur == "auto"))
+                if w.size - len(names) < (2 if auto else 1):
+                    continue
+                results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci, n_boot,
+                                        seed))
     if not results:
         raise FitError(
             f"mismatch: {w.size} point(s) are too few for the noise + blur-mismatch model; "
             "give at least 3 blur levels"
         )
-    if len(results) == 1:
-        return results[0]
 
     def aic(r: FitResult) -> float:
         ssr = r.residual_std**2 * r.dof
         return r.n_points * math.log(max(ssr, 1e-300) / r.n_points) + 2 * len(r.names)
 
-    return results[1] if aic(results[1]) < aic(results[0]) - 2.0 else results[0]
+    # candidates in order of complexity; a richer one must lower the AIC by more than 2
+    best = results[0]
+    for r in results[1:]:
+        if aic(r) < aic(best) - 2.0:
+            best = r
+    return best
 
 
 def _fit_one(
@@ -369,6 +422,8 @@ def _fit_one(
         d = dict(zip(names, p, strict=True))
         d.setdefault("gamma", 1.0)
         d.setdefault("c4", 0.0)
+        d.setdefault("floor", 0.0)
+        d.setdefault("noise_blur", 0.0)
         return d
 
     def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
@@ -380,17 +435,22 @@ def _fit_one(
         noise0 = float(ui[lo] ** 2 * q[lo])
         blur_part = ui[hi] ** 2 - noise0 / q[hi]
         c0 = math.sqrt(max(blur_part, 0.01 * ui[hi] ** 2)) / max(wi[hi] ** 2, 1e-12)
-        start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0}
+        floor0 = 0.3 * float(ui.min())
+        if "floor" in names:  # start with part of the low-W variance on the floor
+            noise0 *= 0.9
+        start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0, "floor": floor0,
+                 "noise_blur": 1e-3}
         p0 = np.array([start[n] for n in names])
         scl = np.where(p0 > 0, p0, 1e-3 * c0 if c0 > 0 else 1e-6)
-        lower = np.array([0.0 if n in ("a", "k", "c") else (0.05 if n == "gamma" else -np.inf)
-                          for n in names])
+        lower = np.array([0.0 if n in ("a", "k", "c", "floor", "noise_blur")
+                          else (0.05 if n == "gamma" else -np.inf) for n in names])
         upper = np.array([5.0 if n == "gamma" else np.inf for n in names])
 
         def resid(pn: NDArray[np.float64]) -> NDArray[np.float64]:
             d = unpack(pn * scl)
             m = mismatch_model(wi, si, sg, c=d["c"], a=d.get("a", 2.0), gamma=d["gamma"],
-                               c4=d["c4"], k=d.get("k"))
+                               c4=d["c4"], k=d.get("k"), floor=d["floor"],
+                               noise_blur=d["noise_blur"])
             return np.log(np.maximum(m, 1e-300)) - np.log(ui)
 
         r = optimize.least_squares(resid, p0 / scl, bounds=(lower / scl, upper / scl),

@@ -39,11 +39,14 @@ class Prediction:
         Prediction interval (level ``confidence``) for a new measurement: parameter
         covariance (delta method, in log space) plus the fit's residual scatter.
     u_noise, u_blur : ndarray or None
-        The two terms of the mismatch model (px; ``None`` for the power law).
+        The noise and blur-mismatch terms of the mismatch model (px; ``None`` for the
+        power law).
     sigma : float or None
         Noise std (GL) the prediction is for.
     model : str
     confidence : float
+    u_floor : float or None
+        Noise-independent floor ``u_0`` of the mismatch model (px), if fitted.
     """
 
     blur: NDArray[np.float64]
@@ -55,6 +58,7 @@ class Prediction:
     sigma: float | None
     model: str
     confidence: float
+    u_floor: float | None = None
 
 
 @dataclass(frozen=True)
@@ -169,7 +173,7 @@ class BlurUncertaintyModel:
                 lu = lu + kappa * math.log(sigma / ref)
             return lu
         noise, blur2 = self._mismatch_terms(p, w, s, sigma)
-        return 0.5 * np.log(noise + blur2)
+        return 0.5 * np.log(noise + p.get("floor", 0.0) ** 2 + blur2)
 
     def _mismatch_terms(self, p: dict[str, float], w: NDArray[np.float64],
                         s: NDArray[np.float64], sigma: float | None
@@ -181,6 +185,7 @@ class BlurUncertaintyModel:
             gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch
                           else 1.0)
             noise = p["a"] * (s / sigma**2) ** (-gamma)
+        noise = noise * (1.0 + p.get("noise_blur", 0.0) * w**4)
         ub = p["c"] * w * w + p.get("c4", 0.0) * w**4
         return noise, ub * ub
 
@@ -250,14 +255,16 @@ class BlurUncertaintyModel:
         tq = t_quantile(self.confidence, fit.dof)
         half = tq * np.sqrt(np.clip(var, 0.0, None))
         u_noise = u_blur = None
+        u_floor: float | None = None
         if kind == "mismatch":
             nf = len(fit.names)
             p = dict(zip(fit.names, theta[:nf], strict=True))
             noise, blur2 = self._mismatch_terms(p, w, self.sssig(w), sig)
             u_noise, u_blur = np.sqrt(noise), np.sqrt(blur2)
+            u_floor = float(p["floor"]) if "floor" in p else None
         return Prediction(blur=w, u_e=np.exp(lu), low=np.exp(lu - half), high=np.exp(lu + half),
                           u_noise=u_noise, u_blur=u_blur, sigma=sig, model=kind,
-                          confidence=self.confidence)
+                          confidence=self.confidence, u_floor=u_floor)
 
     def taylor(self, blur: ArrayLike) -> NDArray[np.float64]:
         """Small-W expansion of eq. 19 at the fit noise: ``u_e(0) (1 + alpha beta W**2)``."""

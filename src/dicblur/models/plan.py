@@ -13,6 +13,12 @@
   on noise only through ``SSSIG / sigma**2`` this is the same as working in electrons.
   Longer exposures lower the relative noise and raise the blur: u_e(t) has a minimum.
 
+With signal-dependent noise the match-score error of a subset is
+``sum g**2 (var_ref + var_cur) / (sum g**2)**2`` with ``var = gain I + read**2``: the shot
+noise counts at the gradient-weighted intensity ``sum(g**2 I) / sum(g**2)``
+(:func:`gradient_weighted_level`, ``noise_level`` of :func:`plan_exposure`), not at the
+mean. On the generated speckle patterns the two differ by < 1 % (docs/models.md s. 8).
+
 The closed-form optimum of docs/models.md (shot-noise limit, no saturation) is what the
 tests check the numerical optimum against.
 """
@@ -27,12 +33,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from .._validation import check_positive
+from .._validation import as_image, check_positive
 from ..errors import InputError
 from .model import BlurUncertaintyModel
 from .units import parse_quantity
 
-__all__ = ["RULE_OF_THUMB_BLUR", "ExposurePlan", "PoissonGaussianCamera", "plan_exposure"]
+__all__ = ["RULE_OF_THUMB_BLUR", "ExposurePlan", "PoissonGaussianCamera",
+           "gradient_weighted_level", "plan_exposure"]
 
 RULE_OF_THUMB_BLUR = 0.02
 """The common rule of thumb: keep the motion during the exposure under 0.02 px."""
@@ -107,11 +114,52 @@ class PoissonGaussianCamera:
         """Exposure (s) at which the brightest pixels reach the full well."""
         return self.full_well / (self.flux * self.peak_to_mean)
 
-    def noise_gl(self, exposure: NDArray[np.float64] | float, mean_level: float
-                 ) -> NDArray[np.float64]:
-        """Noise std in grey levels of images normalised to ``mean_level`` (see module)."""
+    def noise_gl(self, exposure: NDArray[np.float64] | float, mean_level: float,
+                 level: float | None = None) -> NDArray[np.float64]:
+        """Noise std in grey levels of images normalised to ``mean_level`` (see module).
+
+        ``level`` (GL, same images): intensity at which the shot noise is evaluated
+        (default ``mean_level``; the gradient-weighted level for DIC, see
+        :func:`gradient_weighted_level`).
+        """
         e = self.flux * np.asarray(exposure, dtype=np.float64)
-        return np.asarray(mean_level * np.sqrt(e + self.read_noise**2) / e)
+        ratio = 1.0 if level is None else level / mean_level
+        return np.asarray(mean_level * np.sqrt(e * ratio + self.read_noise**2) / e)
+
+
+def gradient_weighted_level(image: Any, *, motion: tuple[float, float] = (0.0, 1.0)
+                            ) -> float:
+    """Intensity at which signal-dependent noise enters the DIC error (GL).
+
+    ``sum(g**2 I) / sum(g**2)`` over the image, ``g`` the central-difference derivative
+    along the motion direction (dy, dx). The linearised least-squares displacement of a
+    subset has variance ``sum g**2 (var_ref + var_cur) / (sum g**2)**2``; with
+    ``var = gain I + read**2`` this is the match-score formula (eq. 2) at this intensity.
+
+    Parameters
+    ----------
+    image : array_like, shape (rows, cols)
+        Noise-free (or low-noise) reference image, grey levels.
+    motion : (dy, dx)
+        Motion direction (only the direction matters).
+
+    Returns
+    -------
+    float
+    """
+    img = as_image(image, "image", min_size=3)
+    dy, dx = (float(motion[0]), float(motion[1]))
+    norm = math.hypot(dy, dx)
+    if not math.isfinite(norm) or norm == 0:
+        raise InputError(f"motion={motion!r}: give a non-zero direction (dy, dx), e.g. (0, 1)")
+    g = np.zeros_like(img)
+    g[1:-1, 1:-1] = (0.5 * dy * (img[2:, 1:-1] - img[:-2, 1:-1])
+                     + 0.5 * dx * (img[1:-1, 2:] - img[1:-1, :-2])) / norm
+    g2 = g * g
+    total = float(g2.sum())
+    if total <= 0:
+        raise InputError("image: no intensity gradient along the motion; use a textured image")
+    return float((g2 * img).sum() / total)
 
 
 @dataclass(frozen=True)
@@ -190,6 +238,7 @@ def plan_exposure(
     sigma: float | None = None,
     which: str | None = None,
     n_curve: int = 200,
+    noise_level: float | None = None,
 ) -> ExposurePlan:
     """Choose the exposure time for a moving target.
 
@@ -212,6 +261,10 @@ def plan_exposure(
         Model to use (default: the model's default).
     n_curve : int
         Points of the returned u_e(t) curve.
+    noise_level : float, optional
+        Intensity (GL of the fitted reference images) at which the camera's shot noise is
+        evaluated: :func:`gradient_weighted_level` of the reference image. Default: the
+        model's mean level.
 
     Returns
     -------
@@ -283,9 +336,16 @@ def plan_exposure(
         notes.append("mean grey level of the reference images unknown: assumed 127.5 GL")
     t_sat = float(getattr(camera, "saturation_exposure", math.inf))
     theta, _ = model._theta(kind)
+    if noise_level is not None:
+        noise_level = check_positive(noise_level, "noise_level")
+
+    def noise(tt: NDArray[np.float64] | float) -> NDArray[np.float64]:
+        if noise_level is None:
+            return np.asarray(camera.noise_gl(tt, mean_level))
+        return np.asarray(camera.noise_gl(tt, mean_level, noise_level))
 
     def log_u(tt: NDArray[np.float64]) -> NDArray[np.float64]:
-        sig = camera.noise_gl(tt, mean_level)
+        sig = noise(tt)
         return np.array([model._log_u(kind, np.array([ti * v_px]), float(si), theta)[0]
                          for ti, si in zip(tt, sig, strict=True)])
 
@@ -310,7 +370,14 @@ def plan_exposure(
         notes.append("the optimum is at the saturation limit (brighter light or a shorter "
                      "exposure range changes the answer)" if i == grid.size - 1 else
                      "the optimum is at the shortest exposure searched")
-    sig_opt = float(camera.noise_gl(t_opt, mean_level))
+    sig_opt = float(noise(t_opt))
+    levels = model.noise_levels
+    if len(levels) == 1 and not (0.5 <= sig_opt / levels[0] <= 2.0) and "floor" not in fit.names:
+        notes.append(
+            f"the noise term is extrapolated from one calibration noise level ({levels[0]:g} "
+            f"GL) to {sig_opt:.3g} GL at the optimum; a noise-independent floor (sub-pixel "
+            "interpolation bias) cannot be separated at one level and inflates the "
+            "extrapolated noise: calibrate at >= 2 noise levels (docs/models.md s. 4)")
     at = model.predict([t_opt * v_px], sig_opt, model=kind)
     t_curve = np.geomspace(max(t_lo, t_opt / 100), min(t_hi, t_opt * 100), n_curve)
     u_curve = np.exp(log_u(t_curve))

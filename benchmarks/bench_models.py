@@ -17,9 +17,7 @@ are compared with each planned one.
 Part E (when ``dicblur.dic`` exists): held-out comparison of the power law and the
 mismatch model on DIC data (W = 0..8 px, noise 1, 2, 4 GL): fit on W <= 5 px and noise
 1, 2 GL, predict the rest.
-Part B (when ``dicblur.dic`` and ``dicblur.blur`` exist): the static prediction of ``c``
-against ``c`` fitted from DIC on noise-free, exactly box-blurred generated patterns over a
-range of speckle sizes, W <= 4 px (acceptance: within 15 %).
+The static ``c`` against IC-GN (formerly part B) is ``benchmarks/bench_blur_sensitivity.py``.
 
 Run: ``.venv/bin/python benchmarks/bench_models.py [--quick] [--only planning ...]
 [--tied-shift]``
@@ -44,7 +42,6 @@ from dicblur.models import (
     PoissonGaussianCamera,
     blur_sensitivity,
     fit_blur_model,
-    fit_mismatch,
     mismatch_model,
     plan_exposure,
     sssig_decay,
@@ -134,44 +131,6 @@ def part_c(quick: bool) -> list[dict]:
                      "c_fit_leading": c_lead, "ratio": c_pure / pred,
                      "ratio_leading": c_lead / pred,
                      "u_e": dict(zip(map(float, blurs), u_e, strict=True))})
-    return rows
-
-
-def part_b(quick: bool) -> list[dict] | None:
-    if importlib.util.find_spec("dicblur.dic") is None or \
-            importlib.util.find_spec("dicblur.blur") is None:
-        return None
-    # imported by name: the stages may be absent (ruff sorts absent modules differently)
-    motion_blur = importlib.import_module("dicblur.blur").motion_blur
-    correlate = importlib.import_module("dicblur.dic").correlate
-
-    sizes = (3.0, 6.0) if quick else (3.0, 4.0, 6.0, 8.0)
-    blurs = np.arange(0.5, 4.01, 0.5)
-    rows = []
-    for size in sizes:
-        img = dicblur.speckle_pattern((192, 192), speckle_size=size, softness=0.5, seed=7)
-        kx = np.fft.fftfreq(img.shape[1])[None, :]
-        for shape in ("translation", "affine"):
-            ref = correlate(img, img, subset=31, step=12, shape=shape)
-            pts = np.stack([ref.rows, ref.cols], axis=1)
-            pred = blur_sensitivity(img, subset=31, points=pts, shape=shape,
-                                    boundary="periodic").c
-            for centred in (True, False):
-                u_e, s = [], []
-                for wl in blurs:
-                    cur = motion_blur(img, (0.0, float(wl)), substeps=None)
-                    if centred:  # undo the W/2 translation: no interpolation bias
-                        cur = np.fft.ifft2(np.fft.fft2(cur) * np.exp(1j * np.pi * kx * wl)).real
-                    res = correlate(img, cur, subset=31, step=12, shape=shape)
-                    u_e.append(float(np.std(res.u[res.converged])))
-                    s.append(float(dicblur.sssig(cur, subset=31, points=pts).mean()))
-                u_arr = np.array(u_e)
-                c_pure, _ = _fit_c(blurs, u_arr)
-                c_model = fit_mismatch(blurs, np.array(s), u_arr, next_term=True)["c"]
-                rows.append({"speckle_size": size, "shape": shape, "centred": centred,
-                             "c_static": pred, "c_fit": c_pure, "ratio": c_pure / pred,
-                             "c_model": c_model, "ratio_model": c_model / pred,
-                             "u_e": dict(zip(map(float, blurs), u_e, strict=True))})
     return rows
 
 
@@ -444,7 +403,7 @@ def _print_d(d: dict) -> None:
     print("pred i = " + "; ".join(f"{i + 1}: {n}" for i, n in enumerate(names)))
 
 
-PARTS = ("speed", "c", "dic_c", "planning", "comparison")
+PARTS = ("speed", "c", "planning", "comparison")
 
 
 def main() -> None:
@@ -475,20 +434,6 @@ def main() -> None:
             print(f"{r['speckle_size']:10.1f} {r['c_static']:10.3e} {r['c_fit']:10.3e} "
                   f"{r['ratio']:6.3f} {r['c_fit_leading']:10.3e} {r['ratio_leading']:6.3f}")
         res["c_vs_bruteforce_ssd"] = cc
-    if "dic_c" in run:
-        b = part_b(args.quick)
-        if b is None:
-            print("part B (static c vs DIC-fitted c): pending, dicblur.dic / dicblur.blur absent")
-        else:
-            print("\nstatic c vs c fitted from DIC (noise-free, exact box blur, W = 0.5..4 px)")
-            print(f"{'speckle px':>10s} {'shape':>12s} {'W/2 shift':>9s} {'c static':>10s} "
-                  f"{'c W^2 fit':>10s} {'ratio':>6s} {'c model':>10s} {'ratio':>6s}")
-            for r in b:
-                print(f"{r['speckle_size']:10.1f} {r['shape']:>12s} "
-                      f"{'undone' if r['centred'] else 'kept':>9s} {r['c_static']:10.3e} "
-                      f"{r['c_fit']:10.3e} {r['ratio']:6.3f} {r['c_model']:10.3e} "
-                      f"{r['ratio_model']:6.3f}")
-        res["c_vs_dic"] = b
     if "planning" in run:
         d = part_d(args.quick, args.tied_shift)
         if d is None:

@@ -58,6 +58,17 @@ __all__ = [
 ]
 
 
+def _subset_inputs(image: ArrayLike, subset: int, step: int | None, points: ArrayLike | None,
+                   boundary: str = "reflect"
+                   ) -> tuple[NDArray[np.float64], int, NDArray[np.intp]]:
+    """Checked image, subset size and subset centres (row, col) of the static predictions."""
+    img = as_image(image, "image", min_size=5)
+    subset = check_odd_subset(subset)
+    if boundary not in ("reflect", "periodic"):
+        raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
+    return img, subset, _resolve_points(img.shape, subset, step, points)
+
+
 @dataclass(frozen=True)
 class BlurSensitivity:
     """Predicted blur sensitivity of a pattern (from the static image alone).
@@ -141,11 +152,7 @@ def blur_sensitivity(
     -------
     BlurSensitivity
     """
-    img = as_image(image, "image", min_size=5)
-    subset = check_odd_subset(subset)
-    if boundary not in ("reflect", "periodic"):
-        raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
-    pts = _resolve_points(img.shape, subset, step, points)
+    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     k = subset_blur_coefficients(img, pts, subset, motion=motion, shape=shape,
                                  derivative=derivative, boundary=boundary, criterion=criterion)
     good = k[np.isfinite(k)]
@@ -236,12 +243,8 @@ def blur_mismatch_curve(
     -------
     BlurMismatchCurve
     """
-    img = as_image(image, "image", min_size=5)
-    subset = check_odd_subset(subset)
+    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     w = as_blur(blur, "blur", increasing=False)
-    if boundary not in ("reflect", "periodic"):
-        raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
-    pts = _resolve_points(img.shape, subset, step, points)
     max_shift = check_positive(max_shift, "max_shift")
     xi = subset_blur_shifts(img, w, pts, subset, motion=motion, shape=shape,
                             derivative=derivative, boundary=boundary, criterion=criterion,

@@ -36,10 +36,10 @@ from .._blur_sensitivity import (
     subset_blur_shifts,
     subset_noise_variance,
 )
-from .._validation import as_image, check_odd_subset, check_positive
+from .._validation import check_positive
 from ..errors import InputError
-from ..metrics import _resolve_points
 from ._checks import as_blur
+from .mismatch import _subset_inputs
 from .model import BlurUncertaintyModel
 
 __all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern"]
@@ -168,14 +168,10 @@ def predict_from_pattern(
     same std in both images (for a Poisson-Gaussian camera give the noise at the mean
     level, or use :func:`model_from_pattern` with ``plan_exposure``).
     """
-    img = as_image(image, "image", min_size=5)
-    subset = check_odd_subset(subset)
+    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     max_shift = check_positive(max_shift, "max_shift")
     w = as_blur(blur, "blur", increasing=False)
-    if boundary not in ("reflect", "periodic"):
-        raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
-    pts = _resolve_points(img.shape, subset, step, points)
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, derivative,
                                         boundary, max_shift)
     u_noise = sigma * np.sqrt(mean_var)
@@ -231,14 +227,12 @@ def model_from_pattern(
     """
     from .fit import fit_blur_model
 
-    img = as_image(image, "image", min_size=5)
+    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
     if np.unique(w).size < 4:
         raise InputError(f"blur: {np.unique(w).size} distinct lengths; give at least 4 "
                          "(e.g. W = 0, 1, 2, 4 px)")
-    subset = check_odd_subset(subset)
-    pts = _resolve_points(img.shape, subset, step, points)
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, "bspline3",
                                         boundary, 1.0)
     keep = frac >= 0.9  # as the campaigns' breakdown rule: >= 90 % of the subsets

@@ -162,3 +162,18 @@ def test_aitken_kernel_matches_reference_on_slow_convergence():
         assert ok and res.status[k] == 0
         assert it > 3  # a slow case: the step gain is exercised
         assert_allclose(res.params[k], p, atol=2e-3)
+
+
+def test_translation_per_call_copy_matches_packed_reference(monkeypatch):
+    # above Correlator.pack_limit_bytes the translation kernel copies each POI's flat
+    # reference subset per call instead of keeping all of them: same arithmetic, same bytes
+    ref = pattern(96, seed=6)
+    cur = fourier_shift(ref, 0.31, -0.22)
+    packed = Correlator(ref, subset=21, step=9, shape="translation").correlate(cur)
+    monkeypatch.setattr(Correlator, "pack_limit_bytes", 0)
+    corr = Correlator(ref, subset=21, step=9, shape="translation")
+    assert corr._packed[0].shape[0] == 0
+    copied = corr.correlate(cur)
+    assert packed.converged.all()
+    np.testing.assert_array_equal(copied.params, packed.params)
+    np.testing.assert_array_equal(copied.iterations, packed.iterations)

@@ -20,7 +20,7 @@ from ..errors import InputError
 from ..metrics import image_gradients, subset_centres
 from . import kernels
 from .icgn import N_PARAMS, prepare_subsets
-from .initial import global_shift, subset_fftcc
+from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
 from .result import DICResult
 from .status import PointStatus
@@ -159,6 +159,7 @@ class Correlator:
         self._args_cache: dict[int, Any] = {}
         self._setup_seeds()
         self._pack_translation()
+        self._ref_spectrum = window_spectrum(ref)
         self.predicted_sigma_u: NDArray[np.float64] | None = None
         self.predicted_sigma_v: NDArray[np.float64] | None = None
         if self.noise_sigma is not None:
@@ -420,7 +421,9 @@ class Correlator:
             gu, gv = guess[:, 0].copy(), guess[:, 1].copy()
             method = "given"
         elif method == "fftcc":
-            su, sv, _ = global_shift(self._ref, cur, workers=self.workers)
+            # one FFT thread: at the 128 px window a second one costs more than it gives
+            su, sv, _ = global_shift(self._ref, cur, workers=1,
+                                     reference_spectrum=self._ref_spectrum)
             gu = np.full(n, float(su))
             gv = np.full(n, float(sv))
         elif method == "subset":

@@ -78,8 +78,9 @@ def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
             if horizon < n:
                 zk = 1.0
                 for k in range(horizon):
+                    xr = x[k, j0:j1]
                     for j in range(w):
-                        s[j] += zk * x[k, j0 + j]
+                        s[j] += zk * xr[j]
                     zk *= z
             else:
                 # exact mirror-symmetric initialisation (Unser 1999; Thevenaz's coeff.c)
@@ -96,23 +97,36 @@ def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
                     z2n *= iz
                 for j in range(w):
                     s[j] /= 1.0 - zn * zn
+            # row slices: loop indices from range(w) are known non-negative, so the
+            # loops vectorise (no wraparound selects)
+            xr = x[0, j0:j1]
             for j in range(w):
-                x[0, j0 + j] = gn * s[j]
+                xr[j] = gn * s[j]
             for r in range(1, n):
-                for j in range(j0, j1):
-                    x[r, j] = gn * x[r, j] + z * x[r - 1, j]
+                xp = x[r - 1, j0:j1]
+                xr = x[r, j0:j1]
+                for j in range(w):
+                    xr[j] = gn * xr[j] + z * xp[j]
             c = z / (z * z - 1.0)
-            for j in range(j0, j1):
-                x[n - 1, j] = c * (x[n - 1, j] + z * x[n - 2, j])
+            xr = x[n - 1, j0:j1]
+            xp = x[n - 2, j0:j1]
+            for j in range(w):
+                xr[j] = c * (xr[j] + z * xp[j])
             for r in range(n - 2, -1, -1):
-                for j in range(j0, j1):
-                    x[r, j] = z * (x[r + 1, j] - x[r, j])
+                xp = x[r + 1, j0:j1]
+                xr = x[r, j0:j1]
+                for j in range(w):
+                    xr[j] = z * (xp[j] - xr[j])
 
 
 @nb.njit(parallel=True, fastmath=True, cache=True)
 def _filter_axis1(src, dst, poles, tol):  # pragma: no cover - compiled
-    """B-spline prefilter of every row of ``src`` into ``dst`` (may differ in dtype):
-    the recursions of 16 rows run interleaved, so no transpose is needed."""
+    """B-spline prefilter of every row of ``src`` into ``dst`` (may differ in dtype).
+
+    A block of 8 rows is copied transposed into a float64 scratch array, so the recursion
+    along the row runs with the 8 rows side by side in contiguous memory (vectorised),
+    then copied back.
+    """
     n_r, n = src.shape
     gain = 1.0
     for z in poles:
@@ -121,45 +135,55 @@ def _filter_axis1(src, dst, poles, tol):  # pragma: no cover - compiled
     nblk = (n_r + bh - 1) // bh
     for blk in nb.prange(nblk):
         r0 = blk * bh
-        r1 = min(n_r, r0 + bh)
-        for r in range(r0, r1):
+        h = min(n_r, r0 + bh) - r0
+        t = np.zeros((n, bh), dtype=np.float64)
+        for r in range(h):
+            row = src[r0 + r]
             for c in range(n):
-                dst[r, c] = src[r, c]
-        if n == 1:
-            continue
-        first = True
-        for z in poles:
-            gn = gain if first else 1.0
-            first = False
-            horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
-            for r in range(r0, r1):
-                s = 0.0
+                t[c, r] = row[c]
+        if n > 1:
+            first = True
+            for z in poles:
+                gn = gain if first else 1.0
+                first = False
+                horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
+                s = np.zeros(bh, dtype=np.float64)
                 if horizon < n:
                     zk = 1.0
                     for k in range(horizon):
-                        s += zk * dst[r, k]
+                        for r in range(bh):
+                            s[r] += zk * t[k, r]
                         zk *= z
                 else:
+                    # exact mirror-symmetric initialisation (Unser 1999; Thevenaz's coeff.c)
                     zn = z
                     iz = 1.0 / z
                     z2n = z ** (n - 1)
-                    s = dst[r, 0] + z2n * dst[r, n - 1]
+                    for r in range(bh):
+                        s[r] = t[0, r] + z2n * t[n - 1, r]
                     z2n = z2n * z2n * iz
                     for k in range(1, n - 1):
-                        s += (zn + z2n) * dst[r, k]
+                        for r in range(bh):
+                            s[r] += (zn + z2n) * t[k, r]
                         zn *= z
                         z2n *= iz
-                    s /= 1.0 - zn * zn
-                dst[r, 0] = gn * s
-            for c in range(1, n):
-                for r in range(r0, r1):
-                    dst[r, c] = gn * dst[r, c] + z * dst[r, c - 1]
-            cc = z / (z * z - 1.0)
-            for r in range(r0, r1):
-                dst[r, n - 1] = cc * (dst[r, n - 1] + z * dst[r, n - 2])
-            for c in range(n - 2, -1, -1):
-                for r in range(r0, r1):
-                    dst[r, c] = z * (dst[r, c + 1] - dst[r, c])
+                    for r in range(bh):
+                        s[r] /= 1.0 - zn * zn
+                for r in range(bh):
+                    t[0, r] = gn * s[r]
+                for c in range(1, n):
+                    for r in range(bh):
+                        t[c, r] = gn * t[c, r] + z * t[c - 1, r]
+                cc = z / (z * z - 1.0)
+                for r in range(bh):
+                    t[n - 1, r] = cc * (t[n - 1, r] + z * t[n - 2, r])
+                for c in range(n - 2, -1, -1):
+                    for r in range(bh):
+                        t[c, r] = z * (t[c + 1, r] - t[c, r])
+        for r in range(h):
+            row = dst[r0 + r]
+            for c in range(n):
+                row[c] = t[c, r]
 
 
 @nb.njit(parallel=True, cache=True)

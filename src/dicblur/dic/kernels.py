@@ -715,6 +715,32 @@ def _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, col
     out_iter[k] = nit
 
 
+@nb.njit(cache=True, inline="always")
+def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
+    """Step gain of IC-GN affine (as :func:`_aitken_gain`), ratio measured on the 6-vector
+    ``(du, h dux, h duy, dv, h dvx, h dvy)`` (``h`` = subset half-width, the weights of
+    the convergence norm); updates the remembered step ``prev`` in place."""
+    pp = 0.0
+    dd = 0.0
+    dot = 0.0
+    for m in range(6):
+        sc = 1.0 if m == 0 or m == 3 else half * 1.0
+        a = d[m] * sc
+        b = prev[m] * sc
+        pp += b * b
+        dd += a * a
+        dot += a * b
+    if pp > 0.0:
+        rho = dot / pp
+        if 0.3 < rho < 0.97 and dot * dot > 0.9025 * dd * pp:
+            for m in range(6):
+                prev[m] = 0.0
+            return 1.0 / (1.0 - rho)
+    for m in range(6):
+        prev[m] = d[m]
+    return 1.0
+
+
 @nb.njit(parallel=True, fastmath=True, cache=True)
 def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hinv, jsum,
                      avec, fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
@@ -812,6 +838,8 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
             continue
         q = np.empty(6, dtype=np.float64)
         p = np.empty(6, dtype=np.float64)
+        dstep = np.empty(6, dtype=np.float64)
+        dprev = np.zeros(6, dtype=np.float64)
         wxs = np.empty((sten, tw), dtype=np.float32)
         wys = np.empty((sten, tw), dtype=np.float32)
         tx = np.empty(tw, dtype=np.float32)
@@ -914,6 +942,25 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                 dv += hinv[k, 3, m] * q[m]
                 dvx += hinv[k, 4, m] * q[m]
                 dvy += hinv[k, 5, m] * q[m]
+            dstep[0] = du
+            dstep[1] = dux
+            dstep[2] = duy
+            dstep[3] = dv
+            dstep[4] = dvx
+            dstep[5] = dvy
+            gain = _aitken_gain6(dstep, dprev, half)
+            du0 = du
+            dux0 = dux
+            duy0 = duy
+            dv0 = dv
+            dvx0 = dvx
+            dvy0 = dvy
+            du *= gain
+            dux *= gain
+            duy *= gain
+            dv *= gain
+            dvx *= gain
+            dvy *= gain
             # inverse composition W(p) <- W(p) o W(dp)^-1 on 3x3 homogeneous matrices
             a11 = 1.0 + dux
             a12 = duy
@@ -947,8 +994,9 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
             if not finite:
                 st = _DIVERGED
                 break
-            norm = math.sqrt(du * du + dv * dv + half * half * (dux * dux + duy * duy
-                                                                  + dvx * dvx + dvy * dvy))
+            # convergence on the plain (unscaled) Gauss-Newton step, as the translation
+            norm = math.sqrt(du0 * du0 + dv0 * dv0 + half * half * (
+                dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0))
             if norm < tol:
                 st = _CONVERGED
                 break

@@ -494,19 +494,18 @@ def flat_lengths(subset: int, order: int) -> tuple[int, int, int]:
 @nb.njit(fastmath=True, cache=True)
 def _load_reference(f, gx, gy, fmean, r0, c0, size, w, fp, gxp, gyp):  # pragma: no cover
     """Reference subset rows (f - fmean, gx, gy), ``w`` px wide, into the flat buffers
-    (row width ``w``; the columns >= size are masked out by the sums)."""
+    (row width ``w``; the columns >= size are masked out by the sums). Unsigned indices:
+    numba emits no negative-index wraparound for them, so the row copies vectorise without
+    per-row slice set-up (3x faster than slices)."""
     fm = np.float32(fmean)
+    cc = np.uint64(c0)
     for i in range(size):
-        fr = f[r0 + i, c0:c0 + w]
-        gxr = gx[r0 + i, c0:c0 + w]
-        gyr = gy[r0 + i, c0:c0 + w]
-        fd = fp[i * w:(i + 1) * w]
-        gxd = gxp[i * w:(i + 1) * w]
-        gyd = gyp[i * w:(i + 1) * w]
-        for j in range(w):
-            fd[j] = fr[j] - fm
-            gxd[j] = gxr[j]
-            gyd[j] = gyr[j]
+        r = np.uint64(r0 + i)
+        o = np.uint64(i * w)
+        for j in range(np.uint64(w)):
+            fp[o + j] = f[r, cc + j] - fm
+            gxp[o + j] = gx[r, cc + j]
+            gyp[o + j] = gy[r, cc + j]
 
 
 @nb.njit(parallel=True, fastmath=True, cache=True)
@@ -535,11 +534,12 @@ def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, m
     taps = order + 1
     ng = maskf.shape[0]
     nh = hbuf.shape[0]
+    cu = np.uint64(cb)
     for a in range(size + taps - 1):
-        src = coef[rb + a, cb:cb + w]
-        dst = cbuf[a * w:(a + 1) * w]
-        for j in range(w):
-            dst[j] = src[j]
+        r = np.uint64(rb + a)
+        o = np.uint64(a * w)
+        for j in range(np.uint64(w)):
+            cbuf[o + j] = coef[r, cu + j]
     # horizontal taps along the flat rows: output columns < size never read across a row end
     # because w >= size + order
     c0 = cbuf[0:nh]
@@ -603,12 +603,18 @@ def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, m
 @nb.njit(fastmath=True, cache=True)
 def _points_translation(todo, m0, m1, source, p0, status_in, coef, himg, wimg, order, w, f,
                         gx, gy, rows, cols, half, hinv, jsum, avec, fmean, fnorm, max_iter,
-                        tol, min_zncc, max_step, maskf, wx, wy, wxf, wyf, cbuf, hbuf, fps, gxps,
-                        gyps, fpk, gxpk, gypk, out_p, out_zncc, out_iter,
-                        out_status):  # pragma: no cover - compiled
+                        tol, min_zncc, max_step, maskf, cbuf, hbuf, fps, gxps, gyps, fpk, gxpk,
+                        gypk, out_p, out_zncc, out_iter, out_status):  # pragma: no cover
     """IC-GN translation of the POIs ``todo[m0:m1]`` (see :func:`icgn_translation`): one call
     per chunk of POIs keeps the call overhead of the many array arguments off each POI."""
     packed = fpk.shape[0] > 0
+    # tap weights: private to this call (per-thread rows of one small array would share a
+    # cache line between the threads and bounce it on every iteration)
+    taps = order + 1
+    wx = np.empty(taps, dtype=np.float64)
+    wy = np.empty(taps, dtype=np.float64)
+    wxf = np.empty(taps, dtype=np.float32)
+    wyf = np.empty(taps, dtype=np.float32)
     for m in range(m0, m1):
         k = todo[m]
         if status_in[k] != 0:
@@ -768,7 +774,6 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hi
     per-thread buffers instead (when n x ng is too large to keep).
     """
     size = 2 * half + 1
-    taps = order + 1
     ng = 32 * ((size * w + 31) // 32)
     nh = 32 * ((ng + order * w + 31) // 32)
     maskf = np.zeros(ng, dtype=np.float32)
@@ -782,10 +787,6 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hi
     fps = np.zeros((nthr, nl), dtype=np.float32)
     gxps = np.zeros((nthr, nl), dtype=np.float32)
     gyps = np.zeros((nthr, nl), dtype=np.float32)
-    wxs = np.zeros((nthr, taps), dtype=np.float64)
-    wys = np.zeros((nthr, taps), dtype=np.float64)
-    wxfs = np.zeros((nthr, taps), dtype=np.float32)
-    wyfs = np.zeros((nthr, taps), dtype=np.float32)
     chunk = 16
     for npass in range(2):
         todo = first if npass == 0 else second
@@ -796,9 +797,8 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hi
             _points_translation(todo, c * chunk, min(todo.shape[0], (c + 1) * chunk), src, p0,
                                 status_in, coef, himg, wimg, order, w, f, gx, gy, rows, cols,
                                 half, hinv, jsum, avec, fmean, fnorm, max_iter, tol, min_zncc,
-                                max_step, maskf, wxs[t], wys[t], wxfs[t], wyfs[t], cbufs[t],
-                                hbufs[t], fps[t], gxps[t], gyps[t], fpk, gxpk, gypk, out_p,
-                                out_zncc, out_iter, out_status)
+                                max_step, maskf, cbufs[t], hbufs[t], fps[t], gxps[t], gyps[t],
+                                fpk, gxpk, gypk, out_p, out_zncc, out_iter, out_status)
 
 
 @nb.njit(parallel=True, fastmath=True, cache=True)

@@ -322,16 +322,11 @@ class Correlator:
         out_z = np.empty(n)
         out_i = np.empty(n, np.int64)
         out_s = np.empty(n, np.uint8)
-        old_chunk = numba.set_parallel_chunksize(8)  # the affine loop is over single POIs
-        try:
-            kernels.icgn_affine(
-                coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
-                self._gx32, self._gy32, rows, cols, self.half, self._tw, hinv, jsum, avec,
-                fmean, fnorm, np.ascontiguousarray(p0), np.ascontiguousarray(status_in),
-                self.max_iterations, self.tolerance, self.min_zncc, float(self.subset),
-                out_p, out_z, out_i, out_s)
-        finally:
-            numba.set_parallel_chunksize(old_chunk)
+        kernels.icgn_affine(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
+             self._gx32, self._gy32,
+             rows, cols, self.half, self._tw, hinv, jsum, avec, fmean, fnorm,
+             np.ascontiguousarray(p0), np.ascontiguousarray(status_in), self.max_iterations,
+             self.tolerance, self.min_zncc, float(self.subset), out_p, out_z, out_i, out_s)
         return out_p, out_z, out_i, out_s
 
     def _seeded_icgn(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
@@ -401,13 +396,9 @@ class Correlator:
         old_threads = numba.get_num_threads()
         if self.workers is not None:
             numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
-        # dynamic scheduling of the parallel loops (blocks of rows, chunks of 16 POIs): on a
-        # shared machine a descheduled thread's share is taken over instead of waited for
-        old_chunk = numba.set_parallel_chunksize(1)
         try:
             return self._correlate(cur, initial)
         finally:
-            numba.set_parallel_chunksize(old_chunk)
             numba.set_num_threads(old_threads)
 
     def _correlate(self, cur: NDArray[np.float64], initial: ArrayLike | None) -> DICResult:

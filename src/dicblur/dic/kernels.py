@@ -828,14 +828,9 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
     dxs = np.zeros(tw, dtype=np.float32)
     for j in range(tw):
         dxs[j] = j - half
-    for k in nb.prange(n):
-        if status_in[k] != 0:
-            out_status[k] = status_in[k]
-            for m in range(6):
-                out_p[k, m] = np.nan
-            out_zncc[k] = np.nan
-            out_iter[k] = 0
-            continue
+    # chunks of 16 POIs: the scratch arrays are allocated once per chunk, not per POI
+    chunk = 16
+    for ch in nb.prange((n + chunk - 1) // chunk):
         q = np.empty(6, dtype=np.float64)
         p = np.empty(6, dtype=np.float64)
         dstep = np.empty(6, dtype=np.float64)
@@ -846,170 +841,180 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
         ty = np.empty(tw, dtype=np.float32)
         hrow = np.empty(tw, dtype=np.float32)
         grow = np.empty(tw, dtype=np.float32)
-        for m in range(6):
-            p[m] = p0[k, m]
-        xc = cols[k]
-        yc = rows[k]
-        r0 = rows[k] - half
-        c0 = cols[k] - half
-        off = np.float32(fmean[k])
-        st = _MAX_ITERATIONS
-        zn = np.nan
-        nit = 0
-        for it in range(max_iter):
-            # bounds: an affine map sends the subset's corners to the warped extremes
-            inside = True
-            oxmin = 1e30
-            oxmax = -1e30
-            oymin = 1e30
-            oymax = -1e30
-            for cy in (-half, half):
-                for cx in (-half, half):
-                    ox = p[0] + p[1] * cx + p[2] * cy
-                    oy = p[3] + p[4] * cx + p[5] * cy
-                    oxmin = min(oxmin, ox)
-                    oxmax = max(oxmax, ox)
-                    oymin = min(oymin, oy)
-                    oymax = max(oymax, oy)
-                    if not (xc + cx + ox >= 0.0 and yc + cy + oy >= 0.0
-                            and xc + cx + ox <= wimg - 1 and yc + cy + oy <= himg - 1):
-                        inside = False
-            if not inside:
-                st = _OUT_OF_BOUNDS
-                break
-            fast = (oxmax - oxmin) < 0.999 and (oymax - oymin) < 0.999
-            bx = int(math.floor(oxmin))
-            by = int(math.floor(oymin))
-            sg = 0.0
-            sgg = 0.0
-            sf = 0.0
+        for k in range(ch * chunk, min(n, (ch + 1) * chunk)):
+            if status_in[k] != 0:
+                out_status[k] = status_in[k]
+                for m in range(6):
+                    out_p[k, m] = np.nan
+                out_zncc[k] = np.nan
+                out_iter[k] = 0
+                continue
             for m in range(6):
-                q[m] = 0.0
-            p1 = np.float32(p[1])
-            p4 = np.float32(p[4])
-            for i in range(size):
-                dy = i - half
-                if fast and order == 3:
-                    t0s, t1s, t2s, t3s, t4s, t5s, t6s = _row_affine_cubic(
-                        coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
-                        np.float32(p[0] + p[2] * dy - bx), np.float32(p[3] + p[5] * dy - by),
-                        p1, p4, dxs, off, mask, f, gx, gy, r0 + i, c0)
-                else:
-                    if fast:
-                        # offsets t in [0, 2) from the common integer base (bx, by)
-                        tx0 = np.float32(p[0] + p[2] * dy - bx)
-                        ty0 = np.float32(p[3] + p[5] * dy - by)
-                        _row_affine_fast(coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
-                                         order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
-                                         grow)
+                dprev[m] = 0.0
+            for m in range(6):
+                p[m] = p0[k, m]
+            xc = cols[k]
+            yc = rows[k]
+            r0 = rows[k] - half
+            c0 = cols[k] - half
+            off = np.float32(fmean[k])
+            st = _MAX_ITERATIONS
+            zn = np.nan
+            nit = 0
+            for it in range(max_iter):
+                # bounds: an affine map sends the subset's corners to the warped extremes
+                inside = True
+                oxmin = 1e30
+                oxmax = -1e30
+                oymin = 1e30
+                oymax = -1e30
+                for cy in (-half, half):
+                    for cx in (-half, half):
+                        ox = p[0] + p[1] * cx + p[2] * cy
+                        oy = p[3] + p[4] * cx + p[5] * cy
+                        oxmin = min(oxmin, ox)
+                        oxmax = max(oxmax, ox)
+                        oymin = min(oymin, oy)
+                        oymax = max(oymax, oy)
+                        if not (xc + cx + ox >= 0.0 and yc + cy + oy >= 0.0
+                                and xc + cx + ox <= wimg - 1 and yc + cy + oy <= himg - 1):
+                            inside = False
+                if not inside:
+                    st = _OUT_OF_BOUNDS
+                    break
+                fast = (oxmax - oxmin) < 0.999 and (oymax - oymin) < 0.999
+                bx = int(math.floor(oxmin))
+                by = int(math.floor(oymin))
+                sg = 0.0
+                sgg = 0.0
+                sf = 0.0
+                for m in range(6):
+                    q[m] = 0.0
+                p1 = np.float32(p[1])
+                p4 = np.float32(p[4])
+                for i in range(size):
+                    dy = i - half
+                    if fast and order == 3:
+                        t0s, t1s, t2s, t3s, t4s, t5s, t6s = _row_affine_cubic(
+                            coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
+                            np.float32(p[0] + p[2] * dy - bx), np.float32(p[3] + p[5] * dy - by),
+                            p1, p4, dxs, off, mask, f, gx, gy, r0 + i, c0)
                     else:
-                        for j in range(tw):
-                            grow[j] = 0.0
-                        for j in range(size):
-                            xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
-                            yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
-                            grow[j] = _sample(coef, order, yy, xx)
-                    t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(grow, off, mask, dxs, f, gx, gy,
-                                                              r0 + i, c0)
-                sg += t0s
-                sgg += t1s
-                q[0] += t2s
-                q[1] += t3s
-                q[2] += t2s * dy
-                q[3] += t4s
-                q[4] += t5s
-                q[5] += t4s * dy
-                sf += t6s
-            gm = sg / npx
-            dg2 = sgg - npx * gm * gm
-            if not dg2 > 1e-12 * (sgg + 1e-30):
-                st = _DIVERGED
-                break
-            dg = math.sqrt(dg2)
-            zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
+                        if fast:
+                            # offsets t in [0, 2) from the common integer base (bx, by)
+                            tx0 = np.float32(p[0] + p[2] * dy - bx)
+                            ty0 = np.float32(p[3] + p[5] * dy - by)
+                            _row_affine_fast(coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
+                                             order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
+                                             grow)
+                        else:
+                            for j in range(tw):
+                                grow[j] = 0.0
+                            for j in range(size):
+                                xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
+                                yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
+                                grow[j] = _sample(coef, order, yy, xx)
+                        t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(grow, off, mask, dxs, f, gx, gy,
+                                                                  r0 + i, c0)
+                    sg += t0s
+                    sgg += t1s
+                    q[0] += t2s
+                    q[1] += t3s
+                    q[2] += t2s * dy
+                    q[3] += t4s
+                    q[4] += t5s
+                    q[5] += t4s * dy
+                    sf += t6s
+                gm = sg / npx
+                dg2 = sgg - npx * gm * gm
+                if not dg2 > 1e-12 * (sgg + 1e-30):
+                    st = _DIVERGED
+                    break
+                dg = math.sqrt(dg2)
+                zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
+                for m in range(6):
+                    q[m] = ((q[m] - jsum[k, m] * gm) / dg - avec[k, m] * zn) / fnorm[k]
+                du = 0.0
+                dux = 0.0
+                duy = 0.0
+                dv = 0.0
+                dvx = 0.0
+                dvy = 0.0
+                for m in range(6):
+                    du += hinv[k, 0, m] * q[m]
+                    dux += hinv[k, 1, m] * q[m]
+                    duy += hinv[k, 2, m] * q[m]
+                    dv += hinv[k, 3, m] * q[m]
+                    dvx += hinv[k, 4, m] * q[m]
+                    dvy += hinv[k, 5, m] * q[m]
+                dstep[0] = du
+                dstep[1] = dux
+                dstep[2] = duy
+                dstep[3] = dv
+                dstep[4] = dvx
+                dstep[5] = dvy
+                gain = _aitken_gain6(dstep, dprev, half)
+                du0 = du
+                dux0 = dux
+                duy0 = duy
+                dv0 = dv
+                dvx0 = dvx
+                dvy0 = dvy
+                du *= gain
+                dux *= gain
+                duy *= gain
+                dv *= gain
+                dvx *= gain
+                dvy *= gain
+                # inverse composition W(p) <- W(p) o W(dp)^-1 on 3x3 homogeneous matrices
+                a11 = 1.0 + dux
+                a12 = duy
+                a21 = dvx
+                a22 = 1.0 + dvy
+                det = a11 * a22 - a12 * a21
+                if not abs(det) > 1e-12:
+                    st = _DIVERGED
+                    break
+                i11 = a22 / det
+                i12 = -a12 / det
+                i21 = -a21 / det
+                i22 = a11 / det
+                it1 = -(i11 * du + i12 * dv)
+                it2 = -(i21 * du + i22 * dv)
+                m11 = 1.0 + p[1]
+                m12 = p[2]
+                m21 = p[4]
+                m22 = 1.0 + p[5]
+                p[0] = m11 * it1 + m12 * it2 + p[0]
+                p[3] = m21 * it1 + m22 * it2 + p[3]
+                p[1] = m11 * i11 + m12 * i21 - 1.0
+                p[2] = m11 * i12 + m12 * i22
+                p[4] = m21 * i11 + m22 * i21
+                p[5] = m21 * i12 + m22 * i22 - 1.0
+                nit = it + 1
+                finite = True
+                for m in range(6):
+                    if not math.isfinite(p[m]):
+                        finite = False
+                if not finite:
+                    st = _DIVERGED
+                    break
+                # convergence on the plain (unscaled) Gauss-Newton step, as the translation
+                norm = math.sqrt(du0 * du0 + dv0 * dv0 + half * half * (
+                    dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0))
+                if norm < tol:
+                    st = _CONVERGED
+                    break
+                if (abs(p[0] - p0[k, 0]) > max_step or abs(p[3] - p0[k, 3]) > max_step
+                        or abs(p[1]) > 0.5 or abs(p[2]) > 0.5 or abs(p[4]) > 0.5
+                        or abs(p[5]) > 0.5):
+                    st = _DIVERGED
+                    break
+            if st == _CONVERGED and not zn >= min_zncc:
+                st = _LOW_CORRELATION
+            out_status[k] = st
+            keep = st == _CONVERGED or st == _MAX_ITERATIONS or st == _LOW_CORRELATION
             for m in range(6):
-                q[m] = ((q[m] - jsum[k, m] * gm) / dg - avec[k, m] * zn) / fnorm[k]
-            du = 0.0
-            dux = 0.0
-            duy = 0.0
-            dv = 0.0
-            dvx = 0.0
-            dvy = 0.0
-            for m in range(6):
-                du += hinv[k, 0, m] * q[m]
-                dux += hinv[k, 1, m] * q[m]
-                duy += hinv[k, 2, m] * q[m]
-                dv += hinv[k, 3, m] * q[m]
-                dvx += hinv[k, 4, m] * q[m]
-                dvy += hinv[k, 5, m] * q[m]
-            dstep[0] = du
-            dstep[1] = dux
-            dstep[2] = duy
-            dstep[3] = dv
-            dstep[4] = dvx
-            dstep[5] = dvy
-            gain = _aitken_gain6(dstep, dprev, half)
-            du0 = du
-            dux0 = dux
-            duy0 = duy
-            dv0 = dv
-            dvx0 = dvx
-            dvy0 = dvy
-            du *= gain
-            dux *= gain
-            duy *= gain
-            dv *= gain
-            dvx *= gain
-            dvy *= gain
-            # inverse composition W(p) <- W(p) o W(dp)^-1 on 3x3 homogeneous matrices
-            a11 = 1.0 + dux
-            a12 = duy
-            a21 = dvx
-            a22 = 1.0 + dvy
-            det = a11 * a22 - a12 * a21
-            if not abs(det) > 1e-12:
-                st = _DIVERGED
-                break
-            i11 = a22 / det
-            i12 = -a12 / det
-            i21 = -a21 / det
-            i22 = a11 / det
-            it1 = -(i11 * du + i12 * dv)
-            it2 = -(i21 * du + i22 * dv)
-            m11 = 1.0 + p[1]
-            m12 = p[2]
-            m21 = p[4]
-            m22 = 1.0 + p[5]
-            p[0] = m11 * it1 + m12 * it2 + p[0]
-            p[3] = m21 * it1 + m22 * it2 + p[3]
-            p[1] = m11 * i11 + m12 * i21 - 1.0
-            p[2] = m11 * i12 + m12 * i22
-            p[4] = m21 * i11 + m22 * i21
-            p[5] = m21 * i12 + m22 * i22 - 1.0
-            nit = it + 1
-            finite = True
-            for m in range(6):
-                if not math.isfinite(p[m]):
-                    finite = False
-            if not finite:
-                st = _DIVERGED
-                break
-            # convergence on the plain (unscaled) Gauss-Newton step, as the translation
-            norm = math.sqrt(du0 * du0 + dv0 * dv0 + half * half * (
-                dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0))
-            if norm < tol:
-                st = _CONVERGED
-                break
-            if (abs(p[0] - p0[k, 0]) > max_step or abs(p[3] - p0[k, 3]) > max_step
-                    or abs(p[1]) > 0.5 or abs(p[2]) > 0.5 or abs(p[4]) > 0.5
-                    or abs(p[5]) > 0.5):
-                st = _DIVERGED
-                break
-        if st == _CONVERGED and not zn >= min_zncc:
-            st = _LOW_CORRELATION
-        out_status[k] = st
-        keep = st == _CONVERGED or st == _MAX_ITERATIONS or st == _LOW_CORRELATION
-        for m in range(6):
-            out_p[k, m] = p[m] if keep else np.nan
-        out_zncc[k] = zn
-        out_iter[k] = nit
+                out_p[k, m] = p[m] if keep else np.nan
+            out_zncc[k] = zn
+            out_iter[k] = nit

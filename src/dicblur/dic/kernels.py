@@ -15,10 +15,14 @@ kernel                     reference
 
 Speed notes (measured on the 512x512, subset 21, step 10 benchmark): float32 working
 arrays; the prefilter runs down the rows with the recursion vectorised across columns
-(the other axis through a transpose); IC-GN is parallel over POIs, reads contiguous row
-slices of the coefficient image and of the reference gradients; a rigidly translated
-subset shares one set of tap weights for all its pixels, so the 4x4 (6x6) interpolation
-becomes a vertical then a horizontal 4-tap (6-tap) pass over contiguous rows.
+(along the rows, blocks of 16 rows are transposed into scratch so the recursion is
+vectorised across them); IC-GN is parallel over POIs. Translation works on flat padded
+buffers (row width :func:`flat_width`, lengths multiples of 32): the reference subsets are
+packed once (:func:`pack_reference`), each iteration copies the coefficient rows under the
+subset, filters them with one horizontal and one vertical 4-tap (6-tap) pass (a rigidly
+translated subset shares one set of tap weights) and reduces the five sums in one masked
+flat loop. Affine reads contiguous row slices of the coefficient image and of the
+reference gradients, with a common-base 5x5 stencil fast path.
 """
 
 from __future__ import annotations

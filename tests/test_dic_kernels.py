@@ -162,3 +162,46 @@ def test_aitken_kernel_matches_reference_on_slow_convergence():
         assert ok and res.status[k] == 0
         assert it > 3  # a slow case: the step gain is exercised
         assert_allclose(res.params[k], p, atol=2e-3)
+
+
+def test_translation_per_call_copy_matches_packed_reference(monkeypatch):
+    # above Correlator.pack_limit_bytes the translation kernel copies each POI's flat
+    # reference subset per call instead of keeping all of them: same arithmetic, same bytes
+    ref = pattern(96, seed=6)
+    cur = fourier_shift(ref, 0.31, -0.22)
+    packed = Correlator(ref, subset=21, step=9, shape="translation").correlate(cur)
+    monkeypatch.setattr(Correlator, "pack_limit_bytes", 0)
+    corr = Correlator(ref, subset=21, step=9, shape="translation")
+    assert corr._packed[0].shape[0] == 0
+    copied = corr.correlate(cur)
+    assert packed.converged.all()
+    np.testing.assert_array_equal(copied.params, packed.params)
+    np.testing.assert_array_equal(copied.iterations, packed.iterations)
+
+
+def test_affine_step_gain_speeds_up_a_strongly_blurred_image():
+    # 4 px speckles, W = 10 px along x: plain affine Gauss-Newton steps shrink slowly (about
+    # 190 iterations on average, a third of the subsets not converged in 200); the step
+    # gain on the weighted 6-vector cuts that by more than half
+    from dicblur import motion_blur, speckle_pattern
+
+    ref = speckle_pattern((128, 128), speckle_size=4, seed=5)
+    cur = motion_blur(ref, (0.0, 10.0))
+    pts = [[64, 64], [50, 70], [80, 50], [40, 40]]
+    corr = Correlator(ref, points=pts, subset=31, shape="affine", initial="zero",
+                      max_iterations=200)
+    res = corr.correlate(cur)
+    gx, gy, cc = _spline_setup(ref, cur, 3)
+    with_gain, plain = [], []
+    for k in range(len(pts)):
+        r, c = int(res.rows[k]), int(res.cols[k])
+        p, _, it, ok = icgn_reference(ref, gx, gy, cc, 3, r, c, 15, "affine", np.zeros(6),
+                                      max_iterations=200)
+        _, _, it0, ok0 = icgn_reference(ref, gx, gy, cc, 3, r, c, 15, "affine", np.zeros(6),
+                                        max_iterations=200, step_gain=False)
+        assert ok and res.status[k] == 0
+        assert abs(int(res.iterations[k]) - it) <= 2
+        assert_allclose(res.params[k, [0, 3]], p[[0, 3]], atol=2e-3)
+        with_gain.append(it)
+        plain.append(it0 if ok0 else 200)
+    assert np.mean(with_gain) < 0.5 * np.mean(plain)

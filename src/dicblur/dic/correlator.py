@@ -20,7 +20,7 @@ from ..errors import InputError
 from ..metrics import image_gradients, subset_centres
 from . import kernels
 from .icgn import N_PARAMS, prepare_subsets
-from .initial import global_shift, subset_fftcc
+from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
 from .result import DICResult
 from .status import PointStatus
@@ -50,7 +50,10 @@ class Correlator:
     ZNSSD Hessians, predicted random errors); :meth:`correlate` then measures any number of
     current images against it. One instance reuses a coefficient buffer between calls:
     do not call :meth:`correlate` of the same instance from several threads at once
-    (processes, or one instance per thread, are fine).
+    (processes, or one instance per thread, are fine). For the translation shape the flat
+    reference subsets are kept too (12 bytes per subset pixel, about 6 kB per POI at
+    subset 21; above :attr:`pack_limit_bytes` they are copied per call instead, with the
+    same results).
 
     Parameters
     ----------
@@ -142,9 +145,10 @@ class Correlator:
         self._ref = ref
         # padded float32 layouts of the kernels (see kernels.icgn_translation)
         self._tw = 16 * ((self.subset + 15) // 16)
+        self._w = kernels.flat_width(self.subset, self.order)
         rows_img, cols_img = self.image_shape
-        extra = self._tw + 16
-        self._f32 = np.zeros((rows_img, cols_img + self._tw), np.float32)
+        extra = max(self._tw, self._w) + 16
+        self._f32 = np.zeros((rows_img, cols_img + max(self._tw, self._w)), np.float32)
         self._f32[:, :cols_img] = ref
         self._gx32 = np.zeros_like(self._f32)
         self._gx32[:, :cols_img] = gx
@@ -153,8 +157,12 @@ class Correlator:
         self._kernel_args = tuple(np.ascontiguousarray(a) for a in (
             rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm))
         self._coef_buf = np.zeros((rows_img + 2 * PAD, cols_img + 2 * PAD + extra), np.float32)
+        self._all = np.arange(len(rows), dtype=np.intp)
+        self._none = np.zeros(0, dtype=np.intp)
         self._args_cache: dict[int, Any] = {}
         self._setup_seeds()
+        self._pack_translation()
+        self._ref_spectrum = window_spectrum(ref)
         self.predicted_sigma_u: NDArray[np.float64] | None = None
         self.predicted_sigma_v: NDArray[np.float64] | None = None
         if self.noise_sigma is not None:
@@ -241,16 +249,61 @@ class Correlator:
         self._rest = rest
         self._rest_seed = seeds[np.asarray(near, dtype=np.intp)]
 
+    #: Largest flat reference copy (bytes) kept for the translation kernel; above it the
+    #: kernel copies each POI's subset per call instead (same results).
+    pack_limit_bytes = 256 * 2**20
+
+    def _pack_translation(self) -> None:
+        ng = kernels.flat_lengths(self.subset, self.order)[0]
+        n = self.n_points if self.shape == "translation" else 0
+        if 3 * 4 * n * ng > self.pack_limit_bytes:
+            n = 0
+        self._packed = tuple(np.zeros((n, ng), np.float32) for _ in range(3))
+        if n:
+            rows, cols, _, _, _, fmean, _ = self._kernel_args
+            kernels.pack_reference(self._f32, self._gx32, self._gy32, fmean, rows, cols,
+                                   self.half, self._w, self._status0, *self._packed)
+
     @property
     def n_points(self) -> int:
         """Number of POIs."""
         return int(self.rows.shape[0])
 
     # ------------------------------------------------------------------ correlation
+    def _translation(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
+                     status_in: NDArray[np.uint8], first: NDArray[np.intp],
+                     second: NDArray[np.intp], source: NDArray[np.intp]
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
+                                NDArray[np.uint8]]:
+        """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
+        ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
+        rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
+        n = self.n_points
+        out_p = np.empty((n, 2))
+        out_z = np.empty(n)
+        out_i = np.empty(n, np.int64)
+        out_s = np.empty(n, np.uint8)
+        kernels.icgn_translation(  # type: ignore[call-arg]
+            coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
+            self._gx32, self._gy32, rows, cols, self.half, self._w, hinv, jsum, avec, fmean,
+            fnorm, p0, status_in,
+            self.max_iterations, self.tolerance, self.min_zncc, float(self.subset), first,
+            second, source, numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
+            *self._packed, out_p, out_z, out_i, out_s)
+        return out_p, out_z, out_i, out_s
+
     def _run_icgn(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
                   status_in: NDArray[np.uint8], idx: NDArray[np.intp] | None = None
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
                              NDArray[np.uint8]]:
+        if self.shape == "translation":
+            full = np.zeros((self.n_points, 2))
+            st_full = np.zeros(self.n_points, np.uint8)
+            sel = self._all if idx is None else idx
+            full[sel] = p0
+            st_full[sel] = status_in
+            out = self._translation(coef, full, st_full, sel, self._none, self._none)
+            return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
         prep = self._prep
         if idx is None:
             rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
@@ -272,8 +325,7 @@ class Correlator:
         out_z = np.empty(n)
         out_i = np.empty(n, np.int64)
         out_s = np.empty(n, np.uint8)
-        kern = kernels.icgn_translation if self.shape == "translation" else kernels.icgn_affine
-        kern(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
+        kernels.icgn_affine(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
              self._gx32, self._gy32,
              rows, cols, self.half, self._tw, hinv, jsum, avec, fmean, fnorm,
              np.ascontiguousarray(p0), np.ascontiguousarray(status_in), self.max_iterations,
@@ -286,6 +338,9 @@ class Correlator:
                                                           NDArray[np.int64], NDArray[np.uint8]]:
         assert self._seeds is not None and self._rest is not None
         seeds, rest, src = self._seeds, self._rest, self._rest_seed
+        if self.shape == "translation":
+            # both passes in one kernel call: the rest start from their seed's result
+            return self._translation(coef, p0, status0, seeds, rest, src)
         n, k = p0.shape
         p = np.empty((n, k))
         z = np.empty(n)
@@ -369,7 +424,9 @@ class Correlator:
             gu, gv = guess[:, 0].copy(), guess[:, 1].copy()
             method = "given"
         elif method == "fftcc":
-            su, sv, _ = global_shift(self._ref, cur, workers=self.workers)
+            # one FFT thread: at the 128 px window a second one costs more than it gives
+            su, sv, _ = global_shift(self._ref, cur, workers=1,
+                                     reference_spectrum=self._ref_spectrum)
             gu = np.full(n, float(su))
             gv = np.full(n, float(sv))
         elif method == "subset":

@@ -153,11 +153,13 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
                    gy: NDArray[np.float64], coef: NDArray[np.floating], order: int,
                    row: int, col: int, half: int, shape: str, p0: NDArray[np.float64], *,
                    max_iterations: int = 50, tolerance: float = 1e-4,
+                   step_gain: bool = True,
                    ) -> tuple[NDArray[np.float64], float, int, bool]:
     """Plain IC-GN for one POI (direct ZNSSD formulas, no precomputed sums): reference.
 
     Returns ``(p, zncc, iterations, converged)``; ``p`` as in the kernels (translation
-    ``(u, v)``, affine ``(u, ux, uy, v, vx, vy)``), px.
+    ``(u, v)``, affine ``(u, ux, uy, v, vx, vy)``), px. ``step_gain=False`` takes plain
+    Gauss-Newton steps (no Aitken gain, see ``kernels._aitken_gain``).
     """
     size = 2 * half + 1
     d = np.arange(size, dtype=np.float64) - half
@@ -175,6 +177,7 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
     p = np.array(p0, dtype=np.float64)
     zncc = float("nan")
     prev = np.zeros(2)
+    prev6 = np.zeros(6)
     for it in range(max_iterations):
         if shape == "translation":
             xs, ys = col + dx + p[0], row + dy + p[1]
@@ -192,13 +195,25 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
             pp = float(prev @ prev)
             dot = float(dp @ prev)
             rho = dot / pp if pp > 0 else 0.0
-            if pp > 0 and 0.3 < rho < 0.97 and dot * dot > 0.9025 * float(dp @ dp) * pp:
+            if (step_gain and pp > 0 and 0.3 < rho < 0.97
+                    and dot * dot > 0.9025 * float(dp @ dp) * pp):
                 gain, prev = 1.0 / (1.0 - rho), np.zeros(2)
             else:
                 prev = dp.copy()
             p = p - gain * dp
         else:
-            p = compose_affine(p, dp)
+            # the same gain on the weighted 6-vector (kernels._aitken_gain6)
+            sc = np.array([1.0, half, half, 1.0, half, half])
+            a, b = dp * sc, prev6 * sc
+            pp, dot = float(b @ b), float(a @ b)
+            rho = dot / pp if pp > 0 else 0.0
+            gain = 1.0
+            if (step_gain and pp > 0 and 0.3 < rho < 0.97
+                    and dot * dot > 0.9025 * float(a @ a) * pp):
+                gain, prev6 = 1.0 / (1.0 - rho), np.zeros(6)
+            else:
+                prev6 = dp.copy()
+            p = compose_affine(p, gain * dp)
         if shape == "translation":
             norm = float(np.hypot(dp[0], dp[1]))
         else:

@@ -19,15 +19,40 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft as sfft
 
-__all__ = ["global_shift", "subset_fftcc"]
+__all__ = ["global_shift", "subset_fftcc", "window_spectrum"]
+
+
+def _window(shape: tuple[int, int], window: int) -> tuple[slice, slice]:
+    rows, cols = shape
+    wr = min(window, rows)
+    wc = min(window, cols)
+    r0 = (rows - wr) // 2
+    c0 = (cols - wc) // 2
+    return slice(r0, r0 + wr), slice(c0, c0 + wc)
+
+
+def window_spectrum(image: NDArray[np.floating], *, window: int = 128,
+                    workers: int | None = None) -> NDArray[np.complex64]:
+    """Spectrum of the Hann-tapered, mean-free central ``window`` x ``window`` region of
+    ``image`` (clipped to the image): the reference half of :func:`global_shift`, computed
+    once per reference by :class:`~dicblur.dic.Correlator`."""
+    sl = _window(image.shape, window)
+    a = np.asarray(image[sl], dtype=np.float32)
+    taper = np.outer(np.hanning(a.shape[0]), np.hanning(a.shape[1])).astype(np.float32)
+    return np.asarray(sfft.rfft2((a - a.mean()) * taper, workers=workers))
 
 
 def global_shift(reference: NDArray[np.floating], current: NDArray[np.floating], *,
-                 window: int = 128, workers: int | None = None) -> tuple[int, int, float]:
+                 window: int = 128, workers: int | None = None,
+                 reference_spectrum: NDArray[np.complex64] | None = None,
+                 ) -> tuple[int, int, float]:
     """Integer rigid shift ``(u, v)`` of ``current`` against ``reference`` (px).
 
     Phase correlation of the central ``window`` x ``window`` region (clipped to the image,
     Hann taper against edge leakage). Shifts up to about a third of the window are found.
+    ``reference_spectrum``: :func:`window_spectrum` of ``reference`` (same ``window``), to
+    skip recomputing it. ``workers``: threads of the FFTs (at the default window one
+    thread is faster than two).
 
     Returns
     -------
@@ -36,16 +61,10 @@ def global_shift(reference: NDArray[np.floating], current: NDArray[np.floating],
     peak : float
         Height of the phase-correlation peak (0..1; near 0 means no common texture).
     """
-    rows, cols = reference.shape
-    wr = min(window, rows)
-    wc = min(window, cols)
-    r0 = (rows - wr) // 2
-    c0 = (cols - wc) // 2
-    taper = np.outer(np.hanning(wr), np.hanning(wc)).astype(np.float32)
-    a = np.asarray(reference[r0:r0 + wr, c0:c0 + wc], dtype=np.float32)
-    b = np.asarray(current[r0:r0 + wr, c0:c0 + wc], dtype=np.float32)
-    fa = sfft.rfft2((a - a.mean()) * taper, workers=workers)
-    fb = sfft.rfft2((b - b.mean()) * taper, workers=workers)
+    fa = (window_spectrum(reference, window=window, workers=workers)
+          if reference_spectrum is None else reference_spectrum)
+    fb = window_spectrum(current, window=window, workers=workers)
+    wr, wc = (s.stop - s.start for s in _window(current.shape, window))
     cross = fb * np.conj(fa)
     cross /= np.maximum(np.abs(cross), 1e-12)
     corr = sfft.irfft2(cross, s=(wr, wc), workers=workers)

@@ -108,6 +108,16 @@ spec = parse_spec({"campaign": {"seed": 1},
                    "dic": {"subsets": [11], "step": 12}})
 for b in iter_batches(spec):
     simulate_batch(make_pattern(spec, spec.patterns[0]), b, spec)
+# the other kernel signatures the tests use: affine, quintic, the static predictions
+import numpy as np
+import dicblur
+img = dicblur.speckle_pattern((48, 48), speckle_size=4.0, seed=1)
+for shape in ("translation", "affine"):
+    for interp in ("bspline3", "bspline5"):
+        dicblur.correlate(img, img, subset=11, step=12, shape=shape, interpolation=interp,
+                          noise_sigma=1.0)
+dicblur.blur_mismatch_curve(img, [1.0], subset=11)
+dicblur.motion_blur(img, (1.0, 2.0), substeps=None)
 """
 
 

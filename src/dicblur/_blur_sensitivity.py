@@ -46,7 +46,7 @@ from collections.abc import Iterator
 from typing import Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError
 
@@ -235,7 +235,17 @@ def _project(jac: NDArray[np.float64], hat: NDArray[np.float64]) -> NDArray[np.f
     """``P jac``: remove from each column the constant and the component along ``hat``
     (zero-mean, unit-norm rows): the ZNSSD offset and scale nuisance parameters."""
     z = jac - jac.mean(axis=1, keepdims=True)
-    return z - hat[:, :, None] * np.einsum("np,npk->nk", hat, z)[:, None, :]
+    return z - hat[:, :, None] * np.matmul(hat[:, None, :], z)
+
+
+def _gram(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Batched ``a^T b`` over the pixels: (m, P, i), (m, P, j) -> (m, i, j) (BLAS)."""
+    return np.asarray(np.matmul(np.swapaxes(a, 1, 2), b))
+
+
+def _tdot(a: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Batched ``a^T v``: (m, P, i), (m, P) -> (m, i)."""
+    return np.asarray(np.matmul(np.swapaxes(a, 1, 2), v[:, :, None])[:, :, 0])
 
 
 def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -310,7 +320,7 @@ def subset_blur_coefficients(
         else:
             jp = jac
         # J^T P J and J^T P f_dd (P symmetric and idempotent)
-        sol = _solve(np.einsum("npi,npj->nij", jp, jp), np.einsum("npi,np->ni", jp, e))
+        sol = _solve(_gram(jp, jp), _tdot(jp, e))
         out[start : start + len(cc)] = -_along(sol, shape, dy, dx) / 24.0
     return out
 
@@ -361,27 +371,57 @@ def subset_blur_shifts(
         Shift of subset ``i`` at blur ``W_j`` (px, along the motion, relative to the blur's
         own centre); ``nan`` where the subset has no gradient or breaks down.
     """
-    _check_shape(shape)
     _check_criterion(criterion)
+    return _shifts_and_variance(image, blur, centres, subset, motion=motion, shape=shape,
+                                derivative=derivative, boundary=boundary,
+                                criterion=criterion, max_shift=max_shift, chunk=chunk,
+                                variance=False)[0]
+
+
+def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
+                         centres: NDArray[np.intp], subset: int, *,
+                         motion: tuple[float, float], shape: Shape, derivative: Derivative,
+                         boundary: Boundary, criterion: Criterion, max_shift: float,
+                         chunk: int, variance: bool
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
+    noise variance per unit noise variance) of :func:`subset_blur_shifts` and
+    :func:`subset_noise_variance`."""
+    _check_shape(shape)
     _check_derivative(derivative)
     dy, dx = _unit(motion)
-    blur = np.asarray(blur, dtype=np.float64)
-    out = np.zeros((len(blur), len(centres)))
-    for j, start, jf, jg, f, gg in _blurred_subsets(image, blur, centres, subset, motion,
+    w = np.asarray(blur, dtype=np.float64)
+    shifts = np.zeros((len(w), len(centres)))
+    var = np.full((len(w), len(centres)), np.nan) if variance else None
+    e = np.zeros(2 if shape == "translation" else 6)
+    e[0] = dx
+    e[1 if shape == "translation" else 3] = dy
+    for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, motion,
                                                     shape, derivative, boundary, chunk):
-        if blur[j] == 0:
-            continue
-        if criterion == "znssd":
-            fh, _ = _normalise(f)
+        rows = slice(start, start + len(f))
+        if criterion == "znssd" or variance:
+            fh, sf = _normalise(f)
             gh, sg = _normalise(gg)
-            sg = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
-            a = np.einsum("npi,npj->nij", jf, _project(jg, gh)) / sg[:, None, None]
-            b = np.einsum("npi,np->ni", jf, fh - gh)
-        else:
-            a = np.einsum("npi,npj->nij", jf, jg)
-            b = np.einsum("npi,np->ni", jf, f - gg)
-        out[j, start : start + len(f)] = _along(_solve(a, b), shape, dy, dx, max_shift)
-    return out
+            cross = _gram(jf, _project(jg, gh))  # J_f^T P_g J_g
+        if w[j] > 0:
+            if criterion == "znssd":
+                sg_ok = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
+                a = cross / sg_ok[:, None, None]
+                b = _tdot(jf, fh - gh)
+            else:
+                a = _gram(jf, jg)
+                b = _tdot(jf, f - gg)
+            shifts[j, rows] = _along(_solve(a, b), shape, dy, dx, max_shift)
+        if var is not None:
+            ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
+            pf, pg = _project(jf, fh), _project(jf, gh)
+            mid = (ratio2[:, None, None] * _gram(pf, pf)
+                   + _gram(pg, pg))
+            # e^T A^-1 M A^-T e = z^T M z with A^T z = e
+            z = _solve(np.transpose(cross, (0, 2, 1)),
+                       np.broadcast_to(e, (len(f), e.size)).copy())
+            var[j, rows] = np.einsum("ni,nij,nj->n", z, mid, z)
+    return shifts, var
 
 
 def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
@@ -442,23 +482,8 @@ def subset_noise_variance(
     ndarray, shape (m, n)
         ``var_i(W_j) / sigma**2`` (px**2 / GL**2); ``nan`` where the subset has no gradient.
     """
-    _check_shape(shape)
-    _check_derivative(derivative)
-    dy, dx = _unit(motion)
-    e = np.zeros(2 if shape == "translation" else 6)
-    e[0] = dx
-    e[1 if shape == "translation" else 3] = dy
-    out = np.full((len(blur), len(centres)), np.nan)
-    for j, start, jf, jg, f, gg in _blurred_subsets(image, blur, centres, subset, motion,
-                                                    shape, derivative, boundary, chunk):
-        fh, sf = _normalise(f)
-        gh, sg = _normalise(gg)
-        ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
-        a = np.einsum("npi,npj->nij", jf, _project(jg, gh))
-        pf, pg = _project(jf, fh), _project(jf, gh)
-        mid = (ratio2[:, None, None] * np.einsum("npi,npj->nij", pf, pf)
-               + np.einsum("npi,npj->nij", pg, pg))
-        # e^T A^-1 M A^-T e = z^T M z with A^T z = e
-        z = _solve(np.transpose(a, (0, 2, 1)), np.broadcast_to(e, (len(f), e.size)).copy())
-        out[j, start : start + len(f)] = np.einsum("ni,nij,nj->n", z, mid, z)
-    return out
+    var = _shifts_and_variance(image, blur, centres, subset, motion=motion, shape=shape,
+                               derivative=derivative, boundary=boundary, criterion="znssd",
+                               max_shift=np.inf, chunk=chunk, variance=True)[1]
+    assert var is not None
+    return var

@@ -31,10 +31,9 @@ from .._blur_sensitivity import (
     Boundary,
     Derivative,
     Shape,
+    _shifts_and_variance,
     _spectral,
     _unit,
-    subset_blur_shifts,
-    subset_noise_variance,
 )
 from .._validation import check_positive
 from ..errors import InputError
@@ -93,8 +92,9 @@ def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.int
     """Per W: mean noise variance per GL**2, mismatch variance, SSSIG, valid fraction."""
     kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative,
                               boundary=boundary)
-    xi = subset_blur_shifts(img, w, pts, subset, max_shift=max_shift, **kw)
-    var = subset_noise_variance(img, w, pts, subset, **kw)
+    xi, var = _shifts_and_variance(img, w, pts, subset, criterion="znssd",
+                                   max_shift=max_shift, chunk=256, variance=True, **kw)
+    assert var is not None
     ok = np.isfinite(xi) & np.isfinite(var)
     count = ok.sum(axis=1)
     if np.any(count < 2):

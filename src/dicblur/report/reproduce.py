@@ -338,11 +338,15 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         full.to_json(str(out / f"model_{k}_all_noise.json"))
         # the whole u_e(W) from the static image alone, no fit (docs/models.md s. 4); one
         # call at sigma = 1 GL: the noise term scales with sigma
-        unit = predict_from_pattern(p.image, W, noise_sigma=1.0, subset=s.subset,
+        # both terms are smooth in W: predicted every 0.5 px (the quick grid) and
+        # interpolated in their squares onto a finer study grid
+        wc = np.union1d(np.arange(0.0, float(W.max()) + 0.25, 0.5), [float(W.max())])
+        unit = predict_from_pattern(p.image, wc, noise_sigma=1.0, subset=s.subset,
                                     step=s.poi_step, boundary="periodic")
+        n2 = np.interp(W, wc, unit.u_noise**2)
+        b2 = np.interp(W, wc, unit.u_blur**2)
         static[k]["predicted_u_e"] = {
-            f"{lv:g}": np.hypot(lv * unit.u_noise, unit.u_blur).tolist()
-            for lv in s.noise_levels}
+            f"{lv:g}": np.sqrt(lv * lv * n2 + b2).tolist() for lv in s.noise_levels}
         st = np.asarray(static[k]["predicted_u_e"][f"{s.main_noise:g}"])[v]
         eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
         mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch

@@ -234,6 +234,8 @@ def _param(fit: Any, name: str) -> dict[str, float]:
 # ---------------------------------------------------------------------------------------
 def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) -> ReproduceResult:
     """Run the whole study and write the report folder (see the module docs)."""
+    from scipy.interpolate import CubicSpline
+
     from ..metrics import pattern_metrics
     from ..models import blur_sensitivity, fit_blur_model, predict_from_pattern
     from ..pulse.study import run_pulse_study
@@ -338,15 +340,15 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         full.to_json(str(out / f"model_{k}_all_noise.json"))
         # the whole u_e(W) from the static image alone, no fit (docs/models.md s. 4); one
         # call at sigma = 1 GL: the noise term scales with sigma
-        # both terms are smooth in W: predicted every 0.5 px (the quick grid) and
-        # interpolated in their squares onto a finer study grid
+        # both terms are smooth in W (u_blur ~ c W^2 at first): predicted every 0.5 px
+        # (the quick grid) and interpolated by cubic splines onto a finer study grid
         wc = np.union1d(np.arange(0.0, float(W.max()) + 0.25, 0.5), [float(W.max())])
         unit = predict_from_pattern(p.image, wc, noise_sigma=1.0, subset=s.subset,
                                     step=s.poi_step, boundary="periodic")
-        n2 = np.interp(W, wc, unit.u_noise**2)
-        b2 = np.interp(W, wc, unit.u_blur**2)
+        un = np.clip(CubicSpline(wc, unit.u_noise)(W), 0.0, None)
+        ub = np.clip(CubicSpline(wc, unit.u_blur)(W), 0.0, None)
         static[k]["predicted_u_e"] = {
-            f"{lv:g}": np.sqrt(lv * lv * n2 + b2).tolist() for lv in s.noise_levels}
+            f"{lv:g}": np.hypot(lv * un, ub).tolist() for lv in s.noise_levels}
         st = np.asarray(static[k]["predicted_u_e"][f"{s.main_noise:g}"])[v]
         eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
         mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch

@@ -363,7 +363,8 @@ def subset_blur_shifts(
         Breakdown threshold (px): a subset whose linearised shift vector is longer is
         reported ``nan``. The linearisation needs shifts well below a pixel; beyond, the
         blur has erased the subset's texture along the motion and IC-GN itself stops
-        converging there (a 3 px speckle at W = 8 px: 11 % of POIs converge).
+        converging on about as many POIs (3 px speckles, affine, W = 8 px: the rule keeps
+        90 % of the subsets, IC-GN converges on 90-92 %).
 
     Returns
     -------

@@ -21,7 +21,7 @@ and 6 px speckles with noise 2 GL, noisy IC-GN lands within 5 % of it for W = 0.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -255,6 +255,4 @@ def model_from_pattern(
                            mean_level=float(img.mean()), next_term=True, default="mismatch",
                            provenance=prov, compare=False)
     # fitted on three noise levels: make the model's own noise the one asked for
-    from dataclasses import replace
-
     return replace(model, noise_sigma=sigma)

@@ -440,14 +440,11 @@ def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
             g, ggy, ggx = image, fy, fx
         else:
             g = _spectral(image, boundary, dy, dx, blur=float(wl))[0]
-            if derivative == "central":
-                gp = np.pad(g, 1, mode="symmetric" if boundary == "reflect" else "wrap")
-                ggx = 0.5 * (gp[1:-1, 2:] - gp[1:-1, :-2])
-                ggy = 0.5 * (gp[2:, 1:-1] - gp[:-2, 1:-1])
-            elif derivative == "spectral":
-                ggy, ggx, _ = _spectral(g, boundary, dy, dx)
-            else:
+            if derivative in ("bspline3", "bspline5"):  # no spectral pass needed
                 ggy, ggx = _spline_gradients(g, derivative)
+            else:
+                ggy, ggx, _ = directional_derivatives(g, motion, derivative=derivative,
+                                                      boundary=boundary)
         win = _Windows(subset, fx, fy, ggx, ggy, image, g)
         for start in range(0, len(centres), chunk):
             ax, ay, bx, by, f, gg = win.take(centres[start : start + chunk])

@@ -24,51 +24,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ConfigError, InputError
+
+# re-exported: the campaigns' SSSIG along the motion lives with the other metrics
+from ..metrics import box_sssig, directional_sssig
 from .spec import CampaignSpec
 from .tasks import Batch, task_seed
 
 __all__ = ["directional_sssig", "simulate_batch", "task_points"]
-
-
-def directional_sssig(
-    image: NDArray[np.float64], points: NDArray[np.intp], *, subset: int, angle: float
-) -> NDArray[np.float64]:
-    """SSSIG along a direction: sum over each subset of ``(cos a f_x + sin a f_y)**2``.
-
-    Central-difference gradients as :func:`dicblur.image_gradients`; ``angle = 0`` is
-    :func:`dicblur.sssig` with ``direction="x"``, 90 with ``"y"``.
-
-    Parameters
-    ----------
-    image : ndarray, shape (rows, cols)
-    points : ndarray of int, shape (n, 2)
-        Subset centres (row, col).
-    subset : int
-        Odd subset size, px.
-    angle : float
-        Degrees from +x (columns) towards +y (rows).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        (grey levels / px)**2 summed over the subset.
-    """
-    from ..metrics import image_gradients
-
-    gy, gx = image_gradients(image)
-    return _box_sssig(gy, gx, points, subset=subset, angle=angle)
-
-
-def _box_sssig(gy: NDArray[np.float64], gx: NDArray[np.float64], points: NDArray[np.intp],
-               *, subset: int, angle: float) -> NDArray[np.float64]:
-    a = math.radians(angle)
-    g = math.cos(a) * gx + math.sin(a) * gy
-    sat = np.zeros((g.shape[0] + 1, g.shape[1] + 1))
-    sat[1:, 1:] = (g * g).cumsum(axis=0).cumsum(axis=1)
-    h = subset // 2
-    r0, c0 = points[:, 0] - h, points[:, 1] - h
-    r1, c1 = points[:, 0] + h + 1, points[:, 1] + h + 1
-    return np.asarray(sat[r1, c1] - sat[r0, c1] - sat[r1, c0] + sat[r0, c0])
 
 
 def _trajectory(spec: CampaignSpec) -> Any:
@@ -231,7 +193,7 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         n_ok = int(ok.sum())
         # one gradient pass for SSSIG and MIG (as dicblur.mig: interior pixels)
         gy, gx = image_gradients(blurred)
-        s_b = _box_sssig(gy, gx, points, subset=batch.subset, angle=batch.angle)
+        s_b = box_sssig(gy, gx, points, subset=batch.subset, angle=batch.angle)
         gw = (gy[window][1:-1, 1:-1], gx[window][1:-1, 1:-1])
         sigma = _effective_noise(spec, batch.noise, blurred)
         out["u_e"][j] = float(np.std(along[ok], ddof=1)) if n_ok >= 2 else np.nan

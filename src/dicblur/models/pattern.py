@@ -37,6 +37,7 @@ from .._blur_sensitivity import (
 )
 from .._validation import check_positive
 from ..errors import InputError
+from ..metrics import directional_sssig
 from ._checks import as_blur
 from .mismatch import _subset_inputs
 from .model import BlurUncertaintyModel
@@ -109,15 +110,11 @@ def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.int
         mean_var = np.nanmean(np.where(ok, var, np.nan), axis=1)
         mis_var = np.nanvar(xi_ok, axis=1)
     dy, dx = _unit(motion)
-    h = subset // 2
-    s = np.empty(w.size)
-    for j, wl in enumerate(w):
-        g = img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0]
-        # directional SSSIG with central differences, as dicblur.sssig / the campaigns
-        gp = np.pad(g, 1, mode="symmetric" if boundary == "reflect" else "wrap")
-        gd = dx * 0.5 * (gp[1:-1, 2:] - gp[1:-1, :-2]) + dy * 0.5 * (gp[2:, 1:-1] - gp[:-2, 1:-1])
-        win = np.lib.stride_tricks.sliding_window_view(gd * gd, (subset, subset))
-        s[j] = float(win[pts[:, 0] - h, pts[:, 1] - h].sum(axis=(1, 2)).mean())
+    angle = math.degrees(math.atan2(dy, dx))
+    # SSSIG along the motion as dicblur.sssig and the campaigns compute it
+    s = np.array([float(directional_sssig(
+        img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0], pts,
+        subset=subset, angle=angle).mean()) for wl in w])
     return mean_var, mis_var, s, count / xi.shape[1]
 
 

@@ -117,9 +117,11 @@ def prepare_subsets(f: NDArray[np.float64], gx: NDArray[np.float64], gy: NDArray
     jc = jac - jsum[:, None, :] / npx
     safe = np.where(fnorm > 0, fnorm, 1.0)
     fh = fc / safe[:, None]
-    avec = np.einsum("ijk,ij->ik", jc, fh)
+    # batched BLAS products (einsum's loops were 80 % of a one-off correlate call)
+    jct = jc.transpose(0, 2, 1)
+    avec = np.matmul(jct, fh[:, :, None])[:, :, 0]
     # Df^2 H = J_c^T J_c - a a^T  (exact ZNSSD Gauss-Newton matrix, GL^2 units)
-    big = np.einsum("ijk,ijl->ikl", jc, jc) - avec[:, :, None] * avec[:, None, :]
+    big = np.matmul(jct, jc) - avec[:, :, None] * avec[:, None, :]
     status = np.zeros(n, dtype=np.uint8)
     scale = np.maximum(np.abs(fp).max(axis=1), 1.0)
     flat = fnorm <= 1e-6 * scale * np.sqrt(npx)

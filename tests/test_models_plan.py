@@ -204,3 +204,43 @@ def test_gradient_weighted_noise_against_monte_carlo():
         plan_exposure(m, velocity=120.0, scale=0.05, camera=cam2, noise_level=-1.0)
     with pytest.raises(InputError, match="motion"):
         gradient_weighted_level(img, motion=(0.0, 0.0))
+
+
+def test_cross_term_recovered_and_planned():
+    # noise-free variance (b W)^2: the mismatch x interpolation cross term (docs/models.md
+    # s. 4); with two noise levels it is told from the noise term, and leaving it out
+    # moves a camera plan by several per cent
+    b_true = 9e-4
+    w = np.tile(W, 2)
+    sig = np.repeat([2.0, 8.0], W.size)
+    s = sssig_decay(w, S0, BETA)
+    exact = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR, cross=b_true)
+    assert np.allclose(exact**2 - mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE,
+                                                 floor=FLOOR)**2, (b_true * w) ** 2)
+    hits = []
+    for seed in range(20):
+        u = exact * np.exp(np.random.default_rng(300 + seed).normal(0.0, 0.01, w.size))
+        fit = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, noise_blur=False)
+        assert fit.names == ("a", "floor", "cross", "c")  # "auto" keeps floor and cross
+        hits.append(all(fit.parameter(n).low <= t <= fit.parameter(n).high
+                        for n, t in (("a", A_TRUE), ("floor", FLOOR), ("cross", b_true),
+                                     ("c", C_TRUE))))
+    assert np.mean(hits) >= 0.75
+    cam = PoissonGaussianCamera.from_camera(
+        dicblur.Camera(read_noise=2.0, gain=0.05, full_well=None, bit_depth=None),
+        nominal_exposure=1e-3, mean_level=127.5)
+
+    def planned(u: np.ndarray, **kw: object) -> float:
+        m = fit_blur_model(w, s, u, noise_sigma=sig, mean_level=127.5, default="mismatch",
+                           compare=False, noise_blur=False, **kw)  # type: ignore[arg-type]
+        return plan_exposure(m, velocity=100.0, scale=0.05, camera=cam).exposure
+
+    t_true = planned(exact, floor=True, cross=True)  # exact data: the true model's plan
+    u = exact * np.exp(np.random.default_rng(7).normal(0.0, 0.01, w.size))
+    assert planned(u) == pytest.approx(t_true, rel=0.01)
+    assert planned(u, cross=False) > 1.02 * t_true  # the floor model bends: plan too long
+    with pytest.raises(InputError, match="cross=True"):
+        fit_mismatch(W, sssig_decay(W, S0, BETA), exact[:W.size], noise_sigma=2.0,
+                     cross=True)
+    with pytest.raises(InputError, match="cross="):
+        fit_mismatch(w, s, exact, noise_sigma=sig, cross="yes")  # type: ignore[arg-type]

@@ -57,6 +57,7 @@ def fit_blur_model(
     next_term: bool | str = False,
     floor: bool | str = "auto",
     noise_blur: bool | str = "auto",
+    cross: bool | str = "auto",
     confidence: float = 0.95,
     ci: str = "covariance",
     n_boot: int = 500,
@@ -108,6 +109,11 @@ def fit_blur_model(
     noise_blur : bool or "auto"
         Growth ``(1 + e W**4)`` of the noise term with the blur mismatch (see
         :func:`fit_mismatch`); ``"auto"`` tries it only with >= 2 noise levels.
+    cross : bool or "auto"
+        Noise-free term ``(b W)**2``, the cross term of the blur mismatch with the
+        interpolation's smoothing (see :func:`fit_mismatch`); ``"auto"`` tries it only with
+        >= 2 noise levels. Without it the fitted floor and ``c`` bend to fit the noise-free
+        error's growth at 1-2 px, and a camera plan comes out 2-3 % long (BENCHMARKS.md).
     confidence, ci, n_boot, seed
         Interval level and method (``"covariance"`` or ``"bootstrap"``; see
         :mod:`dicblur.models._result`); ``seed`` drives the bootstrap only.
@@ -175,6 +181,7 @@ def fit_blur_model(
     try:
         mm = fit_mismatch(w, s, u, noise_sigma=sig, next_term=next_term,  # type: ignore[arg-type]
                           floor=floor, noise_blur=noise_blur,  # type: ignore[arg-type]
+                          cross=cross,  # type: ignore[arg-type]
                           confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
     except FitError as exc:
         warnings.warn(f"mismatch model not fitted: {exc}", stacklevel=2)
@@ -212,7 +219,7 @@ def fit_blur_model(
             cmp_ = compare_models(w, s, u, noise_sigma=sig, contrast_ratio=ratio,
                                   fit_range=fit_range, range_tolerance=range_tolerance,
                                   next_term=next_term, floor=floor,
-                                  noise_blur=noise_blur)
+                                  noise_blur=noise_blur, cross=cross)
             comparison = _json_clean(cmp_.to_dict())
             chosen = cmp_.better
         except (FitError, InputError) as exc:
@@ -263,6 +270,7 @@ def compare_models(
     next_term: bool | str = False,
     floor: bool | str = "auto",
     noise_blur: bool | str = "auto",
+    cross: bool | str = "auto",
 ) -> ModelComparison:
     """Fit both models on part of the data and score their predictions on the rest.
 
@@ -302,7 +310,7 @@ def compare_models(
         w[train], s[train], u[train], noise_sigma=None if sig is None else sig[train],
         contrast_ratio=None if ratio is None else ratio[train], fit_range=fit_range,
         range_tolerance=range_tolerance, default="mismatch", next_term=next_term,
-        floor=floor, noise_blur=noise_blur, compare=False)
+        floor=floor, noise_blur=noise_blur, cross=cross, compare=False)
     rms: dict[str, float] = {}
     mx: dict[str, float] = {}
     rel: dict[str, tuple[float, ...]] = {}

@@ -5,7 +5,7 @@ the noise term of the match-score model evaluated at the blurred SSSIG, and a
 deterministic, pattern-dependent shift of the SSD minimum that does not depend on noise:
 
     u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) (1 + e W**4) + u_0**2
-                       + (c W**2 + c4 W**4)**2
+                       + (b W)**2 + (c W**2 + c4 W**4)**2
 
 Theory gives ``a = 2``, ``gamma = 1`` (eq. 2) and ``c`` from the static image
 (:func:`blur_sensitivity`); ``c4`` is the next term of the expansion, fitted only when the
@@ -18,7 +18,13 @@ fitted only with >= 2 noise levels (docs/models.md s. 4). ``e`` (``noise_blur``,
 is the growth of the noise term with the blur mismatch: with a sharp reference the noise of
 the reference gradients meets the mismatch residual ``(W**2 / 24) f''`` and the Hessian
 ``sum g_ref g_cur`` falls below ``sqrt(SSSIG_ref SSSIG(W))``, both O(W**4) relative
-(docs/models.md s. 4). It is separable from ``c`` only with >= 2 noise levels. The noise
+(docs/models.md s. 4). It is separable from ``c`` only with >= 2 noise levels. ``b``
+(``cross``, px/px) is the cross term of the blur mismatch with the interpolation's own
+smoothing: the B-spline interpolant of the current image at its sub-pixel offset is
+smoother than the sampled reference, an extra even mismatch ``m_i`` per subset that adds to
+the blur's ``c_i W**2``; averaged over offsets, ``var(m_i + c_i W**2)`` gains
+``2 cov(m_i, c_i) W**2``, a noise-free variance linear in ``W**2`` (docs/models.md s. 4).
+Like the floor it is told from the noise term only with >= 2 noise levels. The noise
 enters only through
 ``SSSIG / sigma**2``, so the model is invariant to scaling the image intensity. Without a
 known noise level the noise term is ``k / SSSIG(W)`` with ``k = a sigma**2`` fitted.
@@ -279,12 +285,15 @@ def mismatch_model(
     k: float | None = None,
     floor: float = 0.0,
     noise_blur: float = 0.0,
+    cross: float = 0.0,
 ) -> NDArray[np.float64]:
-    """``sqrt(a (SSSIG/sigma**2)**(-gamma) (1 + e W**4) + floor**2 + (c W**2 + c4 W**4)**2)``.
+    """``sqrt(a (SSSIG/sigma**2)**(-gamma) (1 + e W**4) + floor**2 + (b W)**2
+    + (c W**2 + c4 W**4)**2)``.
 
     In px. With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required).
     ``floor`` (px) is the noise-independent matcher floor ``u_0``; ``noise_blur`` (``e``,
-    px**-4) the growth of the noise term with the blur mismatch.
+    px**-4) the growth of the noise term with the blur mismatch; ``cross`` (``b``, px/px)
+    the mismatch-interpolation cross term.
     """
     w = np.asarray(blur, dtype=np.float64)
     s = np.asarray(sssig, dtype=np.float64)
@@ -297,7 +306,8 @@ def mismatch_model(
         noise = a * (s / sig**2) ** (-gamma)
     noise = noise * (1.0 + noise_blur * w**4)
     ub = c * w * w + c4 * w**4
-    return np.sqrt(noise + floor * floor + ub * ub)
+    bw = cross * w
+    return np.sqrt(noise + floor * floor + bw * bw + ub * ub)
 
 
 def fit_mismatch(
@@ -310,6 +320,7 @@ def fit_mismatch(
     next_term: bool | Literal["auto"] = "auto",
     floor: bool | Literal["auto"] = "auto",
     noise_blur: bool | Literal["auto"] = "auto",
+    cross: bool | Literal["auto"] = "auto",
     confidence: float = 0.95,
     ci: str = "covariance",
     n_boot: int = 500,
@@ -337,12 +348,16 @@ def fit_mismatch(
     noise_blur : bool or "auto"
         Fit ``e`` (name ``"noise_blur"``, px**-4) of the noise term's growth
         ``(1 + e W**4)``; same rules as ``floor``.
+    cross : bool or "auto"
+        Fit ``b`` (name ``"cross"``, px/px) of the noise-free term ``(b W)**2``, the
+        cross term of the blur mismatch with the interpolation's smoothing; same rules as
+        ``floor``.
 
     Returns
     -------
     FitResult
-        ``names`` among ``("a" | "k", "gamma", "noise_blur", "floor", "c", "c4")``;
-        ``fixed`` holds the rest.
+        ``names`` among ``("a" | "k", "gamma", "noise_blur", "floor", "cross", "c",
+        "c4")``; ``fixed`` holds the rest.
     """
     w = as_vector(blur, "blur")
     s = as_positive(sssig, "sssig", w.size)
@@ -360,7 +375,9 @@ def fit_mismatch(
         raise InputError(f"floor={floor!r}: use True, False or 'auto'")
     if noise_blur not in (True, False, "auto"):
         raise InputError(f"noise_blur={noise_blur!r}: use True, False or 'auto'")
-    for opt, val in (("floor", floor), ("noise_blur", noise_blur)):
+    if cross not in (True, False, "auto"):
+        raise InputError(f"cross={cross!r}: use True, False or 'auto'")
+    for opt, val in (("floor", floor), ("noise_blur", noise_blur), ("cross", cross)):
         if val is True and not multi:
             raise InputError(
                 f"{opt}=True: needs data at >= 2 noise levels (with one level it cannot be "
@@ -370,28 +387,34 @@ def fit_mismatch(
     floors = ([False, True] if multi else [False]) if floor == "auto" else [bool(floor)]
     growths = ([False, True] if multi else [False]) if noise_blur == "auto" else [
         bool(noise_blur)]
+    crosses = ([False, True] if multi else [False]) if cross == "auto" else [bool(cross)]
     results = []
-    for with_growth in growths:
-        for with_floor in floors:
-            do_gamma = bool((multi and not with_floor) if fit_gamma is None
-                            else (fit_gamma and sig is not None))
-            for with_c4 in options:
-                names: list[str] = ["a" if sig is not None else "k"]
-                if do_gamma:
-                    names.append("gamma")
-                if with_growth:
-                    names.append("noise_blur")
-                if with_floor:
-                    names.append("floor")
-                names.append("c")
-                if with_c4:
-                    names.append("c4")
-                auto = ((with_c4 and next_term == "auto") or (with_floor and floor == "auto")
-                        or (with_growth and noise_blur == "auto"))
-                if w.size - len(names) < (2 if auto else 1):
-                    continue
-                results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci, n_boot,
-                                        seed))
+    for with_cross in crosses:
+        for with_growth in growths:
+            for with_floor in floors:
+                do_gamma = bool((multi and not (with_floor or with_cross))
+                                if fit_gamma is None else (fit_gamma and sig is not None))
+                for with_c4 in options:
+                    names: list[str] = ["a" if sig is not None else "k"]
+                    if do_gamma:
+                        names.append("gamma")
+                    if with_growth:
+                        names.append("noise_blur")
+                    if with_floor:
+                        names.append("floor")
+                    if with_cross:
+                        names.append("cross")
+                    names.append("c")
+                    if with_c4:
+                        names.append("c4")
+                    auto = ((with_c4 and next_term == "auto")
+                            or (with_floor and floor == "auto")
+                            or (with_growth and noise_blur == "auto")
+                            or (with_cross and cross == "auto"))
+                    if w.size - len(names) < (2 if auto else 1):
+                        continue
+                    results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci,
+                                            n_boot, seed))
     if not results:
         raise FitError(
             f"mismatch: {w.size} point(s) are too few for the noise + blur-mismatch model; "
@@ -427,6 +450,7 @@ def _fit_one(
         d.setdefault("c4", 0.0)
         d.setdefault("floor", 0.0)
         d.setdefault("noise_blur", 0.0)
+        d.setdefault("cross", 0.0)
         return d
 
     def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
@@ -442,10 +466,10 @@ def _fit_one(
         if "floor" in names:  # start with part of the low-W variance on the floor
             noise0 *= 0.9
         start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0, "floor": floor0,
-                 "noise_blur": 1e-3}
+                 "noise_blur": 1e-3, "cross": 0.5 * c0}
         p0 = np.array([start[n] for n in names])
         scl = np.where(p0 > 0, p0, 1e-3 * c0 if c0 > 0 else 1e-6)
-        lower = np.array([0.0 if n in ("a", "k", "c", "floor", "noise_blur")
+        lower = np.array([0.0 if n in ("a", "k", "c", "floor", "noise_blur", "cross")
                           else (0.05 if n == "gamma" else -np.inf) for n in names])
         upper = np.array([5.0 if n == "gamma" else np.inf for n in names])
 
@@ -453,7 +477,7 @@ def _fit_one(
             d = unpack(pn * scl)
             m = mismatch_model(wi, si, sg, c=d["c"], a=d.get("a", 2.0), gamma=d["gamma"],
                                c4=d["c4"], k=d.get("k"), floor=d["floor"],
-                               noise_blur=d["noise_blur"])
+                               noise_blur=d["noise_blur"], cross=d["cross"])
             return np.log(np.maximum(m, 1e-300)) - np.log(ui)
 
         r = optimize.least_squares(resid, p0 / scl, bounds=(lower / scl, upper / scl),

@@ -187,7 +187,8 @@ class BlurUncertaintyModel:
             noise = p["a"] * (s / sigma**2) ** (-gamma)
         noise = noise * (1.0 + p.get("noise_blur", 0.0) * w**4)
         ub = p["c"] * w * w + p.get("c4", 0.0) * w**4
-        return noise, ub * ub
+        bw = p.get("cross", 0.0) * w
+        return noise, ub * ub + bw * bw
 
     def _sigma(self, kind: str, sigma: float | None) -> float | None:
         if sigma is not None:

@@ -37,7 +37,7 @@ in log-log within 1.2x of the lowest point. Uncertainty: bootstrap over brute-fo
 (whole patterns, so POI and exposure correlation is carried), and two independent halves.
 
 Run: ``.venv/bin/python benchmarks/bench_planning.py [--quick] [--n-cal N] [--n-bf N]
-[--workers N]``
+[--replicate K] [--workers N] [--out FILE] [--save FILE.npz]``
 """
 
 from __future__ import annotations
@@ -320,6 +320,7 @@ def main() -> None:
     ap.add_argument("--save", help="also save the raw u_e arrays to this .npz file")
     ap.add_argument("--replicate", type=int, default=0,
                     help="independent replicate: other patterns and noise (default 0)")
+    ap.add_argument("--out", type=Path, default=OUT, help=f"JSON file (default {OUT.name})")
     args = ap.parse_args()
     n_cal, n_bf = (4, 8) if args.quick else (args.n_cal, args.n_bf)
     d = run(n_cal, n_bf, args.workers, n_boot=200 if args.quick else 1000,
@@ -328,9 +329,9 @@ def main() -> None:
     _print(d)
     d["machine"] = {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load": os.getloadavg(), "workers": args.workers, "quick": args.quick}
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(d, indent=1))
-    print(f"wrote {OUT}")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(d, indent=1))
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

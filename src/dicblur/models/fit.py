@@ -113,7 +113,7 @@ def fit_blur_model(
         Noise-free term ``(b W)**2``, the cross term of the blur mismatch with the
         interpolation's smoothing (see :func:`fit_mismatch`); ``"auto"`` tries it only with
         >= 2 noise levels. Without it the fitted floor and ``c`` bend to fit the noise-free
-        error's growth at 1-2 px, and a camera plan comes out 2-3 % long (BENCHMARKS.md).
+        error's growth at 1-2 px, and a camera plan comes out 1.7-2.5 % long (BENCHMARKS.md).
     confidence, ci, n_boot, seed
         Interval level and method (``"covariance"`` or ``"bootstrap"``; see
         :mod:`dicblur.models._result`); ``seed`` drives the bootstrap only.

@@ -335,9 +335,10 @@ def fit_mismatch(
     noise_sigma : float or array_like, shape (n,), optional
         Noise std (GL). ``None``: the noise term is ``k / SSSIG``.
     fit_gamma : bool, optional
-        Fit the noise exponent ``gamma``; default: only with >= 2 noise levels and no
-        ``floor`` (else fixed at the theoretical 1: a floor is the physical reason a fitted
-        ``gamma`` drops below 1, and the two are barely separable with two levels).
+        Fit the noise exponent ``gamma``; default: only with >= 2 noise levels and neither
+        ``floor`` nor ``cross`` (else fixed at the theoretical 1: noise-free terms are the
+        physical reason a fitted ``gamma`` drops below 1, and they are barely separable
+        from it with two levels).
     next_term : bool or "auto"
         Add ``c4 W**4`` to the mismatch term; ``"auto"`` keeps it when the Akaike
         information criterion drops by more than 2 and there are enough points.

@@ -126,3 +126,35 @@ def test_cli_errors(results_csv, tmp_path, capsys):
     assert main(["plan", str(model_path), "--velocity", "1m/s", "--scale", "0.05mm/px",
                  "--full-well", "1e4"]) == 2
     assert "--flux" in capsys.readouterr().err
+
+
+def test_plan_shot_noise_at_reference_level(results_csv, tmp_path, capsys):
+    # --reference: the camera's shot noise at the image's gradient-weighted level (relative
+    # to its mean, on the model's scale), the same plan as the API with noise_level=
+    from dicblur import save_image, speckle_pattern
+    from dicblur.models import PoissonGaussianCamera, gradient_weighted_level, plan_exposure
+
+    model_path = tmp_path / "model.json"
+    assert main(["fit", str(results_csv), "-o", str(model_path)]) == 0
+    model = BlurUncertaintyModel.from_json(str(model_path))
+    img = 0.5 * speckle_pattern((96, 96), speckle_size=4.0, seed=3) + 40.0  # dim, offset
+    ref = tmp_path / "ref.tif"
+    save_image(ref, img, bit_depth=16)
+    cam_args = ["--full-well", "20000", "--read-noise", "5", "--flux", "4e6"]
+    base = ["plan", str(model_path), "--velocity", "120mm/s", "--scale", "0.05mm/px"]
+    capsys.readouterr()
+    assert main([*base, *cam_args, "--reference", str(ref), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    from dicblur import load_image
+    loaded = load_image(ref)
+    level = gradient_weighted_level(loaded) / loaded.mean() * (model.mean_level or 127.5)
+    cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)
+    expect = plan_exposure(model, velocity="120mm/s", scale="0.05mm/px", camera=cam,
+                           noise_level=level)
+    assert got["exposure"] == pytest.approx(expect.exposure, rel=1e-12)
+    assert main([*base, *cam_args, "--noise-level", str(level), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["exposure"] == pytest.approx(expect.exposure,
+                                                                            rel=1e-12)
+    # fixed noise has no shot noise to place; both options at once are ambiguous
+    assert main([*base, "--target", "0.01px", "--noise", "2", "--noise-level", "100"]) != 0
+    assert main([*base, *cam_args, "--reference", str(ref), "--noise-level", "100"]) != 0

@@ -12,11 +12,12 @@ import numpy as np
 import typer
 
 from ..errors import InputError
-from ..io import file_sha256
+from ..io import file_sha256, load_image
 from ..models import (
     BlurUncertaintyModel,
     PoissonGaussianCamera,
     fit_blur_model,
+    gradient_weighted_level,
     parse_quantity,
     plan_exposure,
 )
@@ -232,12 +233,26 @@ def plan_command(
     peak_to_mean: float = typer.Option(2.0, "--peak-to-mean",
                                        help="Brightest / mean grey level."),
     noise: float | None = typer.Option(None, "--noise", help="Fixed noise std, GL."),
+    reference: Path | None = typer.Option(
+        None, "--reference",
+        help="Reference image of the specimen: shot noise at its gradient-weighted level."),
+    noise_level: float | None = typer.Option(
+        None, "--noise-level",
+        help="Grey level (of the fitted images) at which shot noise is evaluated."),
     which: str | None = typer.Option(None, "--model", help="mismatch or power_law."),
     plot: Path | None = typer.Option(None, "--plot", help="Write u_e(exposure) figure."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Plan the exposure: longest under --target, or the optimum with a camera."""
     model = BlurUncertaintyModel.from_json(str(model_path))
+    if reference is not None and noise_level is not None:
+        raise InputError("--reference, --noise-level: give one (the image's level is computed "
+                         "from it)")
+    if reference is not None:
+        # the image's gradient-weighted level relative to its mean, on the model's scale
+        img = load_image(reference)
+        base = model.mean_level if model.mean_level is not None else 127.5
+        noise_level = gradient_weighted_level(img) / float(np.mean(img)) * base
     camera = None
     cam_opts = (full_well, read_noise, flux)
     if any(o is not None for o in cam_opts):
@@ -248,8 +263,11 @@ def plan_command(
                                        read_noise=float(read_noise),  # type: ignore[arg-type]
                                        flux=float(flux),  # type: ignore[arg-type]
                                        peak_to_mean=peak_to_mean)
+    if noise_level is not None and camera is None:
+        raise InputError("--reference/--noise-level: only with a camera (--full-well, "
+                         "--read-noise, --flux); with fixed noise give --noise")
     plan = plan_exposure(model, velocity=velocity, scale=scale, target=target, camera=camera,
-                         sigma=noise, which=which)
+                         sigma=noise, which=which, noise_level=noise_level)
     if as_json:
         print_json(plan.to_dict())
     else:

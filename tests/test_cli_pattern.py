@@ -92,3 +92,22 @@ def test_predict_from_the_static_image(tmp_path, capsys):
     assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
                  "--shape", "quadratic"]) == 2
     assert "--shape='quadratic'" in capsys.readouterr().err
+
+
+def test_predict_with_the_subpixel_position(tmp_path, capsys):
+    import dicblur
+
+    out = tmp_path / "p.png"
+    img = np.clip(np.rint(speckle_pattern((96, 96), speckle_size=4, softness=0.5, seed=4)),
+                  0, 255)
+    save_image(out, img)
+    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
+                 "--blur", "0", "--blur", "1", "--subpixel", "0.5", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    want = dicblur.predict_from_pattern(img, [0.0, 1.0], noise_sigma=2.0, subset=21,
+                                        subpixel=0.5)
+    np.testing.assert_allclose(data["u_blur"], want.u_blur, rtol=1e-6)
+    assert data["u_blur"][0] > 0 and data["subpixel"] == 0.5
+    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
+                 "--subpixel", "half"]) == 2
+    assert "--subpixel='half'" in capsys.readouterr().err

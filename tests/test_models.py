@@ -659,3 +659,39 @@ def test_model_from_pattern_follows_the_prediction_and_plans():
         predict_from_pattern(img, [1.0], noise_sigma=0.0, subset=21)
     with pytest.raises(InputError, match="at least 4"):
         model_from_pattern(img, noise_sigma=2.0, subset=21, blur=[0.0, 1.0, 2.0])
+
+
+def test_interpolated_noise_covariance_matches_simulation():
+    # white noise through the engine's own B-spline interpolant at a fractional offset:
+    # the covariance the sub-pixel noise term uses (docs/models.md s. 4)
+    from dicblur._blur_sensitivity import _interpolated_at, _interpolated_noise_covariance
+
+    rng = np.random.default_rng(5)
+    noise = rng.standard_normal((64, 4096))
+    for t, order in ((0.5, 3), (0.25, 3), (0.3, 5)):
+        cov = _interpolated_noise_covariance(t, order, 5)
+        assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
+        interp = _interpolated_at(noise, "periodic", 0.0, t, order)[0]
+        # the interpolant at x + t of noise moved by t: a filtered copy of the same noise
+        emp = [np.mean(interp[:, 8:-8] * interp[:, 8 + k:interp.shape[1] - 8 + k])
+               for k in range(4)]
+        np.testing.assert_allclose(emp, cov[0, :4], atol=0.01)
+    assert np.allclose(_interpolated_noise_covariance(0.0, 3, 4), np.eye(4), atol=1e-12)
+
+
+def test_subpixel_options_of_the_static_prediction():
+    img = dicblur.speckle_pattern((96, 96), speckle_size=4.0, softness=0.5, seed=2)
+    kw = dict(noise_sigma=2.0, subset=21, step=12, boundary="periodic")
+    aligned = predict_from_pattern(img, [0.0, 1.0], **kw)
+    half = predict_from_pattern(img, [0.0, 1.0], subpixel=0.5, **kw)
+    avg = predict_from_pattern(img, [0.0, 1.0], subpixel="average", **kw)
+    assert aligned.u_blur[0] == 0.0 and half.u_blur[0] > 0.0  # the interpolation floor
+    # the interpolant filters the current image's noise most at half a pixel
+    assert half.u_noise[0] < avg.u_noise[0] < aligned.u_noise[0]
+    assert predict_from_pattern(img, [0.0], subpixel=0.0, **kw).u_e[0] == pytest.approx(
+        aligned.u_e[0], rel=1e-9)
+    for bad in (1.0, -0.1, "half", float("nan"), True):
+        with pytest.raises(InputError, match="subpixel"):
+            predict_from_pattern(img, [0.0], subpixel=bad, **kw)  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="subpixel"):
+        blur_mismatch_curve(img, [1.0], subset=21, subpixel="average")  # type: ignore[arg-type]

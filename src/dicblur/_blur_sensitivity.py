@@ -128,6 +128,75 @@ def _spline_gradients(image: NDArray[np.float64], derivative: str
     return bspline_gradients(coef, order, image.shape)
 
 
+def _interpolated_at(image: NDArray[np.float64], boundary: Boundary, oy: float, ox: float,
+                     order: int
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The current image of a target moved by the sub-pixel offset ``(oy, ox)`` (px), as
+    the matcher sees it back on the reference grid: ``(h~, h~_y, h~_x)`` at ``x + o``, with
+    ``h = image(x - o)`` (exact spectral shift) sampled at the pixels and ``h~`` its B-spline
+    interpolant of degree ``order``. ``h~(x + o) = image(x)`` but for the interpolation
+    error, which is the matcher's sub-pixel bias (docs/models.md s. 4)."""
+    # imported here: dicblur.dic imports dicblur.metrics, which imports this module
+    from .dic.interpolation import PAD, bspline_coefficients, bspline_kernel
+
+    rows, cols = image.shape
+    ext = _extend(image, boundary)
+    shp = ext.shape
+    phase = np.exp(-2j * np.pi * (np.fft.fftfreq(shp[0])[:, None] * oy
+                                  + np.fft.rfftfreq(shp[1])[None, :] * ox))
+    h = np.fft.irfft2(np.fft.rfft2(ext) * phase, s=shp)[:rows, :cols]
+    coef = bspline_coefficients(h, order=order, dtype=np.float64)
+    iy, ix = math.floor(oy), math.floor(ox)
+    ty, tx = oy - iy, ox - ix
+    lo = -(order - 1) // 2
+    ks = range(lo, lo + order + 1)
+
+    def taps(t: float) -> tuple[list[float], list[float]]:
+        val = [float(bspline_kernel(np.array(t - k), order)) for k in ks]
+        der = [float(bspline_kernel(np.array(t - k + 0.5), order - 1)
+                     - bspline_kernel(np.array(t - k - 0.5), order - 1)) for k in ks]
+        return val, der
+
+    vy, dyt = taps(ty)
+    vx, dxt = taps(tx)
+    r0 = PAD + iy
+    c0 = PAD + ix
+    val_r = np.zeros((rows, coef.shape[1]))
+    der_r = np.zeros((rows, coef.shape[1]))
+    for k, a, b in zip(ks, vy, dyt, strict=True):
+        band = coef[r0 + k:r0 + k + rows, :]
+        val_r += a * band
+        der_r += b * band
+    out = np.zeros((rows, cols))
+    gy = np.zeros((rows, cols))
+    gx = np.zeros((rows, cols))
+    for k, a, b in zip(ks, vx, dxt, strict=True):
+        out += a * val_r[:, c0 + k:c0 + k + cols]
+        gy += a * der_r[:, c0 + k:c0 + k + cols]
+        gx += b * val_r[:, c0 + k:c0 + k + cols]
+    return out, gy, gx
+
+
+def _interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[np.float64]:
+    """Toeplitz covariance (size, size) of unit white noise after B-spline interpolation of
+    degree ``order`` at the fractional offset ``t`` (px): ``C(d) = sum_m k(m) k(m + d)``
+    with ``k`` the interpolator's impulse response, transfer
+    ``sum_m beta(t - m) e^{i w m} / sum_m beta(m) e^{-i w m}`` (prefilter, then taps)."""
+    from .dic.interpolation import bspline_kernel
+
+    n = 4096
+    om = 2.0 * np.pi * np.fft.fftfreq(n)
+    lo = -(order - 1) // 2
+    num = sum(float(bspline_kernel(np.array(t - m), order)) * np.exp(1j * om * m)
+              for m in range(lo, lo + order + 1))
+    half = (order + 1) // 2
+    den = sum(float(bspline_kernel(np.array(float(m)), order)) * np.cos(om * m)
+              for m in range(-half, half + 1))
+    acov = np.fft.ifft(np.abs(num) ** 2 / den**2).real
+    d = np.abs(np.arange(size)[:, None] - np.arange(size)[None, :])
+    return np.asarray(acov[d])
+
+
 def _check_derivative(derivative: str) -> None:
     if derivative not in ("bspline3", "bspline5", "spectral", "central"):
         raise InputError(
@@ -338,6 +407,7 @@ def subset_blur_shifts(
     criterion: Criterion = "znssd",
     max_shift: float = 1.0,
     chunk: int = 256,
+    offset: float | None = None,
 ) -> NDArray[np.float64]:
     """Per-subset blur-mismatch shifts at finite blur lengths, every order in ``W``.
 
@@ -365,25 +435,31 @@ def subset_blur_shifts(
         blur has erased the subset's texture along the motion and IC-GN itself stops
         converging on about as many POIs (3 px speckles, affine, W = 8 px: the rule keeps
         90 % of the subsets, IC-GN converges on 90-92 %).
+    offset : float, optional
+        Sub-pixel position (px along the motion) of the moving target: the blurred image is
+        moved by it and matched through the B-spline interpolant of ``derivative``, so the
+        shifts carry the matcher's interpolation bias at that offset (the floor and the
+        cross term of the mismatch model). Default: no interpolation (exactly aligned).
 
     Returns
     -------
     ndarray, shape (m, n)
         Shift of subset ``i`` at blur ``W_j`` (px, along the motion, relative to the blur's
-        own centre); ``nan`` where the subset has no gradient or breaks down.
+        own centre and the offset); ``nan`` where the subset has no gradient or breaks
+        down.
     """
     _check_criterion(criterion)
     return _shifts_and_variance(image, blur, centres, subset, motion=motion, shape=shape,
                                 derivative=derivative, boundary=boundary,
                                 criterion=criterion, max_shift=max_shift, chunk=chunk,
-                                variance=False)[0]
+                                variance=False, offset=offset)[0]
 
 
 def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                          centres: NDArray[np.intp], subset: int, *,
                          motion: tuple[float, float], shape: Shape, derivative: Derivative,
                          boundary: Boundary, criterion: Criterion, max_shift: float,
-                         chunk: int, variance: bool
+                         chunk: int, variance: bool, offset: float | None = None
                          ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
@@ -397,14 +473,24 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
     e = np.zeros(2 if shape == "translation" else 6)
     e[0] = dx
     e[1 if shape == "translation" else 3] = dy
+    if offset is not None and derivative not in ("bspline3", "bspline5"):
+        raise InputError(f"offset={offset!r}: the sub-pixel offset is seen through the "
+                         "matcher's B-spline; use derivative='bspline3' or 'bspline5'")
+    noise_cov = None
+    if offset is not None and variance:
+        order = 3 if derivative == "bspline3" else 5
+        oy, ox = offset * dy, offset * dx
+        noise_cov = (_interpolated_noise_covariance(oy - math.floor(oy), order, subset),
+                     _interpolated_noise_covariance(ox - math.floor(ox), order, subset))
     for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, motion,
-                                                    shape, derivative, boundary, chunk):
+                                                    shape, derivative, boundary, chunk,
+                                                    offset):
         rows = slice(start, start + len(f))
         if criterion == "znssd" or variance:
             fh, sf = _normalise(f)
             gh, sg = _normalise(gg)
             cross = _gram(jf, _project(jg, gh))  # J_f^T P_g J_g
-        if w[j] > 0:
+        if w[j] > 0 or offset is not None:
             if criterion == "znssd":
                 sg_ok = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
                 a = cross / sg_ok[:, None, None]
@@ -416,8 +502,15 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
         if var is not None:
             ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
             pf, pg = _project(jf, fh), _project(jf, gh)
+            if noise_cov is None:
+                pg_c = pg
+            else:  # the current image's noise as the interpolant passes it: (C_y x C_x) pg
+                m_, _, k_ = pg.shape
+                pg4 = pg.reshape(m_, subset, subset, k_)
+                pg_c = np.einsum("ij,mrjk->mrik", noise_cov[1], pg4)
+                pg_c = np.einsum("ij,mjck->mick", noise_cov[0], pg_c).reshape(pg.shape)
             mid = (ratio2[:, None, None] * _gram(pf, pf)
-                   + _gram(pg, pg))
+                   + _gram(pg, pg_c))
             # e^T A^-1 M A^-T e = z^T M z with A^T z = e
             z = _solve(np.transpose(cross, (0, 2, 1)),
                        np.broadcast_to(e, (len(f), e.size)).copy())
@@ -427,16 +520,23 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
 
 def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
                      centres: NDArray[np.intp], subset: int, motion: tuple[float, float],
-                     shape: str, derivative: Derivative, boundary: Boundary, chunk: int
+                     shape: str, derivative: Derivative, boundary: Boundary, chunk: int,
+                     offset: float | None = None
                      ) -> Iterator[tuple[int, int, NDArray[np.float64], NDArray[np.float64],
                                          NDArray[np.float64], NDArray[np.float64]]]:
     """``(j, start, J_f, J_g, f, g)`` for every blur length and chunk of subsets: the
     steepest-descent images of the sharp and of the centred-box-blurred image, and their
-    subset intensities (W = 0: ``g = f``)."""
+    subset intensities (W = 0: ``g = f``). With ``offset`` (px along the motion) the
+    blurred target is moved by it and seen through the matcher's B-spline interpolant
+    (:func:`_interpolated_at`)."""
     dy, dx = _unit(motion)
     fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
     for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
-        if wl == 0:
+        if offset is not None:
+            g = image if wl == 0 else _spectral(image, boundary, dy, dx, blur=float(wl))[0]
+            g, ggy, ggx = _interpolated_at(g, boundary, offset * dy, offset * dx,
+                                           3 if derivative == "bspline3" else 5)
+        elif wl == 0:
             g, ggy, ggx = image, fy, fx
         else:
             g = _spectral(image, boundary, dy, dx, blur=float(wl))[0]

@@ -107,6 +107,10 @@ def predict(
                                      help="Blur length W, px (repeatable; default 0..8)."),
     angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
     shape: str = typer.Option("translation", "--shape", help="translation or affine."),
+    subpixel: str | None = typer.Option(
+        None, "--subpixel",
+        help="Target's sub-pixel position: 'average' (arbitrary, 8x slower) or a fraction "
+             "0..1 px; adds DIC's interpolation bias. Default: aligned."),
     out: Path | None = typer.Option(None, "-o", "--out",
                                     help="Also write a model JSON for dicblur predict/plan."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
@@ -122,19 +126,28 @@ def predict(
     a = math.radians(angle)
     motion = (math.sin(a), math.cos(a))
     w = list(blur) or [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0]
+    sp: float | str | None = subpixel
+    if subpixel is not None and subpixel != "average":
+        try:
+            sp = float(subpixel)
+        except ValueError:
+            raise InputError(f"--subpixel={subpixel!r}: give 'average' or a fraction in "
+                             "[0, 1) px, e.g. 0.5") from None
     pred = predict_from_pattern(img, w, noise_sigma=noise, subset=subset, step=step,
-                                motion=motion, shape=shape)  # type: ignore[arg-type]
+                                motion=motion, shape=shape,  # type: ignore[arg-type]
+                                subpixel=sp)
     if out is not None:
         model = model_from_pattern(img, noise_sigma=noise, subset=subset, step=step,
                                    motion=motion, shape=shape,  # type: ignore[arg-type]
-                                   provenance={"image": str(image)})
+                                   provenance={"image": str(image)}, subpixel=sp)
         model.to_json(str(out))
     if as_json:
         print_json({"blur": pred.blur.tolist(), "u_e": pred.u_e.tolist(),
                     "u_noise": pred.u_noise.tolist(), "u_blur": pred.u_blur.tolist(),
                     "sssig": pred.sssig.tolist(),
                     "valid_fraction": pred.valid_fraction.tolist(), "noise_sigma": noise,
-                    "subset": subset, "shape": shape, "angle": angle})
+                    "subset": subset, "shape": shape, "angle": angle,
+                    "subpixel": sp})
     else:
         table = Table(title=f"predicted from the static image: {image} (noise {noise:g} GL, "
                             f"subset {subset} px, {shape}, motion at {angle:g} deg)")

@@ -224,6 +224,7 @@ def blur_mismatch_curve(
     boundary: Boundary = "reflect",
     criterion: Criterion = "znssd",
     max_shift: float = 1.0,
+    subpixel: float | None = None,
 ) -> BlurMismatchCurve:
     """Predict the blur-mismatch error ``u_blur(W)`` of a pattern at finite ``W``.
 
@@ -244,6 +245,13 @@ def blur_mismatch_curve(
     max_shift : float
         Breakdown threshold (px): subsets whose linearised shift is longer are left out
         of the statistics at that W (``valid_fraction`` says how many remain).
+    subpixel : float, optional
+        Sub-pixel position (px along the motion, e.g. 0.5) of the moving target: the
+        blurred image is matched through the B-spline interpolant, so ``u_blur`` also
+        carries the matcher's interpolation bias there (the floor ``u_0`` and the cross
+        term ``b W`` of the mismatch model; docs/models.md s. 4). Noise-free IC-GN agrees
+        within 1-2.5 % in variance at W = 0..2 px (BENCHMARKS.md). Default: exactly
+        aligned, the blur mismatch alone.
 
     Returns
     -------
@@ -252,9 +260,10 @@ def blur_mismatch_curve(
     img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     w = as_blur(blur, "blur", increasing=False)
     max_shift = check_positive(max_shift, "max_shift")
+    offset = None if subpixel is None else _check_subpixel(subpixel)
     xi = subset_blur_shifts(img, w, pts, subset, motion=motion, shape=shape,
                             derivative=derivative, boundary=boundary, criterion=criterion,
-                            max_shift=max_shift)
+                            max_shift=max_shift, offset=offset)
     good = np.isfinite(xi)
     count = good.sum(axis=1)
     if np.any(count < 2):
@@ -272,6 +281,15 @@ def blur_mismatch_curve(
                              valid_fraction=count / xi.shape[1], shifts=xi, centres=pts,
                              subset=subset, motion=(float(motion[0]) / n, float(motion[1]) / n),
                              shape=str(shape))
+
+def _check_subpixel(subpixel: object) -> float:
+    """A sub-pixel offset (px) as a float in [0, 1)."""
+    if isinstance(subpixel, bool) or not isinstance(subpixel, (int, float)) or not (
+            math.isfinite(subpixel) and 0.0 <= subpixel < 1.0):
+        raise InputError(f"subpixel={subpixel!r}: give the target's sub-pixel position along "
+                         "the motion in [0, 1) px (e.g. 0.5)")
+    return float(subpixel)
+
 
 def mismatch_model(
     blur: ArrayLike,

@@ -39,7 +39,7 @@ from .._validation import check_positive
 from ..errors import InputError
 from ..metrics import directional_sssig
 from ._checks import as_blur
-from .mismatch import _subset_inputs
+from .mismatch import _check_subpixel, _subset_inputs
 from .model import BlurUncertaintyModel
 
 __all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern"]
@@ -85,18 +85,37 @@ class PatternPrediction:
     motion: tuple[float, float]
 
 
+N_OFFSETS = 8  # sub-pixel positions averaged by subpixel="average" (midpoint rule)
+
+
+def _offsets(subpixel: float | str | None) -> list[float | None]:
+    """The sub-pixel offsets a prediction averages over (``[None]``: no interpolation)."""
+    if subpixel is None:
+        return [None]
+    if isinstance(subpixel, str):
+        if subpixel != "average":
+            raise InputError(f"subpixel={subpixel!r}: use None, 'average' or an offset in "
+                             "[0, 1) px")
+        return [(k + 0.5) / N_OFFSETS for k in range(N_OFFSETS)]
+    return [_check_subpixel(subpixel)]
+
+
 def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.intp],
            subset: int, motion: tuple[float, float], shape: Shape, derivative: Derivative,
-           boundary: Boundary, max_shift: float
+           boundary: Boundary, max_shift: float, subpixel: float | str | None = None
            ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                       NDArray[np.float64]]:
-    """Per W: mean noise variance per GL**2, mismatch variance, SSSIG, valid fraction."""
+    """Per W: mean noise variance per GL**2, mismatch variance, SSSIG, valid fraction
+    (averaged over the sub-pixel offsets of ``subpixel``)."""
     kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative,
                               boundary=boundary)
-    xi, var = _shifts_and_variance(img, w, pts, subset, criterion="znssd",
-                                   max_shift=max_shift, chunk=256, variance=True, **kw)
-    assert var is not None
-    ok = np.isfinite(xi) & np.isfinite(var)
+    runs = [_shifts_and_variance(img, w, pts, subset, criterion="znssd",
+                                 max_shift=max_shift, chunk=256, variance=True, offset=o, **kw)
+            for o in _offsets(subpixel)]
+    xis = np.stack([r[0] for r in runs])
+    variances = np.stack([r[1] for r in runs if r[1] is not None])
+    # a subset enters the statistics only where it holds at every offset
+    ok = (np.isfinite(xis) & np.isfinite(variances)).all(axis=0)
     count = ok.sum(axis=1)
     if np.any(count < 2):
         j = int(np.argmax(count < 2))
@@ -105,17 +124,16 @@ def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.int
             "(flat, or erased by the blur); no prediction there (use a textured image, a "
             "larger area or shorter blur lengths)"
         )
-    xi_ok = np.where(ok, xi, np.nan)
     with np.errstate(invalid="ignore"):
-        mean_var = np.nanmean(np.where(ok, var, np.nan), axis=1)
-        mis_var = np.nanvar(xi_ok, axis=1)
+        mean_var = np.nanmean(np.where(ok, variances, np.nan), axis=2).mean(axis=0)
+        mis_var = np.nanvar(np.where(ok, xis, np.nan), axis=2).mean(axis=0)
     dy, dx = _unit(motion)
     angle = math.degrees(math.atan2(dy, dx))
     # SSSIG along the motion as dicblur.sssig and the campaigns compute it
     s = np.array([float(directional_sssig(
         img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0], pts,
         subset=subset, angle=angle).mean()) for wl in w])
-    return mean_var, mis_var, s, count / xi.shape[1]
+    return mean_var, mis_var, s, count / xis.shape[2]
 
 
 def predict_from_pattern(
@@ -131,6 +149,7 @@ def predict_from_pattern(
     derivative: Derivative = "bspline3",
     boundary: Boundary = "reflect",
     max_shift: float = 1.0,
+    subpixel: float | str | None = None,
 ) -> PatternPrediction:
     """Predict the DIC random error u_e(W) of a pattern from its static image alone.
 
@@ -153,6 +172,13 @@ def predict_from_pattern(
     derivative, boundary, max_shift
         As for :func:`~dicblur.models.blur_mismatch_curve` (defaults: the DIC engine's
         cubic spline, mirror extension for camera images, breakdown beyond 1 px).
+    subpixel : {None, "average"} or float
+        Sub-pixel position of the moving target along the motion. ``None`` (default):
+        exactly aligned, no interpolation error. A float in [0, 1) px: the blurred image
+        is matched through the B-spline interpolant at that offset, so ``u_blur`` carries
+        the matcher's interpolation bias (the floor and the cross term of the mismatch
+        model). ``"average"``: the mean over 8 offsets, for a target at an arbitrary
+        position (what a real test sees); 8x the cost.
 
     Returns
     -------
@@ -160,17 +186,18 @@ def predict_from_pattern(
 
     Notes
     -----
-    The prediction leaves out DIC's interpolation bias at the sub-pixel offset of the blur
-    (W/2), which is below the noise term in noisy data; it assumes Gaussian noise of the
-    same std in both images (for a Poisson-Gaussian camera give the noise at the mean
-    level, or use :func:`model_from_pattern` with ``plan_exposure``).
+    Without ``subpixel`` the prediction leaves out DIC's interpolation bias, which is below
+    the noise term in noisy data. The noise term takes the current image's noise as
+    sampled (offset 0); at other offsets the interpolation filters it slightly. It assumes
+    Gaussian noise of the same std in both images (for a Poisson-Gaussian camera give the
+    noise at the mean level, or use :func:`model_from_pattern` with ``plan_exposure``).
     """
     img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     max_shift = check_positive(max_shift, "max_shift")
     w = as_blur(blur, "blur", increasing=False)
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, derivative,
-                                        boundary, max_shift)
+                                        boundary, max_shift, subpixel)
     u_noise = sigma * np.sqrt(mean_var)
     u_blur = np.sqrt(mis_var)
     n = math.hypot(float(motion[0]), float(motion[1]))
@@ -192,6 +219,7 @@ def model_from_pattern(
     shape: Shape = "translation",
     boundary: Boundary = "reflect",
     provenance: dict[str, Any] | None = None,
+    subpixel: float | str | None = None,
 ) -> BlurUncertaintyModel:
     """A :class:`BlurUncertaintyModel` fitted to the static prediction of a pattern.
 
@@ -217,6 +245,10 @@ def model_from_pattern(
         As for :func:`predict_from_pattern`.
     provenance : dict, optional
         Extra JSON-ready fields for the model's provenance.
+    subpixel : {None, "average"} or float
+        As for :func:`predict_from_pattern`; with an offset or ``"average"`` the
+        prediction carries the interpolation bias and the model is fitted with its floor
+        and cross term on ``"auto"``.
 
     Returns
     -------
@@ -231,7 +263,7 @@ def model_from_pattern(
         raise InputError(f"blur: {np.unique(w).size} distinct lengths; give at least 4 "
                          "(e.g. W = 0, 1, 2, 4 px)")
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, "bspline3",
-                                        boundary, 1.0)
+                                        boundary, 1.0, subpixel)
     keep = frac >= 0.9  # as the campaigns' breakdown rule: >= 90 % of the subsets
     if keep.sum() < 4:
         raise InputError(
@@ -245,6 +277,7 @@ def model_from_pattern(
     uu = np.concatenate([np.sqrt(lv**2 * mean_var[keep] + mis_var[keep]) for lv in levels])
     nn = np.repeat(levels, int(keep.sum()))
     prov: dict[str, Any] = {"source": "static prediction", "subset": subset,
+                            "subpixel": subpixel,
                             "shape": str(shape), "motion": [float(motion[0]), float(motion[1])],
                             "n_subsets": len(pts), "image_shape": list(img.shape)}
     prov.update(provenance or {})

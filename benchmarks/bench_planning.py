@@ -122,6 +122,20 @@ def _calibrate_one(p: int) -> tuple[np.ndarray, np.ndarray, float]:
     return var, s, float(im.mean())
 
 
+def _static_one(p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Static prediction of calibration pattern ``p`` (no DIC run): noise variance per
+    GL**2, noise-free variance, SSSIG at W_CAL, target at an arbitrary sub-pixel position."""
+    import dicblur
+    from dicblur.models.pattern import _terms
+
+    im = _pattern(7 + p)
+    ref = dicblur.correlate(im, im, **OPTS)  # only for the POI grid
+    pts = np.stack([ref.rows, ref.cols], axis=1).astype(np.intp)
+    mean_var, mis_var, s, _ = _terms(im, W_CAL, pts, OPTS["subset"], (0.0, 1.0),
+                                     OPTS["shape"], "bspline3", "periodic", 1.0, "average")
+    return mean_var, mis_var, s
+
+
 def _brute_one(p: int) -> np.ndarray:
     """One brute-force pattern: u_e at every exposure of the sweep (photon accumulation)."""
     im = _pattern(1000 + p)
@@ -206,7 +220,7 @@ def _fit_plan(var: np.ndarray, s: np.ndarray, level: float, pats: np.ndarray,
 
 
 def run(n_cal: int, n_bf: int, workers: int, n_boot: int, n_boot_cal: int,
-        save: str | None = None, replicate: int = 0) -> dict:
+        save: str | None = None, replicate: int = 0, n_static: int = 8) -> dict:
     t_start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker) as ex:
         cal = list(ex.map(_calibrate_one, range(100_000 * replicate,
@@ -214,6 +228,10 @@ def run(n_cal: int, n_bf: int, workers: int, n_boot: int, n_boot_cal: int,
         t_cal = time.perf_counter() - t_start
         u_bf = np.array(list(ex.map(_brute_one, range(100_000 * replicate,
                                                       100_000 * replicate + n_bf)))).T
+        t_static = time.perf_counter()
+        static = list(ex.map(_static_one, range(100_000 * replicate,
+                                                100_000 * replicate + n_static)))
+        t_static = time.perf_counter() - t_static
     t_all = time.perf_counter() - t_start
     var = np.array([c[0] for c in cal])
     s = np.array([c[1] for c in cal])
@@ -262,8 +280,40 @@ def run(n_cal: int, n_bf: int, workers: int, n_boot: int, n_boot_cal: int,
             "estimator_on_plan_curve": laurent_optimum(t, pred**2) / plan.exposure,
             "measured_u_e_at_plan_over_min": math.sqrt(at_plan / float(bf_curve.min())),
             "predicted_u_e": [float(v) for v in pred]}
+    # the static prediction (no DIC run, no campaign): pooled over the first calibration
+    # patterns, at the two calibration noise levels, fitted like campaign data
+    mv = np.mean([r[0] for r in static], axis=0)
+    dv = np.mean([r[1] for r in static], axis=0)
+    ss = np.mean([r[2] for r in static], axis=0)
+    from dicblur import Camera
+    from dicblur.models import PoissonGaussianCamera, fit_blur_model, plan_exposure
+
+    sig = np.repeat(NOISE_CAL, W_CAL.size)
+    u_st = np.sqrt(sig**2 * np.tile(mv, 2) + np.tile(dv, 2))
+    m_st = fit_blur_model(np.tile(W_CAL, 2), np.tile(ss, 2), u_st, noise_sigma=sig,
+                          mean_level=level, subset=OPTS["subset"], default="mismatch",
+                          compare=False)
+    cam = PoissonGaussianCamera.from_camera(
+        Camera(read_noise=READ, gain=GAIN, full_well=None, bit_depth=None),
+        nominal_exposure=T0, mean_level=level)
+    p_st = plan_exposure(m_st, velocity=VELOCITY, scale=SCALE, camera=cam)
+    pred_st = np.array([float(m_st.predict([K_PX * ti], float(cam.noise_gl(ti, level))).u_e[0])
+                        for ti in t])
+    static_plan = {
+        "patterns": n_static, "exposure": p_st.exposure,
+        "ratio_to_bruteforce": p_st.exposure / t_bf,
+        "inside_bruteforce_p2_5_p97_5": bool(
+            np.percentile(boots, 2.5) <= p_st.exposure <= np.percentile(boots, 97.5)),
+        "z_bruteforce": float(math.log(p_st.exposure / t_bf) / bf_log_sd),
+        "params": dict(zip(m_st.mismatch.names, map(float, m_st.mismatch.values),
+                           strict=True)),
+        "predicted_u_e": [float(v) for v in pred_st],
+        "measured_u_e_at_plan_over_min": math.sqrt(
+            float(laurent_curve(t, m2, np.array([p_st.exposure]))[0]) / float(bf_curve.min())),
+        "seconds": t_static}
     return {
         "calibration_patterns": n_cal, "bruteforce_patterns": n_bf, "mean_level": level,
+        "static_prediction_plan": static_plan,
         "noise_levels_cal": list(NOISE_CAL), "w_cal": [float(w) for w in W_CAL],
         "bruteforce_exposure": t_bf,
         "bruteforce_exposure_p16_p84": [float(np.percentile(boots, 16)),
@@ -309,6 +359,14 @@ def _print(d: dict) -> None:
               f"{d['measured_rel_se'][i]:7.4f} "
               + " ".join(f"{d['plans'][n]['predicted_u_e'][i]:9.5f}" for n in names))
     print("pred i = " + "; ".join(f"{i + 1}: {n}" for i, n in enumerate(names)))
+    st = d["static_prediction_plan"]
+    print(f"static prediction (no DIC, {st['patterns']} patterns, subpixel='average'): plan "
+          f"{st['exposure'] * 1e3:.4f} ms, / brute {st['ratio_to_bruteforce']:.4f}, in 95 % "
+          f"{st['inside_bruteforce_p2_5_p97_5']}, z (brute-force sd) {st['z_bruteforce']:.2f}, "
+          f"u at plan / min {st['measured_u_e_at_plan_over_min']:.5f}; predicted / measured "
+          "u_e along the sweep " + " ".join(
+              f"{p / m:.3f}" for p, m in zip(st["predicted_u_e"][::4], d["measured_u_e"][::4],
+                                             strict=True)))
 
 
 def main() -> None:
@@ -316,6 +374,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="4 + 8 patterns (smoke run)")
     ap.add_argument("--n-cal", type=int, default=32)
     ap.add_argument("--n-bf", type=int, default=128)
+    ap.add_argument("--n-static", type=int, default=8,
+                    help="calibration patterns given to the static prediction")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--save", help="also save the raw u_e arrays to this .npz file")
     ap.add_argument("--replicate", type=int, default=0,
@@ -324,6 +384,7 @@ def main() -> None:
     args = ap.parse_args()
     n_cal, n_bf = (4, 8) if args.quick else (args.n_cal, args.n_bf)
     d = run(n_cal, n_bf, args.workers, n_boot=200 if args.quick else 1000,
+            n_static=2 if args.quick else args.n_static,
             n_boot_cal=20 if args.quick else 100, save=args.save,
             replicate=args.replicate)
     _print(d)

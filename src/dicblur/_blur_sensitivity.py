@@ -474,8 +474,9 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
     e[0] = dx
     e[1 if shape == "translation" else 3] = dy
     if offset is not None and derivative not in ("bspline3", "bspline5"):
-        raise InputError(f"offset={offset!r}: the sub-pixel offset is seen through the "
-                         "matcher's B-spline; use derivative='bspline3' or 'bspline5'")
+        raise InputError(f"subpixel={offset!r} with derivative={derivative!r}: the sub-pixel "
+                         "position is seen through the matcher's B-spline; use "
+                         "derivative='bspline3' or 'bspline5'")
     noise_cov = None
     if offset is not None and variance:
         order = 3 if derivative == "bspline3" else 5

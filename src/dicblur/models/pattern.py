@@ -58,7 +58,8 @@ class PatternPrediction:
     u_noise : ndarray, shape (m,)
         Noise term ``sqrt(mean_i var_i)`` (px).
     u_blur : ndarray, shape (m,)
-        Blur-mismatch term ``std_i(xi_i)`` (px).
+        Noise-free term ``std_i(xi_i)`` (px): the blur mismatch and, with ``subpixel``, the
+        interpolation bias (mean square over the offsets).
     sssig : ndarray, shape (m,)
         Mean subset SSSIG of the blurred image along the motion ((GL/px)**2, central
         differences, as :func:`dicblur.sssig` and the campaigns compute it).
@@ -186,9 +187,10 @@ def predict_from_pattern(
 
     Notes
     -----
-    Without ``subpixel`` the prediction leaves out DIC's interpolation bias, which is below
-    the noise term in noisy data. The noise term takes the current image's noise as
-    sampled (offset 0); at other offsets the interpolation filters it slightly. It assumes
+    Without ``subpixel`` the prediction leaves out DIC's interpolation bias (below the
+    noise term in noisy data, but the floor of noise-free or low-noise data) and takes the
+    current image's noise as sampled; with it, both come through the interpolant at the
+    offset (docs/models.md s. 4). It assumes
     Gaussian noise of the same std in both images (for a Poisson-Gaussian camera give the
     noise at the mean level, or use :func:`model_from_pattern` with ``plan_exposure``).
     """

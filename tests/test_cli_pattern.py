@@ -73,41 +73,45 @@ def test_cli_errors_exit_2_without_traceback(tmp_path, capsys, argv):
     assert err.strip()
 
 
+def _saved_pattern(tmp_path, size: int, seed: int):
+    """An 8-bit PNG of a generated pattern and the grey levels it holds."""
+    out = tmp_path / "p.png"
+    img = np.clip(np.rint(speckle_pattern((size, size), speckle_size=4, softness=0.5,
+                                          seed=seed)), 0, 255)
+    save_image(out, img)
+    return out, img
+
+
+PREDICT = ["pattern", "predict"]
+NOISE_SUBSET = ["--noise", "2", "--subset", "21"]
+
+
 def test_predict_from_the_static_image(tmp_path, capsys):
     import dicblur
 
-    out = tmp_path / "p.png"
-    img = np.clip(np.rint(speckle_pattern((128, 128), speckle_size=4, softness=0.5, seed=2)),
-                  0, 255)
-    save_image(out, img)
-    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
-                 "--blur", "0", "--blur", "2", "--angle", "90", "--json",
-                 "-o", str(tmp_path / "m.json")]) == 0
+    out, img = _saved_pattern(tmp_path, 128, 2)
+    assert main([*PREDICT, str(out), *NOISE_SUBSET, "--blur", "0", "--blur", "2",
+                 "--angle", "90", "--json", "-o", str(tmp_path / "m.json")]) == 0
     data = json.loads(capsys.readouterr().out.split("\nwrote")[0])
     want = dicblur.predict_from_pattern(img, [0.0, 2.0], noise_sigma=2.0, subset=21,
                                         motion=(1.0, 0.0))
     np.testing.assert_allclose(data["u_e"], want.u_e, rtol=1e-6)
     model = dicblur.BlurUncertaintyModel.from_json(str(tmp_path / "m.json"))
     assert model.provenance["image"] == str(out)
-    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
-                 "--shape", "quadratic"]) == 2
+    assert main([*PREDICT, str(out), *NOISE_SUBSET, "--shape", "quadratic"]) == 2
     assert "--shape='quadratic'" in capsys.readouterr().err
 
 
 def test_predict_with_the_subpixel_position(tmp_path, capsys):
     import dicblur
 
-    out = tmp_path / "p.png"
-    img = np.clip(np.rint(speckle_pattern((96, 96), speckle_size=4, softness=0.5, seed=4)),
-                  0, 255)
-    save_image(out, img)
-    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
-                 "--blur", "0", "--blur", "1", "--subpixel", "0.5", "--json"]) == 0
+    out, img = _saved_pattern(tmp_path, 96, 4)
+    assert main([*PREDICT, str(out), *NOISE_SUBSET, "--blur", "0", "--blur", "1",
+                 "--subpixel", "0.5", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     want = dicblur.predict_from_pattern(img, [0.0, 1.0], noise_sigma=2.0, subset=21,
                                         subpixel=0.5)
     np.testing.assert_allclose(data["u_blur"], want.u_blur, rtol=1e-6)
     assert data["u_blur"][0] > 0 and data["subpixel"] == 0.5
-    assert main(["pattern", "predict", str(out), "--noise", "2", "--subset", "21",
-                 "--subpixel", "half"]) == 2
+    assert main([*PREDICT, str(out), *NOISE_SUBSET, "--subpixel", "half"]) == 2
     assert "--subpixel='half'" in capsys.readouterr().err

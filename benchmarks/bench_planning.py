@@ -28,6 +28,10 @@ is an exact Poisson-Gaussian capture; across exposures the captures share their 
 way one continuing exposure does (common random numbers), so a pattern's u_e(t) is smooth
 in t.
 
+No-DIC plan: the static prediction ``predict_from_pattern(subpixel="average")`` of the
+first ``--n-static`` calibration patterns (default 8) at the two calibration noise levels,
+fitted and planned the same way.
+
 Optimum estimator: least-squares fit of the mean square u_e by ``sum_p c_p t**p``,
 p = -2..6 (read noise, shot noise, floor, noise x SSSIG decay, blur mismatch and its next
 terms), relative residuals, minimised on a fine grid. On smooth model curves and on curves

@@ -204,11 +204,20 @@ VARIANTS = {  # name: (noise levels used, floor, noise growth (1 + e W^4), cross
 }
 
 
+def _camera(level: float):
+    """The benchmark's camera for planning, at the calibration images' mean level."""
+    from dicblur import Camera
+    from dicblur.models import PoissonGaussianCamera
+
+    return PoissonGaussianCamera.from_camera(
+        Camera(read_noise=READ, gain=GAIN, full_well=None, bit_depth=None),
+        nominal_exposure=T0, mean_level=level)
+
+
 def _fit_plan(var: np.ndarray, s: np.ndarray, level: float, pats: np.ndarray,
               levels: tuple[int, ...], floor: bool | str, growth: bool | str,
               cross: bool | str):
-    from dicblur import Camera
-    from dicblur.models import PoissonGaussianCamera, fit_blur_model, plan_exposure
+    from dicblur.models import fit_blur_model, plan_exposure
 
     u = np.sqrt(var[pats].mean(axis=0)[list(levels)]).ravel()
     ss = np.tile(s[pats].mean(axis=0), len(levels))
@@ -217,9 +226,7 @@ def _fit_plan(var: np.ndarray, s: np.ndarray, level: float, pats: np.ndarray,
     model = fit_blur_model(w, ss, u, noise_sigma=n, mean_level=level, subset=OPTS["subset"],
                            default="mismatch", floor=floor, noise_blur=growth, cross=cross,
                            compare=False)
-    cam = PoissonGaussianCamera.from_camera(
-        Camera(read_noise=READ, gain=GAIN, full_well=None, bit_depth=None),
-        nominal_exposure=T0, mean_level=level)
+    cam = _camera(level)
     return model, plan_exposure(model, velocity=VELOCITY, scale=SCALE, camera=cam), cam
 
 
@@ -289,17 +296,14 @@ def run(n_cal: int, n_bf: int, workers: int, n_boot: int, n_boot_cal: int,
     mv = np.mean([r[0] for r in static], axis=0)
     dv = np.mean([r[1] for r in static], axis=0)
     ss = np.mean([r[2] for r in static], axis=0)
-    from dicblur import Camera
-    from dicblur.models import PoissonGaussianCamera, fit_blur_model, plan_exposure
+    from dicblur.models import fit_blur_model, plan_exposure
 
     sig = np.repeat(NOISE_CAL, W_CAL.size)
     u_st = np.sqrt(sig**2 * np.tile(mv, 2) + np.tile(dv, 2))
     m_st = fit_blur_model(np.tile(W_CAL, 2), np.tile(ss, 2), u_st, noise_sigma=sig,
                           mean_level=level, subset=OPTS["subset"], default="mismatch",
                           compare=False)
-    cam = PoissonGaussianCamera.from_camera(
-        Camera(read_noise=READ, gain=GAIN, full_well=None, bit_depth=None),
-        nominal_exposure=T0, mean_level=level)
+    cam = _camera(level)
     p_st = plan_exposure(m_st, velocity=VELOCITY, scale=SCALE, camera=cam)
     pred_st = np.array([float(m_st.predict([K_PX * ti], float(cam.noise_gl(ti, level))).u_e[0])
                         for ti in t])

@@ -77,8 +77,8 @@ def noisy(seeds: range, reps: int, sigma: float = 2.0) -> dict:
                 img = _pattern(seed)
                 rng = np.random.default_rng(1000 * seed + int(100 * d) + int(10 * w))
                 cur = _current(img, w, d)
-                pts = np.stack([dicblur.correlate(img, cur, **OPTS).rows,
-                                dicblur.correlate(img, cur, **OPTS).cols], axis=1)
+                grid = dicblur.correlate(img, cur, **OPTS)  # only for the POI grid
+                pts = np.stack([grid.rows, grid.cols], axis=1)
                 pr = predict_from_pattern(img, [w], noise_sigma=sigma, subset=31, points=pts,
                                           shape="affine", boundary="periodic", subpixel=d)
                 p += float(pr.u_e[0]) ** 2

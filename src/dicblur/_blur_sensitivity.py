@@ -477,12 +477,14 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
         raise InputError(f"subpixel={offset!r} with derivative={derivative!r}: the sub-pixel "
                          "position is seen through the matcher's B-spline; use "
                          "derivative='bspline3' or 'bspline5'")
-    noise_cov = None
+    noise_cov: tuple[NDArray[np.float64] | None, ...] | None = None
     if offset is not None and variance:
         order = 3 if derivative == "bspline3" else 5
         oy, ox = offset * dy, offset * dx
-        noise_cov = (_interpolated_noise_covariance(oy - math.floor(oy), order, subset),
-                     _interpolated_noise_covariance(ox - math.floor(ox), order, subset))
+        # None: no fractional offset along that axis, the interpolant passes noise as is
+        noise_cov = tuple(None if t == 0.0 else
+                          _interpolated_noise_covariance(t, order, subset)
+                          for t in (oy - math.floor(oy), ox - math.floor(ox)))
     for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, motion,
                                                     shape, derivative, boundary, chunk,
                                                     offset):
@@ -507,9 +509,14 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                 pg_c = pg
             else:  # the current image's noise as the interpolant passes it: (C_y x C_x) pg
                 m_, _, k_ = pg.shape
-                pg4 = pg.reshape(m_, subset, subset, k_)
-                pg_c = np.einsum("ij,mrjk->mrik", noise_cov[1], pg4)
-                pg_c = np.einsum("ij,mjck->mick", noise_cov[0], pg_c).reshape(pg.shape)
+                cy, cx = noise_cov
+                # batched BLAS along columns, then rows (an identity factor is skipped)
+                pg_c = pg.reshape(m_, subset, subset, k_)
+                if cx is not None:
+                    pg_c = np.matmul(cx, pg_c)
+                if cy is not None:
+                    pg_c = np.matmul(cy, pg_c.reshape(m_, subset, subset * k_))
+                pg_c = pg_c.reshape(pg.shape)
             mid = (ratio2[:, None, None] * _gram(pf, pf)
                    + _gram(pg, pg_c))
             # e^T A^-1 M A^-T e = z^T M z with A^T z = e

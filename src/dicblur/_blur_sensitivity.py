@@ -137,7 +137,7 @@ def _interpolated_at(image: NDArray[np.float64], boundary: Boundary, oy: float, 
     interpolant of degree ``order``. ``h~(x + o) = image(x)`` but for the interpolation
     error, which is the matcher's sub-pixel bias (docs/models.md s. 4)."""
     # imported here: dicblur.dic imports dicblur.metrics, which imports this module
-    from .dic.interpolation import PAD, bspline_coefficients, bspline_kernel
+    from .dic.interpolation import bspline_at_offset, bspline_coefficients
 
     rows, cols = image.shape
     ext = _extend(image, boundary)
@@ -146,34 +146,8 @@ def _interpolated_at(image: NDArray[np.float64], boundary: Boundary, oy: float, 
                                   + np.fft.rfftfreq(shp[1])[None, :] * ox))
     h = np.fft.irfft2(np.fft.rfft2(ext) * phase, s=shp)[:rows, :cols]
     coef = bspline_coefficients(h, order=order, dtype=np.float64)
-    iy, ix = math.floor(oy), math.floor(ox)
-    ty, tx = oy - iy, ox - ix
-    lo = -(order - 1) // 2
-    ks = range(lo, lo + order + 1)
-
-    def taps(t: float) -> tuple[list[float], list[float]]:
-        val = [float(bspline_kernel(np.array(t - k), order)) for k in ks]
-        der = [float(bspline_kernel(np.array(t - k + 0.5), order - 1)
-                     - bspline_kernel(np.array(t - k - 0.5), order - 1)) for k in ks]
-        return val, der
-
-    vy, dyt = taps(ty)
-    vx, dxt = taps(tx)
-    r0 = PAD + iy
-    c0 = PAD + ix
-    val_r = np.zeros((rows, coef.shape[1]))
-    der_r = np.zeros((rows, coef.shape[1]))
-    for k, a, b in zip(ks, vy, dyt, strict=True):
-        band = coef[r0 + k:r0 + k + rows, :]
-        val_r += a * band
-        der_r += b * band
-    out = np.zeros((rows, cols))
-    gy = np.zeros((rows, cols))
-    gx = np.zeros((rows, cols))
-    for k, a, b in zip(ks, vx, dxt, strict=True):
-        out += a * val_r[:, c0 + k:c0 + k + cols]
-        gy += a * der_r[:, c0 + k:c0 + k + cols]
-        gx += b * val_r[:, c0 + k:c0 + k + cols]
+    out, gy, gx = bspline_at_offset(coef, order, h.shape, oy, ox)
+    assert out is not None
     return out, gy, gx
 
 

@@ -26,6 +26,7 @@ from . import kernels
 __all__ = [
     "INTERPOLATIONS",
     "PAD",
+    "bspline_at_offset",
     "bspline_coefficients",
     "bspline_gradients",
     "bspline_kernel",
@@ -143,24 +144,63 @@ def bspline_gradients(
     gy, gx : ndarray, shape (rows, cols)
         Gradients in grey levels / px along rows (y) and columns (x).
     """
+    _, gy, gx = bspline_at_offset(coeffs, order, shape, 0.0, 0.0, values=False)
+    return gy, gx
+
+
+def bspline_at_offset(
+    coeffs: NDArray[np.floating], order: int, shape: tuple[int, int], oy: float, ox: float,
+    *, values: bool = True,
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64], NDArray[np.float64]]:
+    """The spline and its exact derivatives at every pixel moved by ``(oy, ox)``.
+
+    Parameters
+    ----------
+    coeffs : ndarray, shape (rows + 2*PAD, cols + 2*PAD)
+        Padded coefficients from :func:`bspline_coefficients`.
+    order : {3, 5}
+        Spline degree.
+    shape : (rows, cols)
+        Image shape.
+    oy, ox : float
+        Offset (px, rows and columns) with ``|o| < 1``: the positions ``(r + oy, c + ox)``.
+    values : bool
+        Also return the spline values (else ``None`` in their place).
+
+    Returns
+    -------
+    h, hy, hx : ndarray, shape (rows, cols)
+        Values (grey levels) and derivatives along rows and columns (grey levels / px).
+    """
     rows, cols = shape
     c = np.asarray(coeffs, dtype=np.float64)
-    half = (order + 1) // 2
-    ks = range(-half, half + 1)
-    # separable: derivative taps beta'(-k) along one axis, value taps beta(-k) along the other
-    val = {k: float(bspline_kernel(-k, order)) for k in ks}
-    der = {k: float(bspline_kernel_derivative(-k, order)) for k in ks}
-    sm_rows = np.zeros((rows, c.shape[1]))
-    sm_cols = np.zeros((c.shape[0], cols))
-    for k in ks:
-        sm_rows += val[k] * c[PAD + k:PAD + k + rows, :]
-        sm_cols += val[k] * c[:, PAD + k:PAD + k + cols]
-    gx = np.zeros(shape)
+    iy, ix = math.floor(oy), math.floor(ox)
+    # separable: taps at integer offsets k from floor(position), weight beta(t - k)
+    ks = range(-(order - 1) // 2, (order + 1) // 2 + 1)
+
+    def taps(t: float) -> tuple[list[float], list[float]]:
+        return ([float(bspline_kernel(t - k, order)) for k in ks],
+                [float(bspline_kernel_derivative(t - k, order)) for k in ks])
+
+    vy, dy = taps(oy - iy)
+    vx, dx = taps(ox - ix)
+    r0, c0 = PAD + iy, PAD + ix
+    val_r = np.zeros((rows, c.shape[1]))
+    der_r = np.zeros((rows, c.shape[1]))
+    for k, a, b in zip(ks, vy, dy, strict=True):
+        band = c[r0 + k:r0 + k + rows, :]
+        val_r += a * band
+        der_r += b * band
+    h = np.zeros(shape) if values else None
     gy = np.zeros(shape)
-    for k in ks:
-        gx += der[k] * sm_rows[:, PAD + k:PAD + k + cols]
-        gy += der[k] * sm_cols[PAD + k:PAD + k + rows, :]
-    return gy, gx
+    gx = np.zeros(shape)
+    for k, a, b in zip(ks, vx, dx, strict=True):
+        cv = val_r[:, c0 + k:c0 + k + cols]
+        if h is not None:
+            h += a * cv
+        gy += a * der_r[:, c0 + k:c0 + k + cols]
+        gx += b * cv
+    return h, gy, gx
 
 
 def interpolate_reference(

@@ -109,7 +109,7 @@ def predict(
     shape: str = typer.Option("translation", "--shape", help="translation or affine."),
     subpixel: str | None = typer.Option(
         None, "--subpixel",
-        help="Target's sub-pixel position: 'average' (arbitrary, 8x slower) or a fraction "
+        help="Target's sub-pixel position: 'average' (arbitrary, ~5x slower) or a fraction "
              "0..1 px; adds DIC's interpolation bias. Default: aligned."),
     out: Path | None = typer.Option(None, "-o", "--out",
                                     help="Also write a model JSON for dicblur predict/plan."),

@@ -179,7 +179,7 @@ def predict_from_pattern(
         is matched through the B-spline interpolant at that offset, so ``u_blur`` carries
         the matcher's interpolation bias (the floor and the cross term of the mismatch
         model). ``"average"``: the mean over 8 offsets, for a target at an arbitrary
-        position (what a real test sees); 8x the cost.
+        position (what a real test sees); about 5x the cost of the aligned prediction.
 
     Returns
     -------

@@ -34,7 +34,7 @@ app = typer.Typer(
 
 def _version_callback(value: bool) -> None:
     if value:
-        from .. import __version__
+        from .._version import __version__
 
         typer.echo(f"dicblur {__version__}")
         raise typer.Exit()

@@ -9,10 +9,7 @@ from typing import Annotated
 
 import typer
 
-from ..blur import AcceleratedMotion, SineMotion, motion_blur
-from ..camera import Camera, add_gaussian_noise
 from ..errors import InputError
-from ..io import file_sha256, load_image, save_image
 
 
 def blur_command(
@@ -76,6 +73,10 @@ def blur_command(
     ] = None,
 ) -> None:
     """Blur IMAGE along a path of LENGTH px and write OUT (plus OUT.json settings)."""
+    from ..blur import AcceleratedMotion, SineMotion, motion_blur
+    from ..camera import Camera, add_gaussian_noise
+    from ..io import file_sha256, load_image, save_image
+
     if bit_depth not in (8, 16):
         raise InputError(f"--bit-depth={bit_depth}: must be 8 or 16")
     if noise is not None and (full_well is not None or gain is not None or read_noise > 0):

@@ -5,13 +5,15 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
-from ..campaign import campaign_status, export_csv, load_spec, run_campaign
-from ..campaign.engine import RunSummary
 from ..errors import InputError
 from ._common import console, parse_size, print_json, print_mapping
+
+if TYPE_CHECKING:  # the campaign stage is imported inside the commands (fast --help)
+    from ..campaign.engine import RunSummary
 
 campaign_app = typer.Typer(help="Run blur campaigns (Dask), inspect and export their results.",
                            no_args_is_help=True)
@@ -84,6 +86,8 @@ def run_command(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> int:
     """Run (or resume) the campaign SPEC and store its results in OUT."""
+    from ..campaign import load_spec, run_campaign
+
     s = load_spec(spec)
     with _progress_bar(f"campaign {s.name}", not quiet) as progress:
         summary = run_campaign(s, out, scheduler=scheduler, workers=workers, serial=serial,
@@ -98,6 +102,8 @@ def status_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Progress and provenance of a campaign store."""
+    from ..campaign import campaign_status
+
     st = campaign_status(results)
     if as_json:
         print_json(st.to_dict())
@@ -123,6 +129,8 @@ def export_command(
     csv: Path = typer.Option(..., "--csv", help="Output CSV, one row per finished task."),
 ) -> None:
     """Export the finished tasks of a store as a flat CSV."""
+    from ..campaign import export_csv
+
     n = export_csv(results, csv)
     typer.echo(f"wrote {csv} ({n} rows)")
 

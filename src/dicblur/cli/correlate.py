@@ -7,9 +7,7 @@ from typing import Annotated
 
 import typer
 
-from ..dic import Correlator
 from ..errors import InputError
-from ..io import load_image
 from ._common import console, print_mapping
 
 _UNITS = {"mean_u": "px", "std_u": "px", "mean_v": "px", "std_v": "px",
@@ -33,6 +31,9 @@ def correlate_command(
         "-o", "--out", help="Write the field to .nc (netCDF) or .csv.")] = None,
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
+    from ..dic import Correlator
+    from ..io import load_image
+
     if out is not None and out.suffix.lower() not in (".nc", ".csv"):
         raise InputError(f"--out={str(out)!r}: unknown format; use a .nc or .csv file name")
     import time

@@ -6,22 +6,15 @@ import csv
 import math
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import typer
 
 from ..errors import InputError
-from ..io import file_sha256, load_image
-from ..models import (
-    BlurUncertaintyModel,
-    PoissonGaussianCamera,
-    fit_blur_model,
-    gradient_weighted_level,
-    parse_quantity,
-    plan_exposure,
-)
 from ._common import console, print_json
+
+if TYPE_CHECKING:  # numpy and the models are imported inside the commands (fast --help)
+    import numpy as np
 
 _COLUMNS = ("blur", "sssig", "u_e")
 _OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "rms_contrast_ref",
@@ -33,6 +26,8 @@ _SETTINGS = ("pattern", "angle", "subset", "shape", "step", "noise_model")
 
 def _read_table(path: Path) -> dict[str, np.ndarray]:
     """Columns of a flat CSV, or the flattened variables of a netCDF / zarr dataset."""
+    import numpy as np
+
     if not path.exists():
         raise InputError(f"RESULTS={str(path)!r}: no such file or directory")
     suffix = path.suffix.lower()
@@ -74,6 +69,8 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
 def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.ndarray]:
     """Filter by ``--select key=value``, then one row per (noise, blur): SSSIG and contrast
     averaged, u_e pooled as the root mean square over repetitions."""
+    import numpy as np
+
     missing = [c for c in _COLUMNS if c not in cols]
     if missing:
         raise InputError(
@@ -155,6 +152,9 @@ def fit_command(
     as_json: bool = typer.Option(False, "--json", help="Print the model JSON."),
 ) -> None:
     """Fit the uncertainty models to RESULTS and write the model JSON."""
+    from ..io import file_sha256
+    from ..models import fit_blur_model
+
     data = _aggregate(_read_table(results), select)
     rng = None
     if fit_range is not None:
@@ -192,6 +192,8 @@ def predict_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Predict u_e at blur lengths (--blur) or from velocity x exposure / scale."""
+    from ..models import BlurUncertaintyModel, parse_quantity
+
     model = BlurUncertaintyModel.from_json(str(model_path))
     ws = list(blur)
     if velocity is not None or exposure is not None or scale is not None:
@@ -244,6 +246,16 @@ def plan_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Plan the exposure: longest under --target, or the optimum with a camera."""
+    import numpy as np
+
+    from ..io import load_image
+    from ..models import (
+        BlurUncertaintyModel,
+        PoissonGaussianCamera,
+        gradient_weighted_level,
+        plan_exposure,
+    )
+
     model = BlurUncertaintyModel.from_json(str(model_path))
     if reference is not None and noise_level is not None:
         raise InputError("--reference, --noise-level: give one (the image's level is computed "

@@ -9,9 +9,6 @@ from pathlib import Path
 import typer
 
 from ..errors import InputError
-from ..io import load_image, save_image
-from ..metrics import estimate_noise, pattern_metrics
-from ..patterns import PatternSettings, paper_pattern4, speckle_pattern
 from ._common import console, parse_size, print_json, print_mapping
 
 pattern_app = typer.Typer(help="Generate speckle patterns and measure their metrics.",
@@ -54,6 +51,9 @@ def generate(
     bit_depth: int = typer.Option(8, "--bit-depth", help="8 or 16."),
 ) -> None:
     """Generate a random speckle pattern and write it to OUT (plus OUT.json settings)."""
+    from ..io import save_image
+    from ..patterns import PatternSettings, paper_pattern4, speckle_pattern
+
     shape = parse_size(size)
     if preset not in ("", "paper4"):
         raise InputError(f"--preset={preset!r}: unknown preset; choose 'paper4' or omit it")
@@ -86,6 +86,9 @@ def metrics(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Print the metrics of IMAGE: SSSIG, MIG, speckle size, contrast, static predictions."""
+    from ..io import load_image
+    from ..metrics import pattern_metrics
+
     img = load_image(image)
     pm = pattern_metrics(img, subset=subset, noise_sigma=noise, step=step,
                          gradient=gradient)  # type: ignore[arg-type]
@@ -118,6 +121,7 @@ def predict(
     """Predict u_e(W) of IMAGE from the static image alone (no simulation, no DIC run)."""
     from rich.table import Table
 
+    from ..io import load_image
     from ..models import model_from_pattern, predict_from_pattern
 
     if shape not in ("translation", "affine"):
@@ -168,6 +172,9 @@ def noise_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Estimate the image noise std (grey levels) from two images of a static scene."""
+    from ..io import load_image
+    from ..metrics import estimate_noise
+
     sigma = estimate_noise(load_image(image_a), load_image(image_b))
     if as_json:
         print_json({"noise_sigma": sigma})

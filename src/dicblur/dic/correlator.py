@@ -462,7 +462,7 @@ class Correlator:
         k = p.shape[1]
         u = p[:, 0].copy()
         v = p[:, 1 if k == 2 else 3].copy()
-        from .. import __version__
+        from .._version import __version__
 
         info = {"subset": self.subset, "step": self.step, "shape": self.shape,
                 "interpolation": self.interpolation, "initial": method,

@@ -131,7 +131,7 @@ def fit_blur_model(
     FitError
         A fit has no degrees of freedom left or does not converge.
     """
-    from .. import __version__
+    from .._version import __version__
 
     w0 = as_vector(blur, "blur")
     n = w0.size

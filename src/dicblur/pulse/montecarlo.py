@@ -443,7 +443,7 @@ def simulate(
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     children = ss.spawn(wa.size)
 
-    from .. import __version__  # late: dicblur/__init__ imports this module
+    from .._version import __version__
 
     ref_clean = train.sample(length, w_ref)
     names = ("u_e", "u_e_ci_low", "u_e_ci_high", "mean", "mean_ci_low", "mean_ci_high",

@@ -344,7 +344,7 @@ def run_pulse_study(
     """
     if not isinstance(trials, int | np.integer) or trials < 2:
         raise InputError(f"trials={describe(trials)}: expected an int >= 2 (default 10000)")
-    from .. import __version__  # late: dicblur/__init__ imports this module
+    from .._version import __version__
 
     t0 = time.perf_counter()
     ds = simulate(PAPER_TRAIN, widths=PAPER_WIDTHS, sigma=sigma, n_periods=n_periods,

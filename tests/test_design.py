@@ -24,8 +24,8 @@ from dicblur.design import (
 )
 from dicblur.design import search as search_mod
 from dicblur.design.evaluate import Evaluation
-from dicblur.design.page import spearman
 from dicblur.errors import InputError
+from dicblur.report.design_page import spearman
 
 SMALL = {"noise": 2.0, "subset": 31, "step": 10, "image_size": 128, "realisations": 2}
 

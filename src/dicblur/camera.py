@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._validation import as_image, check_choice, check_positive, describe
 from .errors import InputError
-from .patterns import SeedLike, _rng
+from .patterns import SeedLike, make_rng
 
 __all__ = ["Camera", "add_gaussian_noise"]
 
@@ -43,7 +43,7 @@ def _generator(rng: np.random.Generator | None, seed: SeedLike) -> np.random.Gen
         if not isinstance(rng, np.random.Generator):
             raise InputError(f"rng={describe(rng)}: expected a numpy.random.Generator or None")
         return rng
-    return _rng(seed)
+    return make_rng(seed)
 
 
 def add_gaussian_noise(

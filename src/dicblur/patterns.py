@@ -35,12 +35,20 @@ from scipy import integrate, optimize, special
 from ._validation import check_finite_number, check_positive, check_shape2d, describe
 from .errors import InputError
 
-__all__ = ["PatternSettings", "gaussian_mask", "paper_pattern4", "speckle_pattern"]
+__all__ = [
+    "PatternSettings",
+    "gaussian_filter_periodic",
+    "gaussian_mask",
+    "make_rng",
+    "paper_pattern4",
+    "speckle_pattern",
+]
 
 SeedLike = int | np.random.Generator | np.random.SeedSequence | None
 
 
-def _rng(seed: SeedLike) -> np.random.Generator:
+def make_rng(seed: SeedLike) -> np.random.Generator:
+    """A numpy Generator from ``seed`` (int, SeedSequence, None) or ``seed`` itself."""
     if isinstance(seed, np.random.Generator):
         return seed
     if seed is not None and not isinstance(seed, np.random.SeedSequence | int | np.integer):
@@ -113,7 +121,8 @@ def _half_correlation(density: float) -> float:
     return float(optimize.brentq(cov, 1e-9, 1.0 - 1e-12, xtol=1e-14))
 
 
-def _gaussian_filter_periodic(field: NDArray[np.float64], sigma: float) -> NDArray[np.float64]:
+def gaussian_filter_periodic(field: NDArray[np.float64], sigma: float) -> NDArray[np.float64]:
+    """Gaussian filter of std ``sigma`` px with periodic boundaries (one rFFT pair)."""
     if sigma <= 0:
         return field
     fy = np.fft.fftfreq(field.shape[0])[:, None]
@@ -193,12 +202,12 @@ def speckle_pattern(
     ss = int(supersample)
     if ss < 1 or ss > 16:
         raise InputError(f"supersample={supersample!r}: must be between 1 and 16")
-    rng = _rng(seed)
+    rng = make_rng(seed)
 
     rho_star = _half_correlation(p)
     sigma_fine = d * ss / (4.0 * math.sqrt(-math.log(rho_star)))
     noise = rng.standard_normal((rows * ss, cols * ss))
-    field = _gaussian_filter_periodic(noise, sigma_fine)
+    field = gaussian_filter_periodic(noise, sigma_fine)
     flat = field.ravel()
     k = round(p * flat.size)
     k = min(max(k, 1), flat.size - 1)
@@ -207,7 +216,7 @@ def speckle_pattern(
     if ss > 1:
         blackness = blackness.reshape(rows, ss, cols, ss).mean(axis=(1, 3))
     # Clip the ~1e-16 ringing of the FFT filter so grey levels stay within `levels`.
-    blackness = np.clip(_gaussian_filter_periodic(blackness, soft), 0.0, 1.0)
+    blackness = np.clip(gaussian_filter_periodic(blackness, soft), 0.0, 1.0)
     mid = 0.5 * (black + white)
     half = 0.5 * (white - black) * c
     return (mid + half) - 2.0 * half * blackness

@@ -4,7 +4,7 @@ This is what a user with their own speckle pattern runs (``dicblur calibrate``):
 0.1 to 10 px in 0.1 px steps (Lavatelli & Zappa 2017, Section VI), one noise level, one
 subset size, one motion direction; the campaign's dataset is then fitted with
 :func:`dicblur.models.fit_blur_model` (SSSIG decay, eq. 18; power law, eq. 17; noise +
-blur-mismatch model) and written with figures.
+blur-mismatch model) and written; the report layer draws the figures.
 """
 
 from __future__ import annotations
@@ -15,8 +15,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from ..errors import InputError
 from .spec import CampaignSpec, parse_spec
@@ -37,21 +35,28 @@ class CalibrationResult:
         The fitted model (also written to ``model_path``).
     model_path, results_path, csv_path : pathlib.Path
         ``model.json``, the campaign store (Zarr) and its CSV export.
-    figures : tuple of pathlib.Path
-        PNG figures: u_e vs W with the fits, SSSIG vs W with the eq. 18 fit, log-log u_e
-        vs SSSIG.
     sssig_r2 : float
         R^2 of the SSSIG decay fit (eq. 18), as the paper reports it.
     spec : CampaignSpec
+    curves : xarray.Dataset
+        The campaign's variables against ``blur`` (mean over repetitions) that the model
+        was fitted to; :func:`dicblur.report.plots.calibration_figures` draws them.
+    figures : tuple of pathlib.Path
+        Figures written for this calibration (empty from :func:`calibrate`, which does not
+        draw; the CLI adds the three of ``calibration_figures``).
+
+    An interrupted campaign (Ctrl-C) raises no error: :func:`calibrate` returns ``None``
+    and rerunning it resumes the store.
     """
 
     model: Any
     model_path: Path
     results_path: Path
     csv_path: Path
-    figures: tuple[Path, ...]
     sssig_r2: float
     spec: CampaignSpec
+    curves: Any = None
+    figures: tuple[Path, ...] = ()
 
 
 def calibration_spec(
@@ -131,19 +136,19 @@ def calibrate(
     scheduler: str | None = None,
     workers: int | None = None,
     serial: bool = False,
-    figures: bool = True,
     progress: Callable[[int, int], None] | None = None,
-) -> CalibrationResult:
+) -> CalibrationResult | None:
     """Run the paper's sweep on one pattern and fit the blur-uncertainty model.
 
     Parameters are those of :func:`calibration_spec` plus the execution options of
     :func:`dicblur.campaign.run_campaign`. Writes into ``out_dir``: ``results.zarr`` (the
-    campaign; rerunning resumes it), ``results.csv``, ``model.json`` and, with
-    ``figures=True``, ``ue_vs_blur.png``, ``sssig_vs_blur.png``, ``ue_vs_sssig.png``.
+    campaign; rerunning resumes it), ``results.csv`` and ``model.json``. Figures are the
+    report layer's (:func:`dicblur.report.plots.calibration_figures`).
 
     Returns
     -------
-    CalibrationResult
+    CalibrationResult or None
+        None when the campaign was interrupted before it finished (rerun to resume).
     """
     from ..models import fit_blur_model
     from .engine import run_campaign
@@ -158,7 +163,7 @@ def calibrate(
     summary = run_campaign(spec, results, scheduler=scheduler, workers=workers,
                            serial=serial, progress=progress)
     if not summary.complete:
-        raise KeyboardInterrupt
+        return None  # interrupted (Ctrl-C): the store keeps the finished batches
     csv_path = out / "results.csv"
     export_csv(results, csv_path)
     ds = open_results(results).isel(pattern=0, angle=0, subset=0, noise=0)
@@ -181,62 +186,6 @@ def calibrate(
     )
     model_path = out / "model.json"
     model_path.write_text(model.to_json())
-    figs = _figures(mean, model, out) if figures else ()
     return CalibrationResult(model=model, model_path=model_path, results_path=results,
-                             csv_path=csv_path, figures=figs,
-                             sssig_r2=float(model.decay.r2), spec=spec)
-
-
-def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..models import sssig_decay
-
-    w = ds["blur"].values
-    ue = ds["u_e"].values
-    s = ds["sssig"].values
-    wf = np.linspace(0.0, float(w.max()), 200)
-    paths = []
-
-    fig, ax = plt.subplots(figsize=(5.5, 4))
-    ax.plot(w, ue, "o", ms=3, label="campaign (std over POIs)")
-    pred = model.predict(wf)
-    ax.plot(wf, getattr(pred, "u_e", pred), "-", label=f"model ({model.default})")
-    ax.plot(w, ds["u_match_score"].values, ":", label="static match score, eq. 2")
-    ax.set(xlabel="blur length W (px)", ylabel="u_e (px)",
-           title="random error vs blur")
-    ax.legend()
-    fig.tight_layout()
-    paths.append(out / "ue_vs_blur.png")
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(figsize=(5.5, 4))
-    ax.plot(w, s, "o", ms=3, label="campaign (mean over POIs)")
-    ax.plot(wf, sssig_decay(wf, model.decay["sssig0"], model.decay["beta"]), "-",
-            label=f"eq. 18 fit, R^2 = {model.decay.r2:.3f}")
-    ax.set(xlabel="blur length W (px)", ylabel="SSSIG along the motion ((GL/px)^2)",
-           title="SSSIG vs blur")
-    ax.legend()
-    fig.tight_layout()
-    paths.append(out / "sssig_vs_blur.png")
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(figsize=(5.5, 4))
-    ax.loglog(s, ue, "o", ms=3, label="campaign")
-    sf = np.geomspace(float(s.min()), float(s.max()), 100)
-    pl = model.power_law
-    ax.loglog(sf, pl["eta"] / sf ** pl["alpha"], "-",
-              label=f"eq. 17 fit, alpha = {pl['alpha']:.2f} (W in {model.fit_range[0]:g}.."
-                    f"{model.fit_range[1]:g} px)")
-    ax.set(xlabel="SSSIG ((GL/px)^2)", ylabel="u_e (px)", title="log u_e vs log SSSIG")
-    ax.legend()
-    fig.tight_layout()
-    paths.append(out / "ue_vs_sssig.png")
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
-    return tuple(paths)
+                             csv_path=csv_path, sssig_r2=float(model.decay.r2), spec=spec,
+                             curves=mean)

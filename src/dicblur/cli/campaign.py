@@ -160,7 +160,10 @@ def calibrate_command(
 
     Writes OUT/model.json, OUT/results.zarr (+ results.csv) and three figures.
     """
+    from dataclasses import replace
+
     from ..campaign.calibrate import calibrate
+    from ..report.plots import calibration_figures
 
     try:
         start, stop, inc = (float(v) for v in blur.split(":"))
@@ -173,6 +176,10 @@ def calibrate_command(
                         blur={"start": start, "stop": stop, "step": inc},
                         size=parse_size(size), scheduler=scheduler, workers=workers,
                         serial=serial, progress=progress)
+    if res is None:
+        console.print("interrupted: rerun the same command to finish the remaining tasks")
+        return 130
+    res = replace(res, figures=calibration_figures(res))
     m = res.model
     print_mapping(
         f"calibration: {image}",

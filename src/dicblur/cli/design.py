@@ -133,9 +133,9 @@ def design_command(
         export_pattern,
         sine_blur_distribution,
     )
-    from ..design.page import write_design_report
     from ..io import save_image
     from ..patterns import speckle_pattern
+    from ..report.design_page import write_design_report
 
     rng = parse_range(blur_range, "--blur-range") if blur_range is not None else None
     if rng is not None and rng[1] < rng[0]:

@@ -285,33 +285,10 @@ def plan_command(
     else:
         console.print(plan.summary())
     if plot is not None:
-        _plot(plan, plot)
+        from ..report.plots import plan_figure
+
+        plan_figure(plan, plot)
         typer.echo(f"wrote {plot}")
-
-
-def _plot(plan: Any, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    t = np.asarray(plan.curve_exposure) * 1e3
-    ax.plot(t, plan.curve_u_e, label=f"predicted u_e ({plan.model})")
-    ax.axvline(plan.exposure * 1e3, color="C1", ls="--",
-               label="optimum" if plan.optimal else "longest under target")
-    ax.axvline(plan.rule_of_thumb_exposure * 1e3, color="C2", ls=":", label="0.02 px rule")
-    if plan.target is not None:
-        ax.axhline(plan.target, color="C3", ls="-.", label="target")
-    if plan.optimal:
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-    ax.set_xlabel("exposure (ms)")
-    ax.set_ylabel("u_e (px)")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def register(app: typer.Typer) -> None:

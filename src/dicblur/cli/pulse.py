@@ -84,7 +84,7 @@ def pulse_command(
     if study.dependence:
         written.append("dependence.csv")
     if figures:
-        from ..pulse.figures import write_figures
+        from ..report.pulse_figures import write_figures
 
         written += [p.name for p in write_figures(study, out)]
     fa = next((f for f in study.fits if f.segment == "a"), study.fits[0])

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
 from .._validation import check_positive
-from .signal import PulseTrain, _check_width, _widths, edge_length
+from .signal import PulseTrain, as_widths, check_width, edge_length
 
 __all__ = [
     "chi2_continuous",
@@ -52,7 +52,7 @@ def chi2_regime_a(
     min(dp, g) - w/2``). Units: grey levels^2 x px.
     """
     x = np.abs(np.asarray(xi, dtype=np.float64))
-    wa = _widths(w)
+    wa = as_widths(w)
     inner = wa / 12 + x**2 / wa
     outer = x - wa / 6
     return 2 * n_periods * a**2 * np.where(x <= wa / 2, inner, outer)
@@ -82,8 +82,8 @@ def chi2_continuous(
     Gauss-Legendre rule between its kinks and jumps. ``w_ref = 0`` is the paper's sharp
     reference.
     """
-    w = _check_width(w)
-    w_ref = _check_width(w_ref, "w_ref")
+    w = check_width(w)
+    w_ref = check_width(w_ref, "w_ref")
     n_periods = check_positive(n_periods, "n_periods")
     xis = np.atleast_1d(np.asarray(xi, dtype=np.float64))
     out = np.empty(xis.shape)
@@ -123,7 +123,7 @@ def min_chi2(
     -------
     value, xi_min : ndarray, shape of ``w``
     """
-    wa = np.atleast_1d(_widths(w))
+    wa = np.atleast_1d(as_widths(w))
     vals = np.empty(wa.shape)
     locs = np.empty(wa.shape)
     grid = np.arange(-train.du / 2, train.du / 2 + 1e-9, 0.1)
@@ -157,7 +157,7 @@ def gradient_sums(
     -------
     s_ref, s_blur, cross : ndarray, shape of ``w``, (grey levels / px)^2
     """
-    wa = _widths(w)
+    wa = as_widths(w)
     w_ref = check_positive(w_ref, "w_ref")
     a2 = train.a**2
     s_b = 2 * n_periods * a2 * edge_length(train, wa) / wa**2
@@ -196,5 +196,5 @@ def predict_paper_linear(
     score ``sigma / (a sqrt(N))``: ``sigma w / (a sqrt(N))`` px."""
     sigma = check_positive(sigma, "sigma")
     n_periods = check_positive(n_periods, "n_periods")
-    wa = _widths(w)
+    wa = as_widths(w)
     return sigma * wa / (train.a * np.sqrt(n_periods))

@@ -129,7 +129,7 @@ class PulseTrain:
         ndarray, same shape as ``x``
             Grey levels.
         """
-        w = _check_width(w)
+        w = check_width(w)
         x = np.asarray(x, dtype=np.float64)
         if w == 0.0:
             return self.value(x)
@@ -140,7 +140,7 @@ class PulseTrain:
 
         At a kink the right-hand derivative is returned (pulses are closed on the left).
         """
-        w = _check_width(w)
+        w = check_width(w)
         if w == 0.0:
             raise InputError("w=0: the sharp pulse train has no finite gradient; use w > 0")
         x = np.asarray(x, dtype=np.float64)
@@ -148,7 +148,7 @@ class PulseTrain:
 
     def breakpoints(self, w: float) -> NDArray[np.float64]:
         """Kinks of ``p_b(., w)`` in one period ``[0, du)`` (edges of the sharp pulse if w = 0)."""
-        w = _check_width(w)
+        w = check_width(w)
         edges = np.array([self.x0, self.x0 + self.dp])
         pts = edges if w == 0.0 else np.concatenate([edges - w / 2, edges + w / 2])
         return np.unique(np.mod(pts, self.du))
@@ -166,14 +166,16 @@ class PulseTrain:
         return self.blurred(np.arange(int(n), dtype=np.float64) - shift, w)
 
 
-def _check_width(w: float, name: str = "w") -> float:
+def check_width(w: float, name: str = "w") -> float:
+    """One blur window width ``w`` (px) as a float; InputError unless finite and >= 0."""
     value = check_finite_number(w, name)
     if value < 0:
         raise InputError(f"{name}={w!r}: the blur window width must be >= 0 px (w = 1 + W)")
     return value
 
 
-def _widths(w: ArrayLike, name: str = "w") -> NDArray[np.float64]:
+def as_widths(w: ArrayLike, name: str = "w") -> NDArray[np.float64]:
+    """Blur window widths ``w`` (px) as a float array; InputError unless finite and > 0."""
     arr = np.asarray(w, dtype=np.float64)
     if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
         raise InputError(f"{name}={describe(w)}: blur widths must be finite and > 0 px")
@@ -198,7 +200,7 @@ def regime(train: PulseTrain, w: float) -> Regime:
     (e) ``w >= du``: the window holds a whole period plus ``w - du``; the blurred signal is
     then the ``(w - du)``-blurred one shifted by half a period (contrast reversal) and scaled.
     """
-    w = _check_width(w)
+    w = check_width(w)
     if w == 0:
         return "none"
     if w >= train.du:
@@ -246,7 +248,7 @@ def closed_form_metrics(
     n_periods : float
         Number of periods in the subset (the paper's N).
     """
-    wa = _widths(w)
+    wa = as_widths(w)
     n_periods = check_positive(n_periods, "n_periods")
     m = edge_length(train, wa)
     a, du = train.a, train.du
@@ -297,7 +299,7 @@ def numeric_metrics(
     supersample : int
         Cells per px (``du * supersample`` must be an integer).
     """
-    wa = np.atleast_1d(_widths(w))
+    wa = np.atleast_1d(as_widths(w))
     n_periods = check_positive(n_periods, "n_periods")
     if not isinstance(supersample, int | np.integer) or supersample < 1:
         raise InputError(f"supersample={describe(supersample)}: expected an int >= 1")
@@ -347,7 +349,7 @@ def pixel_metrics(
     derivative of the band-limited (Fourier) interpolant, the one seen by a Fourier-shift
     correlator. These depart from the continuous closed forms; see ``docs/pulse.md``.
     """
-    wa = np.atleast_1d(_widths(w))
+    wa = np.atleast_1d(as_widths(w))
     if not isinstance(n_periods, int | np.integer) or n_periods < 1:
         raise InputError(f"n_periods={describe(n_periods)}: expected an int >= 1")
     n = train.du * n_periods

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -21,6 +21,7 @@ from ..errors import InputError
 from ..patterns import SeedLike
 from .correlation import chi2_regime_a, min_chi2
 from .montecarlo import PAPER_TRAIN, PAPER_WIDTHS, simulate
+from .records import DependenceRow, LogLogFit
 from .signal import (
     REGIMES,
     PulseTrain,
@@ -48,65 +49,6 @@ FIG5_TRAIN = PulseTrain(a=1.0, dp=10.0, du=20.0)
 DENSE_TRAIN = PulseTrain(a=1.0, dp=16.0, du=22.0)
 
 _Z95 = 1.959963984540054
-
-
-@dataclass(frozen=True)
-class LogLogFit:
-    """Weighted least-squares fit of ``log u = log c + slope log w`` over one segment.
-
-    ``slope_ci`` is a 95% interval from the standard errors of ``log u`` (from the Monte
-    Carlo CI), inflated by sqrt(reduced chi^2) when the scatter exceeds them.
-    ``slopes_pred`` holds the slope of each prediction over the same widths and
-    ``ratio_pred`` the geometric-mean ratio MC / prediction.
-    """
-
-    segment: str
-    regime: str
-    w_min: float
-    w_max: float
-    n: int
-    slope: float
-    slope_ci: tuple[float, float]
-    prefactor: float
-    slopes_pred: dict[str, float] = field(default_factory=dict)
-    ratio_pred: dict[str, float] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {
-            "segment": self.segment, "regime": self.regime, "w_min": self.w_min,
-            "w_max": self.w_max, "n": self.n, "slope": self.slope,
-            "slope_ci_low": self.slope_ci[0], "slope_ci_high": self.slope_ci[1],
-            "prefactor": self.prefactor,
-        }
-        d.update({f"slope_{k}": v for k, v in self.slopes_pred.items()})
-        d.update({f"ratio_{k}": v for k, v in self.ratio_pred.items()})
-        return d
-
-
-@dataclass(frozen=True)
-class DependenceRow:
-    """One Monte Carlo variant of the choices the paper leaves open."""
-
-    name: str
-    interpolation: str
-    shifted: str
-    n_periods: int
-    dp: float
-    du: float
-    x0: float
-    slope_a: float
-    slope_a_ci: tuple[float, float]
-    u_e_w1: float
-    u_e_w5: float
-    ratio_first_principles_w5: float
-    ratio_derived_pixel_w5: float
-    knee: float
-    knee_predicted: float
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dict(self.__dict__)
-        d["slope_a_ci_low"], d["slope_a_ci_high"] = d.pop("slope_a_ci")
-        return d
 
 
 @dataclass(frozen=True)

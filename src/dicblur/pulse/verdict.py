@@ -7,7 +7,7 @@ from typing import Any
 
 import xarray as xr
 
-from .study import DependenceRow, LogLogFit
+from .records import DependenceRow, LogLogFit
 
 __all__ = ["verdict_text"]
 

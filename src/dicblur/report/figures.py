@@ -1,7 +1,7 @@
 """Figures of the reproduce report (the paper's Figs. 1, 2, 7-11 and our additions).
 
-Each function takes plain arrays / dicts and returns a matplotlib Figure; matplotlib is
-imported inside the functions (Agg backend), so importing this module stays cheap.
+Each function takes plain arrays / dicts and returns a detached matplotlib ``Figure`` (no
+pyplot); matplotlib is imported inside the functions, so importing this module stays cheap.
 """
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+
+from ._figure import subplots
 
 __all__ = [
     "fig_contrast_error",
@@ -25,15 +27,6 @@ __all__ = [
 _COLORS = ("#d1495b", "#edae49", "#00798c", "#30638e", "#6a4c93", "#8ac926")
 
 
-def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _layout(fig: Any, *, rows: int = 1, twin: bool = False) -> None:
     """Fixed margins (tight_layout measures every text and is the slowest step)."""
     h = fig.get_figheight()
@@ -43,10 +36,9 @@ def _layout(fig: Any, *, rows: int = 1, twin: bool = False) -> None:
 
 
 def _grid(n: int) -> tuple[Any, Any]:
-    plt = _plt()
     cols = 2 if n > 1 else 1
     rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 3.6 * rows), squeeze=False)
+    fig, axes = subplots(rows, cols, figsize=(5.2 * cols, 3.6 * rows), squeeze=False)
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     return fig, axes.ravel()
@@ -54,8 +46,7 @@ def _grid(n: int) -> tuple[Any, Any]:
 
 def fig_patterns(images: Mapping[str, np.ndarray], *, crop: int = 128) -> Any:
     """Fig. 1: a crop of each study pattern."""
-    plt = _plt()
-    fig, axes = plt.subplots(1, len(images), figsize=(3.0 * len(images), 3.2))
+    fig, axes = subplots(1, len(images), figsize=(3.0 * len(images), 3.2))
     for ax, (label, img) in zip(np.atleast_1d(axes), images.items(), strict=True):
         ax.imshow(img[:crop, :crop], cmap="gray", interpolation="nearest")
         ax.set_title(label, fontsize=9)
@@ -154,8 +145,7 @@ def fig_mbrf_mig(
     study: Sequence[Mapping[str, Any]], family: Sequence[Mapping[str, Any]]
 ) -> Any:
     """Fig. 11: eta and MBRF against MIG_0 (study patterns and a generated family)."""
-    plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10.5, 3.9))
+    fig, (a1, a2) = subplots(1, 2, figsize=(10.5, 3.9))
     panels = ((a1, "eta", r"$\eta$ (eq. 17)"),
               (a2, "mbrf", r"MBRF = 2$\alpha\beta$ (px$^{-2}$)"))
     for ax, key, ylab in panels:

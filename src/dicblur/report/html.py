@@ -157,11 +157,8 @@ class HtmlReport:
         self._parts.append("".join(out))
 
     def figure(self, fig: Any, name: str, caption: str) -> None:
-        """Embed a matplotlib figure (and write it as PNG and SVG); closes the figure."""
-        import matplotlib.pyplot as plt
-
+        """Embed a matplotlib figure (and write it as PNG and SVG)."""
         png = fig_to_files(fig, self.folder / "figures", name)
-        plt.close(fig)
         self._embed(png, name, caption)
 
     def figure_from_writer(self, writer: Any, name: str, caption: str) -> None:

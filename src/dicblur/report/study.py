@@ -124,15 +124,15 @@ def emulated_camera_pattern3(size: int, seed: int, *, supersample: int = 4) -> S
     """
     from ..blur import render_blurred
     from ..camera import Camera
-    from ..patterns import _gaussian_filter_periodic
+    from ..patterns import gaussian_filter_periodic
 
     ss = supersample
     ss_seq = np.random.SeedSequence([seed, 3])
     fine = speckle_pattern(size * ss, speckle_size=4.0 * ss, density=0.5,
                            seed=np.random.default_rng(ss_seq))
-    fine = _gaussian_filter_periodic(fine, 0.5 * ss)  # the 4x4 mask of pattern #4
+    fine = gaussian_filter_periodic(fine, 0.5 * ss)  # the 4x4 mask of pattern #4
     fine = 25.0 + fine * (190.0 / 255.0)
-    fine = _gaussian_filter_periodic(fine, 0.6 * ss)  # optics PSF
+    fine = gaussian_filter_periodic(fine, 0.6 * ss)  # optics PSF
     irradiance = render_blurred(fine, (0.0, 0.0), supersample=ss)
     camera = Camera(read_noise=1.0, full_well=20000.0, bit_depth=8)
     img = camera.capture(irradiance, rng=np.random.default_rng(ss_seq.spawn(1)[0]))

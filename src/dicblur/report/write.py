@@ -24,7 +24,7 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
                  timings: dict[str, float], valid: dict[str, np.ndarray]
                  ) -> tuple[Path, list[str]]:
     """Write figures and ``report.html`` into ``out``; return its path and figure names."""
-    from ..pulse.figures import plot_min_chi2, plot_regimes, plot_uncertainty
+    from .pulse_figures import plot_min_chi2, plot_regimes, plot_uncertainty
 
     s = settings
     n = s.main_noise

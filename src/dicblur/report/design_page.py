@@ -3,7 +3,8 @@
 Maps of predicted u_e, eta and MBRF over the family (the generalisation of the paper's
 Fig. 11), eta and MBRF against MIG_0, the search trace, the surrogate against the measured
 objective, the u_e(W) curves of the best, default and worst patterns, the confirmation and
-the export. matplotlib is imported here only, inside the functions.
+the export. matplotlib is imported inside the functions (detached ``Figure`` objects, no
+pyplot).
 """
 
 from __future__ import annotations
@@ -15,21 +16,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .export import PrintExport
-from .search import DesignResult
+from ..design.export import PrintExport
+from ..design.search import DesignResult
+from ._data import spearman
+from ._figure import subplots
 
 __all__ = ["spearman", "write_design_report"]
-
-
-def spearman(a: Any, b: Any) -> float:
-    """Spearman rank correlation of two equal-length sequences (ties by average rank)."""
-    from scipy import stats
-
-    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    ok = np.isfinite(x) & np.isfinite(y)
-    if ok.sum() < 3:
-        return float("nan")
-    return float(stats.spearmanr(x[ok], y[ok]).statistic)
 
 
 def _grid_array(result: DesignResult, attr: str) -> NDArray[np.float64]:
@@ -45,11 +37,6 @@ def _grid_array(result: DesignResult, attr: str) -> NDArray[np.float64]:
 
 
 def _maps(result: DesignResult, attr: str, title: str, *, log: bool) -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
     fam = result.family
     d_ax, p_ax, s_ax = (fam.axis(i) for i in range(3))
     arr = _grid_array(result, attr)
@@ -57,7 +44,7 @@ def _maps(result: DesignResult, attr: str, title: str, *, log: bool) -> Any:
     finite = vals[np.isfinite(vals)]
     vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     n = len(p_ax)
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n + 0.8, 3.4), squeeze=False)
+    fig, axes = subplots(1, n, figsize=(3.6 * n + 0.8, 3.4), squeeze=False)
     im: Any = None
     for k, p in enumerate(p_ax):
         ax = axes[0, k]
@@ -81,12 +68,10 @@ def _maps(result: DesignResult, attr: str, title: str, *, log: bool) -> Any:
 
 
 def _fig11(result: DesignResult) -> Any:
-    import matplotlib.pyplot as plt
-
     grid = result.grid
     mig0 = np.array([e.mig0 for e in grid])
     obj = np.array([e.objective for e in grid])
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, axes = subplots(1, 2, figsize=(10, 3.8))
     for ax, attr, lab in ((axes[0], "eta", "eta (eq. 17)"),
                           (axes[1], "mbrf", "MBRF = 2 alpha beta (1/px^2)")):
         y = np.array([getattr(e, attr) for e in grid])
@@ -100,9 +85,7 @@ def _fig11(result: DesignResult) -> Any:
 
 
 def _trace(result: DesignResult) -> Any:
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 3.4))
+    fig, ax = subplots(figsize=(7, 3.4))
     objs = np.array([e.objective for e in result.evaluations])
     stages = [e.stage for e in result.evaluations]
     idx = np.arange(1, objs.size + 1)
@@ -121,9 +104,7 @@ def _trace(result: DesignResult) -> Any:
 
 
 def _surrogate(result: DesignResult) -> Any:
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(4.6, 4.2))
+    fig, ax = subplots(figsize=(4.6, 4.2))
     x = np.array([e.surrogate for e in result.evaluations])
     y = np.array([e.objective for e in result.evaluations])
     ax.loglog(x, y, "o", ms=4)
@@ -135,9 +116,7 @@ def _surrogate(result: DesignResult) -> Any:
 
 
 def _curves(result: DesignResult) -> Any:
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 4))
+    fig, ax = subplots(figsize=(6.4, 4))
     for e, lab, col in ((result.best, "best", "tab:green"),
                         (result.reference, "default", "tab:red"),
                         (result.worst, "worst of grid", "tab:gray")):
@@ -162,12 +141,10 @@ def _curves(result: DesignResult) -> Any:
 
 
 def _patterns(result: DesignResult) -> Any:
-    import matplotlib.pyplot as plt
-
     from ..patterns import speckle_pattern
 
     n = min(128, result.problem.image_size)
-    fig, axes = plt.subplots(1, 3, figsize=(10, 3.6))
+    fig, axes = subplots(1, 3, figsize=(10, 3.6))
     for ax, e, lab in ((axes[0], result.best, "best"), (axes[1], result.reference, "default"),
                        (axes[2], result.worst, "worst of grid")):
         c = e.candidate
@@ -195,7 +172,7 @@ def write_design_report(result: DesignResult, folder: str | Path, *,
                         export: PrintExport | None = None,
                         command: str | None = None) -> Path:
     """Write ``folder/report.html`` (+ figures as PNG and SVG) and return its path."""
-    from ..report import HtmlReport
+    from .html import HtmlReport
 
     folder = Path(folder)
     rep = HtmlReport("dicblur design: the speckle pattern for your blur", folder)

@@ -1,36 +1,26 @@
-"""Figures of the pulse study (paper Fig. 4, 5, 6). matplotlib is imported inside each
-function (Agg backend), so importing :mod:`dicblur.pulse` stays light."""
+"""Figures of the pulse study (paper Fig. 4, 5, 6), drawn on detached matplotlib
+``Figure`` objects (no pyplot); matplotlib is imported inside each function."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from .montecarlo import PAPER_TRAIN
-from .signal import PulseTrain
-from .study import DENSE_TRAIN, PulseStudy
+from ..pulse.montecarlo import PAPER_TRAIN
+from ..pulse.signal import PulseTrain
+from ..pulse.study import DENSE_TRAIN, PulseStudy
+from ._figure import subplots
 
 __all__ = ["plot_min_chi2", "plot_regimes", "plot_uncertainty", "write_figures"]
 
 
-def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_regimes(path: str | Path) -> Path:
     """Fig. 4: the sharp (dashed) and blurred (solid) train in the four regimes (PNG)."""
-    plt = _plt()
     cases = (("(a) w < dp, w < g", PAPER_TRAIN, 3.0), ("(b) dp <= w < g", PAPER_TRAIN, 10.0),
              ("(c) w >= dp, w >= g", PAPER_TRAIN, 19.0),
              ("(d) g <= w < dp (dp = 16)", DENSE_TRAIN, 10.0))
-    fig, axes = plt.subplots(2, 2, figsize=(9, 5.5), sharey=True)
+    fig, axes = subplots(2, 2, figsize=(9, 5.5), sharey=True)
     for ax, (title, train, w) in zip(axes.ravel(), cases, strict=True):
         x = np.linspace(-train.du / 2, 1.5 * train.du, 2000)
         ax.plot(x, train.value(x), "b--", lw=1, label="sharp p(x)")
@@ -43,16 +33,14 @@ def plot_regimes(path: str | Path) -> Path:
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out
 
 
 def plot_min_chi2(study: PulseStudy, path: str | Path) -> Path:
     """Fig. 5: minimum of the continuous SSD against w, with the regime-(a) law."""
-    plt = _plt()
     f5 = study.fig5
     train = PulseTrain(a=f5.attrs["a"], dp=f5.attrs["dp"], du=f5.attrs["du"])
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = subplots(figsize=(6, 4))
     ax.plot(f5["w"], f5["min_chi2"], "ko", label="min over xi, exact continuous SSD")
     ax.plot(f5["w"], f5["chi2_law"], "r-", label="regime (a): N a^2 w / 6")
     ax.axvline(min(train.dp, train.g), color="grey", ls=":", lw=1)
@@ -63,17 +51,15 @@ def plot_min_chi2(study: PulseStudy, path: str | Path) -> Path:
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out
 
 
 def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
     """Fig. 6: Monte Carlo u_e(w) with its 95% CI and the three predictions (linear and
     log-log axes)."""
-    plt = _plt()
     ds = study.dataset
     w = ds["w"].values
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.3))
+    fig, axes = subplots(1, 2, figsize=(11, 4.3))
     for ax, log in zip(axes, (False, True), strict=True):
         err = np.vstack([ds["u_e"] - ds["u_e_ci_low"], ds["u_e_ci_high"] - ds["u_e"]])
         ax.errorbar(w, ds["u_e"], yerr=err, fmt="ko", ms=4, capsize=2,
@@ -103,7 +89,6 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out
 
 

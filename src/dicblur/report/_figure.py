@@ -1,0 +1,21 @@
+"""Figures without pyplot: a library must not touch the user's pyplot state or backend.
+
+``matplotlib.figure.Figure`` draws with its own Agg canvas (``savefig`` works with no
+backend chosen), is garbage-collected like any object and never appears in a user's
+``plt.show()``. Every figure of dicblur is made here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["subplots"]
+
+
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float] | None = None,
+             **kwargs: Any) -> tuple[Any, Any]:
+    """``(Figure, axes)`` like ``pyplot.subplots``, but on a detached ``Figure``."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **kwargs)

@@ -1,0 +1,93 @@
+"""Figures of the calibration (``dicblur calibrate``) and of an exposure plan
+(``dicblur plan --plot``), drawn on detached matplotlib ``Figure`` objects (no pyplot)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._figure import subplots
+
+__all__ = ["calibration_figures", "plan_figure"]
+
+
+def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Path, ...]:
+    """The three figures of a calibration (:func:`dicblur.campaign.calibrate`).
+
+    ``ue_vs_blur.png`` (u_e against W with the model and the static eq. 2 prediction),
+    ``sssig_vs_blur.png`` (SSSIG against W with the eq. 18 fit) and ``ue_vs_sssig.png``
+    (log u_e against log SSSIG with the eq. 17 fit), written into ``out`` (default: the
+    folder of the result's ``model.json``). Returns their paths.
+    """
+    from ..models import sssig_decay
+
+    ds, model = result.curves, result.model
+    out = Path(out) if out is not None else Path(result.model_path).parent
+
+    w = ds["blur"].values
+    ue = ds["u_e"].values
+    s = ds["sssig"].values
+    wf = np.linspace(0.0, float(w.max()), 200)
+    paths = []
+
+    fig, ax = subplots(figsize=(5.5, 4))
+    ax.plot(w, ue, "o", ms=3, label="campaign (std over POIs)")
+    pred = model.predict(wf)
+    ax.plot(wf, getattr(pred, "u_e", pred), "-", label=f"model ({model.default})")
+    ax.plot(w, ds["u_match_score"].values, ":", label="static match score, eq. 2")
+    ax.set(xlabel="blur length W (px)", ylabel="u_e (px)",
+           title="random error vs blur")
+    ax.legend()
+    fig.tight_layout()
+    paths.append(out / "ue_vs_blur.png")
+    fig.savefig(paths[-1], dpi=120)
+
+    fig, ax = subplots(figsize=(5.5, 4))
+    ax.plot(w, s, "o", ms=3, label="campaign (mean over POIs)")
+    ax.plot(wf, sssig_decay(wf, model.decay["sssig0"], model.decay["beta"]), "-",
+            label=f"eq. 18 fit, R^2 = {model.decay.r2:.3f}")
+    ax.set(xlabel="blur length W (px)", ylabel="SSSIG along the motion ((GL/px)^2)",
+           title="SSSIG vs blur")
+    ax.legend()
+    fig.tight_layout()
+    paths.append(out / "sssig_vs_blur.png")
+    fig.savefig(paths[-1], dpi=120)
+
+    fig, ax = subplots(figsize=(5.5, 4))
+    ax.loglog(s, ue, "o", ms=3, label="campaign")
+    sf = np.geomspace(float(s.min()), float(s.max()), 100)
+    pl = model.power_law
+    ax.loglog(sf, pl["eta"] / sf ** pl["alpha"], "-",
+              label=f"eq. 17 fit, alpha = {pl['alpha']:.2f} (W in {model.fit_range[0]:g}.."
+                    f"{model.fit_range[1]:g} px)")
+    ax.set(xlabel="SSSIG ((GL/px)^2)", ylabel="u_e (px)", title="log u_e vs log SSSIG")
+    ax.legend()
+    fig.tight_layout()
+    paths.append(out / "ue_vs_sssig.png")
+    fig.savefig(paths[-1], dpi=120)
+    return tuple(paths)
+
+
+def plan_figure(plan: Any, path: str | Path) -> Path:
+    """u_e against exposure of an exposure plan (:func:`dicblur.models.plan_exposure`),
+    with the chosen exposure, the 0.02 px rule of thumb and the target; written to
+    ``path`` (format from the extension). Returns the path."""
+    fig, ax = subplots(figsize=(6, 4))
+    t = np.asarray(plan.curve_exposure) * 1e3
+    ax.plot(t, plan.curve_u_e, label=f"predicted u_e ({plan.model})")
+    ax.axvline(plan.exposure * 1e3, color="C1", ls="--",
+               label="optimum" if plan.optimal else "longest under target")
+    ax.axvline(plan.rule_of_thumb_exposure * 1e3, color="C2", ls=":", label="0.02 px rule")
+    if plan.target is not None:
+        ax.axhline(plan.target, color="C3", ls="-.", label="target")
+    if plan.optimal:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.set_xlabel("exposure (ms)")
+    ax.set_ylabel("u_e (px)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    return Path(path)

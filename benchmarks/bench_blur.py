@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import provenance
 
 import dicblur
 from dicblur import motion_blur, render_blurred, speckle_pattern
@@ -131,6 +132,7 @@ def main() -> None:
     out = Path(__file__).resolve().parent / "results" / "blur.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({
+        "provenance": provenance(),
         "benchmark": "blur",
         "dicblur_version": dicblur.__version__,
         "numpy": np.__version__,

@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import provenance
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
@@ -183,6 +184,7 @@ def main() -> None:
         print(f"{r['case']:60s} {r['seconds']:8.4f}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps({
+        "provenance": provenance(),
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load": os.getloadavg()},
         "cases": rows, "noisy": noisy, "speed": sp}, indent=1))

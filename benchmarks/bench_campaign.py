@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import provenance
 
 from dicblur.campaign import iter_batches, make_pattern, parse_spec, run_campaign, simulate_batch
 
@@ -156,7 +157,7 @@ def main() -> None:
     }
     out = Path(__file__).resolve().parent / "results" / args.out
     out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
+    out.write_text(json.dumps({**result, "provenance": provenance()}, indent=2))
     print(f"wrote {out}")
 
 

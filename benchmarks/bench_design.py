@@ -19,6 +19,8 @@ import platform
 import time
 from pathlib import Path
 
+from _harness import provenance
+
 from dicblur import __version__
 from dicblur.design import design_pattern, design_problem
 
@@ -88,7 +90,7 @@ def main() -> int:
               "cpu_count": os.cpu_count(), "load_before": load_before,
               "load_after": load_after, "target_s": 600, "rows": rows}
     out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
+    out.write_text(json.dumps({**result, "provenance": provenance()}, indent=2))
     return 0
 
 

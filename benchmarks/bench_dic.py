@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import provenance
 
 import dicblur
 from dicblur import Correlator, correlate, estimate_noise, load_image, speckle_pattern
@@ -318,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     record["results"] = results
     out = ROOT / "benchmarks" / "results" / "dic.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(record, indent=2))
+    out.write_text(json.dumps({**record, "provenance": provenance()}, indent=2))
     print(f"\nload average: start {record['load_start']:.2f}, after speed runs "
           f"{record['load_after_speed']:.2f}, end {record['load_end']:.2f}; wrote {out}")
     return 0

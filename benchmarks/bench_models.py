@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import provenance
 
 import dicblur
 from dicblur.models import (
@@ -208,7 +209,7 @@ def main() -> None:
                       "load": os.getloadavg()}
     if args.only:
         out["machine"]["parts_run"] = sorted(run)
-    OUT.write_text(json.dumps(out, indent=1))
+    OUT.write_text(json.dumps({**out, "provenance": provenance()}, indent=1))
     print(f"wrote {OUT}")
 
 

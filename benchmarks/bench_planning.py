@@ -56,6 +56,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from _harness import provenance
 
 OUT = Path(__file__).resolve().parent / "results" / "planning.json"
 
@@ -399,7 +400,7 @@ def main() -> None:
     d["machine"] = {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load": os.getloadavg(), "workers": args.workers, "quick": args.quick}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(d, indent=1))
+    args.out.write_text(json.dumps({**d, "provenance": provenance()}, indent=1))
     print(f"wrote {args.out}")
 
 

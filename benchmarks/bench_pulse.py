@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from _harness import provenance
 
 from dicblur import __version__
 from dicblur.pulse import PAPER_WIDTHS, simulate
@@ -73,7 +74,7 @@ def main() -> int:
     }
     out = Path(__file__).resolve().parent / "results" / "pulse.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
+    out.write_text(json.dumps({**result, "provenance": provenance()}, indent=2))
     print(f"pulse Monte Carlo, {args.trials} trials x {len(PAPER_WIDTHS)} widths, "
           f"{args.repeats} repeats; load avg {load_before[0]:.2f} -> {load_after[0]:.2f} "
           f"on {os.cpu_count()} cores")

@@ -21,6 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from _harness import provenance
+
 
 def _run(args: list[str], env: dict[str, str]) -> tuple[float, dict]:
     with tempfile.TemporaryDirectory(prefix="dicblur-bench-") as tmp:
@@ -57,7 +59,8 @@ def main() -> None:
         st = ", ".join(f"{k} {v:.1f}" for k, v in r["stages"].items() if k != "total")
         print(f"{r['mode']:<28}{r['wall_s']:>10.1f}{r['target_s']:>8}  {st}")
     Path(opts.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(opts.out).write_text(json.dumps({"load_average": load, "runs": rows}, indent=2))
+    Path(opts.out).write_text(json.dumps({"load_average": load, "runs": rows,
+                                          "provenance": provenance()}, indent=2))
 
 
 if __name__ == "__main__":

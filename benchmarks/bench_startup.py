@@ -60,7 +60,7 @@ def main() -> None:
     if opts.src:
         env["PYTHONPATH"] = opts.src + os.pathsep + env.get("PYTHONPATH", "")
     rows = []
-    print(f"| case | wall median (s) | CPU median (s) | modules | dicblur modules |")
+    print("| case | wall median (s) | CPU median (s) | modules | dicblur modules |")
     print("|---|---|---|---|---|")
     for name, code in CASES.items():
         run_case(code, env)  # warm the OS file cache and the .pyc files
@@ -70,7 +70,8 @@ def main() -> None:
             walls.append(w)
             cpus.append(c)
         row = {"case": name, "wall_median_s": round(statistics.median(walls), 3),
-               "wall_min_s": round(min(walls), 3), "cpu_median_s": round(statistics.median(cpus), 3),
+               "wall_min_s": round(min(walls), 3),
+               "cpu_median_s": round(statistics.median(cpus), 3),
                "modules": counts[0], "dicblur_modules": counts[1]}
         rows.append(row)
         print(f"| {name} | {row['wall_median_s']:.3f} | {row['cpu_median_s']:.3f} | "

@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import provenance
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, predict_from_pattern
@@ -148,7 +149,8 @@ def main() -> None:
     print(f"seconds per prediction (6 W): aligned {nz['seconds_per_prediction']['aligned']:.2f}, "
           f"average {nz['seconds_per_prediction']['average']:.2f}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps({"machine": {"python": platform.python_version(),
+    OUT.write_text(json.dumps({"provenance": provenance(),
+                               "machine": {"python": platform.python_version(),
                                            "cpus": os.cpu_count(), "load": os.getloadavg()},
                                "quick": args.quick, "noise_free": nf, "noisy": nz}, indent=1))
     print(f"wrote {OUT}")

@@ -1,4 +1,4 @@
-"""Shared fixtures. Tests build their own data; real images are optional."""
+"""Shared fixtures and hooks. Tests build their own data; real images are optional."""
 
 from __future__ import annotations
 
@@ -9,21 +9,19 @@ import pytest
 REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _numba_cache_first() -> None:
-    """Compile the numba kernels in a separate process before any test runs.
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Write numba's cache in a separate process before any test compiles, when a selected
+    test compares this process with worker processes bit for bit (marker ``numba_cache``).
 
     A process that compiles a fast-math kernel itself and one that loads it from numba's
-    on-disk cache can differ in the last bit (measured on IC-GN: 1e-16 px). The campaign
-    tests compare this process with Dask worker processes bit for bit, so every process
-    must load the same cached code: it has to exist before this process compiles anything.
+    on-disk cache can differ in the last bit (measured on IC-GN: 1e-16 px), so such tests
+    need every process to load the same cached code. The other tests compile lazily, only
+    the kernels they call (the fast run needs no warm-up of its own).
     """
-    import sys
+    if any(item.get_closest_marker("numba_cache") for item in session.items):
+        from helpers.campaign import warm_numba_cache
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import campaign_helpers
-
-    campaign_helpers.warm_numba_cache()
+        warm_numba_cache()
 
 
 @pytest.fixture

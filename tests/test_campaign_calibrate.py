@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,15 +12,6 @@ from dicblur.campaign import open_results
 from dicblur.campaign.calibrate import calibrate, calibration_spec
 from dicblur.cli import main
 from dicblur.errors import InputError
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import campaign_helpers
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _cached_kernels():
-    campaign_helpers.warm_numba_cache()
-
 
 REAL = (Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
         / "dicchallenge1_sample3" / "Sample3_Reference.tif")
@@ -40,6 +30,7 @@ def test_calibration_spec_is_the_papers_sweep(tmp_path):
         calibration_spec(tmp_path / "missing.tif")
 
 
+@pytest.mark.slow
 def test_calibrate_generated_pattern(tmp_path, capsys):
     out = tmp_path / "calib"
     code = main(["calibrate", "paper4", "--size", "128x128", "--noise", "2",

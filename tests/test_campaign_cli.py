@@ -17,18 +17,11 @@ import pytest
 
 from dicblur.campaign import open_results, parse_spec, run_campaign
 from dicblur.cli import main
+from helpers.campaign import shift_task, small_spec_dict
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-import campaign_helpers  # noqa: E402
-from campaign_helpers import shift_task, small_spec_dict  # noqa: E402
 
 BIN = Path(sys.executable).parent
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _cached_kernels():
-    campaign_helpers.warm_numba_cache()
 
 
 def _free_port() -> int:
@@ -95,6 +88,8 @@ def dask_cluster(tmp_path_factory):
         worker_log.close()
 
 
+@pytest.mark.slow
+@pytest.mark.numba_cache
 def test_external_cluster_equals_serial(dask_cluster, tmp_path):
     spec = parse_spec(small_spec_dict())
     remote = run_campaign(spec, tmp_path / "remote.zarr", scheduler=dask_cluster,
@@ -107,6 +102,8 @@ def test_external_cluster_equals_serial(dask_cluster, tmp_path):
             assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
 
 
+@pytest.mark.slow
+@pytest.mark.numba_cache
 def test_cli_run_through_scheduler_equals_serial(dask_cluster, tmp_path, capsys):
     # the real task (blur + noise + DIC) on the external worker, through the CLI
     spec_path = tmp_path / "s.toml"

@@ -1,6 +1,6 @@
 """Campaign engine: spec validation, task seeds, store, serial vs Dask, resume after SIGKILL.
 
-These tests drive the engine with ``campaign_helpers.shift_task``, a cheap real task
+These tests drive the engine with ``helpers.campaign.shift_task``, a cheap real task
 (Fourier shift + noise + linearised subset shift estimate), so that they exercise the
 engine alone; ``test_campaign_simulate.py`` runs the real blur + DIC task.
 """
@@ -37,11 +37,10 @@ from dicblur.campaign import (
     task_seed,
 )
 from dicblur.errors import ConfigError, StoreError
+from helpers import campaign as campaign_helpers
+from helpers.campaign import shift_task, small_spec_dict
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-import campaign_helpers  # noqa: E402
-from campaign_helpers import shift_task, small_spec_dict  # noqa: E402
 
 COMPARED = [v for v in VARIABLES if v != "time_s"]  # time_s is a wall-clock measurement
 
@@ -189,6 +188,7 @@ def test_task_seed_depends_on_values_not_order():
     assert len(states) == 5
 
 
+@pytest.mark.slow
 def test_batch_size_does_not_change_results(tmp_path):
     # Seeds are keyed by coordinate values: any chunking of the blur axis gives the same
     # bytes (only the store layout differs).
@@ -263,6 +263,8 @@ def test_rerun_skips_finished_tasks(serial_run, tmp_path):
     assert st.complete and st.n_done == 40 and st.done_by_pattern == {"a": 20, "b": 20}
 
 
+@pytest.mark.slow
+@pytest.mark.numba_cache
 def test_local_cluster_equals_serial(serial_run, tmp_path):
     import cloudpickle
 
@@ -274,6 +276,8 @@ def test_local_cluster_equals_serial(serial_run, tmp_path):
     assert_same_results(open_results(path), open_results(tmp_path / "dask.zarr"))
 
 
+@pytest.mark.slow
+@pytest.mark.numba_cache
 def test_interrupt_on_local_cluster_keeps_finished_batches(serial_run, tmp_path):
     # Ctrl-C while the cluster runs: pending tasks cancelled, cluster closed, the finished
     # batches stored; the rerun completes to the same values.
@@ -296,6 +300,7 @@ def test_interrupt_on_local_cluster_keeps_finished_batches(serial_run, tmp_path)
     assert_same_results(open_results(path), open_results(out))
 
 
+@pytest.mark.slow
 def test_interrupt_keeps_finished_batches_and_resume_completes(serial_run, tmp_path):
     path, _ = serial_run
     spec = parse_spec(small_spec_dict())
@@ -319,20 +324,22 @@ def test_interrupt_keeps_finished_batches_and_resume_completes(serial_run, tmp_p
 
 
 RUNNER = """
-import sys
-sys.path.insert(0, {tests!r})
-from campaign_helpers import kill_spec, shift_task
+from helpers.campaign import kill_spec, shift_task
 from dicblur.campaign import run_campaign
 run_campaign(kill_spec(), {out!r}, serial=True, task=shift_task)
 """
 
 
+@pytest.mark.slow
+@pytest.mark.numba_cache
 def test_sigkill_at_random_point_then_resume_is_bit_identical(tmp_path):
     spec = campaign_helpers.kill_spec()
     out = tmp_path / "killed.zarr"
     script = tmp_path / "runner.py"
-    script.write_text(RUNNER.format(tests=str(HERE), out=str(out)))
-    proc = subprocess.Popen([sys.executable, str(script)], stderr=subprocess.PIPE)
+    script.write_text(RUNNER.format(out=str(out)))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(  # tests/ for the helpers package
+        [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    proc = subprocess.Popen([sys.executable, str(script)], stderr=subprocess.PIPE, env=env)
     try:
         done_dir = out / "done" / "c"
         deadline = time.monotonic() + 60

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,15 +17,6 @@ from dicblur.campaign import (
     run_campaign,
     simulate_batch,
 )
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import campaign_helpers
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _cached_kernels():
-    campaign_helpers.warm_numba_cache()
-
 
 N = 105
 # Whole periods in the image (periodic, exactly shiftable) and in a 21-px subset (periods
@@ -110,6 +99,8 @@ def small_real_spec(**blur: object) -> dicblur.CampaignSpec:
     })
 
 
+@pytest.mark.slow
+@pytest.mark.numba_cache
 def test_real_campaign_on_local_cluster_equals_serial(tmp_path):
     spec = small_real_spec()
     run_campaign(spec, tmp_path / "s.zarr", serial=True)

@@ -158,6 +158,7 @@ def test_measurement_is_the_campaign_engines(tmp_path):
 
 
 # --------------------------------------------------------------------------- search
+@pytest.mark.slow
 def test_ranking_stable_across_seeds():
     fam = small_family()
     ranks = []
@@ -173,6 +174,7 @@ def test_ranking_stable_across_seeds():
     assert min(ranks[0], key=ranks[0].get) == min(ranks[1], key=ranks[1].get)
 
 
+@pytest.mark.slow
 def test_design_beats_default_by_more_than_measurement_uncertainty():
     p = design_problem(blur=3.0, **SMALL)
     r = design_pattern(p, small_family(), max_refine=3, confirm_realisations=4)

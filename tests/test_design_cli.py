@@ -12,6 +12,7 @@ FAST = ["--image-size", "128", "--grid", "2x1x2", "--density-range", "0.5..0.5",
         "--max-refine", "2", "--confirm", "2", "--realisations", "1"]
 
 
+@pytest.mark.slow
 def test_design_cli_writes_everything(tmp_path, capsys):
     out = tmp_path / "d"
     rc = main(["design", "--blur", "2", "--scale", "0.05", "--print-size", "20x30",

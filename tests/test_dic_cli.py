@@ -6,9 +6,9 @@ import csv
 
 import numpy as np
 
-from _dic_helpers import fourier_shift, pattern
 from dicblur import save_image
 from dicblur.cli import main
+from helpers.dic import fourier_shift, pattern
 
 
 def test_correlate_cli_csv_and_netcdf(tmp_path, capsys):

@@ -7,10 +7,10 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import ndimage
 
-from _dic_helpers import affine_warp, fourier_shift, pattern
 from dicblur.dic import Correlator, kernels
 from dicblur.dic import interpolation as itp
 from dicblur.dic.icgn import compose_affine, icgn_reference
+from helpers.dic import affine_warp, fourier_shift, pattern
 
 
 @pytest.mark.parametrize("order", [3, 5])
@@ -25,6 +25,7 @@ def test_prefilter_matches_scipy(order, shape):
     assert_allclose(c[itp.PAD:-itp.PAD, -itp.PAD], ref[:, -2])
 
 
+@pytest.mark.slow
 def test_prefilter_float32_close_to_float64():
     img = pattern(64)
     c32 = itp.bspline_coefficients(img, order=3, dtype=np.float32)
@@ -179,6 +180,7 @@ def test_translation_per_call_copy_matches_packed_reference(monkeypatch):
     np.testing.assert_array_equal(copied.iterations, packed.iterations)
 
 
+@pytest.mark.slow
 def test_affine_step_gain_speeds_up_a_strongly_blurred_image():
     # 4 px speckles, W = 10 px along x: plain affine Gauss-Newton steps shrink slowly (about
     # 190 iterations on average, a third of the subsets not converged in 200); the step

@@ -598,6 +598,7 @@ def test_bad_input(model):
         PoissonGaussianCamera(full_well=0, read_noise=1, flux=1)
 
 
+@pytest.mark.slow
 def test_pattern_noise_variance_matches_monte_carlo_of_the_fixed_point():
     # noise of 2 GL in both images, W = 3 px: the exact IC-GN fixed point (root finding,
     # band-limited interpolation, true derivatives of the *noisy* reference) over 120

@@ -64,7 +64,7 @@ def test_fit_predict_plan(results_csv, tmp_path, capsys):
 
 
 def test_fit_from_netcdf(tmp_path, capsys):
-    xr = pytest.importorskip("xarray")
+    import xarray as xr
     w = np.arange(0.0, 8.01, 1.0)
     s = sssig_decay(w, 1e5, 0.03)
     u = mismatch_model(w, s, 2.0, c=5e-4)
@@ -79,8 +79,7 @@ def test_fit_from_netcdf(tmp_path, capsys):
 @pytest.mark.filterwarnings("ignore::UserWarning", "ignore:The data type")  # zarr v3 notes
 def test_fit_from_campaign_zarr(tmp_path, capsys):
     # the campaign layout: dims (pattern, angle, subset, noise, blur, rep), effective noise
-    xr = pytest.importorskip("xarray")
-    pytest.importorskip("zarr")
+    import xarray as xr
     w = np.arange(0.0, 8.01, 1.0)
     s = sssig_decay(w, 1e5, 0.03)
     dims = ("pattern", "angle", "subset", "noise", "blur", "rep")

@@ -108,6 +108,7 @@ def test_chi2_regime_a_analytic_matches_numeric(w: float) -> None:
     assert_allclose(chi2_regime_a(inner, w), w / 6 + 2 * inner**2 / w, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_chi2_continuous_against_riemann_sum() -> None:
     train = PulseTrain(dp=6.0, du=22.0)
     x = (np.arange(2_200_000) + 0.5) * 1e-5
@@ -141,6 +142,7 @@ def test_min_chi2_fig5() -> None:
     assert val[3] == pytest.approx(train.dp * train.g / train.du, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_cross_gradient_closed_form() -> None:
     train = PulseTrain()
     x = (np.arange(2_200_000) + 0.5) * 1e-5
@@ -153,6 +155,7 @@ def test_cross_gradient_closed_form() -> None:
 
 
 # --- estimator and Monte Carlo ------------------------------------------------------------
+@pytest.mark.slow
 def test_fourier_estimator_recovers_a_known_band_limited_shift() -> None:
     rng = np.random.default_rng(0)
     n = 64
@@ -283,6 +286,7 @@ def test_error_message_names_parameter() -> None:
 
 
 # --- CLI ---------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_cli_writes_all_outputs(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
     out = tmp_path / "pulse"
     rc = main(["pulse", "--trials", "200", "--dependence-trials", "20", "--seed", "3",

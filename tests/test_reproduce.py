@@ -26,6 +26,7 @@ def small_run(tmp_path_factory):
     return settings, reproduce(settings)
 
 
+@pytest.mark.slow
 def test_outputs_exist_and_are_consistent(small_run):
     settings, res = small_run
     out = settings.out
@@ -48,6 +49,7 @@ def test_outputs_exist_and_are_consistent(small_run):
     assert "synthetic stand-ins" in html and "data:image/png;base64," in html
 
 
+@pytest.mark.slow
 def test_rerun_reuses_campaign_results(small_run):
     settings, first = small_run
     assert first.campaign_runs["study"]["run"] == first.campaign_runs["study"]["tasks"]
@@ -60,6 +62,7 @@ def test_rerun_reuses_campaign_results(small_run):
 
 @pytest.mark.skipif(find_browser() is None,
                     reason="no Chromium on PATH; .ci/run installs Debian's chromium")
+@pytest.mark.slow
 def test_report_opens_in_headless_chromium(small_run):
     settings, res = small_run
     chk = check_in_browser(res.report, screenshot=settings.out / "screenshot.png")

@@ -318,6 +318,11 @@ def match_score_sigma(sssig_values: ArrayLike, noise_sigma: float) -> NDArray[np
 
     ``u_e = sqrt(2 sigma**2 / SSSIG)`` for Gaussian noise of std ``noise_sigma`` (grey
     levels) in both images. Vectorised over ``sssig_values``; 0 SSSIG gives ``inf``.
+
+    Examples
+    --------
+    >>> match_score_sigma([8.0, 32.0, 0.0], 2.0).tolist()
+    [1.0, 0.5, inf]
     """
     s = np.asarray(sssig_values, dtype=np.float64)
     sigma = check_positive(noise_sigma, "noise_sigma", allow_zero=True)
@@ -514,9 +519,4 @@ def box_sssig(gy: NDArray[np.float64], gx: NDArray[np.float64], points: NDArray[
     """:func:`directional_sssig` from given gradient images (summed-area table)."""
     a = math.radians(angle)
     g = math.cos(a) * gx + math.sin(a) * gy
-    sat = np.zeros((g.shape[0] + 1, g.shape[1] + 1))
-    sat[1:, 1:] = (g * g).cumsum(axis=0).cumsum(axis=1)
-    h = subset // 2
-    r0, c0 = points[:, 0] - h, points[:, 1] - h
-    r1, c1 = points[:, 0] + h + 1, points[:, 1] + h + 1
-    return np.asarray(sat[r1, c1] - sat[r0, c1] - sat[r1, c0] + sat[r0, c0])
+    return _box_sums(g * g, points, subset)

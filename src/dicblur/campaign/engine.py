@@ -28,7 +28,6 @@ from .tasks import Batch, input_hashes, iter_batches, make_pattern
 
 __all__ = ["CampaignStatus", "RunSummary", "TaskFunction", "campaign_status", "run_campaign"]
 
-logger = logging.getLogger("dicblur")
 
 TaskFunction = Callable[[NDArray[np.float64], Batch, CampaignSpec], Mapping[str, Any]]
 ProgressCallback = Callable[[int, int], None]

@@ -19,7 +19,6 @@ same images, so the ``subset`` dimension is a paired comparison.
 from __future__ import annotations
 
 import hashlib
-import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -94,13 +93,6 @@ def iter_batches(spec: CampaignSpec) -> Iterator[Batch]:
                                         spec.blur[b0:b1],
                                         (ip, ia, isub, inoise, b0, b1, irep))
                             k += 1
-
-
-def n_batches(spec: CampaignSpec) -> int:
-    """Number of batches of a campaign."""
-    per = math.ceil(len(spec.blur) / spec.blur_chunk)
-    d = spec.dims
-    return d["pattern"] * d["angle"] * d["subset"] * d["noise"] * d["rep"] * per
 
 
 def task_seed(base_seed: int, role: str, **coords: Any) -> np.random.SeedSequence:

@@ -17,12 +17,11 @@ with like.
 
 Static surrogate (no DIC). ``u_s(W)**2 = 2 sigma**2 / SSSIG(W) + (c W**2)**2`` with SSSIG(W)
 the mean subset SSSIG of the noise-free blurred image and ``c`` the static blur
-sensitivity (:func:`dicblur.models.blur_sensitivity`); paper-brief s. 10.
+sensitivity (:func:`dicblur.models.blur_sensitivity`); docs/models.md s. 4.
 """
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import dataclass
@@ -249,8 +248,3 @@ def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
         surrogate=problem.objective(u_sur), fit_ok=fit_ok,
         n_points=int(m["u_e"].size), time_s=time.perf_counter() - t0,
     )
-
-
-def objective_ratio(a: float, b: float) -> float:
-    """Relative improvement ``1 - a / b`` (0.2 = a is 20 % lower than b)."""
-    return 1.0 - a / b if b > 0 and math.isfinite(a) else float("nan")

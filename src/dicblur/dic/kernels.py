@@ -190,21 +190,6 @@ def _filter_axis1(src, dst, poles, tol):  # pragma: no cover - compiled
                 row[c] = t[c, r]
 
 
-@nb.njit(parallel=True, cache=True)
-def _transpose(a, out):  # pragma: no cover - compiled
-    n, m = a.shape
-    bs = 32
-    nbr = (n + bs - 1) // bs
-    for bi in nb.prange(nbr):
-        i0 = bi * bs
-        i1 = min(n, i0 + bs)
-        for j0 in range(0, m, bs):
-            j1 = min(m, j0 + bs)
-            for i in range(i0, i1):
-                for j in range(j0, j1):
-                    out[j, i] = a[i, j]
-
-
 @nb.njit(cache=True)
 def _mirror(i, n):  # pragma: no cover - compiled
     if n == 1:

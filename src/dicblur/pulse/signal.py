@@ -2,8 +2,8 @@
 
 Lavatelli & Zappa, IEEE TIM 66(3), 2017, doi:10.1109/TIM.2016.2644898, Section V, Fig. 3-4
 and Table II. The seed's equations are garbled by text extraction; the closed forms below are
-our derivation (``docs/paper-brief.md`` section 6), checked against numerical convolution in
-``tests/test_pulse.py``.
+our derivation (``docs/pulse.md``, "Regimes and closed forms"), checked against numerical
+convolution in ``tests/test_pulse.py``.
 
 Geometry (1-D, x in px): pulses of height ``a`` (grey levels) and width ``dp`` repeat with
 period ``du``; the gap is ``g = du - dp``. The first pulse occupies ``[x0, x0 + dp)``. The

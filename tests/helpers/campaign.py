@@ -121,14 +121,23 @@ dicblur.motion_blur(img, (1.0, 2.0), substeps=None)
 """
 
 
+_WARMED: list[bool] = []
+
+
 def warm_numba_cache() -> None:
     """Compile the task's numba kernels in a separate process, writing the on-disk cache.
 
     A process that compiles the DIC kernels itself and one that loads them from the cache
     can differ in the last bits (measured: 9e-14 relative on u_e; fastmath kernels). Tests
-    that compare a worker process with this process make both load the cached code.
+    that compare a worker process with this process make both load the cached code: the
+    warm-up must run before this process compiles anything (tests/conftest.py runs it
+    after collection when a selected test is marked ``numba_cache``). Once per process;
+    with a warm cache the subprocess only loads (a few seconds).
     """
+    if _WARMED:
+        return
     import subprocess
     import sys
 
-    subprocess.run([sys.executable, "-c", WARM_UP], check=True, timeout=600)
+    subprocess.run([sys.executable, "-c", WARM_UP], check=True, timeout=900)
+    _WARMED.append(True)

@@ -1,0 +1,19 @@
+"""The docstring examples run and print what they show (the runnable, fast ones)."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["dicblur.blur", "dicblur.patterns", "dicblur.metrics", "dicblur.dic.correlator"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    module = importlib.import_module(name)
+    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE,
+                             verbose=False)
+    assert result.attempted > 0, f"{name} has no examples to run"
+    assert result.failed == 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 
 import numpy as np
+import pytest
 
 from dicblur import save_image
 from dicblur.cli import main
@@ -41,3 +42,55 @@ def test_correlate_cli_errors(tmp_path, capsys):
     code = main(["correlate", str(tmp_path / "a.tif"), str(tmp_path / "a.tif"),
                  "--subset", "20"])
     assert code == 2 and "subset=20" in capsys.readouterr().err
+
+
+def test_cold_kernel_cache_is_detected_without_compiling(tmp_path):
+    # an empty numba cache folder: nothing compiled for this kernel source
+    import os
+    import subprocess
+    import sys
+
+    code = ("from dicblur.dic.cache import kernels_cached; "
+            "print(kernels_cached('affine'), kernels_cached('translation'))")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, check=True, timeout=300).stdout.split()
+    assert out == ["False", "False"]
+
+
+def test_correlate_says_when_it_compiles(tmp_path, capsys, monkeypatch):
+    from dicblur.dic import cache
+
+    ref = pattern(64, seed=3)
+    save_image(tmp_path / "a.tif", ref, bit_depth=16)
+    args = ["correlate", str(tmp_path / "a.tif"), str(tmp_path / "a.tif"), "--shape",
+            "translation", "--step", "30"]
+    asked = []
+    monkeypatch.setattr(cache, "kernels_cached", lambda shape: asked.append(shape) or False)
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert err.count(cache.COMPILE_NOTICE) == 1 and asked == ["translation"]
+    monkeypatch.setattr(cache, "kernels_cached", lambda shape: True)
+    assert main(args) == 0
+    assert cache.COMPILE_NOTICE not in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_first_correlate_after_install_prints_one_line_then_none(tmp_path):
+    # a real cold start: a fresh numba cache folder, the CLI in a new process, twice
+    import os
+    import subprocess
+    import sys
+
+    from dicblur.dic.cache import COMPILE_NOTICE
+
+    ref = pattern(64, seed=3)
+    save_image(tmp_path / "a.tif", ref, bit_depth=16)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    cmd = [sys.executable, "-m", "dicblur", "correlate", str(tmp_path / "a.tif"),
+           str(tmp_path / "a.tif"), "--shape", "translation", "--step", "30"]
+    first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+    assert first.returncode == 0, first.stderr
+    assert first.stderr.count(COMPILE_NOTICE) == 1
+    second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+    assert second.returncode == 0 and COMPILE_NOTICE not in second.stderr

@@ -68,3 +68,14 @@ def print_json(data: Any) -> None:
         return v
 
     print(json.dumps(clean(data), indent=2))
+
+
+def notice_compile(shape: str = "affine") -> None:
+    """Say on stderr, before a cold numba compile of the DIC kernels, that it is one
+    (the first run after an install compiles for ~20 s with nothing else on screen)."""
+    import sys
+
+    from ..dic.cache import COMPILE_NOTICE, kernels_cached
+
+    if not kernels_cached("translation" if shape == "translation" else "affine"):
+        print(COMPILE_NOTICE, file=sys.stderr, flush=True)

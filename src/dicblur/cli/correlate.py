@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
-from ._common import console, print_mapping
+from ._common import console, notice_compile, print_mapping
 
 _UNITS = {"mean_u": "px", "std_u": "px", "mean_v": "px", "std_v": "px",
           "predicted_sigma_u": "px", "predicted_sigma_v": "px", "prepare_s": "s",
@@ -42,6 +42,7 @@ def correlate_command(
     cur = load_image(current)
     corr = Correlator(ref, subset=subset, step=step, shape=shape,  # type: ignore[arg-type]
                       interpolation=interpolation, noise_sigma=noise, workers=workers)
+    notice_compile(shape)
     compile_s = corr.warmup()
     t0 = time.perf_counter()
     res = corr.correlate(cur)

@@ -7,9 +7,24 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-__all__ = ["__version__"]
+__all__ = ["DEPENDENCIES", "__version__", "package_versions"]
 
 try:
     __version__: str = version("dicblur")
 except PackageNotFoundError:  # pragma: no cover - running from a source tree, not installed
     __version__ = "0+unknown"
+
+#: The packages whose versions change dicblur's numbers or files (recorded in provenance).
+DEPENDENCIES = ("numpy", "scipy", "numba", "xarray", "zarr", "dask", "distributed",
+                "matplotlib")
+
+
+def package_versions(packages: tuple[str, ...] = DEPENDENCIES) -> dict[str, str]:
+    """Installed versions of dicblur and ``packages`` ("absent" for one not installed)."""
+    out = {"dicblur": __version__}
+    for pkg in packages:
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "absent"
+    return out

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from ..errors import ConfigError, InputError
 
 # re-exported: the campaigns' SSSIG along the motion lives with the other metrics
-from ..metrics import box_sssig, directional_sssig
+from ..metrics import box_sssig, directional_sssig, match_score_sigma, pan_sigma
 from .spec import CampaignSpec
 from .tasks import Batch, task_seed
 
@@ -207,8 +207,8 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         out["mig"][j] = m = float(np.hypot(gw[1], gw[0]).mean())
         out["contrast"][j] = michelson_contrast(blurred[window])
         out["rms_contrast"][j] = rms_contrast(blurred[window])
-        out["u_match_score"][j] = math.sqrt(2.0) * sigma / math.sqrt(out["sssig"][j])
-        out["u_pan"][j] = math.sqrt(2.0) * sigma / (batch.subset * m)
+        out["u_match_score"][j] = float(match_score_sigma(out["sssig"][j], sigma))  # eq. 2
+        out["u_pan"][j] = float(pan_sigma(m, sigma, batch.subset))  # eq. 5
         out["noise_effective"][j] = sigma
         out["n_points"][j] = ok.size
         out["time_s"][j] = time.perf_counter() - t0 + setup / n

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._version import package_versions
 from ..errors import StoreError
 from .spec import CampaignSpec
 from .tasks import Batch
@@ -78,19 +79,6 @@ VARIABLES: dict[str, tuple[str, str]] = {
     "time_s": ("s", "wall time of the task (blur, noise, DIC, metrics; batch set-up "
                "shared out), on its worker"),
 }
-
-
-def _versions() -> dict[str, str]:
-    from importlib import metadata
-
-    out = {}
-    for pkg in ("dicblur", "numpy", "scipy", "numba", "xarray", "zarr", "dask",
-                "distributed"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = "absent"
-    return out
 
 
 def _chunks(spec: CampaignSpec) -> tuple[int, ...]:
@@ -155,7 +143,7 @@ class CampaignStore:
                 "spec": spec.to_json(),
                 "spec_hash": spec.content_hash(),
                 "input_hashes": json.dumps(dict(hashes), sort_keys=True),
-                "versions": json.dumps(_versions(), sort_keys=True),
+                "versions": json.dumps(package_versions(), sort_keys=True),
                 "noise_model": spec.noise_model,
                 "dic_shape": spec.dic_shape,
                 "trajectory": spec.trajectory,

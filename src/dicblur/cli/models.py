@@ -192,6 +192,7 @@ def predict_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Predict u_e at blur lengths (--blur) or from velocity x exposure / scale."""
+    from ..blur import blur_length
     from ..models import BlurUncertaintyModel, parse_quantity
 
     model = BlurUncertaintyModel.from_json(str(model_path))
@@ -206,7 +207,7 @@ def predict_command(
         t = parse_quantity(exposure, "time", name="--exposure")
         if t < 0:
             raise InputError(f"--exposure={exposure!r}: must be >= 0")
-        ws.append(abs(v) * t / sc)
+        ws.append(blur_length(v, t, sc))  # W = |v| t / scale
     if not ws:
         raise InputError("--blur: give at least one blur length (px) or velocity/exposure/scale")
     pred = model.predict(ws, noise, model=which)

@@ -26,12 +26,12 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._version import package_versions
 from ..errors import InputError
 from ._data import series
 from .study import (
@@ -141,16 +141,6 @@ class ReproduceResult:
 
 
 # ---------------------------------------------------------------------------------------
-def _versions() -> dict[str, str]:
-    out = {"python": sys.version.split()[0], "platform": platform.platform()}
-    for pkg in ("dicblur", "numpy", "scipy", "numba", "xarray", "zarr", "dask", "matplotlib"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:  # pragma: no cover
-            out[pkg] = "not installed"
-    return out
-
-
 def _study_patterns(s: ReproduceSettings) -> list[StudyPattern]:
     if s.pattern1 is not None:
         p1 = load_user_pattern("p1", "#1 Sample 13", s.pattern1, s.size)
@@ -400,7 +390,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     claims = evaluate_claims(ds=ds, ds_family=ds_fam, pats=pats, static=static, fits=fits,
                              models=models, family=fam_rows, pulse=pulse, settings=s,
                              valid=valid)
-    versions = _versions()
+    versions = {"python": sys.version.split()[0], "platform": platform.platform(),
+                **package_versions()}
     report_path, figures = write_report(
         out=out, settings=s, ds=ds, pats=pats, static=static, fits=fits, models=models,
         family=fam_rows, pulse=pulse, claims=claims, versions=versions, timings=timings,

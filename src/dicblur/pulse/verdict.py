@@ -128,7 +128,8 @@ def verdict_text(
         "",
         "## Answer",
         "",
-        f"- **Regime (a)** (w = {fa.w_min:g}..{fa.w_max:g}): log-log slope "
+        f"- **Regime (a), spectral correlator of the main run** (w = {fa.w_min:g}.."
+        f"{fa.w_max:g}): log-log slope "
         f"**{fa.slope:.3f}** (95% CI {fa.slope_ci[0]:.3f}..{fa.slope_ci[1]:.3f}), "
         f"i.e. {_follows(fa)}. The first-principles sqrt law (slope 0.5) is "
         f"{'rejected' if not fa.slope_ci[0] <= 0.5 <= fa.slope_ci[1] else 'not rejected'}; "

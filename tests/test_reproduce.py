@@ -35,7 +35,12 @@ def test_outputs_exist_and_are_consistent(small_run):
     assert set(data["fits"]) == {"p1", "p2", "p3", "p4"}
     ids = [c["id"] for c in data["claims"]]
     assert ids == [f"C{i}" for i in range(1, 22)]
-    assert {c["verdict"] for c in data["claims"]} <= {"agrees", "differs", "partly"}
+    assert {c["verdict"] for c in data["claims"]} <= {"agrees", "differs", "partly",
+                                                      "inconclusive"}
+    c1 = next(c for c in data["claims"] if c["id"] == "C1")
+    assert c1["verdict"] == "agrees" and "spectrum" in c1["ours"]  # Algorithm 1 itself
+    c12 = next(c for c in data["claims"] if c["id"] == "C12")
+    assert "2 xi^2 / w" in c12["claim"]
     for name in data["figures"]:
         assert (out / "figures" / f"{name}.png").stat().st_size > 1000
         assert (out / "figures" / f"{name}.svg").exists()
@@ -47,6 +52,12 @@ def test_outputs_exist_and_are_consistent(small_run):
     # The stand-ins are labelled as such.
     html = res.report.read_text()
     assert "synthetic stand-ins" in html and "data:image/png;base64," in html
+    # the pulse verdict is rendered Markdown, not a preformatted block; no internal wording
+    assert "<h3>Verdict" in html and "<pre># Verdict" not in html
+    assert "brief s." not in html and "extraction" not in html
+    # the stage-time table is complete
+    assert "report (claims, figures, page)" in html and "<td class=\"l\">total</td>" in html
+    assert "stand-in (sharp)" not in html
 
 
 @pytest.mark.slow

@@ -25,6 +25,16 @@ How the shifted signal is interpolated (``interpolation``):
     minimised exactly on every piece. This is the idealisation behind the first-principles
     ``sqrt(2 sigma^2 / SSSIG_b)`` prediction.
 
+``"bspline"``
+    An IC-GN-style matcher as in the 2-D engine: the moved signal is read through its
+    periodic cubic B-spline interpolant (noise included) and the fixed signal's gradient
+    is the derivative of its own B-spline interpolant at the pixels. The estimate is the
+    root of the IC-GN fixed-point equation ``sum D f (g(k + xi) - f(k)) = 0`` near the best
+    integer lag (Newton on the interpolant's exact derivative).
+``"keys"``
+    The same with Keys' cubic convolution (a = -1/2) as the interpolant and central
+    differences as the gradient (a common DIC configuration).
+
 ``shifted`` says which signal is moved: ``"blurred"`` (paper eq. 12) or ``"reference"``.
 """
 
@@ -48,17 +58,20 @@ from .correlation import (
     predict_interpolated_noise,
     predict_paper_linear,
 )
-from .signal import PulseTrain, edge_length, regime, spectral_derivative
+from .signal import PulseTrain, edge_length, regime
 
 __all__ = [
     "PAPER_TRAIN",
     "PAPER_WIDTHS",
     "MonteCarloSettings",
+    "derivative_multiplier",
     "estimate_shift",
     "simulate",
 ]
 
-Interpolation = Literal["fourier", "linear", "analytic"]
+Interpolation = Literal["fourier", "linear", "analytic", "bspline", "keys"]
+#: Correlators of the IC-GN type (reference-gradient fixed point)
+_ICGN_KINDS = ("bspline", "keys")
 Shifted = Literal["blurred", "reference"]
 
 #: The paper's Monte Carlo signal (Section V-B): a = 1, dp = 6, du = 22.
@@ -274,6 +287,93 @@ def _analytic_shift_estimate(
     return mid[j] + d[rows, j], np.zeros(val.shape[0], dtype=np.uint8)
 
 
+# --------------------------------------------------------------------------------------
+# IC-GN-type estimators: B-spline (engine-like) and Keys + central differences
+# --------------------------------------------------------------------------------------
+def derivative_multiplier(length: int, kind: str) -> NDArray[np.complex128]:
+    """Fourier multiplier (rFFT bins) of the correlator's derivative D of a periodic signal.
+
+    ``"fourier"``: the spectral derivative ``i q`` (Nyquist 0); ``"bspline"``: the
+    derivative of the cubic B-spline interpolant at the pixels, ``i sin q / ((4 + 2 cos q)
+    / 6)``; ``"keys"``: central differences ``i sin q`` (also the derivative of Keys'
+    interpolant at the pixels).
+    """
+    q = 2 * math.pi * np.arange(length // 2 + 1) / length
+    if kind == "bspline":
+        out = 1j * np.sin(q) * 6.0 / (4.0 + 2.0 * np.cos(q))
+    elif kind == "keys":
+        out = 1j * np.sin(q)
+    else:
+        out = 1j * q
+        if length % 2 == 0:
+            out[-1] = 0.0
+    return out
+
+
+def _taps(t: NDArray[np.float64], kind: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Weights (4, n) of taps -1..2 around ``floor(x)`` and of their derivative in ``t``."""
+    if kind == "bspline":
+        u = 1.0 - t
+        w = np.stack([u**3 / 6, (3 * t**3 - 6 * t**2 + 4) / 6,
+                      (-3 * t**3 + 3 * t**2 + 3 * t + 1) / 6, t**3 / 6])
+        dw = np.stack([-(u**2) / 2, (3 * t**2 - 4 * t) / 2, (-3 * t**2 + 2 * t + 1) / 2,
+                       t**2 / 2])
+        return w, dw
+    x = np.stack([t + 1.0, t, t - 1.0, t - 2.0])  # distance to each tap
+    ax = np.abs(x)
+    inner = ax <= 1.0
+    w = np.where(inner, 1.5 * ax**3 - 2.5 * ax**2 + 1.0,
+                 np.where(ax < 2.0, -0.5 * ax**3 + 2.5 * ax**2 - 4.0 * ax + 2.0, 0.0))
+    dw = np.where(inner, 4.5 * x * ax - 5.0 * x,
+                  np.where(ax < 2.0, -1.5 * x * ax + 5.0 * x - 4.0 * np.sign(x), 0.0))
+    return w, dw
+
+
+def _icgn_shift_estimate(
+    moving: NDArray[np.float64], fixed: NDArray[np.float64], du: float, kind: str,
+    tol: float = 1e-11, max_iter: int = 60,
+) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+    """Root of ``F(xi) = sum_k D f(k) [g(k + xi) - f(k)]`` (IC-GN's fixed point for a
+    translation) with ``g`` the moved signal read through the ``kind`` interpolant."""
+    n, length = moving.shape
+    q = 2 * math.pi * np.arange(length // 2 + 1) / length
+    fm, ff = np.fft.rfft(moving, axis=-1), np.fft.rfft(fixed, axis=-1)
+    df = np.fft.irfft(derivative_multiplier(length, kind) * ff, length, axis=-1)
+    # the interpolant's coefficients: B-spline prefilter, or the samples themselves
+    coef = (np.fft.irfft(fm / ((4.0 + 2.0 * np.cos(q)) / 6.0), length, axis=-1)
+            if kind == "bspline" else moving)
+    corr = np.fft.irfft(fm * np.conj(ff), length, axis=-1)
+    lags = _lag_window(length, du)
+    xi = lags[np.argmax(corr[:, lags % length], axis=-1)].astype(np.float64)
+    k = np.arange(length)[None, :]
+    rows = np.arange(n)[:, None]
+    status = np.ones(n, dtype=np.uint8)
+    active = np.ones(n, dtype=bool)
+    for _ in range(max_iter):
+        i0 = np.floor(xi)
+        t = xi - i0
+        w, dw = _taps(t, kind)
+        val = np.zeros((n, length))
+        der = np.zeros((n, length))
+        for j in range(4):
+            c = coef[rows, (k + i0.astype(np.intp)[:, None] + j - 1) % length]
+            val += w[j][:, None] * c
+            der += dw[j][:, None] * c
+        f_val = np.sum(df * (val - fixed), axis=-1)
+        f_der = np.sum(df * der, axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = np.where(f_der != 0, f_val / f_der, 0.0)
+        step = np.clip(np.nan_to_num(step), -1.0, 1.0)
+        xi = np.where(active, xi - step, xi)
+        done = active & (np.abs(step) < tol)
+        status[done] = 0
+        active &= ~done
+        if not active.any():
+            break
+    status[np.abs(xi) > du / 2] = 2
+    return xi, status
+
+
 def estimate_shift(
     reference: ArrayLike,
     current: ArrayLike,
@@ -290,7 +390,7 @@ def estimate_shift(
         Periodic 1-D signals (grey levels) sampled at pixel centres.
     period : float
         Search half-range is ``period / 2`` px around zero (shifts beyond alias).
-    interpolation : {"fourier", "linear"}
+    interpolation : {"fourier", "linear", "bspline", "keys"}
         How the shifted signal is interpolated (module docstring). ``"analytic"`` needs the
         closed form and is available through :func:`simulate` only.
     shifted : {"blurred", "reference"}
@@ -314,9 +414,14 @@ def estimate_shift(
         raise InputError("reference/current: NaN or infinite samples; remove them first")
     ref, cur = np.broadcast_arrays(ref, cur)
     period = check_positive(period, "period")
-    check_choice(interpolation, "interpolation", ("fourier", "linear"))
+    check_choice(interpolation, "interpolation", ("fourier", "linear", *_ICGN_KINDS))
     check_choice(shifted, "shifted", ("blurred", "reference"))
-    fn = _fourier_shift_estimate if interpolation == "fourier" else _linear_shift_estimate
+    if interpolation in _ICGN_KINDS:
+        def fn(m: NDArray[np.float64], f: NDArray[np.float64], du: float) -> tuple[
+                NDArray[np.float64], NDArray[np.uint8]]:
+            return _icgn_shift_estimate(m, f, du, interpolation)
+    else:
+        fn = _fourier_shift_estimate if interpolation == "fourier" else _linear_shift_estimate
     if shifted == "blurred":
         u, st = fn(np.ascontiguousarray(cur), np.ascontiguousarray(ref), period)
         return u, st
@@ -340,18 +445,23 @@ def _std_ci(x: NDArray[np.float64]) -> tuple[float, float, float]:
 
 
 def _pixel_linearised(
-    train: PulseTrain, w: float, w_ref: float, sigma: float, length: int, displacement: float
+    train: PulseTrain, w: float, w_ref: float, sigma: float, length: int, displacement: float,
+    kind: str = "fourier",
 ) -> tuple[float, float, float, float]:
-    """Pixel-level, spectral-derivative version of ``sigma sqrt(S_o + S_b) / |C|``, with the
-    second-order noise term ``sigma^4 ||D||_F^2`` of the Fourier correlator."""
+    """Pixel-level ``sigma sqrt(S_o + S_b) / |C|`` with the correlator's own derivative D
+    (``S = sum (D p)^2``, ``C = sum D p_o D p_b``) and the second-order noise term
+    ``sigma^4 ||D||_F^2``. It holds for every correlator whose D is antisymmetric and whose
+    interpolant reproduces the samples and has derivative D at the pixels (spectral, cubic
+    B-spline with its own derivative, Keys with central differences)."""
     po = train.sample(length, w_ref)
     pb = train.sample(length, w, shift=displacement)
-    do, db = spectral_derivative(po), spectral_derivative(pb)
+    mult = derivative_multiplier(length, kind if kind in _ICGN_KINDS else "fourier")
+    do = np.fft.irfft(mult * np.fft.rfft(po), length)
+    db = np.fft.irfft(mult * np.fft.rfft(pb), length)
     s_o, s_b, c = float(np.sum(do**2)), float(np.sum(db**2)), float(np.sum(do * db))
-    q = np.fft.fftfreq(length) * 2 * math.pi
-    if length % 2 == 0:
-        q[length // 2] = 0.0
-    dnorm = float(np.sum(q**2))
+    # ||D||_F^2 of the circulant operator: the sum of |multiplier|^2 over all L bins
+    full = np.abs(mult) ** 2
+    dnorm = float(2 * np.sum(full[1:]) - (full[-1] if length % 2 == 0 else 0.0))
     var = sigma**2 * (s_o + s_b) + sigma**4 * dnorm
     pred = math.sqrt(var) / abs(c) if abs(c) > 1e-12 * max(s_o, 1e-300) else math.inf
     return s_o, s_b, c, pred
@@ -424,7 +534,8 @@ def simulate(
     if not isinstance(trials, int | np.integer) or trials < 2:
         raise InputError(f"trials={describe(trials)}: expected an int >= 2 (default 10000)")
     displacement = check_finite_number(displacement, "displacement")
-    check_choice(interpolation, "interpolation", ("fourier", "linear", "analytic"))
+    check_choice(interpolation, "interpolation",
+                 ("fourier", "linear", "analytic", *_ICGN_KINDS))
     check_choice(shifted, "shifted", ("blurred", "reference"))
     w_ref = check_positive(w_ref, "w_ref")
     outlier_threshold = check_positive(outlier_threshold, "outlier_threshold")
@@ -475,7 +586,7 @@ def simulate(
                 u, st = _analytic_shift_estimate(train, w_ref, 0.0,
                                                  cur_clean + tau_b - tau_o)
                 u = -u
-        elif interpolation == "linear":
+        elif interpolation in ("linear", *_ICGN_KINDS):
             u, st = estimate_shift(ref_clean + tau_o, cur_clean + tau_b, period=train.du,
                                    interpolation=interpolation, shifted=shifted)
         if samples is not None:
@@ -491,7 +602,7 @@ def simulate(
                                 float(np.mean(st == 0))), strict=True):
             stats[k][i] = v
         pix[:, i] = _pixel_linearised(train, float(w), w_ref, max(sigma, 0.0), length,
-                                      displacement)
+                                      displacement, interpolation)
 
     s_o, s_b, cross = gradient_sums(train, wa, w_ref=w_ref, n_periods=n_periods)
     sig = max(sigma, 1e-300)
@@ -509,7 +620,7 @@ def simulate(
             train, wa, sigma=sig, n_periods=n_periods, w_ref=w_ref)),
         "u_paper_linear": ("w", predict_paper_linear(train, wa, sigma=sig,
                                                      n_periods=n_periods)),
-        "u_pixel_linearised": ("w", pix[3]),
+        "u_pixel_linearised": ("w", pix[3]),  # with this correlator's own D
         "sssig_blur_spectral": ("w", pix[1]),
         "sssig_ref_spectral": ("w", pix[0]),
         "cross_gradient_spectral": ("w", pix[2]),

@@ -14,7 +14,92 @@ import numpy as np
 
 from ._data import series, spearman
 
-__all__ = ["evaluate_claims"]
+__all__ = ["evaluate_claims", "judge_interval", "ratio_interval", "spearman_interval"]
+
+#: The three verdicts a criterion can give; "inconclusive" when the interval of our number
+#: straddles the criterion's boundary (neither inside it nor clear of it).
+VERDICTS = ("agrees", "differs", "inconclusive", "partly")
+
+
+def judge_interval(low: float, high: float, *, accept: tuple[float, float]) -> str:
+    """Verdict of an interval ``[low, high]`` against an acceptance region ``accept``.
+
+    "agrees" when the whole interval lies inside ``accept``, "differs" when it lies wholly
+    outside, "inconclusive" when it straddles a boundary (or is not finite).
+    """
+    lo, hi = accept
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return "inconclusive"
+    if lo <= low and high <= hi:
+        return "agrees"
+    if high < lo or low > hi:
+        return "differs"
+    return "inconclusive"
+
+
+def ratio_interval(num: Any, den: Any, *, level: float = 0.95) -> tuple[float, float, float]:
+    """Geometric-mean ratio of paired replicates with a t interval on the log ratio.
+
+    Returns ``(ratio, low, high)``; NaN bounds with fewer than two replicates.
+    """
+    from scipy import stats
+
+    r = np.log(np.asarray(num, dtype=float) / np.asarray(den, dtype=float))
+    r = r[np.isfinite(r)]
+    if r.size == 0:
+        return math.nan, math.nan, math.nan
+    m = float(r.mean())
+    if r.size < 2:
+        return math.exp(m), math.nan, math.nan
+    half = float(stats.t.ppf(0.5 + level / 2, r.size - 1)) * float(r.std(ddof=1)) / math.sqrt(
+        r.size)
+    return math.exp(m), math.exp(m - half), math.exp(m + half)
+
+
+def spearman_interval(a: Any, b: Any, *, level: float = 0.95) -> tuple[float, float, float]:
+    """Spearman rank correlation with a Fisher-z interval (variance 1.06 / (n - 3),
+    Fieller, Hartley & Pearson, Biometrika 44, 1957). NaN bounds below 4 pairs."""
+    from scipy import stats
+
+    rho = spearman(a, b)
+    x = np.asarray(a, dtype=float)
+    y = np.asarray(b, dtype=float)
+    n = int(np.sum(np.isfinite(x) & np.isfinite(y)))
+    if not math.isfinite(rho) or n < 4:
+        return rho, math.nan, math.nan
+    z = math.atanh(min(max(rho, -0.999999), 0.999999))
+    half = float(stats.norm.ppf(0.5 + level / 2)) * math.sqrt(1.06 / (n - 3))
+    return rho, math.tanh(z - half), math.tanh(z + half)
+
+
+def algorithm1_translation(image: np.ndarray, blur: float) -> dict[str, float]:
+    """Translation and symmetry of Algorithm 1 measured on the image itself.
+
+    The blurred image's spectrum over the sharp one's is the transfer function H(f) of
+    the blur. For Algorithm 1 along x it is exp(-i pi f X) times a real (Dirichlet) kernel:
+    the phase at the lowest frequency along x gives the translation (X/2 expected), and
+    H(f) exp(i pi f X) must be real at every frequency (a symmetric kernel: no other
+    shift). Returns the measured translation (px) and the largest imaginary residual
+    relative to max |H|.
+    """
+    from ..blur import motion_blur
+
+    img = np.asarray(image, dtype=np.float64)
+    b = motion_blur(img, (0.0, float(blur)))
+    fi = np.fft.fft(img, axis=1)
+    fb = np.fft.fft(b, axis=1)
+    n = img.shape[1]
+    f = np.fft.fftfreq(n)
+    # per-column-frequency transfer function, averaged over rows weighted by |I|^2
+    num = np.sum(fb * np.conj(fi), axis=0)
+    den = np.sum(np.abs(fi) ** 2, axis=0)
+    # the Nyquist bin carries no phase (a real signal): leave it out
+    ok = (den > 1e-12 * den.max()) & (np.abs(f) < 0.5)
+    h = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+    shift = float(-np.angle(h[1]) / (2 * math.pi * f[1]))
+    centred = h * np.exp(1j * math.pi * f * blur)
+    resid = float(np.max(np.abs(centred.imag[ok])) / np.max(np.abs(h[ok])))
+    return {"translation": shift, "expected": blur / 2.0, "asymmetry": resid}
 
 
 def _claim(cid: str, section: str, claim: str, paper: str, ours: str, verdict: str,
@@ -23,12 +108,12 @@ def _claim(cid: str, section: str, claim: str, paper: str, ours: str, verdict: s
             "verdict": verdict, "why": why}
 
 
-def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...]) -> dict[
-    str, Any
-]:
+def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...],
+                      replicates: int) -> dict[str, Any]:
     """u_e on pattern #4 with (a) a rigid offset of 0.5 px added to the motion and (b) a
     reference blurred like the current image (independent noise), against (c) the
-    campaign's case (sharp reference, offset 0). Same noise, subset, step."""
+    campaign's case (sharp reference, offset 0). Same noise, subset, step; ``replicates``
+    independent noise realisations of every image, paired across the three cases."""
     from ..blur import motion_blur
     from ..camera import add_gaussian_noise
     from ..dic import Correlator
@@ -36,25 +121,43 @@ def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...])
     rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 21]))
     sig = settings.main_noise
     kw = {"subset": settings.subset, "step": settings.poi_step, "shape": "translation"}
-    sharp_ref = add_gaussian_noise(image, sig, rng=rng)
-    base = Correlator(sharp_ref, **kw)
-    out: dict[str, Any] = {"blur": list(blur), "sharp_ref": [], "offset": [],
-                           "blurred_ref": []}
+    out: dict[str, Any] = {"blur": list(blur), "replicates": replicates,
+                           "sharp_ref": [], "offset": [], "blurred_ref": []}
     k = 100
     t = np.linspace(0.0, 1.0, k + 1)
     for w in blur:
-        cur = add_gaussian_noise(motion_blur(image, (0.0, w)), sig, rng=rng)
+        sharp = motion_blur(image, (0.0, w))
         # the same linear motion with a constant 0.5 px added to every position
         # (paper Section III: "adding a constant to the values of p")
         path = np.stack([np.zeros_like(t), 0.5 + w * t], axis=1)
-        cur_off = add_gaussian_noise(motion_blur(image, None, trajectory=path), sig, rng=rng)
-        ref_b = add_gaussian_noise(motion_blur(image, (0.0, w)), sig, rng=rng)
-        for key, corr, img in (("sharp_ref", base, cur), ("offset", base, cur_off),
-                               ("blurred_ref", Correlator(ref_b, **kw), cur)):
-            res = corr.correlate(img)
-            u = np.asarray(res.u)[np.asarray(res.converged)]
-            out[key].append(float(np.std(u, ddof=1)))
+        shifted = motion_blur(image, None, trajectory=path)
+        per: dict[str, list[float]] = {"sharp_ref": [], "offset": [], "blurred_ref": []}
+        for _ in range(replicates):
+            base = Correlator(add_gaussian_noise(image, sig, rng=rng), **kw)
+            cur = add_gaussian_noise(sharp, sig, rng=rng)
+            cur_off = add_gaussian_noise(shifted, sig, rng=rng)
+            ref_b = Correlator(add_gaussian_noise(sharp, sig, rng=rng), **kw)
+            for key, corr, img in (("sharp_ref", base, cur), ("offset", base, cur_off),
+                                   ("blurred_ref", ref_b, cur)):
+                res = corr.correlate(img)
+                u = np.asarray(res.u)[np.asarray(res.converged)]
+                per[key].append(float(np.std(u, ddof=1)))
+        for key, vals in per.items():
+            out[key].append(vals)
     return out
+
+
+def _fmt_ci(v: tuple[float, float, float], digits: int = 2) -> str:
+    return f"{v[0]:.{digits}f} [{v[1]:.{digits}f}, {v[2]:.{digits}f}]"
+
+
+def _combine(verdicts: list[str]) -> str:
+    """One verdict from several sub-criteria: all agree -> agrees, any differs -> differs."""
+    if all(v == "agrees" for v in verdicts):
+        return "agrees"
+    if any(v == "differs" for v in verdicts):
+        return "differs"
+    return "inconclusive"
 
 
 def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[str, Any],
@@ -73,54 +176,64 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     W = np.asarray(ds["blur"].values, dtype=float)
     rows: list[dict[str, Any]] = []
 
-    # C1 / C20: translation by X/2 and negligible bias.
+    # C1: Algorithm 1 on the image itself (a property of the blur, not of DIC).
+    p4 = next(p for p in pats if p.key == "p4")
+    alg = [algorithm1_translation(p4.image, w) for w in (1.0, 3.0, 6.0)]
+    dev = max(abs(r["translation"] - r["expected"]) for r in alg)
+    asym = max(r["asymmetry"] for r in alg)
+    rows.append(_claim(
+        "C1", "III", "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
+        "stated", "translation from the spectrum of the blurred / sharp image: " + ", ".join(
+            f"{r['translation']:.6f} px (X = {2 * r['expected']:g})" for r in alg)
+        + f"; max |translation - X/2| = {dev:.1e} px, kernel asymmetry {asym:.1e}",
+        "agrees" if (dev < 1e-6 and asym < 1e-6) else "differs",
+        "criterion: translation within 1e-6 px of X/2 and a symmetric (real, centred) "
+        "transfer function, measured on pattern #4 itself. DIC's own sub-pixel bias at the "
+        "W/2 shift is a separate matter (C2)."))
+
     bias = {k: series(ds, "bias", k, n)[valid[k]] for k in keys}
     ue = {k: series(ds, "u_e", k, n)[valid[k]] for k in keys}
     Wv = {k: W[valid[k]] for k in keys}
-    span = ", ".join(f"{labels[k].split()[0]} W <= {Wv[k].max():g}" for k in keys)
-    worst_bias = max(float(np.nanmax(np.abs(b))) for b in bias.values())
-    worst_rel = max(float(np.nanmax(np.abs(bias[k][Wv[k] > 0]) / (Wv[k][Wv[k] > 0] / 2)))
-                    for k in keys)
-    rows.append(_claim(
-        "C1", "III", "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
-        "stated", f"max |mean u - W/2| = {worst_bias:.4f} px, at most {100 * worst_rel:.2f} % "
-        f"of W/2, where DIC converges ({span})",
-        "agrees" if (worst_bias < 0.01 or worst_rel < 0.01) else "differs",
-        "criterion: |bias| < 0.01 px, or < 1 % of the W/2 shift; the DIC mean displacement "
-        "is W/2."))
+
     def worst(wmin: float) -> float:
         return max(float(np.nanmax(np.abs(bias[k][Wv[k] >= wmin]) / ue[k][Wv[k] >= wmin]))
                    for k in keys)
 
+    worst_bias = max(float(np.nanmax(np.abs(b))) for b in bias.values())
     r1, r3 = worst(1.0), worst(3.0)
     rows.append(_claim(
         "C2", "I, III", "Under blur the bias is negligible against the random error.",
         "stated (refs [5], [6])",
-        f"max |bias| / u_e = {r3:.2f} for W >= 3 px, {r1:.2f} for W >= 1 px",
+        f"max |bias| / u_e = {r3:.2f} for W >= 3 px, {r1:.2f} for W >= 1 px (max |mean u - "
+        f"W/2| = {worst_bias:.4f} px, DIC interpolation bias)",
         "agrees" if r1 < 0.3 else ("partly" if r3 < 0.3 else "differs"),
         "criterion: ratio < 0.3. At small blur the random error of a sharp, noise-light "
         "pattern is a few thousandths of a px and the sub-pixel interpolation bias of the "
         "W/2 shift is of the same size; once blur dominates, the bias is negligible."))
 
-    # Extra experiments on pattern #4.
-    p4 = next(p for p in pats if p.key == "p4")
-    mini = _mini_experiments(p4.image, s, (3.0, 6.0))
-    off = np.array(mini["offset"]) / np.array(mini["sharp_ref"])
+    # Extra experiments on pattern #4, with paired noise replicates.
+    reps = 4 if s.quick else 12
+    mini = _mini_experiments(p4.image, s, (3.0, 6.0), reps)
+    off = [ratio_interval(o, r) for o, r in zip(mini["offset"], mini["sharp_ref"],
+                                                 strict=True)]
     rows.append(_claim(
         "C3", "III", "The rigid part of the motion does not change the blur uncertainty.",
         "verified in [35]",
         "u_e(offset 0.5 px) / u_e(offset 0) = " + ", ".join(
-            f"{r:.2f} (W={w:g})" for r, w in zip(off, mini["blur"], strict=True)),
-        "agrees" if np.all(np.abs(off - 1) < 0.15) else "differs",
-        "criterion: within 15 % (one noise realisation each; pattern #4)."))
-    same = np.array(mini["blurred_ref"]) / np.array(mini["sharp_ref"])
+            f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(off, mini["blur"], strict=True)),
+        _combine([judge_interval(r[1], r[2], accept=(0.85, 1.15)) for r in off]),
+        f"criterion: ratio within 15 % of 1; 95 % interval over {reps} paired noise "
+        "realisations (pattern #4); inconclusive when the interval straddles the bound."))
+    same = [ratio_interval(o, r) for o, r in zip(mini["blurred_ref"], mini["sharp_ref"],
+                                                  strict=True)]
     rows.append(_claim(
         "C4", "V-A", "Random errors are smaller when both images carry the same blur "
         "(a sharp reference is the worst case).", "stated (ref [5])",
         "u_e(blurred ref) / u_e(sharp ref) = " + ", ".join(
-            f"{r:.2f} (W={w:g})" for r, w in zip(same, mini["blur"], strict=True)),
-        "agrees" if np.all(same < 1) else "differs",
-        "criterion: ratio < 1 at every W tested (pattern #4)."))
+            f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(same, mini["blur"], strict=True)),
+        _combine([judge_interval(r[1], r[2], accept=(0.0, 1.0)) for r in same]),
+        f"criterion: ratio < 1 at every W tested; 95 % interval over {reps} paired noise "
+        "realisations (pattern #4)."))
 
     # C5 Pan's approximation at W = 0 (Fig. 2).
     pan = {k: static[k]["metrics"]["sssig_x_mean"] / static[k]["metrics"]["pan_sssig"]
@@ -199,12 +312,17 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     wa = np.asarray(f5["w"].values)
     sel = wa < float(f5.attrs.get("dp", 10.0))
     ratio6 = float(np.mean(np.asarray(f5["min_chi2"].values)[sel] / (wa[sel] / 6.0)))
+    ratio4 = ratio6 * 6 / 4
+    # the paper's w/4 against the exact minimum, our w/6 as the alternative (2 % band)
+    v12 = ("agrees" if abs(ratio4 - 1) < 0.02 else
+           "differs" if abs(ratio6 - 1) < 0.02 else "inconclusive")
     rows.append(_claim(
-        "C12", "V-A, eq. 13", "SSD in regime (a): chi2 ~ N a^2 (w/4 + 2 w xi^2).",
-        "w/4 (as extracted)", f"exact continuous minimum / (a^2 w / 6) = {ratio6:.4f}; "
-        f"w/4 would give {ratio6 * 6 / 4:.3f}",
-        "differs", "our derivation (brief s. 6) gives a^2 (w/6 + 2 xi^2 / w) per period and "
-        "the exact integral confirms it; the seed's equation is garbled by extraction."))
+        "C12", "V-A, eq. 13", "SSD in regime (a): chi2 ~ N a^2 (w/4 + 2 xi^2 / w).",
+        "minimum N a^2 w/4", f"exact continuous minimum / (N a^2 w/4) = {ratio4:.4f}; "
+        f"/ (N a^2 w/6) = {ratio6:.4f}", v12,
+        "criterion: the exact minimum (numerical integral of the SSD of the sampled "
+        "continuous signals, regime a) within 2 % of the paper's w/4; it follows w/6 instead "
+        "(the closed form a^2 (w/6 + 2 xi^2 / w) per period, docs/pulse.md)."))
     mins = np.asarray(f5["min_chi2"].values)
     frac = float(np.mean(np.diff(mins[: int(np.argmax(mins)) + 1]) > 0))
     rows.append(_claim(
@@ -214,15 +332,23 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         "then falls as the blurred pulses merge (regime c)."))
     fit_a = next((f for f in pulse.fits if f.regime == "a"), None)
     if fit_a is not None:
-        lo, hi = fit_a.slope_ci
+        from ..pulse.verdict import CORRELATORS, correlator_rows
+
+        slopes = [("spectral (main run)", fit_a.slope, fit_a.slope_ci)]
+        slopes += [(CORRELATORS[r.interpolation], r.slope_a, r.slope_a_ci)
+                   for r in correlator_rows(pulse.dependence)
+                   if r.interpolation in ("bspline", "keys")]
+        linear = [lo <= 1 <= hi for _, _, (lo, hi) in slopes]
         rows.append(_claim(
             "C14", "V-A/B, eq. 16, Fig. 6", "1-D uncertainty grows linearly with w "
             "(edge-driven region).", "linear (eq. 16)",
-            f"log-log slope {fit_a.slope:.2f} [{lo:.2f}, {hi:.2f}] over w = "
-            f"{fit_a.w_min:g}..{fit_a.w_max:g}", "agrees" if lo <= 1 <= hi else "differs",
-            "slope 1 inside the 95% CI, slope 1/2 (first-principles sqrt law) outside; the "
-            "mechanism is not eq. 16's but the noise weighed against the sharp reference's "
-            "gradient (docs/pulse-verdict.md)."))
+            "log-log slope over regime (a): " + "; ".join(
+                f"{name} {sl:.2f} [{lo:.2f}, {hi:.2f}]" for name, sl, (lo, hi) in slopes),
+            "agrees" if all(linear) else ("partly" if any(linear) else "differs"),
+            "criterion: slope 1 inside the 95 % CI for every correlator (a measured-signal "
+            "estimator: spectral, B-spline IC-GN, Keys + central differences). The slope "
+            "follows sigma sqrt(S_o + S_b) / |C| with each correlator's own derivative "
+            "(docs/pulse-verdict.md), so it depends on the estimator."))
     rows.append(_claim(
         "C15", "V-B, Fig. 6", "u_e rises faster past w = du - dp (contrast-driven region).",
         f"knee at w = {pulse.knee_paper:g}", f"knee observed at w = {pulse.knee:g} "
@@ -272,24 +398,32 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     al, be = fits[k4]["alpha"]["value"], fits[k4]["beta"]["value"]
     w1 = math.sqrt(0.05 / (al * be)) if al * be > 0 else 1.0
     exact = (be * w1**2 + 1) ** al - 1
+    single, double = al * be * w1**2, 2 * al * be * w1**2
+    # which second-order term matches eq. 19's exact rise (10 % band, small W)
+    v20 = ("agrees" if abs(exact / double - 1) < 0.1 else
+           "differs" if abs(exact / single - 1) < 0.1 else "inconclusive")
     rows.append(_claim(
         "C20", "VI, eqs. 21-22", "u_e(W) ~= u_e(0) (1 + 2 alpha beta W^2) = u_e(0) "
         "(1 + MBRF W^2).", "factor 2 alpha beta",
         f"pattern #4 at W = {w1:.2f} px: exact eq. 19 rise {exact:.4f}, alpha beta W^2 = "
-        f"{al * be * w1**2:.4f}, 2 alpha beta W^2 = {2 * al * be * w1**2:.4f}", "differs",
-        "the Taylor expansion of eq. 19 is u_e(0)(1 + alpha beta W^2): eq. 22 doubles the "
-        "second-order term. MBRF = 2 alpha beta is kept as the paper defines it (it equals "
-        "u_e''(0) / u_e(0)); predictions use the correct expansion."))
+        f"{single:.4f}, 2 alpha beta W^2 = {double:.4f}", v20,
+        "criterion: the eq. 22 term within 10 % of the exact rise of eq. 19 at small W. "
+        "The Taylor expansion of eq. 19 is u_e(0)(1 + alpha beta W^2); MBRF = 2 alpha beta "
+        "is kept as the paper defines it (it equals u_e''(0) / u_e(0)); predictions use the "
+        "correct expansion."))
     fam = sorted(family, key=lambda r: r["mig0"])
-    r_u0 = spearman([r["mig0"] for r in fam], [r["u_e0"] for r in fam])
-    r_mb = spearman([r["mig0"] for r in fam], [r["mbrf"] for r in fam])
+    r_u0 = spearman_interval([r["mig0"] for r in fam], [r["u_e0"] for r in fam])
+    r_mb = spearman_interval([r["mig0"] for r in fam], [r["mbrf"] for r in fam])
     rows.append(_claim(
         "C21", "VI, Fig. 11", "Raising MIG_0 improves noise rejection but speeds up the "
         "loss under blur: static and dynamic performance cannot both be maximised.",
         "Fig. 11 (non-monotonic eta, MBRF)",
-        f"over {len(fam)} generated patterns: Spearman(MIG_0, u_e(0)) = {r_u0:.2f}, "
-        f"Spearman(MIG_0, MBRF) = {r_mb:.2f}",
-        "agrees" if (r_u0 < -0.5 and r_mb > 0.5) else "differs",
-        "criterion: u_e(0) falls (< -0.5) while MBRF rises (> 0.5) with MIG_0. eta alone "
-        "is not comparable across patterns when alpha differs (its units change)."))
+        f"over {len(fam)} generated patterns: Spearman(MIG_0, u_e(0)) = {_fmt_ci(r_u0)}, "
+        f"Spearman(MIG_0, MBRF) = {_fmt_ci(r_mb)}",
+        _combine([judge_interval(r_u0[1], r_u0[2], accept=(-1.0, -0.5)),
+                  judge_interval(r_mb[1], r_mb[2], accept=(0.5, 1.0))]),
+        "criterion: u_e(0) falls (rho < -0.5) while MBRF rises (rho > 0.5) with MIG_0, "
+        "each 95 % interval (Fisher z) inside its bound; with few patterns the interval is "
+        "wide and the verdict inconclusive. eta alone is not comparable across patterns "
+        "when alpha differs (its units change)."))
     return rows

@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-__all__ = ["HtmlReport", "fig_to_files"]
+__all__ = ["HtmlReport", "fig_to_files", "markdown_to_html"]
 
 _CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1100px;
@@ -30,7 +30,8 @@ th,td{border:1px solid #c9d3dc;padding:.3em .6em;text-align:right}
 th{background:#eef3f7}td.l,th.l{text-align:left}
 figure{margin:1.5em 0;text-align:center}figure img{max-width:100%;height:auto}
 figcaption{font-size:.9em;color:#44515c;margin-top:.4em}
-.agrees{color:#1a7f37;font-weight:600}.partly{color:#7d6608;font-weight:600}.differs{color:#b35900;font-weight:600}
+.agrees{color:#1a7f37;font-weight:600}.partly{color:#7d6608;font-weight:600}
+.differs{color:#b35900;font-weight:600}.inconclusive{color:#5a6470;font-weight:600}
 .note{background:#f6f8fa;border-left:4px solid #2a6f97;padding:.6em 1em}
 nav ul{columns:2}code,pre{background:#f6f8fa;padding:.1em .3em}
 pre{padding:.8em;overflow-x:auto}
@@ -46,6 +47,72 @@ window.addEventListener('load', function () {
 });
 </script>
 """
+
+
+def _inline(text: str) -> str:
+    body = html.escape(text)
+    body = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", body)
+    body = re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<em>\1</em>", body)
+    return re.sub(r"`(.+?)`", r"<code>\1</code>", body)
+
+
+def markdown_to_html(text: str, *, heading_offset: int = 0) -> str:
+    """Render the small Markdown subset of dicblur's generated texts as HTML.
+
+    Blocks: ``#``..``######`` headings, ``- `` bullet lists, ``|``-delimited tables (the
+    second row a ``|---|`` separator), blank-line separated paragraphs, ``---`` rules.
+    Inline: ``**bold**``, ``*italic*``, ```code```. Everything else is escaped text.
+    """
+    out: list[str] = []
+    para: list[str] = []
+    items: list[str] = []
+    rows: list[list[str]] = []
+
+    def flush() -> None:
+        if para:
+            out.append("<p>" + _inline(" ".join(para)) + "</p>")
+            para.clear()
+        if items:
+            out.append("<ul>" + "".join(f"<li>{_inline(i)}</li>" for i in items) + "</ul>")
+            items.clear()
+        if rows:
+            head, body = rows[0], rows[1:]
+            cells = "".join(f"<th>{_inline(c)}</th>" for c in head)
+            trs = "".join("<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in r) + "</tr>"
+                          for r in body)
+            out.append(f"<table><tr>{cells}</tr>{trs}</table>")
+            rows.clear()
+
+    for raw in text.splitlines():
+        line = raw.rstrip()
+        m = re.match(r"^(#{1,6})\s+(.*)$", line)
+        if m:
+            flush()
+            level = min(len(m.group(1)) + heading_offset + 1, 6)
+            out.append(f"<h{level}>{_inline(m.group(2))}</h{level}>")
+        elif line.startswith("|"):
+            if para or items:
+                flush()
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if not all(re.fullmatch(r":?-{3,}:?", c) for c in cells):
+                rows.append(cells)
+        elif re.match(r"^\s*[-*]\s+", line) and not re.fullmatch(r"-{3,}", line.strip()):
+            if para or rows:
+                flush()
+            items.append(re.sub(r"^\s*[-*]\s+", "", line))
+        elif re.fullmatch(r"-{3,}", line.strip()):
+            flush()
+            out.append("<hr>")
+        elif not line.strip():
+            flush()
+        elif items and raw.startswith(("  ", "\t")):
+            items[-1] += " " + line.strip()
+        else:
+            if rows or items:
+                flush()
+            para.append(line.strip())
+    flush()
+    return "".join(out)
 
 
 def _slug(text: str) -> str:
@@ -106,6 +173,13 @@ class HtmlReport:
         body = re.sub(r"`(.+?)`", r"<code>\1</code>", body)
         cls = f' class="{css_class}"' if css_class else ""
         self._parts.append(f"<p{cls}>{body}</p>")
+
+    def markdown(self, text: str, *, heading_offset: int = 0) -> None:
+        """Add a block of simple Markdown (what dicblur's own generated texts use): ``#``
+        headings, ``-`` lists, ``|`` tables, paragraphs, ``**bold**``, ``*italic*`` and
+        ``code``. Headings are shifted down by ``heading_offset`` levels and are not listed
+        in the table of contents."""
+        self._parts.append(markdown_to_html(text, heading_offset=heading_offset))
 
     def preformatted(self, text: str) -> None:
         """Add a block of preformatted text (commands, versions)."""

@@ -24,6 +24,7 @@ import math
 import platform
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -145,12 +146,14 @@ def _study_patterns(s: ReproduceSettings) -> list[StudyPattern]:
     if s.pattern1 is not None:
         p1 = load_user_pattern("p1", "#1 Sample 13", s.pattern1, s.size)
     else:
-        p1 = StudyPattern("p1", "#1 stand-in (fine, soft)", stand_in_pattern1(s.size, s.seed + 1),
+        p1 = StudyPattern("p1", "#1 stand-in (fine, low contrast)",
+                          stand_in_pattern1(s.size, s.seed + 1),
                           True, "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135")
     if s.pattern2 is not None:
         p2 = load_user_pattern("p2", "#2 Sample 3", s.pattern2, s.size)
     else:
-        p2 = StudyPattern("p2", "#2 stand-in (sharp)", stand_in_pattern2(s.size, s.seed + 2),
+        p2 = StudyPattern("p2", "#2 stand-in (coarse, high contrast)",
+                          stand_in_pattern2(s.size, s.seed + 2),
                           True, "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190")
     return [p1, p2, emulated_camera_pattern3(s.size, s.seed + 3),
             numerical_pattern4(s.size, s.seed + 4)]
@@ -312,9 +315,20 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
                 "step": s.poi_step, "dic": "translation IC-GN, ZNSSD, bspline3",
                 "noise": "per-exposure Gaussian",
                 "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged"}
-        paper = fit_blur_model(W[v], sg, u, noise_sigma=s.main_noise, contrast_ref=cref,
-                               contrast=con, subset=s.subset, c_static=static[k]["c_static"],
-                               provenance=prov, mean_level=float(p.image.mean()))
+        # the automatic eq. 17 range may fall back on its minimum number of points; the
+        # report states the range it used (table "eq.17 range"), so the warning, which
+        # tells an API user to pass fit_range, is kept as a note instead of printed
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            paper = fit_blur_model(W[v], sg, u, noise_sigma=s.main_noise, contrast_ref=cref,
+                                   contrast=con, subset=s.subset,
+                                   c_static=static[k]["c_static"], provenance=prov,
+                                   mean_level=float(p.image.mean()))
+        range_notes = [str(c.message).split(". Pass fit_range")[0] for c in caught
+                       if "edge-driven range" in str(c.message)]
+        for c in caught:
+            if "edge-driven range" not in str(c.message):
+                warnings.warn_explicit(c.message, c.category, c.filename, c.lineno)
         allw = np.concatenate([W[ok[lv]] for lv in s.noise_levels])
         allu = np.concatenate([series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
         alls = np.concatenate([series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
@@ -348,6 +362,7 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
             "beta": _param(paper.decay, "beta"), "sssig0": _param(paper.decay, "sssig0"),
             "mbrf": paper.mbrf, "r2_decay": paper.decay.r2, "r2_power_law": paper.power_law.r2,
             "fit_range": list(paper.fit_range), "range_rule": paper.range_rule,
+            "range_note": "; ".join(range_notes),
             "mig0": static[k]["metrics"]["mig"],
             "c_static": static[k]["c_static"], "c_fitted": full.c,
             "c_fitted_param": _param(full.mismatch, "c") if full.mismatch else None,
@@ -395,7 +410,7 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     report_path, figures = write_report(
         out=out, settings=s, ds=ds, pats=pats, static=static, fits=fits, models=models,
         family=fam_rows, pulse=pulse, claims=claims, versions=versions, timings=timings,
-        valid=valid)
+        valid=valid, clock=(t0, t))
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     results = {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -21,9 +22,13 @@ def _ci(p: dict[str, float], digits: int = 3) -> str:
 def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: dict[str, Any],
                  fits: dict[str, Any], models: dict[str, Any], family: list[dict[str, Any]],
                  pulse: Any, claims: list[dict[str, Any]], versions: dict[str, str],
-                 timings: dict[str, float], valid: dict[str, np.ndarray]
-                 ) -> tuple[Path, list[str]]:
-    """Write figures and ``report.html`` into ``out``; return its path and figure names."""
+                 timings: dict[str, float], valid: dict[str, np.ndarray],
+                 clock: tuple[float, float] | None = None) -> tuple[Path, list[str]]:
+    """Write figures and ``report.html`` into ``out``; return its path and figure names.
+
+    ``clock = (t_start, t_report)`` (``time.perf_counter`` values at the start of the run
+    and of the report stage) completes the stage-time table with the report and the total.
+    """
     from .pulse_figures import plot_min_chi2, plot_regimes, plot_uncertainty
 
     s = settings
@@ -35,13 +40,15 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     rep.section("Summary")
     agree = sum(1 for c in claims if c["verdict"] == "agrees")
     partly = sum(1 for c in claims if c["verdict"] == "partly")
+    unsure = sum(1 for c in claims if c["verdict"] == "inconclusive")
     rep.paragraph(
         f"Mode: **{'quick' if s.quick else 'full'}**; {len(pats)} patterns of {s.size}x{s.size} "
         f"px, blur W = 0..10 px in steps of {s.blur_step:g} px along x, per-exposure Gaussian "
         f"noise {', '.join(f'{v:g}' for v in s.noise_levels)} GL (paper-like fits at {n:g} GL), "
         f"subset {s.subset} px, POIs every {s.poi_step} px, translation IC-GN (ZNSSD, cubic "
-        f"B-spline). {agree} of {len(claims)} claims agree with our numbers, {partly} partly; "
-        "the others are listed with the reason.")
+        f"B-spline). {agree} of {len(claims)} claims agree with our numbers, {partly} partly, "
+        f"{unsure} are inconclusive at this run's size (their interval straddles the "
+        "criterion); the others differ, each with its criterion and reason.")
     if any(p.synthetic and p.key in ("p1", "p2") for p in pats):
         rep.paragraph(
             "Patterns #1 and #2 are **synthetic stand-ins** (the DIC Challenge images are not "
@@ -51,7 +58,8 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     rep.section("Claims of the paper and our verdicts")
     rep.table(claims, columns=["id", "section", "claim", "paper", "ours", "verdict", "why"],
               left=["id", "section", "claim", "paper", "ours", "verdict", "why"],
-              classes={"verdict": {"agrees": "agrees", "differs": "differs", "partly": "partly"}})
+              classes={"verdict": {"agrees": "agrees", "differs": "differs", "partly": "partly",
+                                   "inconclusive": "inconclusive"}})
 
     rep.section("Patterns (Fig. 1) and static metrics")
     rep.figure(F.fig_patterns({p.label: p.image for p in pats}), "fig01_patterns",
@@ -86,7 +94,7 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
                   "Fig. 5: minimum of the SSD against w (a = 1, du = 20, dp = 10).")
     rep.figure_from_writer(lambda pth: plot_uncertainty(pulse, pth), "fig06_pulse_ue",
                   "Fig. 6: 1-D Monte Carlo u_e(w) with the paper's and first-principles laws.")
-    rep.preformatted(pulse.verdict)
+    rep.markdown(pulse.verdict, heading_offset=1)
 
     rep.section("Section VI: the power-law model")
     rep.paragraph(
@@ -139,6 +147,10 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
                           "eq.17 range (px)"],
               caption="Fitted parameters with 95 % confidence intervals (covariance of the "
                       f"fit), noise {n:g} GL.")
+    notes = [f"{lab[p.key]}: {fits[p.key]['range_note']}" for p in pats
+             if fits[p.key].get("range_note")]
+    if notes:
+        rep.paragraph("Automatic eq. 17 range: " + "; ".join(notes) + ".")
 
     rep.section("Fig. 11: eta and MBRF against MIG_0")
     study_rows = [{"label": lab[p.key], "mig0": fits[p.key]["mig0"],
@@ -183,8 +195,14 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     rep.section("Reproducibility")
     rep.preformatted(s.command or "(called from Python)")
     rep.preformatted("\n".join(f"{k}: {v}" for k, v in versions.items()))
-    rep.table([{"stage": k, "seconds": v} for k, v in timings.items()], left=["stage"],
-              caption="Wall time per stage (this run).")
+    stage_rows = [{"stage": k, "seconds": v} for k, v in timings.items()
+                  if k not in ("report", "total")]
+    if clock is not None:
+        now = time.perf_counter()
+        stage_rows.append({"stage": "report (claims, figures, page)", "seconds": now - clock[1]})
+        stage_rows.append({"stage": "total", "seconds": now - clock[0]})
+    rep.table(stage_rows, left=["stage"], caption="Wall time per stage (this run; the "
+              "report and total rows are read just before this page is written).")
     rep.paragraph("Files: results.json (every number above), campaign/*.zarr (datasets), "
                   "model_*.json (fitted models), patterns/*.tif, figures/*.png|svg.")
     return rep.write(), list(rep.figures)

@@ -106,8 +106,28 @@ def fig_loglog(data: Mapping[str, Mapping[str, Any]]) -> Any:
         ax.set_xlabel("SSSIG (GL$^2$/px$^2$)")
         ax.set_ylabel(r"$u_e$ (px)")
         ax.legend(fontsize=8)
+        _readable_log_ticks(ax)
     _layout(fig, rows=len(axes) // 2)
     return fig
+
+
+def _readable_log_ticks(ax: Any) -> None:
+    """Log axes spanning less than a decade get minor-tick labels that overlap: label
+    1-2-5 steps in compact scientific notation and leave the other minor ticks bare."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    def fmt(v: float, _pos: int) -> str:
+        if v <= 0:
+            return ""
+        e = int(np.floor(np.log10(v) + 1e-12))
+        m = v / 10.0**e
+        return f"{m:.0f}e{e}" if abs(e) >= 3 else f"{v:g}"
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        axis.set_major_formatter(FuncFormatter(fmt))
+        axis.set_minor_formatter(NullFormatter())
+    ax.tick_params(axis="both", labelsize=8)
 
 
 def fig_contrast_error(data: Mapping[str, Mapping[str, np.ndarray]]) -> Any:

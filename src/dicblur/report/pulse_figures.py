@@ -20,17 +20,20 @@ def plot_regimes(path: str | Path) -> Path:
     cases = (("(a) w < dp, w < g", PAPER_TRAIN, 3.0), ("(b) dp <= w < g", PAPER_TRAIN, 10.0),
              ("(c) w >= dp, w >= g", PAPER_TRAIN, 19.0),
              ("(d) g <= w < dp (dp = 16)", DENSE_TRAIN, 10.0))
-    fig, axes = subplots(2, 2, figsize=(9, 5.5), sharey=True)
+    fig, axes = subplots(2, 2, figsize=(9, 6), sharey=True)
     for ax, (title, train, w) in zip(axes.ravel(), cases, strict=True):
         x = np.linspace(-train.du / 2, 1.5 * train.du, 2000)
         ax.plot(x, train.value(x), "b--", lw=1, label="sharp p(x)")
-        ax.plot(x, train.blurred(x, w), "r-", lw=1.6, label=f"blurred, w = {w:g} px")
+        ax.plot(x, train.blurred(x, w), "r-", lw=1.6, label="blurred by the box of width w")
         ax.set_title(f"{title}: w = {w:g}, dp = {train.dp:g}, du = {train.du:g}", fontsize=9)
         ax.set_xlabel("x (px)")
-        ax.legend(fontsize=7, loc="upper right")
+        ax.set_ylim(-0.05, 1.1)
     axes[0, 0].set_ylabel("grey level")
     axes[1, 0].set_ylabel("grey level")
-    fig.tight_layout()
+    # one legend below the panels: inside them it covered the signals
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     out = Path(path)
     fig.savefig(out, dpi=120)
     return out
@@ -59,7 +62,7 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
     log-log axes)."""
     ds = study.dataset
     w = ds["w"].values
-    fig, axes = subplots(1, 2, figsize=(11, 4.3))
+    fig, axes = subplots(1, 2, figsize=(11, 5.0))
     for ax, log in zip(axes, (False, True), strict=True):
         err = np.vstack([ds["u_e"] - ds["u_e_ci_low"], ds["u_e_ci_high"] - ds["u_e"]])
         ax.errorbar(w, ds["u_e"], yerr=err, fmt="ko", ms=4, capsize=2,
@@ -77,16 +80,24 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
         if log:
             ax.set_xscale("log")
             ax.set_yscale("log")
-            ax.set_title("log-log", fontsize=9)
+            ax.set_title("all widths, log-log", fontsize=9)
         else:
-            ax.set_ylim(0, max(0.5, float(ds["u_e"].sel(w=slice(None, 13)).max()) * 1.3))
-            ax.set_title("linear axes (zoom on w <= 13)", fontsize=9)
-    axes[1].legend(fontsize=7, loc="upper left")
+            # zoom on the identifiable range, up to the predicted knee
+            w_zoom = float(study.knee_predicted)
+            top = max(float(ds["u_e_ci_high"].sel(w=slice(None, w_zoom)).max()),
+                      float(ds["u_paper_linear"].sel(w=slice(None, w_zoom)).max()))
+            ax.set_xlim(0.5, w_zoom + 0.5)
+            ax.set_ylim(0, 1.1 * top)
+            ax.set_title(f"zoom: w <= {w_zoom:g} (up to the predicted knee), linear axes",
+                         fontsize=9)
+    # one legend below both panels: inside them it covered the Monte Carlo points
+    handles, labels = axes[1].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.suptitle(
         f"1-D pulse Monte Carlo: a = {ds.attrs['a']:g}, dp = {ds.attrs['dp']:g}, du = "
         f"{ds.attrs['du']:g}, sigma = {ds.attrs['sigma']:g}, N = {ds.attrs['n_periods']}, "
         f"{ds.attrs['trials']} trials", fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
     out = Path(path)
     fig.savefig(out, dpi=120)
     return out

@@ -148,6 +148,7 @@ def calibrate(
     from ..models import fit_blur_model
     from .engine import run_campaign
     from .store import export_csv, open_results
+    from .tasks import make_pattern
 
     spec = calibration_spec(image, noise=noise, subset=subset, angle=angle, step=step,
                             noise_model=noise_model, shape=shape, size=size, seed=seed,
@@ -164,16 +165,22 @@ def calibrate(
     ds = open_results(results).isel(pattern=0, angle=0, subset=0, noise=0)
     mean = ds.mean("rep")
     w = mean["blur"].values
+    hashes = json.loads(ds.attrs["input_hashes"])
     model = fit_blur_model(
         w, mean["sssig"].values, mean["u_e"].values,
         noise_sigma=float(mean["noise_effective"].mean()),
         contrast_ref=mean["rms_contrast_ref"].values,
         contrast=mean["rms_contrast"].values,
         subset=subset,
+        # validity domain: DIC breaks down where < 90 % of the POIs converge (worst rep)
+        converged_fraction=ds["converged_fraction"].min("rep").values,
+        shape=shape, pattern=spec.patterns[0].name,
+        pattern_sha256=next(iter(hashes.values()), None) if len(hashes) == 1 else None,
+        mean_level=float(np.mean(make_pattern(spec, spec.patterns[0]))),
         provenance={
             "source": "dicblur calibrate",
             "pattern": spec.patterns[0].to_dict(),
-            "input_hashes": json.loads(ds.attrs["input_hashes"]),
+            "input_hashes": hashes,
             "spec_hash": ds.attrs["spec_hash"],
             "noise_model": noise_model, "noise": noise, "angle": angle, "step": step,
             "dic_shape": shape,
@@ -203,8 +210,13 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
 
     fig, ax = plt.subplots(figsize=(5.5, 4))
     ax.plot(w, ue, "o", ms=3, label="campaign (std over POIs)")
-    pred = model.predict(wf)
-    ax.plot(wf, getattr(pred, "u_e", pred), "-", label=f"model ({model.default})")
+    for kind, style in (("mismatch", "-"), ("power_law", "--")):
+        if kind == "mismatch" and model.mismatch is None:
+            continue
+        pred = model.predict(wf, model=kind)  # NaN (not drawn) where DIC breaks down
+        ax.plot(wf, pred.u_e, style, label=("noise + blur mismatch" if kind == "mismatch"
+                                            else "power law, eq. 19")
+                + (" (default)" if kind == model.default else ""))
     ax.plot(w, ds["u_match_score"].values, ":", label="static match score, eq. 2")
     ax.set(xlabel="blur length W (px)", ylabel="u_e (px)",
            title="random error vs blur")
@@ -230,7 +242,7 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
     ax.loglog(s, ue, "o", ms=3, label="campaign")
     sf = np.geomspace(float(s.min()), float(s.max()), 100)
     pl = model.power_law
-    ax.loglog(sf, pl["eta"] / sf ** pl["alpha"], "-",
+    ax.loglog(sf, pl["u_ref"] * (sf / pl.extra["sssig_ref"]) ** (-pl["alpha"]), "-",
               label=f"eq. 17 fit, alpha = {pl['alpha']:.2f} (W in {model.fit_range[0]:g}.."
                     f"{model.fit_range[1]:g} px)")
     ax.set(xlabel="SSSIG ((GL/px)^2)", ylabel="u_e (px)", title="log u_e vs log SSSIG")

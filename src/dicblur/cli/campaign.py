@@ -166,20 +166,29 @@ def calibrate_command(
                         size=parse_size(size), scheduler=scheduler, workers=workers,
                         serial=serial, progress=progress)
     m = res.model
+    mm = m.mismatch
+    dom = m.domain
     print_mapping(
         f"calibration: {image}",
         {
             "SSSIG_0": m.decay["sssig0"],
             "beta (eq. 18)": m.decay["beta"],
             "R^2 of the SSSIG fit": res.sssig_r2,
-            "alpha (eq. 17)": m.alpha,
+            "power law (paper): u_ref = u_e(0)": m.u_ref,
+            "power law (paper): alpha (eq. 17)": m.alpha,
             "MBRF = 2 alpha beta": m.mbrf,
+            "mismatch model: a": None if mm is None or "a" not in mm else mm["a"],
+            "mismatch model: c": None if mm is None else mm["c"],
             "default model": m.default,
+            "validity domain": dom.describe() if dom else None,
+            "DIC breaks down from W": None if dom is None else dom.breakdown_blur,
             "model": str(res.model_path),
             "results": str(res.results_path),
             "figures": ", ".join(p.name for p in res.figures),
         },
-        {"SSSIG_0": "(GL/px)^2", "beta (eq. 18)": "1/px^2", "MBRF = 2 alpha beta": "1/px^2"},
+        {"SSSIG_0": "(GL/px)^2", "beta (eq. 18)": "1/px^2", "MBRF = 2 alpha beta": "1/px^2",
+         "power law (paper): u_ref = u_e(0)": "px", "mismatch model: c": "px/px^2",
+         "DIC breaks down from W": "px"},
     )
     return 0
 

@@ -177,7 +177,7 @@ def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
     from ..blur import motion_blur
     from ..campaign import directional_sssig
     from ..metrics import subset_centres
-    from ..models import blur_sensitivity
+    from ..models import blur_sensitivity, mismatch_terms
 
     w = problem.blur_array if blurs is None else np.asarray(blurs, dtype=np.float64)
     u2 = np.zeros(w.size)
@@ -192,7 +192,9 @@ def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
             b = img if wj == 0 else motion_blur(img, (0.0, float(wj)),
                                                 substeps=problem.substeps)
             s = float(np.mean(directional_sssig(b, pts, subset=problem.subset, angle=0.0)))
-            u2[j] += 2.0 * problem.noise**2 / s + (c * wj * wj) ** 2
+            # the mismatch model with its theoretical constants (a = 2, gamma = 1, no floor)
+            noise, blur2 = mismatch_terms([wj], [s], problem.noise, c=c)
+            u2[j] += float(noise[0] + blur2[0])
     return np.sqrt(u2 / len(images)), float(np.mean(cs))
 
 

@@ -324,3 +324,38 @@ def test_one_home_for_the_mismatch_formula():
     expect = mismatch_model(w, m.sssig(w), 4.0, a=p["a"], c=p["c"], floor=p["floor"],
                             cross=p["cross"])
     np.testing.assert_allclose(pred.u_e, expect, rtol=1e-12)
+
+
+# ------------------------------------------------------------------ "done when": end to end
+def _direct_u_e(tmp_path, tag: str, *, noise: float, blur: float, size: int, reps: int):
+    """u_e measured by simulation (campaign, same pattern as the calibration: seed 1)."""
+    from dicblur.campaign import open_results, run_campaign
+    from dicblur.campaign.calibrate import calibration_spec
+
+    spec = calibration_spec("paper4", noise=noise, subset=21, size=(size, size),
+                            blur=[float(blur)], repetitions=reps, seed=1)
+    run_campaign(spec, tmp_path / f"{tag}.zarr", serial=True)
+    u = open_results(tmp_path / f"{tag}.zarr")["u_e"].values.ravel()
+    return float(np.sqrt(np.mean(u**2)))
+
+
+@pytest.mark.slow
+def test_calibrate_then_predict_and_plan_match_a_direct_simulation(tmp_path, capsys):
+    # about 20-30 s: a 128^2 calibration (13 blur levels) and two 8-repetition simulations
+    cal = tmp_path / "cal"
+    assert main(["calibrate", "paper4", "--size", "128x128", "--noise", "2", "--subset",
+                 "21", "--blur", "0:6:0.5", "-o", str(cal), "--serial", "-q"]) == 0
+    model = cal / "model.json"
+    capsys.readouterr()
+    assert main(["predict", str(model), "--blur", "3", "--noise", "4", "--json"]) == 0
+    pred = json.loads(capsys.readouterr().out)["predictions"][0]["u_e_px"]
+    meas = _direct_u_e(tmp_path, "n4", noise=4.0, blur=3.0, size=128, reps=8)
+    assert pred == pytest.approx(meas, rel=0.10), (pred, meas)
+    assert main(["plan", str(model), "--velocity", "120mm/s", "--scale", "0.05mm/px",
+                 "--full-well", "20000", "--read-noise", "5", "--flux", "4e6", "--json"]) == 0
+    plan = json.loads(capsys.readouterr().out)
+    m = BlurUncertaintyModel.from_json(str(model))
+    cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)
+    sigma = float(cam.noise_gl(plan["exposure"], m.mean_level))
+    meas = _direct_u_e(tmp_path, "plan", noise=sigma, blur=plan["blur"], size=128, reps=8)
+    assert plan["u_e"] == pytest.approx(meas, rel=0.10), (plan["u_e"], meas)

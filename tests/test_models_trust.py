@@ -19,7 +19,6 @@ from dicblur.models import (
     fit_power_law,
     fit_sssig_decay,
     mismatch_model,
-    mismatch_terms,
     plan_exposure,
     sssig_decay,
 )
@@ -304,6 +303,8 @@ def test_interval_coverage_nominal(which):
 
 # ------------------------------------------------------------------ item 5: one formula
 def test_one_home_for_the_mismatch_formula():
+    from dicblur.models import mismatch_terms
+
     w = np.array([0.0, 1.0, 3.0])
     s = sssig_decay(w, S0, BETA)
     par = {"a": 1.4, "gamma": 0.9, "noise_blur": 1e-3, "cross": 1e-3, "c": 3e-4, "c4": 1e-6}

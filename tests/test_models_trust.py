@@ -360,3 +360,17 @@ def test_calibrate_then_predict_and_plan_match_a_direct_simulation(tmp_path, cap
     sigma = float(cam.noise_gl(plan["exposure"], m.mean_level))
     meas = _direct_u_e(tmp_path, "plan", noise=sigma, blur=plan["blur"], size=128, reps=8)
     assert plan["u_e"] == pytest.approx(meas, rel=0.10), (plan["u_e"], meas)
+
+
+def test_calibrate_at_two_noise_levels(tmp_path, capsys):
+    # two levels: both fitted together, the domain spans them, a plan between them is inside
+    out = tmp_path / "cal2"
+    assert main(["calibrate", "paper4", "--size", "80x80", "--noise", "2", "--noise", "6",
+                 "--subset", "21", "--blur", "0:3:0.5", "-o", str(out), "--serial",
+                 "-q"]) == 0
+    m = BlurUncertaintyModel.from_json(str(out / "model.json"))
+    assert m.noise_levels == (2.0, 6.0) and len(m.data["blur"]) == 14
+    assert (m.domain.noise_min, m.domain.noise_max) == (2.0, 6.0)
+    assert m.domain.pattern == "paper4" and m.mean_level is not None
+    assert m.predict([1.0], 4.0).extrapolated is False
+    assert (out / "ue_vs_blur.png").stat().st_size > 1000

@@ -1,8 +1,10 @@
 """Calibration: the paper's blur sweep on one pattern, then the uncertainty-model fits.
 
 This is what a user with their own speckle pattern runs (``dicblur calibrate``): W from
-0.1 to 10 px in 0.1 px steps (Lavatelli & Zappa 2017, Section VI), one noise level, one
-subset size, one motion direction; the campaign's dataset is then fitted with
+0.1 to 10 px in 0.1 px steps (Lavatelli & Zappa 2017, Section VI), one noise level (or
+several: two levels that bracket the noise of the planned exposure separate the mismatch
+model's floor and cross term and keep a camera plan inside the model's validity domain),
+one subset size, one motion direction; the campaign's dataset is then fitted with
 :func:`dicblur.models.fit_blur_model` (SSSIG decay, eq. 18; power law, eq. 17; noise +
 blur-mismatch model) and written with figures.
 """
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -57,7 +59,7 @@ class CalibrationResult:
 def calibration_spec(
     image: str | os.PathLike[str],
     *,
-    noise: float = 2.0,
+    noise: float | Sequence[float] = 2.0,
     subset: int = 31,
     angle: float = 0.0,
     step: int = 10,
@@ -74,8 +76,9 @@ def calibration_spec(
     ----------
     image : path or {"paper4", "speckle"}
         An image file, or a generator name (pattern of ``size`` px, seeded by ``seed``).
-    noise : float
-        Noise std, grey levels (per image for ``"per-exposure"``).
+    noise : float or sequence of float
+        Noise std, grey levels (per image for ``"per-exposure"``); several levels are
+        swept and fitted together.
     subset, step : int
         DIC subset size and grid step, px.
     angle : float
@@ -110,16 +113,25 @@ def calibration_spec(
         "pattern": [pattern],
         "blur": {"lengths": PAPER_BLUR if blur is None else blur, "angles": [angle],
                  "boundary": boundary},
-        "noise": {"model": noise_model, "levels": [noise]},
+        "noise": {"model": noise_model, "levels": _levels(noise)},
         "dic": {"subsets": [subset], "step": step, "shape": shape},
     })
+
+
+def _levels(noise: float | Sequence[float]) -> list[float]:
+    if isinstance(noise, int | float):
+        return [float(noise)]
+    levels = [float(v) for v in noise]
+    if not levels:
+        raise InputError("noise: give at least one noise level (GL), e.g. 2")
+    return levels
 
 
 def calibrate(
     image: str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
     *,
-    noise: float = 2.0,
+    noise: float | Sequence[float] = 2.0,
     subset: int = 31,
     angle: float = 0.0,
     step: int = 10,
@@ -162,18 +174,25 @@ def calibrate(
         raise KeyboardInterrupt
     csv_path = out / "results.csv"
     export_csv(results, csv_path)
-    ds = open_results(results).isel(pattern=0, angle=0, subset=0, noise=0)
-    mean = ds.mean("rep")
-    w = mean["blur"].values
+    ds = open_results(results).isel(pattern=0, angle=0, subset=0)
+    mean = ds.mean("rep")  # dims (noise, blur)
+    w = np.tile(mean["blur"].values, mean.sizes["noise"])
+
+    def flat(da: Any) -> Any:
+        return np.asarray(da.transpose("noise", "blur").values, dtype=np.float64).ravel()
+
+    # the effective per-image noise of each level (per-subframe noise is sigma/sqrt(K+1))
+    eff = np.repeat([float(v) for v in mean["noise_effective"].mean("blur").values],
+                    mean.sizes["blur"])
     hashes = json.loads(ds.attrs["input_hashes"])
     model = fit_blur_model(
-        w, mean["sssig"].values, mean["u_e"].values,
-        noise_sigma=float(mean["noise_effective"].mean()),
-        contrast_ref=mean["rms_contrast_ref"].values,
-        contrast=mean["rms_contrast"].values,
+        w, flat(mean["sssig"]), flat(mean["u_e"]),
+        noise_sigma=eff,
+        contrast_ref=flat(mean["rms_contrast_ref"]),
+        contrast=flat(mean["rms_contrast"]),
         subset=subset,
         # validity domain: DIC breaks down where < 90 % of the POIs converge (worst rep)
-        converged_fraction=ds["converged_fraction"].min("rep").values,
+        converged_fraction=flat(ds["converged_fraction"].min("rep")),
         shape=shape, pattern=spec.patterns[0].name,
         pattern_sha256=next(iter(hashes.values()), None) if len(hashes) == 1 else None,
         mean_level=float(np.mean(make_pattern(spec, spec.patterns[0]))),
@@ -187,19 +206,21 @@ def calibrate(
             "pattern": spec.patterns[0].to_dict(),
             "input_hashes": hashes,
             "spec_hash": ds.attrs["spec_hash"],
-            "noise_model": noise_model, "noise": noise, "angle": angle, "step": step,
+            "noise_model": noise_model, "noise": _levels(noise), "angle": angle,
+            "step": step,
             "dic_shape": shape,
         },
     )
     model_path = out / "model.json"
     model_path.write_text(model.to_json())
-    figs = _figures(mean, model, out) if figures else ()
+    figs = _figures(mean, model, out, eff[:: mean.sizes["blur"]]) if figures else ()
     return CalibrationResult(model=model, model_path=model_path, results_path=results,
                              csv_path=csv_path, figures=figs,
                              sssig_r2=float(model.decay.r2), spec=spec)
 
 
-def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
+def _figures(dsn: Any, model: Any, out: Path, sigmas: Any) -> tuple[Path, ...]:
+    """The three figures; ``dsn`` has dims (noise, blur), ``sigmas`` the effective noise."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -207,6 +228,7 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
 
     from ..models import sssig_decay
 
+    ds = dsn.isel(noise=0)  # SSSIG is noise-free; the log-log fit is at the first level
     w = ds["blur"].values
     ue = ds["u_e"].values
     s = ds["sssig"].values
@@ -214,15 +236,21 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
     paths = []
 
     fig, ax = plt.subplots(figsize=(5.5, 4))
-    ax.plot(w, ue, "o", ms=3, label="campaign (std over POIs)")
-    for kind, style in (("mismatch", "-"), ("power_law", "--")):
-        if kind == "mismatch" and model.mismatch is None:
-            continue
-        pred = model.predict(wf, model=kind)  # NaN (not drawn) where DIC breaks down
-        ax.plot(wf, pred.u_e, style, label=("noise + blur mismatch" if kind == "mismatch"
-                                            else "power law, eq. 19")
-                + (" (default)" if kind == model.default else ""))
-    ax.plot(w, ds["u_match_score"].values, ":", label="static match score, eq. 2")
+    for i, sig in enumerate(sigmas):
+        col = f"C{i}"
+        ax.plot(w, dsn["u_e"].isel(noise=i).values, "o", ms=3, color=col,
+                label=f"campaign, noise {sig:.3g} GL")
+        for kind, style in (("mismatch", "-"), ("power_law", "--")):
+            if kind == "mismatch" and model.mismatch is None:
+                continue
+            pred = model.predict(wf, float(sig), model=kind)  # NaN where DIC breaks down
+            ax.plot(wf, pred.u_e, style, color=col,
+                    label=(("noise + blur mismatch" if kind == "mismatch"
+                            else "power law, eq. 19")
+                           + (" (default)" if kind == model.default else "")) if i == 0
+                    else None)
+        ax.plot(w, dsn["u_match_score"].isel(noise=i).values, ":", color=col,
+                label="static match score, eq. 2" if i == 0 else None)
     ax.set(xlabel="blur length W (px)", ylabel="u_e (px)",
            title="random error vs blur")
     ax.legend()
@@ -247,7 +275,9 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
     ax.loglog(s, ue, "o", ms=3, label="campaign")
     sf = np.geomspace(float(s.min()), float(s.max()), 100)
     pl = model.power_law
-    ax.loglog(sf, pl["u_ref"] * (sf / pl.extra["sssig_ref"]) ** (-pl["alpha"]), "-",
+    ref = pl.extra.get("sigma_ref")
+    at_first = ((float(sigmas[0]) / ref) ** pl["kappa"] if "kappa" in pl and ref else 1.0)
+    ax.loglog(sf, at_first * pl["u_ref"] * (sf / pl.extra["sssig_ref"]) ** (-pl["alpha"]), "-",
               label=f"eq. 17 fit, alpha = {pl['alpha']:.2f} (W in {model.fit_range[0]:g}.."
                     f"{model.fit_range[1]:g} px)")
     ax.set(xlabel="SSSIG ((GL/px)^2)", ylabel="u_e (px)", title="log u_e vs log SSSIG")

@@ -131,7 +131,11 @@ def calibrate_command(
     image: str = typer.Argument(..., help="Pattern image file, or 'paper4' / 'speckle' "
                                 "to generate one."),
     out: Path = typer.Option(..., "-o", "--output", help="Output folder."),
-    noise: float = typer.Option(2.0, "--noise", help="Noise std per image, GL."),
+    noise: list[float] = typer.Option(
+        [2.0], "--noise",
+        help="Noise std per image, GL; repeat (e.g. --noise 2 --noise 8) to calibrate at "
+        "several levels: the model then separates its floor and cross term and a camera "
+        "plan between the levels stays inside its validity domain."),
     subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
     angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
     step: int = typer.Option(10, "--step", help="POI grid step, px."),
@@ -160,7 +164,8 @@ def calibrate_command(
         raise InputError(f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. "
                          "0.1:10:0.1") from exc
     with _progress_bar("calibrate", not quiet) as progress:
-        res = calibrate(image, out, noise=noise, subset=subset, angle=angle, step=step,
+        res = calibrate(image, out, noise=noise if len(noise) > 1 else noise[0],
+                        subset=subset, angle=angle, step=step,
                         noise_model=noise_model, shape=shape, seed=seed,
                         blur={"start": start, "stop": stop, "step": inc},
                         size=parse_size(size), scheduler=scheduler, workers=workers,

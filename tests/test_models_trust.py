@@ -374,3 +374,21 @@ def test_calibrate_at_two_noise_levels(tmp_path, capsys):
     assert m.domain.pattern == "paper4" and m.mean_level is not None
     assert m.predict([1.0], 4.0).extrapolated is False
     assert (out / "ue_vs_blur.png").stat().st_size > 1000
+
+
+def test_static_prediction_model_stops_at_its_breakdown_test():
+    import dicblur
+    from dicblur.models import model_from_pattern
+
+    img = dicblur.speckle_pattern((80, 80), speckle_size=3.0, softness=0.5, seed=2)
+    m = model_from_pattern(img, noise_sigma=2.0, subset=21, step=10, boundary="periodic",
+                           blur=np.arange(0.0, 12.01, 1.0))
+    d = m.domain
+    assert (d.noise_min, d.noise_max, d.subset, d.shape) == (1.0, 4.0, 21, "translation")
+    assert d.pattern_sha256 is not None and len(d.pattern_sha256) == 64
+    # 3 px speckles: the texture along the motion is gone before W = 12 px
+    assert d.breakdown_blur is not None and "static prediction" in d.breakdown_rule
+    assert d.blur_max < d.breakdown_blur <= 12.0
+    p = m.predict([2.0, 12.0])
+    assert np.isfinite(p.u_e[0]) and np.isnan(p.u_e[1])
+    assert any("breaks down" in n for n in p.notes)

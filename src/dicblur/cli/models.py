@@ -297,7 +297,8 @@ def plan_command(
                          sigma=noise, which=which, noise_level=noise_level,
                          mean_level=mean_level)
     if not plan.inside_domain or plan.limited_by_breakdown:
-        _warn_notes([n for n in plan.notes if "validity domain" in n or "breaks down" in n])
+        _warn_notes([n for n in plan.notes
+                     if "outside the model's validity domain" in n or "breaks down" in n])
     if as_json:
         print_json(plan.to_dict())
     else:

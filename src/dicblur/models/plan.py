@@ -333,11 +333,11 @@ def plan_exposure(
             notes.append("the rule of thumb is not conservative enough for this target")
         sig_used = at.sigma
         inside = bool(dom.inside_blur(np.array([w_max]))[0] and dom.inside_noise(sig_used))
-        if not inside:
-            notes.append(f"planned W = {w_max:.3g} px"
-                         + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL")
-                         + f" lies outside the model's validity domain ({dom.describe()}): "
-                         "extrapolated")
+        notes.append(f"planned W = {w_max:.3g} px"
+                     + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL")
+                     + (" lies inside" if inside else " lies outside")
+                     + f" the model's validity domain ({dom.describe()})"
+                     + ("" if inside else ": extrapolated"))
         return ExposurePlan(
             model=kind, velocity=v, scale=sc, velocity_px=v_px, target=tgt, exposure=t_fix,
             blur=w_max, u_e=float(at.u_e[0]), u_e_low=float(at.low[0]),

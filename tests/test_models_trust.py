@@ -392,3 +392,16 @@ def test_static_prediction_model_stops_at_its_breakdown_test():
     p = m.predict([2.0, 12.0])
     assert np.isfinite(p.u_e[0]) and np.isnan(p.u_e[1])
     assert any("breaks down" in n for n in p.notes)
+
+
+def test_power_law_beyond_its_fit_range_is_flagged():
+    # measured: plan --target answered W = 3.93 px from a power law fitted on W 0.1..2.8 px
+    w = np.round(np.arange(0.1, 6.01, 0.3), 10)
+    s, u = _mismatch_data(w)
+    m = fit_blur_model(w, s, u, noise_sigma=2.0, fit_range=(0.1, 2.8), default="power_law")
+    p = m.predict([1.0, 3.93])
+    assert p.inside_domain.tolist() == [True, False] and p.extrapolated
+    assert any("fit range (W 0.1..2.8 px)" in n for n in p.notes)
+    plan = plan_exposure(m, velocity="120mm/s", scale="0.05mm/px",
+                         target=float(p.u_e[1]))
+    assert plan.blur == pytest.approx(3.93, rel=1e-6) and plan.extrapolated

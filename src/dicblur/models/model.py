@@ -310,6 +310,16 @@ class BlurUncertaintyModel:
         reason = dom.outside_reason(w[~broken], sig)
         if reason is not None:
             notes.append(reason)
+        if kind == "power_law":
+            # the power law was fitted on its edge-driven range only
+            lo, hi = self.fit_range
+            in_fit = (w >= lo - 1e-9) & (w <= hi + 1e-9)
+            if (~in_fit & inside).any():
+                out = w[~in_fit & inside]
+                notes.append(f"W = {', '.join(f'{x:.3g}' for x in out[:3])}"
+                             f"{' ...' if out.size > 3 else ''} px outside the power law's "
+                             f"fit range (W {lo:g}..{hi:g} px): extrapolated")
+            inside &= in_fit
         if broken.any():
             notes.append(self.breakdown_note(w[broken]))
             for arr in (lu, half):

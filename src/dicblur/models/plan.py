@@ -332,7 +332,8 @@ def plan_exposure(
         else:
             notes.append("the rule of thumb is not conservative enough for this target")
         sig_used = at.sigma
-        inside = bool(dom.inside_blur(np.array([w_max]))[0] and dom.inside_noise(sig_used))
+        assert at.inside_domain is not None
+        inside = bool(at.inside_domain[0])  # blur and noise range (power law: fit range)
         notes.append(f"planned W = {w_max:.3g} px"
                      + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL")
                      + (" lies inside" if inside else " lies outside")
@@ -451,7 +452,8 @@ def plan_exposure(
     notes.append(f"rule of thumb gives u_e {u_rule:.3g} px vs {float(at.u_e[0]):.3g} px at "
                  "the optimum")
     w_opt = t_opt * v_px
-    inside = bool(dom.inside_blur(np.array([w_opt]))[0] and dom.inside_noise(sig_opt))
+    assert at.inside_domain is not None
+    inside = bool(at.inside_domain[0])
     notes.append(
         f"the optimum (W = {w_opt:.3g} px, noise {sig_opt:.3g} GL) lies "
         + ("inside" if inside else "outside")

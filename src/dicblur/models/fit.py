@@ -228,7 +228,8 @@ def fit_blur_model(
                           cross=cross,  # type: ignore[arg-type]
                           confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
     except FitError as exc:
-        warnings.warn(f"mismatch model not fitted: {exc}", stacklevel=2)
+        warnings.warn(f"mismatch model not fitted: {exc}; the default model is the power "
+                      "law (eq. 17), which predicts only at the fitted noise", stacklevel=2)
         mm = None
     levels = tuple(float(v) for v in np.unique(sig)) if sig is not None else ()
     data: dict[str, tuple[float, ...]] = {"blur": tuple(map(float, w)),
@@ -276,10 +277,11 @@ def fit_blur_model(
                 chosen = cmp_.better
         except (FitError, InputError) as exc:
             warnings.warn(f"held-out model comparison skipped: {exc}", stacklevel=2)
-    if default != "auto":
-        if default == "mismatch" and mm is None:
-            raise FitError("default='mismatch': the mismatch model could not be fitted")
+    if default == "power_law" or (default == "mismatch" and mm is not None):
         chosen = default
+    elif default == "mismatch":
+        # already warned above; the power law still refuses other noise levels
+        chosen = "power_law"
     from dataclasses import replace
 
     return replace(model, default=chosen, comparison=comparison)

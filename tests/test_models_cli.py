@@ -146,13 +146,18 @@ def test_plan_shot_noise_at_reference_level(results_csv, tmp_path, capsys):
     got = json.loads(capsys.readouterr().out)
     from dicblur import load_image
     loaded = load_image(ref)
-    level = gradient_weighted_level(loaded) / loaded.mean() * (model.mean_level or 127.5)
+    # the model records no mean level: the reference's own mean is the scale
+    assert model.mean_level is None
+    level = gradient_weighted_level(loaded)
     cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)
     expect = plan_exposure(model, velocity="120mm/s", scale="0.05mm/px", camera=cam,
-                           noise_level=level)
+                           noise_level=level, mean_level=float(loaded.mean()))
     assert got["exposure"] == pytest.approx(expect.exposure, rel=1e-12)
+    # --noise-level is a grey level on the model's scale (127.5 GL assumed here)
     assert main([*base, *cam_args, "--noise-level", str(level), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["exposure"] == pytest.approx(expect.exposure,
+    same = plan_exposure(model, velocity="120mm/s", scale="0.05mm/px", camera=cam,
+                         noise_level=level)
+    assert json.loads(capsys.readouterr().out)["exposure"] == pytest.approx(same.exposure,
                                                                             rel=1e-12)
     # fixed noise has no shot noise to place; both options at once are ambiguous
     assert main([*base, "--target", "0.01px", "--noise", "2", "--noise-level", "100"]) != 0

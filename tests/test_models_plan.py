@@ -152,7 +152,7 @@ def test_plan_with_floor_closed_form():
     assert pred.u_floor == pytest.approx(FLOOR, rel=1e-4)
     np.testing.assert_allclose(pred.u_e**2, pred.u_noise**2 + FLOOR**2 + pred.u_blur**2,
                                rtol=1e-6)
-    assert not any("extrapolated" in n for n in plan.notes)
+    assert not any("from one calibration noise level" in n for n in plan.notes)
 
 
 def test_plan_warns_when_one_level_is_extrapolated():

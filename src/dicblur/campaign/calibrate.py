@@ -1,8 +1,10 @@
 """Calibration: the paper's blur sweep on one pattern, then the uncertainty-model fits.
 
 This is what a user with their own speckle pattern runs (``dicblur calibrate``): W from
-0.1 to 10 px in 0.1 px steps (Lavatelli & Zappa 2017, Section VI), one noise level, one
-subset size, one motion direction; the campaign's dataset is then fitted with
+0.1 to 10 px in 0.1 px steps (Lavatelli & Zappa 2017, Section VI), one noise level (or
+several: two levels that bracket the noise of the planned exposure separate the mismatch
+model's floor and cross term and keep a camera plan inside the model's validity domain),
+one subset size, one motion direction; the campaign's dataset is then fitted with
 :func:`dicblur.models.fit_blur_model` (SSSIG decay, eq. 18; power law, eq. 17; noise +
 blur-mismatch model) and written; the report layer draws the figures.
 """
@@ -11,10 +13,12 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ..errors import InputError
 from .spec import CampaignSpec, parse_spec
@@ -62,7 +66,7 @@ class CalibrationResult:
 def calibration_spec(
     image: str | os.PathLike[str],
     *,
-    noise: float = 2.0,
+    noise: float | Sequence[float] = 2.0,
     subset: int = 31,
     angle: float = 0.0,
     step: int = 10,
@@ -79,8 +83,9 @@ def calibration_spec(
     ----------
     image : path or {"paper4", "speckle"}
         An image file, or a generator name (pattern of ``size`` px, seeded by ``seed``).
-    noise : float
-        Noise std, grey levels (per image for ``"per-exposure"``).
+    noise : float or sequence of float
+        Noise std, grey levels (per image for ``"per-exposure"``); several levels are
+        swept and fitted together.
     subset, step : int
         DIC subset size and grid step, px.
     angle : float
@@ -115,16 +120,25 @@ def calibration_spec(
         "pattern": [pattern],
         "blur": {"lengths": PAPER_BLUR if blur is None else blur, "angles": [angle],
                  "boundary": boundary},
-        "noise": {"model": noise_model, "levels": [noise]},
+        "noise": {"model": noise_model, "levels": _levels(noise)},
         "dic": {"subsets": [subset], "step": step, "shape": shape},
     })
+
+
+def _levels(noise: float | Sequence[float]) -> list[float]:
+    if isinstance(noise, int | float):
+        return [float(noise)]
+    levels = [float(v) for v in noise]
+    if not levels:
+        raise InputError("noise: give at least one noise level (GL), e.g. 2")
+    return levels
 
 
 def calibrate(
     image: str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
     *,
-    noise: float = 2.0,
+    noise: float | Sequence[float] = 2.0,
     subset: int = 31,
     angle: float = 0.0,
     step: int = 10,
@@ -153,6 +167,7 @@ def calibrate(
     from ..models import fit_blur_model
     from .engine import run_campaign
     from .store import export_csv, open_results
+    from .tasks import make_pattern
 
     spec = calibration_spec(image, noise=noise, subset=subset, angle=angle, step=step,
                             noise_model=noise_model, shape=shape, size=size, seed=seed,
@@ -166,21 +181,40 @@ def calibrate(
         return None  # interrupted (Ctrl-C): the store keeps the finished batches
     csv_path = out / "results.csv"
     export_csv(results, csv_path)
-    ds = open_results(results).isel(pattern=0, angle=0, subset=0, noise=0)
-    mean = ds.mean("rep")
-    w = mean["blur"].values
+    ds = open_results(results).isel(pattern=0, angle=0, subset=0)
+    mean = ds.mean("rep")  # dims (noise, blur)
+    w = np.tile(mean["blur"].values, mean.sizes["noise"])
+
+    def flat(da: Any) -> Any:
+        return np.asarray(da.transpose("noise", "blur").values, dtype=np.float64).ravel()
+
+    # the effective per-image noise of each level (per-subframe noise is sigma/sqrt(K+1))
+    eff = np.repeat([float(v) for v in mean["noise_effective"].mean("blur").values],
+                    mean.sizes["blur"])
+    hashes = json.loads(ds.attrs["input_hashes"])
     model = fit_blur_model(
-        w, mean["sssig"].values, mean["u_e"].values,
-        noise_sigma=float(mean["noise_effective"].mean()),
-        contrast_ref=mean["rms_contrast_ref"].values,
-        contrast=mean["rms_contrast"].values,
+        w, flat(mean["sssig"]), flat(mean["u_e"]),
+        noise_sigma=eff,
+        contrast_ref=flat(mean["rms_contrast_ref"]),
+        contrast=flat(mean["rms_contrast"]),
         subset=subset,
+        # validity domain: DIC breaks down where < 90 % of the POIs converge (worst rep)
+        converged_fraction=flat(ds["converged_fraction"].min("rep")),
+        shape=shape, pattern=spec.patterns[0].name,
+        pattern_sha256=next(iter(hashes.values()), None) if len(hashes) == 1 else None,
+        mean_level=float(np.mean(make_pattern(spec, spec.patterns[0]))),
+        # the sweep spans the W range the model will be used in (beyond it predictions are
+        # flagged as extrapolated): let the AIC add the W^4 term where the data ask for it.
+        # Measured on paper4 512^2 over W = 0..8 px: without it the fit is 24 % rms off
+        # and over-predicts W = 3 px by 22-30 %; with it 7 % rms and 1-3 % (BENCHMARKS.md).
+        next_term="auto",
         provenance={
             "source": "dicblur calibrate",
             "pattern": spec.patterns[0].to_dict(),
-            "input_hashes": json.loads(ds.attrs["input_hashes"]),
+            "input_hashes": hashes,
             "spec_hash": ds.attrs["spec_hash"],
-            "noise_model": noise_model, "noise": noise, "angle": angle, "step": step,
+            "noise_model": noise_model, "noise": _levels(noise), "angle": angle,
+            "step": step,
             "dic_shape": shape,
         },
     )
@@ -188,4 +222,5 @@ def calibrate(
     model_path.write_text(model.to_json())
     return CalibrationResult(model=model, model_path=model_path, results_path=results,
                              csv_path=csv_path, sssig_r2=float(model.decay.r2), spec=spec,
-                             curves=mean)
+                             curves=mean.assign_coords(
+                                 noise_effective_level=("noise", eff[:: mean.sizes["blur"]])))

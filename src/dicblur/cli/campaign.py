@@ -141,7 +141,11 @@ def calibrate_command(
     image: str = typer.Argument(..., help="Pattern image file, or 'paper4' / 'speckle' "
                                 "to generate one."),
     out: Path = typer.Option(..., "-o", "--output", help="Output folder."),
-    noise: float = typer.Option(2.0, "--noise", help="Noise std per image, GL."),
+    noise: list[float] = typer.Option(
+        [2.0], "--noise",
+        help="Noise std per image, GL; repeat (e.g. --noise 2 --noise 8) to calibrate at "
+        "several levels: the model then separates its floor and cross term and a camera "
+        "plan between the levels stays inside its validity domain."),
     subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
     angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
     step: int = typer.Option(10, "--step", help="POI grid step, px."),
@@ -175,7 +179,8 @@ def calibrate_command(
     if serial:
         notice_compile(shape)
     with _progress_bar("calibrate", not quiet) as progress:
-        res = calibrate(image, out, noise=noise, subset=subset, angle=angle, step=step,
+        res = calibrate(image, out, noise=noise if len(noise) > 1 else noise[0],
+                        subset=subset, angle=angle, step=step,
                         noise_model=noise_model, shape=shape, seed=seed,
                         blur={"start": start, "stop": stop, "step": inc},
                         size=parse_size(size), scheduler=scheduler, workers=workers,
@@ -185,20 +190,29 @@ def calibrate_command(
         return 130
     res = replace(res, figures=calibration_figures(res))
     m = res.model
+    mm = m.mismatch
+    dom = m.domain
     print_mapping(
         f"calibration: {image}",
         {
             "SSSIG_0": m.decay["sssig0"],
             "beta (eq. 18)": m.decay["beta"],
             "R^2 of the SSSIG fit": res.sssig_r2,
-            "alpha (eq. 17)": m.alpha,
+            "power law (paper): u_ref = u_e(0)": m.u_ref,
+            "power law (paper): alpha (eq. 17)": m.alpha,
             "MBRF = 2 alpha beta": m.mbrf,
+            "mismatch model: a": None if mm is None or "a" not in mm else mm["a"],
+            "mismatch model: c": None if mm is None else mm["c"],
             "default model": m.default,
+            "validity domain": dom.describe() if dom else None,
+            "DIC breaks down from W": None if dom is None else dom.breakdown_blur,
             "model": str(res.model_path),
             "results": str(res.results_path),
             "figures": ", ".join(p.name for p in res.figures),
         },
-        {"SSSIG_0": "(GL/px)^2", "beta (eq. 18)": "1/px^2", "MBRF = 2 alpha beta": "1/px^2"},
+        {"SSSIG_0": "(GL/px)^2", "beta (eq. 18)": "1/px^2", "MBRF = 2 alpha beta": "1/px^2",
+         "power law (paper): u_ref = u_e(0)": "px", "mismatch model: c": "px/px^2",
+         "DIC breaks down from W": "px"},
     )
     return 0
 

@@ -18,7 +18,7 @@ if TYPE_CHECKING:  # numpy and the models are imported inside the commands (fast
 
 _COLUMNS = ("blur", "sssig", "u_e")
 _OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "rms_contrast_ref",
-             "rms_contrast", "contrast_ratio")
+             "rms_contrast", "contrast_ratio", "converged_fraction")
 # Coordinates of a campaign (dicblur.campaign.store.DIMS) other than noise, blur and rep:
 # one setting is fitted at a time.
 _SETTINGS = ("pattern", "angle", "subset", "shape", "step", "noise_model")
@@ -108,7 +108,7 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
         noise = np.zeros(keep["u_e"].size)
     blur = keep["blur"].astype(float)
     out: dict[str, list[float]] = {k: [] for k in ("blur", "sssig", "u_e", "noise",
-                                                   "contrast_ratio")}
+                                                   "contrast_ratio", "converged_fraction")}
     for nz in np.unique(noise[ok]):
         for w in np.unique(blur[ok & (noise == nz)]):
             sel = ok & (noise == nz) & (blur == w)
@@ -120,6 +120,9 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
                                 else float(nz))
             out["sssig"].append(float(np.mean(keep["sssig"][sel].astype(float))))
             out["u_e"].append(float(np.sqrt(np.mean(keep["u_e"][sel].astype(float) ** 2))))
+            if "converged_fraction" in keep:  # the worst repetition decides breakdown
+                out["converged_fraction"].append(
+                    float(np.min(keep["converged_fraction"][sel].astype(float))))
             if "contrast_ratio" in keep:
                 out["contrast_ratio"].append(float(np.mean(keep["contrast_ratio"][sel])))
             elif "rms_contrast_ref" in keep and "rms_contrast" in keep:
@@ -135,6 +138,9 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
         res.pop("noise")
     if "subset" in keep and keep["subset"].dtype != object:
         res["subset"] = np.array([float(keep["subset"][0])])
+    for key in ("shape", "pattern"):  # recorded in the model's validity domain
+        if key in keep and keep[key].size:
+            res[key] = np.array([str(keep[key][0])], dtype=object)
     return res
 
 
@@ -147,7 +153,9 @@ def fit_command(
     fit_range: str | None = typer.Option(None, "--fit-range",
                                          help="Power-law W range 'LO:HI' px (default: auto)."),
     ci: str = typer.Option("covariance", "--ci", help="covariance or bootstrap."),
-    default: str = typer.Option("auto", "--default", help="auto, mismatch or power_law."),
+    default: str = typer.Option("mismatch", "--default",
+                                help="mismatch (noise + blur mismatch), power_law (eq. 17, "
+                                "at the fitted noise only) or auto (held-out comparison)."),
     seed: int | None = typer.Option(None, "--seed", help="Bootstrap seed."),
     as_json: bool = typer.Option(False, "--json", help="Print the model JSON."),
 ) -> None:
@@ -171,6 +179,9 @@ def fit_command(
         subset=subset if subset is not None or "subset" not in data else int(data["subset"][0]),
         fit_range=rng, ci=ci,
         default=default, seed=seed,
+        converged_fraction=data.get("converged_fraction"),
+        shape=str(data["shape"][0]) if "shape" in data else None,
+        pattern=str(data["pattern"][0]) if "pattern" in data else None,
         provenance={"results": str(results), "select": list(select),
                     "results_sha256": file_sha256(results) if results.is_file() else None})
     model.to_json(str(out))
@@ -211,17 +222,29 @@ def predict_command(
     if not ws:
         raise InputError("--blur: give at least one blur length (px) or velocity/exposure/scale")
     pred = model.predict(ws, noise, model=which)
-    rows = [{"blur_px": float(w), "u_e_px": float(u), "low_px": float(lo), "high_px": float(hi)}
-            for w, u, lo, hi in zip(pred.blur, pred.u_e, pred.low, pred.high, strict=True)]
+    assert pred.inside_domain is not None and pred.broken_down is not None
+    rows = [{"blur_px": float(w), "u_e_px": float(u), "low_px": float(lo), "high_px": float(hi),
+             "inside_domain": bool(ins), "broken_down": bool(brk)}
+            for w, u, lo, hi, ins, brk in zip(pred.blur, pred.u_e, pred.low, pred.high,
+                                              pred.inside_domain, pred.broken_down,
+                                              strict=True)]
+    _warn_notes(pred.notes)
     if as_json:
         print_json({"model": pred.model, "sigma": pred.sigma, "confidence": pred.confidence,
+                    "extrapolated": pred.extrapolated, "notes": list(pred.notes),
+                    "domain": model.domain.to_dict() if model.domain else None,
                     "predictions": rows})
         return
     pct = f"{100 * pred.confidence:g}%"
     for r in rows:
+        if r["broken_down"]:
+            typer.echo(f"W = {r['blur_px']:.4g} px: no prediction (DIC breaks down) "
+                       f"[{pred.model}]")
+            continue
+        flag = "" if r["inside_domain"] else " (extrapolated)"
         typer.echo(f"W = {r['blur_px']:.4g} px: u_e = {r['u_e_px']:.4g} px "
                    f"({pct} prediction interval {r['low_px']:.4g} .. {r['high_px']:.4g}) "
-                   f"[{pred.model}]")
+                   f"[{pred.model}]{flag}")
 
 
 def plan_command(
@@ -261,10 +284,14 @@ def plan_command(
     if reference is not None and noise_level is not None:
         raise InputError("--reference, --noise-level: give one (the image's level is computed "
                          "from it)")
+    mean_level: float | None = None
     if reference is not None:
-        # the image's gradient-weighted level relative to its mean, on the model's scale
+        # the image's gradient-weighted level relative to its mean, on the model's scale;
+        # a model that does not record its mean level takes the reference's own
         img = load_image(reference)
-        base = model.mean_level if model.mean_level is not None else 127.5
+        base = model.mean_level if model.mean_level is not None else float(np.mean(img))
+        if model.mean_level is None:
+            mean_level = base
         noise_level = gradient_weighted_level(img) / float(np.mean(img)) * base
     camera = None
     cam_opts = (full_well, read_noise, flux)
@@ -280,7 +307,11 @@ def plan_command(
         raise InputError("--reference/--noise-level: only with a camera (--full-well, "
                          "--read-noise, --flux); with fixed noise give --noise")
     plan = plan_exposure(model, velocity=velocity, scale=scale, target=target, camera=camera,
-                         sigma=noise, which=which, noise_level=noise_level)
+                         sigma=noise, which=which, noise_level=noise_level,
+                         mean_level=mean_level)
+    if not plan.inside_domain or plan.limited_by_breakdown:
+        _warn_notes([n for n in plan.notes
+                     if "outside the model's validity domain" in n or "breaks down" in n])
     if as_json:
         print_json(plan.to_dict())
     else:
@@ -290,6 +321,12 @@ def plan_command(
 
         plan_figure(plan, plot)
         typer.echo(f"wrote {plot}")
+
+
+def _warn_notes(notes: Any) -> None:
+    """Each extrapolation / breakdown note as one visible line on stderr."""
+    for note in notes:
+        typer.echo(f"warning: {note}", err=True)
 
 
 def register(app: typer.Typer) -> None:

@@ -57,8 +57,9 @@ class Evaluation:
         Measured u_e (px) per W, root mean square over the realisations.
     sssig : tuple of float
         Mean subset SSSIG (GL/px)**2 of the noise-free blurred images per W.
-    eta, alpha, beta, mbrf : float
-        Power law (eq. 17), SSSIG decay (eq. 18), MBRF = 2 alpha beta (eq. 22), 1/px**2.
+    u_ref, alpha, beta, mbrf : float
+        Power law (eq. 17) as ``u_e = u_ref (SSSIG / SSSIG_0)**-alpha`` (``u_ref`` px: its
+        u_e(0)), SSSIG decay (eq. 18), MBRF = 2 alpha beta (eq. 22), 1/px**2.
     c_fit : float
         Fitted blur-mismatch coefficient (px/px**2), NaN if the fit failed.
     c_static : float
@@ -82,7 +83,7 @@ class Evaluation:
     fit_blurs: tuple[float, ...]
     u_e: tuple[float, ...]
     sssig: tuple[float, ...]
-    eta: float
+    u_ref: float
     alpha: float
     beta: float
     mbrf: float
@@ -97,7 +98,7 @@ class Evaluation:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (NaN kept as float NaN)."""
         d: dict[str, Any] = {**self.candidate.to_dict(), "stage": self.stage}
-        for k in ("objective", "eta", "alpha", "beta", "mbrf", "c_fit", "c_static", "mig0",
+        for k in ("objective", "u_ref", "alpha", "beta", "mbrf", "c_fit", "c_static", "mig0",
                   "surrogate", "fit_ok", "n_points", "time_s"):
             d[k] = getattr(self, k)
         for k in ("predicted", "fit_blurs", "u_e", "sssig"):
@@ -176,7 +177,7 @@ def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
     from ..blur import motion_blur
     from ..campaign import directional_sssig
     from ..metrics import subset_centres
-    from ..models import blur_sensitivity
+    from ..models import blur_sensitivity, mismatch_terms
 
     w = problem.blur_array if blurs is None else np.asarray(blurs, dtype=np.float64)
     u2 = np.zeros(w.size)
@@ -191,7 +192,9 @@ def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
             b = img if wj == 0 else motion_blur(img, (0.0, float(wj)),
                                                 substeps=problem.substeps)
             s = float(np.mean(directional_sssig(b, pts, subset=problem.subset, angle=0.0)))
-            u2[j] += 2.0 * problem.noise**2 / s + (c * wj * wj) ** 2
+            # the mismatch model with its theoretical constants (a = 2, gamma = 1, no floor)
+            noise, blur2 = mismatch_terms([wj], [s], problem.noise, c=c)
+            u2[j] += float(noise[0] + blur2[0])
     return np.sqrt(u2 / len(images)), float(np.mean(cs))
 
 
@@ -218,7 +221,7 @@ def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
     sssig = np.nanmean(m["sssig"], axis=0)
     u_sur, c_static = surrogate(m["images"], problem)
     nan = float("nan")
-    eta = alpha = beta = mbrf = c_fit = nan
+    u_ref = alpha = beta = mbrf = c_fit = nan
     fit_ok = False
     pred = np.interp(problem.blur_array, w, u_e)
     if np.all(np.isfinite(u_e)) and np.all(u_e > 0):
@@ -232,7 +235,7 @@ def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
                     contrast=np.nanmean(m["rms_contrast"], axis=0), subset=problem.subset,
                     fit_range=(0.0, float(w[-1])), c_static=c_static, default="mismatch",
                     compare=False, provenance={"candidate": candidate.to_dict()})
-            eta, alpha, beta, mbrf = model.eta, model.alpha, model.beta, model.mbrf
+            u_ref, alpha, beta, mbrf = model.u_ref, model.alpha, model.beta, model.mbrf
             if model.mismatch is not None:
                 c_fit = float(model.mismatch["c"])
                 pred = model.predict(problem.blur_array, problem.noise, model="mismatch").u_e
@@ -243,7 +246,7 @@ def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
         candidate=candidate, stage=stage, objective=problem.objective(pred),
         predicted=tuple(map(float, pred)), fit_blurs=problem.fit_blurs,
         u_e=tuple(map(float, u_e)), sssig=tuple(map(float, sssig)),
-        eta=float(eta), alpha=float(alpha), beta=float(beta), mbrf=float(mbrf),
+        u_ref=float(u_ref), alpha=float(alpha), beta=float(beta), mbrf=float(mbrf),
         c_fit=c_fit, c_static=c_static, mig0=float(np.mean(m["mig_ref"][:, 0])),
         surrogate=problem.objective(u_sur), fit_ok=fit_ok,
         n_points=int(m["u_e"].size), time_s=time.perf_counter() - t0,

@@ -1,7 +1,7 @@
 """Search the pattern family: coarse campaign sweep, local refinement, confirmation.
 
 1. Coarse sweep: every member of the family's grid gets a campaign and a blur-model fit
-   (:func:`~dicblur.design.evaluate_candidate`); these give the maps of eta, MBRF and
+   (:func:`~dicblur.design.evaluate_candidate`); these give the maps of u_ref, MBRF and
    predicted u_e (the generalisation of the paper's Fig. 11). With ``screen=n`` the grid
    is first ranked by the static surrogate (no DIC) and only its ``n`` best members get
    campaigns (the maps then have holes).

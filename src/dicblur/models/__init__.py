@@ -22,6 +22,7 @@ from .mismatch import (
     blur_sensitivity,
     fit_mismatch,
     mismatch_model,
+    mismatch_terms,
 )
 from .model import BlurUncertaintyModel, Prediction
 from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern
@@ -62,6 +63,7 @@ __all__ = [
     "match_score_uncertainty",
     "mbrf",
     "mismatch_model",
+    "mismatch_terms",
     "model_from_pattern",
     "pan_uncertainty",
     "parse_quantity",

@@ -172,11 +172,18 @@ def make_result(
     seed: int | np.random.Generator | None,
     extra: dict[str, Any] | None = None,
     log_params: tuple[str, ...] = (),
+    nonneg: tuple[str, ...] = (),
+    intervals: bool = True,
 ) -> FitResult:
     """Run ``fit_once`` on all points and build the result with CIs.
 
     ``fit_once(idx)`` fits the points ``idx`` and returns ``(values, jacobian, residuals)``
     with the Jacobian of the residual vector at the solution (rows: points).
+    ``log_params``: positive scale factors (interval symmetric in the logarithm);
+    ``nonneg``: parameters bounded below by 0 (interval clipped there). With
+    ``ci="covariance"`` and a degenerate covariance (module docstring) the intervals come
+    from a seeded bootstrap (``ci_method = "bootstrap"``). ``intervals=False`` skips
+    the intervals (zero covariance, ``ci_method = "none"``): for model selection.
     """
     p = len(names)
     dof = n - p
@@ -191,44 +198,36 @@ def make_result(
     s2 = ssr / dof
     ss_tot = float(np.sum((data_space - data_space.mean()) ** 2))
     r2 = 1.0 - ssr / ss_tot if ss_tot > 0 else math.nan
-    if ci == "covariance":
-        jtj = jac.T @ jac
-        try:
-            cov = np.linalg.pinv(jtj) * s2
-        except np.linalg.LinAlgError as exc:  # pragma: no cover - pinv rarely fails
-            raise FitError(f"{model}: singular fit; the data do not constrain {names}") from exc
-        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        tq = t_quantile(confidence, dof)
-        low, high = values - tq * se, values + tq * se
-        # positive scale factors: interval symmetric in log (exact for the power law's
-        # eta, which is fitted as log eta; never below zero for the noise factor a or k)
-        for i, name in enumerate(names):
-            if name in log_params and values[i] > 0:
-                # an unconstrained factor (e.g. the noise term of noise-free data) has a
-                # relative error of 1e3 or more: its interval is (0, inf), not an overflow
-                rel = min(tq * se[i] / values[i], 700.0)
-                low[i], high[i] = values[i] * np.exp(-rel), values[i] * np.exp(rel)
-                if rel == 700.0:
-                    low[i], high[i] = 0.0, np.inf
-    else:
-        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-        boots = []
-        for _ in range(n_boot):
-            idx = np.sort(rng.integers(0, n, n))
-            if np.unique(blur[idx]).size < p + 1:
-                continue
-            try:
-                boots.append(fit_once(idx)[0])
-            except (FitError, np.linalg.LinAlgError, ValueError):
-                continue
-        if len(boots) < 10:
-            raise FitError(
-                f"{model}: bootstrap failed (too few valid resamples); use ci='covariance'"
-            )
-        b = np.array(boots)
-        cov = np.atleast_2d(np.cov(b, rowvar=False))
-        a = (1.0 - confidence) / 2.0
-        low, high = np.quantile(b, a, axis=0), np.quantile(b, 1.0 - a, axis=0)
+    low = high = cov = None
+    method = ci if intervals else "none"
+    if method == "none":
+        low, high, cov = values.copy(), values.copy(), np.zeros((p, p))
+    elif ci == "covariance":
+        low, high, cov = _wald(values, jac, s2, names, log_params, nonneg, confidence, dof)
+        if low is None:
+            # degenerate Gaussian covariance (a parameter the data do not constrain, or
+            # one on its bound): a seeded pairs bootstrap instead (docs/models.md s. 5)
+            method = "bootstrap"
+            seed = 0 if seed is None else seed
+    if method == "bootstrap":
+        boot = _bootstrap(fit_once, n, p, blur, confidence, n_boot, seed)
+        if boot is not None:
+            low, high, cov = boot
+        else:
+            if ci == "bootstrap":
+                raise FitError(
+                    f"{model}: bootstrap failed (too few valid resamples); use "
+                    "ci='covariance'"
+                )
+            # neither works: say so with unbounded intervals rather than a false width
+            method = "unidentified"
+            cov = np.full((p, p), np.inf)
+            low = np.where([nm in log_params or nm in nonneg for nm in names], 0.0, -np.inf)
+            high = np.full(p, np.inf)
+    assert low is not None and high is not None and cov is not None
+    if nonneg:
+        low = np.array([max(lo, 0.0) if nm in nonneg else lo
+                        for lo, nm in zip(low, names, strict=True)])
     return FitResult(
         model=model,
         names=names,
@@ -244,6 +243,72 @@ def make_result(
         n_points=int(n),
         blur_range=(float(blur.min()), float(blur.max())),
         confidence=float(confidence),
-        ci_method=ci,
+        ci_method=method,
         extra=dict(extra or {}),
     )
+
+
+_MAX_COND = 1e12
+"""Condition number of the column-scaled ``J^T J`` above which the covariance is degenerate."""
+
+
+def _wald(values: NDArray[np.float64], jac: NDArray[np.float64], s2: float,
+          names: tuple[str, ...], log_params: tuple[str, ...], nonneg: tuple[str, ...],
+          confidence: float, dof: int
+          ) -> tuple[Any, Any, Any]:
+    """Student-t intervals from ``s**2 (J^T J)^-1``; ``(None, None, None)`` if degenerate:
+    a singular (column-scaled) ``J^T J``, a zero standard error, or a parameter bounded at
+    0 whose interval reaches below it.
+
+    The Jacobian's columns are scaled to unit norm before the inversion, so the units of a
+    parameter (``c`` ~ 1e-4 px/px**2 next to ``gamma`` ~ 1) do not make ``pinv`` drop it.
+    """
+    norms = np.linalg.norm(jac, axis=0)
+    if not np.all(np.isfinite(norms)) or np.any(norms == 0):
+        return None, None, None
+    js = jac / norms
+    jtj = js.T @ js
+    cond = np.linalg.cond(jtj)
+    if not math.isfinite(cond) or cond > _MAX_COND:
+        return None, None, None
+    cov = np.linalg.inv(jtj) / np.outer(norms, norms) * s2
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    if s2 > 0 and np.any(se == 0):
+        return None, None, None
+    tq = t_quantile(confidence, dof)
+    low, high = values - tq * se, values + tq * se
+    if any(nm in nonneg and lo < 0 for nm, lo in zip(names, low, strict=True)):
+        # a parameter within reach of its bound (e.g. a cross term fitted at ~0): the
+        # likelihood is truncated there and the Gaussian interval is not valid
+        return None, None, None
+    for i, name in enumerate(names):
+        if name in log_params and values[i] > 0:
+            # positive scale factor: symmetric in log (exact for the power law's u_ref,
+            # fitted as log u_ref); a relative error beyond e^700 is (0, inf)
+            rel = min(tq * se[i] / values[i], 700.0)
+            low[i], high[i] = values[i] * np.exp(-rel), values[i] * np.exp(rel)
+            if rel == 700.0:
+                low[i], high[i] = 0.0, np.inf
+    return low, high, cov
+
+
+def _bootstrap(fit_once: Callable[[NDArray[np.intp]], tuple[NDArray[np.float64], ...]],
+               n: int, p: int, blur: NDArray[np.float64], confidence: float, n_boot: int,
+               seed: int | np.random.Generator | None) -> tuple[Any, Any, Any] | None:
+    """Pairs bootstrap percentile intervals and covariance, or None if it fails."""
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    boots = []
+    for _ in range(n_boot):
+        idx = np.sort(rng.integers(0, n, n))
+        if np.unique(blur[idx]).size < p + 1:
+            continue
+        try:
+            boots.append(fit_once(idx)[0])
+        except (FitError, np.linalg.LinAlgError, ValueError):
+            continue
+    if len(boots) < 10:
+        return None
+    b = np.array(boots)
+    cov = np.atleast_2d(np.cov(b, rowvar=False))
+    a = (1.0 - confidence) / 2.0
+    return np.quantile(b, a, axis=0), np.quantile(b, 1.0 - a, axis=0), cov

@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import FitError, InputError
 from ._checks import as_blur, as_positive, as_vector
 from .decay import fit_sssig_decay
+from .domain import ValidityDomain
 from .mismatch import fit_mismatch
 from .model import BlurUncertaintyModel
 from .powerlaw import edge_driven_range, fit_power_law
@@ -53,7 +54,7 @@ def fit_blur_model(
     range_tolerance: float = 0.05,
     mean_level: float | None = None,
     c_static: float | None = None,
-    default: str = "auto",
+    default: str = "mismatch",
     next_term: bool | str = False,
     floor: bool | str = "auto",
     noise_blur: bool | str = "auto",
@@ -64,6 +65,13 @@ def fit_blur_model(
     seed: int | np.random.Generator | None = None,
     provenance: dict[str, Any] | None = None,
     compare: bool = True,
+    shape: str | None = None,
+    pattern: str | None = None,
+    pattern_sha256: str | None = None,
+    converged_fraction: ArrayLike | None = None,
+    min_converged: float = 0.9,
+    breakdown_blur: float | None = None,
+    breakdown_rule: str | None = None,
 ) -> BlurUncertaintyModel:
     """Fit the SSSIG decay, the power law and the noise + blur-mismatch model.
 
@@ -92,9 +100,12 @@ def fit_blur_model(
     c_static : float, optional
         Blur sensitivity predicted from the static image (:func:`blur_sensitivity`), for
         comparison with the fitted ``c``.
-    default : {"auto", "mismatch", "power_law"}
-        Model used by ``predict``/``plan``; ``"auto"`` picks the better one on held-out
-        points (:func:`compare_models`) when there are >= 6 blur levels, else ``mismatch``.
+    default : {"mismatch", "power_law", "auto"}
+        Model used by ``predict``/``plan``. Default ``"mismatch"``: the noise +
+        blur-mismatch model, the one that follows the noise (the power law's noise
+        dependence is not measured at one noise level, and it is refused at another).
+        ``"auto"`` picks the better one on held-out points (:func:`compare_models`). The
+        comparison is run (and reported) whenever there are >= 6 blur levels.
     next_term : bool or "auto"
         ``c4 W**4`` term of the mismatch model (see :func:`fit_mismatch`). Off by
         default: a quartic fitted on a limited W range extrapolates badly (on DIC data a
@@ -119,6 +130,15 @@ def fit_blur_model(
         :mod:`dicblur.models._result`); ``seed`` drives the bootstrap only.
     provenance : dict, optional
         JSON-ready record of the inputs (pattern hash or generator settings, DIC settings).
+    shape, pattern, pattern_sha256 : str, optional
+        DIC shape function, pattern name and pattern hash, recorded in the model's
+        validity domain (:class:`~dicblur.models.ValidityDomain`).
+    converged_fraction : array_like, shape (n,), optional
+        Fraction of converged DIC subsets per point. From the first W at which it falls
+        below ``min_converged`` (at any noise level) DIC is taken to break down: those
+        points are left out of the fits and the model makes no prediction there.
+    breakdown_blur, breakdown_rule : float and str, optional
+        A breakdown W (px) found otherwise (e.g. the static prediction's own test) and how.
 
     Returns
     -------
@@ -146,7 +166,30 @@ def fit_blur_model(
             "(e.g. W = 0, 2, 4, 6 px)"
         )
     if default not in ("auto", "mismatch", "power_law"):
-        raise InputError(f"default={default!r}: choose 'auto', 'mismatch' or 'power_law'")
+        raise InputError(f"default={default!r}: choose 'mismatch', 'power_law' or 'auto'")
+    if converged_fraction is not None:
+        conv = as_vector(converged_fraction, "converged_fraction", n)
+        bad = np.unique(w[conv < min_converged])
+        if bad.size and (breakdown_blur is None or bad[0] < breakdown_blur):
+            breakdown_blur = float(bad[0])
+            breakdown_rule = f"converged fraction < {min_converged:g}"
+    if breakdown_blur is not None:
+        keep = w < breakdown_blur
+        if np.unique(w[keep]).size < 3:
+            raise InputError(
+                f"blur: DIC breaks down from W = {breakdown_blur:g} px "
+                f"({breakdown_rule or 'given'}), leaving {np.unique(w[keep]).size} blur "
+                "level(s) below it; the models need at least 3 (use shorter blur lengths)"
+            )
+        w, s, u = w[keep], s[keep], u[keep]
+        sig = None if sig is None else sig[keep]
+        if contrast_ratio is not None:
+            contrast_ratio = as_positive(contrast_ratio, "contrast_ratio", n)[keep]
+        if contrast_ref is not None and contrast is not None:
+            contrast_ref = np.broadcast_to(np.asarray(contrast_ref, dtype=float), (n,))[keep]
+            contrast = as_positive(contrast, "contrast", n)[keep]
+        n = w.size
+        levels_w = np.unique(w)
     ratio: NDArray[np.float64] | None = None
     if contrast_ratio is not None:
         ratio = as_positive(contrast_ratio, "contrast_ratio", n)
@@ -177,14 +220,16 @@ def fit_blur_model(
             "the power law needs at least 3"
         )
     pl = fit_power_law(s[in_range], u[in_range], noise_sigma=None if sig is None else sig[in_range],
-                       blur=w[in_range], confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
+                       blur=w[in_range], sssig_ref=decay["sssig0"], confidence=confidence,
+                       ci=ci, n_boot=n_boot, seed=seed)
     try:
         mm = fit_mismatch(w, s, u, noise_sigma=sig, next_term=next_term,  # type: ignore[arg-type]
                           floor=floor, noise_blur=noise_blur,  # type: ignore[arg-type]
                           cross=cross,  # type: ignore[arg-type]
                           confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
     except FitError as exc:
-        warnings.warn(f"mismatch model not fitted: {exc}", stacklevel=2)
+        warnings.warn(f"mismatch model not fitted: {exc}; the default model is the power "
+                      "law (eq. 17), which predicts only at the fitted noise", stacklevel=2)
         mm = None
     levels = tuple(float(v) for v in np.unique(sig)) if sig is not None else ()
     data: dict[str, tuple[float, ...]] = {"blur": tuple(map(float, w)),
@@ -196,7 +241,7 @@ def fit_blur_model(
         data["contrast_ratio"] = tuple(map(float, ratio))
     # Model errors at the measured SSSIG (the paper's Fig. 8 against the contrast ratio).
     kappa = pl["kappa"] if "kappa" in pl else 2.0 * pl["alpha"]
-    pl_pred = pl["eta"] * s ** (-pl["alpha"])
+    pl_pred = pl["u_ref"] * (s / pl.extra["sssig_ref"]) ** (-pl["alpha"])
     if sig is not None and pl.extra.get("sigma_ref"):
         pl_pred = pl_pred * (sig / pl.extra["sigma_ref"]) ** kappa
     data["err_power_law"] = tuple(map(float, pl_pred / u - 1.0))
@@ -211,23 +256,32 @@ def fit_blur_model(
         c_static=None if c_static is None else float(c_static), data=data, comparison=None,
         provenance=_json_clean(provenance or {}), version=__version__,
         confidence=float(confidence),
+        domain=ValidityDomain(
+            blur_min=float(w.min()), blur_max=float(w.max()),
+            noise_min=float(min(levels)) if levels else None,
+            noise_max=float(max(levels)) if levels else None,
+            subset=None if subset is None else int(subset), shape=shape, pattern=pattern,
+            pattern_sha256=pattern_sha256, breakdown_blur=breakdown_blur,
+            breakdown_rule=breakdown_rule if breakdown_blur is not None else None),
     )
     chosen = model.default
     comparison = None
-    if default == "auto" and mm is not None and compare and levels_w.size >= 6:
+    if mm is not None and compare and levels_w.size >= 6:
         try:
             cmp_ = compare_models(w, s, u, noise_sigma=sig, contrast_ratio=ratio,
                                   fit_range=fit_range, range_tolerance=range_tolerance,
                                   next_term=next_term, floor=floor,
                                   noise_blur=noise_blur, cross=cross)
             comparison = _json_clean(cmp_.to_dict())
-            chosen = cmp_.better
+            if default == "auto":
+                chosen = cmp_.better
         except (FitError, InputError) as exc:
             warnings.warn(f"held-out model comparison skipped: {exc}", stacklevel=2)
-    elif default != "auto":
-        if default == "mismatch" and mm is None:
-            raise FitError("default='mismatch': the mismatch model could not be fitted")
+    if default == "power_law" or (default == "mismatch" and mm is not None):
         chosen = default
+    elif default == "mismatch":
+        # already warned above; the power law still refuses other noise levels
+        chosen = "power_law"
     from dataclasses import replace
 
     return replace(model, default=chosen, comparison=comparison)
@@ -318,7 +372,11 @@ def compare_models(
         pred = np.empty(int(test.sum()))
         for j, i in enumerate(np.nonzero(test)[0]):
             sg = None if sig is None else float(sig[i])
-            pred[j] = fitted.predict([w[i]], sg, model=kind).u_e[0]
+            if sg is None and kind == "mismatch" and "a" in fitted._fit(kind).names:
+                sg = fitted.noise_sigma
+            # the paper's noise rule for the power law (kappa = 2 alpha from one level) is
+            # what is being scored here, so it is evaluated where predict() refuses it
+            pred[j] = math.exp(float(fitted._evaluate(kind, np.array([w[i]]), sg)[0][0]))
         r = pred / u[test]
         rms[kind] = float(np.sqrt(np.mean(np.log(r) ** 2)))
         mx[kind] = float(np.max(np.abs(r - 1.0)))

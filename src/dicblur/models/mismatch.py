@@ -61,6 +61,7 @@ __all__ = [
     "blur_sensitivity",
     "fit_mismatch",
     "mismatch_model",
+    "mismatch_terms",
 ]
 
 
@@ -291,6 +292,58 @@ def _check_subpixel(subpixel: object) -> float:
     return float(subpixel)
 
 
+def mismatch_terms(
+    blur: ArrayLike,
+    sssig: ArrayLike,
+    noise_sigma: ArrayLike | None,
+    *,
+    c: float,
+    a: float = 2.0,
+    gamma: float = 1.0,
+    c4: float = 0.0,
+    k: float | None = None,
+    noise_blur: float = 0.0,
+    cross: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The two variance terms of the noise + blur-mismatch model (docs/models.md eq. M1).
+
+    This is the one implementation of the formula (``mismatch_model``, the fitted
+    :class:`~dicblur.models.BlurUncertaintyModel` and the pattern-design surrogate call it):
+
+        noise  = a (SSSIG / sigma**2)**(-gamma) (1 + e W**4)          (M2)
+        blur2  = (b W)**2 + (c W**2 + c4 W**4)**2                     (M3)
+
+    With ``noise_sigma=None`` the noise term is ``k / SSSIG (1 + e W**4)`` (``k = a
+    sigma**2``, GL**2, required). ``u_e**2 = noise + u_0**2 + blur2`` (M1); the floor
+    ``u_0`` is added by the caller.
+
+    Parameters
+    ----------
+    blur, sssig : array_like, shape (n,)
+        W (px) and SSSIG(W) of the blurred image along the motion ((GL/px)**2).
+    noise_sigma : float, array_like or None
+        Noise std (GL).
+
+    Returns
+    -------
+    noise, blur2 : ndarray, shape (n,)
+        Variances, px**2.
+    """
+    w = np.asarray(blur, dtype=np.float64)
+    s = np.asarray(sssig, dtype=np.float64)
+    if noise_sigma is None:
+        if k is None:
+            raise InputError("k: give k (= a sigma**2, GL**2) when noise_sigma is None")
+        noise = k / s
+    else:
+        sig = np.asarray(noise_sigma, dtype=np.float64)
+        noise = a * (s / sig**2) ** (-gamma)
+    noise = noise * (1.0 + noise_blur * w**4)
+    ub = c * w * w + c4 * w**4
+    bw = cross * w
+    return noise, bw * bw + ub * ub
+
+
 def mismatch_model(
     blur: ArrayLike,
     sssig: ArrayLike,
@@ -306,26 +359,16 @@ def mismatch_model(
     cross: float = 0.0,
 ) -> NDArray[np.float64]:
     """``sqrt(a (SSSIG/sigma**2)**(-gamma) (1 + e W**4) + floor**2 + (b W)**2
-    + (c W**2 + c4 W**4)**2)``.
+    + (c W**2 + c4 W**4)**2)`` (docs/models.md eq. M1, via :func:`mismatch_terms`).
 
     In px. With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required).
     ``floor`` (px) is the noise-independent matcher floor ``u_0``; ``noise_blur`` (``e``,
     px**-4) the growth of the noise term with the blur mismatch; ``cross`` (``b``, px/px)
     the mismatch-interpolation cross term.
     """
-    w = np.asarray(blur, dtype=np.float64)
-    s = np.asarray(sssig, dtype=np.float64)
-    if noise_sigma is None:
-        if k is None:
-            raise InputError("k: give k (= a sigma**2, GL**2) when noise_sigma is None")
-        noise = k / s
-    else:
-        sig = np.asarray(noise_sigma, dtype=np.float64)
-        noise = a * (s / sig**2) ** (-gamma)
-    noise = noise * (1.0 + noise_blur * w**4)
-    ub = c * w * w + c4 * w**4
-    bw = cross * w
-    return np.sqrt(noise + floor * floor + bw * bw + ub * ub)
+    noise, blur2 = mismatch_terms(blur, sssig, noise_sigma, c=c, a=a, gamma=gamma, c4=c4,
+                                  k=k, noise_blur=noise_blur, cross=cross)
+    return np.sqrt(noise + floor * floor + blur2)
 
 
 def fit_mismatch(
@@ -433,7 +476,7 @@ def fit_mismatch(
                     if w.size - len(names) < (2 if auto else 1):
                         continue
                     results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci,
-                                            n_boot, seed))
+                                            n_boot, seed, intervals=False))
     if not results:
         raise FitError(
             f"mismatch: {w.size} point(s) are too few for the noise + blur-mismatch model; "
@@ -449,7 +492,8 @@ def fit_mismatch(
     for r in results[1:]:
         if aic(r) < aic(best) - 2.0:
             best = r
-    return best
+    # intervals only for the chosen candidate (a degenerate one falls back to a bootstrap)
+    return _fit_one(w, s, u, sig, best.names, confidence, ci, n_boot, seed)
 
 
 def _fit_one(
@@ -462,6 +506,8 @@ def _fit_one(
     ci: str,
     n_boot: int,
     seed: int | np.random.Generator | None,
+    *,
+    intervals: bool = True,
 ) -> FitResult:
     def unpack(p: NDArray[np.float64]) -> dict[str, float]:
         d = dict(zip(names, p, strict=True))
@@ -511,4 +557,5 @@ def _fit_one(
     fixed = {} if "gamma" in names or sig is None else {"gamma": 1.0}
     return make_result(model="mismatch", names=names, fit_once=fit_once, n=w.size,
                        data_space=np.log(u), blur=w, fixed=fixed, confidence=confidence,
-                       ci=ci, n_boot=n_boot, seed=seed, extra=extra, log_params=("eta", "a", "k"))
+                       ci=ci, n_boot=n_boot, seed=seed, extra=extra, log_params=("a", "k"),
+                       nonneg=("c", "floor", "noise_blur", "cross"), intervals=intervals)

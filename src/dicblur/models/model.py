@@ -17,12 +17,17 @@ from ._checks import as_vector
 from ._result import FitResult, t_quantile
 from .decay import mbrf as _mbrf
 from .decay import sssig_decay
+from .domain import ValidityDomain
+from .mismatch import mismatch_terms
 
 __all__ = ["BlurUncertaintyModel", "ModelKind", "Prediction"]
 
 ModelKind = Literal["mismatch", "power_law"]
 _KINDS = ("mismatch", "power_law")
-SCHEMA = "dicblur.BlurUncertaintyModel/1"
+SCHEMA = "dicblur.BlurUncertaintyModel/2"
+"""Schema of the model JSON. /2: power law as ``u_ref``, ``alpha`` around ``sssig_ref``
+(was ``eta``), and the ``domain`` block; /1 files still load (:func:`model_kwargs`)."""
+SCHEMA_V1 = "dicblur.BlurUncertaintyModel/1"
 
 
 @dataclass(frozen=True)
@@ -47,6 +52,16 @@ class Prediction:
     confidence : float
     u_floor : float or None
         Noise-independent floor ``u_0`` of the mismatch model (px), if fitted.
+    inside_domain : ndarray of bool, shape (n,)
+        Per W: inside the model's validity domain (fitted blur range, and the noise inside
+        the fitted noise range).
+    broken_down : ndarray of bool, shape (n,)
+        Per W: at or beyond the blur length where DIC broke down; ``u_e``, ``low`` and
+        ``high`` are NaN there (no prediction, see ``notes``).
+    extrapolated : bool
+        Some W (or the noise) lies outside the domain.
+    notes : tuple of str
+        One line per reason (extrapolation, breakdown).
     """
 
     blur: NDArray[np.float64]
@@ -59,6 +74,10 @@ class Prediction:
     model: str
     confidence: float
     u_floor: float | None = None
+    inside_domain: NDArray[np.bool_] | None = None
+    broken_down: NDArray[np.bool_] | None = None
+    extrapolated: bool = False
+    notes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -69,11 +88,12 @@ class BlurUncertaintyModel:
     ----------
     default : {"mismatch", "power_law"}
         Model used by :meth:`predict`, :meth:`max_blur` and planning when none is named:
-        the one that predicted held-out data better (``comparison``), else ``mismatch``.
+        ``mismatch`` unless asked otherwise (the power law cannot follow the noise).
     decay : FitResult
         SSSIG(W) decay, eq. 18 (``sssig0`` (GL/px)**2, ``beta`` 1/px**2).
     power_law : FitResult
-        Eq. 17 on the edge-driven range (``eta`` px (GL/px)**(2 alpha), ``alpha``[, ``kappa``]).
+        Eq. 17 on the edge-driven range, as ``u_e = u_ref (SSSIG / sssig_ref)**-alpha``
+        (``u_ref`` px, ``alpha``[, ``kappa``]; ``extra["sssig_ref"]`` = SSSIG_0).
     mismatch : FitResult or None
         Noise + blur-mismatch model (``a`` or ``k``, [``gamma``], ``c`` px/px**2, [``c4``]).
     fit_range : (float, float)
@@ -98,6 +118,9 @@ class BlurUncertaintyModel:
         dicblur version that fitted the model.
     confidence : float
         Level of every confidence and prediction interval.
+    domain : ValidityDomain
+        Blur and noise ranges, subset, shape, pattern and breakdown blur of the fitted
+        data (filled from the other fields for models built without it).
     """
 
     default: str
@@ -116,6 +139,11 @@ class BlurUncertaintyModel:
     provenance: dict[str, Any]
     version: str
     confidence: float
+    domain: ValidityDomain | None = None
+
+    def __post_init__(self) -> None:
+        if self.domain is None:
+            object.__setattr__(self, "domain", _domain_from_fields(self))
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -127,8 +155,19 @@ class BlurUncertaintyModel:
         return self.decay["beta"]
 
     @property
+    def u_ref(self) -> float:
+        """Power law's u_e (px) at ``sssig_ref`` (= SSSIG_0: its static u_e(0))."""
+        return self.power_law["u_ref"]
+
+    @property
+    def sssig_ref(self) -> float:
+        """Reference SSSIG ((GL/px)**2) of the power law's ``u_ref``."""
+        return float(self.power_law.extra["sssig_ref"])
+
+    @property
     def eta(self) -> float:
-        return self.power_law["eta"]
+        """The paper's ``eta = u_ref sssig_ref**alpha`` (px (GL/px)**(2 alpha)), derived."""
+        return self.u_ref * self.sssig_ref**self.alpha
 
     @property
     def mbrf(self) -> float:
@@ -168,7 +207,7 @@ class BlurUncertaintyModel:
             alpha = p["alpha"]
             kappa = p.get("kappa", 2.0 * alpha)
             ref = fit.extra.get("sigma_ref")
-            lu = np.log(p["eta"]) - alpha * np.log(s)
+            lu = np.log(p["u_ref"]) - alpha * np.log(s / fit.extra["sssig_ref"])
             if sigma is not None and ref is not None:
                 lu = lu + kappa * math.log(sigma / ref)
             return lu
@@ -178,17 +217,16 @@ class BlurUncertaintyModel:
     def _mismatch_terms(self, p: dict[str, float], w: NDArray[np.float64],
                         s: NDArray[np.float64], sigma: float | None
                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch
+                      else 1.0)
         if "k" in p:
-            noise = p["k"] / s
-        else:
-            assert sigma is not None
-            gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch
-                          else 1.0)
-            noise = p["a"] * (s / sigma**2) ** (-gamma)
-        noise = noise * (1.0 + p.get("noise_blur", 0.0) * w**4)
-        ub = p["c"] * w * w + p.get("c4", 0.0) * w**4
-        bw = p.get("cross", 0.0) * w
-        return noise, ub * ub + bw * bw
+            return mismatch_terms(w, s, None, k=p["k"], c=p["c"], c4=p.get("c4", 0.0),
+                                  noise_blur=p.get("noise_blur", 0.0),
+                                  cross=p.get("cross", 0.0))
+        assert sigma is not None
+        return mismatch_terms(w, s, sigma, a=p["a"], gamma=gamma, c=p["c"],
+                              c4=p.get("c4", 0.0), noise_blur=p.get("noise_blur", 0.0),
+                              cross=p.get("cross", 0.0))
 
     def _sigma(self, kind: str, sigma: float | None) -> float | None:
         if sigma is not None:
@@ -201,6 +239,8 @@ class BlurUncertaintyModel:
                 f"sigma={sigma!r}: the model was fitted without noise levels, so it cannot "
                 "predict at another noise; refit with noise_sigma or use sigma=None"
             )
+        if sigma is not None and kind == "power_law":
+            self._check_power_law_noise(sigma)
         if sigma is None and has_noise:
             if self.noise_sigma is None:
                 raise InputError(
@@ -209,6 +249,24 @@ class BlurUncertaintyModel:
                 )
             return float(self.noise_sigma)
         return sigma
+
+    def _check_power_law_noise(self, sigma: float) -> None:
+        """Refuse a power-law prediction away from the noise it was fitted at."""
+        levels = [float(v) for v in self.power_law.extra.get("noise_levels", [])]
+        if not levels:
+            return
+        lo, hi = min(levels), max(levels)
+        if lo * (1 - 1e-6) <= sigma <= hi * (1 + 1e-6) and (len(levels) > 1
+                                                           or math.isclose(sigma, lo)):
+            return
+        where = (f"{lo:g} GL" if len(levels) == 1 else f"{lo:g}..{hi:g} GL")
+        raise InputError(
+            f"sigma={sigma:g} GL: the power law (eq. 17) was fitted at noise {where} and "
+            "its noise dependence is not measured (one level: u_e would scale as "
+            f"sigma^(2 alpha) = sigma^{2 * self.alpha:.2g}); use model='mismatch' "
+            "(CLI: --model mismatch), the noise + blur-mismatch model, to predict at "
+            "another noise level"
+        )
 
     def _theta(self, kind: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         fit = self._fit(kind)
@@ -243,6 +301,51 @@ class BlurUncertaintyModel:
             raise InputError(f"blur: negative blur length {w[w < 0][0]!r} px; W must be >= 0")
         kind = self._kind(model)
         sig = self._sigma(kind, sigma)
+        lu, half, u_noise, u_blur, u_floor = self._evaluate(kind, w, sig)
+        dom = self.domain
+        assert dom is not None
+        inside = dom.inside_blur(w) & dom.inside_noise(sig)
+        broken = dom.broken_down(w)
+        notes = []
+        reason = dom.outside_reason(w[~broken], sig)
+        if reason is not None:
+            notes.append(reason)
+        if kind == "power_law":
+            # the power law was fitted on its edge-driven range only
+            lo, hi = self.fit_range
+            in_fit = (w >= lo - 1e-9) & (w <= hi + 1e-9)
+            if (~in_fit & inside).any():
+                out = w[~in_fit & inside]
+                notes.append(f"W = {', '.join(f'{x:.3g}' for x in out[:3])}"
+                             f"{' ...' if out.size > 3 else ''} px outside the power law's "
+                             f"fit range (W {lo:g}..{hi:g} px): extrapolated")
+            inside &= in_fit
+        if broken.any():
+            notes.append(self.breakdown_note(w[broken]))
+            for arr in (lu, half):
+                arr[broken] = np.nan
+            if u_noise is not None and u_blur is not None:
+                u_noise[broken] = np.nan
+                u_blur[broken] = np.nan
+        return Prediction(blur=w, u_e=np.exp(lu), low=np.exp(lu - half), high=np.exp(lu + half),
+                          u_noise=u_noise, u_blur=u_blur, sigma=sig, model=kind,
+                          confidence=self.confidence, u_floor=u_floor,
+                          inside_domain=inside & ~broken, broken_down=broken,
+                          extrapolated=bool((~inside & ~broken).any()), notes=tuple(notes))
+
+    def breakdown_note(self, blur: NDArray[np.float64]) -> str:
+        """The one-line reason why no prediction is made at ``blur`` (px)."""
+        dom = self.domain
+        assert dom is not None and dom.breakdown_blur is not None
+        return (f"no prediction at W = {', '.join(f'{x:.3g}' for x in blur[:3])}"
+                f"{' ...' if blur.size > 3 else ''} px: DIC breaks down from W = "
+                f"{dom.breakdown_blur:g} px ({dom.breakdown_rule or 'breakdown'})")
+
+    def _evaluate(self, kind: str, w: NDArray[np.float64], sig: float | None
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                             NDArray[np.float64] | None, NDArray[np.float64] | None,
+                             float | None]:
+        """log u_e, the half-width of its prediction interval and the mismatch terms."""
         theta, cov = self._theta(kind)
         lu = self._log_u(kind, w, sig, theta)
         grad = np.empty((w.size, theta.size))
@@ -252,7 +355,10 @@ class BlurUncertaintyModel:
             tp[j] += h
             grad[:, j] = (self._log_u(kind, w, sig, tp) - lu) / h
         fit = self._fit(kind)
-        var = np.einsum("ni,ij,nj->n", grad, cov, grad) + fit.residual_std**2
+        with np.errstate(invalid="ignore"):
+            var = np.einsum("ni,ij,nj->n", grad, cov, grad) + fit.residual_std**2
+        if not np.all(np.isfinite(cov)):
+            var = np.full(w.size, np.inf)  # unidentified parameters: unbounded interval
         tq = t_quantile(self.confidence, fit.dof)
         half = tq * np.sqrt(np.clip(var, 0.0, None))
         u_noise = u_blur = None
@@ -263,9 +369,7 @@ class BlurUncertaintyModel:
             noise, blur2 = self._mismatch_terms(p, w, self.sssig(w), sig)
             u_noise, u_blur = np.sqrt(noise), np.sqrt(blur2)
             u_floor = float(p["floor"]) if "floor" in p else None
-        return Prediction(blur=w, u_e=np.exp(lu), low=np.exp(lu - half), high=np.exp(lu + half),
-                          u_noise=u_noise, u_blur=u_blur, sigma=sig, model=kind,
-                          confidence=self.confidence, u_floor=u_floor)
+        return lu, half, u_noise, u_blur, u_floor
 
     def taylor(self, blur: ArrayLike) -> NDArray[np.float64]:
         """Small-W expansion of eq. 19 at the fit noise: ``u_e(0) (1 + alpha beta W**2)``."""
@@ -277,6 +381,10 @@ class BlurUncertaintyModel:
                  model: str | None = None) -> float:
         """Largest blur length W (px) whose predicted u_e stays <= ``target`` (px).
 
+        Capped at the domain's breakdown blur (DIC fails beyond it): if the target still
+        holds there, that W is returned. The W may lie outside the fitted blur range
+        (check ``domain.inside_blur``).
+
         Raises
         ------
         InputError
@@ -284,9 +392,10 @@ class BlurUncertaintyModel:
         """
         target = check_positive(target, "target")
         kind = self._kind(model)
+        sig = self._sigma(kind, sigma)
 
         def f(wv: float) -> float:
-            return float(self.predict([wv], sigma, model=kind).u_e[0]) - target
+            return float(np.exp(self._evaluate(kind, np.array([wv]), sig)[0][0])) - target
 
         u0 = f(0.0) + target
         if u0 > target:
@@ -295,6 +404,11 @@ class BlurUncertaintyModel:
                 "this pattern and noise; no blur length meets it (raise the target, lower "
                 "the noise or use a larger subset)"
             )
+        assert self.domain is not None
+        w_break = self.domain.breakdown_blur
+        if w_break is not None and f(w_break) < 0:
+            # DIC breaks down before the target is reached: the last W before it
+            return float(np.nextafter(w_break, 0.0))
         hi = 1.0
         while f(hi) < 0:
             hi *= 2.0
@@ -311,18 +425,25 @@ class BlurUncertaintyModel:
             f"subset {self.subset} px; noise levels {list(self.noise_levels) or 'unknown'} GL; "
             f"{len(self.data['blur'])} points, W {min(self.data['blur']):g}..."
             f"{max(self.data['blur']):g} px",
+            f"validity domain: {self.domain.describe() if self.domain else 'unknown'}"
+            + (f"; DIC breaks down from W = {self.domain.breakdown_blur:g} px"
+               if self.domain and self.domain.breakdown_blur is not None else ""),
             "",
             f"SSSIG decay (eq. 18), R^2 = {self.decay.r2:.4f} [{self.decay.ci_method} {pct} CI]",
         ]
 
         def block(fit: FitResult) -> None:
+            how = "" if fit.ci_method in ("covariance", "none") else f" ({fit.ci_method})"
             for p in fit.parameters:
-                ci = "fixed" if p.fixed else f"[{p.low:.4g}, {p.high:.4g}]"
+                ci = "fixed" if p.fixed else f"[{p.low:.4g}, {p.high:.4g}]{how}"
                 lines.append(f"  {p.name:7s} = {p.value:.5g}  {ci}")
 
         block(self.decay)
         lines += [f"power law (eq. 17) on W {self.fit_range[0]:g}..{self.fit_range[1]:g} px "
                   f"({self.range_rule}), R^2 (log) = {self.power_law.r2:.4f}"]
+        lines.append(f"  u_e = u_ref (SSSIG / {self.sssig_ref:.4g})^-alpha; the paper's eta = "
+                     f"u_ref sssig_ref^alpha = {self.eta:.4g} (units depend on alpha); "
+                     "predicts only at the noise it was fitted at")
         block(self.power_law)
         lines.append(f"  MBRF = 2 alpha beta = {self.mbrf:.4g} 1/px^2 "
                      f"(u_e ~ u_e(0) (1 + {self.alpha * self.beta:.4g} W^2))")
@@ -350,7 +471,7 @@ class BlurUncertaintyModel:
         d: dict[str, Any] = {"schema": SCHEMA}
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, FitResult):
+            if isinstance(v, FitResult | ValidityDomain):
                 v = v.to_dict()
             elif f.name == "data":
                 v = {k: list(x) for k, x in v.items()}
@@ -373,7 +494,10 @@ class BlurUncertaintyModel:
 
     @classmethod
     def from_json(cls, text: str) -> BlurUncertaintyModel:
-        """Rebuild a model from :meth:`to_json` text (or a path to a ``.json`` file)."""
+        """Rebuild a model from :meth:`to_json` text (or a path to a ``.json`` file).
+
+        Files of schema /1 (power law as ``eta``, no domain) load too (:func:`model_kwargs`).
+        """
         if not text.lstrip().startswith("{"):
             from pathlib import Path
 
@@ -385,13 +509,67 @@ class BlurUncertaintyModel:
             d = json.loads(text)
         except json.JSONDecodeError as exc:
             raise InputError(f"model: invalid JSON ({exc})") from exc
-        if not isinstance(d, dict) or d.get("schema") != SCHEMA:
+        if not isinstance(d, dict) or d.get("schema") not in (SCHEMA, SCHEMA_V1):
             raise InputError(f"model: not a dicblur model file (schema must be {SCHEMA!r})")
-        kw = {k: v for k, v in d.items() if k != "schema"}
-        kw["decay"] = FitResult.from_dict(d["decay"])
-        kw["power_law"] = FitResult.from_dict(d["power_law"])
-        kw["mismatch"] = None if d["mismatch"] is None else FitResult.from_dict(d["mismatch"])
-        kw["fit_range"] = (float(d["fit_range"][0]), float(d["fit_range"][1]))
-        kw["noise_levels"] = tuple(float(x) for x in d["noise_levels"])
-        kw["data"] = {k: tuple(float(x) for x in v) for k, v in d["data"].items()}
-        return cls(**kw)
+        return cls(**model_kwargs(d))
+
+
+# ---------------------------------------------------------------------- loading (schemas)
+def model_kwargs(d: dict[str, Any]) -> dict[str, Any]:
+    """Constructor arguments of a :class:`BlurUncertaintyModel` from its JSON dict.
+
+    Schema /2 maps field by field. Schema /1 (before the validity domain) is upgraded:
+    the power law, stored as ``eta``, is refitted from the stored data on its fit range
+    around ``sssig_ref = SSSIG_0`` (the same least squares, so ``alpha`` is unchanged and
+    ``u_ref = eta SSSIG_0**-alpha``), and the domain is rebuilt from the data, the subset
+    and the provenance.
+    """
+    kw = {k: v for k, v in d.items() if k != "schema"}
+    kw["decay"] = FitResult.from_dict(d["decay"])
+    kw["power_law"] = FitResult.from_dict(d["power_law"])
+    kw["mismatch"] = None if d["mismatch"] is None else FitResult.from_dict(d["mismatch"])
+    kw["fit_range"] = (float(d["fit_range"][0]), float(d["fit_range"][1]))
+    kw["noise_levels"] = tuple(float(x) for x in d["noise_levels"])
+    kw["data"] = {k: tuple(float(x) for x in v) for k, v in d["data"].items()}
+    dom = d.get("domain")
+    kw["domain"] = None if dom is None else ValidityDomain.from_dict(dom)
+    if d.get("schema") == SCHEMA_V1 and "eta" in kw["power_law"].names:
+        kw["power_law"] = _refit_power_law_v1(kw)
+    return kw
+
+
+def _refit_power_law_v1(kw: dict[str, Any]) -> FitResult:
+    from .powerlaw import fit_power_law
+
+    data = kw["data"]
+    w = np.array(data["blur"])
+    lo, hi = kw["fit_range"]
+    sel = (w >= lo) & (w <= hi)
+    noise = np.array(data["noise"])[sel] if "noise" in data else None
+    old = kw["power_law"]
+    return fit_power_law(np.array(data["sssig"])[sel], np.array(data["u_e"])[sel],
+                         noise_sigma=noise, blur=w[sel],
+                         sssig_ref=kw["decay"]["sssig0"],
+                         fit_noise_exponent="kappa" in old.names,
+                         confidence=old.confidence)
+
+
+def _domain_from_fields(m: BlurUncertaintyModel) -> ValidityDomain:
+    """The domain of a model built without one: the data's ranges and the recorded settings."""
+    w = m.data.get("blur", (0.0,))
+    levels = m.noise_levels
+    prov = m.provenance or {}
+    pat = prov.get("pattern")
+    name = pat.get("name") if isinstance(pat, dict) else (pat if isinstance(pat, str) else None)
+    hashes = prov.get("input_hashes")
+    sha = prov.get("pattern_sha256")
+    if sha is None and isinstance(hashes, dict) and len(hashes) == 1:
+        sha = next(iter(hashes.values()))
+    shape = prov.get("dic_shape", prov.get("shape"))
+    return ValidityDomain(
+        blur_min=float(min(w)), blur_max=float(max(w)),
+        noise_min=float(min(levels)) if levels else None,
+        noise_max=float(max(levels)) if levels else None,
+        subset=m.subset, shape=shape if isinstance(shape, str) else None,
+        pattern=name if isinstance(name, str) else None,
+        pattern_sha256=sha if isinstance(sha, str) else None)

@@ -283,8 +283,29 @@ def model_from_pattern(
                             "shape": str(shape), "motion": [float(motion[0]), float(motion[1])],
                             "n_subsets": len(pts), "image_shape": list(img.shape)}
     prov.update(provenance or {})
+    # validity domain: the static prediction's own breakdown test ends it
+    broken = np.nonzero(~keep)[0]
+    w_break = float(w[broken[0]]) if broken.size else None
+    import hashlib
+
     model = fit_blur_model(ww, ss, uu, noise_sigma=nn, subset=subset,
                            mean_level=float(img.mean()), next_term=True, default="mismatch",
-                           provenance=prov, compare=False)
+                           provenance=prov, compare=False, shape=str(shape),
+                           pattern=_pattern_name(prov),
+                           pattern_sha256=hashlib.sha256(img.tobytes()).hexdigest(),
+                           breakdown_blur=w_break,
+                           breakdown_rule="static prediction: < 90 % of the subsets keep a "
+                           "shift below 1 px" if w_break is not None else None)
     # fitted on three noise levels: make the model's own noise the one asked for
     return replace(model, noise_sigma=sigma)
+
+
+def _pattern_name(prov: dict[str, Any]) -> str | None:
+    """Pattern name for the validity domain: ``provenance["pattern"]`` or the image's stem."""
+    if isinstance(prov.get("pattern"), str):
+        return str(prov["pattern"])
+    if isinstance(prov.get("image"), str):
+        from pathlib import Path
+
+        return Path(prov["image"]).stem or None
+    return None

@@ -164,7 +164,14 @@ def gradient_weighted_level(image: Any, *, motion: tuple[float, float] = (0.0, 1
 
 @dataclass(frozen=True)
 class ExposurePlan:
-    """Result of :func:`plan_exposure` (times in s, lengths in mm, blur and u_e in px)."""
+    """Result of :func:`plan_exposure` (times in s, lengths in mm, blur and u_e in px).
+
+    ``inside_domain``: the planned blur (and, with a camera, the noise there) lies inside
+    the model's validity domain; ``extrapolated`` is its negation. ``limited_by_breakdown``:
+    the answer is capped at the blur length where DIC breaks down. ``domain`` is the
+    model's :class:`~dicblur.models.ValidityDomain` as a dict. ``notes`` says all of it in
+    words.
+    """
 
     model: str
     velocity: float
@@ -187,6 +194,10 @@ class ExposurePlan:
     curve_u_e: NDArray[np.float64] = field(repr=False)
     notes: tuple[str, ...] = ()
     camera: dict[str, float] | None = None
+    inside_domain: bool = True
+    extrapolated: bool = False
+    limited_by_breakdown: bool = False
+    domain: dict[str, Any] | None = None
 
     def summary(self) -> str:
         """A readable answer."""
@@ -239,6 +250,7 @@ def plan_exposure(
     which: str | None = None,
     n_curve: int = 200,
     noise_level: float | None = None,
+    mean_level: float | None = None,
 ) -> ExposurePlan:
     """Choose the exposure time for a moving target.
 
@@ -265,6 +277,10 @@ def plan_exposure(
         Intensity (GL of the fitted reference images) at which the camera's shot noise is
         evaluated: :func:`gradient_weighted_level` of the reference image. Default: the
         model's mean level.
+    mean_level : float, optional
+        Mean grey level (GL) of the images the model was fitted on, when the model does not
+        record it (e.g. the mean of the reference image given with ``noise_level``);
+        default the model's, else 127.5 GL with a note.
 
     Returns
     -------
@@ -291,6 +307,9 @@ def plan_exposure(
     kind = model._kind(which)
     notes: list[str] = []
     t_rule = RULE_OF_THUMB_BLUR / v_px
+    dom = model.domain
+    assert dom is not None
+    w_break = dom.breakdown_blur
 
     if camera is None:
         if tgt is None:
@@ -300,6 +319,10 @@ def plan_exposure(
             )
         w_max = model.max_blur(tgt, sigma, model=kind)
         t_fix = w_max / v_px
+        limited = w_break is not None and w_max >= w_break * (1.0 - 1e-12)
+        if limited:
+            notes.append(f"the target holds up to W = {w_break:g} px, where DIC breaks down "
+                         f"({dom.breakdown_rule}); no longer exposure is planned")
         t = np.linspace(0.0, 2.0 * max(t_fix, t_rule), n_curve)
         pred = model.predict(t * v_px, sigma, model=kind)
         at = model.predict([w_max], sigma, model=kind)
@@ -308,12 +331,22 @@ def plan_exposure(
             notes.append(f"the model allows {t_fix / t_rule:.3g}x the rule-of-thumb exposure")
         else:
             notes.append("the rule of thumb is not conservative enough for this target")
+        sig_used = at.sigma
+        assert at.inside_domain is not None
+        inside = bool(at.inside_domain[0])  # blur and noise range (power law: fit range)
+        notes.append(f"planned W = {w_max:.3g} px"
+                     + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL")
+                     + (" lies inside" if inside else " lies outside")
+                     + f" the model's validity domain ({dom.describe()})"
+                     + ("" if inside else ": extrapolated"))
         return ExposurePlan(
             model=kind, velocity=v, scale=sc, velocity_px=v_px, target=tgt, exposure=t_fix,
             blur=w_max, u_e=float(at.u_e[0]), u_e_low=float(at.low[0]),
             u_e_high=float(at.high[0]), max_exposure=t_fix, min_exposure=None, optimal=False,
             saturation_exposure=None, rule_of_thumb_exposure=t_rule, rule_of_thumb_u_e=u_rule,
-            curve_exposure=t, curve_blur=t * v_px, curve_u_e=pred.u_e, notes=tuple(notes))
+            curve_exposure=t, curve_blur=t * v_px, curve_u_e=pred.u_e, notes=tuple(notes),
+            inside_domain=inside, extrapolated=not inside, limited_by_breakdown=limited,
+            domain=dom.to_dict())
 
     for attr in ("full_well", "read_noise", "flux"):
         if not hasattr(camera, attr):
@@ -324,14 +357,22 @@ def plan_exposure(
     if sigma is not None:
         raise InputError("sigma: with a camera the noise follows the exposure; omit sigma")
     fit = model._fit(kind)
-    if (kind == "mismatch" and "a" not in fit.names) or (
-            kind == "power_law" and fit.extra.get("sigma_ref") is None):
+    if kind == "power_law":
+        raise InputError(
+            "camera: with a camera the noise follows the exposure, and the power law "
+            "(eq. 17) predicts only at the noise it was fitted at; plan with "
+            "which='mismatch' (CLI: --model mismatch), the noise + blur-mismatch model"
+        )
+    if "a" not in fit.names:
         raise InputError(
             "camera: the model was fitted without a noise level, so it cannot follow the "
             "noise with the exposure; refit with noise_sigma"
         )
-    mean_level = model.mean_level
-    if mean_level is None:
+    if mean_level is not None:
+        mean_level = check_positive(mean_level, "mean_level")
+    elif model.mean_level is not None:
+        mean_level = model.mean_level
+    else:
         mean_level = 127.5
         notes.append("mean grey level of the reference images unknown: assumed 127.5 GL")
     t_sat = float(getattr(camera, "saturation_exposure", math.inf))
@@ -349,9 +390,13 @@ def plan_exposure(
         return np.array([model._log_u(kind, np.array([ti * v_px]), float(si), theta)[0]
                          for ti, si in zip(tt, sig, strict=True)])
 
-    # search blur lengths 1e-4 .. 1e4 px, capped by saturation
+    # search blur lengths 1e-4 .. 1e4 px, capped by saturation and by DIC's breakdown
     t_lo = 1e-4 / v_px
     t_hi = min(t_sat, 1e4 / v_px)
+    limited = False
+    if w_break is not None and w_break / v_px < t_hi:
+        t_hi = w_break / v_px * (1.0 - 1e-9)
+        limited = True
     if t_hi <= t_lo:
         raise InputError(
             f"camera: the sensor saturates after {t_sat:.3g} s, before the target moves "
@@ -367,9 +412,14 @@ def plan_exposure(
         t_opt = float(math.exp(r.x))
     else:
         t_opt = float(grid[i])
-        notes.append("the optimum is at the saturation limit (brighter light or a shorter "
-                     "exposure range changes the answer)" if i == grid.size - 1 else
-                     "the optimum is at the shortest exposure searched")
+        if i == grid.size - 1 and limited:
+            notes.append(f"u_e still falls at W = {w_break:g} px, where DIC breaks down "
+                         f"({dom.breakdown_rule}): the plan stops there")
+        else:
+            notes.append("the optimum is at the saturation limit (brighter light or a "
+                         "shorter exposure range changes the answer)" if i == grid.size - 1
+                         else "the optimum is at the shortest exposure searched")
+    limited = limited and i == grid.size - 1
     sig_opt = float(noise(t_opt))
     levels = model.noise_levels
     if len(levels) == 1 and not (0.5 <= sig_opt / levels[0] <= 2.0) and "floor" not in fit.names:
@@ -401,6 +451,14 @@ def plan_exposure(
                          f"{float(at.u_e[0]):.3g} px")
     notes.append(f"rule of thumb gives u_e {u_rule:.3g} px vs {float(at.u_e[0]):.3g} px at "
                  "the optimum")
+    w_opt = t_opt * v_px
+    assert at.inside_domain is not None
+    inside = bool(at.inside_domain[0])
+    notes.append(
+        f"the optimum (W = {w_opt:.3g} px, noise {sig_opt:.3g} GL) lies "
+        + ("inside" if inside else "outside")
+        + f" the model's validity domain ({dom.describe()})"
+        + ("" if inside else ": extrapolated"))
     return ExposurePlan(
         model=kind, velocity=v, scale=sc, velocity_px=v_px, target=tgt, exposure=t_opt,
         blur=t_opt * v_px, u_e=float(at.u_e[0]), u_e_low=float(at.low[0]),
@@ -409,4 +467,6 @@ def plan_exposure(
         rule_of_thumb_exposure=t_rule, rule_of_thumb_u_e=u_rule, curve_exposure=t_curve,
         curve_blur=t_curve * v_px, curve_u_e=u_curve, notes=tuple(notes),
         camera={k: float(getattr(camera, k)) for k in ("full_well", "read_noise", "flux",
-                                                        "peak_to_mean") if hasattr(camera, k)})
+                                                        "peak_to_mean") if hasattr(camera, k)},
+        inside_domain=inside, extrapolated=not inside, limited_by_breakdown=limited,
+        domain=dom.to_dict())

@@ -7,10 +7,25 @@ invariant to scaling the image intensity (ZNSSD DIC is). We therefore write it a
     u_e = eta_n (SSSIG / sigma**2)**(-alpha),   i.e.  eta = eta_n sigma**(2 alpha),
 
 which depends on the image only through the scale-free ratio ``SSSIG / sigma**2``. With
-one noise level this is the paper's law (``eta`` is reported at that level and the noise
-exponent ``kappa = 2 alpha`` is assumed). With several noise levels the exponent is fitted:
-``u_e = eta (sigma / sigma_ref)**kappa SSSIG**(-alpha)`` with ``sigma_ref`` the geometric
-mean of the levels; scale consistency is the testable statement ``kappa = 2 alpha``.
+one noise level this is the paper's law (``eta`` at that level; a prediction at another
+noise level is refused: the law's noise dependence was never measured). With several noise
+levels the exponent is fitted: ``u_e ∝ (sigma / sigma_ref)**kappa SSSIG**(-alpha)`` with
+``sigma_ref`` the geometric mean of the levels; scale consistency is the testable statement
+``kappa = 2 alpha``.
+
+Parameters with plain units
+---------------------------
+``eta`` has the units px (GL/px)**(2 alpha), which depend on the fitted ``alpha``; its value
+runs over decades (1e2..1e26 on the study's patterns) and its Gaussian interval is
+degenerate (``log eta`` and ``alpha`` are almost perfectly correlated because ``log SSSIG``
+is far from zero). The fit is therefore parameterised around a reference SSSIG:
+
+    u_e = u_ref (SSSIG / SSSIG_ref)**(-alpha),      eta = u_ref SSSIG_ref**alpha,
+
+``u_ref`` in px (the power law's u_e at ``SSSIG_ref``; :func:`dicblur.fit_blur_model` sets
+``SSSIG_ref = SSSIG_0`` of the eq. 18 fit, so ``u_ref`` is its static u_e(0)), ``alpha``
+dimensionless. ``eta`` is still available (``FitResult.extra["eta"]``,
+``BlurUncertaintyModel.eta``), derived.
 
 Fit range
 ---------
@@ -109,13 +124,15 @@ def fit_power_law(
     *,
     noise_sigma: ArrayLike | None = None,
     blur: ArrayLike | None = None,
+    sssig_ref: float | None = None,
     fit_noise_exponent: bool | None = None,
     confidence: float = 0.95,
     ci: str = "covariance",
     n_boot: int = 500,
     seed: int | np.random.Generator | None = None,
 ) -> FitResult:
-    """Fit ``log u_e = log eta - alpha log SSSIG [+ kappa log(sigma / sigma_ref)]``.
+    """Fit ``log u_e = log u_ref - alpha log(SSSIG / SSSIG_ref) [+ kappa log(sigma /
+    sigma_ref)]`` (eq. 17 around a reference SSSIG; module docstring).
 
     Ordinary least squares in log-log space (so CIs from the covariance are exact under
     Gaussian log residuals). Pass only the points of the fit range.
@@ -125,20 +142,28 @@ def fit_power_law(
     sssig, u_e : array_like, shape (n,)
         SSSIG ((GL/px)**2) and measured uncertainty (px), > 0.
     noise_sigma : float or array_like, shape (n,), optional
-        Noise std (GL) of each point. One level: stored as the reference (``kappa = 2
-        alpha`` assumed). Several: ``kappa`` fitted unless ``fit_noise_exponent=False``.
+        Noise std (GL) of each point. One level: stored as the reference (predictions at
+        other levels are refused by the model). Several: ``kappa`` fitted unless
+        ``fit_noise_exponent=False`` (then ``kappa = 2 alpha``).
     blur : array_like, shape (n,), optional
         W of each point (px), recorded as the fit range.
+    sssig_ref : float, optional
+        Reference SSSIG ((GL/px)**2) of ``u_ref``; default the largest SSSIG of the data
+        (:func:`dicblur.fit_blur_model` passes ``SSSIG_0`` of the eq. 18 fit).
 
     Returns
     -------
     FitResult
-        ``names = ("eta", "alpha"[, "kappa"])``; ``extra`` holds ``sigma_ref`` (GL or None).
+        ``names = ("u_ref", "alpha"[, "kappa"])`` (px, 1, 1); ``extra`` holds
+        ``sssig_ref``, ``sigma_ref`` (GL or None) and the derived paper ``eta``.
     """
     s = as_positive(sssig, "sssig", len(np.atleast_1d(np.asarray(sssig))))
     u = as_positive(u_e, "u_e", s.size)
     w = np.zeros(s.size) if blur is None else as_vector(blur, "blur", s.size)
     check_ci(ci, confidence, n_boot)
+    s_ref = float(s.max()) if sssig_ref is None else float(sssig_ref)
+    if not (math.isfinite(s_ref) and s_ref > 0):
+        raise InputError(f"sssig_ref={sssig_ref!r}: must be a finite SSSIG > 0 ((GL/px)^2)")
     sig: NDArray[np.float64] | None = None
     if noise_sigma is not None:
         sig = np.broadcast_to(np.asarray(noise_sigma, dtype=np.float64), s.shape).copy()
@@ -148,10 +173,10 @@ def fit_power_law(
     fit_kappa = multi if fit_noise_exponent is None else bool(fit_noise_exponent and multi)
     sigma_ref = (float(np.exp(np.mean(np.log(levels)))) if multi
                  else (float(levels[0]) if levels.size else None))
-    x = np.log(s)
+    x = np.log(s / s_ref)
     y = np.log(u)
     z = np.log(sig / sigma_ref) if (sig is not None and sigma_ref is not None) else np.zeros_like(x)
-    names: tuple[str, ...] = ("eta", "alpha", "kappa") if fit_kappa else ("eta", "alpha")
+    names: tuple[str, ...] = ("u_ref", "alpha", "kappa") if fit_kappa else ("u_ref", "alpha")
 
     def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
         cols = [np.ones(idx.size), -x[idx]] + ([z[idx]] if fit_kappa else [])
@@ -160,15 +185,20 @@ def fit_power_law(
             # kappa fixed at 2 alpha: regress on log(SSSIG / sigma^2) relative to sigma_ref
             a[:, 1] = -(x[idx] - 2.0 * z[idx])
         coef, *_ = np.linalg.lstsq(a, y[idx], rcond=None)
-        eta = math.exp(coef[0])
-        vals = np.array([eta, *coef[1:]])
+        u_ref = math.exp(coef[0])
+        vals = np.array([u_ref, *coef[1:]])
         res = a @ coef - y[idx]
         jac = a.copy()
-        jac[:, 0] = 1.0 / eta
+        jac[:, 0] = 1.0 / u_ref
         return vals, jac, res
 
-    extra = {"sigma_ref": sigma_ref, "noise_levels": [float(v) for v in levels],
+    extra = {"sigma_ref": sigma_ref, "sssig_ref": s_ref,
+             "noise_levels": [float(v) for v in levels],
              "kappa_rule": "fitted" if fit_kappa else "2*alpha"}
-    return make_result(model="power_law", names=names, fit_once=fit_once, n=s.size,
-                       data_space=y, blur=w, fixed={}, confidence=confidence, ci=ci,
-                       n_boot=n_boot, seed=seed, extra=extra, log_params=("eta", "a", "k"))
+    res = make_result(model="power_law", names=names, fit_once=fit_once, n=s.size,
+                      data_space=y, blur=w, fixed={}, confidence=confidence, ci=ci,
+                      n_boot=n_boot, seed=seed, extra=extra, log_params=("u_ref", "a", "k"))
+    eta = res["u_ref"] * s_ref ** res["alpha"]
+    from dataclasses import replace
+
+    return replace(res, extra={**res.extra, "eta": float(eta)})

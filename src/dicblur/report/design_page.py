@@ -1,10 +1,10 @@
 """The design report: one self-contained HTML page (dicblur.report.HtmlReport).
 
-Maps of predicted u_e, eta and MBRF over the family (the generalisation of the paper's
-Fig. 11), eta and MBRF against MIG_0, the search trace, the surrogate against the measured
-objective, the u_e(W) curves of the best, default and worst patterns, the confirmation and
-the export. matplotlib is imported inside the functions (detached ``Figure`` objects, no
-pyplot).
+Maps of predicted u_e, u_ref (the power law's u_e(0), px) and MBRF over the family (the
+generalisation of the paper's Fig. 11, which plots eta), u_ref and MBRF against MIG_0, the
+search trace, the surrogate against the measured objective, the u_e(W) curves of the best,
+default and worst patterns, the confirmation and the export. matplotlib is imported
+inside the functions (detached ``Figure`` objects, no pyplot).
 """
 
 from __future__ import annotations
@@ -72,13 +72,13 @@ def _fig11(result: DesignResult) -> Any:
     mig0 = np.array([e.mig0 for e in grid])
     obj = np.array([e.objective for e in grid])
     fig, axes = subplots(1, 2, figsize=(10, 3.8))
-    for ax, attr, lab in ((axes[0], "eta", "eta (eq. 17)"),
+    for ax, attr, lab in ((axes[0], "u_ref", "u_ref = eq. 17 u_e(0) (px)"),
                           (axes[1], "mbrf", "MBRF = 2 alpha beta (1/px^2)")):
         y = np.array([getattr(e, attr) for e in grid])
         sc = ax.scatter(mig0, y, c=np.log10(obj), cmap="viridis_r", s=28)
         ax.set_xlabel("MIG_0 (GL/px)")
         ax.set_ylabel(lab)
-        if attr == "eta":
+        if attr == "u_ref":
             ax.set_yscale("log")
     fig.colorbar(sc, ax=axes.tolist(), label="log10 predicted u_e (px)")
     return fig
@@ -213,13 +213,13 @@ def write_design_report(result: DesignResult, folder: str | Path, *,
     rep.figure(_maps(result, "objective", "predicted u_e (px)", log=True), "map_u_e",
                f"Predicted u_e at {prob.describe_target()} over speckle size, softness and "
                "density.")
-    rep.figure(_maps(result, "eta", "eta", log=True), "map_eta",
-               "eta of the power law u_e = eta SSSIG^-alpha (eq. 17), fitted over the whole "
-               "W grid.")
+    rep.figure(_maps(result, "u_ref", "u_ref (px)", log=True), "map_u_ref",
+               "u_ref of the power law u_e = u_ref (SSSIG / SSSIG_0)^-alpha (eq. 17 around "
+               "SSSIG_0: its u_e at W = 0, px), fitted over the whole W grid.")
     rep.figure(_maps(result, "mbrf", "MBRF (1/px^2)", log=False), "map_mbrf",
                "Motion blur rejection factor MBRF = 2 alpha beta (eq. 22).")
     rep.figure(_fig11(result), "fig11_family",
-               "eta and MBRF against the static MIG_0, coloured by predicted u_e: the "
+               "u_ref and MBRF against the static MIG_0, coloured by predicted u_e: the "
                "paper's Fig. 11 over the whole family.")
     rep.section("Search")
     n_ref = s["n_refine"]

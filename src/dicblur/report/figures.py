@@ -100,7 +100,8 @@ def fig_loglog(data: Mapping[str, Mapping[str, Any]]) -> Any:
         ax.loglog(d["sssig"], d["u_e"], "o", ms=3, color="k", label="data")
         inside = d["in_range"]
         s = np.sort(d["sssig"][inside])
-        ax.loglog(s, d["eta"] * s ** (-d["alpha"]), "-", color=_COLORS[0], lw=2,
+        ax.loglog(s, d["u_ref"] * (s / d["sssig_ref"]) ** (-d["alpha"]), "-",
+                  color=_COLORS[0], lw=2,
                   label=rf"eq. 17: $\alpha$={d['alpha']:.2f}, fit W $\leq$ {d['w_max']:.1f}")
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("SSSIG (GL$^2$/px$^2$)")
@@ -164,9 +165,10 @@ def fig_sssig_decay(data: Mapping[str, Mapping[str, Any]]) -> Any:
 def fig_mbrf_mig(
     study: Sequence[Mapping[str, Any]], family: Sequence[Mapping[str, Any]]
 ) -> Any:
-    """Fig. 11: eta and MBRF against MIG_0 (study patterns and a generated family)."""
+    """Fig. 11: u_ref (eq. 17 around SSSIG_0, px) and MBRF against MIG_0 (study patterns and
+    a generated family). The paper plots eta, whose units depend on alpha."""
     fig, (a1, a2) = subplots(1, 2, figsize=(10.5, 3.9))
-    panels = ((a1, "eta", r"$\eta$ (eq. 17)"),
+    panels = ((a1, "u_ref", r"$u_{ref}$ = eq. 17 $u_e$(0) (px)"),
               (a2, "mbrf", r"MBRF = 2$\alpha\beta$ (px$^{-2}$)"))
     for ax, key, ylab in panels:
         fam = sorted(family, key=lambda r: r["mig0"])

@@ -23,8 +23,13 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     """
     from ..models import sssig_decay
 
-    ds, model = result.curves, result.model
+    dsn, model = result.curves, result.model
     out = Path(out) if out is not None else Path(result.model_path).parent
+    if "noise" not in dsn.dims:
+        dsn = dsn.expand_dims("noise")
+    sigmas = (dsn["noise_effective_level"].values if "noise_effective_level" in dsn.coords
+              else dsn["noise"].values)
+    ds = dsn.isel(noise=0)  # SSSIG is noise-free; the log-log fit is at the first level
 
     w = ds["blur"].values
     ue = ds["u_e"].values
@@ -33,13 +38,26 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     paths = []
 
     fig, ax = subplots(figsize=(5.5, 4))
-    ax.plot(w, ue, "o", ms=3, label="campaign (std over POIs)")
-    pred = model.predict(wf)
-    ax.plot(wf, getattr(pred, "u_e", pred), "-", label=f"model ({model.default})")
-    ax.plot(w, ds["u_match_score"].values, ":", label="static match score, eq. 2")
+    for i, sig in enumerate(sigmas):
+        col = f"C{i}"
+        ax.plot(w, dsn["u_e"].isel(noise=i).values, "o", ms=3, color=col,
+                label=f"campaign, noise {float(sig):.3g} GL")
+        for kind, style in (("mismatch", "-"), ("power_law", "--")):
+            if kind == "mismatch" and model.mismatch is None:
+                continue
+            if kind == "power_law" and i > 0:
+                continue  # the power law predicts at its fitted noise only
+            pred = model.predict(wf, float(sig), model=kind)  # NaN where DIC breaks down
+            ax.plot(wf, pred.u_e, style, color=col,
+                    label=(("noise + blur mismatch" if kind == "mismatch"
+                            else "power law, eq. 19")
+                           + (" (default)" if kind == model.default else "")) if i == 0
+                    else None)
+        ax.plot(w, dsn["u_match_score"].isel(noise=i).values, ":", color=col,
+                label="static match score, eq. 2" if i == 0 else None)
     ax.set(xlabel="blur length W (px)", ylabel="u_e (px)",
            title="random error vs blur")
-    ax.legend()
+    ax.legend(fontsize=8)
     fig.tight_layout()
     paths.append(out / "ue_vs_blur.png")
     fig.savefig(paths[-1], dpi=120)
@@ -59,7 +77,10 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     ax.loglog(s, ue, "o", ms=3, label="campaign")
     sf = np.geomspace(float(s.min()), float(s.max()), 100)
     pl = model.power_law
-    ax.loglog(sf, pl["eta"] / sf ** pl["alpha"], "-",
+    ref = pl.extra.get("sigma_ref")
+    at_first = ((float(sigmas[0]) / ref) ** pl["kappa"] if "kappa" in pl.names and ref
+                else 1.0)
+    ax.loglog(sf, at_first * pl["u_ref"] * (sf / pl.extra["sssig_ref"]) ** (-pl["alpha"]), "-",
               label=f"eq. 17 fit, alpha = {pl['alpha']:.2f} (W in {model.fit_range[0]:g}.."
                     f"{model.fit_range[1]:g} px)")
     ax.set(xlabel="SSSIG ((GL/px)^2)", ylabel="u_e (px)", title="log u_e vs log SSSIG")

@@ -358,7 +358,10 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch
                 else None)
         fits[k] = {
-            "eta": _param(paper.power_law, "eta"), "alpha": _param(paper.power_law, "alpha"),
+            # eq. 17 around SSSIG_0: u_ref (px) = its u_e(0); eta = u_ref SSSIG_0^alpha is
+            # kept as a derived number (its units depend on alpha)
+            "u_ref": _param(paper.power_law, "u_ref"), "eta": paper.eta,
+            "sssig_ref": paper.sssig_ref, "alpha": _param(paper.power_law, "alpha"),
             "beta": _param(paper.decay, "beta"), "sssig0": _param(paper.decay, "sssig0"),
             "mbrf": paper.mbrf, "r2_decay": paper.decay.r2, "r2_power_law": paper.power_law.r2,
             "fit_range": list(paper.fit_range), "range_rule": paper.range_rule,
@@ -392,7 +395,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
                            subset=s.subset, compare=False, default="power_law")
         fam_rows.append({"name": name, "speckle_size": spec_row["speckle_size"],
                          "mig0": float(series(ds_fam, "mig_ref", name, s.main_noise)[0]),
-                         "eta": fm.eta, "alpha": fm.alpha, "beta": fm.beta, "mbrf": fm.mbrf,
+                         "u_ref": fm.u_ref, "alpha": fm.alpha, "beta": fm.beta,
+                         "mbrf": fm.mbrf,
                          "u_e0": float(u[0]), "u_e_max": float(u[-1])})
     timings["fits"] = time.perf_counter() - t
 

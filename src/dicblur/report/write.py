@@ -110,7 +110,8 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
         sg = series(ds, "sssig", k, n)
         lo, hi = paper.fit_range
         d7[lab[k]] = {"sssig": sg, "u_e": u, "in_range": (W >= lo) & (W <= hi) & valid[k],
-                      "eta": paper.eta, "alpha": paper.alpha, "w_max": hi}
+                      "u_ref": paper.u_ref, "sssig_ref": paper.sssig_ref,
+                      "alpha": paper.alpha, "w_max": hi}
         d8[lab[k]] = {"blur": W[valid[k]], "error": np.asarray(paper.data["err_power_law"], float),
                       "contrast_ratio": np.asarray(paper.data["contrast_ratio"], float)}
         d9[lab[k]] = {"blur": W, "sssig": sg, "fit": paper.sssig(W), "beta": paper.beta,
@@ -138,28 +139,33 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
     prow = []
     for p in pats:
         f = fits[p.key]
-        prow.append({"pattern": p.label, "eta": _ci(f["eta"]), "alpha": _ci(f["alpha"]),
+        prow.append({"pattern": p.label, "u_ref (px)": _ci(f["u_ref"]),
+                     "alpha": _ci(f["alpha"]),
                      "beta (1/px^2)": _ci(f["beta"]), "MBRF (1/px^2)": f["mbrf"],
                      "SSSIG0": _ci(f["sssig0"]), "MIG0": f["mig0"],
                      "R^2 eq.18": f["r2_decay"], "R^2 eq.17": f["r2_power_law"],
                      "eq.17 range (px)": f"{f['fit_range'][0]:g}..{f['fit_range'][1]:g}"})
-    rep.table(prow, left=["pattern", "eta", "alpha", "beta (1/px^2)", "SSSIG0",
+    rep.table(prow, left=["pattern", "u_ref (px)", "alpha", "beta (1/px^2)", "SSSIG0",
                           "eq.17 range (px)"],
               caption="Fitted parameters with 95 % confidence intervals (covariance of the "
-                      f"fit), noise {n:g} GL.")
+                      "fit, or a seeded bootstrap where it is degenerate), noise "
+                      f"{n:g} GL. Eq. 17 is written u_e = u_ref (SSSIG / SSSIG0)^-alpha, so "
+                      "u_ref is its u_e at W = 0 in px; the paper's eta = u_ref "
+                      "SSSIG0^alpha has units that depend on alpha.")
     notes = [f"{lab[p.key]}: {fits[p.key]['range_note']}" for p in pats
              if fits[p.key].get("range_note")]
     if notes:
         rep.paragraph("Automatic eq. 17 range: " + "; ".join(notes) + ".")
 
-    rep.section("Fig. 11: eta and MBRF against MIG_0")
+    rep.section("Fig. 11: u_ref and MBRF against MIG_0")
     study_rows = [{"label": lab[p.key], "mig0": fits[p.key]["mig0"],
-                   "eta": fits[p.key]["eta"]["value"], "mbrf": fits[p.key]["mbrf"]}
+                   "u_ref": fits[p.key]["u_ref"]["value"], "mbrf": fits[p.key]["mbrf"]}
                   for p in pats]
-    rep.figure(F.fig_mbrf_mig(study_rows, family), "fig11_eta_mbrf_mig",
-               "Fig. 11: eta and MBRF against MIG_0 over the study patterns and a family of "
-               "generated patterns (speckle size swept, softness 0.5 px).")
-    rep.table(family, columns=["name", "speckle_size", "mig0", "eta", "alpha", "beta", "mbrf",
+    rep.figure(F.fig_mbrf_mig(study_rows, family), "fig11_uref_mbrf_mig",
+               "Fig. 11: u_ref (the power law's u_e(0), px; the paper plots eta, whose units "
+               "depend on alpha) and MBRF against MIG_0 over the study patterns and a family "
+               "of generated patterns (speckle size swept, softness 0.5 px).")
+    rep.table(family, columns=["name", "speckle_size", "mig0", "u_ref", "alpha", "beta", "mbrf",
                                "u_e0", "u_e_max"], left=["name"],
               caption="Generated family (W = 0..6 px).")
 

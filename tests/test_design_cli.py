@@ -21,6 +21,9 @@ def test_design_cli_writes_everything(tmp_path, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["n_campaigns"] >= 4 + 3 and summary["n_points"] > 0
     assert summary["speckle_size_mm"] == pytest.approx(summary["best"]["speckle_size"] * 0.05)
+    # every file on disk is counted, the report's figures included
+    on_disk = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    assert summary["files"] == on_disk and any(f.startswith("figures") for f in on_disk)
     for name in ("design.json", "evaluations.csv", "best_pattern.png", "pattern.png",
                  "pattern.pdf", "pattern.json", "report.html"):
         assert (out / name).is_file(), name
@@ -67,12 +70,31 @@ def test_design_cli_velocity_and_range(tmp_path, capsys):
     assert main(["design", "--velocity", "100", "--exposure", "1e-3", "--scale", "0.05",
                  "--dpi", "300", "--print-size", "20", "-o", str(out), "--no-report",
                  "--json", *FAST]) == 0
+    summary = json.loads(capsys.readouterr().out)
     doc = json.loads((out / "design.json").read_text())
     assert doc["problem"]["blurs"] == [pytest.approx(2.0)]  # 100 mm/s * 1 ms / 0.05 mm/px
     assert not (out / "report.html").exists()
-    capsys.readouterr()
+    # the files it reports are the files it wrote (a fresh folder: all of them)
+    assert summary["files"] == sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                                      if p.is_file())
     out2 = tmp_path / "r"
     assert main(["design", "--blur-range", "1..3", "-o", str(out2), "--no-report", "--json",
                  *FAST, "--confirm", "0"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["target"].startswith("mean over W = 1..3 px") and "pattern.png" not in s["files"]
+
+
+def test_design_cli_takes_unit_strings_and_says_the_winner_in_words(tmp_path, capsys):
+    out = tmp_path / "u"
+    assert main(["design", "--velocity", "0.2m/s", "--exposure", "0.5ms", "--scale",
+                 "20px/mm", "-o", str(out), "--no-report", *FAST, "--max-refine", "0",
+                 "--confirm", "0", "--print-size", "20"]) == 0
+    text = capsys.readouterr().out
+    doc = json.loads((out / "design.json").read_text())
+    assert doc["problem"]["blurs"] == [pytest.approx(2.0)]  # 200 mm/s * 0.5 ms * 20 px/mm
+    best = doc["summary"]["best"]
+    words = (f"best pattern: speckle {best['speckle_size']:.2g} px, density "
+             f"{best['density']:.2f}, edge softness {best['softness']:.2g} px")
+    assert words in text
+    n = sum(1 for p in out.rglob("*") if p.is_file())
+    assert f"wrote {n} files to {out}" in text

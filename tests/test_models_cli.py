@@ -63,6 +63,25 @@ def test_fit_predict_plan(results_csv, tmp_path, capsys):
     assert fig.stat().st_size > 1000
 
 
+def test_fit_takes_the_papers_column_names_in_any_case(results_csv, tmp_path, capsys):
+    # W, SSSIG, u_e (the paper's names, as the models issue wrote them) = blur, sssig, u_e
+    rows = results_csv.read_text().splitlines()
+    header = rows[0].replace("blur", "W").replace("sssig", "SSSIG").replace("u_e", "U_E")
+    paper = tmp_path / "paper.csv"
+    paper.write_text("\n".join([header, *rows[1:]]) + "\n")
+    assert main(["fit", str(results_csv), "-o", str(tmp_path / "a.json")]) == 0
+    assert main(["fit", str(paper), "-o", str(tmp_path / "b.json"), "--select",
+                 "PATTERN=p1"]) == 0
+    a = BlurUncertaintyModel.from_json(str(tmp_path / "a.json"))
+    b = BlurUncertaintyModel.from_json(str(tmp_path / "b.json"))
+    assert b.decay["beta"] == a.decay["beta"] and b.mismatch["c"] == a.mismatch["c"]
+    both = tmp_path / "both.csv"
+    both.write_text("W,blur,sssig,u_e\n1,1,2,3\n")
+    capsys.readouterr()
+    assert main(["fit", str(both), "-o", str(tmp_path / "c.json")]) == 2
+    assert "both mean 'blur'" in capsys.readouterr().err
+
+
 def test_fit_from_netcdf(tmp_path, capsys):
     import xarray as xr
     w = np.arange(0.0, 8.01, 1.0)

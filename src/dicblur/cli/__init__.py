@@ -13,15 +13,78 @@ import sys
 import traceback
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import click
 import typer
+import typer.core
 
 from ..errors import DicblurError
 
 __all__ = ["app", "main", "run"]
 
+# Commands in pipeline order (make a pattern, blur it, correlate, sweep, fit, plan; then the
+# paper's studies), each with one full line in ``dicblur --help``.
+PIPELINE: dict[str, str] = {
+    "pattern": "Make speckle patterns, measure them, predict u_e(W) from one.",
+    "noise": "Noise std (grey levels) from two images of a static scene.",
+    "blur": "Motion-blur an image (paper's Algorithm 1), add camera noise.",
+    "correlate": "Subset DIC of two images: the displacement field and its summary.",
+    "campaign": "Run blur campaigns (serial or Dask), inspect and export them.",
+    "calibrate": "The paper's blur sweep on one pattern, then the model fits.",
+    "fit": "Fit the uncertainty models to campaign results (model JSON).",
+    "predict": "Predict u_e at blur lengths, or from velocity, exposure, scale.",
+    "plan": "Plan the exposure for a target u_e (optionally with a camera).",
+    "pulse": "The paper's 1-D pulse study (Section V): Table II, Fig. 4-6.",
+    "design": "Find the speckle pattern with the lowest u_e at your blur.",
+    "reproduce": "Reproduce the paper: figures, tables, claims in one HTML report.",
+}
+_SUBCOMMANDS: dict[tuple[str, str], str] = {
+    ("pattern", "generate"): "Write a random speckle pattern (plus its settings JSON).",
+    ("pattern", "metrics"): "SSSIG, MIG, speckle size, contrast, static predictions.",
+    ("pattern", "predict"): "Predict u_e(W) from the static image alone (no simulation).",
+}
+
+
+class _PipelineGroup(typer.core.TyperGroup):
+    """The root group: lists the commands in :data:`PIPELINE` order with its one-liners."""
+
+    # ``Any``: typer >= 0.20 vendors its own click, whose Context differs from click's.
+    def list_commands(self, ctx: Any) -> list[str]:
+        names = list(super().list_commands(ctx))
+        order = list(PIPELINE)
+        return sorted(names, key=lambda n: (order.index(n) if n in order else len(order),
+                                            names.index(n)))
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        cmd = super().get_command(ctx, cmd_name)
+        if cmd is not None and cmd_name in PIPELINE:
+            cmd.short_help = PIPELINE[cmd_name]
+        if cmd is not None:
+            _plain_usage(cmd)
+            for name, sub in getattr(cmd, "commands", {}).items():
+                if (cmd_name, name) in _SUBCOMMANDS:
+                    sub.short_help = _SUBCOMMANDS[(cmd_name, name)]
+        return cmd
+
+
+def _plain_usage(cmd: Any) -> None:
+    """Usage lines as ``dicblur blur [OPTIONS] IMAGE OUT``: typer writes required arguments
+    as ``{image}``, which reads like a template placeholder. Only our commands change."""
+    for param in getattr(cmd, "params", ()):
+        if hasattr(param, "_usage_display_name"):
+            def plain(p: Any = param) -> str:
+                name = (p.metavar or p.name).upper()
+                name = name if p.required else f"[{name}]"
+                return name + ("..." if p.nargs != 1 else "")
+
+            param._usage_display_name = plain
+    for sub in getattr(cmd, "commands", {}).values():
+        _plain_usage(sub)
+
+
 app = typer.Typer(
+    cls=_PipelineGroup,
     name="dicblur",
     help="Predict, measure and reduce the displacement uncertainty of 2-D DIC under motion "
     "blur.",

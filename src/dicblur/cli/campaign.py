@@ -75,7 +75,8 @@ def _print_summary(s: RunSummary) -> None:
 @campaign_app.command("run")
 def run_command(
     spec: Path = typer.Argument(..., help="Campaign spec (TOML)."),
-    out: Path = typer.Option(..., "-o", "--output", help="Results store (Zarr folder)."),
+    out: Path = typer.Option(..., "-o", "--out", "--output",
+                             help="Results store (Zarr folder)."),
     scheduler: str | None = typer.Option(
         None, "--scheduler", help="Existing Dask scheduler, tcp://HOST:PORT (default: a "
         "local cluster)."),
@@ -140,7 +141,7 @@ def export_command(
 def calibrate_command(
     image: str = typer.Argument(..., help="Pattern image file, or 'paper4' / 'speckle' "
                                 "to generate one."),
-    out: Path = typer.Option(..., "-o", "--output", help="Output folder."),
+    out: Path = typer.Option(..., "-o", "--out", "--output", help="Output folder."),
     noise: list[float] = typer.Option(
         [2.0], "--noise",
         help="Noise std per image, GL; repeat (e.g. --noise 2 --noise 8) to calibrate at "

@@ -7,6 +7,7 @@ import json
 import math
 import shlex
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -74,25 +75,45 @@ def _clean(v: object) -> object:
     return v
 
 
+def _in_words(c: Any) -> str:
+    """A candidate in words, e.g. "speckle 2.8 px, density 0.50, edge softness 0.95 px"."""
+    return (f"speckle {c.speckle_size:.2g} px, density {c.density:.2f}, edge softness "
+            f"{c.softness:.2g} px")
+
+
+def _stamps(folder: Path) -> dict[Path, int]:
+    return {p: p.stat().st_mtime_ns for p in folder.rglob("*") if p.is_file()}
+
+
+def _written_since(folder: Path, before: dict[Path, int]) -> list[str]:
+    """Files under ``folder`` created or rewritten since ``before`` (relative names)."""
+    return sorted(str(p.relative_to(folder)) for p, t in _stamps(folder).items()
+                  if before.get(p) != t)
+
+
 def design_command(
     ctx: typer.Context,
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     blur: float | None = typer.Option(None, "--blur", help="Design blur length W, px."),
     blur_range: str | None = typer.Option(None, "--blur-range",
                                           help="LO..HI px: minimise the mean u_e over it."),
-    velocity: float | None = typer.Option(None, "--velocity",
-                                          help="Target speed, mm/s (with --exposure, --scale)."),
-    exposure: float | None = typer.Option(None, "--exposure", help="Exposure time, s."),
+    velocity: str | None = typer.Option(None, "--velocity",
+                                        help="Target speed, e.g. 200mm/s or 800px/s (a bare "
+                                        "number is mm/s; with --exposure, --scale)."),
+    exposure: str | None = typer.Option(None, "--exposure",
+                                        help="Exposure time, e.g. 1ms (a bare number is s)."),
     blur_dist: str | None = typer.Option(None, "--blur-dist",
                                          help="Blur distribution W:weight,... px, e.g. "
                                          "1:0.2,3:0.5,5:0.3."),
-    amplitude: float | None = typer.Option(None, "--amplitude",
-                                           help="Sine vibration amplitude, mm (with "
-                                           "--frequency, --exposure, --scale)."),
+    amplitude: str | None = typer.Option(None, "--amplitude",
+                                         help="Sine vibration amplitude, e.g. 0.5mm (a bare "
+                                         "number is mm; with --frequency, --exposure, "
+                                         "--scale)."),
     frequency: float | None = typer.Option(None, "--frequency",
                                            help="Sine vibration frequency, Hz."),
-    scale: float | None = typer.Option(None, "--scale",
-                                       help="Camera scale, mm per px (print export)."),
+    scale: str | None = typer.Option(None, "--scale",
+                                     help="Camera scale, e.g. 0.05mm/px or 20px/mm (a bare "
+                                     "number is mm/px; enables the print export)."),
     noise: float = typer.Option(2.0, "--noise", help="Camera noise std, grey levels."),
     subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
     step: int = typer.Option(10, "--step", help="POI grid step, px."),
@@ -134,9 +155,20 @@ def design_command(
         sine_blur_distribution,
     )
     from ..io import save_image
+    from ..models import parse_quantity
     from ..patterns import speckle_pattern
     from ..report.design_page import write_design_report
 
+    # unit strings (120mm/s, 1ms, 0.05mm/px, 0.5mm); bare numbers in the documented units
+    scale_v = parse_quantity(scale, "scale", name="--scale") if scale is not None else None
+    if scale_v is not None and not scale_v > 0:
+        raise InputError(f"--scale={scale!r}: must be > 0 mm/px")
+    velocity_v = (parse_quantity(velocity, "velocity", name="--velocity", scale=scale_v)
+                  if velocity is not None else None)
+    exposure_v = (parse_quantity(exposure, "time", name="--exposure")
+                  if exposure is not None else None)
+    amplitude_v = (parse_quantity(amplitude, "length", name="--amplitude")
+                   if amplitude is not None else None)
     rng = parse_range(blur_range, "--blur-range") if blur_range is not None else None
     if rng is not None and rng[1] < rng[0]:
         raise InputError(f"--blur-range={blur_range}: inverted; give it as "
@@ -150,21 +182,20 @@ def design_command(
     blurs = weights = None
     if blur_dist is not None:
         blurs, weights = _distribution(blur_dist)
-    if amplitude is not None or frequency is not None:
-        if amplitude is None or frequency is None or exposure is None or scale is None:
+    if amplitude_v is not None or frequency is not None:
+        if (amplitude_v is None or frequency is None or exposure_v is None
+                or scale_v is None):
             raise InputError("--amplitude, --frequency: a sine vibration needs --amplitude "
                              "(mm), --frequency (Hz), --exposure (s) and --scale (mm/px)")
-        if velocity is not None or blurs is not None:
+        if velocity_v is not None or blurs is not None:
             raise InputError("--amplitude: give either a sine vibration or --velocity / "
                              "--blur-dist, not both")
-        if scale <= 0:
-            raise InputError(f"--scale={scale!r}: must be > 0 mm/px")
-        bl, wt = sine_blur_distribution(amplitude / scale, frequency, exposure)
+        bl, wt = sine_blur_distribution(amplitude_v / scale_v, frequency, exposure_v)
         blurs, weights = list(bl), list(wt)
-        exposure = None
+        exposure_v = None
     problem = design_problem(
-        blur=blur, blur_range=rng, blurs=blurs, weights=weights, velocity=velocity,
-        exposure=exposure, scale=scale, noise=noise, subset=subset, step=step,
+        blur=blur, blur_range=rng, blurs=blurs, weights=weights, velocity=velocity_v,
+        exposure=exposure_v, scale=scale_v, noise=noise, subset=subset, step=step,
         image_size=image_size, dic_shape=shape, realisations=realisations, seed=seed)
     sz = (parse_range(speckle_range, "--speckle-range") if speckle_range is not None
           else (2.0, max(2.0, min(10.0, subset / 3.0))))
@@ -173,6 +204,7 @@ def design_command(
                            softness=parse_range(softness_range, "--softness-range"),
                            grid=_grid(grid))
     out.mkdir(parents=True, exist_ok=True)
+    before = _stamps(out)
     n_grid = len(family.grid_candidates())
     if not as_json:
         console.print(f"design: {problem.describe_target()}, {n_grid} grid candidates, up "
@@ -185,19 +217,16 @@ def design_command(
     result = design_pattern(problem, family, max_refine=max_refine,
                             confirm_realisations=confirm, screen=screen, progress=progress)
     best = result.best.candidate
-    written = []
     cam = speckle_pattern(problem.image_size, speckle_size=best.speckle_size,
                           density=best.density, softness=best.softness, seed=seed)
     save_image(out / "best_pattern.png", cam, bit_depth=8)
     (out / "best_pattern.png.json").write_text(json.dumps(
         {"generator": best.settings((problem.image_size, problem.image_size), seed)},
         indent=2))
-    written += ["best_pattern.png", "best_pattern.png.json"]
     export = None
-    if scale is not None:
-        export = export_pattern(best, out, scale=scale, size_mm=size_mm, dpi=dpi, seed=seed,
+    if scale_v is not None:
+        export = export_pattern(best, out, scale=scale_v, size_mm=size_mm, dpi=dpi, seed=seed,
                                 extra={"design_summary": result.summary()})
-        written += ["pattern.png", "pattern.pdf", "pattern.json"]
     doc = result.to_dict()
     doc["export"] = None if export is None else export.to_dict()
     (out / "design.json").write_text(json.dumps(_clean(doc), indent=2, allow_nan=False))
@@ -209,7 +238,6 @@ def design_command(
         w.writeheader()
         for e in result.evaluations:
             w.writerow(e.to_dict())
-    written += ["design.json", "evaluations.csv"]
     if not no_report:
         # The options as parsed (defaults included), so the page says how to re-run it.
         parts = []
@@ -220,7 +248,6 @@ def design_command(
             parts.append(opt if value is True else f"{opt}={shlex.quote(str(value))}")
         cmd = "dicblur design " + " ".join(parts)
         page = write_design_report(result, out, export=export, command=cmd)
-        written.append(page.name)
         if check_browser:
             from ..report import check_in_browser
 
@@ -232,11 +259,13 @@ def design_command(
     if export is not None:
         summary["speckle_size_mm"] = export.speckle_size_mm
         summary["print_dpi"] = export.dpi
-    summary["files"] = written
+    # what this run wrote, counted on disk (the report's figures included)
+    summary["files"] = _written_since(out, before)
     if as_json:
         print_json(summary)
         return
-    console.print(f"best: {best.label()}  predicted u_e {result.best.objective:.4g} px "
+    console.print(f"best pattern: {_in_words(best)} ({best.label()}), predicted u_e "
+                  f"{result.best.objective:.4g} px "
                   f"(default {result.reference.objective:.4g}, worst "
                   f"{result.worst.objective:.4g})")
     if result.confirmation is not None:
@@ -250,7 +279,7 @@ def design_command(
                       f"DPI = {export.size_mm[0]:.1f}x{export.size_mm[1]:.1f} mm, speckle "
                       f"{export.speckle_size_mm:.3g} mm")
     console.print(f"{result.n_campaigns} campaigns, {result.n_points} campaign points, "
-                  f"{result.wall_s:.1f} s; wrote {len(written)} files to {out}")
+                  f"{result.wall_s:.1f} s; wrote {len(summary['files'])} files to {out}")
 
 
 def register(app: typer.Typer) -> None:

@@ -24,6 +24,16 @@ _OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "rms_contra
 _SETTINGS = ("pattern", "angle", "subset", "shape", "step", "noise_model")
 
 
+# The paper's column names (W, SSSIG, u_e) and the campaign store's (blur, sssig, u_e) are
+# both accepted, in any case: names are compared lower-cased, then W means blur.
+_ALIASES = {"w": "blur"}
+
+
+def _canonical(column: str) -> str:
+    low = column.strip().lower()
+    return _ALIASES.get(low, low)
+
+
 def _read_table(path: Path) -> dict[str, np.ndarray]:
     """Columns of a flat CSV, or the flattened variables of a netCDF / zarr dataset."""
     import numpy as np
@@ -37,12 +47,18 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         if not rows:
             raise InputError(f"RESULTS={str(path)!r}: empty CSV (expected a header and rows)")
         cols: dict[str, np.ndarray] = {}
+        seen: dict[str, str] = {}
         for key in rows[0]:
+            name = _canonical(key)
+            if name in seen:
+                raise InputError(f"RESULTS={str(path)!r}: columns {seen[name]!r} and {key!r} "
+                                 f"both mean {name!r}; keep one")
+            seen[name] = key
             values = [r[key] for r in rows]
             try:
-                cols[key] = np.array([float(v) if v != "" else math.nan for v in values])
+                cols[name] = np.array([float(v) if v != "" else math.nan for v in values])
             except ValueError:
-                cols[key] = np.array(values, dtype=object)
+                cols[name] = np.array(values, dtype=object)
         return cols
     if suffix in (".nc", ".netcdf", ".zarr", ".h5") or path.is_dir():
         import xarray as xr
@@ -74,12 +90,14 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
     missing = [c for c in _COLUMNS if c not in cols]
     if missing:
         raise InputError(
-            f"RESULTS: missing column(s) {missing}; the table needs blur, sssig and u_e "
+            f"RESULTS: missing column(s) {missing}; the table needs blur (or W), sssig and "
+            "u_e, in any case "
             f"(optional: {', '.join(_OPTIONAL)})"
         )
     mask = np.ones(cols["u_e"].size, dtype=bool)
     for item in select:
         key, sep, value = item.partition("=")
+        key = _canonical(key)
         if not sep or key not in cols:
             raise InputError(f"--select {item!r}: expected COLUMN=VALUE with a column of "
                              f"RESULTS ({sorted(cols)})")

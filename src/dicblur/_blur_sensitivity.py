@@ -171,6 +171,101 @@ def _interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[n
     return np.asarray(acov[d])
 
 
+def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9
+                       ) -> NDArray[np.float64]:
+    """Impulse response ``d[m]``, ``m = -L..L``, of the matcher's derivative at the pixels:
+    ``f_x[j] = sum_m d[m] n[j - m]``. For a B-spline, the derivative of the interpolant of
+    the samples ``n`` (prefilter, then the derivative taps; transfer ``sum_m beta'(m)
+    e^{-i w m} / sum_m beta(m) e^{-i w m}``), truncated where ``|d| < tol max |d|`` (the
+    prefilter's poles decay as 0.27^m for the cubic, 0.43^m for the quintic spline);
+    ``"central"``: ``(n[j+1] - n[j-1]) / 2``; ``"spectral"``: the ideal derivative
+    ``(-1)^(m+1) / m`` of an infinite signal, cut at ``L = 3 subset`` (it decays as 1/m).
+    Real and odd."""
+    from .dic.interpolation import bspline_kernel, bspline_kernel_derivative
+
+    if derivative == "central":
+        return np.array([0.5, 0.0, -0.5])
+    if derivative == "spectral":
+        m = np.arange(-3 * subset, 3 * subset + 1, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.asarray(np.where(m == 0, 0.0, -((-1.0) ** np.abs(m)) / m))
+    order = 3 if derivative == "bspline3" else 5
+    n = 4096
+    om = 2.0 * np.pi * np.fft.fftfreq(n)
+    half = (order + 1) // 2
+    ms = range(-half, half + 1)
+    num = sum(float(bspline_kernel_derivative(np.array(float(m)), order)) * np.exp(-1j * om * m)
+              for m in ms)
+    den = sum(float(bspline_kernel(np.array(float(m)), order)) * np.cos(om * m) for m in ms)
+    d = np.fft.ifft(num / den).real
+    d = np.concatenate([d[n // 2:], d[: n // 2]])  # lag -n/2 .. n/2 - 1
+    big = np.flatnonzero(np.abs(d) >= tol * np.abs(d).max())
+    lag = max(abs(int(big[0]) - n // 2), abs(int(big[-1]) - n // 2))
+    return np.asarray(d[n // 2 - lag : n // 2 + lag + 1])
+
+
+def _gradient_noise_fields(r0: NDArray[np.float64], subset: int, shape: str,
+                           ex: NDArray[np.float64], ey: NDArray[np.float64],
+                           kernel: NDArray[np.float64]
+                           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``D_k^T (S_k r0)`` of every steepest-descent column ``k``: the linear functional of
+    the reference noise ``n`` by which the noisy gradients move ``J_f^T r0``
+    (``delta J_f[:, k] = S_k D n``, ``D`` the spline derivative along x or y, ``S_k`` the
+    weight 1, dx or dy of the shape function). ``D^T`` spreads each field by the kernel's
+    half-length ``L`` along its axis (the gradients at the subset's pixels depend on noise
+    just outside it).
+
+    Returns the x-type fields, shape (m, S, S + 2L, kx), and the y-type fields, shape
+    (m, S + 2L, S, ky), in the column order of :meth:`_Windows.jacobian`.
+    """
+    m = len(r0)
+    size = subset
+    lag = len(kernel) // 2
+    r = r0.reshape(m, size, size)
+    if shape == "translation":
+        weights = [np.ones_like(ex)]
+    else:
+        weights = [np.ones_like(ex), ex, ey]
+    w3 = np.stack([(wt * np.ones((1, size * size))).reshape(size, size) for wt in weights])
+    # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
+    idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
+    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)],
+                    0.0)
+    v = r[:, None, :, :] * w3[None]  # (m, k, S, S)
+    qx = np.matmul(v, tmat.T)  # along columns: (m, k, S, S + 2L)
+    qy = np.matmul(tmat, v)  # along rows: (m, k, S + 2L, S)
+    return np.moveaxis(qx, 1, -1), np.moveaxis(qy, 1, -1)
+
+
+def _reference_noise_middle(pf: NDArray[np.float64], ratio: NDArray[np.float64],
+                            sg: NDArray[np.float64], r0: NDArray[np.float64], subset: int,
+                            shape: str, ex: NDArray[np.float64], ey: NDArray[np.float64],
+                            kernel: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``M^T M`` of the reference noise's response ``A^-1 M^T n``, per unit noise variance:
+    ``M = ratio P_f J_f + sigma_g Q`` with ``Q = [D_k^T (S_k r0)]`` (docs/models.md s. 4,
+    the complete noise term). Shape (m, k, k)."""
+    m, npx, k = pf.shape
+    lag = len(kernel) // 2
+    qx, qy = _gradient_noise_fields(r0, subset, shape, ex, ey, kernel)
+    kx = qx.shape[-1]
+    sub_x = qx[:, :, lag : lag + subset, :].reshape(m, npx, kx)
+    sub_y = qy[:, lag : lag + subset, :, :].reshape(m, npx, k - kx)
+    q_sub = np.concatenate([sub_x, sub_y], axis=2)  # Q on the subset's own pixels
+    qq = np.empty((m, k, k))
+    fx = qx.reshape(m, -1, kx)
+    fy = qy.reshape(m, -1, k - kx)
+    qq[:, :kx, :kx] = _gram(fx, fx)
+    qq[:, kx:, kx:] = _gram(fy, fy)
+    xy = _gram(sub_x, sub_y)  # x- and y-spread fields overlap on the subset only
+    qq[:, :kx, kx:] = xy
+    qq[:, kx:, :kx] = np.transpose(xy, (0, 2, 1))
+    cross = _gram(pf, q_sub)
+    r = ratio[:, None, None]
+    s = sg[:, None, None]
+    return (r * r * _gram(pf, pf) + r * s * (cross + np.transpose(cross, (0, 2, 1)))
+            + s * s * qq)
+
+
 def _check_derivative(derivative: str) -> None:
     if derivative not in ("bspline3", "bspline5", "spectral", "central"):
         raise InputError(
@@ -433,17 +528,23 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                          centres: NDArray[np.intp], subset: int, *,
                          motion: tuple[float, float], shape: Shape, derivative: Derivative,
                          boundary: Boundary, criterion: Criterion, max_shift: float,
-                         chunk: int, variance: bool, offset: float | None = None
+                         chunk: int, variance: bool, offset: float | None = None,
+                         complete: bool = True
                          ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
-    :func:`subset_noise_variance`."""
+    :func:`subset_noise_variance`.
+
+    The variance comes as shape (2, m, n): the reference image's share, then the current
+    image's. ``complete=False`` drops the reference-gradient noise x mismatch term (the
+    earlier, incomplete formula; kept for the benchmark's comparison)."""
     _check_shape(shape)
     _check_derivative(derivative)
     dy, dx = _unit(motion)
     w = np.asarray(blur, dtype=np.float64)
     shifts = np.zeros((len(w), len(centres)))
-    var = np.full((len(w), len(centres)), np.nan) if variance else None
+    var = np.full((2, len(w), len(centres)), np.nan) if variance else None
+    kernel = _derivative_kernel(derivative, subset) if variance and complete else None
     e = np.zeros(2 if shape == "translation" else 6)
     e[0] = dx
     e[1 if shape == "translation" else 3] = dy
@@ -459,6 +560,8 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
         noise_cov = tuple(None if t == 0.0 else
                           _interpolated_noise_covariance(t, order, subset)
                           for t in (oy - math.floor(oy), ox - math.floor(ox)))
+    offsets = _Windows(subset)
+    win_ex, win_ey = offsets.ex, offsets.ey
     for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, motion,
                                                     shape, derivative, boundary, chunk,
                                                     offset):
@@ -466,7 +569,9 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
         if criterion == "znssd" or variance:
             fh, sf = _normalise(f)
             gh, sg = _normalise(gg)
-            cross = _gram(jf, _project(jg, gh))  # J_f^T P_g J_g
+            pjg = _project(jg, gh)  # P_g J_g
+            cross = _gram(jf, pjg)  # J_f^T P_g J_g
+        p0 = None
         if w[j] > 0 or offset is not None:
             if criterion == "znssd":
                 sg_ok = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
@@ -475,7 +580,8 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
             else:
                 a = _gram(jf, jg)
                 b = _tdot(jf, f - gg)
-            shifts[j, rows] = _along(_solve(a, b), shape, dy, dx, max_shift)
+            p0 = _solve(a, b)
+            shifts[j, rows] = _along(p0, shape, dy, dx, max_shift)
         if var is not None:
             ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
             pf, pg = _project(jf, fh), _project(jf, gh)
@@ -491,12 +597,21 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                 if cy is not None:
                     pg_c = np.matmul(cy, pg_c.reshape(m_, subset, subset * k_))
                 pg_c = pg_c.reshape(pg.shape)
-            mid = (ratio2[:, None, None] * _gram(pf, pf)
-                   + _gram(pg, pg_c))
+            if kernel is not None and p0 is not None:
+                if criterion != "znssd":  # the ZNSSD fixed point's own shift
+                    sg_ok = np.where(sg > 0, sg, np.nan)
+                    p0 = _solve(cross / sg_ok[:, None, None], _tdot(jf, fh - gh))
+                # residual at the linearised fixed point, orthogonal to J_f
+                r0 = fh - gh - np.matmul(pjg, p0[:, :, None])[:, :, 0] / sg_ok[:, None]
+                mid_ref = _reference_noise_middle(pf, np.sqrt(ratio2), sg, r0, subset,
+                                                  shape, win_ex, win_ey, kernel)
+            else:
+                mid_ref = ratio2[:, None, None] * _gram(pf, pf)
             # e^T A^-1 M A^-T e = z^T M z with A^T z = e
             z = _solve(np.transpose(cross, (0, 2, 1)),
                        np.broadcast_to(e, (len(f), e.size)).copy())
-            var[j, rows] = np.einsum("ni,nij,nj->n", z, mid, z)
+            var[0, j, rows] = np.einsum("ni,nij,nj->n", z, mid_ref, z)
+            var[1, j, rows] = np.einsum("ni,nij,nj->n", z, _gram(pg, pg_c), z)
     return shifts, var
 
 
@@ -566,4 +681,4 @@ def subset_noise_variance(
                                derivative=derivative, boundary=boundary, criterion="znssd",
                                max_shift=np.inf, chunk=chunk, variance=True)[1]
     assert var is not None
-    return var
+    return np.asarray(var[0] + var[1])

@@ -17,6 +17,7 @@ from ._checks import as_vector
 from ._result import FitResult, t_quantile
 from .decay import mbrf as _mbrf
 from .decay import sssig_decay
+from .mismatch import noise_growth
 
 __all__ = ["BlurUncertaintyModel", "ModelKind", "Prediction"]
 
@@ -185,7 +186,7 @@ class BlurUncertaintyModel:
             gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch
                           else 1.0)
             noise = p["a"] * (s / sigma**2) ** (-gamma)
-        noise = noise * (1.0 + p.get("noise_blur", 0.0) * w**4)
+        noise = noise * noise_growth(w, p.get("noise_blur", 0.0), p.get("noise_blur2", 0.0))
         ub = p["c"] * w * w + p.get("c4", 0.0) * w**4
         bw = p.get("cross", 0.0) * w
         return noise, ub * ub + bw * bw

@@ -47,8 +47,12 @@ def test_reference_and_current_shares_match_a_monte_carlo_of_the_engine():
     pr = predict_from_pattern(img, [wl], noise_sigma=sigma, points=pts, boundary="periodic",
                               **opts)
     assert pr.u_noise_reference is not None and pr.u_noise_current is not None
+    assert pr.u_noise_interaction is not None
     np.testing.assert_allclose(pr.u_noise**2, pr.u_noise_reference**2
-                               + pr.u_noise_current**2, rtol=1e-12)
+                               + pr.u_noise_current**2 + pr.u_noise_interaction**2,
+                               rtol=1e-12)
+    # the second-order interaction of the two noises: ~1 % of the variance at 2 GL here
+    assert 0 < pr.u_noise_interaction[0] ** 2 < 0.02 * pr.u_noise[0] ** 2
     assert pr.u_noise_reference[0] ** 2 == pytest.approx(mc_ref, rel=0.15)
     assert pr.u_noise_current[0] ** 2 == pytest.approx(mc_cur, rel=0.15)
     old = _shifts_and_variance(img, [wl], pts, SUB, motion=(0.0, 1.0), shape="translation",
@@ -69,8 +73,9 @@ def test_no_mismatch_no_extra_term():
     new = _shifts_and_variance(img, [0.0], pts, 21, complete=True, **kw)[1]
     old = _shifts_and_variance(img, [0.0], pts, 21, complete=False, **kw)[1]
     assert new is not None and old is not None
-    np.testing.assert_allclose(new, old, rtol=1e-12)
+    np.testing.assert_allclose(new[:2], old[:2], rtol=1e-12)
     np.testing.assert_allclose(new[0], new[1], rtol=1e-10)
+    assert np.all(old[2] == 0) and np.all(new[2] > 0)  # the sigma**4 interaction
 
 
 def test_noise_growth_allows_a_negative_w2_term():

@@ -535,15 +535,18 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
     :func:`subset_noise_variance`.
 
-    The variance comes as shape (2, m, n): the reference image's share, then the current
-    image's. ``complete=False`` drops the reference-gradient noise x mismatch term (the
-    earlier, incomplete formula; kept for the benchmark's comparison)."""
+    The variance comes as shape (3, m, n): the reference image's share and the current
+    image's (per unit noise variance, first order in the noise), then the interaction of
+    the two noises (per unit ``sigma**4``: the reference-gradient noise against the current
+    image's noise, second order; it exists only when both images are noisy).
+    ``complete=False`` drops the reference-gradient noise terms (the earlier, incomplete
+    formula; kept for the benchmark's comparison)."""
     _check_shape(shape)
     _check_derivative(derivative)
     dy, dx = _unit(motion)
     w = np.asarray(blur, dtype=np.float64)
     shifts = np.zeros((len(w), len(centres)))
-    var = np.full((2, len(w), len(centres)), np.nan) if variance else None
+    var = np.full((3, len(w), len(centres)), np.nan) if variance else None
     kernel = _derivative_kernel(derivative, subset) if variance and complete else None
     e = np.zeros(2 if shape == "translation" else 6)
     e[0] = dx
@@ -562,6 +565,24 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                           for t in (oy - math.floor(oy), ox - math.floor(ox)))
     offsets = _Windows(subset)
     win_ex, win_ey = offsets.ex, offsets.ey
+    # E[dJ_f^T P_g n_g n_g^T P_g dJ_f] ~= sigma**4 R(0) G (interaction share): same-axis
+    # columns only (the x and y kernels share no tap: d[0] = 0), G the sums of the shape
+    # weights' products; the projections' O(1/N) parts are left out
+    # (the current noise through the interpolant: sum_D R(D) C(D) along the column's axis,
+    # times C(0) across it; R the kernel's autocorrelation)
+    gmat = np.zeros((e.size, e.size))
+    if kernel is not None:
+        rk = np.correlate(kernel, kernel, "full")[len(kernel) - 1:]  # R(0), R(1), ...
+        cov_yx = (None, None) if noise_cov is None else noise_cov
+        c_axis = [np.eye(1)[0] if c is None else c[0] for c in cov_yx]  # C(0), C(1), ...
+        along = [float(rk[0] * c[0] + 2 * np.dot(rk[1:len(c)], c[1:len(rk)]))
+                 for c in c_axis]  # (y, x)
+        wts = (np.ones((subset * subset, 1)) if shape == "translation"
+               else np.stack([np.ones(subset * subset), win_ex[0], win_ey[0]], axis=1))
+        gs = wts.T @ wts
+        kx = wts.shape[1]
+        gmat[:kx, :kx] = along[1] * c_axis[0][0] * gs  # x-type columns
+        gmat[kx:, kx:] = along[0] * c_axis[1][0] * gs  # y-type columns
     for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, motion,
                                                     shape, derivative, boundary, chunk,
                                                     offset):
@@ -612,6 +633,7 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                        np.broadcast_to(e, (len(f), e.size)).copy())
             var[0, j, rows] = np.einsum("ni,nij,nj->n", z, mid_ref, z)
             var[1, j, rows] = np.einsum("ni,nij,nj->n", z, _gram(pg, pg_c), z)
+            var[2, j, rows] = np.einsum("ni,ij,nj->n", z, gmat, z)
     return shifts, var
 
 
@@ -681,4 +703,4 @@ def subset_noise_variance(
                                derivative=derivative, boundary=boundary, criterion="znssd",
                                max_shift=np.inf, chunk=chunk, variance=True)[1]
     assert var is not None
-    return np.asarray(var[0] + var[1])
+    return np.asarray(var[0] + var[1])  # first order (the sigma**4 interaction left out)

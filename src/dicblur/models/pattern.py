@@ -72,9 +72,12 @@ class PatternPrediction:
     shape : str
     motion : tuple of float
         Unit motion direction (dy, dx).
-    u_noise_reference, u_noise_current : ndarray, shape (m,)
-        The reference and the current image's shares of ``u_noise`` (px; their squares add
-        up to ``u_noise**2``: the two images' noises are independent).
+    u_noise_reference, u_noise_current, u_noise_interaction : ndarray, shape (m,)
+        The shares of ``u_noise`` (px; their squares add up to ``u_noise**2``): the
+        reference image's noise alone and the current image's alone (first order, each
+        ``~ sigma``), and the interaction of the two (the reference-gradient noise against
+        the current noise, second order, ``~ sigma**2``; a few per cent of the variance at
+        8 GL on soft patterns).
     """
 
     blur: NDArray[np.float64]
@@ -89,6 +92,7 @@ class PatternPrediction:
     motion: tuple[float, float]
     u_noise_reference: NDArray[np.float64] | None = None
     u_noise_current: NDArray[np.float64] | None = None
+    u_noise_interaction: NDArray[np.float64] | None = None
 
 
 N_OFFSETS = 8  # sub-pixel positions averaged by subpixel="average" (midpoint rule)
@@ -111,16 +115,16 @@ def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.int
            boundary: Boundary, max_shift: float, subpixel: float | str | None = None
            ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                       NDArray[np.float64]]:
-    """Per W: mean noise variance per GL**2 (shape (2, m): the reference and the current
-    image's shares), mismatch variance, SSSIG, valid fraction (averaged over the sub-pixel
-    offsets of ``subpixel``)."""
+    """Per W: mean noise variance (shape (3, m): the reference and the current image's
+    shares per GL**2, their interaction per GL**4), mismatch variance, SSSIG, valid
+    fraction (averaged over the sub-pixel offsets of ``subpixel``)."""
     kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative,
                               boundary=boundary)
     runs = [_shifts_and_variance(img, w, pts, subset, criterion="znssd",
                                  max_shift=max_shift, chunk=256, variance=True, offset=o, **kw)
             for o in _offsets(subpixel)]
     xis = np.stack([r[0] for r in runs])
-    parts = np.stack([r[1] for r in runs if r[1] is not None])  # (offsets, 2, m, n)
+    parts = np.stack([r[1] for r in runs if r[1] is not None])  # (offsets, 3, m, n)
     variances = parts.sum(axis=1)
     # a subset enters the statistics only where it holds at every offset
     ok = (np.isfinite(xis) & np.isfinite(variances)).all(axis=0)
@@ -209,7 +213,7 @@ def predict_from_pattern(
     w = as_blur(blur, "blur", increasing=False)
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, derivative,
                                         boundary, max_shift, subpixel)
-    u_noise = sigma * np.sqrt(mean_var.sum(axis=0))
+    u_noise = np.sqrt(sigma**2 * (mean_var[0] + mean_var[1]) + sigma**4 * mean_var[2])
     u_blur = np.sqrt(mis_var)
     n = math.hypot(float(motion[0]), float(motion[1]))
     return PatternPrediction(blur=w, u_e=np.hypot(u_noise, u_blur), u_noise=u_noise,
@@ -217,7 +221,8 @@ def predict_from_pattern(
                              subset=subset, shape=str(shape),
                              motion=(float(motion[0]) / n, float(motion[1]) / n),
                              u_noise_reference=sigma * np.sqrt(mean_var[0]),
-                             u_noise_current=sigma * np.sqrt(mean_var[1]))
+                             u_noise_current=sigma * np.sqrt(mean_var[1]),
+                             u_noise_interaction=sigma**2 * np.sqrt(mean_var[2]))
 
 
 def model_from_pattern(
@@ -287,8 +292,9 @@ def model_from_pattern(
     levels = (0.5 * sigma, sigma, 2.0 * sigma)
     ww = np.concatenate([w[keep]] * 3)
     ss = np.concatenate([s[keep]] * 3)
-    var_noise = mean_var.sum(axis=0)
-    uu = np.concatenate([np.sqrt(lv**2 * var_noise[keep] + mis_var[keep]) for lv in levels])
+    var1 = mean_var[0] + mean_var[1]
+    uu = np.concatenate([np.sqrt(lv**2 * var1[keep] + lv**4 * mean_var[2][keep]
+                                 + mis_var[keep]) for lv in levels])
     nn = np.repeat(levels, int(keep.sum()))
     prov: dict[str, Any] = {"source": "static prediction", "subset": subset,
                             "subpixel": subpixel,

@@ -117,8 +117,9 @@ def predict(img: np.ndarray, boundary: str, row: dict) -> dict:
     """The prediction (and the earlier formula) on a Monte Carlo row's POIs."""
     pts = np.asarray(row["points"], dtype=np.intp)
     sigma, w = row["noise"], row["blur"]
+    # every POI the Monte Carlo kept (no breakdown test: same POIs on both sides)
     pr = predict_from_pattern(img, [w], noise_sigma=sigma, points=pts, boundary=boundary,
-                              **OPTS)
+                              min_contraction=0.0, **OPTS)
     assert pr.u_noise_reference is not None and pr.u_noise_current is not None
     assert pr.u_noise_interaction is not None
     old = _shifts_and_variance(img, [w], pts, SUBSET, motion=(0.0, 1.0),

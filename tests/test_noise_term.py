@@ -94,3 +94,21 @@ def test_noise_growth_allows_a_negative_w2_term():
     assert "noise_blur2" in fit.names
     d = fit.parameter("noise_blur2")
     assert d.value < 0 and d.low <= -0.02 <= d.high
+
+
+def test_breakdown_test_stops_the_static_prediction_instead_of_a_spike():
+    # the reproduce stand-in for pattern #1 (2 px soft speckles): at W = 8.5 px the blur
+    # has nearly erased, in some subsets reversed, the gradients along the motion; their
+    # near-singular fixed points made the noise term spike to ~5 px (report Fig. 12)
+    img = dicblur.speckle_pattern((512, 512), speckle_size=2.0, density=0.5, softness=0.9,
+                                  levels=(55.0, 135.0), seed=2018)
+    w = [6.0, 7.0, 8.0, 8.5, 9.0]
+    kw = dict(noise_sigma=2.0, subset=SUB, step=20, boundary="periodic")
+    raw = predict_from_pattern(img, w, min_contraction=0.0, **kw)
+    assert raw.u_noise.max() > 1.0  # the spike
+    pr = predict_from_pattern(img, w, **kw)
+    assert pr.breakdown_blur is not None and 7.0 <= pr.breakdown_blur <= 8.0
+    assert np.all(np.isfinite(pr.u_e)) and pr.u_noise.max() < 0.2
+    below = np.asarray(w) < pr.breakdown_blur
+    assert np.all(pr.valid_fraction[below] >= 0.9)
+    assert np.all(np.diff(pr.u_e[below]) > 0)

@@ -529,7 +529,8 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                          motion: tuple[float, float], shape: Shape, derivative: Derivative,
                          boundary: Boundary, criterion: Criterion, max_shift: float,
                          chunk: int, variance: bool, offset: float | None = None,
-                         complete: bool = True
+                         complete: bool = True, min_contraction: float = 0.0,
+                         contraction_out: NDArray[np.float64] | None = None
                          ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
@@ -540,7 +541,9 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
     the two noises (per unit ``sigma**4``: the reference-gradient noise against the current
     image's noise, second order; it exists only when both images are noisy).
     ``complete=False`` drops the reference-gradient noise terms (the earlier, incomplete
-    formula; kept for the benchmark's comparison)."""
+    formula; kept for the benchmark's comparison). ``min_contraction > 0``: a subset whose
+    IC-GN contraction (:func:`_contraction`) falls below it has broken down (``nan``).
+    ``contraction_out``, shape (m, n): filled with the contraction of every subset."""
     _check_shape(shape)
     _check_derivative(derivative)
     dy, dx = _unit(motion)
@@ -593,6 +596,7 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
             pjg = _project(jg, gh)  # P_g J_g
             cross = _gram(jf, pjg)  # J_f^T P_g J_g
         p0 = None
+        broken = np.zeros(len(f), dtype=bool)
         if w[j] > 0 or offset is not None:
             if criterion == "znssd":
                 sg_ok = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
@@ -603,6 +607,15 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                 b = _tdot(jf, f - gg)
             p0 = _solve(a, b)
             shifts[j, rows] = _along(p0, shape, dy, dx, max_shift)
+            if min_contraction > 0 or contraction_out is not None:
+                lam = _contraction(jf, fh, sf, cross, sg)
+                if contraction_out is not None:
+                    contraction_out[j, rows] = lam
+                if min_contraction > 0:
+                    broken = ~(lam >= min_contraction)
+                    shifts[j, rows][broken] = np.nan
+        elif contraction_out is not None:
+            contraction_out[j, rows] = 1.0  # the reference itself: K = I
         if var is not None:
             ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
             pf, pg = _project(jf, fh), _project(jf, gh)
@@ -634,7 +647,28 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
             var[0, j, rows] = np.einsum("ni,nij,nj->n", z, mid_ref, z)
             var[1, j, rows] = np.einsum("ni,nij,nj->n", z, _gram(pg, pg_c), z)
             var[2, j, rows] = np.einsum("ni,ij,nj->n", z, gmat, z)
+            var[:, j, rows] = np.where(broken[None, :], np.nan, var[:, j, rows])
     return shifts, var
+
+
+def _contraction(jf: NDArray[np.float64], fh: NDArray[np.float64], sf: NDArray[np.float64],
+                 cross: NDArray[np.float64], sg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Smallest real part of the eigenvalues of ``K = (sigma_f / sigma_g) H^-1 A`` per subset,
+    ``H = J_f^T P_f J_f`` (the IC-GN Hessian of ZNSSD) and ``A = J_f^T P_g J_g`` (the
+    fixed point's Jacobian). IC-GN against the blurred image moves by ``I - K`` per step
+    near its fixed point: ``K = I`` for a warped copy; blur lowers it, and as it nears 0
+    the fixed point degenerates (the noise response grows as ``1 / lambda``, IC-GN stalls)
+    and beyond 0 it repels (the blur has reversed the subset's gradients along the motion:
+    the sinc's negative lobe). ``nan`` where undefined."""
+    pf = _project(jf, fh)
+    hess = _gram(pf, pf)
+    ok = np.isfinite(hess).all(axis=(1, 2)) & np.isfinite(cross).all(axis=(1, 2)) & (sg > 0)
+    ok[ok] = np.linalg.cond(hess[ok]) < 1e12
+    lam = np.full(len(jf), np.nan)
+    if ok.any():
+        k = np.linalg.solve(hess[ok], cross[ok]) * (sf[ok] / sg[ok])[:, None, None]
+        lam[ok] = np.linalg.eigvals(k).real.min(axis=1)
+    return lam
 
 
 def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],

@@ -21,6 +21,7 @@ and 6 px speckles with noise 2 GL, noisy IC-GN lands within 5 % of it for W = 0.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -78,6 +79,12 @@ class PatternPrediction:
         ``~ sigma``), and the interaction of the two (the reference-gradient noise against
         the current noise, second order, ``~ sigma**2``; a few per cent of the variance at
         8 GL on soft patterns).
+    breakdown_blur : float or None
+        The smallest W (px) of ``blur`` at which fewer than 90 % of the subsets hold (the
+        campaigns' DIC breakdown rule; a subset breaks down when its IC-GN contraction
+        falls below ``min_contraction`` or its shift exceeds ``max_shift``): the prediction
+        describes DIC only below it; at and beyond it the terms come from the surviving
+        subsets (``nan`` where fewer than two survive). ``None``: no breakdown in ``blur``.
     """
 
     blur: NDArray[np.float64]
@@ -93,8 +100,12 @@ class PatternPrediction:
     u_noise_reference: NDArray[np.float64] | None = None
     u_noise_current: NDArray[np.float64] | None = None
     u_noise_interaction: NDArray[np.float64] | None = None
+    breakdown_blur: float | None = None
 
 
+BREAKDOWN_FRACTION = 0.9  # as the campaigns: DIC broken down below 90 % of the subsets
+MIN_CONTRACTION = 0.1  # default breakdown test of a subset (predict_from_pattern)
+DEGENERATE = 0.02  # contraction below which a subset's fixed point is left out
 N_OFFSETS = 8  # sub-pixel positions averaged by subpixel="average" (midpoint rule)
 
 
@@ -112,31 +123,42 @@ def _offsets(subpixel: float | str | None) -> list[float | None]:
 
 def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.intp],
            subset: int, motion: tuple[float, float], shape: Shape, derivative: Derivative,
-           boundary: Boundary, max_shift: float, subpixel: float | str | None = None
+           boundary: Boundary, max_shift: float, subpixel: float | str | None = None,
+           min_contraction: float = 0.0
            ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                       NDArray[np.float64]]:
     """Per W: mean noise variance (shape (3, m): the reference and the current image's
     shares per GL**2, their interaction per GL**4), mismatch variance, SSSIG, valid
-    fraction (averaged over the sub-pixel offsets of ``subpixel``)."""
+    fraction (subsets with a shift <= ``max_shift`` and an IC-GN contraction >=
+    ``min_contraction``; averaged over the sub-pixel offsets of ``subpixel``). The terms
+    leave out only the degenerate subsets (contraction < ``DEGENERATE``); ``nan`` where
+    fewer than two subsets remain."""
     kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative,
                               boundary=boundary)
+    offs = _offsets(subpixel)
+    lams = np.empty((len(offs), len(w), len(pts)))
+    # degenerate fixed points (contraction below DEGENERATE) are left out, as DIC's
+    # non-converged points; the breakdown counts those below min_contraction
     runs = [_shifts_and_variance(img, w, pts, subset, criterion="znssd",
-                                 max_shift=max_shift, chunk=256, variance=True, offset=o, **kw)
-            for o in _offsets(subpixel)]
+                                 max_shift=max_shift, chunk=256, variance=True, offset=o,
+                                 min_contraction=min(DEGENERATE, min_contraction),
+                                 contraction_out=lams[i], **kw)
+            for i, o in enumerate(offs)]
     xis = np.stack([r[0] for r in runs])
     parts = np.stack([r[1] for r in runs if r[1] is not None])  # (offsets, 3, m, n)
     variances = parts.sum(axis=1)
     # a subset enters the statistics only where it holds at every offset
     ok = (np.isfinite(xis) & np.isfinite(variances)).all(axis=0)
     count = ok.sum(axis=1)
-    if np.any(count < 2):
-        j = int(np.argmax(count < 2))
+    if count[np.argmin(w)] < 2:  # larger W may break down (nan there, flagged)
+        j = int(np.argmin(w))
         raise InputError(
             f"image: fewer than two subsets keep an intensity gradient at W = {w[j]:g} px "
             "(flat, or erased by the blur); no prediction there (use a textured image, a "
             "larger area or shorter blur lengths)"
         )
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-nan beyond the breakdown
         # reference and current shares, each averaged over the subsets and offsets
         mean_var = np.nanmean(np.where(ok[None], np.moveaxis(parts, 1, 0), np.nan),
                               axis=3).mean(axis=1)
@@ -147,7 +169,8 @@ def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.int
     s = np.array([float(directional_sssig(
         img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0], pts,
         subset=subset, angle=angle).mean()) for wl in w])
-    return mean_var, mis_var, s, count / xis.shape[2]
+    held = ok & ((lams >= min_contraction).all(axis=0) if min_contraction > 0 else True)
+    return mean_var, mis_var, s, held.sum(axis=1) / xis.shape[2]
 
 
 def predict_from_pattern(
@@ -164,6 +187,7 @@ def predict_from_pattern(
     boundary: Boundary = "reflect",
     max_shift: float = 1.0,
     subpixel: float | str | None = None,
+    min_contraction: float = 0.1,
 ) -> PatternPrediction:
     """Predict the DIC random error u_e(W) of a pattern from its static image alone.
 
@@ -193,6 +217,15 @@ def predict_from_pattern(
         the matcher's interpolation bias (the floor and the cross term of the mismatch
         model). ``"average"``: the mean over 8 offsets, for a target at an arbitrary
         position (what a real test sees); about 5x the cost of the aligned prediction.
+    min_contraction : float
+        Breakdown test: a subset whose IC-GN contraction (the smallest eigenvalue of
+        ``(sigma_f / sigma_g) H^-1 A``, 1 for a warped copy) is below it has broken down,
+        and ``breakdown_blur`` is the first W where more than 10 % have. As it nears 0 the
+        blur has nearly erased (beyond 0: reversed) the subset's gradients along the
+        motion, the noise response grows as its inverse and IC-GN stalls. The terms keep
+        such subsets (DIC does, while they converge) but leave out the degenerate ones,
+        contraction < 0.02, which made the predicted noise term spike (to ~5 px on 2 px
+        speckles at W = 8.5 px). ``0`` switches both off.
 
     Returns
     -------
@@ -210,9 +243,12 @@ def predict_from_pattern(
     img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     max_shift = check_positive(max_shift, "max_shift")
+    lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
     w = as_blur(blur, "blur", increasing=False)
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, derivative,
-                                        boundary, max_shift, subpixel)
+                                        boundary, max_shift, subpixel, lam_min)
+    broken = frac < BREAKDOWN_FRACTION
+    breakdown = float(w[broken].min()) if broken.any() else None
     u_noise = np.sqrt(sigma**2 * (mean_var[0] + mean_var[1]) + sigma**4 * mean_var[2])
     u_blur = np.sqrt(mis_var)
     n = math.hypot(float(motion[0]), float(motion[1]))
@@ -222,7 +258,8 @@ def predict_from_pattern(
                              motion=(float(motion[0]) / n, float(motion[1]) / n),
                              u_noise_reference=sigma * np.sqrt(mean_var[0]),
                              u_noise_current=sigma * np.sqrt(mean_var[1]),
-                             u_noise_interaction=sigma**2 * np.sqrt(mean_var[2]))
+                             u_noise_interaction=sigma**2 * np.sqrt(mean_var[2]),
+                             breakdown_blur=breakdown)
 
 
 def model_from_pattern(
@@ -281,8 +318,10 @@ def model_from_pattern(
         raise InputError(f"blur: {np.unique(w).size} distinct lengths; give at least 4 "
                          "(e.g. W = 0, 1, 2, 4 px)")
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, "bspline3",
-                                        boundary, 1.0, subpixel)
-    keep = frac >= 0.9  # as the campaigns' breakdown rule: >= 90 % of the subsets
+                                        boundary, 1.0, subpixel, MIN_CONTRACTION)
+    # below the first breakdown only (as the campaigns' rule: >= 90 % of the subsets)
+    keep = frac >= BREAKDOWN_FRACTION
+    keep &= w < (w[~keep].min() if (~keep).any() else np.inf)
     if keep.sum() < 4:
         raise InputError(
             f"blur: only {int(keep.sum())} blur lengths keep >= 90 % of the subsets; the "

@@ -722,16 +722,23 @@ def subset_noise_variance(
     ``p = sigma_g A^-1 J_f^T (f_hat - g_hat)`` (module docstring, ``A = J_f^T P_g J_g``) by a
     linear response with covariance
 
-        sigma**2 A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f + J_f^T P_g J_f] A^-T,
+        sigma**2 A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f
+                       + (sigma_g**2 / sigma_f) (J_f^T P_f Q + Q^T P_f J_f)
+                       + sigma_g**2 Q^T Q + J_f^T P_g J_f] A^-T,
 
-    the sharp reference's noise weighed down by the blurred subset's lower contrast. At
-    ``W = 0`` it is ``2 sigma**2 (J^T P J)^-1``, the match-score bound (eq. 2) with the ZNSSD
-    projection; with blur, the weaker current gradients in ``A`` raise it.
+    ``Q[:, k] = D_k^T (S_k r_0)``: the reference's noise moves the fixed point through its
+    intensities and through its spline gradients ``D_k`` (weighted by the shape function's
+    ``S_k``), which meet the residual ``r_0`` left at the fixed point (docs/models.md s. 4,
+    the complete noise term; the middle term is negative, O(W**2)). At ``W = 0`` it is
+    ``2 sigma**2 (J^T P J)^-1``, the match-score bound (eq. 2) with the ZNSSD projection;
+    with blur, the weaker current gradients in ``A`` raise it.
 
     Returns
     -------
     ndarray, shape (m, n)
-        ``var_i(W_j) / sigma**2`` (px**2 / GL**2); ``nan`` where the subset has no gradient.
+        ``var_i(W_j) / sigma**2`` (px**2 / GL**2), first order in the noise (the
+        ``sigma**4`` interaction of the two noises, which ``predict_from_pattern`` adds, is
+        left out); ``nan`` where the subset has no gradient.
     """
     var = _shifts_and_variance(image, blur, centres, subset, motion=motion, shape=shape,
                                derivative=derivative, boundary=boundary, criterion="znssd",

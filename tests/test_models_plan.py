@@ -74,8 +74,9 @@ def test_noise_growth_recovered_from_two_noise_levels():
     u = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR, noise_blur=e) * np.exp(
         rng.normal(0.0, 0.01, w.size))
     fit = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True)
-    assert fit.names == ("a", "noise_blur", "floor", "c")  # "auto" kept it
-    for name, true in (("c", C_TRUE), ("a", A_TRUE)):
+    # "auto" kept the growth (its W**2 and W**4 parts: data made with d = 0)
+    assert fit.names == ("a", "noise_blur2", "noise_blur", "floor", "c")
+    for name, true in (("c", C_TRUE), ("a", A_TRUE), ("noise_blur2", 0.0)):
         p = fit.parameter(name)
         assert p.low <= true <= p.high, (name, p)
     # e over repeated seeds: roughly nominal coverage of its 95 % interval, small bias

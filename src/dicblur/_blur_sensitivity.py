@@ -171,6 +171,101 @@ def _interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[n
     return np.asarray(acov[d])
 
 
+def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9
+                       ) -> NDArray[np.float64]:
+    """Impulse response ``d[m]``, ``m = -L..L``, of the matcher's derivative at the pixels:
+    ``f_x[j] = sum_m d[m] n[j - m]``. For a B-spline, the derivative of the interpolant of
+    the samples ``n`` (prefilter, then the derivative taps; transfer ``sum_m beta'(m)
+    e^{-i w m} / sum_m beta(m) e^{-i w m}``), truncated where ``|d| < tol max |d|`` (the
+    prefilter's poles decay as 0.27^m for the cubic, 0.43^m for the quintic spline);
+    ``"central"``: ``(n[j+1] - n[j-1]) / 2``; ``"spectral"``: the ideal derivative
+    ``(-1)^(m+1) / m`` of an infinite signal, cut at ``L = 3 subset`` (it decays as 1/m).
+    Real and odd."""
+    from .dic.interpolation import bspline_kernel, bspline_kernel_derivative
+
+    if derivative == "central":
+        return np.array([0.5, 0.0, -0.5])
+    if derivative == "spectral":
+        m = np.arange(-3 * subset, 3 * subset + 1, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.asarray(np.where(m == 0, 0.0, -((-1.0) ** np.abs(m)) / m))
+    order = 3 if derivative == "bspline3" else 5
+    n = 4096
+    om = 2.0 * np.pi * np.fft.fftfreq(n)
+    half = (order + 1) // 2
+    ms = range(-half, half + 1)
+    num = sum(float(bspline_kernel_derivative(np.array(float(m)), order)) * np.exp(-1j * om * m)
+              for m in ms)
+    den = sum(float(bspline_kernel(np.array(float(m)), order)) * np.cos(om * m) for m in ms)
+    d = np.fft.ifft(num / den).real
+    d = np.concatenate([d[n // 2:], d[: n // 2]])  # lag -n/2 .. n/2 - 1
+    big = np.flatnonzero(np.abs(d) >= tol * np.abs(d).max())
+    lag = max(abs(int(big[0]) - n // 2), abs(int(big[-1]) - n // 2))
+    return np.asarray(d[n // 2 - lag : n // 2 + lag + 1])
+
+
+def _gradient_noise_fields(r0: NDArray[np.float64], subset: int, shape: str,
+                           ex: NDArray[np.float64], ey: NDArray[np.float64],
+                           kernel: NDArray[np.float64]
+                           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``D_k^T (S_k r0)`` of every steepest-descent column ``k``: the linear functional of
+    the reference noise ``n`` by which the noisy gradients move ``J_f^T r0``
+    (``delta J_f[:, k] = S_k D n``, ``D`` the spline derivative along x or y, ``S_k`` the
+    weight 1, dx or dy of the shape function). ``D^T`` spreads each field by the kernel's
+    half-length ``L`` along its axis (the gradients at the subset's pixels depend on noise
+    just outside it).
+
+    Returns the x-type fields, shape (m, S, S + 2L, kx), and the y-type fields, shape
+    (m, S + 2L, S, ky), in the column order of :meth:`_Windows.jacobian`.
+    """
+    m = len(r0)
+    size = subset
+    lag = len(kernel) // 2
+    r = r0.reshape(m, size, size)
+    if shape == "translation":
+        weights = [np.ones_like(ex)]
+    else:
+        weights = [np.ones_like(ex), ex, ey]
+    w3 = np.stack([(wt * np.ones((1, size * size))).reshape(size, size) for wt in weights])
+    # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
+    idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
+    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)],
+                    0.0)
+    v = r[:, None, :, :] * w3[None]  # (m, k, S, S)
+    qx = np.matmul(v, tmat.T)  # along columns: (m, k, S, S + 2L)
+    qy = np.matmul(tmat, v)  # along rows: (m, k, S + 2L, S)
+    return np.moveaxis(qx, 1, -1), np.moveaxis(qy, 1, -1)
+
+
+def _reference_noise_middle(pf: NDArray[np.float64], ratio: NDArray[np.float64],
+                            sg: NDArray[np.float64], r0: NDArray[np.float64], subset: int,
+                            shape: str, ex: NDArray[np.float64], ey: NDArray[np.float64],
+                            kernel: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``M^T M`` of the reference noise's response ``A^-1 M^T n``, per unit noise variance:
+    ``M = ratio P_f J_f + sigma_g Q`` with ``Q = [D_k^T (S_k r0)]`` (docs/models.md s. 4,
+    the complete noise term). Shape (m, k, k)."""
+    m, npx, k = pf.shape
+    lag = len(kernel) // 2
+    qx, qy = _gradient_noise_fields(r0, subset, shape, ex, ey, kernel)
+    kx = qx.shape[-1]
+    sub_x = qx[:, :, lag : lag + subset, :].reshape(m, npx, kx)
+    sub_y = qy[:, lag : lag + subset, :, :].reshape(m, npx, k - kx)
+    q_sub = np.concatenate([sub_x, sub_y], axis=2)  # Q on the subset's own pixels
+    qq = np.empty((m, k, k))
+    fx = qx.reshape(m, -1, kx)
+    fy = qy.reshape(m, -1, k - kx)
+    qq[:, :kx, :kx] = _gram(fx, fx)
+    qq[:, kx:, kx:] = _gram(fy, fy)
+    xy = _gram(sub_x, sub_y)  # x- and y-spread fields overlap on the subset only
+    qq[:, :kx, kx:] = xy
+    qq[:, kx:, :kx] = np.transpose(xy, (0, 2, 1))
+    cross = _gram(pf, q_sub)
+    r = ratio[:, None, None]
+    s = sg[:, None, None]
+    return (r * r * _gram(pf, pf) + r * s * (cross + np.transpose(cross, (0, 2, 1)))
+            + s * s * qq)
+
+
 def _check_derivative(derivative: str) -> None:
     if derivative not in ("bspline3", "bspline5", "spectral", "central"):
         raise InputError(
@@ -433,17 +528,29 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                          centres: NDArray[np.intp], subset: int, *,
                          motion: tuple[float, float], shape: Shape, derivative: Derivative,
                          boundary: Boundary, criterion: Criterion, max_shift: float,
-                         chunk: int, variance: bool, offset: float | None = None
+                         chunk: int, variance: bool, offset: float | None = None,
+                         complete: bool = True, min_contraction: float = 0.0,
+                         contraction_out: NDArray[np.float64] | None = None
                          ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
-    :func:`subset_noise_variance`."""
+    :func:`subset_noise_variance`.
+
+    The variance comes as shape (3, m, n): the reference image's share and the current
+    image's (per unit noise variance, first order in the noise), then the interaction of
+    the two noises (per unit ``sigma**4``: the reference-gradient noise against the current
+    image's noise, second order; it exists only when both images are noisy).
+    ``complete=False`` drops the reference-gradient noise terms (the earlier, incomplete
+    formula; kept for the benchmark's comparison). ``min_contraction > 0``: a subset whose
+    IC-GN contraction (:func:`_contraction`) falls below it has broken down (``nan``).
+    ``contraction_out``, shape (m, n): filled with the contraction of every subset."""
     _check_shape(shape)
     _check_derivative(derivative)
     dy, dx = _unit(motion)
     w = np.asarray(blur, dtype=np.float64)
     shifts = np.zeros((len(w), len(centres)))
-    var = np.full((len(w), len(centres)), np.nan) if variance else None
+    var = np.full((3, len(w), len(centres)), np.nan) if variance else None
+    kernel = _derivative_kernel(derivative, subset) if variance and complete else None
     e = np.zeros(2 if shape == "translation" else 6)
     e[0] = dx
     e[1 if shape == "translation" else 3] = dy
@@ -459,6 +566,26 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
         noise_cov = tuple(None if t == 0.0 else
                           _interpolated_noise_covariance(t, order, subset)
                           for t in (oy - math.floor(oy), ox - math.floor(ox)))
+    offsets = _Windows(subset)
+    win_ex, win_ey = offsets.ex, offsets.ey
+    # E[dJ_f^T P_g n_g n_g^T P_g dJ_f] ~= sigma**4 R(0) G (interaction share): same-axis
+    # columns only (the x and y kernels share no tap: d[0] = 0), G the sums of the shape
+    # weights' products; the projections' O(1/N) parts are left out
+    # (the current noise through the interpolant: sum_D R(D) C(D) along the column's axis,
+    # times C(0) across it; R the kernel's autocorrelation)
+    gmat = np.zeros((e.size, e.size))
+    if kernel is not None:
+        rk = np.correlate(kernel, kernel, "full")[len(kernel) - 1:]  # R(0), R(1), ...
+        cov_yx = (None, None) if noise_cov is None else noise_cov
+        c_axis = [np.eye(1)[0] if c is None else c[0] for c in cov_yx]  # C(0), C(1), ...
+        along = [float(rk[0] * c[0] + 2 * np.dot(rk[1:len(c)], c[1:len(rk)]))
+                 for c in c_axis]  # (y, x)
+        wts = (np.ones((subset * subset, 1)) if shape == "translation"
+               else np.stack([np.ones(subset * subset), win_ex[0], win_ey[0]], axis=1))
+        gs = wts.T @ wts
+        kx = wts.shape[1]
+        gmat[:kx, :kx] = along[1] * c_axis[0][0] * gs  # x-type columns
+        gmat[kx:, kx:] = along[0] * c_axis[1][0] * gs  # y-type columns
     for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, motion,
                                                     shape, derivative, boundary, chunk,
                                                     offset):
@@ -466,7 +593,10 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
         if criterion == "znssd" or variance:
             fh, sf = _normalise(f)
             gh, sg = _normalise(gg)
-            cross = _gram(jf, _project(jg, gh))  # J_f^T P_g J_g
+            pjg = _project(jg, gh)  # P_g J_g
+            cross = _gram(jf, pjg)  # J_f^T P_g J_g
+        p0 = None
+        broken = np.zeros(len(f), dtype=bool)
         if w[j] > 0 or offset is not None:
             if criterion == "znssd":
                 sg_ok = np.where(sg > 0, sg, np.nan)  # a flat blurred subset: no fixed point
@@ -475,7 +605,17 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
             else:
                 a = _gram(jf, jg)
                 b = _tdot(jf, f - gg)
-            shifts[j, rows] = _along(_solve(a, b), shape, dy, dx, max_shift)
+            p0 = _solve(a, b)
+            shifts[j, rows] = _along(p0, shape, dy, dx, max_shift)
+            if min_contraction > 0 or contraction_out is not None:
+                lam = _contraction(jf, fh, sf, cross, sg)
+                if contraction_out is not None:
+                    contraction_out[j, rows] = lam
+                if min_contraction > 0:
+                    broken = ~(lam >= min_contraction)
+                    shifts[j, rows][broken] = np.nan
+        elif contraction_out is not None:
+            contraction_out[j, rows] = 1.0  # the reference itself: K = I
         if var is not None:
             ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
             pf, pg = _project(jf, fh), _project(jf, gh)
@@ -491,13 +631,44 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                 if cy is not None:
                     pg_c = np.matmul(cy, pg_c.reshape(m_, subset, subset * k_))
                 pg_c = pg_c.reshape(pg.shape)
-            mid = (ratio2[:, None, None] * _gram(pf, pf)
-                   + _gram(pg, pg_c))
+            if kernel is not None and p0 is not None:
+                if criterion != "znssd":  # the ZNSSD fixed point's own shift
+                    sg_ok = np.where(sg > 0, sg, np.nan)
+                    p0 = _solve(cross / sg_ok[:, None, None], _tdot(jf, fh - gh))
+                # residual at the linearised fixed point, orthogonal to J_f
+                r0 = fh - gh - np.matmul(pjg, p0[:, :, None])[:, :, 0] / sg_ok[:, None]
+                mid_ref = _reference_noise_middle(pf, np.sqrt(ratio2), sg, r0, subset,
+                                                  shape, win_ex, win_ey, kernel)
+            else:
+                mid_ref = ratio2[:, None, None] * _gram(pf, pf)
             # e^T A^-1 M A^-T e = z^T M z with A^T z = e
             z = _solve(np.transpose(cross, (0, 2, 1)),
                        np.broadcast_to(e, (len(f), e.size)).copy())
-            var[j, rows] = np.einsum("ni,nij,nj->n", z, mid, z)
+            var[0, j, rows] = np.einsum("ni,nij,nj->n", z, mid_ref, z)
+            var[1, j, rows] = np.einsum("ni,nij,nj->n", z, _gram(pg, pg_c), z)
+            var[2, j, rows] = np.einsum("ni,ij,nj->n", z, gmat, z)
+            var[:, j, rows] = np.where(broken[None, :], np.nan, var[:, j, rows])
     return shifts, var
+
+
+def _contraction(jf: NDArray[np.float64], fh: NDArray[np.float64], sf: NDArray[np.float64],
+                 cross: NDArray[np.float64], sg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Smallest real part of the eigenvalues of ``K = (sigma_f / sigma_g) H^-1 A`` per subset,
+    ``H = J_f^T P_f J_f`` (the IC-GN Hessian of ZNSSD) and ``A = J_f^T P_g J_g`` (the
+    fixed point's Jacobian). IC-GN against the blurred image moves by ``I - K`` per step
+    near its fixed point: ``K = I`` for a warped copy; blur lowers it, and as it nears 0
+    the fixed point degenerates (the noise response grows as ``1 / lambda``, IC-GN stalls)
+    and beyond 0 it repels (the blur has reversed the subset's gradients along the motion:
+    the sinc's negative lobe). ``nan`` where undefined."""
+    pf = _project(jf, fh)
+    hess = _gram(pf, pf)
+    ok = np.isfinite(hess).all(axis=(1, 2)) & np.isfinite(cross).all(axis=(1, 2)) & (sg > 0)
+    ok[ok] = np.linalg.cond(hess[ok]) < 1e12
+    lam = np.full(len(jf), np.nan)
+    if ok.any():
+        k = np.linalg.solve(hess[ok], cross[ok]) * (sf[ok] / sg[ok])[:, None, None]
+        lam[ok] = np.linalg.eigvals(k).real.min(axis=1)
+    return lam
 
 
 def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
@@ -551,19 +722,26 @@ def subset_noise_variance(
     ``p = sigma_g A^-1 J_f^T (f_hat - g_hat)`` (module docstring, ``A = J_f^T P_g J_g``) by a
     linear response with covariance
 
-        sigma**2 A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f + J_f^T P_g J_f] A^-T,
+        sigma**2 A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f
+                       + (sigma_g**2 / sigma_f) (J_f^T P_f Q + Q^T P_f J_f)
+                       + sigma_g**2 Q^T Q + J_f^T P_g J_f] A^-T,
 
-    the sharp reference's noise weighed down by the blurred subset's lower contrast. At
-    ``W = 0`` it is ``2 sigma**2 (J^T P J)^-1``, the match-score bound (eq. 2) with the ZNSSD
-    projection; with blur, the weaker current gradients in ``A`` raise it.
+    ``Q[:, k] = D_k^T (S_k r_0)``: the reference's noise moves the fixed point through its
+    intensities and through its spline gradients ``D_k`` (weighted by the shape function's
+    ``S_k``), which meet the residual ``r_0`` left at the fixed point (docs/models.md s. 4,
+    the complete noise term; the middle term is negative, O(W**2)). At ``W = 0`` it is
+    ``2 sigma**2 (J^T P J)^-1``, the match-score bound (eq. 2) with the ZNSSD projection;
+    with blur, the weaker current gradients in ``A`` raise it.
 
     Returns
     -------
     ndarray, shape (m, n)
-        ``var_i(W_j) / sigma**2`` (px**2 / GL**2); ``nan`` where the subset has no gradient.
+        ``var_i(W_j) / sigma**2`` (px**2 / GL**2), first order in the noise (the
+        ``sigma**4`` interaction of the two noises, which ``predict_from_pattern`` adds, is
+        left out); ``nan`` where the subset has no gradient.
     """
     var = _shifts_and_variance(image, blur, centres, subset, motion=motion, shape=shape,
                                derivative=derivative, boundary=boundary, criterion="znssd",
                                max_shift=np.inf, chunk=chunk, variance=True)[1]
     assert var is not None
-    return var
+    return np.asarray(var[0] + var[1])  # first order (the sigma**4 interaction left out)

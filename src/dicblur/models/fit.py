@@ -118,7 +118,7 @@ def fit_blur_model(
         one level the floor is absorbed in ``a`` and the noise term extrapolates too high
         (docs/models.md s. 4).
     noise_blur : bool or "auto"
-        Growth ``(1 + e W**4)`` of the noise term with the blur mismatch (see
+        Growth ``(1 + d W**2)**2 + e W**4`` of the noise term with the blur mismatch (see
         :func:`fit_mismatch`); ``"auto"`` tries it only with >= 2 noise levels.
     cross : bool or "auto"
         Noise-free term ``(b W)**2``, the cross term of the blur mismatch with the

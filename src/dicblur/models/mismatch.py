@@ -4,8 +4,8 @@ With a sharp reference and a blurred current image the error of a subset has two
 the noise term of the match-score model evaluated at the blurred SSSIG, and a
 deterministic, pattern-dependent shift of the SSD minimum that does not depend on noise:
 
-    u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) (1 + e W**4) + u_0**2
-                       + (b W)**2 + (c W**2 + c4 W**4)**2
+    u_e(W, sigma)**2 = a (SSSIG(W) / sigma**2)**(-gamma) [(1 + d W**2)**2 + e W**4]
+                       + u_0**2 + (b W)**2 + (c W**2 + c4 W**4)**2
 
 Theory gives ``a = 2``, ``gamma = 1`` (eq. 2) and ``c`` from the static image
 (:func:`blur_sensitivity`); ``c4`` is the next term of the expansion, fitted only when the
@@ -14,11 +14,14 @@ sub-pixel interpolation bias at the fractional shift of the blurred image (W/2 f
 trajectory; Schreier, Braasch & Sutton, Opt. Eng. 39(11), 2000,
 doi:10.1117/1.1314593), about 1e-3 px with bicubic B-splines on 4 px speckles. With one
 noise level it cannot be told from the noise term (both are flat in W at small W), so it is
-fitted only with >= 2 noise levels (docs/models.md s. 4). ``e`` (``noise_blur``, px**-4)
-is the growth of the noise term with the blur mismatch: with a sharp reference the noise of
-the reference gradients meets the mismatch residual ``(W**2 / 24) f''`` and the Hessian
-``sum g_ref g_cur`` falls below ``sqrt(SSSIG_ref SSSIG(W))``, both O(W**4) relative
-(docs/models.md s. 4). It is separable from ``c`` only with >= 2 noise levels. ``b``
+fitted only with >= 2 noise levels (docs/models.md s. 4). ``d`` (``noise_blur2``, px**-2,
+either sign) and ``e`` (``noise_blur``, px**-4, >= 0) are the growth of the noise term
+with the blur mismatch: with a sharp reference the noise of the reference gradients meets
+the mismatch residual ``(W**2 / 24) f''`` left at the fixed point, and its covariance with
+the reference intensities' own noise is negative, O(W**2) relative; its variance and the
+Hessian ``sum g_ref g_cur`` falling below ``sqrt(SSSIG_ref SSSIG(W))`` are O(W**4)
+(docs/models.md s. 4, the complete noise term). The square keeps the factor positive.
+They are separable from ``c`` only with >= 2 noise levels. ``b``
 (``cross``, px/px) is the cross term of the blur mismatch with the interpolation's own
 smoothing: the B-spline interpolant of the current image at its sub-pixel offset is
 smoother than the sampled reference, an extra even mismatch ``m_i`` per subset that adds to
@@ -304,16 +307,19 @@ def mismatch_terms(
     k: float | None = None,
     noise_blur: float = 0.0,
     cross: float = 0.0,
+    noise_blur2: float = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The two variance terms of the noise + blur-mismatch model (docs/models.md eq. M1).
 
     This is the one implementation of the formula (``mismatch_model``, the fitted
     :class:`~dicblur.models.BlurUncertaintyModel` and the pattern-design surrogate call it):
 
-        noise  = a (SSSIG / sigma**2)**(-gamma) (1 + e W**4)          (M2)
+        noise  = a (SSSIG / sigma**2)**(-gamma) [(1 + d W**2)**2 + e W**4]   (M2)
         blur2  = (b W)**2 + (c W**2 + c4 W**4)**2                     (M3)
 
-    With ``noise_sigma=None`` the noise term is ``k / SSSIG (1 + e W**4)`` (``k = a
+    ``d = noise_blur2`` (px**-2, either sign) and ``e = noise_blur`` (px**-4) are the noise
+    growth with the blur mismatch (:func:`noise_growth`).
+    With ``noise_sigma=None`` the noise term is ``k / SSSIG`` times that growth (``k = a
     sigma**2``, GL**2, required). ``u_e**2 = noise + u_0**2 + blur2`` (M1); the floor
     ``u_0`` is added by the caller.
 
@@ -338,7 +344,7 @@ def mismatch_terms(
     else:
         sig = np.asarray(noise_sigma, dtype=np.float64)
         noise = a * (s / sig**2) ** (-gamma)
-    noise = noise * (1.0 + noise_blur * w**4)
+    noise = noise * noise_growth(w, noise_blur, noise_blur2)
     ub = c * w * w + c4 * w**4
     bw = cross * w
     return noise, bw * bw + ub * ub
@@ -357,18 +363,32 @@ def mismatch_model(
     floor: float = 0.0,
     noise_blur: float = 0.0,
     cross: float = 0.0,
+    noise_blur2: float = 0.0,
 ) -> NDArray[np.float64]:
-    """``sqrt(a (SSSIG/sigma**2)**(-gamma) (1 + e W**4) + floor**2 + (b W)**2
-    + (c W**2 + c4 W**4)**2)`` (docs/models.md eq. M1, via :func:`mismatch_terms`).
+    """``sqrt(a (SSSIG/sigma**2)**(-gamma) [(1 + d W**2)**2 + e W**4] + floor**2
+    + (b W)**2 + (c W**2 + c4 W**4)**2)`` (docs/models.md eq. M1, via
+    :func:`mismatch_terms`).
 
     In px. With ``noise_sigma=None`` the noise term is ``k / SSSIG`` (``k`` required).
-    ``floor`` (px) is the noise-independent matcher floor ``u_0``; ``noise_blur`` (``e``,
-    px**-4) the growth of the noise term with the blur mismatch; ``cross`` (``b``, px/px)
-    the mismatch-interpolation cross term.
+    ``floor`` (px) is the noise-independent matcher floor ``u_0``; ``noise_blur2`` (``d``,
+    px**-2, either sign) and ``noise_blur`` (``e``, px**-4) the growth of the noise term
+    with the blur mismatch (:func:`noise_growth`); ``cross`` (``b``, px/px) the
+    mismatch-interpolation cross term.
     """
     noise, blur2 = mismatch_terms(blur, sssig, noise_sigma, c=c, a=a, gamma=gamma, c4=c4,
-                                  k=k, noise_blur=noise_blur, cross=cross)
+                                  k=k, noise_blur=noise_blur, cross=cross,
+                                  noise_blur2=noise_blur2)
     return np.sqrt(noise + floor * floor + blur2)
+
+
+def noise_growth(blur: ArrayLike, noise_blur: float, noise_blur2: float = 0.0
+                 ) -> NDArray[np.float64]:
+    """Growth factor of the noise term with the blur mismatch, ``(1 + d W**2)**2 + e W**4``
+    (``d = noise_blur2`` px**-2, any sign: the negative covariance of the reference
+    gradients' noise with its intensities' noise; ``e = noise_blur`` px**-4 >= 0). Positive
+    for every ``W``; ``d = 0`` is the earlier ``1 + e W**4``. docs/models.md s. 4."""
+    w2 = np.asarray(blur, dtype=np.float64) ** 2
+    return np.asarray((1.0 + noise_blur2 * w2) ** 2 + noise_blur * w2 * w2)
 
 
 def fit_mismatch(
@@ -408,8 +428,9 @@ def fit_mismatch(
         only with >= 2 noise levels (with one level it is confounded with ``a``) and kept
         when the AIC drops by more than 2. ``True`` with one level raises.
     noise_blur : bool or "auto"
-        Fit ``e`` (name ``"noise_blur"``, px**-4) of the noise term's growth
-        ``(1 + e W**4)``; same rules as ``floor``.
+        Fit ``d`` and ``e`` (names ``"noise_blur2"``, px**-2, and ``"noise_blur"``,
+        px**-4) of the noise term's growth ``(1 + d W**2)**2 + e W**4``; same rules as
+        ``floor``.
     cross : bool or "auto"
         Fit ``b`` (name ``"cross"``, px/px) of the noise-free term ``(b W)**2``, the
         cross term of the blur mismatch with the interpolation's smoothing; same rules as
@@ -418,8 +439,8 @@ def fit_mismatch(
     Returns
     -------
     FitResult
-        ``names`` among ``("a" | "k", "gamma", "noise_blur", "floor", "cross", "c",
-        "c4")``; ``fixed`` holds the rest.
+        ``names`` among ``("a" | "k", "gamma", "noise_blur2", "noise_blur", "floor",
+        "cross", "c", "c4")``; ``fixed`` holds the rest.
     """
     w = as_vector(blur, "blur")
     s = as_positive(sssig, "sssig", w.size)
@@ -460,8 +481,8 @@ def fit_mismatch(
                     names: list[str] = ["a" if sig is not None else "k"]
                     if do_gamma:
                         names.append("gamma")
-                    if with_growth:
-                        names.append("noise_blur")
+                    if with_growth:  # the W**2 (either sign) and W**4 growth together
+                        names += ["noise_blur2", "noise_blur"]
                     if with_floor:
                         names.append("floor")
                     if with_cross:
@@ -515,6 +536,7 @@ def _fit_one(
         d.setdefault("c4", 0.0)
         d.setdefault("floor", 0.0)
         d.setdefault("noise_blur", 0.0)
+        d.setdefault("noise_blur2", 0.0)
         d.setdefault("cross", 0.0)
         return d
 
@@ -531,9 +553,10 @@ def _fit_one(
         if "floor" in names:  # start with part of the low-W variance on the floor
             noise0 *= 0.9
         start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0, "floor": floor0,
-                 "noise_blur": 1e-3, "cross": 0.5 * c0}
+                 "noise_blur": 1e-3, "noise_blur2": 0.0, "cross": 0.5 * c0}
         p0 = np.array([start[n] for n in names])
         scl = np.where(p0 > 0, p0, 1e-3 * c0 if c0 > 0 else 1e-6)
+        scl[[n == "noise_blur2" for n in names]] = 1e-2  # px**-2, starts at 0
         lower = np.array([0.0 if n in ("a", "k", "c", "floor", "noise_blur", "cross")
                           else (0.05 if n == "gamma" else -np.inf) for n in names])
         upper = np.array([5.0 if n == "gamma" else np.inf for n in names])
@@ -542,7 +565,8 @@ def _fit_one(
             d = unpack(pn * scl)
             m = mismatch_model(wi, si, sg, c=d["c"], a=d.get("a", 2.0), gamma=d["gamma"],
                                c4=d["c4"], k=d.get("k"), floor=d["floor"],
-                               noise_blur=d["noise_blur"], cross=d["cross"])
+                               noise_blur=d["noise_blur"], cross=d["cross"],
+                               noise_blur2=d["noise_blur2"])
             return np.log(np.maximum(m, 1e-300)) - np.log(ui)
 
         r = optimize.least_squares(resid, p0 / scl, bounds=(lower / scl, upper / scl),

@@ -222,11 +222,13 @@ class BlurUncertaintyModel:
         if "k" in p:
             return mismatch_terms(w, s, None, k=p["k"], c=p["c"], c4=p.get("c4", 0.0),
                                   noise_blur=p.get("noise_blur", 0.0),
-                                  cross=p.get("cross", 0.0))
+                                  cross=p.get("cross", 0.0),
+                                  noise_blur2=p.get("noise_blur2", 0.0))
         assert sigma is not None
         return mismatch_terms(w, s, sigma, a=p["a"], gamma=gamma, c=p["c"],
                               c4=p.get("c4", 0.0), noise_blur=p.get("noise_blur", 0.0),
-                              cross=p.get("cross", 0.0))
+                              cross=p.get("cross", 0.0),
+                              noise_blur2=p.get("noise_blur2", 0.0))
 
     def _sigma(self, kind: str, sigma: float | None) -> float | None:
         if sigma is not None:

@@ -5,10 +5,14 @@ image and its exact box blur, subset by subset, for the ZNSSD IC-GN matcher:
 
 - the mismatch shift ``xi_i(W)``: where IC-GN stops against the blurred image
   (:func:`~dicblur.models.blur_mismatch_curve`);
-- the noise variance ``var_i(W)``: the linear response of that fixed point to
-  independent Gaussian noise of std ``sigma`` in both images (the sandwich formula of
-  :func:`dicblur._blur_sensitivity.subset_noise_variance`; at W = 0 the match-score
-  bound, eq. 2).
+- the noise variance ``var_i(W)``: the response of that fixed point to independent
+  Gaussian noise of std ``sigma`` in both images (the sandwich formula of
+  :func:`dicblur._blur_sensitivity.subset_noise_variance`, with the reference's noise
+  through its intensities and its gradients, plus the two noises' second-order
+  interaction; at W = 0 the match-score bound, eq. 2). Against a Monte Carlo of the
+  engine: within 3 % at W = 0..8 px (BENCHMARKS.md).
+- a breakdown test: the IC-GN contraction of each subset; ``breakdown_blur`` is where
+  the prediction stops describing DIC.
 
 The field statistic DIC reports, the std of the displacement over POIs, then has
 expectation ``u_e(W)**2 = mean_i var_i(W) + var_i(xi_i(W))``. On generated patterns of 3
@@ -21,6 +25,7 @@ and 6 px speckles with noise 2 GL, noisy IC-GN lands within 5 % of it for W = 0.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -72,6 +77,18 @@ class PatternPrediction:
     shape : str
     motion : tuple of float
         Unit motion direction (dy, dx).
+    u_noise_reference, u_noise_current, u_noise_interaction : ndarray, shape (m,)
+        The shares of ``u_noise`` (px; their squares add up to ``u_noise**2``): the
+        reference image's noise alone and the current image's alone (first order, each
+        ``~ sigma``), and the interaction of the two (the reference-gradient noise against
+        the current noise, second order, ``~ sigma**2``; a few per cent of the variance at
+        8 GL on soft patterns).
+    breakdown_blur : float or None
+        The smallest W (px) of ``blur`` at which fewer than 90 % of the subsets hold (the
+        campaigns' DIC breakdown rule; a subset breaks down when its IC-GN contraction
+        falls below ``min_contraction`` or its shift exceeds ``max_shift``): the prediction
+        describes DIC only below it; at and beyond it the terms come from the surviving
+        subsets (``nan`` where fewer than two survive). ``None``: no breakdown in ``blur``.
     """
 
     blur: NDArray[np.float64]
@@ -84,8 +101,15 @@ class PatternPrediction:
     subset: int
     shape: str
     motion: tuple[float, float]
+    u_noise_reference: NDArray[np.float64] | None = None
+    u_noise_current: NDArray[np.float64] | None = None
+    u_noise_interaction: NDArray[np.float64] | None = None
+    breakdown_blur: float | None = None
 
 
+BREAKDOWN_FRACTION = 0.9  # as the campaigns: DIC broken down below 90 % of the subsets
+MIN_CONTRACTION = 0.1  # default breakdown test of a subset (predict_from_pattern)
+DEGENERATE = 0.02  # contraction below which a subset's fixed point is left out
 N_OFFSETS = 8  # sub-pixel positions averaged by subpixel="average" (midpoint rule)
 
 
@@ -103,30 +127,45 @@ def _offsets(subpixel: float | str | None) -> list[float | None]:
 
 def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.intp],
            subset: int, motion: tuple[float, float], shape: Shape, derivative: Derivative,
-           boundary: Boundary, max_shift: float, subpixel: float | str | None = None
+           boundary: Boundary, max_shift: float, subpixel: float | str | None = None,
+           min_contraction: float = 0.0
            ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                       NDArray[np.float64]]:
-    """Per W: mean noise variance per GL**2, mismatch variance, SSSIG, valid fraction
-    (averaged over the sub-pixel offsets of ``subpixel``)."""
+    """Per W: mean noise variance (shape (3, m): the reference and the current image's
+    shares per GL**2, their interaction per GL**4), mismatch variance, SSSIG, valid
+    fraction (subsets with a shift <= ``max_shift`` and an IC-GN contraction >=
+    ``min_contraction``; averaged over the sub-pixel offsets of ``subpixel``). The terms
+    leave out only the degenerate subsets (contraction < ``DEGENERATE``); ``nan`` where
+    fewer than two subsets remain."""
     kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative,
                               boundary=boundary)
+    offs = _offsets(subpixel)
+    lams = np.empty((len(offs), len(w), len(pts)))
+    # degenerate fixed points (contraction below DEGENERATE) are left out, as DIC's
+    # non-converged points; the breakdown counts those below min_contraction
     runs = [_shifts_and_variance(img, w, pts, subset, criterion="znssd",
-                                 max_shift=max_shift, chunk=256, variance=True, offset=o, **kw)
-            for o in _offsets(subpixel)]
+                                 max_shift=max_shift, chunk=256, variance=True, offset=o,
+                                 min_contraction=min(DEGENERATE, min_contraction),
+                                 contraction_out=lams[i], **kw)
+            for i, o in enumerate(offs)]
     xis = np.stack([r[0] for r in runs])
-    variances = np.stack([r[1] for r in runs if r[1] is not None])
+    parts = np.stack([r[1] for r in runs if r[1] is not None])  # (offsets, 3, m, n)
+    variances = parts.sum(axis=1)
     # a subset enters the statistics only where it holds at every offset
     ok = (np.isfinite(xis) & np.isfinite(variances)).all(axis=0)
     count = ok.sum(axis=1)
-    if np.any(count < 2):
-        j = int(np.argmax(count < 2))
+    if count[np.argmin(w)] < 2:  # larger W may break down (nan there, flagged)
+        j = int(np.argmin(w))
         raise InputError(
             f"image: fewer than two subsets keep an intensity gradient at W = {w[j]:g} px "
             "(flat, or erased by the blur); no prediction there (use a textured image, a "
             "larger area or shorter blur lengths)"
         )
-    with np.errstate(invalid="ignore"):
-        mean_var = np.nanmean(np.where(ok, variances, np.nan), axis=2).mean(axis=0)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-nan beyond the breakdown
+        # reference and current shares, each averaged over the subsets and offsets
+        mean_var = np.nanmean(np.where(ok[None], np.moveaxis(parts, 1, 0), np.nan),
+                              axis=3).mean(axis=1)
         mis_var = np.nanvar(np.where(ok, xis, np.nan), axis=2).mean(axis=0)
     dy, dx = _unit(motion)
     angle = math.degrees(math.atan2(dy, dx))
@@ -134,7 +173,8 @@ def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.int
     s = np.array([float(directional_sssig(
         img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0], pts,
         subset=subset, angle=angle).mean()) for wl in w])
-    return mean_var, mis_var, s, count / xis.shape[2]
+    held = ok & ((lams >= min_contraction).all(axis=0) if min_contraction > 0 else True)
+    return mean_var, mis_var, s, held.sum(axis=1) / xis.shape[2]
 
 
 def predict_from_pattern(
@@ -151,6 +191,7 @@ def predict_from_pattern(
     boundary: Boundary = "reflect",
     max_shift: float = 1.0,
     subpixel: float | str | None = None,
+    min_contraction: float = 0.1,
 ) -> PatternPrediction:
     """Predict the DIC random error u_e(W) of a pattern from its static image alone.
 
@@ -180,6 +221,15 @@ def predict_from_pattern(
         the matcher's interpolation bias (the floor and the cross term of the mismatch
         model). ``"average"``: the mean over 8 offsets, for a target at an arbitrary
         position (what a real test sees); about 5x the cost of the aligned prediction.
+    min_contraction : float
+        Breakdown test: a subset whose IC-GN contraction (the smallest eigenvalue of
+        ``(sigma_f / sigma_g) H^-1 A``, 1 for a warped copy) is below it has broken down,
+        and ``breakdown_blur`` is the first W where more than 10 % have. As it nears 0 the
+        blur has nearly erased (beyond 0: reversed) the subset's gradients along the
+        motion, the noise response grows as its inverse and IC-GN stalls. The terms keep
+        such subsets (DIC does, while they converge) but leave out the degenerate ones,
+        contraction < 0.02, which made the predicted noise term spike (to ~5 px on 2 px
+        speckles at W = 8.5 px). ``0`` switches both off.
 
     Returns
     -------
@@ -197,16 +247,23 @@ def predict_from_pattern(
     img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     max_shift = check_positive(max_shift, "max_shift")
+    lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
     w = as_blur(blur, "blur", increasing=False)
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, derivative,
-                                        boundary, max_shift, subpixel)
-    u_noise = sigma * np.sqrt(mean_var)
+                                        boundary, max_shift, subpixel, lam_min)
+    broken = frac < BREAKDOWN_FRACTION
+    breakdown = float(w[broken].min()) if broken.any() else None
+    u_noise = np.sqrt(sigma**2 * (mean_var[0] + mean_var[1]) + sigma**4 * mean_var[2])
     u_blur = np.sqrt(mis_var)
     n = math.hypot(float(motion[0]), float(motion[1]))
     return PatternPrediction(blur=w, u_e=np.hypot(u_noise, u_blur), u_noise=u_noise,
                              u_blur=u_blur, sssig=s, valid_fraction=frac, noise_sigma=sigma,
                              subset=subset, shape=str(shape),
-                             motion=(float(motion[0]) / n, float(motion[1]) / n))
+                             motion=(float(motion[0]) / n, float(motion[1]) / n),
+                             u_noise_reference=sigma * np.sqrt(mean_var[0]),
+                             u_noise_current=sigma * np.sqrt(mean_var[1]),
+                             u_noise_interaction=sigma**2 * np.sqrt(mean_var[2]),
+                             breakdown_blur=breakdown)
 
 
 def model_from_pattern(
@@ -265,8 +322,10 @@ def model_from_pattern(
         raise InputError(f"blur: {np.unique(w).size} distinct lengths; give at least 4 "
                          "(e.g. W = 0, 1, 2, 4 px)")
     mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, "bspline3",
-                                        boundary, 1.0, subpixel)
-    keep = frac >= 0.9  # as the campaigns' breakdown rule: >= 90 % of the subsets
+                                        boundary, 1.0, subpixel, MIN_CONTRACTION)
+    # below the first breakdown only (as the campaigns' rule: >= 90 % of the subsets)
+    keep = frac >= BREAKDOWN_FRACTION
+    keep &= w < (w[~keep].min() if (~keep).any() else np.inf)
     if keep.sum() < 4:
         raise InputError(
             f"blur: only {int(keep.sum())} blur lengths keep >= 90 % of the subsets; the "
@@ -276,7 +335,9 @@ def model_from_pattern(
     levels = (0.5 * sigma, sigma, 2.0 * sigma)
     ww = np.concatenate([w[keep]] * 3)
     ss = np.concatenate([s[keep]] * 3)
-    uu = np.concatenate([np.sqrt(lv**2 * mean_var[keep] + mis_var[keep]) for lv in levels])
+    var1 = mean_var[0] + mean_var[1]
+    uu = np.concatenate([np.sqrt(lv**2 * var1[keep] + lv**4 * mean_var[2][keep]
+                                 + mis_var[keep]) for lv in levels])
     nn = np.repeat(levels, int(keep.sum()))
     prov: dict[str, Any] = {"source": "static prediction", "subset": subset,
                             "subpixel": subpixel,

@@ -349,10 +349,17 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         wc = np.union1d(np.arange(0.0, float(W.max()) + 0.25, 0.5), [float(W.max())])
         unit = predict_from_pattern(p.image, wc, noise_sigma=1.0, subset=s.subset,
                                     step=s.poi_step, boundary="periodic")
-        un = np.clip(CubicSpline(wc, unit.u_noise)(W), 0.0, None)
+        # first-order noise scales with sigma, the two noises' interaction with sigma^2
+        assert unit.u_noise_interaction is not None
+        un = np.clip(CubicSpline(wc, np.sqrt(np.maximum(
+            unit.u_noise**2 - unit.u_noise_interaction**2, 0.0)))(W), 0.0, None)
+        ui = np.clip(CubicSpline(wc, unit.u_noise_interaction)(W), 0.0, None)
         ub = np.clip(CubicSpline(wc, unit.u_blur)(W), 0.0, None)
         static[k]["predicted_u_e"] = {
-            f"{lv:g}": np.hypot(lv * un, ub).tolist() for lv in s.noise_levels}
+            f"{lv:g}": np.sqrt((lv * un) ** 2 + (lv * lv * ui) ** 2 + ub**2).tolist()
+            for lv in s.noise_levels}
+        # where the static prediction stops describing DIC (docs/models.md s. 4)
+        static[k]["breakdown_blur"] = unit.breakdown_blur
         st = np.asarray(static[k]["predicted_u_e"][f"{s.main_noise:g}"])[v]
         eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
         mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch

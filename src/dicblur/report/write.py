@@ -124,8 +124,12 @@ def write_report(*, out: Path, settings: Any, ds: Any, pats: list[Any], static: 
         curves = [(lv, series(ds, "u_e", k, lv),
                    full.predict(W, lv, model="mismatch").u_e if full.mismatch is not None
                    else np.full(W.size, np.nan)) for lv in s.noise_levels]
+        # the static prediction stops at its breakdown W (no curve beyond: a gap)
+        brk = static[k].get("breakdown_blur")
+        stop = W >= (np.inf if brk is None else brk)
         d12[lab[k]] = {"blur": W, "curves": curves,
-                       "static": [np.asarray(static[k]["predicted_u_e"][f"{lv:g}"])
+                       "static": [np.where(stop, np.nan,
+                                           np.asarray(static[k]["predicted_u_e"][f"{lv:g}"]))
                                   for lv in s.noise_levels]}
     rep.figure(F.fig_loglog(d7), "fig07_loglog",
                "Fig. 7: log u_e against log SSSIG with the eq. 17 fit over its automatic range.")

@@ -145,15 +145,17 @@ def calibrate(
     -------
     CalibrationResult
     """
+    from ..io import check_output
     from ..models import fit_blur_model
     from .engine import run_campaign
     from .store import export_csv, open_results
 
+    check_output(out_dir, "out", folder=True)
     spec = calibration_spec(image, noise=noise, subset=subset, angle=angle, step=step,
                             noise_model=noise_model, shape=shape, size=size, seed=seed,
                             blur=blur)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(exist_ok=True)
     results = out / "results.zarr"
     summary = run_campaign(spec, results, scheduler=scheduler, workers=workers,
                            serial=serial, progress=progress)
@@ -180,11 +182,18 @@ def calibrate(
         },
     )
     model_path = out / "model.json"
-    model_path.write_text(model.to_json())
+    model.to_json(str(model_path))
     figs = _figures(mean, model, out) if figures else ()
     return CalibrationResult(model=model, model_path=model_path, results_path=results,
                              csv_path=csv_path, figures=figs,
                              sssig_r2=float(model.decay.r2), spec=spec)
+
+
+def _save(fig: Any, path: Path) -> None:
+    from ..io import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
 
 
 def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
@@ -211,7 +220,7 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
     ax.legend()
     fig.tight_layout()
     paths.append(out / "ue_vs_blur.png")
-    fig.savefig(paths[-1], dpi=120)
+    _save(fig, paths[-1])
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(5.5, 4))
@@ -223,7 +232,7 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
     ax.legend()
     fig.tight_layout()
     paths.append(out / "sssig_vs_blur.png")
-    fig.savefig(paths[-1], dpi=120)
+    _save(fig, paths[-1])
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(5.5, 4))
@@ -237,6 +246,6 @@ def _figures(ds: Any, model: Any, out: Path) -> tuple[Path, ...]:
     ax.legend()
     fig.tight_layout()
     paths.append(out / "ue_vs_sssig.png")
-    fig.savefig(paths[-1], dpi=120)
+    _save(fig, paths[-1])
     plt.close(fig)
     return tuple(paths)

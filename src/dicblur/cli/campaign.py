@@ -84,6 +84,14 @@ def run_command(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> int:
     """Run (or resume) the campaign SPEC and store its results in OUT."""
+    from ..campaign.engine import check_scheduler_address
+    from ..io import check_output
+
+    # every check before the spec's patterns are built: the store folder may be created,
+    # its parent must exist (the rule of every output)
+    check_output(out, "--output", folder=True)
+    if scheduler is not None and not serial:
+        check_scheduler_address(scheduler)
     s = load_spec(spec)
     with _progress_bar(f"campaign {s.name}", not quiet) as progress:
         summary = run_campaign(s, out, scheduler=scheduler, workers=workers, serial=serial,
@@ -123,6 +131,9 @@ def export_command(
     csv: Path = typer.Option(..., "--csv", help="Output CSV, one row per finished task."),
 ) -> None:
     """Export the finished tasks of a store as a flat CSV."""
+    from ..io import check_output
+
+    check_output(csv, "--csv")
     n = export_csv(results, csv)
     typer.echo(f"wrote {csv} ({n} rows)")
 

@@ -8,8 +8,7 @@ from typing import Annotated
 import typer
 
 from ..dic import Correlator
-from ..errors import InputError
-from ..io import load_image
+from ..io import atomic_path, check_output, load_image
 from ._common import console, print_mapping
 
 _UNITS = {"mean_u": "px", "std_u": "px", "mean_v": "px", "std_v": "px",
@@ -33,8 +32,8 @@ def correlate_command(
         "-o", "--out", help="Write the field to .nc (netCDF) or .csv.")] = None,
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
-    if out is not None and out.suffix.lower() not in (".nc", ".csv"):
-        raise InputError(f"--out={str(out)!r}: unknown format; use a .nc or .csv file name")
+    if out is not None:
+        check_output(out, "--out", suffixes=(".nc", ".csv"))
     import time
 
     ref = load_image(reference)
@@ -54,7 +53,8 @@ def correlate_command(
         if out.suffix.lower() == ".csv":
             res.to_csv(out)
         else:
-            res.to_xarray().to_netcdf(out, engine="scipy")
+            with atomic_path(out) as tmp:
+                res.to_xarray().to_netcdf(tmp, engine="scipy")
         console.print(f"wrote {out}")
 
 

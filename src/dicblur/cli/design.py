@@ -134,8 +134,10 @@ def design_command(
         sine_blur_distribution,
     )
     from ..design.page import write_design_report
-    from ..io import save_image
+    from ..io import atomic_open, check_output, save_image, write_text
     from ..patterns import speckle_pattern
+
+    check_output(out, "--out", folder=True)
 
     rng = parse_range(blur_range, "--blur-range") if blur_range is not None else None
     if rng is not None and rng[1] < rng[0]:
@@ -172,7 +174,7 @@ def design_command(
                                                                   "--density-range"),
                            softness=parse_range(softness_range, "--softness-range"),
                            grid=_grid(grid))
-    out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(exist_ok=True)
     n_grid = len(family.grid_candidates())
     if not as_json:
         console.print(f"design: {problem.describe_target()}, {n_grid} grid candidates, up "
@@ -189,7 +191,7 @@ def design_command(
     cam = speckle_pattern(problem.image_size, speckle_size=best.speckle_size,
                           density=best.density, softness=best.softness, seed=seed)
     save_image(out / "best_pattern.png", cam, bit_depth=8)
-    (out / "best_pattern.png.json").write_text(json.dumps(
+    write_text(out / "best_pattern.png.json", json.dumps(
         {"generator": best.settings((problem.image_size, problem.image_size), seed)},
         indent=2))
     written += ["best_pattern.png", "best_pattern.png.json"]
@@ -200,8 +202,8 @@ def design_command(
         written += ["pattern.png", "pattern.pdf", "pattern.json"]
     doc = result.to_dict()
     doc["export"] = None if export is None else export.to_dict()
-    (out / "design.json").write_text(json.dumps(_clean(doc), indent=2, allow_nan=False))
-    with open(out / "evaluations.csv", "w", newline="") as fh:
+    write_text(out / "design.json", json.dumps(_clean(doc), indent=2, allow_nan=False))
+    with atomic_open(out / "evaluations.csv", "w", newline="") as fh:
         cols = ["stage", "speckle_size", "density", "softness", "objective", "surrogate",
                 "eta", "alpha", "beta", "mbrf", "c_fit", "c_static", "mig0", "fit_ok",
                 "n_points", "time_s"]

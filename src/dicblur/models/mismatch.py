@@ -48,7 +48,7 @@ from .._blur_sensitivity import (
     subset_blur_coefficients,
     subset_blur_shifts,
 )
-from .._validation import as_image, check_odd_subset, check_positive
+from .._validation import as_image, check_odd_subset, check_positive, check_textured
 from ..errors import FitError, InputError
 from ..metrics import _resolve_points
 from ._checks import as_blur, as_positive, as_vector
@@ -69,6 +69,7 @@ def _subset_inputs(image: ArrayLike, subset: int, step: int | None, points: Arra
                    ) -> tuple[NDArray[np.float64], int, NDArray[np.intp]]:
     """Checked image, subset size and subset centres (row, col) of the static predictions."""
     img = as_image(image, "image", min_size=5)
+    check_textured(img)  # a flat image has no blur sensitivity (c would read 0.0)
     subset = check_odd_subset(subset)
     if boundary not in ("reflect", "periodic"):
         raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")

@@ -17,12 +17,12 @@ from ._checks import as_vector
 from ._result import FitResult, t_quantile
 from .decay import mbrf as _mbrf
 from .decay import sssig_decay
+from .model_schema import SCHEMA, validate_model_dict
 
 __all__ = ["BlurUncertaintyModel", "ModelKind", "Prediction"]
 
 ModelKind = Literal["mismatch", "power_law"]
 _KINDS = ("mismatch", "power_law")
-SCHEMA = "dicblur.BlurUncertaintyModel/1"
 
 
 @dataclass(frozen=True)
@@ -368,25 +368,42 @@ class BlurUncertaintyModel:
         if path is not None:
             from pathlib import Path
 
-            Path(path).write_text(text + "\n", encoding="utf-8")
+            from ..io import write_text
+
+            write_text(Path(path), text + "\n")
         return text
 
     @classmethod
     def from_json(cls, text: str) -> BlurUncertaintyModel:
-        """Rebuild a model from :meth:`to_json` text (or a path to a ``.json`` file)."""
+        """Rebuild a model from :meth:`to_json` text (or a path to a ``.json`` file).
+
+        The content is checked against the schema table of
+        :mod:`dicblur.models.model_schema` first: a damaged file (missing key, wrong type,
+        NaN parameter, binary data) raises one ``InputError`` naming the key.
+        """
+        source = "model"
         if not text.lstrip().startswith("{"):
             from pathlib import Path
 
+            p = Path(text)
+            source = f"model={text!r}"
+            if not p.is_file():
+                why = "is a directory" if p.is_dir() else "no such file"
+                raise InputError(f"{source}: {why}; give a model .json written by dicblur fit "
+                                 "(or dicblur pattern predict -o)")
             try:
-                text = Path(text).read_text(encoding="utf-8")
+                text = p.read_bytes().decode("utf-8")
+            except UnicodeDecodeError:
+                raise InputError(f"{source}: binary data, not a JSON text file; give a model "
+                                 ".json written by dicblur fit") from None
             except OSError as exc:
-                raise InputError(f"model={text!r}: not JSON text and not a readable file") from exc
+                raise InputError(f"{source}: cannot be read ({exc.strerror})") from exc
         try:
             d = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise InputError(f"model: invalid JSON ({exc})") from exc
-        if not isinstance(d, dict) or d.get("schema") != SCHEMA:
-            raise InputError(f"model: not a dicblur model file (schema must be {SCHEMA!r})")
+            raise InputError(f"{source}: invalid JSON ({exc.msg} at line {exc.lineno}); the "
+                             "file is truncated or not a model file") from exc
+        validate_model_dict(d, source)
         kw = {k: v for k, v in d.items() if k != "schema"}
         kw["decay"] = FitResult.from_dict(d["decay"])
         kw["power_law"] = FitResult.from_dict(d["power_law"])

@@ -8,11 +8,17 @@ from typing import Any
 
 import numpy as np
 
+from ..io import atomic_path
 from .montecarlo import PAPER_TRAIN
 from .signal import PulseTrain
 from .study import DENSE_TRAIN, PulseStudy
 
 __all__ = ["plot_min_chi2", "plot_regimes", "plot_uncertainty", "write_figures"]
+
+
+def _save(fig: Any, out: Path | str) -> None:
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=120)
 
 
 def _plt() -> Any:
@@ -42,7 +48,7 @@ def plot_regimes(path: str | Path) -> Path:
     axes[1, 0].set_ylabel("grey level")
     fig.tight_layout()
     out = Path(path)
-    fig.savefig(out, dpi=120)
+    _save(fig, out)
     plt.close(fig)
     return out
 
@@ -62,7 +68,7 @@ def plot_min_chi2(study: PulseStudy, path: str | Path) -> Path:
     ax.legend(fontsize=8)
     fig.tight_layout()
     out = Path(path)
-    fig.savefig(out, dpi=120)
+    _save(fig, out)
     plt.close(fig)
     return out
 
@@ -102,7 +108,7 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
         f"{ds.attrs['trials']} trials", fontsize=9)
     fig.tight_layout()
     out = Path(path)
-    fig.savefig(out, dpi=120)
+    _save(fig, out)
     plt.close(fig)
     return out
 

@@ -434,8 +434,10 @@ def pattern_metrics(
     PatternMetrics
     """
     img = as_image(image, "image", min_size=3)
-    check_textured(img)
     subset = check_odd_subset(subset)
+    if noise_sigma is not None:
+        check_positive(noise_sigma, "noise_sigma")  # the options first, then the content
+    check_textured(img)
     sx = sssig(img, subset=subset, step=step, direction="x", gradient=gradient)
     sy = sssig(img, subset=subset, step=step, direction="y", gradient=gradient)
     m = mig(img, gradient=gradient)

@@ -48,7 +48,7 @@ from .._blur_sensitivity import (
     subset_blur_coefficients,
     subset_blur_shifts,
 )
-from .._validation import as_image, check_odd_subset, check_positive, check_textured
+from .._validation import as_image, check_odd_subset, check_positive
 from ..errors import FitError, InputError
 from ..metrics import _resolve_points
 from ._checks import as_blur, as_positive, as_vector
@@ -69,7 +69,6 @@ def _subset_inputs(image: ArrayLike, subset: int, step: int | None, points: Arra
                    ) -> tuple[NDArray[np.float64], int, NDArray[np.intp]]:
     """Checked image, subset size and subset centres (row, col) of the static predictions."""
     img = as_image(image, "image", min_size=5)
-    check_textured(img)  # a flat image has no blur sensitivity (c would read 0.0)
     subset = check_odd_subset(subset)
     if boundary not in ("reflect", "periodic"):
         raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
@@ -168,6 +167,13 @@ def blur_sensitivity(
             "image: fewer than two subsets have an intensity gradient; the blur sensitivity "
             "is undefined (use a textured image or a larger area)"
         )
+    if float(good.std()) <= 1e-9 * float(np.max(np.abs(good))):
+        # c is the spread of the subsets' responses: zero means no random texture, not a
+        # pattern immune to blur
+        raise InputError(
+            f"image: all {good.size} subsets respond identically to blur (c = 0); the image "
+            "has no random texture (flat, or periodic with the subset grid); use a speckle "
+            "image")
     n = math.hypot(float(motion[0]), float(motion[1]))
     return BlurSensitivity(c=float(good.std()), mean=float(good.mean()), k=k, centres=pts,
                            subset=subset, motion=(float(motion[0]) / n, float(motion[1]) / n),

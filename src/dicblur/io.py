@@ -66,7 +66,7 @@ DEFAULT_MAX_PIXELS = 100_000_000
 _ENV_MAX_PIXELS = "DICBLUR_MAX_PIXELS"
 
 
-def max_pixels(override: int | float | None = None) -> int:
+def max_pixels(override: int | float | str | None = None) -> int:
     """The image size limit in pixels: ``override``, else ``$DICBLUR_MAX_PIXELS``, else
     :data:`DEFAULT_MAX_PIXELS`."""
     name = "max_pixels"
@@ -290,7 +290,7 @@ def _header(p: Path) -> ImageHeader:
         import tifffile
 
         with _quiet_tifffile(), tifffile.TiffFile(p) as tif:
-            page = tif.pages[0]
+            page: Any = tif.pages[0]
             shape = tuple(int(s) for s in page.shape)
             axes = str(page.axes)
             spp = int(getattr(page, "samplesperpixel", 1))
@@ -353,7 +353,7 @@ def _read_tiff(path: Path, limit: int) -> np.ndarray:
 
     try:
         with _quiet_tifffile(), tifffile.TiffFile(path) as tif:
-            page = tif.pages[0]
+            page: Any = tif.pages[0]
             arr = np.asarray(page.asarray())
             axes = str(page.axes)
             if "S" in axes and axes.index("S") != len(axes) - 1:

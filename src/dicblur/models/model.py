@@ -240,7 +240,8 @@ class BlurUncertaintyModel:
         """
         w = as_vector(blur, "blur")
         if np.any(w < 0):
-            raise InputError(f"blur: negative blur length {w[w < 0][0]!r} px; W must be >= 0")
+            raise InputError(f"blur: negative blur length {float(w[w < 0][0])!r} px; W must be "
+                             ">= 0")
         kind = self._kind(model)
         sig = self._sigma(kind, sigma)
         theta, cov = self._theta(kind)

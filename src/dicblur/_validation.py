@@ -18,15 +18,28 @@ __all__ = [
     "check_finite_number",
     "check_odd_subset",
     "check_positive",
+    "check_seed",
     "check_shape2d",
+    "check_subset_fits",
+    "check_textured",
     "describe",
 ]
+
+MAX_GREY = 1e20
+"""Largest magnitude accepted as a grey level (GL): above any integer camera format
+(2**64 = 1.8e19), and far enough below the float64 range (1.8e308) that squared gradients
+summed over a subset cannot overflow."""
 
 
 def describe(value: Any) -> str:
     """Short, safe representation of a value for error messages."""
     if isinstance(value, np.ndarray):
-        return f"array(shape={value.shape}, dtype={value.dtype})"
+        if value.ndim == 0:
+            value = value.item()
+        else:
+            return f"array(shape={value.shape}, dtype={value.dtype})"
+    if isinstance(value, np.generic):
+        value = value.item()  # -1.0, not np.float64(-1.0)
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
 
@@ -78,7 +91,36 @@ def as_image(
             f"{name}={describe(arr)}: {bad} pixel(s) are NaN or infinite; "
             "replace or crop them before processing"
         )
+    if out.size and float(np.max(np.abs(out))) > MAX_GREY:
+        raise InputError(
+            f"{name}={describe(arr)}: grey levels up to {float(np.max(np.abs(out))):.3g} GL, "
+            f"beyond +-{MAX_GREY:.0e} GL (no camera records these; squared gradients would "
+            "overflow); rescale the image to its camera's grey-level range"
+        )
     return out
+
+
+def check_textured(image: NDArray[np.float64], name: str = "image") -> None:
+    """Refuse an image without texture (every pixel the same grey level): no metric, no
+    correlation and no blur sensitivity is defined on it."""
+    if image.size and float(np.ptp(image)) == 0.0:
+        raise InputError(
+            f"{name}: the image is constant ({image.shape[0]}x{image.shape[1]} px, every "
+            f"pixel {describe(float(image.flat[0]))} GL): no texture to measure or "
+            "correlate; give an image of the speckle pattern"
+        )
+
+
+def check_seed(seed: Any, name: str = "seed") -> Any:
+    """Check a seed argument: None, an int >= 0, a numpy Generator or SeedSequence."""
+    if seed is None or isinstance(seed, np.random.Generator | np.random.SeedSequence):
+        return seed
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise InputError(f"{name}={describe(seed)}: expected an int >= 0, a numpy Generator, "
+                         "a SeedSequence or None")
+    if seed < 0:
+        raise InputError(f"{name}={describe(seed)}: seeds must be integers >= 0 (e.g. 1)")
+    return int(seed)
 
 
 def check_odd_subset(subset: Any, name: str = "subset", *, minimum: int = 3) -> int:
@@ -98,6 +140,28 @@ def check_odd_subset(subset: Any, name: str = "subset", *, minimum: int = 3) -> 
             f"{name}={subset}: the subset size must be an odd integer >= {minimum} ({hint})"
         )
     return subset
+
+
+def check_subset_fits(subset: int, shape: tuple[int, ...], name: str = "subset", *,
+                      border: int = 1, minimum: int = 3) -> None:
+    """Check that an odd ``subset`` plus ``border`` px on each side fits in an image of
+    ``shape``; the message gives the largest subset that fits, or says that none does."""
+    rows, cols = int(shape[0]), int(shape[1])
+    if subset + 2 * border <= min(rows, cols):
+        return
+    largest = min(rows, cols) - 2 * border
+    largest -= 1 - largest % 2
+    what = f"a subset plus a {border}-px border" if border else "a subset"
+    if largest < minimum:
+        raise InputError(
+            f"{name}={subset}: the image is {rows}x{cols} px, too small for any subset "
+            f"({what} needs at least {minimum + 2 * border}x{minimum + 2 * border} px); "
+            "use a larger image"
+        )
+    raise InputError(
+        f"{name}={subset}: {what} does not fit in an image of {rows}x{cols} px; use a "
+        f"subset <= {largest}"
+    )
 
 
 def check_positive(value: Any, name: str, *, allow_zero: bool = False) -> float:

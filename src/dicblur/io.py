@@ -1,17 +1,36 @@
-"""Reading and writing grey-level images.
+"""Reading and writing grey-level images, and writing any output file safely.
 
 Supported formats: TIFF (8/16/32-bit integer or float, uncompressed, LZW, Deflate, PackBits),
 PNG (8/16-bit), BMP and JPEG. TIFF files are read with ``tifffile``; compressions it cannot
 decode without extra codecs (e.g. LZW) fall back to Pillow, which decodes them natively.
+
+Reliability rules shared by every command (docs/reliability.md):
+
+- **Size limit.** An image's declared size is read from its header and checked against
+  :func:`max_pixels` (default 100 Mpx; ``DICBLUR_MAX_PIXELS``, ``max_pixels=``, or
+  ``dicblur --max-pixels``) before any pixel is decoded, so a decompression bomb is refused
+  at the cost of reading a header.
+- **Outputs.** :func:`check_output` is called on every output path before the work starts:
+  the parent folder must exist (nothing creates missing parents), a file output must not be
+  a folder and a folder output must not be a file. :func:`atomic_path` /
+  :func:`write_text` write through a temporary file in the same folder, fsync it and
+  rename it over the target, so a crash leaves either the old file or the new one, never
+  half a file.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
+import math
 import os
+import tempfile
 import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -19,7 +38,20 @@ from numpy.typing import ArrayLike, NDArray
 from ._validation import as_image
 from .errors import ImageReadError, InputError
 
-__all__ = ["file_sha256", "load_image", "save_image"]
+__all__ = [
+    "DEFAULT_MAX_PIXELS",
+    "ImageHeader",
+    "atomic_open",
+    "atomic_path",
+    "check_output",
+    "check_pixels",
+    "file_sha256",
+    "load_image",
+    "max_pixels",
+    "read_image_header",
+    "save_image",
+    "write_text",
+]
 
 logger = logging.getLogger("dicblur")
 
@@ -27,6 +59,148 @@ _TIFF = {".tif", ".tiff"}
 _PIL_FORMATS = {".png", ".bmp", ".jpg", ".jpeg"}
 # ITU-R BT.601 luma weights: the conversion most cameras and image tools use.
 _LUMA = np.array([0.299, 0.587, 0.114])
+
+DEFAULT_MAX_PIXELS = 100_000_000
+"""Largest image (rows x cols, after supersampling) read or generated without an override:
+100 Mpx is 800 MB as float64, and a DIC or blur stage holds a few such copies."""
+_ENV_MAX_PIXELS = "DICBLUR_MAX_PIXELS"
+
+
+def max_pixels(override: int | float | str | None = None) -> int:
+    """The image size limit in pixels: ``override``, else ``$DICBLUR_MAX_PIXELS``, else
+    :data:`DEFAULT_MAX_PIXELS`."""
+    name = "max_pixels"
+    value: Any = override
+    if value is None:
+        value = os.environ.get(_ENV_MAX_PIXELS)
+        name = _ENV_MAX_PIXELS
+        if value is None or value == "":
+            return DEFAULT_MAX_PIXELS
+    try:
+        n = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}={value!r}: expected a number of pixels, e.g. 4e8") from None
+    if not math.isfinite(n) or n < 1:
+        raise InputError(f"{name}={value!r}: expected a number of pixels >= 1, e.g. 4e8")
+    return int(n)
+
+
+def check_pixels(shape: tuple[int, ...], what: str, *, factor: int = 1,
+                 limit: int | float | None = None) -> None:
+    """Refuse an image of ``shape`` (times ``factor`` pixels per pixel, e.g. a supersampled
+    grid) above the size limit, before it is allocated.
+
+    Raises
+    ------
+    InputError
+        Naming ``what``, the size, the memory it would take and how to raise the limit.
+    """
+    lim = max_pixels(limit)
+    n = math.prod(int(s) for s in shape) * int(factor)
+    if n > lim:
+        dims = "x".join(str(int(s)) for s in shape)
+        extra = f" x {factor} (supersampling)" if factor != 1 else ""
+        raise InputError(
+            f"{what}: {dims} px{extra} = {n / 1e6:.4g} Mpx, about {8 * n / 1e9:.3g} GB per "
+            f"float64 copy, is above the limit of {lim / 1e6:.4g} Mpx; use a smaller image, "
+            f"or raise the limit (dicblur --max-pixels N, {_ENV_MAX_PIXELS}=N or "
+            "max_pixels=N)"
+        )
+
+
+# ------------------------------------------------------------------------- output paths
+def check_output(path: str | os.PathLike[str], name: str = "path", *, folder: bool = False,
+                 suffixes: tuple[str, ...] | None = None) -> Path:
+    """Check an output path before any work is done, and return it as a ``Path``.
+
+    The rule is the same for every command: the parent folder must exist (dicblur never
+    creates missing parents); a file output must not be an existing folder, a folder
+    output (``folder=True``, created later if absent) must not be an existing file; the
+    parent must be writable.
+
+    Raises
+    ------
+    InputError
+        Naming ``name`` (the option as the user typed it), the path and the fix.
+    """
+    p = Path(path)
+    if str(path) == "":
+        raise InputError(f"{name}='': give a file name")
+    if suffixes is not None and not folder and p.suffix.lower() not in suffixes:
+        raise InputError(f"{name}={str(p)!r}: unsupported extension {p.suffix.lower()!r}; "
+                         f"use {', '.join(suffixes)}")
+    parent = p.parent
+    if not parent.exists():
+        raise InputError(f"{name}={str(p)!r}: the folder {str(parent)!r} does not exist; "
+                         "create it first (dicblur does not create missing parent folders)")
+    if not parent.is_dir():
+        raise InputError(f"{name}={str(p)!r}: {str(parent)!r} is not a folder")
+    if folder:
+        if p.exists() and not p.is_dir():
+            raise InputError(f"{name}={str(p)!r}: exists and is not a folder; give a folder "
+                             "name (created if absent)")
+    elif p.is_dir():
+        raise InputError(f"{name}={str(p)!r}: is a directory; give a file name inside it")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"{name}={str(p)!r}: the folder {str(parent)!r} is not writable")
+    return p
+
+
+def _fsync_dir(folder: Path) -> None:
+    with contextlib.suppress(OSError):  # not every file system syncs a directory
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success fsync it and rename it over
+    ``path`` (atomic on POSIX), on an exception delete it.
+
+    The temporary name keeps the suffix, so writers that pick a format from the extension
+    (Pillow, matplotlib, tifffile) still work. Use for any writer that takes a path::
+
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp)
+    """
+    target = Path(path)
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}",
+                                dir=target.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        if tmp.is_file():
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    _fsync_dir(target.parent)
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike[str], mode: str = "w", **kwargs: Any) -> Iterator[IO[Any]]:
+    """``open(path, mode)`` through :func:`atomic_path` (``mode`` ``"w"`` or ``"wb"``)."""
+    if mode not in ("w", "wb"):
+        raise InputError(f"mode={mode!r}: atomic_open writes new files only ('w' or 'wb')")
+    if mode == "w":
+        kwargs.setdefault("encoding", "utf-8")
+    with atomic_path(path) as tmp, open(tmp, mode, **kwargs) as fh:
+        yield fh
+        fh.flush()
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically; return the path."""
+    with atomic_open(path, "w") as fh:
+        fh.write(text)
+    return Path(path)
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:
@@ -38,22 +212,175 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
     return h.hexdigest()
 
 
-def _read_tiff(path: Path) -> np.ndarray:
+# ------------------------------------------------------------------------- reading
+@dataclass(frozen=True)
+class ImageHeader:
+    """What an image file declares, read without decoding its pixels.
+
+    Attributes
+    ----------
+    shape : (int, int)
+        (rows, cols) of the first image in the file, px.
+    channels : int
+        Samples per pixel (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA, ...).
+    dtype : str
+        Sample type as stored (``"uint8"``, ``"uint16"``, ``"float32"``, ...); a palette
+        image gives its index type.
+    pages : int
+        Images in the file (TIFF pages; 1 for other formats, frames beyond the first are
+        not counted).
+    palette : bool
+        Whether pixels are indices into a colour map.
+    format : str
+        ``"TIFF"``, ``"PNG"``, ``"BMP"``, ``"JPEG"``, ...
+    """
+
+    shape: tuple[int, int]
+    channels: int
+    dtype: str
+    pages: int
+    palette: bool
+    format: str
+
+    @property
+    def bit_depth(self) -> int:
+        """Bits per sample of the stored data."""
+        return int(np.dtype(self.dtype).itemsize * 8)
+
+
+def _pil_dtype(mode: str) -> str:
+    return {"1": "bool", "L": "uint8", "P": "uint8", "LA": "uint8", "RGB": "uint8",
+            "RGBA": "uint8", "CMYK": "uint8", "I;16": "uint16", "I;16B": "uint16",
+            "I;16L": "uint16", "I": "int32", "F": "float32"}.get(mode, "uint8")
+
+
+@contextlib.contextmanager
+def _pil_limit(limit: int | None) -> Iterator[None]:
+    # Pillow refuses images above 2 * MAX_IMAGE_PIXELS on its own: align its limit with
+    # ours (we check the header ourselves first), and restore it afterwards.
+    from PIL import Image
+
+    old = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None if limit is None else max(int(limit), 1)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            yield
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+
+
+@contextlib.contextmanager
+def _quiet_tifffile() -> Iterator[None]:
+    # tifffile logs damaged-file warnings on its own; the exception we raise says it
+    log = logging.getLogger("tifffile")
+    old = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        log.setLevel(old)
+
+
+def _header(p: Path) -> ImageHeader:
+    suffix = p.suffix.lower()
+    with open(p, "rb") as fh:
+        magic = fh.read(4)
+    if suffix in _TIFF or magic in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"):
+        import tifffile
+
+        with _quiet_tifffile(), tifffile.TiffFile(p) as tif:
+            page: Any = tif.pages[0]
+            shape = tuple(int(s) for s in page.shape)
+            axes = str(page.axes)
+            spp = int(getattr(page, "samplesperpixel", 1))
+            rows_cols = [s for s, a in zip(shape, axes, strict=False) if a in "YX"]
+            other = [s for s, a in zip(shape, axes, strict=False) if a not in "YXS" and s > 1]
+            if len(rows_cols) != 2 or other:
+                raise ImageReadError(
+                    f"path={str(p)!r}: TIFF page of shape {shape} (axes {axes}) is not a 2-D "
+                    "image; save one 2-D plane per page")
+            return ImageHeader(shape=(rows_cols[0], rows_cols[1]), channels=spp,
+                               dtype=str(page.dtype), pages=len(tif.pages),
+                               palette=int(page.photometric) == 3, format="TIFF")
+    from PIL import Image
+
+    with _pil_limit(None), Image.open(p) as im:  # the header only: we check its size
+        cols, rows = im.size
+        return ImageHeader(shape=(int(rows), int(cols)), channels=len(im.getbands()),
+                           dtype=_pil_dtype(im.mode), pages=1, palette=im.mode == "P",
+                           format=str(im.format))
+
+
+def read_image_header(path: str | os.PathLike[str]) -> ImageHeader:
+    """Read an image file's header (size, channels, sample type) without its pixels.
+
+    Raises
+    ------
+    ImageReadError
+        If the file is missing, a folder, empty, or has no readable image header.
+    """
+    p = _check_input_file(path)
+    try:
+        return _header(p)
+    except ImageReadError:
+        raise
+    except Exception as exc:
+        raise ImageReadError(
+            f"path={str(p)!r}: cannot be read as an image ({type(exc).__name__}: "
+            f"{_short(exc)}); is the file truncated or not an image? Supported: TIFF, PNG, "
+            "BMP, JPEG") from exc
+
+
+def _short(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
+def _check_input_file(path: str | os.PathLike[str]) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise ImageReadError(f"path={str(p)!r}: no such file; check the path")
+    if p.is_dir():
+        raise ImageReadError(f"path={str(p)!r}: is a directory, expected an image file")
+    if p.stat().st_size == 0:
+        raise ImageReadError(f"path={str(p)!r}: the file is empty (0 bytes)")
+    return p
+
+
+def _read_tiff(path: Path, limit: int) -> np.ndarray:
     import tifffile
 
     try:
-        return np.asarray(tifffile.imread(path, key=0))
+        with _quiet_tifffile(), tifffile.TiffFile(path) as tif:
+            page: Any = tif.pages[0]
+            arr = np.asarray(page.asarray())
+            axes = str(page.axes)
+            if "S" in axes and axes.index("S") != len(axes) - 1:
+                arr = np.moveaxis(arr, axes.index("S"), -1)  # planar: samples last
+            if int(page.photometric) == 3 and page.colormap is not None:
+                arr = _apply_colormap(arr, np.asarray(page.colormap))
+            return arr
     except ValueError as exc:
         if "imagecodecs" not in str(exc):
             raise
         logger.debug("tifffile cannot decode %s (%s); using Pillow", path, exc)
-        return _read_pillow(path)
+        return _read_pillow(path, limit)
 
 
-def _read_pillow(path: Path) -> np.ndarray:
+def _apply_colormap(index: np.ndarray, cmap: np.ndarray) -> np.ndarray:
+    """RGB of a palette image, as the PNG path gives it (8-bit when the 16-bit colour map
+    holds 8-bit values scaled by 257, as most writers store them)."""
+    rgb = np.moveaxis(cmap[:, index.astype(np.intp)], 0, -1)
+    if np.all(cmap % 257 == 0):
+        return (rgb // 257).astype(np.uint8)
+    return rgb.astype(np.uint16)
+
+
+def _read_pillow(path: Path, limit: int) -> np.ndarray:
     from PIL import Image
 
-    with Image.open(path) as im:
+    with _pil_limit(limit), Image.open(path) as im:
         im.load()
         if im.mode in ("I;16", "I;16B", "I;16L"):
             return np.asarray(im, dtype=np.uint16)
@@ -66,76 +393,86 @@ def _to_grey(arr: np.ndarray, path: Path) -> np.ndarray:
     if arr.ndim == 2:
         return arr
     if arr.ndim == 3 and arr.shape[-1] in (3, 4):
+        rgb = arr[..., :3]
+        if np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 0],
+                                                                         rgb[..., 2]):
+            return rgb[..., 0]  # grey stored as RGB (e.g. a grey palette): exact
         warnings.warn(
             f"{path.name}: colour image converted to grey with BT.601 luma weights "
             "(0.299 R + 0.587 G + 0.114 B); alpha ignored",
             UserWarning,
             stacklevel=3,
         )
-        return arr[..., :3].astype(np.float64) @ _LUMA
+        return rgb.astype(np.float64) @ _LUMA
     if arr.ndim == 3 and arr.shape[-1] in (1, 2):  # grey (+ alpha)
         return arr[..., 0]
-    if arr.ndim == 3 and arr.shape[0] > 1:
-        warnings.warn(
-            f"{path.name}: multi-page image with {arr.shape[0]} pages; reading page 0",
-            UserWarning,
-            stacklevel=3,
-        )
-        return _to_grey(arr[0], path)
+    if arr.ndim == 3:
+        raise ImageReadError(
+            f"path={str(path)!r}: {arr.shape[-1]} channels per pixel; dicblur reads grey, "
+            "grey + alpha, RGB or RGBA images: save the channel to analyse as a grey image")
     raise ImageReadError(f"path={str(path)!r}: unsupported image layout {arr.shape}")
 
 
-def load_image(path: str | os.PathLike[str]) -> NDArray[np.float64]:
+def load_image(path: str | os.PathLike[str], *,
+               max_pixels: int | float | None = None) -> NDArray[np.float64]:
     """Read an image file as grey levels.
 
     Parameters
     ----------
     path : str or path-like
         TIFF (8/16-bit, incl. LZW-compressed), PNG (8/16-bit), BMP or JPEG file.
+    max_pixels : int, optional
+        Size limit (rows x cols); default :func:`max_pixels` (100 Mpx unless
+        ``DICBLUR_MAX_PIXELS`` says otherwise). Checked on the header, before decoding.
 
     Returns
     -------
     ndarray of float64, shape (rows, cols)
         Grey levels on the file's own scale (0..255 for 8-bit, 0..65535 for 16-bit files);
         nothing is rescaled. Colour images are converted to grey with BT.601 luma weights,
-        with a ``UserWarning``.
+        with a ``UserWarning``; palette images get their colour map applied first. A
+        multi-page TIFF gives its first page, with a ``UserWarning``.
 
     Raises
     ------
     ImageReadError
-        If the file is missing, a directory, empty, truncated, not an image, or its pixels
-        are not finite.
+        If the file is missing, a directory, empty, truncated, not an image, has more than
+        4 channels, or its pixels are not finite real grey levels.
+    InputError
+        If the declared size exceeds the limit.
     """
+    limit = _max_pixels(max_pixels)
+    header = read_image_header(path)
     p = Path(path)
-    if not p.exists():
-        raise ImageReadError(f"path={str(p)!r}: no such file; check the path")
-    if p.is_dir():
-        raise ImageReadError(f"path={str(p)!r}: is a directory, expected an image file")
-    if p.stat().st_size == 0:
-        raise ImageReadError(f"path={str(p)!r}: the file is empty (0 bytes)")
-    suffix = p.suffix.lower()
+    check_pixels(header.shape, f"path={str(p)!r}", factor=max(header.channels, 1),
+                 limit=limit)
+    if header.pages > 1:
+        warnings.warn(f"{p.name}: multi-page image with {header.pages} pages; reading "
+                      "page 0", UserWarning, stacklevel=2)
     try:
-        if suffix in _TIFF:
-            arr = _read_tiff(p)
-        elif suffix in _PIL_FORMATS:
-            arr = _read_pillow(p)
+        if header.format == "TIFF":
+            arr = _read_tiff(p, limit)
         else:
-            # Unknown extension: let Pillow sniff the content.
-            arr = _read_pillow(p)
-    except ImageReadError:
+            arr = _read_pillow(p, limit)
+    except (ImageReadError, InputError):
         raise
     except Exception as exc:
         raise ImageReadError(
-            f"path={str(p)!r}: cannot be read as an image ({type(exc).__name__}: {exc}); "
-            "is the file truncated or not an image? Supported: TIFF, PNG, BMP, JPEG"
+            f"path={str(p)!r}: cannot be read as an image ({type(exc).__name__}: "
+            f"{_short(exc)}); is the file truncated or not an image? Supported: TIFF, PNG, "
+            "BMP, JPEG"
         ) from exc
     arr = _to_grey(np.asarray(arr), p)
     if np.iscomplexobj(arr) or arr.dtype == object:
-        raise ImageReadError(f"path={str(p)!r}: pixels are not real grey levels ({arr.dtype})")
+        raise ImageReadError(f"path={str(p)!r}: pixels are not real grey levels ({arr.dtype}); "
+                             "save a real-valued (integer or float) image")
     try:
         return as_image(arr, "image", min_size=1)
     except InputError as exc:
         raise ImageReadError(f"path={str(p)!r}: {exc}") from exc
+
+
+_max_pixels = max_pixels  # the keyword of load_image shadows the function's name
 
 
 def save_image(
@@ -168,6 +505,7 @@ def save_image(
     img = as_image(image, "image", min_size=1)
     p = Path(path)
     suffix = p.suffix.lower()
+    check_output(p, "path")
     if suffix not in _TIFF | {".png", ".bmp"}:
         raise InputError(
             f"path={str(p)!r}: unsupported extension {suffix!r}; use .tif, .tiff, .png or .bmp"
@@ -183,14 +521,14 @@ def save_image(
             stacklevel=2,
         )
     data = np.clip(rounded, 0, top).astype(np.uint8 if bit_depth == 8 else np.uint16)
-    if not p.parent.exists():
-        raise InputError(f"path={str(p)!r}: the folder {str(p.parent)!r} does not exist")
-    if suffix in _TIFF:
-        import tifffile
+    check_output(p, "path")
+    with atomic_path(p) as tmp:
+        if suffix in _TIFF:
+            import tifffile
 
-        tifffile.imwrite(p, data, photometric="minisblack")
-    else:
-        from PIL import Image
+            tifffile.imwrite(tmp, data, photometric="minisblack")
+        else:
+            from PIL import Image
 
-        Image.fromarray(data).save(p)
+            Image.fromarray(data).save(tmp, format="PNG" if suffix == ".png" else "BMP")
     return p

@@ -29,7 +29,15 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from ._blur_sensitivity import subset_blur_coefficients
-from ._validation import as_image, check_choice, check_odd_subset, check_positive, describe
+from ._validation import (
+    as_image,
+    check_choice,
+    check_odd_subset,
+    check_positive,
+    check_subset_fits,
+    check_textured,
+    describe,
+)
 from .errors import InputError
 
 __all__ = [
@@ -107,10 +115,7 @@ def subset_centres(shape: tuple[int, int], *, subset: int, step: int) -> NDArray
     r = np.arange(h + 1, rows - h - 1, int(step))
     c = np.arange(h + 1, cols - h - 1, int(step))
     if r.size == 0 or c.size == 0:
-        raise InputError(
-            f"subset={subset}: a subset plus a 1-px gradient border does not fit in an "
-            f"image of {rows}x{cols} px; use a subset <= {min(rows, cols) - 3}"
-        )
+        check_subset_fits(subset, (rows, cols))
     rr, cc = np.meshgrid(r, c, indexing="ij")
     return np.stack([rr.ravel(), cc.ravel()], axis=1)
 
@@ -197,11 +202,7 @@ def sssig(
     """
     img = as_image(image, "image", min_size=3)
     subset = check_odd_subset(subset)
-    if subset + 2 > min(img.shape):
-        raise InputError(
-            f"subset={subset}: larger than the image ({img.shape[0]}x{img.shape[1]}) allows; "
-            f"use a subset <= {min(img.shape) - 2 - (min(img.shape) % 2 == 0)}"
-        )
+    check_subset_fits(subset, img.shape)
     check_choice(direction, "direction", ("x", "y"))
     gy, gx = image_gradients(img, gradient=gradient)
     g = gx if direction == "x" else gy
@@ -439,6 +440,9 @@ def pattern_metrics(
     """
     img = as_image(image, "image", min_size=3)
     subset = check_odd_subset(subset)
+    if noise_sigma is not None:
+        check_positive(noise_sigma, "noise_sigma")  # the options first, then the content
+    check_textured(img)
     sx = sssig(img, subset=subset, step=step, direction="x", gradient=gradient)
     sy = sssig(img, subset=subset, step=step, direction="y", gradient=gradient)
     m = mig(img, gradient=gradient)

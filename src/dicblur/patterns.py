@@ -32,8 +32,15 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import integrate, optimize, special
 
-from ._validation import check_finite_number, check_positive, check_shape2d, describe
+from ._validation import (
+    check_finite_number,
+    check_positive,
+    check_seed,
+    check_shape2d,
+    describe,
+)
 from .errors import InputError
+from .io import check_pixels
 
 __all__ = [
     "PatternSettings",
@@ -51,11 +58,7 @@ def make_rng(seed: SeedLike) -> np.random.Generator:
     """A numpy Generator from ``seed`` (int, SeedSequence, None) or ``seed`` itself."""
     if isinstance(seed, np.random.Generator):
         return seed
-    if seed is not None and not isinstance(seed, np.random.SeedSequence | int | np.integer):
-        raise InputError(
-            f"seed={describe(seed)}: expected an int, a numpy Generator, a SeedSequence or None"
-        )
-    return np.random.default_rng(seed)
+    return np.random.default_rng(check_seed(seed))
 
 
 @dataclass(frozen=True)
@@ -202,6 +205,7 @@ def speckle_pattern(
     ss = int(supersample)
     if ss < 1 or ss > 16:
         raise InputError(f"supersample={supersample!r}: must be between 1 and 16")
+    check_pixels((rows, cols), f"shape={describe((rows, cols))}", factor=ss * ss)
     rng = make_rng(seed)
 
     rho_star = _half_correlation(p)

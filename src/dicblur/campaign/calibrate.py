@@ -164,16 +164,18 @@ def calibrate(
     CalibrationResult or None
         None when the campaign was interrupted before it finished (rerun to resume).
     """
+    from ..io import check_output
     from ..models import fit_blur_model
     from .engine import run_campaign
     from .store import export_csv, open_results
     from .tasks import make_pattern
 
+    check_output(out_dir, "out", folder=True)
     spec = calibration_spec(image, noise=noise, subset=subset, angle=angle, step=step,
                             noise_model=noise_model, shape=shape, size=size, seed=seed,
                             blur=blur)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(exist_ok=True)
     results = out / "results.zarr"
     summary = run_campaign(spec, results, scheduler=scheduler, workers=workers,
                            serial=serial, progress=progress)
@@ -219,7 +221,7 @@ def calibrate(
         },
     )
     model_path = out / "model.json"
-    model_path.write_text(model.to_json())
+    model.to_json(str(model_path))
     return CalibrationResult(model=model, model_path=model_path, results_path=results,
                              csv_path=csv_path, sssig_r2=float(model.decay.r2), spec=spec,
                              curves=mean.assign_coords(

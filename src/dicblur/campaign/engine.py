@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -96,6 +97,25 @@ def _timed_task(fn: TaskFunction, image: NDArray[np.float64], batch: Batch,
     return out
 
 
+_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ucx|ws|wss)://)?(?:\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+)"
+                      r":\d{1,5}/?$|^inproc://\S+$")
+
+
+def check_scheduler_address(address: str) -> str:
+    """Check the form of a Dask scheduler address (``tcp://HOST:PORT``) before connecting.
+
+    Raises
+    ------
+    InputError
+        If ``address`` is not ``[tcp|tls|ucx|ws|wss://]HOST:PORT`` or ``inproc://...``.
+    """
+    if not isinstance(address, str) or not _ADDRESS.match(address.strip()):
+        raise InputError(f"scheduler={address!r}: not a Dask scheduler address; give "
+                         "tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786 (or omit it for a "
+                         "local cluster)")
+    return address.strip()
+
+
 def _default_task() -> TaskFunction:
     from .simulate import simulate_batch
 
@@ -169,9 +189,15 @@ def run_campaign(
     finished before is stored and is skipped by the next run.
     """
     t0 = time.perf_counter()
+    if scheduler is not None and not serial:
+        check_scheduler_address(scheduler)
+    from ..io import check_output
+
+    # the one output rule (docs/reliability.md): the store folder may be created, its
+    # parent must exist
+    path = check_output(results, "results", folder=True)
     if not isinstance(spec, CampaignSpec):
         spec = load_spec(spec)
-    path = Path(results)
     store, images = _prepare(spec, path)
     fn = task if task is not None else _default_task()
     mask = store.done_mask()

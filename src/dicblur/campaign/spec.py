@@ -64,13 +64,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError
+from ..errors import ConfigError, InputError
+from ..io import check_pixels
 
 __all__ = [
     "BLUR_METHODS",
     "NOISE_MODELS",
     "CampaignSpec",
     "PatternSpec",
+    "check_pattern_fits",
     "load_spec",
     "parse_spec",
 ]
@@ -81,6 +83,9 @@ GENERATORS = ("speckle", "paper4")
 DIC_SHAPES = ("translation", "affine")
 INTERPOLATIONS = ("bspline3", "bspline5")
 _MAX_BLUR_VALUES = 100_000
+MAX_TASKS = 10_000_000
+"""Most tasks (DIC runs) in one campaign: the store holds ~20 float64 arrays of this size
+(1.6 GB), and at ~10 ms per task it is more than a day of computing."""
 
 _SECTIONS = {
     "campaign": {"name", "seed", "repetitions", "description"},
@@ -225,6 +230,41 @@ class CampaignSpec:
             raise ConfigError(f"pattern {pattern.name!r}: has no path (it is generated)")
         p = Path(os.path.expanduser(pattern.path))
         return p if p.is_absolute() else Path(self.base_dir) / p
+
+
+def check_pattern_fits(spec: CampaignSpec, pattern: PatternSpec,
+                       shape: tuple[int, int]) -> None:
+    """Refuse a pattern too small for the campaign's largest blur and subset.
+
+    The blur path at the largest W must be shorter, along each image axis, than the
+    pattern minus the largest subset: beyond, a blurred subset is smeared over the whole
+    (periodic) pattern and every u_e would be NaN. Called by :func:`parse_spec` for
+    generated and cropped patterns, and before any task for image files.
+
+    Raises
+    ------
+    ConfigError
+    """
+    rows, cols = int(shape[0]), int(shape[1])
+    s = max(spec.subsets)
+    if s + 2 > min(rows, cols):
+        raise ConfigError(f"dic.subsets={s}: pattern {pattern.name!r} is {rows}x{cols} px, "
+                          f"too small for a subset of {s} px plus a 1-px border; use "
+                          "smaller subsets or a larger pattern")
+    w = max(spec.blur)
+    for a in spec.angles:
+        dy = abs(w * math.sin(math.radians(a)))
+        dx = abs(w * math.cos(math.radians(a)))
+        for ext, size, axis in ((dx, cols, "columns"), (dy, rows, "rows")):
+            if ext > size - s:
+                room = (size - s) / max(abs(math.cos(math.radians(a))) if axis == "columns"
+                                        else abs(math.sin(math.radians(a))), 1e-12)
+                raise ConfigError(
+                    f"blur.lengths: W = {w:g} px at angle {a:g} deg moves {ext:.4g} px along "
+                    f"the {axis}, more than pattern {pattern.name!r} ({rows}x{cols} px) "
+                    f"minus the subset ({s} px) allows: the blurred subsets would be smeared "
+                    f"over the whole pattern and u_e would be NaN; use W <= {room:.4g} px "
+                    "or a larger pattern")
 
 
 # -- parsing helpers -----------------------------------------------------------------------
@@ -490,7 +530,24 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
     blur_chunk = _int(sec["run"].get("blur_chunk", 10), "run.blur_chunk", minimum=1)
     blur_chunk = min(blur_chunk, len(lengths))
 
-    return CampaignSpec(
+    n_tasks = (len(patterns) * len(angles) * len(subsets) * len(levels) * len(lengths)
+               * repetitions)
+    if n_tasks > MAX_TASKS:
+        raise _err("campaign.repetitions", repetitions,
+                   f"{n_tasks:.4g} tasks in all ({len(patterns)} pattern(s) x {len(angles)} "
+                   f"angle(s) x {len(subsets)} subset(s) x {len(levels)} noise level(s) x "
+                   f"{len(lengths)} W x {repetitions} repetition(s)); at most "
+                   f"{MAX_TASKS:.0e} tasks per campaign: split it or use fewer repetitions")
+    for p in patterns:
+        if p.generator is not None:
+            ss = supersample if method == "rendered" else int(p.settings.get("supersample", 1))
+            try:
+                check_pixels(tuple(p.settings["shape"]), f"pattern {p.name!r} shape",
+                             factor=ss * ss)
+            except InputError as exc:
+                raise ConfigError(str(exc)) from None
+
+    spec = CampaignSpec(
         name=name, seed=seed, patterns=patterns, blur=lengths, angles=angles,
         trajectory=trajectory, trajectory_params=dict(tparams), method=method,
         substeps=substeps, boundary=boundary, supersample=supersample, noise_model=model,
@@ -499,6 +556,12 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
         tolerance=tolerance, repetitions=repetitions, blur_chunk=blur_chunk,
         description=description, base_dir=str(Path(base_dir).resolve()),
     )
+    for p in patterns:
+        if p.crop is not None:
+            check_pattern_fits(spec, p, (p.crop[2], p.crop[3]))
+        elif p.generator is not None:
+            check_pattern_fits(spec, p, tuple(p.settings["shape"]))
+    return spec
 
 
 def load_spec(path: str | os.PathLike[str]) -> CampaignSpec:

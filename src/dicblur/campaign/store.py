@@ -394,7 +394,10 @@ def export_csv(path: str | os.PathLike[str], out: str | os.PathLike[str]) -> int
     idx = np.argwhere(done)
     coords = [ds[d].values.tolist() for d in DIMS]
     values = [ds[v].values for v in VARIABLES]
-    with open(out, "w", newline="", encoding="utf-8") as fh:
+    from ..io import atomic_open, check_output
+
+    check_output(out, "out")
+    with atomic_open(out, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(df_cols)
         for ix in idx:

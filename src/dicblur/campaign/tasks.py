@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ConfigError, InputError
-from .spec import CampaignSpec, PatternSpec
+from .spec import CampaignSpec, PatternSpec, check_pattern_fits
 
 __all__ = [
     "Batch",
@@ -157,6 +157,13 @@ def make_pattern(spec: CampaignSpec, pattern: PatternSpec) -> NDArray[np.float64
                 f"({img.shape[0]}x{img.shape[1]} px); use a window inside it"
             )
         img = img[r0:r0 + nr, c0:c0 + nc]
+    if pattern.generator is None:
+        k = spec.supersample if spec.method == "rendered" else 1
+        check_pattern_fits(spec, pattern, (img.shape[0] // k, img.shape[1] // k))
+    if float(np.ptp(img)) == 0.0:
+        raise ConfigError(f"pattern {pattern.name!r}: the image is constant (every pixel "
+                          f"{float(img.flat[0]):g} GL): no texture to correlate; give a "
+                          "speckle image")
     return np.ascontiguousarray(img, dtype=np.float64)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import sys
 import traceback
 import warnings
@@ -111,6 +112,11 @@ def _root(
     version: bool = typer.Option(
         False, "--version", callback=_version_callback, is_eager=True, help="Print the version."
     ),
+    max_pixels: str | None = typer.Option(
+        None, "--max-pixels", metavar="N",
+        help="Largest image read or generated, rows x cols px (default 1e8; also the "
+        "DICBLUR_MAX_PIXELS environment variable). Larger images are refused before they "
+        "are decoded or allocated."),
 ) -> None:
     logging.basicConfig(
         level=logging.DEBUG if verbose else logging.WARNING,
@@ -124,6 +130,16 @@ def _root(
         os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
         for name in ("distributed", "dask"):
             logging.getLogger(name).setLevel(logging.WARNING)
+    if max_pixels is not None:
+        from ..io import max_pixels as _limit
+
+        try:
+            _limit(max_pixels)
+        except DicblurError:
+            raise DicblurError(f"--max-pixels={max_pixels}: expected a number of pixels "
+                               ">= 1, e.g. 4e8") from None
+        # the environment reaches every reader, and Dask workers started from here
+        os.environ["DICBLUR_MAX_PIXELS"] = max_pixels
 
 
 # Stage command groups register themselves here (one import per stage).
@@ -158,6 +174,61 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"warning: {message}", file=sys.stderr)
 
 
+# API parameter names that a command exposes under another option name (used only when
+# the command has that option).
+_ALIASES = {"sigma": "noise", "noise_sigma": "noise", "shape": "size", "motion": "length",
+            "start_speed": "start-speed", "max_pixels": "max-pixels", "results": "out",
+            "out": "csv"}
+_NUMPY_REPR = re.compile(r"np\.(?:float|int|uint|complex|bool|str)[a-z_]*\d*\(([^()]*)\)")
+_PARAM = re.compile(r"(?<![\w.\-])([A-Za-z_][A-Za-z0-9_]*)=")
+_LEADING = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*):")
+
+
+def _command_options(args: Sequence[str]) -> dict[str, str]:
+    """{python parameter name: option as typed} of the command that ``args`` invoke."""
+    try:
+        cmd: Any = typer.main.get_command(app)
+    except Exception:  # pragma: no cover - the app is built at import
+        return {}
+    names: dict[str, str] = {"max_pixels": "--max-pixels"}
+    it = iter(args)
+    for tok in it:
+        if tok == "--max-pixels":
+            next(it, None)
+            continue
+        # typer may vendor its own click: duck-type groups and options
+        sub = getattr(cmd, "commands", None)
+        if isinstance(sub, dict) and tok in sub:
+            cmd = sub[tok]
+    for param in getattr(cmd, "params", ()):
+        if getattr(param, "param_type_name", "") == "option" and param.name:
+            long = [o for o in param.opts if o.startswith("--")]
+            names[param.name] = (long or list(param.opts))[0]
+    return names
+
+
+def cli_message(text: str, args: Sequence[str]) -> str:
+    """An API error message as the CLI user should read it: ``sigma=-1.0`` becomes
+    ``--noise=-1.0`` (and a leading ``blur:`` becomes ``--blur:``) when the command has
+    that option, numpy reprs become plain numbers, and the message is one line."""
+    text = " ".join(_NUMPY_REPR.sub(r"\1", str(text)).split())
+    opts = _command_options(args)
+
+    def option(name: str) -> str | None:
+        key = name if name in opts else _ALIASES.get(name, "").replace("-", "_")
+        return opts.get(key)
+
+    def repl(m: re.Match[str]) -> str:
+        opt = option(m.group(1))
+        return f"{opt}=" if opt else m.group(0)
+
+    text = _PARAM.sub(repl, text)
+    lead = _LEADING.match(text)
+    if lead and option(lead.group(1)):
+        text = f"{option(lead.group(1))}:{text[lead.end():]}"
+    return text
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI with ``argv`` (default ``sys.argv[1:]``) and return the exit code.
 
@@ -167,13 +238,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     verbose = "--verbose" in args or "-v" in args
     old_show = warnings.showwarning
     warnings.showwarning = _show_warning
+    old_limit = os.environ.get("DICBLUR_MAX_PIXELS")
     try:
         rv = app(args=args, prog_name="dicblur", standalone_mode=False)
         return rv if isinstance(rv, int) else 0
     except DicblurError as exc:
         if verbose:
             traceback.print_exc()
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {cli_message(str(exc), args)}", file=sys.stderr)
         return 2
     except (click.exceptions.Exit, typer.Exit) as exc:
         return int(getattr(exc, "exit_code", 0))
@@ -188,8 +260,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        if verbose:
+            traceback.print_exc()
+        print("error: out of memory; use a smaller image or campaign (see dicblur "
+              "--max-pixels)", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        # the file system refused (disk full, permission, ...): not a dicblur bug
+        if verbose:
+            traceback.print_exc()
+        print(f"error: {cli_message(str(exc), args)}", file=sys.stderr)
+        return 2
     finally:
         warnings.showwarning = old_show
+        # --max-pixels applies to this invocation only (main may run many times in-process)
+        if old_limit is None:
+            os.environ.pop("DICBLUR_MAX_PIXELS", None)
+        else:
+            os.environ["DICBLUR_MAX_PIXELS"] = old_limit
 
 
 def run() -> None:

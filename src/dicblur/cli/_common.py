@@ -34,7 +34,7 @@ def fmt(value: Any) -> str:
         return "-"
     if isinstance(value, float):
         if not math.isfinite(value):
-            return str(value)
+            return "-"  # undefined: callers warn why; never print nan or inf
         if value != 0 and (abs(value) >= 1e5 or abs(value) < 1e-3):
             return f"{value:.4g}"
         return f"{value:.4f}".rstrip("0").rstrip(".") if abs(value) < 1000 else f"{value:.1f}"

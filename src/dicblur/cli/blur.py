@@ -75,8 +75,9 @@ def blur_command(
     """Blur IMAGE along a path of LENGTH px and write OUT (plus OUT.json settings)."""
     from ..blur import AcceleratedMotion, SineMotion, motion_blur
     from ..camera import Camera, add_gaussian_noise
-    from ..io import file_sha256, load_image, save_image
+    from ..io import check_output, file_sha256, load_image, save_image, write_text
 
+    check_output(out, "OUT", suffixes=(".tif", ".tiff", ".png", ".bmp"))
     if bit_depth not in (8, 16):
         raise InputError(f"--bit-depth={bit_depth}: must be 8 or 16")
     if noise is not None and (full_well is not None or gain is not None or read_noise > 0):
@@ -86,6 +87,15 @@ def blur_command(
         )
     if not math.isfinite(length) or not math.isfinite(angle):
         raise InputError(f"--length={length}, --angle={angle}: must be finite numbers")
+    if length < 0:
+        raise InputError(f"--length={length:g}: the path length (or sine amplitude) is >= 0 "
+                         f"px; reverse the motion with --angle {angle + 180:g} instead")
+    if trajectory == "acceleration" and not 0.0 <= start_speed <= 2.0:
+        raise InputError(f"--start-speed={start_speed:g}: must be in 0..2 (0 starts from "
+                         "rest, 1 is uniform speed, 2 comes to rest at the end)")
+    if not continuous and substeps < 1:
+        raise InputError(f"--substeps={substeps}: K must be >= 1 sub-steps (the paper uses "
+                         "100); for the continuous limit K -> inf use --continuous")
     rad = math.radians(angle)
     motion = (length * math.sin(rad), length * math.cos(rad))
     traj: str | SineMotion | AcceleratedMotion
@@ -145,7 +155,7 @@ def blur_command(
         "seed": seed,
     }
     sidecar = out.with_name(out.name + ".json")
-    sidecar.write_text(json.dumps(settings, indent=2))
+    write_text(sidecar, json.dumps(settings, indent=2))
     typer.echo(
         f"wrote {out} ({img.shape[0]}x{img.shape[1]} px, W = {length:g} px) and {sidecar.name}"
     )

@@ -88,7 +88,14 @@ def run_command(
 ) -> int:
     """Run (or resume) the campaign SPEC and store its results in OUT."""
     from ..campaign import load_spec, run_campaign
+    from ..campaign.engine import check_scheduler_address
+    from ..io import check_output
 
+    # every check before the spec's patterns are built: the store folder may be created,
+    # its parent must exist (the rule of every output)
+    check_output(out, "--output", folder=True)
+    if scheduler is not None and not serial:
+        check_scheduler_address(scheduler)
     s = load_spec(spec)
     if serial:  # a cluster's workers compile in their own processes
         notice_compile(s.dic_shape)
@@ -133,7 +140,9 @@ def export_command(
 ) -> None:
     """Export the finished tasks of a store as a flat CSV."""
     from ..campaign import export_csv
+    from ..io import check_output
 
+    check_output(csv, "--csv")
     n = export_csv(results, csv)
     typer.echo(f"wrote {csv} ({n} rows)")
 

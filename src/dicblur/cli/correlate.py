@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 
-from ..errors import InputError
 from ._common import console, notice_compile, print_mapping
 
 _UNITS = {"mean_u": "px", "std_u": "px", "mean_v": "px", "std_v": "px",
@@ -32,10 +31,10 @@ def correlate_command(
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
     from ..dic import Correlator
-    from ..io import load_image
+    from ..io import atomic_path, check_output, load_image
 
-    if out is not None and out.suffix.lower() not in (".nc", ".csv"):
-        raise InputError(f"--out={str(out)!r}: unknown format; use a .nc or .csv file name")
+    if out is not None:
+        check_output(out, "--out", suffixes=(".nc", ".csv"))
     import time
 
     ref = load_image(reference)
@@ -56,7 +55,8 @@ def correlate_command(
         if out.suffix.lower() == ".csv":
             res.to_csv(out)
         else:
-            res.to_xarray().to_netcdf(out, engine="scipy")
+            with atomic_path(out) as tmp:
+                res.to_xarray().to_netcdf(tmp, engine="scipy")
         console.print(f"wrote {out}")
 
 

@@ -154,10 +154,12 @@ def design_command(
         export_pattern,
         sine_blur_distribution,
     )
-    from ..io import save_image
+    from ..io import atomic_open, check_output, save_image, write_text
     from ..models import parse_quantity
     from ..patterns import speckle_pattern
     from ..report.design_page import write_design_report
+
+    check_output(out, "--out", folder=True)
 
     # unit strings (120mm/s, 1ms, 0.05mm/px, 0.5mm); bare numbers in the documented units
     scale_v = parse_quantity(scale, "scale", name="--scale") if scale is not None else None
@@ -203,7 +205,7 @@ def design_command(
                                                                   "--density-range"),
                            softness=parse_range(softness_range, "--softness-range"),
                            grid=_grid(grid))
-    out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(exist_ok=True)
     before = _stamps(out)
     n_grid = len(family.grid_candidates())
     if not as_json:
@@ -220,7 +222,7 @@ def design_command(
     cam = speckle_pattern(problem.image_size, speckle_size=best.speckle_size,
                           density=best.density, softness=best.softness, seed=seed)
     save_image(out / "best_pattern.png", cam, bit_depth=8)
-    (out / "best_pattern.png.json").write_text(json.dumps(
+    write_text(out / "best_pattern.png.json", json.dumps(
         {"generator": best.settings((problem.image_size, problem.image_size), seed)},
         indent=2))
     export = None
@@ -229,8 +231,8 @@ def design_command(
                                 extra={"design_summary": result.summary()})
     doc = result.to_dict()
     doc["export"] = None if export is None else export.to_dict()
-    (out / "design.json").write_text(json.dumps(_clean(doc), indent=2, allow_nan=False))
-    with open(out / "evaluations.csv", "w", newline="") as fh:
+    write_text(out / "design.json", json.dumps(_clean(doc), indent=2, allow_nan=False))
+    with atomic_open(out / "evaluations.csv", "w", newline="") as fh:
         cols = ["stage", "speckle_size", "density", "softness", "objective", "surrogate",
                 "eta", "alpha", "beta", "mbrf", "c_fit", "c_static", "mig0", "fit_ok",
                 "n_points", "time_s"]

@@ -42,19 +42,34 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         raise InputError(f"RESULTS={str(path)!r}: no such file or directory")
     suffix = path.suffix.lower()
     if suffix == ".csv":
-        with path.open(newline="", encoding="utf-8") as fh:
-            rows = list(csv.DictReader(fh))
+        if path.is_dir():
+            raise InputError(f"RESULTS={str(path)!r}: is a directory, expected a .csv file")
+        try:
+            text = path.read_bytes().decode("utf-8")
+        except UnicodeDecodeError:
+            raise InputError(f"RESULTS={str(path)!r}: binary data, not a UTF-8 CSV text "
+                             "file; give the CSV of dicblur campaign export") from None
+        if "\0" in text:
+            raise InputError(f"RESULTS={str(path)!r}: binary data (NUL bytes), not a CSV "
+                             "text file")
+        try:
+            rows = list(csv.DictReader(text.splitlines()))
+        except csv.Error as exc:
+            raise InputError(f"RESULTS={str(path)!r}: not a readable CSV ({exc})") from exc
         if not rows:
             raise InputError(f"RESULTS={str(path)!r}: empty CSV (expected a header and rows)")
         cols: dict[str, np.ndarray] = {}
         seen: dict[str, str] = {}
         for key in rows[0]:
+            if key is None:
+                raise InputError(f"RESULTS={str(path)!r}: a row has more fields than the "
+                                 "header")
             name = _canonical(key)
             if name in seen:
                 raise InputError(f"RESULTS={str(path)!r}: columns {seen[name]!r} and {key!r} "
                                  f"both mean {name!r}; keep one")
             seen[name] = key
-            values = [r[key] for r in rows]
+            values = [r[key] if r[key] is not None else "" for r in rows]
             try:
                 cols[name] = np.array([float(v) if v != "" else math.nan for v in values])
             except ValueError:
@@ -87,6 +102,8 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
     averaged, u_e pooled as the root mean square over repetitions."""
     import numpy as np
 
+    from ..models import check_measurements
+
     missing = [c for c in _COLUMNS if c not in cols]
     if missing:
         raise InputError(
@@ -115,7 +132,16 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
                 f"RESULTS: column {key!r} has several values; fit one setting at a time "
                 f"with --select {key}=VALUE"
             )
-    ok = np.isfinite(keep["u_e"].astype(float))
+    # the API's checks (fit_blur_model: u_e, SSSIG finite and > 0) on every row, before
+    # the RMS over repetitions hides a sign; rows without u_e (unfinished tasks) are dropped
+    ue = keep["u_e"]
+    if ue.dtype == object:
+        check_measurements(u_e=ue)
+    ok = np.isfinite(ue.astype(float))
+    if not ok.any():
+        raise InputError(f"RESULTS: u_e has no finite value ({ue.size} row(s), all NaN or "
+                         "infinite); export a campaign with finished tasks")
+    check_measurements(u_e=ue[ok], sssig=keep["sssig"][ok])
     if not ok.all():
         warnings.warn(f"{int((~ok).sum())} row(s) without u_e dropped", stacklevel=2)
     if "noise" in keep:
@@ -178,9 +204,10 @@ def fit_command(
     as_json: bool = typer.Option(False, "--json", help="Print the model JSON."),
 ) -> None:
     """Fit the uncertainty models to RESULTS and write the model JSON."""
-    from ..io import file_sha256
+    from ..io import check_output, file_sha256
     from ..models import fit_blur_model
 
+    check_output(out, "--out")
     data = _aggregate(_read_table(results), select)
     rng = None
     if fit_range is not None:
@@ -290,7 +317,7 @@ def plan_command(
     """Plan the exposure: longest under --target, or the optimum with a camera."""
     import numpy as np
 
-    from ..io import load_image
+    from ..io import check_output, load_image
     from ..models import (
         BlurUncertaintyModel,
         PoissonGaussianCamera,
@@ -298,6 +325,8 @@ def plan_command(
         plan_exposure,
     )
 
+    if plot is not None:
+        check_output(plot, "--plot")
     model = BlurUncertaintyModel.from_json(str(model_path))
     if reference is not None and noise_level is not None:
         raise InputError("--reference, --noise-level: give one (the image's level is computed "
@@ -310,7 +339,11 @@ def plan_command(
         base = model.mean_level if model.mean_level is not None else float(np.mean(img))
         if model.mean_level is None:
             mean_level = base
-        noise_level = gradient_weighted_level(img) / float(np.mean(img)) * base
+        try:
+            level = gradient_weighted_level(img)
+        except InputError as exc:
+            raise InputError(f"--reference={str(reference)!r}: {exc}") from None
+        noise_level = level / float(np.mean(img)) * base
     camera = None
     cam_opts = (full_well, read_noise, flux)
     if any(o is not None for o in cam_opts):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import typer
@@ -51,9 +52,14 @@ def generate(
     bit_depth: int = typer.Option(8, "--bit-depth", help="8 or 16."),
 ) -> None:
     """Generate a random speckle pattern and write it to OUT (plus OUT.json settings)."""
-    from ..io import save_image
+    from ..io import check_output, save_image, write_text
     from ..patterns import PatternSettings, paper_pattern4, speckle_pattern
 
+    check_output(out, "OUT", suffixes=(".tif", ".tiff", ".png", ".bmp"))
+    if bit_depth not in (8, 16):
+        raise InputError(f"--bit-depth={bit_depth}: must be 8 or 16")
+    if bit_depth == 16 and out.suffix.lower() == ".bmp":
+        raise InputError(f"--bit-depth=16: BMP files are 8-bit only; use .tif or .png for {out}")
     shape = parse_size(size)
     if preset not in ("", "paper4"):
         raise InputError(f"--preset={preset!r}: unknown preset; choose 'paper4' or omit it")
@@ -72,7 +78,7 @@ def generate(
         img = img * (65535.0 / 255.0)
     save_image(out, img, bit_depth=bit_depth)
     sidecar = out.with_name(out.name + ".json")
-    sidecar.write_text(json.dumps({"generator": settings, "bit_depth": bit_depth}, indent=2))
+    write_text(sidecar, json.dumps({"generator": settings, "bit_depth": bit_depth}, indent=2))
     typer.echo(f"wrote {out} ({shape[0]}x{shape[1]} px, {bit_depth}-bit) and {sidecar.name}")
 
 
@@ -93,6 +99,12 @@ def metrics(
     pm = pattern_metrics(img, subset=subset, noise_sigma=noise, step=step,
                          gradient=gradient)  # type: ignore[arg-type]
     data = pm.to_dict()
+    undefined = [k for k, v in data.items() if isinstance(v, float) and not math.isfinite(v)]
+    if undefined:
+        # printed as '-' (null in JSON), never as nan or inf
+        warnings.warn(f"{image}: {', '.join(undefined)} undefined for this image (a subset or "
+                      "the whole image without texture, or speckles too large to measure); "
+                      "shown as '-'", UserWarning, stacklevel=1)
     if as_json:
         print_json(data)
     else:
@@ -121,11 +133,13 @@ def predict(
     """Predict u_e(W) of IMAGE from the static image alone (no simulation, no DIC run)."""
     from rich.table import Table
 
-    from ..io import load_image
+    from ..io import check_output, load_image
     from ..models import model_from_pattern, predict_from_pattern
 
     if shape not in ("translation", "affine"):
         raise InputError(f"--shape={shape!r}: choose 'translation' or 'affine'")
+    if out is not None:
+        check_output(out, "--out")
     img = load_image(image)
     a = math.radians(angle)
     motion = (math.sin(a), math.cos(a))
@@ -172,10 +186,20 @@ def noise_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Estimate the image noise std (grey levels) from two images of a static scene."""
-    from ..io import load_image
+    from ..io import load_image, read_image_header
     from ..metrics import estimate_noise
 
-    sigma = estimate_noise(load_image(image_a), load_image(image_b))
+    img_a, img_b = load_image(image_a), load_image(image_b)  # each file checked first
+    ha, hb = read_image_header(image_a), read_image_header(image_b)
+    if ha.shape != hb.shape:
+        raise InputError(f"IMAGE_B={str(image_b)!r}: shape {hb.shape[0]}x{hb.shape[1]} px, "
+                         f"IMAGE_A is {ha.shape[0]}x{ha.shape[1]} px; give two images of the "
+                         "same scene from the same camera")
+    if ha.dtype != hb.dtype:
+        raise InputError(f"IMAGE_B={str(image_b)!r}: {hb.bit_depth}-bit {hb.dtype} samples, "
+                         f"IMAGE_A has {ha.bit_depth}-bit {ha.dtype}: their grey levels are on "
+                         "different scales; give two images saved at the same bit depth")
+    sigma = estimate_noise(img_a, img_b)
     if as_json:
         print_json({"noise_sigma": sigma})
     else:

@@ -35,7 +35,9 @@ def _table_markdown(rows: tuple[dict[str, Any], ...]) -> str:
 
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    with path.open("w", newline="") as fh:
+    from ..io import atomic_open
+
+    with atomic_open(path, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
@@ -54,7 +56,10 @@ def pulse_command(
                                           help="Write PNG figures.")] = True,
 ) -> None:
     """Section V of the paper: Table II, Fig. 4-6, the Monte Carlo and verdict.md in OUT."""
+    from ..io import atomic_path, check_output, write_text
     from ..pulse.study import run_pulse_study
+
+    check_output(out, "--out", folder=True)
 
     if trials < 2:
         raise InputError(f"--trials={trials}: expected an int >= 2 (default 10000)")
@@ -62,21 +67,24 @@ def pulse_command(
         raise InputError(f"--n-periods={n_periods}: expected an int >= 1 (default 10)")
     if dependence_trials < 0:
         raise InputError(f"--dependence-trials={dependence_trials}: expected >= 0")
-    out.mkdir(parents=True, exist_ok=True)
     study = run_pulse_study(trials=trials, seed=seed, n_periods=n_periods,
                             dependence_trials=dependence_trials or None)
+    out.mkdir(exist_ok=True)
     _write_csv(out / "table_ii.csv", list(study.table))
-    (out / "table_ii.md").write_text(_table_markdown(study.table))
+    write_text(out / "table_ii.md", _table_markdown(study.table))
     ds = study.dataset
     summary = ds.drop_vars("u") if "u" in ds else ds
-    summary.to_dataframe().to_csv(out / "montecarlo.csv")
-    summary.to_netcdf(out / "montecarlo.nc", engine="scipy")
-    study.fig5.to_dataframe().to_csv(out / "fig5_min_chi2.csv")
+    with atomic_path(out / "montecarlo.csv") as tmp:
+        summary.to_dataframe().to_csv(tmp)
+    with atomic_path(out / "montecarlo.nc") as tmp:
+        summary.to_netcdf(tmp, engine="scipy")
+    with atomic_path(out / "fig5_min_chi2.csv") as tmp:
+        study.fig5.to_dataframe().to_csv(tmp)
     _write_csv(out / "fits.csv", [f.to_dict() for f in study.fits])
     if study.dependence:
         _write_csv(out / "dependence.csv", [r.to_dict() for r in study.dependence])
-    (out / "verdict.md").write_text(study.verdict)
-    (out / "settings.json").write_text(json.dumps(
+    write_text(out / "verdict.md", study.verdict)
+    write_text(out / "settings.json", json.dumps(
         {**study.settings, "seed": seed, "montecarlo_seconds": study.elapsed_s,
          "knee": study.knee, "knee_predicted": study.knee_predicted}, indent=2))
     written = ["table_ii.csv", "table_ii.md", "montecarlo.csv", "montecarlo.nc",

@@ -28,7 +28,10 @@ def reproduce_command(
     """Reproduce Lavatelli & Zappa (2017): figures, tables, claims, report.html."""
     from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
+    from ..io import check_output
     from ..report.reproduce import ReproduceSettings, reproduce
+
+    check_output(out, "--out", folder=True)
 
     settings = ReproduceSettings(
         out=out, quick=quick, pattern1=pattern1, pattern2=pattern2, workers=workers,

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from .._validation import check_positive, describe
 from ..errors import InputError
+from ..io import atomic_path, write_text
 from .family import Candidate
 
 __all__ = ["PrintExport", "export_pattern", "regenerate"]
@@ -163,11 +164,13 @@ def export_pattern(
     out.mkdir(parents=True, exist_ok=True)
     png = out / f"{stem}.png"
     pil = Image.fromarray(data)  # 2-D uint8 -> mode "L"
-    pil.save(png, dpi=(dpi_f, dpi_f))
+    with atomic_path(png) as tmp:
+        pil.save(tmp, format="PNG", dpi=(dpi_f, dpi_f))
     pdf_path = None
     if pdf:
         pdf_path = out / f"{stem}.pdf"
-        pil.save(pdf_path, "PDF", resolution=dpi_f)
+        with atomic_path(pdf_path) as tmp:
+            pil.save(tmp, "PDF", resolution=dpi_f)
     size = (rows * pitch, cols * pitch)
     record = {
         "schema": "dicblur.design.PrintExport/1",
@@ -183,7 +186,7 @@ def export_pattern(
         **(extra or {}),
     }
     settings = out / f"{stem}.json"
-    settings.write_text(json.dumps(record, indent=2, default=float), encoding="utf-8")
+    write_text(settings, json.dumps(record, indent=2, default=float))
     return PrintExport(png=png, pdf=pdf_path, settings=settings, dpi=dpi_f,
                        shape=(rows, cols), size_mm=size, speckle_size_mm=d_mm,
                        softness_mm=s_mm, speckle_size_dots=d_dots, softness_dots=s_dots,

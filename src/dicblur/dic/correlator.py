@@ -15,7 +15,15 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_image, check_choice, check_odd_subset, check_positive, describe
+from .._validation import (
+    as_image,
+    check_choice,
+    check_odd_subset,
+    check_positive,
+    check_subset_fits,
+    check_textured,
+    describe,
+)
 from ..errors import InputError
 from ..metrics import image_gradients, subset_centres
 from . import kernels
@@ -106,11 +114,8 @@ class Correlator:
         t0 = time.perf_counter()
         ref = as_image(reference, "reference", min_size=3)
         self.subset = check_odd_subset(subset)
-        if self.subset + 2 > min(ref.shape):
-            raise InputError(
-                f"subset={self.subset}: larger than the reference image {ref.shape[0]}x"
-                f"{ref.shape[1]} px allows (a subset plus a 1-px border); use a subset <= "
-                f"{(min(ref.shape) - 3) | 1}")
+        check_subset_fits(self.subset, ref.shape)
+        check_textured(ref, "reference")
         self.step = _check_int(step, "step", 1)
         self.shape: str = check_choice(shape, "shape", SHAPES)
         self.interpolation = interpolation

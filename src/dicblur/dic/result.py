@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError, StoreError
+from ..io import atomic_open
 from .status import PointStatus
 
 __all__ = ["PARAM_NAMES", "DICResult"]
@@ -173,7 +174,7 @@ class DICResult:
         if pred:
             header += ["predicted_sigma_u", "predicted_sigma_v"]
         try:
-            with path.open("w", newline="") as fh:
+            with atomic_open(path, "w", newline="") as fh:
                 w = csv.writer(fh)
                 w.writerow(header)
                 for i in range(len(self)):

@@ -14,7 +14,7 @@ from .decay import (
     sssig_decay,
     taylor_model,
 )
-from .fit import ModelComparison, compare_models, fit_blur_model
+from .fit import ModelComparison, check_measurements, compare_models, fit_blur_model
 from .mismatch import (
     BlurMismatchCurve,
     BlurSensitivity,
@@ -51,6 +51,7 @@ __all__ = [
     "Prediction",
     "blur_mismatch_curve",
     "blur_sensitivity",
+    "check_measurements",
     "combined_model",
     "combined_pan_model",
     "compare_models",

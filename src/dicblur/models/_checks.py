@@ -38,7 +38,7 @@ def as_blur(x: ArrayLike, name: str = "blur", *, increasing: bool = True,
         raise InputError(f"{name}: empty; give the blur lengths W (px) of the measurements")
     if np.any(w < 0):
         raise InputError(
-            f"{name}: negative blur length {w[w < 0][0]!r} px; W = |motion| is >= 0"
+            f"{name}: negative blur length {float(w[w < 0][0])!r} px; W = |motion| is >= 0"
         )
     if increasing:
         keys = np.zeros(w.size) if groups is None else groups
@@ -57,7 +57,7 @@ def as_positive(x: ArrayLike, name: str, n: int) -> NDArray[np.float64]:
     a = as_vector(x, name, n)
     if np.any(a <= 0):
         raise InputError(
-            f"{name}: value {a[a <= 0][0]!r} at index {int(np.argmax(a <= 0))} is <= 0; "
+            f"{name}: value {float(a[a <= 0][0])!r} at index {int(np.argmax(a <= 0))} is <= 0; "
             f"{name} must be > 0"
         )
     return a

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._validation import describe
 from ..errors import FitError, InputError
 from ._checks import as_blur, as_positive, as_vector
 from .decay import fit_sssig_decay
@@ -38,6 +39,31 @@ def _noise_vector(noise_sigma: ArrayLike | None, n: int) -> NDArray[np.float64] 
     if arr.ndim == 0:
         arr = np.full(n, float(arr))
     return as_positive(arr, "noise_sigma", n)
+
+
+def check_measurements(**columns: ArrayLike) -> None:
+    """Apply :func:`fit_blur_model`'s checks to raw measurement rows before any averaging.
+
+    Each keyword is a column (``u_e=..., sssig=...``): every value must be a finite
+    number > 0. Used by ``dicblur fit`` on a results table, where an RMS over repetitions
+    would otherwise hide a negative u_e.
+
+    Raises
+    ------
+    InputError
+        Naming the column, the first bad value and its row.
+    """
+    for name, col in columns.items():
+        arr = np.asarray(col)
+        if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+            try:
+                arr = arr.astype(np.float64)
+            except (TypeError, ValueError):
+                raise InputError(f"{name}: the column is not numeric (e.g. "
+                                 f"{describe(arr.ravel()[0])}); give numbers") from None
+        if arr.size == 0:
+            raise InputError(f"{name}: no rows; give the measured values")
+        as_positive(arr, name, arr.size)
 
 
 def fit_blur_model(

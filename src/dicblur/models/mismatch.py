@@ -171,6 +171,13 @@ def blur_sensitivity(
             "image: fewer than two subsets have an intensity gradient; the blur sensitivity "
             "is undefined (use a textured image or a larger area)"
         )
+    if float(good.std()) <= 1e-9 * float(np.max(np.abs(good))):
+        # c is the spread of the subsets' responses: zero means no random texture, not a
+        # pattern immune to blur
+        raise InputError(
+            f"image: all {good.size} subsets respond identically to blur (c = 0); the image "
+            "has no random texture (flat, or periodic with the subset grid); use a speckle "
+            "image")
     n = math.hypot(float(motion[0]), float(motion[1]))
     return BlurSensitivity(c=float(good.std()), mean=float(good.mean()), k=k, centres=pts,
                            subset=subset, motion=(float(motion[0]) / n, float(motion[1]) / n),

@@ -19,15 +19,12 @@ from .decay import mbrf as _mbrf
 from .decay import sssig_decay
 from .domain import ValidityDomain
 from .mismatch import mismatch_terms
+from .model_schema import SCHEMA, SCHEMA_V1, validate_model_dict
 
 __all__ = ["BlurUncertaintyModel", "ModelKind", "Prediction"]
 
 ModelKind = Literal["mismatch", "power_law"]
 _KINDS = ("mismatch", "power_law")
-SCHEMA = "dicblur.BlurUncertaintyModel/2"
-"""Schema of the model JSON. /2: power law as ``u_ref``, ``alpha`` around ``sssig_ref``
-(was ``eta``), and the ``domain`` block; /1 files still load (:func:`model_kwargs`)."""
-SCHEMA_V1 = "dicblur.BlurUncertaintyModel/1"
 
 
 @dataclass(frozen=True)
@@ -300,7 +297,8 @@ class BlurUncertaintyModel:
         """
         w = as_vector(blur, "blur")
         if np.any(w < 0):
-            raise InputError(f"blur: negative blur length {w[w < 0][0]!r} px; W must be >= 0")
+            raise InputError(f"blur: negative blur length {float(w[w < 0][0])!r} px; W must be "
+                             ">= 0")
         kind = self._kind(model)
         sig = self._sigma(kind, sigma)
         lu, half, u_noise, u_blur, u_floor = self._evaluate(kind, w, sig)
@@ -491,7 +489,9 @@ class BlurUncertaintyModel:
         if path is not None:
             from pathlib import Path
 
-            Path(path).write_text(text + "\n", encoding="utf-8")
+            from ..io import write_text
+
+            write_text(Path(path), text + "\n")
         return text
 
     @classmethod
@@ -499,20 +499,33 @@ class BlurUncertaintyModel:
         """Rebuild a model from :meth:`to_json` text (or a path to a ``.json`` file).
 
         Files of schema /1 (power law as ``eta``, no domain) load too (:func:`model_kwargs`).
+        The content is checked against the schema table of
+        :mod:`dicblur.models.model_schema` first: a damaged file (missing key, wrong type,
+        NaN parameter, binary data) raises one ``InputError`` naming the key.
         """
+        source = "model"
         if not text.lstrip().startswith("{"):
             from pathlib import Path
 
+            p = Path(text)
+            source = f"model={text!r}"
+            if not p.is_file():
+                why = "is a directory" if p.is_dir() else "no such file"
+                raise InputError(f"{source}: {why}; give a model .json written by dicblur fit "
+                                 "(or dicblur pattern predict -o)")
             try:
-                text = Path(text).read_text(encoding="utf-8")
+                text = p.read_bytes().decode("utf-8")
+            except UnicodeDecodeError:
+                raise InputError(f"{source}: binary data, not a JSON text file; give a model "
+                                 ".json written by dicblur fit") from None
             except OSError as exc:
-                raise InputError(f"model={text!r}: not JSON text and not a readable file") from exc
+                raise InputError(f"{source}: cannot be read ({exc.strerror})") from exc
         try:
             d = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise InputError(f"model: invalid JSON ({exc})") from exc
-        if not isinstance(d, dict) or d.get("schema") not in (SCHEMA, SCHEMA_V1):
-            raise InputError(f"model: not a dicblur model file (schema must be {SCHEMA!r})")
+            raise InputError(f"{source}: invalid JSON ({exc.msg} at line {exc.lineno}); the "
+                             "file is truncated or not a model file") from exc
+        validate_model_dict(d, source)
         return cls(**model_kwargs(d))
 
 

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from .._validation import as_image, check_positive
+from .._validation import as_image, check_positive, check_textured
 from ..errors import InputError
 from .model import BlurUncertaintyModel
 from .units import parse_quantity
@@ -148,6 +148,7 @@ def gradient_weighted_level(image: Any, *, motion: tuple[float, float] = (0.0, 1
     float
     """
     img = as_image(image, "image", min_size=3)
+    check_textured(img)
     dy, dx = (float(motion[0]), float(motion[1]))
     norm = math.hypot(dy, dx)
     if not math.isfinite(norm) or norm == 0:

@@ -19,6 +19,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from ..io import atomic_open, atomic_path, write_text
+
 __all__ = ["HtmlReport", "fig_to_files", "markdown_to_html"]
 
 _CSS = """
@@ -127,8 +129,10 @@ def fig_to_files(fig: Any, folder: Path, name: str, *, dpi: int = 110) -> bytes:
     # redo the text layout on every save, the slowest part of writing a report.
     fig.savefig(buf, format="png", dpi=dpi)
     png = buf.getvalue()
-    (folder / f"{name}.png").write_bytes(png)
-    fig.savefig(folder / f"{name}.svg", format="svg")
+    with atomic_open(folder / f"{name}.png", "wb") as fh:
+        fh.write(png)
+    with atomic_path(folder / f"{name}.svg") as tmp:
+        fig.savefig(tmp, format="svg")
     return png
 
 
@@ -266,5 +270,5 @@ class HtmlReport:
             f"</p><nav><ul>{toc}</ul></nav>{''.join(self._parts)}{_SCRIPT}</body></html>"
         )
         path = self.folder / filename
-        path.write_text(page, encoding="utf-8")
+        write_text(path, page)
         return path

@@ -13,6 +13,14 @@ from ._figure import subplots
 __all__ = ["calibration_figures", "plan_figure"]
 
 
+def _save(fig: Any, path: str | Path) -> None:
+    """Write a figure atomically (a temporary file, then rename)."""
+    from ..io import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+
+
 def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Path, ...]:
     """The three figures of a calibration (:func:`dicblur.campaign.calibrate`).
 
@@ -60,7 +68,7 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     ax.legend(fontsize=8)
     fig.tight_layout()
     paths.append(out / "ue_vs_blur.png")
-    fig.savefig(paths[-1], dpi=120)
+    _save(fig, paths[-1])
 
     fig, ax = subplots(figsize=(5.5, 4))
     ax.plot(w, s, "o", ms=3, label="campaign (mean over POIs)")
@@ -71,7 +79,7 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     ax.legend()
     fig.tight_layout()
     paths.append(out / "sssig_vs_blur.png")
-    fig.savefig(paths[-1], dpi=120)
+    _save(fig, paths[-1])
 
     fig, ax = subplots(figsize=(5.5, 4))
     ax.loglog(s, ue, "o", ms=3, label="campaign")
@@ -87,7 +95,7 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     ax.legend()
     fig.tight_layout()
     paths.append(out / "ue_vs_sssig.png")
-    fig.savefig(paths[-1], dpi=120)
+    _save(fig, paths[-1])
     return tuple(paths)
 
 
@@ -110,5 +118,5 @@ def plan_figure(plan: Any, path: str | Path) -> Path:
     ax.set_ylabel("u_e (px)")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _save(fig, path)
     return Path(path)

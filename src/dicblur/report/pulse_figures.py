@@ -4,15 +4,22 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from ..io import atomic_path
 from ..pulse.montecarlo import PAPER_TRAIN
 from ..pulse.signal import PulseTrain
 from ..pulse.study import DENSE_TRAIN, PulseStudy
 from ._figure import subplots
 
 __all__ = ["plot_min_chi2", "plot_regimes", "plot_uncertainty", "write_figures"]
+
+
+def _save(fig: Any, out: Path | str) -> None:
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=120)
 
 
 def plot_regimes(path: str | Path) -> Path:
@@ -35,7 +42,7 @@ def plot_regimes(path: str | Path) -> Path:
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     out = Path(path)
-    fig.savefig(out, dpi=120)
+    _save(fig, out)
     return out
 
 
@@ -53,7 +60,7 @@ def plot_min_chi2(study: PulseStudy, path: str | Path) -> Path:
     ax.legend(fontsize=8)
     fig.tight_layout()
     out = Path(path)
-    fig.savefig(out, dpi=120)
+    _save(fig, out)
     return out
 
 
@@ -99,7 +106,7 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
         f"{ds.attrs['trials']} trials", fontsize=9)
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     out = Path(path)
-    fig.savefig(out, dpi=120)
+    _save(fig, out)
     return out
 
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from .._version import package_versions
 from ..errors import InputError
+from ..io import atomic_path, check_output, write_text
 from ._data import series
 from .study import (
     StudyPattern,
@@ -162,7 +163,8 @@ def _study_patterns(s: ReproduceSettings) -> list[StudyPattern]:
 def _write_float_tiff(path: Path, image: np.ndarray) -> None:
     import tifffile
 
-    tifffile.imwrite(path, np.ascontiguousarray(image, dtype=np.float64))
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, np.ascontiguousarray(image, dtype=np.float64))
 
 
 def _campaign(
@@ -240,8 +242,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     if s.main_noise not in s.noise_levels:
         raise InputError(f"main_noise={s.main_noise}: must be one of noise_levels "
                          f"{s.noise_levels}")
-    out = Path(s.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_output(s.out, "out", folder=True)
+    out.mkdir(exist_ok=True)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
 
@@ -443,8 +445,8 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         "campaign_runs": {"study": run_study, "family": run_family},
     }
     rj = out / "results.json"
-    rj.write_text(json.dumps(_clean(results), indent=2))
-    (out / "command.txt").write_text(
+    write_text(rj, json.dumps(_clean(results), indent=2))
+    write_text(out / "command.txt",
         s.command + "\n\n" + "\n".join(f"{k}: {v}" for k, v in versions.items()) + "\n")
     return ReproduceResult(report_path, rj, tuple(figures), tuple(claims), timings,
                            {"study": run_study, "family": run_family})

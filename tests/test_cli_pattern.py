@@ -115,3 +115,19 @@ def test_predict_with_the_subpixel_position(tmp_path, capsys):
     assert data["u_blur"][0] > 0 and data["subpixel"] == 0.5
     assert main([*PREDICT, str(out), *NOISE_SUBSET, "--subpixel", "half"]) == 2
     assert "--subpixel='half'" in capsys.readouterr().err
+
+
+def test_predict_says_where_dic_breaks_down(tmp_path, capsys):
+    import dicblur
+
+    img = dicblur.speckle_pattern((128, 128), speckle_size=2.0, density=0.5, softness=0.9,
+                                  levels=(55.0, 135.0), seed=3)
+    out = tmp_path / "fine.tif"
+    save_image(out, img)
+    blur = [a for w in ("0", "4", "8", "10") for a in ("--blur", w)]
+    assert main([*PREDICT, str(out), *NOISE_SUBSET, *blur]) == 0
+    text = capsys.readouterr().out
+    assert "DIC breaks down from W = " in text
+    assert main([*PREDICT, str(out), *NOISE_SUBSET, *blur, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["breakdown_blur"] in (8.0, 10.0)

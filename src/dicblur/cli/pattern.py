@@ -165,7 +165,7 @@ def predict(
                     "sssig": pred.sssig.tolist(),
                     "valid_fraction": pred.valid_fraction.tolist(), "noise_sigma": noise,
                     "subset": subset, "shape": shape, "angle": angle,
-                    "subpixel": sp})
+                    "subpixel": sp, "breakdown_blur": pred.breakdown_blur})
     else:
         table = Table(title=f"predicted from the static image: {image} (noise {noise:g} GL, "
                             f"subset {subset} px, {shape}, motion at {angle:g} deg)")
@@ -177,6 +177,10 @@ def predict(
                           f"{pred.u_blur[j]:.4g}", f"{pred.sssig[j]:.4g}",
                           f"{100 * pred.valid_fraction[j]:.0f} %")
         console.print(table)
+        if pred.breakdown_blur is not None:
+            console.print(f"DIC breaks down from W = {pred.breakdown_blur:g} px (fewer than "
+                          "90 % of the subsets keep their texture along the motion): the "
+                          "rows from there on do not describe DIC")
     if out is not None:
         console.print(f"wrote {out}: use it with dicblur predict / dicblur plan")
 

@@ -150,6 +150,10 @@ def main(argv: list[str] | None = None) -> int:
                 "flagged_fraction": float(flagged.mean()),
                 "flagged_but_right_fraction": float((flagged & (err <= 0.1)).mean()),
                 "mean_iterations": float(r.iterations.mean()),
+                "mean_iterations_converged": float(r.iterations[ok].mean()),
+                # share of all IC-GN iterations spent on POIs that end not CONVERGED
+                "failing_iteration_share": float(r.iterations[~ok].sum()
+                                                 / max(1, r.iterations.sum())),
                 "max_iterations_used": int(r.iterations.max()),
                 "status_counts": r.status_counts(),
             }
@@ -162,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{args.workers} threads, screening {'off' if args.no_screen else 'on'}; "
           f"load {record['load_start']:.1f} -> {record['load_end']:.1f}")
     print(f"{'case':20s} {'POI/s':>9s} {'POI/CPU-s':>10s} {'wrong %':>8s} {'gross %':>8s} "
-          f"{'flagged %':>9s} {'flag-ok %':>9s} {'mean it':>8s}  statuses")
+          f"{'flagged %':>9s} {'flag-ok %':>9s} {'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
+          "  statuses")
     for shape in ("translation", "affine"):
         for name in ("clean", "blobs"):
             s = results[f"{name}_{shape}"]
@@ -173,7 +178,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"{100 * s['gross_unflagged_fraction']:8.2f} "
                   f"{100 * s['flagged_fraction']:9.2f} "
                   f"{100 * s['flagged_but_right_fraction']:9.2f} "
-                  f"{s['mean_iterations']:8.2f}  {counts}")
+                  f"{s['mean_iterations']:8.2f} {s['mean_iterations_converged']:6.2f} "
+                  f"{100 * s['failing_iteration_share']:9.1f}  {counts}")
         print(f"  blobs / clean ({shape}): wall {results[f'ratio_{shape}_poi_per_s']:.2f}, "
               f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}")
     out = Path(args.out)

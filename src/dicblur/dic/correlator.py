@@ -640,7 +640,7 @@ class Correlator:
         img = rng.normal(128.0, 30.0, (self.subset + 12, self.subset + 12))
         c = Correlator(img, subset=self.subset, step=self.step, shape=self.shape,  # type: ignore[arg-type]
                        interpolation=self.interpolation, initial="zero",
-                       workers=self.workers)
+                       workers=self.workers, median_test=self.median_test)
         c.correlate(img)
         return time.perf_counter() - t0
 

@@ -105,9 +105,15 @@ def test_median_test_needs_a_grid():
     with pytest.raises(InputError, match="median_test"):
         Correlator(ref, median_test="yes")  # type: ignore[arg-type]
     pts = np.array([(r, c) for r in (20, 40, 60) for c in (25, 45, 65)])
-    res = Correlator(ref, points=pts[::-1], shape="translation",
-                     median_test=True).correlate(np.roll(ref, 1, axis=1))
+    corr = Correlator(ref, points=pts[::-1], shape="translation", median_test=True)
+    res = corr.correlate(np.roll(ref, 1, axis=1))
     assert res.converged.all() and np.allclose(res.u, 1.0, atol=1e-2)
+    assert corr.grid_shape == (3, 3) and res.info["grid_shape"] == "3x3"
+    assert np.array_equal(corr.grid_cells, np.arange(9)[::-1])
+    own = Correlator(ref, step=20)
+    n_r, n_c = own.grid_shape
+    assert np.array_equal(own.rows.reshape(n_r, n_c)[:, 0], np.unique(own.rows))
+    assert Correlator(ref, points=pts[:5]).grid_shape is None
 
 
 def test_statuses_reach_csv_xarray_and_cli(tmp_path, capsys, blob_pair):

@@ -312,6 +312,21 @@ class Correlator:
         """Number of POIs."""
         return int(self.rows.shape[0])
 
+    @property
+    def grid_shape(self) -> tuple[int, int] | None:
+        """``(rows, cols)`` of the POI grid, or None when the POIs do not fill one.
+
+        The Correlator's own grid lists its POIs in row-major order, so result arrays
+        reshape to this shape (e.g. for :func:`~dicblur.dic.normalized_median_test`); for
+        explicit ``points`` use :attr:`grid_cells`.
+        """
+        return self._grid_shape
+
+    @property
+    def grid_cells(self) -> NDArray[np.intp] | None:
+        """Row-major grid cell of each POI (n,), or None (see :attr:`grid_shape`)."""
+        return None if self._grid_index is None else self._grid_index.copy()
+
     # ------------------------------------------------------------------ correlation
     def _translation(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
                      status_in: NDArray[np.uint8], first: NDArray[np.intp],
@@ -510,6 +525,8 @@ class Correlator:
                 "max_residual": self.max_residual, "median_test": int(self.median_test),
                 "screen_noise_sigma": None if noise_var is None else float(np.sqrt(noise_var)),
                 "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
+                "grid_shape": (None if self._grid_shape is None
+                               else f"{self._grid_shape[0]}x{self._grid_shape[1]}"),
                 "dicblur_version": __version__}
         return DICResult(
             rows=self.rows.copy(), cols=self.cols.copy(), u=u, v=v, params=p, zncc=z,

@@ -18,7 +18,8 @@ class PointStatus(IntEnum):
     #: IC-GN met the tolerance, the ZNCC is above ``min_zncc`` and no screening test
     #: flagged the point.
     CONVERGED = 0
-    #: ``max_iterations`` reached before the update fell below ``tolerance``.
+    #: ``max_iterations`` reached before the update fell below ``tolerance``, or the update
+    #: stopped shrinking (no new minimum for ``kernels.STALL_ITERATIONS`` iterations).
     MAX_ITERATIONS = 1
     #: The reference subset has (almost) no grey-level variation: the Hessian is singular.
     LOW_TEXTURE = 2

@@ -28,6 +28,9 @@ def correlate_command(
                                                 help="Threads (default: all).")] = None,
     out: Annotated[Path | None, typer.Option(
         "-o", "--out", help="Write the field to .nc (netCDF) or .csv.")] = None,
+    median_test: Annotated[bool, typer.Option(
+        "--median-test", help="Flag OUTLIER points: normalised median test of the field "
+        "(eps 0.1 px, threshold 2) and a probe of the neighbours' displacement.")] = False,
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
     from ..dic import Correlator
@@ -40,7 +43,8 @@ def correlate_command(
     ref = load_image(reference)
     cur = load_image(current)
     corr = Correlator(ref, subset=subset, step=step, shape=shape,  # type: ignore[arg-type]
-                      interpolation=interpolation, noise_sigma=noise, workers=workers)
+                      interpolation=interpolation, noise_sigma=noise, workers=workers,
+                      median_test=median_test)
     notice_compile(shape)
     compile_s = corr.warmup()
     t0 = time.perf_counter()

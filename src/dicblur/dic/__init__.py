@@ -9,7 +9,9 @@ Stages, one module each (OpenCorr/DICe style): :mod:`.interpolation`, :mod:`.ini
 from __future__ import annotations
 
 from .correlator import Correlator, correlate
+from .outliers import neighbour_median, normalized_median_test
 from .result import DICResult
 from .status import PointStatus
 
-__all__ = ["Correlator", "DICResult", "PointStatus", "correlate"]
+__all__ = ["Correlator", "DICResult", "PointStatus", "correlate", "neighbour_median",
+           "normalized_median_test"]

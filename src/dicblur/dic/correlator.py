@@ -30,6 +30,7 @@ from . import kernels
 from .icgn import N_PARAMS, prepare_subsets
 from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
+from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen, neighbour_medians
 from .result import DICResult
 from .status import PointStatus
 
@@ -43,6 +44,15 @@ INITIAL_METHODS: tuple[str, ...] = ("fftcc", "subset", "zero")
 
 _RETRY = (PointStatus.MAX_ITERATIONS, PointStatus.DIVERGED, PointStatus.LOW_CORRELATION,
           PointStatus.OUT_OF_BOUNDS)
+#: A retried POI gets at most this many times the median iterations of the converged POIs
+#: (at least 10): a subset that failed once rarely needs the full ``max_iterations``.
+RETRY_BUDGET = 4
+#: ``OUTLIER`` when the neighbours' median displacement fits a subset better than its own
+#: result by more than this chi-square gain (``Df^2 (zncc_nb - zncc) / sigma^2``; 0 or less
+#: at a true optimum): IC-GN stopped at a false optimum.
+PROBE_CHI2 = 10.0
+#: Only POIs farther than this (px) from their neighbours' median are probed.
+PROBE_DISTANCE = 0.05
 
 
 def _check_int(value: Any, name: str, minimum: int) -> int:
@@ -92,6 +102,15 @@ class Correlator:
         predicted sigma.
     min_zncc : float
         Converged points with a lower ZNCC get status ``LOW_CORRELATION``.
+    max_residual : float or None
+        With ``noise_sigma``: converged points whose ZNSSD residual exceeds this many times
+        the subset's noise prediction get status ``HIGH_RESIDUAL`` (None: no test).
+    median_test : bool
+        Screen the converged points of the POI grid for ``OUTLIER``: the normalised median
+        test (:func:`~dicblur.dic.normalized_median_test`, eps 0.1 px, threshold 2) and a
+        probe of the neighbours' median displacement (explicit ``points`` must then fill a
+        regular grid). Off by default: where the random error itself approaches eps
+        (strong blur) the test trims the tails of the field and biases its std low.
     workers : int, optional
         Threads of the compiled kernels (default: all numba threads).
 
@@ -110,7 +129,8 @@ class Correlator:
                  shape: Shape = "affine", interpolation: str = "bspline3",
                  initial: str = "fftcc", max_iterations: int = 50, tolerance: float = 1e-4,
                  noise_sigma: float | None = None, min_zncc: float = 0.6,
-                 workers: int | None = None) -> None:
+                 workers: int | None = None, max_residual: float | None = 2.0,
+                 median_test: bool = False) -> None:
         t0 = time.perf_counter()
         ref = as_image(reference, "reference", min_size=3)
         self.subset = check_odd_subset(subset)
@@ -129,6 +149,10 @@ class Correlator:
         if not -1.0 <= self.min_zncc <= 1.0:
             raise InputError(f"min_zncc={min_zncc!r}: must lie in [-1, 1]")
         self.workers = None if workers is None else _check_int(workers, "workers", 1)
+        self.max_residual = (None if max_residual is None
+                             else check_positive(max_residual, "max_residual"))
+        if not isinstance(median_test, bool | np.bool_):
+            raise InputError(f"median_test={describe(median_test)}: must be True or False")
         self.image_shape: tuple[int, int] = (int(ref.shape[0]), int(ref.shape[1]))
         half = self.subset // 2
         self.half = half
@@ -136,6 +160,10 @@ class Correlator:
         rows, cols, status0 = self._points(roi, points)
         self.rows = rows
         self.cols = cols
+        self._grid_shape, self._grid_index = self._grid_of(
+            rows, cols, required=bool(median_test))
+        #: Whether :meth:`correlate` screens the grid for ``OUTLIER`` points.
+        self.median_test = bool(median_test)
         coef = bspline_coefficients(ref, order=self.order, dtype=np.float64)
         # IC-GN uses the exact derivatives of the reference spline (consistent with the
         # interpolant of the current image: fast, unbiased convergence)
@@ -229,6 +257,21 @@ class Correlator:
         c = centres[:, 1].astype(np.int64) + c0
         return r, c, np.zeros(len(r), np.uint8)
 
+    @staticmethod
+    def _grid_of(rows: NDArray[np.int64], cols: NDArray[np.int64], *, required: bool
+                 ) -> tuple[tuple[int, int] | None, NDArray[np.intp] | None]:
+        """Shape of the POI grid and each POI's row-major cell, when the POIs fill one."""
+        ur, ri = np.unique(rows, return_inverse=True)
+        uc, ci = np.unique(cols, return_inverse=True)
+        cell = ri.astype(np.intp) * len(uc) + ci.astype(np.intp)
+        if len(rows) == len(ur) * len(uc) and np.unique(cell).size == len(rows):
+            return (len(ur), len(uc)), cell
+        if required:
+            raise InputError(f"median_test=True: the {len(rows)} points do not fill a "
+                             f"regular grid ({len(ur)} rows x {len(uc)} columns of centres)"
+                             "; use median_test=False or a full grid of points")
+        return None, None
+
     def _setup_seeds(self) -> None:
         """Two-pass start: IC-GN first on sparse seed POIs (about 1 in 16), then every other
         POI starts from its nearest seed's warp carried to its own centre. A start within a
@@ -274,10 +317,26 @@ class Correlator:
         """Number of POIs."""
         return int(self.rows.shape[0])
 
+    @property
+    def grid_shape(self) -> tuple[int, int] | None:
+        """``(rows, cols)`` of the POI grid, or None when the POIs do not fill one.
+
+        The Correlator's own grid lists its POIs in row-major order, so result arrays
+        reshape to this shape (e.g. for :func:`~dicblur.dic.normalized_median_test`); for
+        explicit ``points`` use :attr:`grid_cells`.
+        """
+        return self._grid_shape
+
+    @property
+    def grid_cells(self) -> NDArray[np.intp] | None:
+        """Row-major grid cell of each POI (n,), or None (see :attr:`grid_shape`)."""
+        return None if self._grid_index is None else self._grid_index.copy()
+
     # ------------------------------------------------------------------ correlation
     def _translation(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
                      status_in: NDArray[np.uint8], first: NDArray[np.intp],
-                     second: NDArray[np.intp], source: NDArray[np.intp]
+                     second: NDArray[np.intp], source: NDArray[np.intp],
+                     max_iter: int | None = None
                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
                                 NDArray[np.uint8]]:
         """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
@@ -292,13 +351,15 @@ class Correlator:
             coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
             self._gx32, self._gy32, rows, cols, self.half, self._w, hinv, jsum, avec, fmean,
             fnorm, p0, status_in,
-            self.max_iterations, self.tolerance, self.min_zncc, float(self.subset), first,
+            self.max_iterations if max_iter is None else max_iter, self.tolerance,
+            self.min_zncc, float(self.subset), first,
             second, source, numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
             *self._packed, out_p, out_z, out_i, out_s)
         return out_p, out_z, out_i, out_s
 
     def _run_icgn(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
-                  status_in: NDArray[np.uint8], idx: NDArray[np.intp] | None = None
+                  status_in: NDArray[np.uint8], idx: NDArray[np.intp] | None = None,
+                  max_iter: int | None = None
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
                              NDArray[np.uint8]]:
         if self.shape == "translation":
@@ -307,7 +368,8 @@ class Correlator:
             sel = self._all if idx is None else idx
             full[sel] = p0
             st_full[sel] = status_in
-            out = self._translation(coef, full, st_full, sel, self._none, self._none)
+            out = self._translation(coef, full, st_full, sel, self._none, self._none,
+                                    max_iter)
             return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
         prep = self._prep
         if idx is None:
@@ -333,7 +395,8 @@ class Correlator:
         kernels.icgn_affine(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
              self._gx32, self._gy32,
              rows, cols, self.half, self._tw, hinv, jsum, avec, fmean, fnorm,
-             np.ascontiguousarray(p0), np.ascontiguousarray(status_in), self.max_iterations,
+             np.ascontiguousarray(p0), np.ascontiguousarray(status_in),
+             self.max_iterations if max_iter is None else max_iter,
              self.tolerance, self.min_zncc, float(self.subset), out_p, out_z, out_i, out_s)
         return out_p, out_z, out_i, out_s
 
@@ -449,21 +512,12 @@ class Correlator:
             p, z, it, st = self._run_icgn(coef, p0, status0)
         t3 = time.perf_counter()
         if method == "fftcc":
-            retry = np.flatnonzero(np.isin(st, _RETRY) & (status0 == 0))
-            if retry.size:
-                iu, iv, _ = subset_fftcc(self._ref, cur, self.rows[retry], self.cols[retry],
-                                         self.half, guess_u=gu[retry], guess_v=gv[retry],
-                                         workers=self.workers)
-                p2, z2, it2, st2 = self._run_icgn(
-                    coef, self._guess_to_params(iu.astype(float), iv.astype(float)),
-                    status0[retry], retry)
-                better = (st2 == PointStatus.CONVERGED) | (st[retry] != PointStatus.CONVERGED)
-                idx = retry[better]
-                p[idx], z[idx], st[idx] = p2[better], z2[better], st2[better]
-                it[idx] = it[idx] + it2[better]
+            self._retry(cur, coef, gu, gv, p, z, it, st)
         t4 = time.perf_counter()
+        noise_var = self._screen(coef, p, z, st)
+        t5 = time.perf_counter()
         self.last_timings = {"prefilter_s": t1 - t0, "initial_s": (t2 - t1) + (t4 - t3),
-                             "icgn_s": t3 - t2, "total_s": t4 - t0}
+                             "icgn_s": t3 - t2, "screen_s": t5 - t4, "total_s": t5 - t0}
         k = p.shape[1]
         u = p[:, 0].copy()
         v = p[:, 1 if k == 2 else 3].copy()
@@ -473,7 +527,11 @@ class Correlator:
                 "interpolation": self.interpolation, "initial": method,
                 "max_iterations": self.max_iterations, "tolerance": self.tolerance,
                 "noise_sigma": self.noise_sigma, "min_zncc": self.min_zncc,
+                "max_residual": self.max_residual, "median_test": int(self.median_test),
+                "screen_noise_sigma": None if noise_var is None else float(np.sqrt(noise_var)),
                 "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
+                "grid_shape": (None if self._grid_shape is None
+                               else f"{self._grid_shape[0]}x{self._grid_shape[1]}"),
                 "dicblur_version": __version__}
         return DICResult(
             rows=self.rows.copy(), cols=self.cols.copy(), u=u, v=v, params=p, zncc=z,
@@ -484,6 +542,118 @@ class Correlator:
             else self.predicted_sigma_v.copy(),
             info=info)
 
+    def _retry(self, cur: NDArray[np.float64], coef: NDArray[np.float32],
+               gu: NDArray[np.float64], gv: NDArray[np.float64], p: NDArray[np.float64],
+               z: NDArray[np.float64], it: NDArray[np.int64], st: NDArray[np.uint8]) -> None:
+        """Second chance for the failed POIs, in place, within an iteration budget.
+
+        A POI with converged grid neighbours restarts from their median parameters (a
+        start near the local field, one compiled call for all); the others get the
+        per-subset FFT-CC integer guess, unless it equals the start they already had.
+        """
+        status0 = self._status0
+        retry = np.flatnonzero(np.isin(st, _RETRY) & (status0 == 0))
+        if retry.size == 0:
+            return
+        ok = st == PointStatus.CONVERGED
+        conv = it[ok]
+        budget = self.max_iterations if conv.size == 0 else min(
+            self.max_iterations, max(10, RETRY_BUDGET * int(np.median(conv))))
+        k = p.shape[1]
+        start = np.full((retry.size, k), np.nan)
+        if self._grid_shape is not None and ok.any():
+            assert self._grid_index is not None
+            ny, nx = self._grid_shape
+            cell = self._grid_index
+            grid = np.full((k, ny * nx), np.nan)
+            grid[:, cell] = p.T
+            valid = np.zeros(ny * nx, bool)
+            valid[cell] = ok
+            start = neighbour_medians(grid.reshape(k, ny, nx), valid.reshape(ny, nx),
+                                      cell[retry]).T
+        near = np.all(np.isfinite(start), axis=1)
+        far = retry[~near]
+        if far.size:
+            iu, iv, _ = subset_fftcc(self._ref, cur, self.rows[far], self.cols[far],
+                                     self.half, guess_u=gu[far], guess_v=gv[far],
+                                     workers=1)
+            # the first pass started there already: nothing new to try
+            new = (iu != np.rint(gu[far])) | (iv != np.rint(gv[far]))
+            start[~near] = self._guess_to_params(iu.astype(float), iv.astype(float))
+            near[~near] = new
+        retry, start = retry[near], start[near]
+        if retry.size == 0:
+            return
+        p2, z2, it2, st2 = self._run_icgn(coef, start, status0[retry], retry, budget)
+        better = (st2 == PointStatus.CONVERGED) | (st[retry] != PointStatus.CONVERGED)
+        idx = retry[better]
+        p[idx], z[idx], st[idx] = p2[better], z2[better], st2[better]
+        it[idx] = it[idx] + it2[better]
+
+    def _screen(self, coef: NDArray[np.float32], p: NDArray[np.float64],
+                z: NDArray[np.float64], st: NDArray[np.uint8]) -> float | None:
+        """Flag false convergence in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
+
+        Returns the noise variance (GL^2) the tests used, or None when none ran.
+
+        Residual: at the true match, with independent noise of std sigma in both images,
+        ``1 - zncc ~ sigma^2 m / Df^2`` with ``m = npx - k - 2`` (ZNSSD ``C = 2 (1 - zncc)``,
+        the residual being the difference of the two noises after removing mean, gain and
+        the ``k`` fitted parameters). The noise variance used is the larger of
+        ``noise_sigma^2`` and the field's median of ``(1 - zncc) Df^2 / m`` (so a blurred
+        or otherwise mismatched pair, whose every subset exceeds the noise, is not flagged
+        as a whole). The interpolation of the current image slightly smooths its noise,
+        so the prediction is conservative (up to ~10 % high at half-pixel shifts).
+        """
+        ok = st == PointStatus.CONVERGED
+        residual = self.max_residual is not None and self.noise_sigma is not None
+        if not ok.any() or not (residual or self.median_test):
+            return None
+        k = p.shape[1]
+        fnorm2 = self._prep.fnorm ** 2
+        m = self.subset * self.subset - k - 2
+        unit = np.maximum(1.0 - z, 0.0) * fnorm2 / m
+        noise_var = float(np.median(unit[ok]))
+        if self.noise_sigma is not None:
+            noise_var = max(noise_var, self.noise_sigma ** 2)
+        if self.max_residual is not None and self.noise_sigma is not None and noise_var > 0:
+            high = ok & (unit > self.max_residual * noise_var)
+            st[high] = PointStatus.HIGH_RESIDUAL
+            ok &= ~high
+        if not self.median_test or self._grid_shape is None or not ok.any():
+            return noise_var
+        assert self._grid_index is not None
+        shape, cell = self._grid_shape, self._grid_index
+        ucol, vcol = 0, 1 if k == 2 else 3
+        # (k, ny, nx) with u, v first: the components the median test looks at
+        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+        grid = np.full((k, shape[0] * shape[1]), np.nan)
+        grid[:, cell] = np.where(ok, p[:, order].T, np.nan)
+        valid = np.zeros(shape[0] * shape[1], bool)
+        valid[cell] = ok
+        # points within PROBE_DISTANCE of their neighbours' median skip the median (and the
+        # probe): the shortcut of median_screen
+        out2, med_g = median_screen(grid.reshape(k, *shape), valid.reshape(shape),
+                                    eps=MEDIAN_EPS, threshold=MEDIAN_THRESHOLD,
+                                    within=PROBE_DISTANCE / np.sqrt(2.0))
+        out = out2.ravel()[cell]
+        st[out] = PointStatus.OUTLIER
+        ok &= ~out
+        # probe: a POI far from its neighbours' median is evaluated (one IC-GN iteration,
+        # which reports the ZNCC at its start) at the neighbours' median parameters; a
+        # clearly better fit there means IC-GN stopped at a false optimum
+        med = np.empty((len(cell), k))
+        med[:, order] = med_g.reshape(k, -1)[:, cell].T
+        dist = np.hypot(p[:, ucol] - med[:, ucol], p[:, vcol] - med[:, vcol])
+        with np.errstate(invalid="ignore"):
+            probe = np.flatnonzero(ok & (dist > PROBE_DISTANCE))
+        if probe.size and noise_var > 0:
+            _, zp, _, _ = self._run_icgn(coef, med[probe], self._status0[probe], probe, 1)
+            with np.errstate(invalid="ignore"):
+                gain = fnorm2[probe] * (zp - z[probe]) / noise_var
+            st[probe[gain > PROBE_CHI2]] = PointStatus.OUTLIER
+        return noise_var
+
     def warmup(self) -> float:
         """Compile (or load from the numba cache) the kernels of this configuration on a
         tiny image and return the seconds it took (the first call's compile time)."""
@@ -492,7 +662,7 @@ class Correlator:
         img = rng.normal(128.0, 30.0, (self.subset + 12, self.subset + 12))
         c = Correlator(img, subset=self.subset, step=self.step, shape=self.shape,  # type: ignore[arg-type]
                        interpolation=self.interpolation, initial="zero",
-                       workers=self.workers)
+                       workers=self.workers, median_test=self.median_test)
         c.correlate(img)
         return time.perf_counter() - t0
 
@@ -502,7 +672,9 @@ def correlate(reference: ArrayLike, current: ArrayLike, *, subset: int = 21, ste
               shape: Shape = "affine", interpolation: str = "bspline3",
               initial: str | ArrayLike = "fftcc", max_iterations: int = 50,
               tolerance: float = 1e-4, noise_sigma: float | None = None,
-              min_zncc: float = 0.6, workers: int | None = None) -> DICResult:
+              min_zncc: float = 0.6, workers: int | None = None,
+              max_residual: float | None = 2.0,
+              median_test: bool = False) -> DICResult:
     """One-shot subset DIC of ``current`` against ``reference`` (see :class:`Correlator`).
 
     ``initial`` is a method name (``"fftcc"``, ``"subset"``, ``"zero"``) or an array of
@@ -512,7 +684,8 @@ def correlate(reference: ArrayLike, current: ArrayLike, *, subset: int = 21, ste
     c = Correlator(reference, subset=subset, step=step, roi=roi, points=points, shape=shape,
                    interpolation=interpolation, initial=method,
                    max_iterations=max_iterations, tolerance=tolerance,
-                   noise_sigma=noise_sigma, min_zncc=min_zncc, workers=workers)
+                   noise_sigma=noise_sigma, min_zncc=min_zncc, workers=workers,
+                   max_residual=max_residual, median_test=median_test)
     return c.correlate(current, initial=None if isinstance(initial, str) else initial)
 
 

@@ -33,6 +33,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from .interpolation import interpolate_reference
+from .kernels import STALL_ITERATIONS
 from .status import PointStatus
 
 __all__ = ["PreparedSubsets", "compose_affine", "icgn_reference", "prepare_subsets",
@@ -180,6 +181,7 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
     zncc = float("nan")
     prev = np.zeros(2)
     prev6 = np.zeros(6)
+    best, ibest = np.inf, 0
     for it in range(max_iterations):
         if shape == "translation":
             xs, ys = col + dx + p[0], row + dy + p[1]
@@ -224,4 +226,9 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
                                                 + dp[5] ** 2)))
         if norm < tolerance:
             return p, zncc, it + 1, True
+        # stall test, as the kernels (kernels.STALL_ITERATIONS)
+        if norm < best:
+            best, ibest = norm, it
+        elif it - ibest >= STALL_ITERATIONS:
+            return p, zncc, it + 1, False
     return p, zncc, max_iterations, False

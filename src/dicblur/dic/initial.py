@@ -111,8 +111,9 @@ def subset_fftcc(reference: NDArray[np.floating], current: NDArray[np.floating],
     gv = np.zeros(n, np.int64) if guess_v is None else np.rint(guess_v).astype(np.int64)
     win = size + 2 * s
     L = sfft.next_fast_len(win, real=True)
-    margin = s + half + int(max(np.abs(gu).max(initial=0), np.abs(gv).max(initial=0))) + 1
-    cur = np.pad(np.asarray(current, dtype=np.float64), margin, mode="edge")
+    # windows past the image edge repeat the edge pixels (clipped indices: no padded copy
+    # of the whole image, which dominated a retry of a few POIs)
+    cur = np.asarray(current, dtype=np.float64)
     ref = np.asarray(reference, dtype=np.float64)
     out_u = np.zeros(n, np.int64)
     out_v = np.zeros(n, np.int64)
@@ -128,9 +129,11 @@ def subset_fftcc(reference: NDArray[np.floating], current: NDArray[np.floating],
         fsub = fsub - fsub.mean(axis=(1, 2), keepdims=True)
         fnorm = np.sqrt((fsub ** 2).sum(axis=(1, 2)))
         wi = np.arange(win)
-        top = r + gv[sl] - half - s + margin
-        left = c + gu[sl] - half - s + margin
-        gwin = cur[(top[:, None] + wi)[:, :, None], (left[:, None] + wi)[:, None, :]]
+        top = r + gv[sl] - half - s
+        left = c + gu[sl] - half - s
+        ry = np.clip(top[:, None] + wi, 0, cur.shape[0] - 1)
+        rx = np.clip(left[:, None] + wi, 0, cur.shape[1] - 1)
+        gwin = cur[ry[:, :, None], rx[:, None, :]]
         ff = sfft.rfft2(fsub, s=(L, L), workers=workers)
         fg = sfft.rfft2(gwin, s=(L, L), workers=workers)
         num = sfft.irfft2(fg * np.conj(ff), s=(L, L), workers=workers)[:, :2 * s + 1, :2 * s + 1]

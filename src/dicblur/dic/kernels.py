@@ -34,8 +34,8 @@ import numpy as np
 
 from .status import PointStatus
 
-__all__ = ["PAD", "flat_lengths", "flat_width", "icgn_affine", "icgn_translation",
-           "pack_reference", "prefilter_padded", "weights"]
+__all__ = ["PAD", "STALL_ITERATIONS", "flat_lengths", "flat_width", "icgn_affine",
+           "icgn_translation", "pack_reference", "prefilter_padded", "weights"]
 
 #: Margin (px) of mirrored coefficients around the image (quintic needs 3 taps + 1).
 PAD = 4
@@ -45,6 +45,11 @@ _MAX_ITERATIONS = int(PointStatus.MAX_ITERATIONS)
 _OUT_OF_BOUNDS = int(PointStatus.OUT_OF_BOUNDS)
 _DIVERGED = int(PointStatus.DIVERGED)
 _LOW_CORRELATION = int(PointStatus.LOW_CORRELATION)
+#: IC-GN stops (status ``MAX_ITERATIONS``) when the update norm has not reached a new
+#: minimum for this many iterations: a converging subset, even one shrinking by 0.97 per
+#: iteration, sets a new minimum every iteration; an oscillating or wandering one (a false
+#: or flat optimum) would otherwise spend all of ``max_iterations``.
+STALL_ITERATIONS = 8
 
 # Poles of the B-spline prefilters (Unser 1999, Table I).
 _POLES3 = np.array([math.sqrt(3.0) - 2.0])
@@ -655,6 +660,8 @@ def _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, col
     nit = 0
     pdu = 0.0
     pdv = 0.0
+    best = np.inf
+    ibest = 0
     for it in range(max_iter):
         x0 = c0 + u
         y0 = r0 + v
@@ -691,8 +698,14 @@ def _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, col
         if not (math.isfinite(u) and math.isfinite(v)):
             st = _DIVERGED
             break
-        if math.sqrt(du * du + dv * dv) < tol:
+        norm = math.sqrt(du * du + dv * dv)
+        if norm < tol:
             st = _CONVERGED
+            break
+        if norm < best:
+            best = norm
+            ibest = it
+        elif it - ibest >= STALL_ITERATIONS:
             break
         if abs(u - u_start) > max_step or abs(v - v_start) > max_step:
             st = _DIVERGED
@@ -850,6 +863,8 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
             st = _MAX_ITERATIONS
             zn = np.nan
             nit = 0
+            best = np.inf
+            ibest = 0
             for it in range(max_iter):
                 # bounds: an affine map sends the subset's corners to the warped extremes
                 inside = True
@@ -993,6 +1008,11 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                     dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0))
                 if norm < tol:
                     st = _CONVERGED
+                    break
+                if norm < best:
+                    best = norm
+                    ibest = it
+                elif it - ibest >= STALL_ITERATIONS:
                     break
                 if (abs(p[0] - p0[k, 0]) > max_step or abs(p[3] - p0[k, 3]) > max_step
                         or abs(p[1]) > 0.5 or abs(p[2]) > 0.5 or abs(p[4]) > 0.5

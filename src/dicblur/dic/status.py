@@ -10,14 +10,16 @@ __all__ = ["PointStatus"]
 class PointStatus(IntEnum):
     """Status code of one POI, stored as ``uint8`` in :class:`~dicblur.dic.DICResult`.
 
-    Only ``CONVERGED`` points carry a trusted displacement. ``MAX_ITERATIONS`` and
-    ``LOW_CORRELATION`` points keep their last (finite) estimate for inspection; the others
-    carry NaN displacements.
+    Only ``CONVERGED`` points carry a trusted displacement. ``MAX_ITERATIONS``,
+    ``LOW_CORRELATION``, ``HIGH_RESIDUAL`` and ``OUTLIER`` points keep their last (finite)
+    estimate for inspection; the others carry NaN displacements.
     """
 
-    #: IC-GN met the tolerance and the ZNCC is above ``min_zncc``.
+    #: IC-GN met the tolerance, the ZNCC is above ``min_zncc`` and no screening test
+    #: flagged the point.
     CONVERGED = 0
-    #: ``max_iterations`` reached before the update fell below ``tolerance``.
+    #: ``max_iterations`` reached before the update fell below ``tolerance``, or the update
+    #: stopped shrinking (no new minimum for ``kernels.STALL_ITERATIONS`` iterations).
     MAX_ITERATIONS = 1
     #: The reference subset has (almost) no grey-level variation: the Hessian is singular.
     LOW_TEXTURE = 2
@@ -27,3 +29,10 @@ class PointStatus(IntEnum):
     DIVERGED = 4
     #: Converged, but to a poor match (ZNCC below ``min_zncc``): not the same texture.
     LOW_CORRELATION = 5
+    #: Converged, but the ZNSSD residual exceeds ``max_residual`` times the value the noise
+    #: predicts for this subset (``noise_sigma`` given): the images differ there.
+    HIGH_RESIDUAL = 6
+    #: Converged, but inconsistent with its grid neighbours: it fails the normalised
+    #: median test, or the neighbours' displacement matches its subset better (a false
+    #: optimum; see :func:`dicblur.dic.normalized_median_test`).
+    OUTLIER = 7

@@ -1,0 +1,193 @@
+"""Benchmark of the DIC engine on a hostile image (issue 15): cost of failing subsets and
+false convergence, against the clean speckle case of ``bench_dic.py``, in one run.
+
+Images (512x512, subset 21, step 10, 2401 POIs, Gaussian noise 2 GL in both images,
+translation (u, v) = (0.3, -0.2) px by Fourier shift of the noise-free image):
+
+- ``clean``: ``speckle_pattern(speckle_size=4, softness=1)`` (the ``bench_dic.py`` case);
+- ``blobs``: sparse Gaussian blobs (:func:`blobs`: 0.008 blobs per px^2, std 2..3 px,
+  amplitude 50..300 GL on a 10 GL background) clipped to [10, 245]. The clipped plateaus
+  are not band-limited, so the Fourier-shifted current image is not a spline-warped
+  reference, and the sparse texture leaves some subsets with flat or false optima.
+
+Per image and shape: throughput (best of ``--repeats``, wall time with ``--workers``
+threads and CPU time of one thread, the two images timed alternately so the load hits
+both alike), the fraction of POIs returned ``CONVERGED`` more than 0.1 px from the truth
+("wrong unflagged"), the same beyond ``max(0.1 px, 5 predicted sigma)`` (gross), and the
+counts per status. Screening: ``max_residual=2`` (default) and ``median_test=True``.
+Writes ``benchmarks/results/dic_robust.json``.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_dic_robust.py [--workers 2] [--repeats 10]
+
+Runs against an older checkout too (``PYTHONPATH=OLD/src``; the screening options are
+then dropped), to measure the engine before the change on the same images.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import dicblur
+from dicblur import Correlator, speckle_pattern
+
+ROOT = Path(__file__).resolve().parents[1]
+TRUE_U, TRUE_V = 0.3, -0.2
+
+
+def fourier_shift(image: np.ndarray, dy: float, dx: float) -> np.ndarray:
+    ky = np.fft.fftfreq(image.shape[0])[:, None]
+    kx = np.fft.fftfreq(image.shape[1])[None, :]
+    return np.fft.ifft2(np.fft.fft2(image) * np.exp(-2j * np.pi * (ky * dy + kx * dx))).real
+
+
+def blobs(shape: tuple[int, int], *, density: float = 0.008,
+          sigma: tuple[float, float] = (2.0, 3.0), amplitude: tuple[float, float] = (50, 300),
+          background: float = 10.0, clip: tuple[float, float] = (10.0, 245.0),
+          seed: int = 3) -> np.ndarray:
+    """Sum of isotropic Gaussian blobs at uniform random centres, clipped (GL)."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    n = int(density * h * w)
+    ys, xs = rng.uniform(0, h, n), rng.uniform(0, w, n)
+    ss, aa = rng.uniform(*sigma, n), rng.uniform(*amplitude, n)
+    img = np.full(shape, float(background))
+    for y, x, s, a in zip(ys, xs, ss, aa, strict=True):
+        r = int(np.ceil(4 * s))
+        y0, y1 = max(0, int(y) - r), min(h, int(y) + r + 1)
+        x0, x1 = max(0, int(x) - r), min(w, int(x) + r + 1)
+        yy = np.arange(y0, y1)[:, None] - y
+        xx = np.arange(x0, x1)[None, :] - x
+        img[y0:y1, x0:x1] += a * np.exp(-(yy ** 2 + xx ** 2) / (2 * s * s))
+    return np.clip(img, *clip)
+
+
+def load() -> float:
+    try:
+        return os.getloadavg()[0]
+    except OSError:  # pragma: no cover
+        return float("nan")
+
+
+def make_pair(name: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    img = (blobs((512, 512)) if name == "blobs"
+           else speckle_pattern((512, 512), speckle_size=4, softness=1.0, seed=seed))
+    rng = np.random.default_rng([seed, 99])
+    ref = img + rng.normal(0, 2.0, img.shape)
+    cur = fourier_shift(img, TRUE_V, TRUE_U) + rng.normal(0, 2.0, img.shape)
+    return ref, cur
+
+
+def correlator(ref: np.ndarray, shape: str, workers: int, screen: bool) -> Correlator:
+    kw = dict(subset=21, step=10, shape=shape, noise_sigma=2.0, workers=workers)
+    if screen:
+        try:
+            return Correlator(ref, **kw, median_test=True)  # type: ignore[arg-type]
+        except TypeError:  # an engine from before issue 15
+            pass
+    return Correlator(ref, **kw)  # type: ignore[arg-type]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=10)
+    ap.add_argument("--seed", type=int, default=2024)
+    ap.add_argument("--no-screen", action="store_true", help="median_test off")
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "dic_robust.json"))
+    args = ap.parse_args(argv)
+    import numba
+
+    numba.set_num_threads(min(args.workers, numba.config.NUMBA_NUM_THREADS))
+    record: dict = {"command": "benchmarks/bench_dic_robust.py " + " ".join(argv or sys.argv[1:]),
+                    "machine": platform.processor() or platform.machine(),
+                    "cpu_count": os.cpu_count(), "workers": args.workers,
+                    "load_start": load(), "dicblur": dicblur.__version__,
+                    "dicblur_path": str(Path(dicblur.__file__).parent)}
+    pairs = {name: make_pair(name, args.seed) for name in ("clean", "blobs")}
+    results: dict = {}
+    for shape in ("translation", "affine"):
+        cors = {name: (correlator(ref, shape, args.workers, not args.no_screen),
+                       correlator(ref, shape, 1, not args.no_screen))
+                for name, (ref, _) in pairs.items()}
+        wall: dict[str, list[float]] = {n: [] for n in pairs}
+        cpu: dict[str, list[float]] = {n: [] for n in pairs}
+        res = {}
+        for name, (cw, c1) in cors.items():
+            res[name] = cw.correlate(pairs[name][1])
+            c1.correlate(pairs[name][1])
+        for _ in range(args.repeats):
+            for name, (cw, c1) in cors.items():
+                cur = pairs[name][1]
+                t0 = time.perf_counter()
+                cw.correlate(cur)
+                wall[name].append(time.perf_counter() - t0)
+                t0 = time.process_time()
+                c1.correlate(cur)
+                cpu[name].append(time.process_time() - t0)
+        for name, r in res.items():
+            n = len(r)
+            err = np.hypot(r.u - TRUE_U, r.v - TRUE_V)
+            ok = r.converged
+            wrong = ok & (err > 0.1)
+            pred = np.hypot(r.predicted_sigma_u, r.predicted_sigma_v)
+            gross = wrong & (err > 5 * pred)
+            flagged = np.isin(r.status, [6, 7])  # HIGH_RESIDUAL, OUTLIER
+            results[f"{name}_{shape}"] = {
+                "poi_per_s": n / min(wall[name]),
+                "poi_per_cpu_s_1thread": n / min(cpu[name]),
+                "wrong_unflagged_fraction": float(wrong.mean()),
+                "gross_unflagged_fraction": float(gross.mean()),
+                "flagged_fraction": float(flagged.mean()),
+                "flagged_but_right_fraction": float((flagged & (err <= 0.1)).mean()),
+                "mean_iterations": float(r.iterations.mean()),
+                "mean_iterations_converged": float(r.iterations[ok].mean()),
+                # share of all IC-GN iterations spent on POIs that end not CONVERGED
+                "failing_iteration_share": float(r.iterations[~ok].sum()
+                                                 / max(1, r.iterations.sum())),
+                "max_iterations_used": int(r.iterations.max()),
+                "status_counts": r.status_counts(),
+            }
+        for key in ("poi_per_s", "poi_per_cpu_s_1thread"):
+            results[f"ratio_{shape}_{key}"] = (results[f"blobs_{shape}"][key]
+                                              / results[f"clean_{shape}"][key])
+    record["load_end"] = load()
+    record["results"] = results
+    print(f"512x512, subset 21, step 10, noise 2 GL, (u, v) = ({TRUE_U}, {TRUE_V}) px, "
+          f"{args.workers} threads, screening {'off' if args.no_screen else 'on'}; "
+          f"load {record['load_start']:.1f} -> {record['load_end']:.1f}")
+    print(f"{'case':20s} {'POI/s':>9s} {'POI/CPU-s':>10s} {'wrong %':>8s} {'gross %':>8s} "
+          f"{'flagged %':>9s} {'flag-ok %':>9s} {'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
+          "  statuses")
+    for shape in ("translation", "affine"):
+        for name in ("clean", "blobs"):
+            s = results[f"{name}_{shape}"]
+            counts = {k: v for k, v in s["status_counts"].items() if v}
+            print(f"{name + ' ' + shape:20s} {s['poi_per_s']:9.0f} "
+                  f"{s['poi_per_cpu_s_1thread']:10.0f} "
+                  f"{100 * s['wrong_unflagged_fraction']:8.2f} "
+                  f"{100 * s['gross_unflagged_fraction']:8.2f} "
+                  f"{100 * s['flagged_fraction']:9.2f} "
+                  f"{100 * s['flagged_but_right_fraction']:9.2f} "
+                  f"{s['mean_iterations']:8.2f} {s['mean_iterations_converged']:6.2f} "
+                  f"{100 * s['failing_iteration_share']:9.1f}  {counts}")
+        print(f"  blobs / clean ({shape}): wall {results[f'ratio_{shape}_poi_per_s']:.2f}, "
+              f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(record, indent=2))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

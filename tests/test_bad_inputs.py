@@ -275,9 +275,8 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small finished campaign store (cheap task function, serial)."""
-    from campaign_helpers import shift_task, small_spec_dict
-
     from dicblur.campaign import parse_spec, run_campaign
+    from helpers.campaign import shift_task, small_spec_dict
 
     d = small_spec_dict(blur__lengths=[0.0, 1.0], campaign__repetitions=1)
     d["pattern"] = d["pattern"][:1]

@@ -70,6 +70,21 @@ def print_json(data: Any) -> None:
     print(json.dumps(clean(data), indent=2))
 
 
+def notice_on_start(progress: Any, shape: str, enabled: bool) -> Any:
+    """Wrap a ``progress(done, total)`` callback so that :func:`notice_compile` runs at its
+    first call: after the inputs are validated, just before the first task (a bad input
+    then gets its one error line and no compile notice)."""
+    fired = [not enabled]
+
+    def cb(done: int, total: int) -> None:
+        if not fired[0]:
+            fired[0] = True
+            notice_compile(shape)
+        progress(done, total)
+
+    return cb
+
+
 def notice_compile(shape: str = "affine") -> None:
     """Say on stderr, before a cold numba compile of the DIC kernels, that it is one
     (the first run after an install compiles for ~20 s with nothing else on screen)."""

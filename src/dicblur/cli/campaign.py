@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from ..errors import InputError
-from ._common import console, notice_compile, parse_size, print_json, print_mapping
+from ._common import console, notice_on_start, parse_size, print_json, print_mapping
 
 if TYPE_CHECKING:  # the campaign stage is imported inside the commands (fast --help)
     from ..campaign.engine import RunSummary
@@ -97,11 +97,10 @@ def run_command(
     if scheduler is not None and not serial:
         check_scheduler_address(scheduler)
     s = load_spec(spec)
-    if serial:  # a cluster's workers compile in their own processes
-        notice_compile(s.dic_shape)
     with _progress_bar(f"campaign {s.name}", not quiet) as progress:
+        # a cluster's workers compile in their own processes: the notice only when serial
         summary = run_campaign(s, out, scheduler=scheduler, workers=workers, serial=serial,
-                               progress=progress)
+                               progress=notice_on_start(progress, s.dic_shape, serial))
     _print_summary(summary)
     return 130 if summary.interrupted else 0
 
@@ -186,9 +185,8 @@ def calibrate_command(
     except ValueError as exc:
         raise InputError(f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. "
                          "0.1:10:0.1") from exc
-    if serial:
-        notice_compile(shape)
     with _progress_bar("calibrate", not quiet) as progress:
+        progress = notice_on_start(progress, shape, serial)
         res = calibrate(image, out, noise=noise if len(noise) > 1 else noise[0],
                         subset=subset, angle=angle, step=step,
                         noise_model=noise_model, shape=shape, seed=seed,

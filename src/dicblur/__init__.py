@@ -81,6 +81,7 @@ from .models import (
 from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
 from .pulse import PulseTrain
 from .pulse.study import PulseStudy, run_pulse_study
+from .track import track
 
 __version__ = "0.1.0"
 
@@ -153,6 +154,7 @@ __all__ = [
     "speckle_size",
     "sssig",
     "subset_centres",
+    "track",
     "trajectory_positions",
     "valid_region",
 ]

@@ -89,6 +89,9 @@ _design.register(app)
 from . import reproduce as _reproduce  # noqa: E402
 
 _reproduce.register(app)
+from . import track as _track  # noqa: E402
+
+_track.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

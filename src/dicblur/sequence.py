@@ -8,8 +8,8 @@ Sources (:func:`open_recording`):
 - a Phantom ``.cine`` file (``pims.Cine``: pure Python, random access to any frame, reads
   the setup's frame rate and shutter and the per-frame exposure tag);
 - a Photron ``.cih``/``.cihx`` header with its ``.mraw`` data (the header parsed by
-  ``pyMRAW.get_cih``; 8- and 16-bit data memory-mapped, 12-bit packed data unpacked one
-  frame at a time, which pyMRAW itself would load whole).
+  ``pyMRAW.get_cih``; frames read one at a time, 12-bit packed data unpacked per frame, which
+  pyMRAW itself would load whole).
 
 Frames come out as float64 grey levels on the file's own scale (8, 10, 12 or 16-bit data,
 nothing rescaled); ``bit_depth`` says which. A recording shorter than its header promises
@@ -183,15 +183,15 @@ def _tiff_stack(path: Path) -> Recording:
         pages = tf.pages
         n = len(pages)
         first = pages[0]
-        shape = tuple(int(s) for s in first.shape[:2])  # type: ignore[union-attr]
-        dtype = first.dtype  # type: ignore[union-attr]
+        shape = tuple(int(s) for s in first.shape[:2])
+        dtype = np.dtype(first.dtype)
     except Exception as exc:
         raise ImageReadError(f"recording={str(path)!r}: cannot be read as a TIFF stack "
                              f"({type(exc).__name__}: {exc})") from exc
 
     def read(i: int) -> NDArray[Any]:
         try:
-            return np.asarray(pages[i].asarray())  # type: ignore[union-attr]
+            return np.asarray(pages[i].asarray())
         except Exception as exc:
             raise ImageReadError(f"recording={str(path)!r}: page {i} cannot be read "
                                  f"({type(exc).__name__}: {exc}); is the file "
@@ -290,15 +290,21 @@ def _mraw(path: Path) -> Recording:
                       "header lists are complete; reading those", UserWarning, stacklevel=3)
         n = int(complete)
     effective = _number(cih, "EffectiveBit Depth") or bits
-    raw = np.memmap(data, dtype=np.uint8, mode="r", shape=(n * frame_bytes,))
+    # one seek + read per frame (a memory map would count every page read in the
+    # process's resident memory until the kernel drops it)
+    fh = open(data, "rb")  # closed by Recording.close
 
     def read(i: int) -> NDArray[Any]:
-        chunk = raw[i * frame_bytes:(i + 1) * frame_bytes]
+        fh.seek(i * frame_bytes)
+        chunk = np.frombuffer(fh.read(frame_bytes), dtype=np.uint8)
+        if chunk.size != frame_bytes:
+            raise ImageReadError(f"recording={str(data)!r}: frame {i} is incomplete; is "
+                                 "the file truncated?")
         if bits == 8:
-            return np.array(chunk).reshape(rows, cols)
+            return chunk.reshape(rows, cols)
         if bits == 16:
-            return np.array(chunk).view("<u2").reshape(rows, cols)
-        b = np.array(chunk).reshape(-1, 3).astype(np.uint16)  # 12-bit, big-endian pairs
+            return chunk.view("<u2").reshape(rows, cols)
+        b = chunk.reshape(-1, 3).astype(np.uint16)  # 12-bit, big-endian pairs
         out = np.empty((b.shape[0], 2), np.uint16)
         out[:, 0] = (b[:, 0] << 4) | (b[:, 1] >> 4)
         out[:, 1] = ((b[:, 1] & 0x0F) << 8) | b[:, 2]
@@ -307,7 +313,7 @@ def _mraw(path: Path) -> Recording:
     return Recording(source=str(head), kind="mraw", n_frames=n, shape=(rows, cols),
                      bit_depth=int(effective), fps=_number(cih, "Record Rate(fps)"),
                      exposure=_number(cih, "Shutter Speed(s)"),
-                     names=[f"frame {i}" for i in range(n)], _read=read,
+                     names=[f"frame {i}" for i in range(n)], _read=read, _close=fh.close,
                      meta={"camera": str(cih.get("Camera Type", ""))})
 
 

@@ -184,7 +184,7 @@ def write_track_report(ds: Any, folder: Path, *, image: NDArray[np.float64] | No
                       f"{a.get('n_frames_tracked')} frames tracked.", css_class="note")
     if "advice_sentence" in a:
         rep.paragraph(str(a["advice_sentence"]), css_class="note")
-    rows = [
+    rows: list[dict[str, Any]] = [
         {"quantity": "recording", "value": str(a.get("source", ""))},
         {"quantity": "frames tracked", "value": int(ds.sizes["frame"])},
         {"quantity": "points", "value": int(ds.sizes["point"])},

@@ -6,7 +6,9 @@ Pipeline (docs/track.md):
    from the extrapolated track of the previous frames (quadratic over the last three) and
    falls back to the engine's FFT-CC start (global phase correlation, then per-subset
    FFT-CC) where that fails, point by point;
-2. gross errors per frame: the normalised median test on the POI grid;
+2. gross errors per frame: the normalised median test on the POI grid (at its fixed eps,
+   then at eps = 2 x the frame's median predicted sigma) and a ZNCC far below the point's
+   usual (:func:`zncc_flags`);
 3. noise from the static frames (pairwise differences, per grey level where it varies),
    or given;
 4. blur of every point in every frame from its track (:mod:`.kinematics`);
@@ -44,7 +46,8 @@ from .uncertainty import (
     subset_levels,
 )
 
-__all__ = ["TrackInterrupted", "parse_frame_range", "parse_rate", "track"]
+__all__ = ["ZNCC_RATIO", "TrackInterrupted", "parse_frame_range", "parse_rate", "track",
+           "zncc_flags"]
 
 #: A frame falls back to the engine's FFT-CC start when more than this share of its
 #: correlatable points fails from the extrapolated guess.
@@ -202,6 +205,43 @@ def _correlate_frame(corr: Correlator, img: NDArray[np.float64],
     return _FrameResult(np.where(take, alt.u, res.u), np.where(take, alt.v, res.v),
                         np.where(take, alt.zncc, res.zncc),
                         np.where(take, alt.status, res.status).astype(np.uint8)), True
+
+
+#: A converged point whose ``1 - ZNCC`` exceeds this multiple of its usual value (its
+#: frame's median, scaled by the point's own median ratio over the recording) is flagged.
+ZNCC_RATIO = 4.0
+
+
+def zncc_flags(zncc: NDArray[np.float64], converged: NDArray[np.bool_], *,
+               ratio: float = ZNCC_RATIO) -> NDArray[np.bool_]:
+    """Converged points whose match is much worse than usual (frames, points).
+
+    ``q = 1 - ZNCC`` grows with the noise and the blur of a frame and with how little
+    texture a subset has; dividing by the frame's median ``q`` removes the first, by the
+    point's median of that ratio over the recording the second. A foreign texture in the
+    subset (debris, glare, a false convergence) leaves the ratio far above 1.
+    """
+    q = np.where(converged, 1.0 - zncc, np.nan)
+    with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med_f = np.nanmedian(q, axis=1, keepdims=True)
+        rel = np.where(med_f > 0, q / med_f, np.nan)
+        med_p = np.nanmedian(rel, axis=0, keepdims=True)
+        score = rel / med_p
+    return np.asarray(converged & np.isfinite(score) & (score > ratio))
+
+
+def _median_flags(u: NDArray[np.float64], v: NDArray[np.float64], ok: NDArray[np.bool_],
+                  gshape: tuple[int, int] | None, eps: NDArray[np.float64],
+                  threshold: float) -> NDArray[np.bool_]:
+    out = np.zeros(u.shape, bool)
+    if gshape is None:
+        return out
+    for i in range(u.shape[0]):
+        out[i] = normalized_median_test(np.where(ok[i], u[i], np.nan),
+                                        np.where(ok[i], v[i], np.nan), gshape,
+                                        eps=float(eps[i]), threshold=threshold)
+    return out
 
 
 def track(
@@ -394,24 +434,27 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstim
     n_f, n_p = u.shape
     conv = st == PointStatus.CONVERGED
     gshape = _grid_shape(corr.rows, corr.cols)
-    outlier = np.zeros((n_f, n_p), bool)
-    if gshape is not None:
-        for i in range(n_f):
-            uu = np.where(conv[i], u[i], np.nan)
-            vv = np.where(conv[i], v[i], np.nan)
-            outlier[i] = normalized_median_test(uu, vv, gshape, eps=eps, threshold=threshold)
-    else:
+    if gshape is None:
         notes.append("POIs not on a grid: no normalised median test")
-    good = conv & ~outlier
+    # pass 1: the median test at its fixed eps (catches errors of tenths of a px) and the
+    # ZNCC test; pass 2, once sigma is known, at eps = 2 x the frame's median sigma
+    outlier = _median_flags(u, v, conv, gshape, np.full(n_f, eps), threshold)
+    low_zncc = zncc_flags(zn, conv)
+    contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
+
+    def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        if n_f >= 2 and contiguous:
+            return exposure_motion(np.where(good, u, np.nan), np.where(good, v, np.nan),
+                                   fps=fps, exposure=t_exp, half_window=half_window)
+        nan = np.full((n_f, n_p), np.nan)
+        return nan, nan.copy()
+
+    if not (n_f >= 2 and contiguous):
+        notes.append("fewer than 2 consecutive frames: no blur estimate")
+    good = conv & ~outlier & ~low_zncc
+    wu, wv = motion(good)
     uk = np.where(good, u, np.nan)
     vk = np.where(good, v, np.nan)
-    contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
-    if n_f >= 2 and contiguous:
-        wu, wv = exposure_motion(uk, vk, fps=fps, exposure=t_exp, half_window=half_window)
-    else:
-        wu = np.full((n_f, n_p), np.nan)
-        wv = np.full((n_f, n_p), np.nan)
-        notes.append("fewer than 2 consecutive frames: no blur estimate")
     w = np.hypot(wu, wv)
     ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
     # static range: check for motion (it inflates the pairwise-difference noise)
@@ -443,19 +486,39 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstim
         table = build_blur_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
                                  blur=np.where(good[:, pin], w[:, pin], np.nan),
                                  angle=ang[:, pin])
-        look = table.lookup(np.where(np.isfinite(w[:, pin]), w[:, pin], 0.0), ang[:, pin])
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
-        sig["sigma_u_noise"][:, pin] = np.sqrt(nv * look[..., 2])
-        sig["sigma_v_noise"][:, pin] = np.sqrt(nv * look[..., 3])
-        sig["sigma_u_blur"][:, pin] = np.abs(look[..., 0])
-        sig["sigma_v_blur"][:, pin] = np.abs(look[..., 1])
+
+        def predict() -> None:
+            look = table.lookup(w[:, pin], ang[:, pin])  # NaN where the blur is unknown
+            sig["sigma_u_noise"][:, pin] = np.sqrt(nv * look[..., 2])
+            sig["sigma_v_noise"][:, pin] = np.sqrt(nv * look[..., 3])
+            sig["sigma_u_blur"][:, pin] = np.abs(look[..., 0])
+            sig["sigma_v_blur"][:, pin] = np.abs(look[..., 1])
+
+        predict()
+        if gshape is not None:
+            s_max = np.fmax(np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"]),
+                            np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"]))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                eps_k = 2.0 * np.nanmedian(np.where(good, s_max, np.nan), axis=1)
+            eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
+            second = _median_flags(u, v, conv & ~low_zncc, gshape, eps_k, threshold)
+            if (second & ~outlier).any():
+                outlier |= second
+                good = conv & ~outlier & ~low_zncc
+                wu, wv = motion(good)
+                w = np.hypot(wu, wv)
+                ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
+                predict()
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available])
     settings["prediction_time_s"] = time.perf_counter() - t0
     sigma_u = np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"])
     sigma_v = np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"])
+    outlier |= low_zncc
     valid = good & np.isfinite(sigma_u) & np.isfinite(sigma_v) & np.isfinite(w)
     with np.errstate(invalid="ignore"):
         dom = (np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"])
@@ -498,7 +561,8 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstim
         "status": (fr, st, {"legend": attrs["status_legend"]}),
         "zncc": (fr, zn),
         "outlier": (fr, outlier.astype(np.uint8),
-                    {"long_name": "normalised median test (Westerweel & Scarano 2005)"}),
+                    {"long_name": "gross error: normalised median test (Westerweel & "
+                     "Scarano 2005) or ZNCC far below the point's usual"}),
         "valid": (fr, valid.astype(np.uint8)),
         "n_converged": ("frame", conv.sum(axis=1).astype(np.int32)),
         "n_outliers": ("frame", outlier.sum(axis=1).astype(np.int32)),

@@ -126,7 +126,7 @@ def build_blur_table(reference: NDArray[np.float64], centres: NDArray[np.intp], 
     if nodes.size < 2:
         nodes = np.array([0.0, BLUR_STEP])
     a = round(180.0 / ANGLE_STEP)
-    angles = np.arange(a) * ANGLE_STEP
+    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
     th = np.mod(angle[finite & (blur >= min_blur)], 180.0) / ANGLE_STEP
     need = np.zeros(a, bool)
     if th.size:

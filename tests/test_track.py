@@ -113,7 +113,9 @@ def test_track_tiny_truth(tiny):
     valid = ds["valid"].values.astype(bool)
     assert valid.mean() > 0.8
     eu = ds["u"].values - tu[:, None]
+    ev = ds["v"].values - tv[:, None]
     assert np.nanmax(np.abs(np.where(valid, eu, np.nan))) < 0.25
+    assert np.nanmax(np.abs(np.where(valid, ev, np.nan))) < 0.25
     w_med = np.nanmedian(np.where(valid, ds["W"].values, np.nan), axis=1)
     np.testing.assert_allclose(w_med[5:-2], np.hypot(bu, bv)[5:-2], atol=0.1)
     # the static frames: noise only, predicted sigma close to the measured scatter
@@ -247,3 +249,34 @@ def test_real_sample3_static_pair(tmp_path):
     pred = np.sqrt(np.mean(ds["sigma_u"].values[1][valid[1]] ** 2))
     assert 0.6 < pred / meas < 1.6
     assert ds.attrs["noise_sigma"] == pytest.approx(1.1, rel=0.3)
+
+
+# ---------------------------------------------------------------- validation (slow)
+@pytest.mark.slow
+def test_predicted_sigma_matches_scatter_over_w():
+    """Smaller version of benchmarks/bench_track.py: a 192^2 target vibrating 8 px at 200
+    Hz, 2000 fps, exposures 0.15 and 0.45 ms (W up to 4.5 px): over 1 px bins of W the
+    quadratic mean of the predicted sigma is within 15 % of the scatter over points."""
+    w_all, d_all, s_all = [], [], []
+    for i, t in enumerate((0.15e-3, 0.45e-3)):
+        tgt = VibratingTarget(_pattern(192, seed=5), fps=2000.0, exposure=t, amplitude=8.0,
+                              frequency=200.0, angle=20.0, static=8, seed=20 + i)
+        ds = dicblur.track(tgt.recording(38), static="0:8", subset=21, step=10,
+                           advice=False)
+        tu, _tv, bu, bv = tgt.truth(ds["frame"].values)
+        valid = ds["valid"].values.astype(bool)
+        eu = ds["u"].values - tu[:, None]
+        mu = np.nanmean(np.where(valid, eu, np.nan), axis=1, keepdims=True)
+        w_all.append(np.broadcast_to(np.hypot(bu, bv)[:, None], eu.shape)[valid])
+        d_all.append((eu - mu)[valid])
+        s_all.append(ds["sigma_u"].values[valid])
+    w, d, s = (np.concatenate(a) for a in (w_all, d_all, s_all))
+    checked = 0
+    for lo in np.arange(0.0, 5.0, 1.0):
+        sel = (w >= lo) & (w < lo + 1.0)
+        if sel.sum() < 300:
+            continue
+        ratio = np.sqrt(np.mean(s[sel] ** 2)) / np.sqrt(np.mean(d[sel] ** 2))
+        assert 0.85 <= ratio <= 1.15, (lo, ratio)
+        checked += 1
+    assert checked >= 4

@@ -259,6 +259,8 @@ def track(
     frames: str | Sequence[int] | None = None,
     shape: Literal["affine", "translation"] = "affine",
     min_zncc: float = 0.6,
+    update_reference: bool = False,
+    update_share: float = 0.9,
     half_window: int = 2,
     median_eps: float = 0.1,
     median_threshold: float = 2.0,
@@ -290,6 +292,13 @@ def track(
         Reference frame (tracking runs forwards from it, then backwards).
     frames : str or (start, stop), optional
         Frames to track (default all).
+    update_reference : bool
+        Renew the reference on the last tracked frame when a frame's converged share falls
+        below ``update_share`` x the reference frame's (large deformation, decorrelation);
+        the new reference's POIs sit at the points' positions there and its increments add
+        to their displacement (recorded per frame in ``reference_frame``; the predicted
+        variance of the renewal frame is carried into the later frames). The blur
+        prediction still uses the first reference's subsets.
     half_window : int
         Frames on each side of the local trajectory fit (:mod:`.kinematics`).
     median_eps, median_threshold : float
@@ -347,32 +356,67 @@ def track(
     if noise is not None and (not math.isfinite(float(noise)) or float(noise) <= 0):
         raise InputError(f"noise={noise!r}: must be a noise std > 0 (GL)")
     ref_img = rec.frame(reference)
-    corr = Correlator(ref_img, subset=subset, step=step, roi=roi, points=points, shape=shape,
-                      min_zncc=min_zncc, workers=workers)
+    opts: dict[str, Any] = {"subset": subset, "step": step, "shape": shape,
+                            "min_zncc": min_zncc, "workers": workers}
+    corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
+    corr = corr0
+    n_pts = corr0.n_points
     # points that can be correlated at all (set from the reference frame's own result)
-    ok0 = np.ones(corr.n_points, bool)
+    ok0 = np.ones(n_pts, bool)
     order = list(range(reference, f1)) + list(range(reference - 1, f0 - 1, -1))
     out = _Tracked([], [], [], [], [], [])
+    refs: list[int] = []
     hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    base = np.zeros((n_pts, 2))  # displacement of the current reference's POIs (px)
+    ref_now, ref_share = reference, 1.0
+    prev: tuple[int, NDArray[np.float64]] | None = None
     error: BaseException | None = None
     t_start = time.perf_counter()
     try:
         for k in order:
-            if k == reference - 1:
-                hist = hist[:1]  # backwards from the reference
+            if k == reference - 1:  # backwards from the reference, on the first one
+                hist = hist[:1]
+                corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
             img = rec.frame(k)
-            res, fb = _correlate_frame(corr, img, _extrapolate(hist), ok0)
+            guess = _extrapolate(hist)
+            res, fb = _correlate_frame(corr, img, None if guess is None else guess - base,
+                                       ok0)
+            share = float(np.mean(res.status[ok0] == PointStatus.CONVERGED)) if ok0.any() \
+                else 0.0
             if k == reference:
                 ok0 = ~np.isin(res.status, (PointStatus.LOW_TEXTURE,
                                             PointStatus.OUT_OF_BOUNDS))
+                ref_share = max(float(np.mean(res.status[ok0] == PointStatus.CONVERGED)),
+                                1e-9) if ok0.any() else 1.0
+            elif (update_reference and prev is not None and hist
+                  and share < update_share * ref_share):
+                # renew the reference on the last frame tracked, POIs at their positions
+                # there (Lagrangian: the increments add to that frame's displacement)
+                last = np.stack(hist[-1], axis=1)
+                bad = ~np.isfinite(last).all(axis=1)
+                if not bad.all():
+                    last[bad] = np.median(last[~bad], axis=0)
+                    pts = np.stack([np.rint(corr0.rows + last[:, 1]),
+                                    np.rint(corr0.cols + last[:, 0])], axis=1).astype(int)
+                    new = Correlator(prev[1], points=pts, **opts)
+                    g2 = None if guess is None else guess - last
+                    res2, fb2 = _correlate_frame(new, img, g2, ok0)
+                    share2 = float(np.mean(res2.status[ok0] == PointStatus.CONVERGED))
+                    if share2 > share:
+                        # increments of the subset now centred at the rounded position:
+                        # within half a px of the material point, the field locally uniform
+                        corr, base, ref_now, fb = new, last, prev[0], fb or fb2
+                        res = res2
             out.frames.append(k)
-            out.u.append(np.asarray(res.u, np.float64))
-            out.v.append(np.asarray(res.v, np.float64))
+            out.u.append(np.asarray(res.u, np.float64) + base[:, 0])
+            out.v.append(np.asarray(res.v, np.float64) + base[:, 1])
             out.zncc.append(np.asarray(res.zncc, np.float64))
             out.status.append(np.asarray(res.status, np.uint8))
             out.fallback.append(bool(fb))
+            refs.append(ref_now)
             good = res.status == PointStatus.CONVERGED
-            hist.append((np.where(good, res.u, np.nan), np.where(good, res.v, np.nan)))
+            hist.append((np.where(good, out.u[-1], np.nan), np.where(good, out.v[-1], np.nan)))
+            prev = (k, img)
             if progress is not None:
                 progress(len(out.frames), len(order))
     except (DicblurError, KeyboardInterrupt, OSError, MemoryError) as exc:
@@ -381,7 +425,7 @@ def track(
     if not out.frames:
         if error is not None:
             raise error
-    settings = {"subset": corr.subset, "step": corr.step, "shape": corr.shape,
+    settings = {"subset": corr0.subset, "step": corr0.step, "shape": corr0.shape,
                 "reference": reference, "min_zncc": min_zncc, "half_window": half_window,
                 "median_eps": median_eps, "median_threshold": median_threshold,
                 "exposure": t_exp, "fps": fps_v, "source": rec.source, "kind": rec.kind,
@@ -401,7 +445,9 @@ def track(
         except (DicblurError, OSError) as exc:
             if noise_est is None:
                 notes.append(f"no noise estimate: {exc}")
-    ds = _assemble(rec, corr, out, noise_est, st_range, fps_v, t_exp, settings, notes,
+    settings["update_reference"] = int(update_reference)
+    settings["n_reference_updates"] = len(set(refs)) - 1
+    ds = _assemble(rec, corr0, out, refs, noise_est, st_range, fps_v, t_exp, settings, notes,
                    half_window=half_window, eps=median_eps, threshold=median_threshold,
                    advice=advice and error is None, ref_img=ref_img)
     if error is not None:
@@ -414,7 +460,8 @@ def track(
     return ds
 
 
-def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstimate | None,
+def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
+              noise: NoiseEstimate | None,
               st_range: tuple[int, int] | None, fps: float, t_exp: float,
               settings: dict[str, Any], notes: list[str], *, half_window: int, eps: float,
               threshold: float, advice: bool, ref_img: NDArray[np.float64]) -> Any:
@@ -431,6 +478,7 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstim
     zn = np.stack(out.zncc)[idx]
     st = np.stack(out.status)[idx]
     fb = np.asarray(out.fallback)[idx]
+    ref_of = np.asarray(refs, dtype=np.int64)[idx]
     for lst in (out.u, out.v, out.zncc, out.status):
         lst.clear()  # the stacked copies replace them (memory of long recordings)
     n_f, n_p = u.shape
@@ -522,6 +570,16 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstim
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available])
     settings["prediction_time_s"] = time.perf_counter() - t0
+    # after a reference renewal the increments add to the renewal frame's displacement:
+    # its predicted variance carries over (into the noise part: a random error)
+    pos = {int(f): i for i, f in enumerate(frames)}
+    ref0 = int(settings["reference"])
+    for i in sorted(range(n_f), key=lambda i: abs(int(frames[i]) - ref0)):
+        j = pos.get(int(ref_of[i]))
+        if int(ref_of[i]) != ref0 and j is not None:
+            for c in ("u", "v"):
+                carry = np.hypot(sig[f"sigma_{c}_noise"][j], sig[f"sigma_{c}_blur"][j])
+                sig[f"sigma_{c}_noise"][i] = np.hypot(sig[f"sigma_{c}_noise"][i], carry)
     sigma_u = np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"])
     sigma_v = np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"])
     outlier |= low_zncc
@@ -557,8 +615,10 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstim
     data = {
         "u": (fr, u, {"units": "px", "long_name": "displacement along x"}),
         "v": (fr, v, {"units": "px", "long_name": "displacement along y"}),
-        "blur_u": (fr, wu.astype(np.float32), {"units": "px", "long_name": "motion along x during the exposure"}),
-        "blur_v": (fr, wv.astype(np.float32), {"units": "px", "long_name": "motion along y during the exposure"}),
+        "blur_u": (fr, wu.astype(np.float32),
+                   {"units": "px", "long_name": "motion along x during the exposure"}),
+        "blur_v": (fr, wv.astype(np.float32),
+                   {"units": "px", "long_name": "motion along y during the exposure"}),
         "W": (fr, w.astype(np.float32), {"units": "px", "long_name": "blur length"}),
         "blur_direction": (fr, ang.astype(np.float32), {"units": "deg",
                                      "long_name": "blur direction from +x towards +y"}),
@@ -573,6 +633,7 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, noise: NoiseEstim
         "n_converged": ("frame", conv.sum(axis=1).astype(np.int32)),
         "n_outliers": ("frame", outlier.sum(axis=1).astype(np.int32)),
         "blur_dominated_share": ("frame", blur_dom),
+        "reference_frame": ("frame", ref_of.astype(np.int32)),
         "fallback": ("frame", fb.astype(np.uint8),
                      {"long_name": "frame needed the FFT-CC start"}),
     }

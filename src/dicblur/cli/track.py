@@ -41,6 +41,9 @@ def track_command(
     roi: Annotated[str | None, typer.Option(
         "--roi", help="Grid region ROW0,ROW1,COL0,COL1 (px, half-open).")] = None,
     reference: Annotated[int, typer.Option("--reference", help="Reference frame.")] = 0,
+    update_reference: Annotated[bool, typer.Option(
+        "--update-reference", help="Renew the reference when the correlation degrades.")
+        ] = False,
     frames: Annotated[str | None, typer.Option(
         "--frames", help="Frames to track, START:STOP (default all).")] = None,
     plot: Annotated[str | None, typer.Option(
@@ -97,6 +100,7 @@ def track_command(
             ds = track(rec, exposure=exposure, fps=fps, static=static, noise=noise,
                        subset=subset, step=step, shape=shape,  # type: ignore[arg-type]
                        points=pts, roi=roi_v, reference=reference, frames=frames,
+                       update_reference=update_reference,
                        workers=workers, progress=progress)
         except TrackInterrupted as exc:
             if exc.dataset is not None:

@@ -107,7 +107,8 @@ def test_track_tiny_truth(tiny):
     assert ds.sizes["frame"] == 24 and ds.attrs["complete"] == 1
     for name in ("u", "v", "W", "blur_direction", "sigma_u", "sigma_v", "sigma_u_noise",
                  "sigma_u_blur", "sigma_v_noise", "sigma_v_blur", "status", "zncc",
-                 "outlier", "n_outliers", "blur_dominated_share"):
+                 "outlier", "n_outliers", "blur_dominated_share", "bias_u", "bias_v",
+                 "reference_frame"):
         assert name in ds
     tu, tv, bu, bv = tgt.truth(ds["frame"].values)
     valid = ds["valid"].values.astype(bool)
@@ -308,3 +309,42 @@ def test_reference_update_follows_a_large_rotation():
     np.testing.assert_allclose(mag[ok], 2 * r[ok] * np.sin(np.radians(36) / 2), atol=0.3)
     s = upd["sigma_u"].values
     assert np.nanmedian(s[-1]) > np.nanmedian(s[1])  # the carried variance grows
+
+
+def test_kernel_skew_from_track_and_its_bias():
+    """An accelerating blur shifts IC-GN off the time-average position by about
+    (kappa_3 / 6) (J^T P J)^-1 J^T P f_ddd, the same sign for every subset; kappa_3 comes
+    from the fitted track."""
+    from dicblur._blur_sensitivity import subset_skew_coefficients
+    from dicblur.track.kinematics import exposure_skew
+
+    fps, f, a, t = 2000.0, 200.0, 10.0, 0.45e-3
+    w = 2 * np.pi * f
+    t0 = np.arange(30) / fps
+    nodes, wg = np.polynomial.legendre.leggauss(64)
+    pos = a * (1 - np.cos(w * (t0[:, None] + t * 0.5 * (nodes + 1)[None, :])))
+    avg = (pos * 0.5 * wg).sum(axis=1)
+    k3_true = (((pos - avg[:, None]) ** 3) * 0.5 * wg).sum(axis=1)
+    k3, axis = exposure_skew(avg[:, None], np.zeros((30, 1)), fps=fps, exposure=t)
+    np.testing.assert_allclose(k3[3:-3, 0], k3_true[3:-3], atol=0.03 * np.abs(k3_true).max())
+    assert np.allclose(axis[3:-3], 0.0) or np.allclose(axis[3:-3], 180.0)
+
+    img = _pattern(160, seed=9)
+    s_max = 2.5  # accelerating from rest over 2.5 px
+
+    def path(tau):
+        s = s_max * np.asarray(tau) ** 2
+        return np.stack([0 * s, s], axis=1)
+
+    cur = dicblur.motion_blur(img, None, substeps=None, trajectory=path)
+    res = dicblur.correlate(img, cur, subset=21, step=12, shape="affine")
+    tt = np.linspace(0, 1, 100001)
+    s = s_max * tt**2
+    kappa3 = np.mean((s - s.mean()) ** 3)
+    pts = np.stack([res.rows, res.cols], axis=1)
+    q = subset_skew_coefficients(img, pts, 21, motion=(0.0, 1.0), shape="affine")
+    ok = res.converged & np.isfinite(q[:, 0])
+    meas = np.mean(res.u[ok] - s.mean())
+    pred = np.mean(kappa3 * q[ok, 0])
+    assert np.all(q[ok, 0] < 0)  # one sign for every subset
+    assert abs(pred - meas) < 0.3 * abs(meas)

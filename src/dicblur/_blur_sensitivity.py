@@ -646,3 +646,52 @@ def subset_blur_response(
                       for c in range(2)], axis=1)  # (m, 2, k): A^T z_c = e_c
         cov[j, rows] = np.einsum("nci,nij,ndj->ncd", z, mid, z)
     return shift, cov
+
+
+def subset_skew_coefficients(
+    image: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    *,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "bspline3",
+    boundary: Boundary = "reflect",
+    chunk: int = 256,
+) -> NDArray[np.float64]:
+    """Per-subset shift per unit third moment of the blur kernel, ``(u, v)`` px / px**3.
+
+    A blur kernel of positions ``s`` along ``d`` (an accelerating target: the time spent
+    per px is not uniform) with third central moment ``kappa_3`` adds
+    ``-(kappa_3 / 6) f_ddd`` to the image about its mean position; the ZNSSD IC-GN fixed
+    point then moves by ``+(kappa_3 / 6) (J^T P J)^-1 J^T P f_ddd`` (the same
+    linearisation as the ``W**2 / 24`` term of :func:`subset_blur_coefficients`, which is
+    ``kappa_2 / 2`` of a box). By parts ``sum f_d f_ddd = -sum f_dd**2``: the shift has
+    the same sign in every subset, a common offset of the field. Returns the factor of
+    ``kappa_3``, shape (n, 2) (NaN: no gradient).
+    """
+    _check_shape(shape)
+    _check_derivative(derivative)
+    dy, dx = _unit(motion)
+    rows, cols = image.shape
+    ext = _extend(image, boundary)
+    shp = ext.shape
+    k = (2j * np.pi) * (dy * np.fft.fftfreq(shp[0])[:, None]
+                        + dx * np.fft.rfftfreq(shp[1])[None, :])
+    fddd = np.fft.irfft2(np.fft.rfft2(ext) * k**3, s=shp)[:rows, :cols]
+    if derivative in ("bspline3", "bspline5"):
+        fy, fx = _spline_gradients(image, derivative)
+    else:
+        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative,
+                                            boundary=boundary)
+    win = _Windows(subset, fx, fy, fddd, image)
+    out = np.full((len(centres), 2), np.nan)
+    iv = 1 if shape == "translation" else 3
+    for start in range(0, len(centres), chunk):
+        cc = centres[start : start + chunk]
+        gx, gy, e3, f = win.take(cc)
+        jp = _project(win.jacobian(gx, gy, shape), _normalise(f)[0])
+        sol = _solve(_gram(jp, jp), _tdot(jp, e3)) / 6.0
+        out[start : start + len(cc), 0] = sol[:, 0]
+        out[start : start + len(cc), 1] = sol[:, iv]
+    return out

@@ -37,11 +37,12 @@ from ..errors import DicblurError, InputError
 from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
-from .kinematics import exposure_motion
+from .kinematics import exposure_motion, exposure_skew
 from .median import normalized_median_test
 from .uncertainty import (
     NoiseEstimate,
     build_blur_table,
+    build_skew_table,
     estimate_static_noise,
     subset_levels,
 )
@@ -569,6 +570,20 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available])
+    # the bias of an accelerating blur: the kernel's third moment from the fitted track
+    # times each subset's skew coefficient (a shift common to nearly all points)
+    bias = np.full((n_f, n_p, 2), np.nan, np.float32)
+    if noise is not None and inside.any() and n_f >= 2 and contiguous:
+        pin = np.flatnonzero(inside)
+        gu = np.where(good, u, np.nan)
+        gv = np.where(good, v, np.nan)
+        k3, axis = exposure_skew(gu[:, pin], gv[:, pin], fps=fps, exposure=t_exp,
+                                 half_window=half_window)
+        skew = build_skew_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
+                                axis=axis, kappa3=k3)
+        for a in range(0, n_f, 128):
+            b = slice(a, a + 128)
+            bias[b, pin] = skew.bias(k3[b], axis[b])
     settings["prediction_time_s"] = time.perf_counter() - t0
     # after a reference renewal the increments add to the renewal frame's displacement:
     # its predicted variance carries over (into the noise part: a random error)
@@ -624,6 +639,10 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
                                      "long_name": "blur direction from +x towards +y"}),
         "sigma_u": (fr, sigma_u, pu), "sigma_v": (fr, sigma_v, pu),
         **{k: (fr, a, pu) for k, a in sig.items()},
+        "bias_u": (fr, bias[..., 0], {"units": "px", "long_name": "predicted bias of an "
+                                      "accelerating blur (kernel skew), along x"}),
+        "bias_v": (fr, bias[..., 1], {"units": "px", "long_name": "predicted bias of an "
+                                      "accelerating blur (kernel skew), along y"}),
         "status": (fr, st, {"legend": attrs["status_legend"]}),
         "zncc": (fr, zn.astype(np.float32)),
         "outlier": (fr, outlier.astype(np.uint8),

@@ -261,3 +261,72 @@ def subset_levels(reference: NDArray[np.float64], centres: NDArray[np.intp], sub
     with np.errstate(invalid="ignore", divide="ignore"):
         lv = num[r, c] / den[r, c]
     return np.where(np.isfinite(lv), lv, reference.mean())
+
+
+def _angle_interp(values: NDArray[np.float64], available: NDArray[np.bool_],
+                  angle: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``values`` (a, n, c) on the direction nodes, linearly interpolated at ``angle``
+    (frames, n) deg; a missing node is replaced by the nearest computed one."""
+    a = values.shape[0]
+    f, n = angle.shape
+    th = np.mod(np.where(np.isfinite(angle), angle, 0.0), 180.0) / ANGLE_STEP
+    j0 = np.floor(th).astype(np.intp) % a
+    j1 = (j0 + 1) % a
+    ta = th - np.floor(th)
+    idx = np.flatnonzero(available)
+    d = np.abs(np.arange(a)[:, None] - idx[None, :])
+    near = idx[np.argmin(np.minimum(d, a - d), axis=1)]
+    both = available[j0] & available[j1]
+    k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
+    k1 = np.where(both, j1, k0)
+    ta = np.where(both, ta, 0.0)[..., None]
+    p = np.broadcast_to(np.arange(n), (f, n))
+    return np.asarray((1 - ta) * values[k0, p] + ta * values[k1, p])
+
+
+@dataclass(frozen=True)
+class SkewTable:
+    """Per-point shift per unit third moment of the blur kernel on direction nodes.
+
+    ``values`` (a, n, 2): ``(u, v)`` px / px**3
+    (:func:`dicblur._blur_sensitivity.subset_skew_coefficients`).
+    """
+
+    angles: NDArray[np.float64]
+    available: NDArray[np.bool_]
+    values: NDArray[np.float64]
+
+    def bias(self, kappa3: NDArray[np.float64], axis: NDArray[np.float64]
+             ) -> NDArray[np.float64]:
+        """Predicted shift ``(u, v)`` (frames, points, 2), px, of kernels with third
+        moment ``kappa3`` (px**3) along ``axis`` (deg)."""
+        q = _angle_interp(self.values, self.available, axis)
+        return np.asarray(q * np.where(np.isfinite(kappa3), kappa3, np.nan)[..., None])
+
+
+def build_skew_table(reference: NDArray[np.float64], centres: NDArray[np.intp], *,
+                     subset: int, shape: str, axis: NDArray[np.float64],
+                     kappa3: NDArray[np.float64], min_fraction: float = 0.05) -> SkewTable:
+    """Compute the skew coefficients at the direction nodes around every axis whose
+    ``|kappa3|`` exceeds ``min_fraction`` of the largest (at least one node)."""
+    from .._blur_sensitivity import subset_skew_coefficients
+
+    a = round(180.0 / ANGLE_STEP)
+    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
+    ok = np.isfinite(kappa3) & np.isfinite(axis)
+    need = np.zeros(a, bool)
+    if ok.any():
+        big = ok & (np.abs(np.where(ok, kappa3, 0.0))
+                    >= min_fraction * np.nanmax(np.abs(kappa3[ok])))
+        th = np.mod(axis[big], 180.0) / ANGLE_STEP
+        need[np.floor(th).astype(int) % a] = True
+        need[(np.floor(th).astype(int) + 1) % a] = True
+    if not need.any():
+        need[0] = True
+    values = np.full((a, len(centres), 2), np.nan)
+    for j in np.flatnonzero(need):
+        t = math.radians(angles[j])
+        values[j] = subset_skew_coefficients(reference, centres, subset,
+                                             motion=(math.sin(t), math.cos(t)),
+                                             shape=shape)  # type: ignore[arg-type]
+    return SkewTable(angles=angles, available=need, values=values)

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..dic import Correlator, PointStatus
+from ..dic.initial import global_shift, window_spectrum
 from ..errors import DicblurError, InputError
 from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
@@ -370,6 +371,8 @@ def track(
     hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
     base = np.zeros((n_pts, 2))  # displacement of the current reference's POIs (px)
     ref_now, ref_share = reference, 1.0
+    spectrum = {reference: window_spectrum(ref_img)}
+    ref_img_now = ref_img
     prev: tuple[int, NDArray[np.float64]] | None = None
     error: BaseException | None = None
     t_start = time.perf_counter()
@@ -378,8 +381,20 @@ def track(
             if k == reference - 1:  # backwards from the reference, on the first one
                 hist = hist[:1]
                 corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
+                ref_img_now = ref_img
             img = rec.frame(k)
             guess = _extrapolate(hist)
+            if guess is not None:
+                # fast motion: when the rigid shift (phase correlation, integer px) is
+                # more than 1 px from the extrapolated field's median, move the guesses
+                # by the difference (the extrapolation of a sine at 10 frames per cycle
+                # misses by ~2.5 px at the turning points)
+                gu, gv, peak = global_shift(ref_img_now, img, workers=1,
+                                            reference_spectrum=spectrum[ref_now])
+                dmed = (np.array([gu, gv], float) + np.median(base, axis=0)
+                        - np.median(guess, axis=0))
+                if peak > 0.05 and np.hypot(*dmed) > 1.0:
+                    guess = guess + np.rint(dmed)
             res, fb = _correlate_frame(corr, img, None if guess is None else guess - base,
                                        ok0)
             share = float(np.mean(res.status[ok0] == PointStatus.CONVERGED)) if ok0.any() \
@@ -407,6 +422,8 @@ def track(
                         # increments of the subset now centred at the rounded position:
                         # within half a px of the material point, the field locally uniform
                         corr, base, ref_now, fb = new, last, prev[0], fb or fb2
+                        spectrum[ref_now] = window_spectrum(prev[1])
+                        ref_img_now = prev[1]
                         res = res2
             out.frames.append(k)
             out.u.append(np.asarray(res.u, np.float64) + base[:, 0])

@@ -52,12 +52,13 @@ _SUBMODULES: dict[str, tuple[str, ...]] = {
     "patterns": ("PatternSettings", "gaussian_mask", "paper_pattern4", "speckle_pattern"),
     "pulse": ("PulseTrain",),
     "pulse.study": ("PulseStudy", "run_pulse_study"),
+    "track": ("track",),
 }
 _LAZY: dict[str, str] = {name: mod for mod, names in _SUBMODULES.items() for name in names}
 # Submodules reachable as attributes (``dicblur.campaign.run_campaign``) after a bare
 # ``import dicblur``, as when the root imported them all.
 _MODULES = frozenset({"blur", "camera", "campaign", "cli", "design", "dic", "errors", "io",
-                      "metrics", "models", "patterns", "pulse", "report"})
+                      "metrics", "models", "patterns", "pulse", "report", "sequence"})
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from .blur import (
@@ -217,6 +218,7 @@ __all__ = [
     "speckle_size",
     "sssig",
     "subset_centres",
+    "track",
     "trajectory_positions",
     "valid_region",
 ]

@@ -745,3 +745,131 @@ def subset_noise_variance(
                                max_shift=np.inf, chunk=chunk, variance=True)[1]
     assert var is not None
     return np.asarray(var[0] + var[1])  # first order (the sigma**4 interaction left out)
+
+
+def subset_blur_response(
+    image: NDArray[np.float64],
+    blur: ArrayLike,
+    centres: NDArray[np.intp],
+    subset: int,
+    *,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "bspline3",
+    boundary: Boundary = "reflect",
+    max_shift: float = 1.0,
+    chunk: int = 256,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Blur-mismatch shift vector and noise covariance of each subset, along x and y.
+
+    The same fixed point and linear noise response as :func:`subset_blur_shifts` and
+    :func:`subset_noise_variance` (ZNSSD IC-GN, exactly blurred current image, module
+    docstring), but both displacement components instead of the one along the motion:
+    ``dicblur track`` needs ``sigma_u`` and ``sigma_v`` of a point whose blur runs in any
+    direction.
+
+    Parameters
+    ----------
+    image : ndarray, shape (rows, cols)
+        Sharp reference image, grey levels.
+    blur : array_like, shape (m,)
+        Blur lengths ``W`` (px, >= 0) of a centred box along ``motion``.
+    centres, subset, motion, shape, derivative, boundary
+        As for :func:`subset_blur_coefficients`.
+    max_shift : float
+        Breakdown threshold (px) on the linearised shift vector (NaN beyond).
+
+    Returns
+    -------
+    shift : ndarray, shape (m, n, 2)
+        ``(u, v)`` mismatch shift of subset ``i`` at ``W_j`` (px; NaN: no gradient or
+        breakdown).
+    cov : ndarray, shape (m, n, 2, 2)
+        Covariance of ``(u, v)`` per unit noise variance in each image (px**2 / GL**2):
+        ``A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f + J_f^T P_g J_f] A^-T`` restricted to
+        the centre displacement (NaN where the subset has no gradient).
+    """
+    _check_shape(shape)
+    _check_derivative(derivative)
+    dy, dx = _unit(motion)
+    w = np.asarray(blur, dtype=np.float64)
+    n = len(centres)
+    shift = np.full((len(w), n, 2), np.nan)
+    cov = np.full((len(w), n, 2, 2), np.nan)
+    k = 2 if shape == "translation" else 6
+    iu, iv = 0, (1 if shape == "translation" else 3)
+    e = np.zeros((2, k))
+    e[0, iu] = 1.0
+    e[1, iv] = 1.0
+    for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, (dy, dx),
+                                                    shape, derivative, boundary, chunk):
+        rows = slice(start, start + len(f))
+        fh, sf = _normalise(f)
+        gh, sg = _normalise(gg)
+        cross = _gram(jf, _project(jg, gh))  # J_f^T P_g J_g
+        if w[j] > 0:
+            sg_ok = np.where(sg > 0, sg, np.nan)
+            sol = _solve(cross / sg_ok[:, None, None], _tdot(jf, fh - gh))
+            uv = np.stack([sol[:, iu], sol[:, iv]], axis=1)
+            uv[~(np.hypot(uv[:, 0], uv[:, 1]) <= max_shift)] = np.nan
+            shift[j, rows] = uv
+        else:
+            shift[j, rows] = np.where(np.isfinite(sf)[:, None] & (sf > 0)[:, None], 0.0,
+                                      np.nan)
+        ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
+        pf, pg = _project(jf, fh), _project(jf, gh)
+        mid = ratio2[:, None, None] * _gram(pf, pf) + _gram(pg, pg)
+        at = np.transpose(cross, (0, 2, 1))
+        z = np.stack([_solve(at, np.broadcast_to(e[c], (len(f), k)).copy())
+                      for c in range(2)], axis=1)  # (m, 2, k): A^T z_c = e_c
+        cov[j, rows] = np.einsum("nci,nij,ndj->ncd", z, mid, z)
+    return shift, cov
+
+
+def subset_skew_coefficients(
+    image: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    *,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    derivative: Derivative = "bspline3",
+    boundary: Boundary = "reflect",
+    chunk: int = 256,
+) -> NDArray[np.float64]:
+    """Per-subset shift per unit third moment of the blur kernel, ``(u, v)`` px / px**3.
+
+    A blur kernel of positions ``s`` along ``d`` (an accelerating target: the time spent
+    per px is not uniform) with third central moment ``kappa_3`` adds
+    ``-(kappa_3 / 6) f_ddd`` to the image about its mean position; the ZNSSD IC-GN fixed
+    point then moves by ``+(kappa_3 / 6) (J^T P J)^-1 J^T P f_ddd`` (the same
+    linearisation as the ``W**2 / 24`` term of :func:`subset_blur_coefficients`, which is
+    ``kappa_2 / 2`` of a box). By parts ``sum f_d f_ddd = -sum f_dd**2``: the shift has
+    the same sign in every subset, a common offset of the field. Returns the factor of
+    ``kappa_3``, shape (n, 2) (NaN: no gradient).
+    """
+    _check_shape(shape)
+    _check_derivative(derivative)
+    dy, dx = _unit(motion)
+    rows, cols = image.shape
+    ext = _extend(image, boundary)
+    shp = ext.shape
+    k = (2j * np.pi) * (dy * np.fft.fftfreq(shp[0])[:, None]
+                        + dx * np.fft.rfftfreq(shp[1])[None, :])
+    fddd = np.fft.irfft2(np.fft.rfft2(ext) * k**3, s=shp)[:rows, :cols]
+    if derivative in ("bspline3", "bspline5"):
+        fy, fx = _spline_gradients(image, derivative)
+    else:
+        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative,
+                                            boundary=boundary)
+    win = _Windows(subset, fx, fy, fddd, image)
+    out = np.full((len(centres), 2), np.nan)
+    iv = 1 if shape == "translation" else 3
+    for start in range(0, len(centres), chunk):
+        cc = centres[start : start + chunk]
+        gx, gy, e3, f = win.take(cc)
+        jp = _project(win.jacobian(gx, gy, shape), _normalise(f)[0])
+        sol = _solve(_gram(jp, jp), _tdot(jp, e3)) / 6.0
+        out[start : start + len(cc), 0] = sol[:, 0]
+        out[start : start + len(cc), 1] = sol[:, iv]
+    return out

@@ -35,7 +35,8 @@ PIPELINE: dict[str, str] = {
     "calibrate": "The paper's blur sweep on one pattern, then the model fits.",
     "fit": "Fit the uncertainty models to campaign results (model JSON).",
     "predict": "Predict u_e at blur lengths, or from velocity, exposure, scale.",
-    "plan": "Plan the exposure for a target u_e (optionally with a camera).",
+    "plan": "Plan the exposure for a target u_e (optionally with a camera, or a page).",
+    "track": "Track a high-speed recording: u, v and their sigma per point and frame.",
     "pulse": "The paper's 1-D pulse study (Section V): Table II, Fig. 4-6.",
     "design": "Find the speckle pattern with the lowest u_e at your blur.",
     "reproduce": "Reproduce the paper: figures, tables, claims in one HTML report.",
@@ -168,6 +169,9 @@ _design.register(app)
 from . import reproduce as _reproduce  # noqa: E402
 
 _reproduce.register(app)
+from . import track as _track  # noqa: E402
+
+_track.register(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

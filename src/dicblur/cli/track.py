@@ -1,0 +1,145 @@
+"""CLI: ``dicblur track RECORDING`` (displacements with per-point, per-frame sigma, issue 17)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import InputError
+from ._common import console, print_mapping
+
+
+def _ints(text: str, name: str, count: int | None = None) -> list[int]:
+    try:
+        vals = [int(x) for x in text.replace(";", ",").split(",") if x.strip()]
+    except ValueError as exc:
+        raise InputError(f"{name}={text!r}: expected integers separated by commas") from exc
+    if count is not None and len(vals) != count:
+        raise InputError(f"{name}={text!r}: expected {count} integers separated by commas")
+    return vals
+
+
+def track_command(
+    recording: Annotated[str, typer.Argument(
+        help="Folder of frames, glob ('run/*.tif'), multi-page TIFF, .cine or .cih/.mraw.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")],
+    exposure: Annotated[str | None, typer.Option(
+        "--exposure", help="Exposure time, e.g. 1ms (default: from the metadata).")] = None,
+    fps: Annotated[str | None, typer.Option(
+        "--fps", help="Frame rate, e.g. 5000 or 5kHz (default: from the metadata).")] = None,
+    static: Annotated[str | None, typer.Option(
+        "--static", help="Frames of the static scene for the noise, e.g. 0:20.")] = None,
+    noise: Annotated[float | None, typer.Option(
+        "--noise", help="Noise std (grey levels) instead of --static.")] = None,
+    subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
+    step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
+    shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
+    points: Annotated[str | None, typer.Option(
+        "--points", help="Explicit POIs 'r1,c1;r2,c2' (px) instead of a grid.")] = None,
+    roi: Annotated[str | None, typer.Option(
+        "--roi", help="Grid region ROW0,ROW1,COL0,COL1 (px, half-open).")] = None,
+    reference: Annotated[int, typer.Option("--reference", help="Reference frame.")] = 0,
+    update_reference: Annotated[bool, typer.Option(
+        "--update-reference", help="Renew the reference when the correlation degrades.")
+        ] = False,
+    frames: Annotated[str | None, typer.Option(
+        "--frames", help="Frames to track, START:STOP (default all).")] = None,
+    plot: Annotated[str | None, typer.Option(
+        "--plot-points", help="Point indices for the report's time series, e.g. 0,40.")] = None,
+    fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
+    csv: Annotated[bool, typer.Option("--csv", help="Also write track.csv (long).")] = False,
+    report: Annotated[bool, typer.Option("--report/--no-report",
+                                         help="Write report.html.")] = True,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", help="Threads of the correlation kernels.")] = None,
+) -> None:
+    """Track RECORDING and predict the random error (noise + motion blur) of every point in
+    every frame; writes OUT/track.nc (or .zarr), OUT/report.html and, with --csv,
+    OUT/track.csv. A run that stops part-way writes what was tracked (attribute
+    complete = 0) before reporting the error."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from ..sequence import open_recording
+    from ..track import TrackInterrupted, track
+    from ..track.store import save_track, write_track_csv
+
+    if fmt not in ("netcdf", "zarr"):
+        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
+    if shape not in ("affine", "translation"):
+        raise InputError(f"--shape={shape!r}: choose affine or translation")
+    if points is not None and roi is not None:
+        raise InputError("--points and --roi: give one of them")
+    pts = None
+    if points is not None:
+        pairs = [p for p in points.split(";") if p.strip()]
+        pts = [_ints(p, "--points", 2) for p in pairs]
+    roi_v = None if roi is None else _ints(roi, "--roi", 4)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out={str(out)!r}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    rec = open_recording(recording)
+    target = out / ("track.nc" if fmt == "netcdf" else "track.zarr")
+    with Progress(TextColumn("tracking"), BarColumn(), MofNCompleteColumn(),
+                  TextColumn("frames"), TimeElapsedColumn(), TextColumn("ETA"),
+                  TimeRemainingColumn(), console=console, transient=False) as bar:
+        task = bar.add_task("track", total=len(rec))
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        try:
+            ds = track(rec, exposure=exposure, fps=fps, static=static, noise=noise,
+                       subset=subset, step=step, shape=shape,  # type: ignore[arg-type]
+                       points=pts, roi=roi_v, reference=reference, frames=frames,
+                       update_reference=update_reference,
+                       workers=workers, progress=progress)
+        except TrackInterrupted as exc:
+            if exc.dataset is not None:
+                save_track(exc.dataset, target)
+                if csv:
+                    write_track_csv(exc.dataset, out / "track.csv")
+                console.print(f"wrote the {exc.dataset.sizes['frame']} frames tracked "
+                              f"before the stop to {target}")
+            if isinstance(exc.__cause__, KeyboardInterrupt):
+                raise KeyboardInterrupt from exc
+            raise
+    save_track(ds, target)
+    written = [str(target)]
+    if csv:
+        written.append(str(write_track_csv(ds, out / "track.csv")))
+    if report:
+        from ..report.track import write_track_report
+
+        plot_pts = None if plot is None else _ints(plot, "--plot-points")
+        if plot_pts and max(plot_pts) >= ds.sizes["point"]:
+            raise InputError(f"--plot-points={plot!r}: the recording has "
+                             f"{ds.sizes['point']} points (0..{ds.sizes['point'] - 1})")
+        written.append(str(write_track_report(ds, out, image=rec.frame(reference),
+                                              points=plot_pts)))
+    a = ds.attrs
+    valid = ds["valid"].values.astype(bool)
+    print_mapping(f"track: {recording}", {
+        "frames": int(ds.sizes["frame"]), "points": int(ds.sizes["point"]),
+        "exposure": float(a["exposure"]), "fps": float(a["fps"]),
+        "noise_sigma": float(a.get("noise_sigma", float("nan"))),
+        "valid_share": float(valid.mean()),
+        "outliers": int(ds["n_outliers"].values.sum()),
+        "frames_per_s": int(ds.sizes["frame"]) / max(float(a["tracking_time_s"]), 1e-9),
+        "advice": str(a.get("advice_sentence", "-")),
+    }, {"exposure": "s", "fps": "Hz", "noise_sigma": "GL"})
+    for w in written:
+        console.print(f"wrote {w}")
+
+
+def register(app: typer.Typer) -> None:
+    """Attach ``track`` to the root app."""
+    app.command("track")(track_command)

@@ -1,0 +1,48 @@
+"""``dicblur track``: a high-speed recording in, displacements with a per-point, per-frame
+uncertainty (noise and motion blur) out (issue 17, docs/track.md).
+
+Stages, one module each: :mod:`.core` (the tracking loop and the Dataset),
+:mod:`.kinematics` (motion during each exposure from the track), :mod:`.uncertainty`
+(noise estimate, per-point blur response table), :mod:`.median` (normalised median test),
+:mod:`.advice` (the exposure that would have been best).
+
+``dicblur.track(...)`` calls :func:`track`; this package's module object is callable too,
+so the name works whether it resolves to the function or to the package.
+"""
+
+from __future__ import annotations
+
+import sys
+import types
+from typing import Any
+
+from .advice import ExposureAdvice, advise_exposure
+from .core import TrackInterrupted, parse_frame_range, parse_rate, track
+from .kinematics import blur_weights, exposure_motion
+from .median import normalized_median_test, normalized_residual
+from .uncertainty import BlurTable, NoiseEstimate, build_blur_table, estimate_static_noise
+
+__all__ = [
+    "BlurTable",
+    "ExposureAdvice",
+    "NoiseEstimate",
+    "TrackInterrupted",
+    "advise_exposure",
+    "blur_weights",
+    "build_blur_table",
+    "estimate_static_noise",
+    "exposure_motion",
+    "normalized_median_test",
+    "normalized_residual",
+    "parse_frame_range",
+    "parse_rate",
+    "track",
+]
+
+
+class _CallableModule(types.ModuleType):
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return track(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -1,0 +1,680 @@
+"""``dicblur.track``: displacements of a recording with a per-point, per-frame sigma.
+
+Pipeline (docs/track.md):
+
+1. one prepared :class:`~dicblur.Correlator` on the reference frame; each frame starts
+   from the extrapolated track of the previous frames (quadratic over the last three) and
+   falls back to the engine's FFT-CC start (global phase correlation, then per-subset
+   FFT-CC) where that fails, point by point;
+2. gross errors per frame: the normalised median test on the POI grid (at its fixed eps,
+   then at eps = 2 x the frame's median predicted sigma) and a ZNCC far below the point's
+   usual (:func:`zncc_flags`);
+3. noise from the static frames (pairwise differences, per grey level where it varies),
+   or given;
+4. blur of every point in every frame from its track (:mod:`.kinematics`);
+5. predicted sigma along x and y, noise and blur parts (:mod:`.uncertainty`);
+6. per frame the share of points where blur dominates; per recording the exposure that
+   would have minimised the error (:mod:`.advice`).
+
+If reading or tracking stops part-way (a bad frame, Ctrl-C), :class:`TrackInterrupted`
+carries the Dataset of the frames tracked so far, with steps 2-6 done on them.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..dic import Correlator, PointStatus
+from ..dic.initial import global_shift, window_spectrum
+from ..errors import DicblurError, InputError
+from ..models.units import parse_quantity
+from ..sequence import Recording, open_recording
+from .advice import advise_exposure
+from .kinematics import exposure_motion, exposure_skew
+from .median import normalized_median_test
+from .uncertainty import (
+    NoiseEstimate,
+    build_blur_table,
+    build_skew_table,
+    estimate_static_noise,
+    subset_levels,
+)
+
+__all__ = ["ZNCC_RATIO", "TrackInterrupted", "parse_frame_range", "parse_rate", "track",
+           "zncc_flags"]
+
+#: A frame falls back to the engine's FFT-CC start when more than this share of its
+#: correlatable points fails from the extrapolated guess.
+FALLBACK_SHARE = 0.02
+#: Static frames whose median displacement spreads by more than this (px) are moving.
+STATIC_MOTION_PX = 0.05
+
+
+class TrackInterrupted(DicblurError, RuntimeError):
+    """Tracking stopped part-way; ``dataset`` holds the frames tracked before the stop.
+
+    Attributes
+    ----------
+    dataset : xarray.Dataset or None
+        The partial result (``attrs["complete"] == 0``, ``attrs["n_frames_tracked"]``).
+    """
+
+    def __init__(self, message: str, dataset: Any = None) -> None:
+        super().__init__(message)
+        self.dataset = dataset
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (str(self), self.dataset))
+
+
+def parse_rate(value: float | str, name: str = "fps") -> float:
+    """Frame rate from a number (Hz) or ``"5000"``, ``"5000fps"``, ``"5kHz"``, ``"2000Hz"``."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        x = float(value)
+    else:
+        text = str(value).strip().lower().replace(" ", "")
+        mult = 1.0
+        for suffix, m in (("khz", 1e3), ("mhz", 1e6), ("hz", 1.0), ("fps", 1.0)):
+            if text.endswith(suffix):
+                text, mult = text[: -len(suffix)], m
+                break
+        try:
+            x = float(text) * mult
+        except ValueError as exc:
+            raise InputError(f"{name}={value!r}: expected a frame rate such as 5000, "
+                             "'5000fps' or '5kHz'") from exc
+    if not math.isfinite(x) or x <= 0:
+        raise InputError(f"{name}={value!r}: the frame rate must be > 0 Hz, e.g. 5000")
+    return x
+
+
+def parse_frame_range(text: str | Sequence[int], n_frames: int, name: str = "static"
+                      ) -> tuple[int, int]:
+    """``"0:20"`` (half-open, Python style; negative counts from the end) -> (0, 20)."""
+    if isinstance(text, str):
+        parts = text.split(":")
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            a = int(parts[0]) if parts[0] else 0
+            b = int(parts[1]) if parts[1] else n_frames
+        except ValueError as exc:
+            raise InputError(f"{name}={text!r}: expected START:STOP frame numbers, e.g. "
+                             "0:20") from exc
+    else:
+        a, b = (int(x) for x in text)
+    a = a + n_frames if a < 0 else a
+    b = b + n_frames if b < 0 else b
+    if not 0 <= a < b <= n_frames:
+        raise InputError(f"{name}={text!r}: must satisfy 0 <= START < STOP <= {n_frames} "
+                         "(the recording's frames)")
+    return a, b
+
+
+def _resolve(value: Any, meta: float | None, kind: str, name: str, flag: str,
+             example: str) -> float:
+    given = None
+    if value is not None:
+        given = (parse_rate(value, name) if kind == "rate"
+                 else parse_quantity(value, "time", name=name))
+        if given <= 0:
+            raise InputError(f"{name}={value!r}: must be > 0, e.g. {example}")
+    if given is not None and meta is not None and abs(given - meta) > 0.01 * meta:
+        warnings.warn(f"{flag}={value}: the recording's metadata says {meta:g} "
+                      f"{'Hz' if kind == 'rate' else 's'}; using the value given",
+                      UserWarning, stacklevel=3)
+    out = given if given is not None else meta
+    if out is None:
+        raise InputError(f"{flag}: the recording has no {name} in its metadata; give "
+                         f"{flag} (e.g. {flag} {example})")
+    return float(out)
+
+
+def _grid_shape(rows: NDArray[np.int64], cols: NDArray[np.int64]) -> tuple[int, int] | None:
+    ur, uc = np.unique(rows), np.unique(cols)
+    if ur.size * uc.size != rows.size:
+        return None
+    if not (np.array_equal(rows, np.repeat(ur, uc.size))
+            and np.array_equal(cols, np.tile(uc, ur.size))):
+        return None
+    return int(ur.size), int(uc.size)
+
+
+@dataclass
+class _Tracked:
+    """Raw per-frame results of the correlation loop, in frame order."""
+
+    frames: list[int]
+    u: list[NDArray[np.float64]]
+    v: list[NDArray[np.float64]]
+    zncc: list[NDArray[np.float64]]
+    status: list[NDArray[np.uint8]]
+    fallback: list[bool]
+
+
+def _extrapolate(hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]]
+                 ) -> NDArray[np.float64] | None:
+    """Guess (n, 2) for the next frame from up to the last three fields."""
+    if not hist:
+        return None
+    us = [np.stack(h, axis=1) for h in hist[-3:]]
+    if len(us) == 1:
+        g = us[-1]
+    elif len(us) == 2:
+        g = 2 * us[-1] - us[-2]
+    else:
+        g = 3 * us[-1] - 3 * us[-2] + us[-3]
+    bad = ~np.isfinite(g).all(axis=1)
+    if bad.all():
+        return None
+    if bad.any():
+        g[bad] = np.median(g[~bad], axis=0)
+    return g
+
+
+@dataclass(frozen=True)
+class _FrameResult:
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    zncc: NDArray[np.float64]
+    status: NDArray[np.uint8]
+
+
+def _correlate_frame(corr: Correlator, img: NDArray[np.float64],
+                     guess: NDArray[np.float64] | None, ok0: NDArray[np.bool_]
+                     ) -> tuple[_FrameResult, bool]:
+    """Correlate one frame from ``guess``; where too many points fail, run the engine's
+    FFT-CC start too and keep, per point, the better of the two (converged, higher ZNCC)."""
+    if guess is None:
+        r = corr.correlate(img)
+        return _FrameResult(r.u, r.v, r.zncc, r.status), True
+    res = corr.correlate(img, initial=guess)
+    # a subset that leaves the frame (the target moved it out) is no reason to restart
+    failed = ~np.isin(res.status, (PointStatus.CONVERGED, PointStatus.OUT_OF_BOUNDS)) & ok0
+    if failed.sum() <= FALLBACK_SHARE * max(int(ok0.sum()), 1):
+        return _FrameResult(res.u, res.v, res.zncc, res.status), False
+    alt = corr.correlate(img)
+    take = (alt.status == PointStatus.CONVERGED) & (
+        (res.status != PointStatus.CONVERGED) | (alt.zncc > res.zncc + 1e-9))
+    return _FrameResult(np.where(take, alt.u, res.u), np.where(take, alt.v, res.v),
+                        np.where(take, alt.zncc, res.zncc),
+                        np.where(take, alt.status, res.status).astype(np.uint8)), True
+
+
+#: A converged point whose ``1 - ZNCC`` exceeds this multiple of its usual value (its
+#: frame's median, scaled by the point's own median ratio over the recording) is flagged.
+ZNCC_RATIO = 4.0
+
+
+def zncc_flags(zncc: NDArray[np.float64], converged: NDArray[np.bool_], *,
+               ratio: float = ZNCC_RATIO) -> NDArray[np.bool_]:
+    """Converged points whose match is much worse than usual (frames, points).
+
+    ``q = 1 - ZNCC`` grows with the noise and the blur of a frame and with how little
+    texture a subset has; dividing by the frame's median ``q`` removes the first, by the
+    point's median of that ratio over the recording the second. A foreign texture in the
+    subset (debris, glare, a false convergence) leaves the ratio far above 1.
+    """
+    q = np.where(converged, 1.0 - zncc, np.nan)
+    with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med_f = np.nanmedian(q, axis=1, keepdims=True)
+        rel = np.where(med_f > 0, q / med_f, np.nan)
+        med_p = np.nanmedian(rel, axis=0, keepdims=True)
+        score = rel / med_p
+    return np.asarray(converged & np.isfinite(score) & (score > ratio))
+
+
+def _median_flags(u: NDArray[np.float64], v: NDArray[np.float64], ok: NDArray[np.bool_],
+                  gshape: tuple[int, int] | None, eps: NDArray[np.float64],
+                  threshold: float) -> NDArray[np.bool_]:
+    out = np.zeros(u.shape, bool)
+    if gshape is None:
+        return out
+    for i in range(u.shape[0]):
+        out[i] = normalized_median_test(np.where(ok[i], u[i], np.nan),
+                                        np.where(ok[i], v[i], np.nan), gshape,
+                                        eps=float(eps[i]), threshold=threshold)
+    return out
+
+
+def track(
+    recording: Recording | str,
+    *,
+    exposure: float | str | None = None,
+    fps: float | str | None = None,
+    subset: int = 21,
+    step: int = 10,
+    roi: Sequence[int] | None = None,
+    points: ArrayLike | None = None,
+    static: str | Sequence[int] | None = None,
+    noise: float | None = None,
+    reference: int = 0,
+    frames: str | Sequence[int] | None = None,
+    shape: Literal["affine", "translation"] = "affine",
+    min_zncc: float = 0.6,
+    update_reference: bool = False,
+    update_share: float = 0.9,
+    half_window: int = 2,
+    median_eps: float = 0.1,
+    median_threshold: float = 2.0,
+    advice: bool = True,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Any:
+    """Track a recording and predict the random error of every point in every frame.
+
+    Parameters
+    ----------
+    recording : Recording or str
+        An open :class:`~dicblur.sequence.Recording` or anything
+        :func:`~dicblur.sequence.open_recording` takes (folder, glob, TIFF stack, .cine,
+        .cih/.mraw).
+    exposure : float or str, optional
+        Exposure time (s, or ``"1ms"``); default from the metadata. Given and metadata
+        disagreeing by > 1 %: a warning, the given value is used.
+    fps : float or str, optional
+        Frame rate (Hz, or ``"5000fps"``, ``"5kHz"``); default from the metadata.
+    subset, step, roi, points, shape, min_zncc
+        As for :class:`~dicblur.Correlator` (``roi`` = (row_start, row_stop, col_start,
+        col_stop) px).
+    static : str or (start, stop), optional
+        Frames of the static scene (``"0:20"``, half-open) for the noise estimate.
+    noise : float, optional
+        Noise std (GL) instead of ``static``.
+    reference : int
+        Reference frame (tracking runs forwards from it, then backwards).
+    frames : str or (start, stop), optional
+        Frames to track (default all).
+    update_reference : bool
+        Renew the reference on the last tracked frame when a frame's converged share falls
+        below ``update_share`` x the reference frame's (large deformation, decorrelation);
+        the new reference's POIs sit at the points' positions there and its increments add
+        to their displacement (recorded per frame in ``reference_frame``; the predicted
+        variance of the renewal frame is carried into the later frames). The blur
+        prediction still uses the first reference's subsets.
+    half_window : int
+        Frames on each side of the local trajectory fit (:mod:`.kinematics`).
+    median_eps, median_threshold : float
+        Normalised median test parameters (px, -).
+    advice : bool
+        Compute the exposure advice (a static prediction of the reference, a few s).
+    workers : int, optional
+        Threads of the correlation kernels.
+    progress : callable(done, total), optional
+        Called after every frame.
+
+    Returns
+    -------
+    xarray.Dataset
+        Dimensions ``frame`` and ``point``. Coordinates ``row``, ``col`` (point, px),
+        ``time`` (frame, s: centre of the exposure, frame 0 opening at 0). Variables
+        (frame, point): ``u``, ``v`` (px), ``blur_u``, ``blur_v`` (motion during the
+        exposure, px), ``W`` (px), ``blur_direction`` (deg in [0, 180) from +x towards +y),
+        ``sigma_u``, ``sigma_v`` and their ``_noise`` and ``_blur`` parts (px),
+        ``status`` (:class:`~dicblur.PointStatus`), ``zncc``, ``outlier`` (normalised
+        median test), ``valid`` (converged, not an outlier, sigma defined). Per frame:
+        ``n_converged``, ``n_outliers``, ``blur_dominated_share``, ``fallback``. Attributes:
+        settings, noise model, exposure advice (``advice_*``), ``complete``,
+        ``n_frames_tracked``.
+
+    Raises
+    ------
+    InputError
+        Missing exposure/fps, exposure longer than the frame interval, no noise source,
+        bad ranges.
+    TrackInterrupted
+        A frame could not be read or tracking was interrupted; ``.dataset`` holds what was
+        tracked.
+    """
+    rec = recording if isinstance(recording, Recording) else open_recording(recording)
+    n_total = len(rec)
+    if n_total < 2:
+        raise InputError(f"recording={rec.source!r}: {n_total} frame(s); tracking needs at "
+                         "least 2")
+    fps_v = _resolve(fps, rec.fps, "rate", "fps", "--fps", "5000")
+    t_exp = _resolve(exposure, rec.exposure, "time", "exposure", "--exposure", "1ms")
+    if t_exp > 1.0 / fps_v * (1 + 1e-6):
+        raise InputError(f"exposure={t_exp:g} s: longer than the frame interval 1/fps = "
+                         f"{1.0 / fps_v:g} s; check --exposure and --fps")
+    f0, f1 = (0, n_total) if frames is None else parse_frame_range(frames, n_total, "frames")
+    if not f0 <= reference < f1:
+        raise InputError(f"reference={reference}: must be one of the tracked frames "
+                         f"{f0}..{f1 - 1}")
+    st_range = None
+    if static is not None:
+        st_range = parse_frame_range(static, n_total, "static")
+    elif noise is None:
+        raise InputError("noise: give the static frames (--static 0:20) or the noise std "
+                         "(--noise 2, grey levels)")
+    if noise is not None and (not math.isfinite(float(noise)) or float(noise) <= 0):
+        raise InputError(f"noise={noise!r}: must be a noise std > 0 (GL)")
+    ref_img = rec.frame(reference)
+    opts: dict[str, Any] = {"subset": subset, "step": step, "shape": shape,
+                            "min_zncc": min_zncc, "workers": workers}
+    corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
+    corr = corr0
+    n_pts = corr0.n_points
+    # points that can be correlated at all (set from the reference frame's own result)
+    ok0 = np.ones(n_pts, bool)
+    order = list(range(reference, f1)) + list(range(reference - 1, f0 - 1, -1))
+    out = _Tracked([], [], [], [], [], [])
+    refs: list[int] = []
+    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    base = np.zeros((n_pts, 2))  # displacement of the current reference's POIs (px)
+    ref_now, ref_share = reference, 1.0
+    spectrum = {reference: window_spectrum(ref_img)}
+    ref_img_now = ref_img
+    prev: tuple[int, NDArray[np.float64]] | None = None
+    error: BaseException | None = None
+    t_start = time.perf_counter()
+    try:
+        for k in order:
+            if k == reference - 1:  # backwards from the reference, on the first one
+                hist = hist[:1]
+                corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
+                ref_img_now = ref_img
+            img = rec.frame(k)
+            guess = _extrapolate(hist)
+            if guess is not None:
+                # fast motion: when the rigid shift (phase correlation, integer px) is
+                # more than 1 px from the extrapolated field's median, move the guesses
+                # by the difference (the extrapolation of a sine at 10 frames per cycle
+                # misses by ~2.5 px at the turning points)
+                gu, gv, peak = global_shift(ref_img_now, img, workers=1,
+                                            reference_spectrum=spectrum[ref_now])
+                dmed = (np.array([gu, gv], float) + np.median(base, axis=0)
+                        - np.median(guess, axis=0))
+                if peak > 0.05 and np.hypot(*dmed) > 1.0:
+                    guess = guess + np.rint(dmed)
+            res, fb = _correlate_frame(corr, img, None if guess is None else guess - base,
+                                       ok0)
+            share = float(np.mean(res.status[ok0] == PointStatus.CONVERGED)) if ok0.any() \
+                else 0.0
+            if k == reference:
+                ok0 = ~np.isin(res.status, (PointStatus.LOW_TEXTURE,
+                                            PointStatus.OUT_OF_BOUNDS))
+                ref_share = max(float(np.mean(res.status[ok0] == PointStatus.CONVERGED)),
+                                1e-9) if ok0.any() else 1.0
+            elif (update_reference and prev is not None and hist
+                  and share < update_share * ref_share):
+                # renew the reference on the last frame tracked, POIs at their positions
+                # there (Lagrangian: the increments add to that frame's displacement)
+                last = np.stack(hist[-1], axis=1)
+                bad = ~np.isfinite(last).all(axis=1)
+                if not bad.all():
+                    last[bad] = np.median(last[~bad], axis=0)
+                    pts = np.stack([np.rint(corr0.rows + last[:, 1]),
+                                    np.rint(corr0.cols + last[:, 0])], axis=1).astype(int)
+                    new = Correlator(prev[1], points=pts, **opts)
+                    g2 = None if guess is None else guess - last
+                    res2, fb2 = _correlate_frame(new, img, g2, ok0)
+                    share2 = float(np.mean(res2.status[ok0] == PointStatus.CONVERGED))
+                    if share2 > share:
+                        # increments of the subset now centred at the rounded position:
+                        # within half a px of the material point, the field locally uniform
+                        corr, base, ref_now, fb = new, last, prev[0], fb or fb2
+                        spectrum[ref_now] = window_spectrum(prev[1])
+                        ref_img_now = prev[1]
+                        res = res2
+            out.frames.append(k)
+            out.u.append(np.asarray(res.u, np.float64) + base[:, 0])
+            out.v.append(np.asarray(res.v, np.float64) + base[:, 1])
+            out.zncc.append(np.asarray(res.zncc, np.float64))
+            out.status.append(np.asarray(res.status, np.uint8))
+            out.fallback.append(bool(fb))
+            refs.append(ref_now)
+            good = res.status == PointStatus.CONVERGED
+            hist.append((np.where(good, out.u[-1], np.nan), np.where(good, out.v[-1], np.nan)))
+            prev = (k, img)
+            if progress is not None:
+                progress(len(out.frames), len(order))
+    except (DicblurError, KeyboardInterrupt, OSError, MemoryError) as exc:
+        error = exc
+    elapsed = time.perf_counter() - t_start
+    if not out.frames:
+        if error is not None:
+            raise error
+    settings = {"subset": corr0.subset, "step": corr0.step, "shape": corr0.shape,
+                "reference": reference, "min_zncc": min_zncc, "half_window": half_window,
+                "median_eps": median_eps, "median_threshold": median_threshold,
+                "exposure": t_exp, "fps": fps_v, "source": rec.source, "kind": rec.kind,
+                "bit_depth": rec.bit_depth, "n_frames_recording": n_total,
+                "tracking_time_s": elapsed}
+    noise_est: NoiseEstimate | None = None
+    notes: list[str] = []
+    if noise is not None:
+        noise_est = NoiseEstimate(sigma=float(noise), read_variance=float(noise) ** 2,
+                                  slope=0.0, level_dependent=False, source="given")
+    if st_range is not None:
+        try:
+            est = estimate_static_noise(rec, *st_range)
+            noise_est = noise_est or est
+            if noise is not None:
+                notes.append(f"static frames give {est.sigma:.3g} GL; using --noise {noise}")
+        except (DicblurError, OSError) as exc:
+            if noise_est is None:
+                notes.append(f"no noise estimate: {exc}")
+    settings["update_reference"] = int(update_reference)
+    settings["n_reference_updates"] = len(set(refs)) - 1
+    ds = _assemble(rec, corr0, out, refs, noise_est, st_range, fps_v, t_exp, settings, notes,
+                   half_window=half_window, eps=median_eps, threshold=median_threshold,
+                   advice=advice and error is None, ref_img=ref_img)
+    if error is not None:
+        what = ("interrupted" if isinstance(error, KeyboardInterrupt)
+                else f"stopped: {error}")
+        ds.attrs["complete"] = 0
+        ds.attrs["stop_reason"] = what
+        raise TrackInterrupted(f"tracking {what} after {len(out.frames)} of {len(order)} "
+                               "frames; the frames tracked so far are kept", ds) from error
+    return ds
+
+
+def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
+              noise: NoiseEstimate | None,
+              st_range: tuple[int, int] | None, fps: float, t_exp: float,
+              settings: dict[str, Any], notes: list[str], *, half_window: int, eps: float,
+              threshold: float, advice: bool, ref_img: NDArray[np.float64]) -> Any:
+    import xarray as xr
+
+    from .. import __version__
+
+    idx = np.argsort(out.frames)
+    frames = np.asarray(out.frames, dtype=np.int64)[idx]
+    # frames tracked may have a gap only at the start (backwards part not reached): the
+    # kinematics needs consecutive frames, so keep the contiguous run around the reference
+    u = np.stack(out.u)[idx]
+    v = np.stack(out.v)[idx]
+    zn = np.stack(out.zncc)[idx]
+    st = np.stack(out.status)[idx]
+    fb = np.asarray(out.fallback)[idx]
+    ref_of = np.asarray(refs, dtype=np.int64)[idx]
+    for lst in (out.u, out.v, out.zncc, out.status):
+        lst.clear()  # the stacked copies replace them (memory of long recordings)
+    n_f, n_p = u.shape
+    conv = st == PointStatus.CONVERGED
+    gshape = _grid_shape(corr.rows, corr.cols)
+    if gshape is None:
+        notes.append("POIs not on a grid: no normalised median test")
+    # pass 1: the median test at its fixed eps (catches errors of tenths of a px) and the
+    # ZNCC test; pass 2, once sigma is known, at eps = 2 x the frame's median sigma
+    outlier = _median_flags(u, v, conv, gshape, np.full(n_f, eps), threshold)
+    low_zncc = zncc_flags(zn, conv)
+    contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
+
+    def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        if n_f >= 2 and contiguous:
+            return exposure_motion(np.where(good, u, np.nan), np.where(good, v, np.nan),
+                                   fps=fps, exposure=t_exp, half_window=half_window)
+        nan = np.full((n_f, n_p), np.nan)
+        return nan, nan.copy()
+
+    if not (n_f >= 2 and contiguous):
+        notes.append("fewer than 2 consecutive frames: no blur estimate")
+    good = conv & ~outlier & ~low_zncc
+    wu, wv = motion(good)
+    uk = np.where(good, u, np.nan)
+    vk = np.where(good, v, np.nan)
+    w = np.hypot(wu, wv)
+    ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
+    # static range: check for motion (it inflates the pairwise-difference noise)
+    if st_range is not None:
+        sel = (frames >= st_range[0]) & (frames < st_range[1])
+        if sel.sum() >= 2:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mu = np.nanmedian(uk[sel], axis=1)
+                mv = np.nanmedian(vk[sel], axis=1)
+            spread = float(max(np.nanmax(mu) - np.nanmin(mu), np.nanmax(mv) - np.nanmin(mv)))
+            settings["static_motion_px"] = spread
+            if spread > STATIC_MOTION_PX:
+                msg = (f"static={st_range[0]}:{st_range[1]}: the scene moves by {spread:.3g} "
+                       "px over these frames, so the noise estimate from their differences "
+                       "is too high; give frames where nothing moves, or --noise")
+                warnings.warn(msg, UserWarning, stacklevel=4)
+                notes.append(msg)
+    centres = np.stack([corr.rows, corr.cols], axis=1).astype(np.intp)
+    inside = ((corr.rows - corr.half >= 0) & (corr.cols - corr.half >= 0)
+              & (corr.rows + corr.half < ref_img.shape[0])
+              & (corr.cols + corr.half < ref_img.shape[1]))
+    # derived per-point fields in float32 (7 significant digits; halves the memory of a
+    # long recording), displacements stay float64
+    sig = {k: np.full((n_f, n_p), np.nan, np.float32) for k in
+           ("sigma_u_noise", "sigma_v_noise", "sigma_u_blur", "sigma_v_blur")}
+    blur_dom = np.full(n_f, np.nan)
+    t0 = time.perf_counter()
+    if noise is not None and inside.any():
+        pin = np.flatnonzero(inside)
+        table = build_blur_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
+                                 blur=np.where(good[:, pin], w[:, pin], np.nan),
+                                 angle=ang[:, pin])
+        levels = subset_levels(ref_img, centres[pin], corr.subset)
+        nv = noise.variance(levels)[None, :]
+
+        def predict() -> None:
+            for a in range(0, n_f, 128):  # frame blocks: bounded temporaries
+                b = slice(a, a + 128)
+                look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
+                sig["sigma_u_noise"][b, pin] = np.sqrt(nv * look[..., 2])
+                sig["sigma_v_noise"][b, pin] = np.sqrt(nv * look[..., 3])
+                sig["sigma_u_blur"][b, pin] = np.abs(look[..., 0])
+                sig["sigma_v_blur"][b, pin] = np.abs(look[..., 1])
+
+        predict()
+        if gshape is not None:
+            s_max = np.fmax(np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"]),
+                            np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"]))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                eps_k = 2.0 * np.nanmedian(np.where(good, s_max, np.nan), axis=1)
+            eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
+            second = _median_flags(u, v, conv & ~low_zncc, gshape, eps_k, threshold)
+            if (second & ~outlier).any():
+                outlier |= second
+                good = conv & ~outlier & ~low_zncc
+                wu, wv = motion(good)
+                w = np.hypot(wu, wv)
+                ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
+                predict()
+        settings["blur_table_max_px"] = float(table.blur[-1])
+        settings["blur_table_angles_deg"] = ",".join(
+            f"{a:g}" for a in table.angles[table.available])
+    # the bias of an accelerating blur: the kernel's third moment from the fitted track
+    # times each subset's skew coefficient (a shift common to nearly all points)
+    bias = np.full((n_f, n_p, 2), np.nan, np.float32)
+    if noise is not None and inside.any() and n_f >= 2 and contiguous:
+        pin = np.flatnonzero(inside)
+        gu = np.where(good, u, np.nan)
+        gv = np.where(good, v, np.nan)
+        k3, axis = exposure_skew(gu[:, pin], gv[:, pin], fps=fps, exposure=t_exp,
+                                 half_window=half_window)
+        skew = build_skew_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
+                                axis=axis, kappa3=k3)
+        for a in range(0, n_f, 128):
+            b = slice(a, a + 128)
+            bias[b, pin] = skew.bias(k3[b], axis[b])
+    settings["prediction_time_s"] = time.perf_counter() - t0
+    # after a reference renewal the increments add to the renewal frame's displacement:
+    # its predicted variance carries over (into the noise part: a random error)
+    pos = {int(f): i for i, f in enumerate(frames)}
+    ref0 = int(settings["reference"])
+    for i in sorted(range(n_f), key=lambda i: abs(int(frames[i]) - ref0)):
+        j = pos.get(int(ref_of[i]))
+        if int(ref_of[i]) != ref0 and j is not None:
+            for c in ("u", "v"):
+                carry = np.hypot(sig[f"sigma_{c}_noise"][j], sig[f"sigma_{c}_blur"][j])
+                sig[f"sigma_{c}_noise"][i] = np.hypot(sig[f"sigma_{c}_noise"][i], carry)
+    sigma_u = np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"])
+    sigma_v = np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"])
+    outlier |= low_zncc
+    valid = good & np.isfinite(sigma_u) & np.isfinite(sigma_v) & np.isfinite(w)
+    with np.errstate(invalid="ignore"):
+        dom = (np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"])
+               > np.hypot(sig["sigma_u_noise"], sig["sigma_v_noise"]))
+        cnt = valid.sum(axis=1)
+        blur_dom = np.where(cnt > 0, (dom & valid).sum(axis=1) / np.maximum(cnt, 1), np.nan)
+    attrs: dict[str, Any] = {**{k: v for k, v in settings.items() if v is not None},
+                             "dicblur_version": __version__, "complete": 1,
+                             "n_frames_tracked": int(n_f),
+                             "status_legend": ", ".join(f"{s.value}={s.name}"
+                                                        for s in PointStatus)}
+    if noise is not None:
+        attrs.update({f"noise_{k}": (int(v) if isinstance(v, bool) else v)
+                      for k, v in noise.to_dict().items()})
+    if advice and noise is not None and valid.any():
+        try:
+            adv = advise_exposure(ref_img, centres[inside], (w / t_exp)[valid], ang[valid],
+                                  exposure=t_exp, fps=fps, noise=noise,
+                                  level=float(np.median(subset_levels(ref_img, centres[inside],
+                                                                      corr.subset))),
+                                  subset=corr.subset, shape=corr.shape,
+                                  bit_depth=rec.bit_depth)
+            attrs.update({f"advice_{k}": v for k, v in adv.to_dict().items()})
+        except DicblurError as exc:
+            notes.append(f"no exposure advice: {exc}")
+    if notes:
+        attrs["notes"] = " | ".join(notes)
+    fr = ("frame", "point")
+    pu = {"units": "px"}
+    data = {
+        "u": (fr, u, {"units": "px", "long_name": "displacement along x"}),
+        "v": (fr, v, {"units": "px", "long_name": "displacement along y"}),
+        "blur_u": (fr, wu.astype(np.float32),
+                   {"units": "px", "long_name": "motion along x during the exposure"}),
+        "blur_v": (fr, wv.astype(np.float32),
+                   {"units": "px", "long_name": "motion along y during the exposure"}),
+        "W": (fr, w.astype(np.float32), {"units": "px", "long_name": "blur length"}),
+        "blur_direction": (fr, ang.astype(np.float32), {"units": "deg",
+                                     "long_name": "blur direction from +x towards +y"}),
+        "sigma_u": (fr, sigma_u, pu), "sigma_v": (fr, sigma_v, pu),
+        **{k: (fr, a, pu) for k, a in sig.items()},
+        "bias_u": (fr, bias[..., 0], {"units": "px", "long_name": "predicted bias of an "
+                                      "accelerating blur (kernel skew), along x"}),
+        "bias_v": (fr, bias[..., 1], {"units": "px", "long_name": "predicted bias of an "
+                                      "accelerating blur (kernel skew), along y"}),
+        "status": (fr, st, {"legend": attrs["status_legend"]}),
+        "zncc": (fr, zn.astype(np.float32)),
+        "outlier": (fr, outlier.astype(np.uint8),
+                    {"long_name": "gross error: normalised median test (Westerweel & "
+                     "Scarano 2005) or ZNCC far below the point's usual"}),
+        "valid": (fr, valid.astype(np.uint8)),
+        "n_converged": ("frame", conv.sum(axis=1).astype(np.int32)),
+        "n_outliers": ("frame", outlier.sum(axis=1).astype(np.int32)),
+        "blur_dominated_share": ("frame", blur_dom),
+        "reference_frame": ("frame", ref_of.astype(np.int32)),
+        "fallback": ("frame", fb.astype(np.uint8),
+                     {"long_name": "frame needed the FFT-CC start"}),
+    }
+    return xr.Dataset(data, coords={
+        "frame": ("frame", frames), "point": ("point", np.arange(n_p)),
+        "row": ("point", corr.rows.astype(np.int32)),
+        "col": ("point", corr.cols.astype(np.int32)),
+        "time": ("frame", frames / fps + 0.5 * t_exp, {"units": "s"})}, attrs=attrs)

@@ -1,0 +1,332 @@
+"""Predicted random error of every point in every frame: noise term + blur-mismatch term.
+
+Both terms come from the static reference subset of each point (docs/models.md s. 4; the
+machinery of :func:`dicblur.models.predict_from_pattern`), evaluated at the point's own
+blur length ``W`` and direction in that frame:
+
+- noise: the linear response of the ZNSSD IC-GN fixed point to the image noise, a 2x2
+  covariance per unit noise variance, times the noise variance of the static frames (at
+  the subset's gradient-weighted grey level when the noise depends on the level);
+- blur: the mismatch shift ``xi(W)`` of the subset against its exactly blurred copy, a
+  deterministic error of that subset at that ``W`` (its quadratic mean over the subsets
+  is the field's ``u_blur``); its magnitude per component is the blur part of sigma.
+
+The per-point responses are tabulated once per recording on a grid of ``W`` (1 px steps
+up to the largest measured blur; 2.1 s per node for 2,401 affine
+subsets of a 512^2 frame on the loaded machine) and of directions (15 degree nodes, only those the
+measured motion needs), then interpolated (linearly in ``W**2``: the shift's leading
+order is ``k W**2``; between the two nearest direction nodes).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._blur_sensitivity import subset_blur_response
+from ..errors import InputError
+from ..metrics import estimate_noise
+
+__all__ = ["ANGLE_STEP", "BLUR_STEP", "BlurTable", "NoiseEstimate", "build_blur_table",
+           "estimate_static_noise", "subset_levels"]
+
+ANGLE_STEP = 15.0  # deg between direction nodes of the table
+BLUR_STEP = 1.0  # px between blur nodes of the table
+
+
+@dataclass(frozen=True)
+class BlurTable:
+    """Per-point blur response on a grid of blur lengths and directions.
+
+    Attributes
+    ----------
+    blur : ndarray, shape (m,)
+        Blur lengths W (px), from 0 in steps of :data:`BLUR_STEP`.
+    angles : ndarray, shape (a,)
+        Direction nodes (deg in [0, 180), from the x axis towards +y (rows)); a centred box
+        blur is the same for theta and theta + 180.
+    available : ndarray of bool, shape (a,)
+        Nodes that were computed.
+    values : ndarray, shape (a, m, n, 4)
+        ``(xi_u, xi_v, c_uu, c_vv)``: mismatch shift (px) and noise variance per unit
+        noise variance (px**2 / GL**2) of each point (NaN: no gradient or breakdown).
+    """
+
+    blur: NDArray[np.float64]
+    angles: NDArray[np.float64]
+    available: NDArray[np.bool_]
+    values: NDArray[np.float64]
+
+    def lookup(self, w: NDArray[np.float64], angle: NDArray[np.float64]
+               ) -> NDArray[np.float64]:
+        """Interpolated ``(xi_u, xi_v, c_uu, c_vv)`` at ``w`` (px) and ``angle`` (deg), both
+        shape (frames, points); returns shape (frames, points, 4) (NaN where ``w`` is NaN
+        or beyond the table)."""
+        f, n = w.shape
+        a = self.angles.size
+        wq = np.where(np.isfinite(w), w, 0.0)
+        # linear in W**2 between the nodes
+        s2 = wq ** 2
+        b2 = self.blur ** 2
+        i1 = np.clip(np.searchsorted(b2, s2, side="right"), 1, b2.size - 1)
+        i0 = i1 - 1
+        tw = np.clip((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0, 1.0)[..., None]
+        th = np.mod(np.where(np.isfinite(angle), angle, 0.0), 180.0) / ANGLE_STEP
+        j0 = np.floor(th).astype(np.intp) % a
+        j1 = (j0 + 1) % a
+        ta = (th - np.floor(th))
+        # a missing node: use the nearest computed one
+        near = self._nearest()
+        both = self.available[j0] & self.available[j1]
+        k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
+        k1 = np.where(both, j1, k0)
+        ta = np.where(both, ta, 0.0)[..., None]
+        p = np.broadcast_to(np.arange(n), (f, n))
+
+        def at(j: NDArray[np.intp]) -> NDArray[np.float64]:
+            return np.asarray((1 - tw) * self.values[j, i0, p] + tw * self.values[j, i1, p])
+
+        out = (1 - ta) * at(k0) + ta * at(k1)
+        out[~np.isfinite(w) | (w > self.blur[-1] + 1e-9)] = np.nan
+        return np.asarray(out)
+
+    def _nearest(self) -> NDArray[np.intp]:
+        a = self.angles.size
+        idx = np.flatnonzero(self.available)
+        d = np.abs(np.arange(a)[:, None] - idx[None, :])
+        d = np.minimum(d, a - d)
+        return np.asarray(idx[np.argmin(d, axis=1)], dtype=np.intp)
+
+
+def build_blur_table(reference: NDArray[np.float64], centres: NDArray[np.intp], *,
+                     subset: int, shape: str, blur: NDArray[np.float64],
+                     angle: NDArray[np.float64], min_blur: float = 0.5) -> BlurTable:
+    """Tabulate the blur response of every point for the blur vectors that occur.
+
+    Parameters
+    ----------
+    reference : ndarray, shape (rows, cols)
+        Reference frame, grey levels.
+    centres : ndarray of int, shape (n, 2)
+        POI centres (row, col); each subset must lie inside the frame.
+    subset : int
+    shape : {"translation", "affine"}
+    blur, angle : ndarray, shape (frames, points)
+        Measured blur lengths (px) and directions (deg); NaN ignored. The direction nodes
+        computed are the two around every direction whose blur is >= ``min_blur`` px (the
+        one nearest the dominant direction when none is).
+    """
+    finite = np.isfinite(blur) & np.isfinite(angle)
+    w_max = float(np.max(blur[finite])) if finite.any() else 0.0
+    nodes = np.arange(0.0, BLUR_STEP * (math.ceil(w_max / BLUR_STEP) + 1) + 1e-9, BLUR_STEP)
+    if nodes.size < 2:
+        nodes = np.array([0.0, BLUR_STEP])
+    a = round(180.0 / ANGLE_STEP)
+    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
+    th = np.mod(angle[finite & (blur >= min_blur)], 180.0) / ANGLE_STEP
+    need = np.zeros(a, bool)
+    if th.size:
+        need[np.floor(th).astype(int) % a] = True
+        need[(np.floor(th).astype(int) + 1) % a] = True
+    else:
+        if finite.any():
+            ww = blur[finite]
+            mu = np.average(np.exp(2j * np.deg2rad(angle[finite])), weights=ww + 1e-12)
+            dom = (np.rad2deg(np.angle(mu)) / 2.0) % 180.0
+        else:
+            dom = 0.0
+        need[round(dom / ANGLE_STEP) % a] = True
+    values = np.full((a, nodes.size, len(centres), 4), np.nan)
+    for j in np.flatnonzero(need):
+        t = math.radians(angles[j])
+        shift, cov = subset_blur_response(reference, nodes, centres, subset,
+                                          motion=(math.sin(t), math.cos(t)),
+                                          shape=shape,  # type: ignore[arg-type]
+                                          max_shift=1.0)
+        values[j, ..., 0:2] = shift
+        values[j, ..., 2] = cov[..., 0, 0]
+        values[j, ..., 3] = cov[..., 1, 1]
+    return BlurTable(blur=nodes, angles=angles, available=need, values=values)
+
+
+@dataclass(frozen=True)
+class NoiseEstimate:
+    """Image noise of a recording (GL), from its static frames or given.
+
+    ``variance(level) = read_variance + slope * level`` (Poisson-Gaussian: the slope is
+    the gain in GL per electron); ``slope = 0`` when the noise does not measurably depend
+    on the level (or was given as one number).
+
+    Attributes
+    ----------
+    sigma : float
+        Noise std (GL) over the image (pairwise differences, as ``dicblur noise``).
+    read_variance, slope : float
+        The level model (GL**2 and GL).
+    level_dependent : bool
+    source : str
+        ``"static frames a:b"`` or ``"given"``.
+    pairs : int
+        Frame pairs used.
+    """
+
+    sigma: float
+    read_variance: float
+    slope: float
+    level_dependent: bool
+    source: str
+    pairs: int = 0
+
+    def variance(self, level: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Noise variance (GL**2) at grey levels ``level``."""
+        lv = np.asarray(level, dtype=np.float64)
+        if not self.level_dependent:
+            return np.full(lv.shape, self.sigma ** 2)
+        return np.maximum(self.read_variance + self.slope * lv, 1e-12)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"sigma": self.sigma, "read_variance": self.read_variance,
+                "slope": self.slope, "level_dependent": self.level_dependent,
+                "source": self.source, "pairs": self.pairs}
+
+
+def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24
+                          ) -> NoiseEstimate:
+    """Noise of a recording from its static frames ``start .. stop - 1``.
+
+    Consecutive pairs give ``sigma**2 = var(a - b) / 2`` (a global offset, flicker,
+    removed first: :func:`dicblur.estimate_noise`); the same differences binned by the
+    pair's mean level give the level model ``var = read + slope * level`` (weighted least
+    squares over the bins), kept when it explains the data better than one variance
+    (slope > 0 and the variance changes by > 20 % over the levels present).
+
+    Parameters
+    ----------
+    frames : Recording or sequence of arrays
+        Indexable by frame number.
+    start, stop : int
+        Static frames, half-open (at least 2).
+    """
+    if stop - start < 2:
+        raise InputError(f"static={start}:{stop}: needs at least 2 frames of the static "
+                         "scene (e.g. --static 0:20)")
+    prev = frames[start]
+    lo, hi = float(prev.min()), float(prev.max())
+    edges = np.linspace(lo, hi + 1e-9, bins + 1)
+    s2 = np.zeros(bins)
+    cnt = np.zeros(bins)
+    sig2 = []
+    for k in range(start + 1, stop):
+        cur = frames[k]
+        sig2.append(estimate_noise(prev, cur) ** 2)
+        d = prev - cur
+        d = d - d.mean()
+        lev = 0.5 * (prev + cur)
+        idx = np.clip(np.searchsorted(edges, lev.ravel(), side="right") - 1, 0, bins - 1)
+        s2 += np.bincount(idx, weights=d.ravel() ** 2, minlength=bins)
+        cnt += np.bincount(idx, minlength=bins)
+        prev = cur
+    sigma = math.sqrt(float(np.mean(sig2)))
+    ok = cnt >= 200
+    read, slope, dep = sigma ** 2, 0.0, False
+    if ok.sum() >= 3:
+        lev_c = 0.5 * (edges[:-1] + edges[1:])[ok]
+        var_b = s2[ok] / cnt[ok] / 2.0
+        wts = cnt[ok]
+        A = np.stack([np.ones_like(lev_c), lev_c], axis=1) * np.sqrt(wts)[:, None]
+        coef = np.linalg.lstsq(A, var_b * np.sqrt(wts), rcond=None)[0]
+        span = coef[1] * (lev_c.max() - lev_c.min())
+        if coef[1] > 0 and span > 0.2 * sigma ** 2:
+            read, slope, dep = float(max(coef[0], 0.0)), float(coef[1]), True
+    return NoiseEstimate(sigma=sigma, read_variance=read, slope=slope, level_dependent=dep,
+                         source=f"static frames {start}:{stop}", pairs=len(sig2))
+
+
+def subset_levels(reference: NDArray[np.float64], centres: NDArray[np.intp], subset: int
+                  ) -> NDArray[np.float64]:
+    """Gradient-weighted grey level ``sum(g**2 I) / sum(g**2)`` of each subset (GL): the
+    level at which signal-dependent noise enters its displacement error
+    (:func:`dicblur.gradient_weighted_level`, per subset and for both directions)."""
+    from scipy.ndimage import uniform_filter
+
+    gy, gx = np.gradient(reference)
+    g2 = gx * gx + gy * gy
+    num = uniform_filter(g2 * reference, subset, mode="reflect")
+    den = uniform_filter(g2, subset, mode="reflect")
+    r, c = centres[:, 0], centres[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lv = num[r, c] / den[r, c]
+    return np.where(np.isfinite(lv), lv, reference.mean())
+
+
+def _angle_interp(values: NDArray[np.float64], available: NDArray[np.bool_],
+                  angle: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``values`` (a, n, c) on the direction nodes, linearly interpolated at ``angle``
+    (frames, n) deg; a missing node is replaced by the nearest computed one."""
+    a = values.shape[0]
+    f, n = angle.shape
+    th = np.mod(np.where(np.isfinite(angle), angle, 0.0), 180.0) / ANGLE_STEP
+    j0 = np.floor(th).astype(np.intp) % a
+    j1 = (j0 + 1) % a
+    ta = th - np.floor(th)
+    idx = np.flatnonzero(available)
+    d = np.abs(np.arange(a)[:, None] - idx[None, :])
+    near = idx[np.argmin(np.minimum(d, a - d), axis=1)]
+    both = available[j0] & available[j1]
+    k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
+    k1 = np.where(both, j1, k0)
+    ta = np.where(both, ta, 0.0)[..., None]
+    p = np.broadcast_to(np.arange(n), (f, n))
+    return np.asarray((1 - ta) * values[k0, p] + ta * values[k1, p])
+
+
+@dataclass(frozen=True)
+class SkewTable:
+    """Per-point shift per unit third moment of the blur kernel on direction nodes.
+
+    ``values`` (a, n, 2): ``(u, v)`` px / px**3
+    (:func:`dicblur._blur_sensitivity.subset_skew_coefficients`).
+    """
+
+    angles: NDArray[np.float64]
+    available: NDArray[np.bool_]
+    values: NDArray[np.float64]
+
+    def bias(self, kappa3: NDArray[np.float64], axis: NDArray[np.float64]
+             ) -> NDArray[np.float64]:
+        """Predicted shift ``(u, v)`` (frames, points, 2), px, of kernels with third
+        moment ``kappa3`` (px**3) along ``axis`` (deg)."""
+        q = _angle_interp(self.values, self.available, axis)
+        return np.asarray(q * np.where(np.isfinite(kappa3), kappa3, np.nan)[..., None])
+
+
+def build_skew_table(reference: NDArray[np.float64], centres: NDArray[np.intp], *,
+                     subset: int, shape: str, axis: NDArray[np.float64],
+                     kappa3: NDArray[np.float64], min_fraction: float = 0.05) -> SkewTable:
+    """Compute the skew coefficients at the direction nodes around every axis whose
+    ``|kappa3|`` exceeds ``min_fraction`` of the largest (at least one node)."""
+    from .._blur_sensitivity import subset_skew_coefficients
+
+    a = round(180.0 / ANGLE_STEP)
+    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
+    ok = np.isfinite(kappa3) & np.isfinite(axis)
+    need = np.zeros(a, bool)
+    if ok.any():
+        big = ok & (np.abs(np.where(ok, kappa3, 0.0))
+                    >= min_fraction * np.nanmax(np.abs(kappa3[ok])))
+        th = np.mod(axis[big], 180.0) / ANGLE_STEP
+        need[np.floor(th).astype(int) % a] = True
+        need[(np.floor(th).astype(int) + 1) % a] = True
+    if not need.any():
+        need[0] = True
+    values = np.full((a, len(centres), 2), np.nan)
+    for j in np.flatnonzero(need):
+        t = math.radians(angles[j])
+        values[j] = subset_skew_coefficients(reference, centres, subset,
+                                             motion=(math.sin(t), math.cos(t)),
+                                             shape=shape)  # type: ignore[arg-type]
+    return SkewTable(angles=angles, available=need, values=values)

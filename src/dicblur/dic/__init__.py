@@ -8,8 +8,10 @@ Stages, one module each (OpenCorr/DICe style): :mod:`.interpolation`, :mod:`.ini
 
 from __future__ import annotations
 
+from .compensation import blur_reference, deblur_wiener
 from .correlator import Correlator, correlate
 from .result import DICResult
 from .status import PointStatus
 
-__all__ = ["Correlator", "DICResult", "PointStatus", "correlate"]
+__all__ = ["Correlator", "DICResult", "PointStatus", "blur_reference", "correlate",
+           "deblur_wiener"]

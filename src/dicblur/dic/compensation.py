@@ -40,7 +40,7 @@ from ..errors import InputError
 from .icgn import N_PARAMS, raw_jacobian
 
 __all__ = ["BLUR_MODES", "BlurStepPrep", "blur_reference", "check_blur_vector",
-           "deblur_wiener", "prepare_blur_step"]
+           "deblur_wiener", "noise_gain_slope", "prepare_blur_step"]
 
 #: Matcher modes: ``none`` (plain IC-GN), ``given`` (blur vector known), ``estimate``
 #: (blur length along a given direction estimated per subset).
@@ -213,6 +213,23 @@ def deblur_wiener(image: ArrayLike, blur_vector: ArrayLike, noise_sigma: float
         filt = hh / (hh * hh + nsr) if nsr > 0 else np.where(hh != 0, 1.0 / hh, 0.0)
     out = sfft.irfft2(sfft.rfft2(work) * filt, s=work.shape)[:img.shape[0], :img.shape[1]]
     return np.ascontiguousarray(out)
+
+
+def noise_gain_slope(length: float, direction: ArrayLike, *, grid: int = 256) -> float:
+    """``d kappa / dW`` of the noise variance gain ``kappa(W) = mean_f sinc^2(W f . e)``.
+
+    The centred box of length ``W`` scales the variance of white noise in the reference by
+    ``kappa(W)`` (about ``1 / W`` for ``W >= 1``; mean over the frequency square
+    ``[-1/2, 1/2)^2``, midpoint rule on ``grid^2`` points), px^-1. Blurring the *noisy*
+    reference further lowers its noise, so the joint estimate of the blur length leans
+    long by ``-n sigma^2 kappa'(W) / (2 |D_perp|^2)`` (n subset pixels); the estimation
+    removes that lean when the noise level is known.
+    """
+    e = np.asarray(direction, dtype=np.float64)
+    f = (np.arange(grid) + 0.5) / grid - 0.5
+    s = f[:, None] * float(e[0]) + f[None, :] * float(e[1])
+    x = float(length) * s
+    return float(np.mean(2.0 * np.sinc(x) * s * _dsinc(x)))
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,13 @@ from .._validation import as_image, check_choice, check_odd_subset, check_positi
 from ..errors import InputError
 from ..metrics import image_gradients, subset_centres
 from . import kernels
-from .compensation import BLUR_MODES, blur_reference, check_blur_vector, prepare_blur_step
+from .compensation import (
+    BLUR_MODES,
+    blur_reference,
+    check_blur_vector,
+    noise_gain_slope,
+    prepare_blur_step,
+)
 from .icgn import N_PARAMS, prepare_subsets
 from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
@@ -57,6 +63,7 @@ class _BlurredReference:
 
     corr: Correlator
     index: NDArray[np.intp] | None
+    vector: NDArray[np.float64]
     step: Any = None
     images: tuple[NDArray[np.float64], ...] = ()
 
@@ -573,7 +580,8 @@ class Correlator:
             cc = np.clip(pts[:, 1], self.half, self.image_shape[1] - 1 - self.half)
             prep = prepare_blur_step(blurred, gx, gy, dimg, rc, cc, self.half, self.shape)
             images = (blurred, gx, gy, dimg)
-        entry = _BlurredReference(corr=corr, index=index, step=prep, images=images)
+        entry = _BlurredReference(corr=corr, index=index, vector=np.array(vec, dtype=float),
+                                  step=prep, images=images)
         self._blur_cache[key] = entry
         while len(self._blur_cache) > _BLUR_CACHE_SIZE:
             self._blur_cache.popitem(last=False)
@@ -698,6 +706,13 @@ class Correlator:
         npx = self.subset ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
             sig = np.sqrt(np.maximum(out_r, 0.0) / (npx - k - 1) * sp.hinv[:, k, k])
+            if self.noise_sigma:
+                # the blurred noisy reference loses noise as W grows: remove the lean
+                # -n sigma^2 kappa'(W0) / 2 (Df^-2 hinv) of the length (noise_gain_slope)
+                length = math.hypot(float(entry.vector[0]), float(entry.vector[1]))
+                slope = noise_gain_slope(length, entry.vector / length)
+                out_lam += (sp.hinv[:, k, k] / np.where(sp.fnorm > 0, sp.fnorm, 1.0) ** 2
+                            * npx * self.noise_sigma ** 2 * slope / 2.0)
         return out_p, out_lam, out_z, sig, out_i, out_s
 
     def _correlate_estimate(self, cur: NDArray[np.float64], initial: ArrayLike | None,

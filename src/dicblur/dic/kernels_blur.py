@@ -143,6 +143,14 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
             sfg = 0.0
             for m in range(k + 1):
                 q[m] = 0.0
+            if not affine:
+                # translation: every pixel has the same sub-pixel offset, one set of taps
+                bx = int(math.floor(xc + p[0]))  # noqa: RUF046 - numba needs the int
+                by = int(math.floor(yc + p[1]))  # noqa: RUF046 - numba needs the int
+                lo = (order - 1) // 2
+                for a in range(order + 1):
+                    wy[a] = _bspline(yc + p[1] - by - (a - lo), order)
+                    wx[a] = _bspline(xc + p[0] - bx - (a - lo), order)
             for i in range(size):
                 dyo = float(i - half)
                 for j in range(size):
@@ -150,10 +158,15 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
                     if affine:
                         x = xc + p[0] + (1.0 + p[1]) * dxo + p[2] * dyo
                         y = yc + p[3] + p[4] * dxo + (1.0 + p[5]) * dyo
+                        g = _sample(coef, order, y, x, wy, wx)
                     else:
-                        x = xc + dxo + p[0]
-                        y = yc + dyo + p[1]
-                    g = _sample(coef, order, y, x, wy, wx)
+                        g = 0.0
+                        for a in range(order + 1):
+                            row = coef[by + i - half - lo + a + PAD]
+                            acc = 0.0
+                            for b in range(order + 1):
+                                acc += wx[b] * row[bx + j - half - lo + b + PAD]
+                            g += wy[a] * acc
                     sg += g
                     sgg += g * g
                     sfg += f[r0 + i, c0 + j] * g

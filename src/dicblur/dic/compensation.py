@@ -25,6 +25,7 @@ baseline the benchmark compares against.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -226,9 +227,14 @@ def noise_gain_slope(length: float, direction: ArrayLike, *, grid: int = 256) ->
     removes that lean when the noise level is known.
     """
     e = np.asarray(direction, dtype=np.float64)
+    return _noise_gain_slope(float(length), float(e[0]), float(e[1]), int(grid))
+
+
+@functools.lru_cache(maxsize=64)
+def _noise_gain_slope(length: float, ey: float, ex: float, grid: int) -> float:
     f = (np.arange(grid) + 0.5) / grid - 0.5
-    s = f[:, None] * float(e[0]) + f[None, :] * float(e[1])
-    x = float(length) * s
+    s = f[:, None] * ey + f[None, :] * ex
+    x = length * s
     return float(np.mean(2.0 * np.sinc(x) * s * _dsinc(x)))
 
 

@@ -53,6 +53,8 @@ _BLUR_CACHE_SIZE = 12
 #: Grid (px) of the blur lengths W0 the estimation blurs the reference to; the per-subset
 #: joint step estimates the remainder (|lam| <= 1/8 px at convergence).
 _BLUR_GRID = 0.25
+#: Convergence of the blur length in the joint step, px (its random error is 0.01-0.1 px).
+_BLUR_TOLERANCE = 1e-3
 #: Most POIs the estimation's image-level search of W0 uses.
 _BLUR_SAMPLE = 64
 
@@ -702,7 +704,7 @@ class Correlator:
                         f0, gx, gy, dimg, c.rows, c.cols, self.half, self.shape == "affine",
                         sp.hinv, sp.fmean, sp.fnorm, sp.jsum, sp.avec, sp.evec, sp.dsum,
                         sp.bval, sp.dd, np.ascontiguousarray(res.params), st_in, max_iter,
-                        self.tolerance, out_p, out_lam, out_z, out_r, out_i, out_s)
+                        self.tolerance, _BLUR_TOLERANCE, out_p, out_lam, out_z, out_r, out_i, out_s)
         npx = self.subset ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
             sig = np.sqrt(np.maximum(out_r, 0.0) / (npx - k - 1) * sp.hinv[:, k, k])

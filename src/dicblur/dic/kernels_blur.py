@@ -67,20 +67,22 @@ def _sample(coef, order, y, x, wy, wx):  # pragma: no cover - compiled
     for a in range(order + 1):
         wy[a] = _bspline(ty - (a - lo), order)
         wx[a] = _bspline(tx - (a - lo), order)
+    r0 = iy - lo + PAD
+    c0 = ix - lo + PAD
     g = 0.0
     for a in range(order + 1):
-        row = coef[iy - lo + a + PAD]
         acc = 0.0
         for b in range(order + 1):
-            acc += wx[b] * row[ix - lo + b + PAD]
+            acc += wx[b] * coef[r0 + a, c0 + b]
         g += wy[a] * acc
     return g
 
 
-@nb.njit(parallel=True, cache=True)
+# reassociation only (vectorised sums); no 'nnan'/'ninf', so the finiteness checks stay
+@nb.njit(parallel=True, cache=True, fastmath={"reassoc", "contract", "arcp", "nsz"})
 def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, affine,
                     hinv, fmean, fnorm, jsum, avec, evec, dsum, bval, dd, p_in, status_in,
-                    max_iter, tol, out_p, out_lam, out_z, out_res2, out_iter,
+                    max_iter, tol, lam_tol, out_p, out_lam, out_z, out_res2, out_iter,
                     out_status):  # pragma: no cover - compiled
     """Joint Gauss-Newton in the shape parameters and the blur-length correction ``lam``.
 
@@ -89,7 +91,8 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
     composition; ``lam`` additively. Outputs: parameters, ``lam`` (px), ZNCC of the model
     ``Fh`` with the warped current subset, the normalised squared residual
     ``|gh - Fh|^2 = 2 - 2 zncc``, iterations, status (``OUT_OF_BOUNDS``, ``DIVERGED``,
-    ``MAX_ITERATIONS`` or ``CONVERGED``).
+    ``MAX_ITERATIONS`` or ``CONVERGED``). Converged when the shape step meets ``tol``
+    (the IC-GN norm) and the length step ``lam_tol`` (px).
     """
     n = rows.shape[0]
     k = 6 if affine else 2
@@ -102,6 +105,8 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
         p = np.empty(k)
         wy = np.empty(order + 1)
         wx = np.empty(order + 1)
+        hbuf = np.empty((size + order, size))
+        grow = np.empty(size)
         for m in range(k):
             p[m] = p_in[pt, m]
             out_p[pt, m] = p_in[pt, m]
@@ -144,45 +149,73 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
             for m in range(k + 1):
                 q[m] = 0.0
             if not affine:
-                # translation: every pixel has the same sub-pixel offset, one set of taps
+                # translation: every pixel has the same sub-pixel offset, so the spline is
+                # separable on one set of taps: one pass along x into hbuf, one along y
                 bx = int(math.floor(xc + p[0]))  # noqa: RUF046 - numba needs the int
                 by = int(math.floor(yc + p[1]))  # noqa: RUF046 - numba needs the int
                 lo = (order - 1) // 2
                 for a in range(order + 1):
                     wy[a] = _bspline(yc + p[1] - by - (a - lo), order)
                     wx[a] = _bspline(xc + p[0] - bx - (a - lo), order)
+                rb = by - half - lo + PAD
+                cb = bx - half - lo + PAD
+                for r in range(size + order):
+                    for j in range(size):
+                        acc = 0.0
+                        for b in range(order + 1):
+                            acc += wx[b] * coef[rb + r, cb + j + b]
+                        hbuf[r, j] = acc
             for i in range(size):
                 dyo = float(i - half)
-                for j in range(size):
-                    dxo = float(j - half)
-                    if affine:
+                if affine:
+                    for j in range(size):
+                        dxo = float(j - half)
                         x = xc + p[0] + (1.0 + p[1]) * dxo + p[2] * dyo
                         y = yc + p[3] + p[4] * dxo + (1.0 + p[5]) * dyo
-                        g = _sample(coef, order, y, x, wy, wx)
-                    else:
-                        g = 0.0
+                        grow[j] = _sample(coef, order, y, x, wy, wx)
+                else:
+                    for j in range(size):
+                        acc = 0.0
                         for a in range(order + 1):
-                            row = coef[by + i - half - lo + a + PAD]
-                            acc = 0.0
-                            for b in range(order + 1):
-                                acc += wx[b] * row[bx + j - half - lo + b + PAD]
-                            g += wy[a] * acc
-                    sg += g
-                    sgg += g * g
-                    sfg += f[r0 + i, c0 + j] * g
-                    tx = gx[r0 + i, c0 + j] * g
-                    ty = gy[r0 + i, c0 + j] * g
-                    if affine:
-                        q[0] += tx
-                        q[1] += tx * dxo
-                        q[2] += tx * dyo
-                        q[3] += ty
-                        q[4] += ty * dxo
-                        q[5] += ty * dyo
-                    else:
-                        q[0] += tx
-                        q[1] += ty
-                    q[k] += dimg[r0 + i, c0 + j] * g
+                            acc += wy[a] * hbuf[i + a, j]
+                        grow[j] = acc
+                # row sums in scalars (a vectorisable reduction)
+                s_g = 0.0
+                s_gg = 0.0
+                s_fg = 0.0
+                s_x = 0.0
+                s_y = 0.0
+                s_xd = 0.0
+                s_yd = 0.0
+                s_d = 0.0
+                ri = r0 + i
+                for j in range(size):
+                    g = grow[j]
+                    cj = c0 + j
+                    tx = gx[ri, cj] * g
+                    ty = gy[ri, cj] * g
+                    s_g += g
+                    s_gg += g * g
+                    s_fg += f[ri, cj] * g
+                    s_x += tx
+                    s_y += ty
+                    s_xd += tx * (j - half)
+                    s_yd += ty * (j - half)
+                    s_d += dimg[ri, cj] * g
+                sg += s_g
+                sgg += s_gg
+                sfg += s_fg
+                if affine:
+                    q[0] += s_x
+                    q[1] += s_xd
+                    q[2] += s_x * dyo
+                    q[3] += s_y
+                    q[4] += s_yd
+                    q[5] += s_y * dyo
+                else:
+                    q[0] += s_x
+                    q[1] += s_y
+                q[k] += s_d
             gm = sg / npx
             dg2 = sgg - npx * gm * gm
             if not dg2 > 1e-12 * (sgg + 1e-30):
@@ -245,7 +278,7 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
             if not finite or abs(lam) > size:
                 st = _DIVERGED
                 break
-            if norm < tol and abs(stp[k]) < tol:
+            if norm < tol and abs(stp[k]) < lam_tol:
                 st = _CONVERGED
                 break
         out_status[pt] = st

@@ -45,6 +45,7 @@ from dicblur.blur import motion_blur
 from dicblur.dic import Correlator, deblur_wiener
 from dicblur.dic.icgn import prepare_subsets
 from dicblur.metrics import directional_sssig, image_gradients
+from dicblur.models.compensated import predict_compensated
 
 OUT = Path(__file__).resolve().parent / "results" / "compensation.json"
 SAMPLE3 = Path("/work/shared/data/real/dicchallenge1_sample3/Sample3_Reference.tif")
@@ -94,8 +95,16 @@ def accuracy(patterns: list[tuple[str, np.ndarray]], blurs: list[float], angles:
         for shape in shapes:
             kw = {"subset": SUBSET, "step": step, "shape": shape, "roi": roi,
                   "noise_sigma": SIGMA}
+            grid = Correlator(ref, **kw)
+            grid_pts = np.stack([grid.rows, grid.cols], axis=1)
             for angle in angles:
-                for w in blurs:
+                a = math.radians(angle)
+                t0 = time.perf_counter()
+                pred = predict_compensated(ref, blurs, noise_sigma=SIGMA, subset=SUBSET,
+                                           points=grid_pts, motion=(math.sin(a), math.cos(a)),
+                                           shape=shape)
+                t_pred = time.perf_counter() - t0
+                for j, w in enumerate(blurs):
                     x = _vector(w, angle)
                     blurred = motion_blur(ref, x, substeps=100, boundary="reflect")
                     a = math.radians(angle)
@@ -136,7 +145,9 @@ def accuracy(patterns: list[tuple[str, np.ndarray]], blurs: list[float], angles:
                     assert pts is not None
                     eq2, fisher = _bounds(blurred, pts, angle, shape)
                     row = {"pattern": name, "shape": shape, "angle": angle, "blur": w,
-                           "bound_eq2": eq2, "bound_fisher": fisher, "n_points": len(pts)}
+                           "bound_eq2": eq2, "bound_fisher": fisher, "n_points": len(pts),
+                           "u_e_predicted_given": float(pred.u_e[j]),
+                           "seconds_prediction": t_pred / len(blurs)}
                     for m, vals in acc.items():
                         arr = np.array(vals)
                         row[f"u_e_{m}"] = float(np.sqrt(np.mean(arr[:, 0] ** 2)))
@@ -149,7 +160,8 @@ def accuracy(patterns: list[tuple[str, np.ndarray]], blurs: list[float], angles:
                     row["blur_identified"] = ls.size / (reps * len(pts))
                     rows.append(row)
                     print(f"{name:10s} {shape:11s} {angle:4.0f} {w:5.1f} | bound "
-                          f"{eq2:.4f} {fisher:.4f} | u_e plain {row['u_e_plain']:.4f} given "
+                          f"{eq2:.4f} {fisher:.4f} pred {pred.u_e[j]:.4f} | u_e plain "
+                          f"{row['u_e_plain']:.4f} given "
                           f"{row['u_e_given']:.4f} deblur {row['u_e_deblur']:.4f} est "
                           f"{row['u_e_estimate']:.4f} | bias given {row['bias_given']:+.4f}"
                           f" est {row['bias_estimate']:+.4f} | W_est "
@@ -233,6 +245,8 @@ def summary(rows: list[dict]) -> dict:
         "estimate_length_std_at_4_max": max(r["blur_length_std"] or np.nan for r in at4),
         "estimate_length_bias_at_4_max": max(abs((r["blur_length_mean"] or np.nan) - 4)
                                              for r in at4),
+        "predicted_given_max_rel_error_w_le_8": max(
+            abs(r["u_e_predicted_given"] / r["u_e_given"] - 1) for r in le8),
         "estimate_max_ratio_to_bound_w_le_8": max(
             ratio(r, "estimate") for r in le8 if r["blur"] > 0),
         "bound_used": "eq. 2 (translation), affine Fisher bound (affine)",

@@ -202,3 +202,40 @@ def test_correlate_cli_blur_compensation(ref: np.ndarray, tmp_path, capsys) -> N
                           (["--blur-compensation", "given", "--blur", "40"], "subset")):
         assert main([*base, *extra]) == 2
         assert needle in capsys.readouterr().err
+
+
+def test_predict_compensated_zero_blur_is_match_score_bound() -> None:
+    from dicblur.metrics import directional_sssig
+    from dicblur.models.compensated import predict_compensated
+
+    img = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=8, softness=0.5)
+    p = predict_compensated(img, [0.0, 4.0], noise_sigma=2.0, subset=21, step=10)
+    pts = np.asarray(dicblur.subset_centres(img.shape, subset=21, step=10))
+    s = directional_sssig(img, pts, subset=21, angle=0.0)
+    assert p.u_e[0] == pytest.approx(math.sqrt(np.mean(2 * 4.0 / s)), rel=1e-12)
+    assert np.all(p.u_blur == 0)
+    # blurring lowers the reference's noise: below the blurred image's static bound
+    assert p.u_e[1] < math.sqrt(2 * 4.0 / p.sssig[1])
+    with pytest.raises(InputError, match="subset"):
+        predict_compensated(img, [25.0], noise_sigma=2.0, subset=21)
+
+
+def test_predict_compensated_against_monte_carlo() -> None:
+    from dicblur.models.compensated import predict_compensated
+
+    img = dicblur.speckle_pattern((128, 128), speckle_size=4, seed=9, softness=0.5)
+    x = np.array([0.0, 6.0])
+    cur = _blurred(img, np.array([0.0, -3.0]), x)
+    c = Correlator(img, subset=21, step=6, roi=(10, 118, 10, 118), shape="translation",
+                   blur="given")
+    pts = np.stack([c.rows, c.cols], axis=1)
+    pred = predict_compensated(img, [6.0], noise_sigma=2.0, subset=21, points=pts)
+    rng = np.random.default_rng(2)
+    var = []
+    for _ in range(4):
+        cc = Correlator(img + rng.normal(0, 2.0, img.shape), subset=21, step=6,
+                        roi=(10, 118, 10, 118), shape="translation", blur="given")
+        r = cc.correlate(cur + rng.normal(0, 2.0, img.shape), blur_vector=x)
+        var.append(np.var(r.u[r.converged], ddof=1))
+    measured = math.sqrt(np.mean(var))
+    assert measured == pytest.approx(float(pred.u_e[0]), rel=0.15)

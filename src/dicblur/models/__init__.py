@@ -24,6 +24,7 @@ from .mismatch import (
     mismatch_model,
 )
 from .model import BlurUncertaintyModel, Prediction
+from .compensated import predict_compensated
 from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern
 from .plan import (
     RULE_OF_THUMB_BLUR,
@@ -67,6 +68,7 @@ __all__ = [
     "parse_quantity",
     "plan_exposure",
     "power_law",
+    "predict_compensated",
     "predict_from_pattern",
     "sssig_decay",
     "taylor_model",

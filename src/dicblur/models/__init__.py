@@ -6,6 +6,7 @@ fitted :class:`BlurUncertaintyModel` and exposure planning. See docs/models.md.
 from __future__ import annotations
 
 from ._result import FitResult, ParameterEstimate
+from .compensated import predict_compensated
 from .decay import (
     combined_model,
     combined_pan_model,
@@ -24,7 +25,6 @@ from .mismatch import (
     mismatch_model,
 )
 from .model import BlurUncertaintyModel, Prediction
-from .compensated import predict_compensated
 from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern
 from .plan import (
     RULE_OF_THUMB_BLUR,

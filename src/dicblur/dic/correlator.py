@@ -683,7 +683,9 @@ class Correlator:
         return np.array([math.sin(rad), math.cos(rad)]), None
 
     def _joint_step(self, entry: _BlurredReference, cur_corr: Correlator, res: DICResult,
-                    max_iter: int = 10) -> tuple[NDArray[np.float64], ...]:
+                    max_iter: int = 10) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                 NDArray[np.float64], NDArray[np.float64],
+                                                 NDArray[np.int64], NDArray[np.uint8]]:
         """Joint (shape, blur length) Gauss-Newton from the compensated IC-GN result."""
         from .kernels_blur import joint_blur_step
 

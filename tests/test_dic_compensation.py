@@ -239,3 +239,39 @@ def test_predict_compensated_against_monte_carlo() -> None:
         var.append(np.var(r.u[r.converged], ddof=1))
     measured = math.sqrt(np.mean(var))
     assert measured == pytest.approx(float(pred.u_e[0]), rel=0.15)
+
+
+def test_campaign_sweeps_with_compensation(tmp_path) -> None:
+    from dicblur.campaign import iter_batches, make_pattern, parse_spec, simulate_batch
+    from dicblur.errors import ConfigError
+
+    img = dicblur.speckle_pattern((96, 96), speckle_size=4, softness=0.7, seed=9)
+    path = tmp_path / "p.tif"
+    dicblur.save_image(path, img * 200.0, bit_depth=16)
+
+    def spec(**dic: object) -> dicblur.CampaignSpec:
+        return parse_spec({
+            "campaign": {"seed": 1},
+            "pattern": [{"name": "p", "path": str(path)}],
+            "blur": {"lengths": [0.0, 6.0], "boundary": "reflect"},
+            "noise": {"model": "per-exposure", "levels": [2.0]},
+            "dic": {"subsets": [21], "step": 8, **dic},
+        })
+
+    plain, comp = spec(), spec(compensation="given")
+    assert plain.content_hash() == spec(compensation="none").content_hash()
+    assert comp.content_hash() != plain.content_hash()
+    out = {}
+    for name, s in (("plain", plain), ("given", comp)):
+        (batch,) = iter_batches(s)
+        out[name] = simulate_batch(make_pattern(s, s.patterns[0]), batch, s)
+    # W = 0: the same matcher; W = 6 px: the mismatch is gone
+    assert out["given"]["u_e"][0] == out["plain"]["u_e"][0]
+    assert out["given"]["u_e"][1] < 0.5 * out["plain"]["u_e"][1]
+    assert abs(out["given"]["bias"][1]) < 0.01
+    with pytest.raises(ConfigError, match=r"dic\.compensation"):
+        spec(compensation="sometimes")
+    with pytest.raises(ConfigError, match="subsets larger"):
+        parse_spec({"campaign": {"seed": 1}, "pattern": [{"name": "p", "path": str(path)}],
+                    "blur": {"lengths": [0.0, 30.0]}, "dic": {"subsets": [21],
+                                                               "compensation": "given"}})

@@ -118,6 +118,12 @@ def test_estimate_recovers_blur(ref: np.ndarray, shape: str) -> None:
     # the direction may come from a vector, whose length only starts the search
     res2 = c.correlate(cur, blur_vector=_vector(2.0, 30.0))
     assert np.abs(res2.blur_length - 4.6).max() < 0.01
+    # the next image starts from this one's length and follows a changed blur
+    x3 = _vector(6.3, 30.0)
+    res3 = c.correlate(_blurred(ref, mean - x3 / 2, x3), blur_angle=30.0)
+    assert res3.blur_length is not None
+    assert np.abs(res3.blur_length - 6.3).max() < 0.01
+    assert np.abs(res3.u - mean[1]).max() < 1e-3
 
 
 def test_estimate_flags_unidentifiable_blur() -> None:

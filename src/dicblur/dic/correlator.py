@@ -753,6 +753,9 @@ class Correlator:
                 return w0, -np.inf
             return w0 + float(np.median(lam[ok])), float(np.median(z[ok]))
 
+        # warm start (the previous image's W0, no length given): skip the sample search
+        # and check W0 on the full pass instead
+        warm = guess is None and self._last_blur_length is not None
         if guess is None:
             guess = self._last_blur_length
         if guess is None:
@@ -760,16 +763,25 @@ class Correlator:
             trials = [(sample_run(w)) for w in cands]
             guess = max(trials, key=lambda t: t[1])[0]
         w0 = grid(guess)
-        for _ in range(8):
-            w_new, _ = sample_run(w0)
-            # a linear step far from W0 is only a direction: move at most 3 px per pass
-            w_new = w0 + max(-3.0, min(3.0, w_new - w0))
-            if grid(w_new) == w0:
+        if not warm:
+            for _ in range(8):
+                w_new, _ = sample_run(w0)
+                # a linear step far from W0 is only a direction: at most 3 px per pass
+                w_new = w0 + max(-3.0, min(3.0, w_new - w0))
+                if grid(w_new) == w0:
+                    break
+                w0 = grid(w_new)
+        for _ in range(4):
+            entry = self._blurred(w0 * e, None, tag="estimate", step=True)
+            base = entry.corr._correlate(cur, initial)
+            p, lam, z, sig, its, st = self._joint_step(entry, entry.corr, base)
+            good_lam = (st == PointStatus.CONVERGED) & np.isfinite(lam)
+            if not warm or not good_lam.any():
                 break
-            w0 = grid(w_new)
-        entry = self._blurred(w0 * e, None, tag="estimate", step=True)
-        base = entry.corr._correlate(cur, initial)
-        p, lam, z, sig, its, st = self._joint_step(entry, entry.corr, base)
+            step = max(-3.0, min(3.0, float(np.median(lam[good_lam]))))
+            if grid(w0 + step) == w0:
+                break
+            w0 = grid(w0 + step)  # the blur changed since the last image
         self._last_blur_length = w0
         identified = (st == PointStatus.CONVERGED) & np.isfinite(sig) & (
             sig <= self.max_blur_sigma)

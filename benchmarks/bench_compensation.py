@@ -253,12 +253,33 @@ def summary(rows: list[dict]) -> dict:
     }
 
 
+def _commit() -> str | None:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                              check=True, cwd=Path(__file__).parent).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--speed-only", action="store_true",
+                    help="only the speed table (writes compensation_speed.json)")
     args = ap.parse_args()
     load0 = os.getloadavg()
     pats = _patterns()
+    if args.speed_only:
+        sp = speed(pats[0][1], 5)
+        path = OUT.with_name("compensation_speed.json")
+        path.write_text(json.dumps({
+            "commit": _commit(), "version": dicblur.__version__,
+            "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
+                        "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
+                        "load_start": load0, "load_end": os.getloadavg()},
+            "pattern": pats[0][0], "speed": sp}, indent=1))
+        print(f"wrote {path}")
+        return
     if args.quick:
         pats = pats[:1]
     blurs = [0.0, 4.0, 8.0] if args.quick else [0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
@@ -270,11 +291,7 @@ def main() -> None:
     print("\ntargets:")
     for k, v in summ.items():
         print(f"  {k}: {v if isinstance(v, str) else round(v, 4)}")
-    try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                                check=True, cwd=Path(__file__).parent).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = None
+    commit = _commit()
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps({
         "commit": commit, "version": dicblur.__version__,

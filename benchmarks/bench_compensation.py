@@ -268,12 +268,13 @@ def main() -> None:
                     help="only the speed table (writes compensation_speed.json)")
     args = ap.parse_args()
     load0 = os.getloadavg()
+    commit = _commit()  # at the start: the code this run imported
     pats = _patterns()
     if args.speed_only:
         sp = speed(pats[0][1], 5)
         path = OUT.with_name("compensation_speed.json")
         path.write_text(json.dumps({
-            "commit": _commit(), "version": dicblur.__version__,
+            "commit": commit, "version": dicblur.__version__,
             "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                         "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
                         "load_start": load0, "load_end": os.getloadavg()},
@@ -291,7 +292,6 @@ def main() -> None:
     print("\ntargets:")
     for k, v in summ.items():
         print(f"  {k}: {v if isinstance(v, str) else round(v, 4)}")
-    commit = _commit()
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps({
         "commit": commit, "version": dicblur.__version__,

@@ -48,7 +48,8 @@ _RETRY = (PointStatus.MAX_ITERATIONS, PointStatus.DIVERGED, PointStatus.LOW_CORR
           PointStatus.OUT_OF_BOUNDS)
 
 
-#: Blurred references kept per Correlator (each holds a prepared reference).
+#: Most blurred references kept per Correlator (each holds a prepared reference; fewer
+#: for large images, see Correlator._blurred).
 _BLUR_CACHE_SIZE = 12
 #: Grid (px) of the blur lengths W0 the estimation blurs the reference to; the per-subset
 #: joint step estimates the remainder (|lam| <= 1/8 px at convergence).
@@ -585,7 +586,9 @@ class Correlator:
         entry = _BlurredReference(corr=corr, index=index, vector=np.array(vec, dtype=float),
                                   step=prep, images=images)
         self._blur_cache[key] = entry
-        while len(self._blur_cache) > _BLUR_CACHE_SIZE:
+        # about 64 bytes per image pixel per entry: keep the cache under ~1 GiB
+        limit = max(2, min(_BLUR_CACHE_SIZE, 2**30 // (64 * self._ref.size)))
+        while len(self._blur_cache) > limit:
             self._blur_cache.popitem(last=False)
         return entry
 

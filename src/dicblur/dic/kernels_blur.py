@@ -159,12 +159,15 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
                     wx[a] = _bspline(xc + p[0] - bx - (a - lo), order)
                 rb = by - half - lo + PAD
                 cb = bx - half - lo + PAD
+                # tap loops outside, pixel loops inside: contiguous, vectorisable
                 for r in range(size + order):
+                    w0 = wx[0]
                     for j in range(size):
-                        acc = 0.0
-                        for b in range(order + 1):
-                            acc += wx[b] * coef[rb + r, cb + j + b]
-                        hbuf[r, j] = acc
+                        hbuf[r, j] = w0 * coef[rb + r, cb + j]
+                    for b in range(1, order + 1):
+                        wb = wx[b]
+                        for j in range(size):
+                            hbuf[r, j] += wb * coef[rb + r, cb + j + b]
             for i in range(size):
                 dyo = float(i - half)
                 if affine:
@@ -174,11 +177,13 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
                         y = yc + p[3] + p[4] * dxo + (1.0 + p[5]) * dyo
                         grow[j] = _sample(coef, order, y, x, wy, wx)
                 else:
+                    w0 = wy[0]
                     for j in range(size):
-                        acc = 0.0
-                        for a in range(order + 1):
-                            acc += wy[a] * hbuf[i + a, j]
-                        grow[j] = acc
+                        grow[j] = w0 * hbuf[i, j]
+                    for a in range(1, order + 1):
+                        wa = wy[a]
+                        for j in range(size):
+                            grow[j] += wa * hbuf[i + a, j]
                 # row sums in scalars (a vectorisable reduction)
                 s_g = 0.0
                 s_gg = 0.0

@@ -215,7 +215,8 @@ def test_predict_compensated_zero_blur_is_match_score_bound() -> None:
     from dicblur.models.compensated import predict_compensated
 
     img = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=8, softness=0.5)
-    p = predict_compensated(img, [0.0, 4.0], noise_sigma=2.0, subset=21, step=10)
+    p = predict_compensated(img, [0.0, 4.0], noise_sigma=2.0, subset=21, step=10,
+                            derivative="central")
     pts = np.asarray(dicblur.subset_centres(img.shape, subset=21, step=10))
     s = directional_sssig(img, pts, subset=21, angle=0.0)
     assert p.u_e[0] == pytest.approx(math.sqrt(np.mean(2 * 4.0 / s)), rel=1e-12)
@@ -281,3 +282,21 @@ def test_campaign_sweeps_with_compensation(tmp_path) -> None:
         parse_spec({"campaign": {"seed": 1}, "pattern": [{"name": "p", "path": str(path)}],
                     "blur": {"lengths": [0.0, 30.0]}, "dic": {"subsets": [21],
                                                                "compensation": "given"}})
+
+
+def test_pattern_predict_cli_compensation(tmp_path, capsys) -> None:
+    import json
+
+    from dicblur import save_image
+    from dicblur.cli import main
+
+    img = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=8, softness=0.5)
+    save_image(tmp_path / "p.tif", img, bit_depth=16)
+    args = ["pattern", "predict", str(tmp_path / "p.tif"), "--noise", "2", "--subset", "21",
+            "--step", "10", "--blur", "0", "--blur", "6"]
+    assert main([*args, "--compensation", "given", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["gain"][0] == pytest.approx(1.0, rel=0.03)  # no blur: the same matcher
+    assert data["gain"][1] > 2.0  # W = 6 px: the mismatch term is gone
+    assert main([*args, "--compensation", "given", "-o", str(tmp_path / "m.json")]) == 2
+    assert "--compensation" in capsys.readouterr().err

@@ -17,7 +17,8 @@ error"), now with the gradients of the *blurred* reference ``f_W``:
 At W = 0 both terms are the match-score bound's halves, ``u_e = sqrt(2 sigma^2 / SSSIG)``;
 with blur the second shrinks (the blurred reference is less noisy), so the compensated
 matcher lands *below* the blurred image's static bound ``sqrt(2 sigma^2 / SSSIG(W))``.
-Gradients are central differences, as :func:`dicblur.sssig` and the campaigns.
+Gradients are the exact derivatives of the engine's cubic B-spline by default (as
+:func:`~dicblur.models.predict_from_pattern`), or central differences.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._validation import as_image, check_choice, check_odd_subset, check_positive, describe
 from ..dic.compensation import blur_reference
 from ..dic.icgn import raw_jacobian
+from ..dic.interpolation import bspline_coefficients, bspline_gradients
 from ..errors import InputError
 from ..metrics import directional_sssig, image_gradients, subset_centres
 from ._checks import as_blur
@@ -60,14 +62,26 @@ def _points(img: NDArray[np.float64], subset: int, step: int | None,
     return pts
 
 
+def _gradients(img: NDArray[np.float64], derivative: str
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(d/drow, d/dcol): exact B-spline derivatives (as the matcher) or central
+    differences (as dicblur.sssig)."""
+    if derivative == "central":
+        gy, gx = image_gradients(img)
+        return gy, gx
+    order = int(derivative[-1])
+    coef = bspline_coefficients(img, order=order, dtype=np.float64)
+    return bspline_gradients(coef, order, img.shape)
+
+
 def _noise_variance(fw: NDArray[np.float64], fww: NDArray[np.float64],
                     pts: NDArray[np.intp], half: int, shape: str,
-                    e: tuple[float, float]) -> NDArray[np.float64]:
+                    e: tuple[float, float], derivative: str) -> NDArray[np.float64]:
     """Per-subset variance along ``e`` (dy, dx) per unit noise variance, px^2 / GL^2."""
     size = 2 * half + 1
     npx = size * size
-    gy, gx = image_gradients(fw)
-    hy, hx = image_gradients(fww)
+    gy, gx = _gradients(fw, derivative)
+    hy, hx = _gradients(fww, derivative)
     r, c = pts[:, 0] - half, pts[:, 1] - half
     views = [np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), npx)
              for a in (fw, gx, gy, hx, hy)]
@@ -110,6 +124,7 @@ def predict_compensated(
     points: ArrayLike | None = None,
     motion: tuple[float, float] = (0.0, 1.0),
     shape: str = "translation",
+    derivative: str = "bspline3",
 ) -> PatternPrediction:
     """Predict u_e(W) of the blur-compensated matcher from the static image.
 
@@ -129,6 +144,10 @@ def predict_compensated(
         Motion direction (only the direction matters).
     shape : {"translation", "affine"}
         Shape function of the matcher.
+    derivative : {"bspline3", "bspline5", "central"}
+        Image gradients: the exact derivatives of the engine's B-spline (default, as
+        :func:`~dicblur.models.predict_from_pattern`) or central differences (as
+        :func:`dicblur.sssig` and the campaigns' ``u_match_score``).
 
     Returns
     -------
@@ -150,6 +169,7 @@ def predict_compensated(
     subset = check_odd_subset(subset)
     sigma = check_positive(noise_sigma, "noise_sigma")
     shape = check_choice(shape, "shape", ("translation", "affine"))
+    derivative = check_choice(derivative, "derivative", ("bspline3", "bspline5", "central"))
     w = as_blur(blur, "blur", increasing=False)
     try:
         my, mx = (float(x) for x in motion)
@@ -171,7 +191,7 @@ def predict_compensated(
         vec = (wl * e[0], wl * e[1])
         fw = blur_reference(img, vec)[0]
         fww = blur_reference(fw, vec)[0]
-        var = _noise_variance(fw, fww, pts, subset // 2, shape, e)
+        var = _noise_variance(fw, fww, pts, subset // 2, shape, e, derivative)
         ok = np.isfinite(var) & (var > 0)
         if ok.sum() < 2:
             raise InputError(f"image: fewer than two subsets keep an intensity gradient at "

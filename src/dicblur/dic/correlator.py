@@ -818,6 +818,11 @@ class Correlator:
                        interpolation=self.interpolation, initial="zero",
                        workers=self.workers)
         c.correlate(img)
+        if self.blur == "estimate":  # the joint (shape, length) step's kernel too
+            e = Correlator(img, subset=self.subset, step=self.step, shape=self.shape,  # type: ignore[arg-type]
+                           interpolation=self.interpolation, initial="zero",
+                           workers=self.workers, blur="estimate")
+            e.correlate(img, blur_vector=(0.0, 1.0))
         return time.perf_counter() - t0
 
 

@@ -93,6 +93,8 @@ def test_bad_blur_vectors(ref: np.ndarray) -> None:
         c.correlate(cur, blur_vector=np.zeros((3, 2)))
     with pytest.raises(InputError, match="blur='given' needs"):
         c.correlate(cur)
+    with pytest.raises(InputError, match="blur_angle"):
+        c.correlate(cur, blur_vector=(0.0, 2.0), blur_angle=30.0)
     plain = Correlator(ref, subset=21, step=20, shape="translation")
     with pytest.raises(InputError, match="blur='none'"):
         plain.correlate(cur, blur_vector=(0.0, 2.0))

@@ -472,6 +472,9 @@ class Correlator:
                 if blur_vector is None:
                     raise InputError("blur_vector=None: blur='given' needs the motion "
                                      "during the exposure (dy, dx) px, e.g. (0.0, 3.5)")
+                if blur_angle is not None:
+                    raise InputError(f"blur_angle={blur_angle!r}: only for blur='estimate'; "
+                                     "with blur='given' the vector holds the direction")
                 vec = check_blur_vector(blur_vector, n_points=self.n_points,
                                         subset=self.subset)
                 return self._correlate_given(cur, initial, vec)

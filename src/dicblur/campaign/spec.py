@@ -47,7 +47,7 @@ Example
     interpolation = "bspline3"
     max_iterations = 50
     tolerance = 1e-4
-    compensation = "none"    # or "given": blur-compensated matcher (linear motion)
+    compensation = "none"    # "given": blur-compensated matcher; "deblur": Wiener baseline
 
     [run]
     blur_chunk = 10          # blur values per task batch (one Correlator per batch)
@@ -80,9 +80,10 @@ NOISE_MODELS = ("per-subframe", "per-exposure", "poisson-gaussian")
 BLUR_METHODS = ("transfer", "rendered")
 GENERATORS = ("speckle", "paper4")
 DIC_SHAPES = ("translation", "affine")
-#: ``dic.compensation``: the plain matcher, or blur-compensated with the known motion
-#: (``Correlator(blur="given")``, issue 18).
-COMPENSATIONS = ("none", "given")
+#: ``dic.compensation``: the plain matcher; blur-compensated with the known motion
+#: (``Correlator(blur="given")``, issue 18); or the deblur baseline (Wiener-deblurred
+#: current image with the known kernel, then the plain matcher).
+COMPENSATIONS = ("none", "given", "deblur")
 INTERPOLATIONS = ("bspline3", "bspline5")
 _MAX_BLUR_VALUES = 100_000
 
@@ -498,7 +499,7 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
 
     compensation = _choice(dic.get("compensation", "none"), "dic.compensation",
                            COMPENSATIONS)
-    if compensation == "given":
+    if compensation != "none":
         if trajectory != "linear":
             raise _err("dic.compensation", compensation,
                        "the compensated matcher models linear motion (a centred box); "

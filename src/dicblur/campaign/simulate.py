@@ -127,7 +127,7 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         One entry per name of :data:`dicblur.campaign.VARIABLES`.
     """
     from ..blur import motion_blur, render_blurred, trajectory_positions
-    from ..dic import Correlator, PointStatus
+    from ..dic import Correlator, PointStatus, deblur_wiener
     from ..metrics import image_gradients, michelson_contrast, mig, rms_contrast
 
     t_start = time.perf_counter()
@@ -155,6 +155,7 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         points=points, shape=spec.dic_shape,  # type: ignore[arg-type]
         interpolation=spec.interpolation,
         max_iterations=spec.max_iterations, tolerance=spec.tolerance, workers=1,
+        blur="given" if spec.compensation == "given" else "none",
     )
     sssig_ref = float(np.mean(directional_sssig(reference, points, subset=batch.subset,
                                                 angle=batch.angle)))
@@ -186,7 +187,14 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         true_dy, true_dx = w @ pos
         seed = task_seed(spec.seed, "current", pattern=batch.pattern, angle=batch.angle,
                          noise=batch.noise, blur=length, rep=batch.rep)
-        result = correlator.correlate(_noisy(blurred, spec, batch.noise, seed))
+        noisy = _noisy(blurred, spec, batch.noise, seed)
+        if spec.compensation == "given":  # the known motion of the exposure (issue 18)
+            result = correlator.correlate(noisy, blur_vector=motion)
+        elif spec.compensation == "deblur":  # the published baseline, known kernel
+            result = correlator.correlate(deblur_wiener(
+                noisy, motion, _effective_noise(spec, batch.noise, blurred)))
+        else:
+            result = correlator.correlate(noisy)
         ok = np.asarray(result.status) == int(PointStatus.CONVERGED)
         along = result.u * ca + result.v * sa
         across = -result.u * sa + result.v * ca

@@ -47,6 +47,7 @@ Example
     interpolation = "bspline3"
     max_iterations = 50
     tolerance = 1e-4
+    compensation = "none"    # "given": blur-compensated matcher; "deblur": Wiener baseline
 
     [run]
     blur_chunk = 10          # blur values per task batch (one Correlator per batch)
@@ -81,6 +82,10 @@ NOISE_MODELS = ("per-subframe", "per-exposure", "poisson-gaussian")
 BLUR_METHODS = ("transfer", "rendered")
 GENERATORS = ("speckle", "paper4")
 DIC_SHAPES = ("translation", "affine")
+#: ``dic.compensation``: the plain matcher; blur-compensated with the known motion
+#: (``Correlator(blur="given")``, issue 18); or the deblur baseline (Wiener-deblurred
+#: current image with the known kernel, then the plain matcher).
+COMPENSATIONS = ("none", "given", "deblur")
 INTERPOLATIONS = ("bspline3", "bspline5")
 _MAX_BLUR_VALUES = 100_000
 MAX_TASKS = 10_000_000
@@ -92,7 +97,8 @@ _SECTIONS = {
     "blur": {"lengths", "angles", "trajectory", "trajectory_params", "method", "substeps",
              "boundary", "supersample"},
     "noise": {"model", "levels", "full_well"},
-    "dic": {"subsets", "step", "shape", "interpolation", "max_iterations", "tolerance"},
+    "dic": {"subsets", "step", "shape", "interpolation", "max_iterations", "tolerance",
+            "compensation"},
     "run": {"blur_chunk"},
 }
 _PATTERN_KEYS = {"name", "generator", "path", "crop", "shape", "speckle_size", "density",
@@ -166,6 +172,7 @@ class CampaignSpec:
     subsets: tuple[int, ...] = (31,)
     step: int = 10
     dic_shape: str = "translation"
+    compensation: str = "none"
     interpolation: str = "bspline3"
     max_iterations: int = 50
     tolerance: float = 1e-4
@@ -208,7 +215,10 @@ class CampaignSpec:
                       **({} if self.full_well is None else {"full_well": self.full_well})},
             "dic": {"subsets": list(self.subsets), "step": self.step,
                     "shape": self.dic_shape, "interpolation": self.interpolation,
-                    "max_iterations": self.max_iterations, "tolerance": self.tolerance},
+                    "max_iterations": self.max_iterations, "tolerance": self.tolerance,
+                    # only when on: the hashes of existing specs stay what they were
+                    **({} if self.compensation == "none"
+                       else {"compensation": self.compensation})},
             "run": {"blur_chunk": self.blur_chunk},
         }
 
@@ -527,6 +537,18 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
     if tolerance <= 0:
         raise _err("dic.tolerance", tolerance, "must be > 0")
 
+    compensation = _choice(dic.get("compensation", "none"), "dic.compensation",
+                           COMPENSATIONS)
+    if compensation != "none":
+        if trajectory != "linear":
+            raise _err("dic.compensation", compensation,
+                       "the compensated matcher models linear motion (a centred box); "
+                       "use blur.trajectory = \"linear\"")
+        if max(lengths) >= min(subsets):
+            raise _err("dic.compensation", compensation,
+                       f"blur lengths up to {max(lengths):g} px need subsets larger than "
+                       f"that (smallest: {min(subsets)} px)")
+
     blur_chunk = _int(sec["run"].get("blur_chunk", 10), "run.blur_chunk", minimum=1)
     blur_chunk = min(blur_chunk, len(lengths))
 
@@ -552,7 +574,8 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
         trajectory=trajectory, trajectory_params=dict(tparams), method=method,
         substeps=substeps, boundary=boundary, supersample=supersample, noise_model=model,
         noise_levels=levels, full_well=full_well, subsets=subsets, step=step,
-        dic_shape=dic_shape, interpolation=interpolation, max_iterations=max_iterations,
+        dic_shape=dic_shape, compensation=compensation, interpolation=interpolation,
+        max_iterations=max_iterations,
         tolerance=tolerance, repetitions=repetitions, blur_chunk=blur_chunk,
         description=description, base_dir=str(Path(base_dir).resolve()),
     )

@@ -6,6 +6,7 @@ import json
 import math
 import warnings
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -129,6 +130,10 @@ def predict(
     out: Path | None = typer.Option(None, "-o", "--out",
                                     help="Also write a model JSON for dicblur predict/plan."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    compensation: str = typer.Option(
+        "none", "--compensation",
+        help="'given': also predict the blur-compensated matcher (dicblur correlate "
+             "--blur-compensation given) and the gain over the plain one."),
 ) -> None:
     """Predict u_e(W) of IMAGE from the static image alone (no simulation, no DIC run)."""
     from rich.table import Table
@@ -140,6 +145,11 @@ def predict(
         raise InputError(f"--shape={shape!r}: choose 'translation' or 'affine'")
     if out is not None:
         check_output(out, "--out")
+    if compensation not in ("none", "given"):
+        raise InputError(f"--compensation={compensation!r}: choose 'none' or 'given'")
+    if compensation == "given" and (out is not None or subpixel is not None):
+        raise InputError("--compensation=given: prints the compensated prediction only; "
+                         "drop -o/--out and --subpixel")
     img = load_image(image)
     a = math.radians(angle)
     motion = (math.sin(a), math.cos(a))
@@ -154,6 +164,10 @@ def predict(
     pred = predict_from_pattern(img, w, noise_sigma=noise, subset=subset, step=step,
                                 motion=motion, shape=shape,  # type: ignore[arg-type]
                                 subpixel=sp)
+    if compensation == "given":
+        _print_compensated(img, pred, image, noise=noise, subset=subset, step=step,
+                           motion=motion, shape=shape, angle=angle, as_json=as_json)
+        return
     if out is not None:
         model = model_from_pattern(img, noise_sigma=noise, subset=subset, step=step,
                                    motion=motion, shape=shape,  # type: ignore[arg-type]
@@ -183,6 +197,35 @@ def predict(
                           "rows from there on do not describe DIC")
     if out is not None:
         console.print(f"wrote {out}: use it with dicblur predict / dicblur plan")
+
+def _print_compensated(img: Any, pred: Any, image: Path, *, noise: float, subset: int,
+                       step: int | None, motion: tuple[float, float], shape: str,
+                       angle: float, as_json: bool) -> None:
+    """Plain and blur-compensated predictions side by side (issue 18)."""
+    from rich.table import Table
+
+    from ..models.compensated import predict_compensated
+
+    comp = predict_compensated(img, pred.blur, noise_sigma=noise, subset=subset, step=step,
+                               motion=motion, shape=shape)
+    gain = pred.u_e / comp.u_e
+    if as_json:
+        print_json({"blur": pred.blur.tolist(), "u_e": pred.u_e.tolist(),
+                    "u_e_compensated": comp.u_e.tolist(), "gain": gain.tolist(),
+                    "sssig": pred.sssig.tolist(), "noise_sigma": noise, "subset": subset,
+                    "shape": shape, "angle": angle, "compensation": "given"})
+        return
+    table = Table(title=f"plain and blur-compensated matcher: {image} (noise {noise:g} GL, "
+                        f"subset {subset} px, {shape}, motion at {angle:g} deg)")
+    for col in ("W (px)", "u_e plain (px)", "u_e compensated (px)", "gain",
+                "static bound (px)"):
+        table.add_column(col, justify="right")
+    for j in range(pred.blur.size):
+        bound = math.sqrt(2.0 * noise ** 2 / comp.sssig[j])
+        table.add_row(f"{pred.blur[j]:g}", f"{pred.u_e[j]:.4g}", f"{comp.u_e[j]:.4g}",
+                      f"{gain[j]:.2f}x", f"{bound:.4g}")
+    console.print(table)
+
 
 def noise_command(
     image_a: Path = typer.Argument(..., help="First image of a static scene."),

@@ -8,10 +8,11 @@ Stages, one module each (OpenCorr/DICe style): :mod:`.interpolation`, :mod:`.ini
 
 from __future__ import annotations
 
+from .compensation import blur_reference, deblur_wiener
 from .correlator import Correlator, correlate
 from .outliers import neighbour_median, normalized_median_test
 from .result import DICResult
 from .status import PointStatus
 
-__all__ = ["Correlator", "DICResult", "PointStatus", "correlate", "neighbour_median",
-           "normalized_median_test"]
+__all__ = ["Correlator", "DICResult", "PointStatus", "blur_reference", "correlate",
+           "deblur_wiener", "neighbour_median", "normalized_median_test"]

@@ -7,8 +7,11 @@ ZNSSD criterion (:mod:`.icgn`, compiled in :mod:`.kernels`), result (:mod:`.resu
 
 from __future__ import annotations
 
+import math
 import time
+from collections import OrderedDict
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numba
@@ -27,6 +30,13 @@ from .._validation import (
 from ..errors import InputError
 from ..metrics import image_gradients, subset_centres
 from . import kernels
+from .compensation import (
+    BLUR_MODES,
+    blur_reference,
+    check_blur_vector,
+    noise_gain_slope,
+    prepare_blur_step,
+)
 from .icgn import N_PARAMS, prepare_subsets
 from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
@@ -37,6 +47,7 @@ from .status import PointStatus
 __all__ = ["INITIAL_METHODS", "SHAPES", "Correlator", "correlate"]
 
 Shape = Literal["affine", "translation"]
+BlurMode = Literal["none", "given", "estimate"]
 SHAPES: tuple[str, ...] = ("affine", "translation")
 #: ``fftcc``: global phase correlation, then per-subset FFT-CC for the POIs that fail;
 #: ``subset``: per-subset FFT-CC for every POI; ``zero``: start every POI at (0, 0).
@@ -53,6 +64,29 @@ RETRY_BUDGET = 4
 PROBE_CHI2 = 10.0
 #: Only POIs farther than this (px) from their neighbours' median are probed.
 PROBE_DISTANCE = 0.05
+
+
+#: Most blurred references kept per Correlator (each holds a prepared reference; fewer
+#: for large images, see Correlator._blurred).
+_BLUR_CACHE_SIZE = 12
+#: Grid (px) of the blur lengths W0 the estimation blurs the reference to; the per-subset
+#: joint step estimates the remainder (|lam| <= 1/8 px at convergence).
+_BLUR_GRID = 0.25
+#: Convergence of the blur length in the joint step, px (its random error is 0.01-0.1 px).
+_BLUR_TOLERANCE = 1e-3
+#: Most POIs the estimation's image-level search of W0 uses.
+_BLUR_SAMPLE = 64
+
+
+@dataclass(frozen=True)
+class _BlurredReference:
+    """A plain Correlator on the blurred reference, and (estimation) the joint-step data."""
+
+    corr: Correlator
+    index: NDArray[np.intp] | None
+    vector: NDArray[np.float64]
+    step: Any = None
+    images: tuple[NDArray[np.float64], ...] = ()
 
 
 def _check_int(value: Any, name: str, minimum: int) -> int:
@@ -113,6 +147,15 @@ class Correlator:
         (strong blur) the test trims the tails of the field and biases its std low.
     workers : int, optional
         Threads of the compiled kernels (default: all numba threads).
+    blur : {"none", "given", "estimate"}
+        Motion-blur compensation (docs/dic.md, "Blur-compensated correlation"): ``none``
+        correlates the sharp reference as is; ``given`` compares each current image with
+        the reference blurred by the ``blur_vector`` passed to :meth:`correlate`;
+        ``estimate`` also estimates the blur length along a given direction per subset.
+        With compensation the displacement is the mean position during the exposure.
+    max_blur_sigma : float
+        ``blur="estimate"``: a subset whose estimated blur length has a larger standard
+        error (px) is flagged as not identifying the blur (``DICResult.blur_identified``).
 
     Examples
     --------
@@ -130,8 +173,11 @@ class Correlator:
                  initial: str = "fftcc", max_iterations: int = 50, tolerance: float = 1e-4,
                  noise_sigma: float | None = None, min_zncc: float = 0.6,
                  workers: int | None = None, max_residual: float | None = 2.0,
-                 median_test: bool = False) -> None:
+                 median_test: bool = False, blur: BlurMode = "none",
+                 max_blur_sigma: float = 0.5) -> None:
         t0 = time.perf_counter()
+        self.blur: str = check_choice(blur, "blur", BLUR_MODES)
+        self.max_blur_sigma = check_positive(max_blur_sigma, "max_blur_sigma")
         ref = as_image(reference, "reference", min_size=3)
         self.subset = check_odd_subset(subset)
         check_subset_fits(self.subset, ref.shape)
@@ -214,6 +260,9 @@ class Correlator:
             bad = status0 != 0
             self.predicted_sigma_u = np.where(bad, np.nan, pu)
             self.predicted_sigma_v = np.where(bad, np.nan, pv)
+        # blur compensation: prepared blurred references by (blur vector, point set)
+        self._blur_cache: OrderedDict[tuple[Any, ...], _BlurredReference] = OrderedDict()
+        self._last_blur_length: float | None = None
         self.prepare_time_s = time.perf_counter() - t0
         #: Timings (s) of the last :meth:`correlate` call: prefilter, initial, icgn, total.
         self.last_timings: dict[str, float] = {}
@@ -445,7 +494,9 @@ class Correlator:
         p0[:, 1 if k == 2 else 3] = v
         return p0
 
-    def correlate(self, current: ArrayLike, *, initial: ArrayLike | None = None) -> DICResult:
+    def correlate(self, current: ArrayLike, *, initial: ArrayLike | None = None,
+                  blur_vector: ArrayLike | None = None,
+                  blur_angle: float | None = None) -> DICResult:
         """Measure the displacement of every POI in ``current``.
 
         Parameters
@@ -455,10 +506,21 @@ class Correlator:
         initial : array_like, shape (n, 2) or (2,), optional
             Initial guess ``(u, v)`` per POI (or one for all), px; overrides the
             initial-guess method.
+        blur_vector : array_like, shape (2,) or (n, 2), optional
+            Motion during the exposure ``(dy, dx)`` px, as :func:`dicblur.motion_blur`
+            takes it, for the whole image or per POI. Required with ``blur="given"``
+            (blur length ``hypot(dy, dx)`` shorter than the subset); with
+            ``blur="estimate"`` one vector gives the direction and the starting length.
+        blur_angle : float, optional
+            ``blur="estimate"`` without ``blur_vector``: the blur direction, degrees from
+            +x (columns) towards +y (rows), as ``dicblur blur --angle``.
 
         Returns
         -------
         DICResult
+            With compensation the displacement is the mean position during the exposure
+            (``d0 + X / 2`` for a target moving from ``d0`` to ``d0 + X``);
+            ``blur="estimate"`` adds ``blur_length``, ``blur_sigma``, ``blur_identified``.
         """
         cur = as_image(current, "current", min_size=3)
         if cur.shape != self.image_shape:
@@ -468,7 +530,23 @@ class Correlator:
         if self.workers is not None:
             numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
         try:
-            return self._correlate(cur, initial)
+            if self.blur == "none":
+                if blur_vector is not None or blur_angle is not None:
+                    raise InputError(f"blur_vector={describe(blur_vector)}: this Correlator "
+                                     "has blur='none'; create it with blur='given' or "
+                                     "blur='estimate' to compensate the blur")
+                return self._correlate(cur, initial)
+            if self.blur == "given":
+                if blur_vector is None:
+                    raise InputError("blur_vector=None: blur='given' needs the motion "
+                                     "during the exposure (dy, dx) px, e.g. (0.0, 3.5)")
+                if blur_angle is not None:
+                    raise InputError(f"blur_angle={blur_angle!r}: only for blur='estimate'; "
+                                     "with blur='given' the vector holds the direction")
+                vec = check_blur_vector(blur_vector, n_points=self.n_points,
+                                        subset=self.subset)
+                return self._correlate_given(cur, initial, vec)
+            return self._correlate_estimate(cur, initial, blur_vector, blur_angle)
         finally:
             numba.set_num_threads(old_threads)
 
@@ -654,6 +732,260 @@ class Correlator:
             st[probe[gain > PROBE_CHI2]] = PointStatus.OUTLIER
         return noise_var
 
+    # ------------------------------------------------------------------ blur compensation
+    def _blurred(self, vec: NDArray[np.float64], index: NDArray[np.intp] | None, *,
+                 tag: str = "given", step: bool = False) -> _BlurredReference:
+        """The prepared blurred reference for ``vec`` on the POIs ``index`` (None: all)."""
+        key = (tag, float(vec[0]), float(vec[1]),
+               None if index is None else index.tobytes(), step)
+        hit = self._blur_cache.get(key)
+        if hit is not None:
+            self._blur_cache.move_to_end(key)
+            return hit
+        blurred, dimg = blur_reference(self._ref, vec, derivative=step)
+        sel = self._all if index is None else index
+        pts = np.stack([self.rows[sel], self.cols[sel]], axis=1)
+        corr = Correlator(blurred, subset=self.subset, step=self.step, points=pts,
+                          shape=self.shape,  # type: ignore[arg-type]
+                          interpolation=self.interpolation, initial=self.initial,
+                          max_iterations=self.max_iterations, tolerance=self.tolerance,
+                          noise_sigma=self.noise_sigma, min_zncc=self.min_zncc,
+                          workers=self.workers)
+        prep = None
+        images: tuple[NDArray[np.float64], ...] = ()
+        if step:
+            assert dimg is not None
+            coef = bspline_coefficients(blurred, order=self.order, dtype=np.float64)
+            gy, gx = bspline_gradients(coef, self.order, self.image_shape)
+            rc = np.clip(pts[:, 0], self.half, self.image_shape[0] - 1 - self.half)
+            cc = np.clip(pts[:, 1], self.half, self.image_shape[1] - 1 - self.half)
+            prep = prepare_blur_step(blurred, gx, gy, dimg, rc, cc, self.half, self.shape)
+            images = (blurred, gx, gy, dimg)
+        entry = _BlurredReference(corr=corr, index=index, vector=np.array(vec, dtype=float),
+                                  step=prep, images=images)
+        self._blur_cache[key] = entry
+        # about 64 bytes per image pixel per entry: keep the cache under ~1 GiB
+        limit = max(2, min(_BLUR_CACHE_SIZE, 2**30 // (64 * self._ref.size)))
+        while len(self._blur_cache) > limit:
+            self._blur_cache.popitem(last=False)
+        return entry
+
+    @staticmethod
+    def _initial_for(initial: ArrayLike | None, index: NDArray[np.intp], n: int
+                     ) -> ArrayLike | None:
+        if initial is None:
+            return None
+        arr = np.asarray(initial, dtype=np.float64)
+        return arr[index] if arr.shape == (n, 2) else arr
+
+    def _blur_info(self, res: DICResult, **extra: Any) -> DICResult:
+        info = dict(self._info_base(res.info.get("initial", self.initial)))
+        info.update(extra)
+        return replace(res, info=info)
+
+    def _info_base(self, method: str) -> dict[str, Any]:
+        from .. import __version__
+
+        return {"subset": self.subset, "step": self.step, "shape": self.shape,
+                "interpolation": self.interpolation, "initial": method,
+                "max_iterations": self.max_iterations, "tolerance": self.tolerance,
+                "noise_sigma": self.noise_sigma, "min_zncc": self.min_zncc,
+                "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
+                "dicblur_version": __version__}
+
+    def _correlate_given(self, cur: NDArray[np.float64], initial: ArrayLike | None,
+                         vec: NDArray[np.float64]) -> DICResult:
+        t0 = time.perf_counter()
+        n = self.n_points
+        if vec.ndim == 2 and np.all(vec == vec[:1]):
+            vec = vec[0]
+        if vec.ndim == 1:
+            if vec[0] == 0.0 and vec[1] == 0.0:
+                # zero blur: the blurred reference is the reference (bit-identical path)
+                res = self._correlate(cur, initial)
+            else:
+                entry = self._blurred(vec, None)
+                res = entry.corr._correlate(cur, initial)
+                self.last_timings = dict(entry.corr.last_timings)
+            self.last_timings["total_with_blur_s"] = time.perf_counter() - t0
+            return self._blur_info(res, blur_compensation="given",
+                                   blur_dy=float(vec[0]), blur_dx=float(vec[1]))
+        # one vector per POI: group the POIs that share a vector
+        uniq, inverse = np.unique(vec, axis=0, return_inverse=True)
+        inverse = np.asarray(inverse).ravel()
+        k = N_PARAMS[self.shape]
+        p = np.full((n, k), np.nan)
+        z = np.full(n, np.nan)
+        it = np.zeros(n, np.int64)
+        st = np.zeros(n, np.uint8)
+        pu = np.full(n, np.nan) if self.noise_sigma is not None else None
+        pv = np.full(n, np.nan) if self.noise_sigma is not None else None
+        for g, v in enumerate(uniq):
+            idx = np.flatnonzero(inverse == g).astype(np.intp)
+            if v[0] == 0.0 and v[1] == 0.0:
+                entry = self._blurred(np.zeros(2), idx, tag="plain")
+            else:
+                entry = self._blurred(v, idx)
+            r = entry.corr._correlate(cur, self._initial_for(initial, idx, n))
+            p[idx], z[idx], it[idx], st[idx] = r.params, r.zncc, r.iterations, r.status
+            if pu is not None and pv is not None:
+                assert r.predicted_sigma_u is not None and r.predicted_sigma_v is not None
+                pu[idx], pv[idx] = r.predicted_sigma_u, r.predicted_sigma_v
+        self.last_timings = {"total_s": time.perf_counter() - t0}
+        info = self._info_base(self.initial)
+        info.update(blur_compensation="given", blur_vectors=len(uniq))
+        return DICResult(rows=self.rows.copy(), cols=self.cols.copy(), u=p[:, 0].copy(),
+                         v=p[:, 1 if k == 2 else 3].copy(), params=p, zncc=z,
+                         iterations=it, status=st, predicted_sigma_u=pu,
+                         predicted_sigma_v=pv, info=info)
+
+    def _blur_direction(self, blur_vector: ArrayLike | None, blur_angle: float | None
+                        ) -> tuple[NDArray[np.float64], float | None]:
+        if blur_vector is not None:
+            vec = check_blur_vector(blur_vector, n_points=self.n_points, subset=self.subset)
+            if vec.ndim != 1:
+                raise InputError(f"blur_vector={describe(vec)}: blur='estimate' takes one "
+                                 "vector (dy, dx) px: its direction and starting length")
+            length = math.hypot(float(vec[0]), float(vec[1]))
+            if length == 0.0:
+                raise InputError("blur_vector=(0, 0): blur='estimate' needs the direction; "
+                                 "give a non-zero vector or blur_angle (degrees)")
+            return vec / length, length
+        if blur_angle is None:
+            raise InputError("blur_angle=None: blur='estimate' needs the blur direction; "
+                             "pass blur_angle (degrees from +x towards +y) or blur_vector")
+        try:
+            ang = float(blur_angle)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"blur_angle={describe(blur_angle)}: expected degrees") from exc
+        if not math.isfinite(ang):
+            raise InputError(f"blur_angle={blur_angle!r}: must be a finite number (degrees)")
+        rad = math.radians(ang)
+        return np.array([math.sin(rad), math.cos(rad)]), None
+
+    def _joint_step(self, entry: _BlurredReference, cur_corr: Correlator, res: DICResult,
+                    max_iter: int = 10) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                 NDArray[np.float64], NDArray[np.float64],
+                                                 NDArray[np.int64], NDArray[np.uint8]]:
+        """Joint (shape, blur length) Gauss-Newton from the compensated IC-GN result."""
+        from .kernels_blur import joint_blur_step
+
+        sp = entry.step
+        f0, gx, gy, dimg = entry.images
+        c = cur_corr
+        n = len(res)
+        k = res.params.shape[1]
+        out_p = np.empty((n, k))
+        out_lam = np.empty(n)
+        out_z = np.empty(n)
+        out_r = np.empty(n)
+        out_i = np.empty(n, np.int64)
+        out_s = np.empty(n, np.uint8)
+        st_in = np.where(res.status == PointStatus.CONVERGED, 0, res.status).astype(np.uint8)
+        st_in[~sp.ok & (st_in == 0)] = int(PointStatus.LOW_TEXTURE)
+        joint_blur_step(c._coef_buf, self.image_shape[0], self.image_shape[1], self.order,
+                        f0, gx, gy, dimg, c.rows, c.cols, self.half, self.shape == "affine",
+                        sp.hinv, sp.fmean, sp.fnorm, sp.jsum, sp.avec, sp.evec, sp.dsum,
+                        sp.bval, sp.dd, np.ascontiguousarray(res.params), st_in, max_iter,
+                        self.tolerance, _BLUR_TOLERANCE, out_p, out_lam, out_z, out_r, out_i, out_s)
+        npx = self.subset ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sig = np.sqrt(np.maximum(out_r, 0.0) / (npx - k - 1) * sp.hinv[:, k, k])
+            if self.noise_sigma:
+                # the blurred noisy reference loses noise as W grows: remove the lean
+                # -n sigma^2 kappa'(W0) / 2 (Df^-2 hinv) of the length (noise_gain_slope)
+                length = math.hypot(float(entry.vector[0]), float(entry.vector[1]))
+                slope = noise_gain_slope(length, entry.vector / length)
+                out_lam += (sp.hinv[:, k, k] / np.where(sp.fnorm > 0, sp.fnorm, 1.0) ** 2
+                            * npx * self.noise_sigma ** 2 * slope / 2.0)
+        return out_p, out_lam, out_z, sig, out_i, out_s
+
+    def _correlate_estimate(self, cur: NDArray[np.float64], initial: ArrayLike | None,
+                            blur_vector: ArrayLike | None, blur_angle: float | None
+                            ) -> DICResult:
+        """Blur length along a fixed direction, estimated with the displacement.
+
+        1. image level, on up to 64 spread POIs: compensated IC-GN at ``W0`` (a 0.25 px
+           grid), then the joint step; ``W0`` <- the grid length nearest
+           ``W0 + median(lam)`` until it stays (a coarse search over 1..11 px starts it
+           when no length is known);
+        2. every POI: compensated IC-GN at the final ``W0``, then the joint step gives the
+           per-subset blur length ``W0 + lam``, its standard error and the displacement.
+        """
+        t0 = time.perf_counter()
+        e, guess = self._blur_direction(blur_vector, blur_angle)
+        wmax = self.subset - 1.0
+        n = self.n_points
+        good = np.flatnonzero(self._status0 == 0)
+        if good.size == 0:
+            good = self._all
+        sample = (good if good.size <= _BLUR_SAMPLE else
+                  good[np.linspace(0, good.size - 1, _BLUR_SAMPLE).round().astype(np.intp)])
+
+        def grid(w: float) -> float:
+            return float(min(max(round(w / _BLUR_GRID) * _BLUR_GRID, 0.5), wmax))
+
+        def sample_run(w0: float) -> tuple[float, float]:
+            entry = self._blurred(w0 * e, sample, tag="estimate", step=True)
+            r = entry.corr._correlate(cur, self._initial_for(initial, sample, n))
+            _, lam, z, _, _, s = self._joint_step(entry, entry.corr, r)
+            ok = (s == PointStatus.CONVERGED) & np.isfinite(lam)
+            if not ok.any():
+                return w0, -np.inf
+            return w0 + float(np.median(lam[ok])), float(np.median(z[ok]))
+
+        # warm start (the previous image's W0, no length given): skip the sample search
+        # and check W0 on the full pass instead
+        warm = guess is None and self._last_blur_length is not None
+        if guess is None:
+            guess = self._last_blur_length
+        if guess is None:
+            cands = [w for w in (1.0, 3.0, 6.0, 10.0) if w <= wmax] or [grid(wmax / 2)]
+            trials = [(sample_run(w)) for w in cands]
+            guess = max(trials, key=lambda t: t[1])[0]
+        w0 = grid(guess)
+        if not warm:
+            for _ in range(8):
+                w_new, _ = sample_run(w0)
+                # a linear step far from W0 is only a direction: at most 3 px per pass
+                w_new = w0 + max(-3.0, min(3.0, w_new - w0))
+                if grid(w_new) == w0:
+                    break
+                w0 = grid(w_new)
+        for _ in range(4):
+            entry = self._blurred(w0 * e, None, tag="estimate", step=True)
+            base = entry.corr._correlate(cur, initial)
+            p, lam, z, sig, its, st = self._joint_step(entry, entry.corr, base)
+            good_lam = (st == PointStatus.CONVERGED) & np.isfinite(lam)
+            if not warm or not good_lam.any():
+                break
+            step = max(-3.0, min(3.0, float(np.median(lam[good_lam]))))
+            if grid(w0 + step) == w0:
+                break
+            w0 = grid(w0 + step)  # the blur changed since the last image
+        self._last_blur_length = w0
+        identified = (st == PointStatus.CONVERGED) & np.isfinite(sig) & (
+            sig <= self.max_blur_sigma)
+        # a subset that cannot tell its own blur keeps the displacement at the image's W0
+        keep = ~identified
+        p[keep] = base.params[keep]
+        z[keep] = base.zncc[keep]
+        st = np.where(keep, base.status, st).astype(np.uint8)
+        st[(st == PointStatus.CONVERGED) & ~(z >= self.min_zncc)] = int(
+            PointStatus.LOW_CORRELATION)
+        k = p.shape[1]
+        length = np.where(np.isfinite(lam), w0 + lam, np.nan)
+        self.last_timings = {"total_s": time.perf_counter() - t0}
+        info = self._info_base(base.info.get("initial", self.initial))
+        info.update(blur_compensation="estimate", blur_dir_dy=float(e[0]),
+                    blur_dir_dx=float(e[1]), blur_w0=w0)
+        return DICResult(rows=self.rows.copy(), cols=self.cols.copy(), u=p[:, 0].copy(),
+                         v=p[:, 1 if k == 2 else 3].copy(), params=p, zncc=z,
+                         iterations=base.iterations + its, status=st,
+                         predicted_sigma_u=base.predicted_sigma_u,
+                         predicted_sigma_v=base.predicted_sigma_v, info=info,
+                         blur_length=length, blur_sigma=sig, blur_identified=identified)
+
     def warmup(self) -> float:
         """Compile (or load from the numba cache) the kernels of this configuration on a
         tiny image and return the seconds it took (the first call's compile time)."""
@@ -664,6 +996,11 @@ class Correlator:
                        interpolation=self.interpolation, initial="zero",
                        workers=self.workers, median_test=self.median_test)
         c.correlate(img)
+        if self.blur == "estimate":  # the joint (shape, length) step's kernel too
+            e = Correlator(img, subset=self.subset, step=self.step, shape=self.shape,  # type: ignore[arg-type]
+                           interpolation=self.interpolation, initial="zero",
+                           workers=self.workers, blur="estimate")
+            e.correlate(img, blur_vector=(0.0, 1.0))
         return time.perf_counter() - t0
 
 

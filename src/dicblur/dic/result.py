@@ -51,6 +51,13 @@ class DICResult:
         ``sqrt(2 sigma^2 / SSSIG)`` (translation) or the Fisher bound of the affine fit.
     info : mapping
         Settings and provenance (subset, step, shape, interpolation, noise_sigma, version).
+    blur_length, blur_sigma : ndarray, shape (n,), or None
+        ``blur="estimate"``: the blur length estimated per POI along the given direction
+        and its standard error, px (NaN where the joint step did not converge).
+    blur_identified : ndarray of bool, shape (n,), or None
+        ``blur="estimate"``: the subset's texture tells its blur from the noise
+        (``blur_sigma <= max_blur_sigma``); elsewhere the displacement is the one at the
+        image's blur length.
     """
 
     rows: NDArray[np.int64]
@@ -64,6 +71,9 @@ class DICResult:
     predicted_sigma_u: NDArray[np.float64] | None = None
     predicted_sigma_v: NDArray[np.float64] | None = None
     info: Mapping[str, Any] = field(default_factory=dict)
+    blur_length: NDArray[np.float64] | None = None
+    blur_sigma: NDArray[np.float64] | None = None
+    blur_identified: NDArray[np.bool_] | None = None
 
     @property
     def converged(self) -> NDArray[np.bool_]:
@@ -154,6 +164,11 @@ class DICResult:
         if self.predicted_sigma_u is not None and self.predicted_sigma_v is not None:
             data["predicted_sigma_u"] = ("point", self.predicted_sigma_u, {"units": "px"})
             data["predicted_sigma_v"] = ("point", self.predicted_sigma_v, {"units": "px"})
+        if self.blur_length is not None and self.blur_sigma is not None:
+            data["blur_length"] = ("point", self.blur_length, {"units": "px"})
+            data["blur_sigma"] = ("point", self.blur_sigma, {"units": "px"})
+        if self.blur_identified is not None:
+            data["blur_identified"] = ("point", self.blur_identified.astype(np.uint8))
         attrs = {k: (v if isinstance(v, int | float | str) else str(v))
                  for k, v in self.info.items() if v is not None}
         return xr.Dataset(
@@ -173,6 +188,9 @@ class DICResult:
         pred = self.predicted_sigma_u is not None and self.predicted_sigma_v is not None
         if pred:
             header += ["predicted_sigma_u", "predicted_sigma_v"]
+        blur = self.blur_length is not None and self.blur_sigma is not None
+        if blur:
+            header += ["blur_length", "blur_sigma", "blur_identified"]
         try:
             with atomic_open(path, "w", newline="") as fh:
                 w = csv.writer(fh)
@@ -189,6 +207,12 @@ class DICResult:
                         assert self.predicted_sigma_v is not None
                         row += [repr(float(self.predicted_sigma_u[i])),
                                 repr(float(self.predicted_sigma_v[i]))]
+                    if blur:
+                        assert self.blur_length is not None and self.blur_sigma is not None
+                        ident = (self.blur_identified is not None
+                                 and bool(self.blur_identified[i]))
+                        row += [repr(float(self.blur_length[i])),
+                                repr(float(self.blur_sigma[i])), int(ident)]
                     w.writerow(row)
         except OSError as exc:
             raise StoreError(f"path={str(path)!r}: cannot write the CSV ({exc})") from exc

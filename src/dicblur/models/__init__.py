@@ -6,6 +6,7 @@ fitted :class:`BlurUncertaintyModel` and exposure planning. See docs/models.md.
 from __future__ import annotations
 
 from ._result import FitResult, ParameterEstimate
+from .compensated import predict_compensated
 from .decay import (
     combined_model,
     combined_pan_model,
@@ -70,6 +71,7 @@ __all__ = [
     "parse_quantity",
     "plan_exposure",
     "power_law",
+    "predict_compensated",
     "predict_from_pattern",
     "sssig_decay",
     "taylor_model",

@@ -1,0 +1,299 @@
+"""Compiled joint (shape, blur length) Gauss-Newton step of the blur estimation (issue 18).
+
+Kept apart from :mod:`.kernels` (the plain IC-GN kernels): the step samples each subset
+pixel on its own spline taps (no fast path) because it runs once or twice per POI after
+the compensated IC-GN at the image's blur length ``W0`` has converged.
+
+Model of the normalised reference subset: ``Fh = normalise(f0 + lam D)`` with ``f0`` the
+reference blurred to ``W0`` and ``D = d f0 / dW`` (a linear appearance parameter, Baker &
+Matthews, IJCV 56, 2004). The Gauss-Newton matrix is held at ``lam = 0`` (constant, as in
+IC-GN), so per iteration only the sums of ``g``, ``g^2``, ``f0 g``, ``D g`` and ``J^T g``
+over the warped current subset are needed; the projections of ``Fh`` onto the model's
+tangent vectors have the closed forms used below (``a = J_c^T fh``, ``b = D_c^T fh``,
+``e = J_c^T D_c``, ``dd = D_c^T D_c``, ``Df = ||f0_c||``):
+
+    Jh^T Fh = lam (e - a b) / (|F_c| Df),   Dh^T Fh = lam (dd - b^2) / (|F_c| Df),
+    |F_c|^2 = Df^2 + 2 lam Df b + lam^2 dd.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .kernels import PAD
+from .status import PointStatus
+
+__all__ = ["joint_blur_step"]
+
+_CONVERGED = int(PointStatus.CONVERGED)
+_MAX_ITERATIONS = int(PointStatus.MAX_ITERATIONS)
+_OUT_OF_BOUNDS = int(PointStatus.OUT_OF_BOUNDS)
+_DIVERGED = int(PointStatus.DIVERGED)
+
+
+@nb.njit(inline="always", cache=True)
+def _bspline(x, order):  # pragma: no cover - compiled
+    a = abs(x)
+    if order == 3:
+        if a < 1.0:
+            return 2.0 / 3.0 - a * a + 0.5 * a * a * a
+        if a < 2.0:
+            b = 2.0 - a
+            return b * b * b / 6.0
+        return 0.0
+    if a < 1.0:
+        a2 = a * a
+        return 0.55 - 0.5 * a2 + 0.25 * a2 * a2 - a2 * a2 * a / 12.0
+    if a < 2.0:
+        a2 = a * a
+        return (17.0 / 40.0 + 0.625 * a - 1.75 * a2 + 1.25 * a2 * a - 0.375 * a2 * a2
+                + a2 * a2 * a / 24.0)
+    if a < 3.0:
+        b = 3.0 - a
+        return b * b * b * b * b / 120.0
+    return 0.0
+
+
+@nb.njit(inline="always", cache=True)
+def _sample(coef, order, y, x, wy, wx):  # pragma: no cover - compiled
+    lo = (order - 1) // 2
+    ix = int(math.floor(x))  # noqa: RUF046 - numba needs the int
+    iy = int(math.floor(y))  # noqa: RUF046 - numba needs the int
+    tx = x - ix
+    ty = y - iy
+    for a in range(order + 1):
+        wy[a] = _bspline(ty - (a - lo), order)
+        wx[a] = _bspline(tx - (a - lo), order)
+    r0 = iy - lo + PAD
+    c0 = ix - lo + PAD
+    g = 0.0
+    for a in range(order + 1):
+        acc = 0.0
+        for b in range(order + 1):
+            acc += wx[b] * coef[r0 + a, c0 + b]
+        g += wy[a] * acc
+    return g
+
+
+# reassociation only (vectorised sums); no 'nnan'/'ninf', so the finiteness checks stay
+@nb.njit(parallel=True, cache=True, fastmath={"reassoc", "contract", "arcp", "nsz"})
+def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, affine,
+                    hinv, fmean, fnorm, jsum, avec, evec, dsum, bval, dd, p_in, status_in,
+                    max_iter, tol, lam_tol, out_p, out_lam, out_z, out_res2, out_iter,
+                    out_status):  # pragma: no cover - compiled
+    """Joint Gauss-Newton in the shape parameters and the blur-length correction ``lam``.
+
+    Points with ``status_in != 0`` are copied through (``lam`` NaN). ``p`` as the IC-GN
+    kernels (translation ``(u, v)``; affine ``(u, ux, uy, v, vx, vy)``), updated by inverse
+    composition; ``lam`` additively. Outputs: parameters, ``lam`` (px), ZNCC of the model
+    ``Fh`` with the warped current subset, the normalised squared residual
+    ``|gh - Fh|^2 = 2 - 2 zncc``, iterations, status (``OUT_OF_BOUNDS``, ``DIVERGED``,
+    ``MAX_ITERATIONS`` or ``CONVERGED``). Converged when the shape step meets ``tol``
+    (the IC-GN norm) and the length step ``lam_tol`` (px).
+    """
+    n = rows.shape[0]
+    k = 6 if affine else 2
+    size = 2 * half + 1
+    npx = size * size
+    for pt in nb.prange(n):
+        q = np.zeros(k + 1)
+        rhs = np.zeros(k + 1)
+        stp = np.zeros(k + 1)
+        p = np.empty(k)
+        wy = np.empty(order + 1)
+        wx = np.empty(order + 1)
+        hbuf = np.empty((size + order, size))
+        grow = np.empty(size)
+        for m in range(k):
+            p[m] = p_in[pt, m]
+            out_p[pt, m] = p_in[pt, m]
+        out_lam[pt] = np.nan
+        out_z[pt] = np.nan
+        out_res2[pt] = np.nan
+        out_iter[pt] = 0
+        if status_in[pt] != 0:
+            out_status[pt] = status_in[pt]
+            continue
+        lam = 0.0
+        xc = cols[pt]
+        yc = rows[pt]
+        r0 = yc - half
+        c0 = xc - half
+        df = fnorm[pt]
+        st = _MAX_ITERATIONS
+        zf = np.nan
+        nit = 0
+        for it in range(max_iter):
+            inside = True
+            for cy in (-half, half):
+                for cx in (-half, half):
+                    if affine:
+                        ox = p[0] + p[1] * cx + p[2] * cy
+                        oy = p[3] + p[4] * cx + p[5] * cy
+                    else:
+                        ox = p[0]
+                        oy = p[1]
+                    x = xc + cx + ox
+                    y = yc + cy + oy
+                    if not (x >= 0.0 and y >= 0.0 and x <= wimg - 1 and y <= himg - 1):
+                        inside = False
+            if not inside:
+                st = _OUT_OF_BOUNDS
+                break
+            sg = 0.0
+            sgg = 0.0
+            sfg = 0.0
+            for m in range(k + 1):
+                q[m] = 0.0
+            if not affine:
+                # translation: every pixel has the same sub-pixel offset, so the spline is
+                # separable on one set of taps: one pass along x into hbuf, one along y
+                bx = int(math.floor(xc + p[0]))  # noqa: RUF046 - numba needs the int
+                by = int(math.floor(yc + p[1]))  # noqa: RUF046 - numba needs the int
+                lo = (order - 1) // 2
+                for a in range(order + 1):
+                    wy[a] = _bspline(yc + p[1] - by - (a - lo), order)
+                    wx[a] = _bspline(xc + p[0] - bx - (a - lo), order)
+                rb = by - half - lo + PAD
+                cb = bx - half - lo + PAD
+                # tap loops outside, pixel loops inside: contiguous, vectorisable
+                for r in range(size + order):
+                    w0 = wx[0]
+                    for j in range(size):
+                        hbuf[r, j] = w0 * coef[rb + r, cb + j]
+                    for b in range(1, order + 1):
+                        wb = wx[b]
+                        for j in range(size):
+                            hbuf[r, j] += wb * coef[rb + r, cb + j + b]
+            for i in range(size):
+                dyo = float(i - half)
+                if affine:
+                    for j in range(size):
+                        dxo = float(j - half)
+                        x = xc + p[0] + (1.0 + p[1]) * dxo + p[2] * dyo
+                        y = yc + p[3] + p[4] * dxo + (1.0 + p[5]) * dyo
+                        grow[j] = _sample(coef, order, y, x, wy, wx)
+                else:
+                    w0 = wy[0]
+                    for j in range(size):
+                        grow[j] = w0 * hbuf[i, j]
+                    for a in range(1, order + 1):
+                        wa = wy[a]
+                        for j in range(size):
+                            grow[j] += wa * hbuf[i + a, j]
+                # row sums in scalars (a vectorisable reduction)
+                s_g = 0.0
+                s_gg = 0.0
+                s_fg = 0.0
+                s_x = 0.0
+                s_y = 0.0
+                s_xd = 0.0
+                s_yd = 0.0
+                s_d = 0.0
+                ri = r0 + i
+                for j in range(size):
+                    g = grow[j]
+                    cj = c0 + j
+                    tx = gx[ri, cj] * g
+                    ty = gy[ri, cj] * g
+                    s_g += g
+                    s_gg += g * g
+                    s_fg += f[ri, cj] * g
+                    s_x += tx
+                    s_y += ty
+                    s_xd += tx * (j - half)
+                    s_yd += ty * (j - half)
+                    s_d += dimg[ri, cj] * g
+                sg += s_g
+                sgg += s_gg
+                sfg += s_fg
+                if affine:
+                    q[0] += s_x
+                    q[1] += s_xd
+                    q[2] += s_x * dyo
+                    q[3] += s_y
+                    q[4] += s_yd
+                    q[5] += s_y * dyo
+                else:
+                    q[0] += s_x
+                    q[1] += s_y
+                q[k] += s_d
+            gm = sg / npx
+            dg2 = sgg - npx * gm * gm
+            if not dg2 > 1e-12 * (sgg + 1e-30):
+                st = _DIVERGED
+                break
+            dg = math.sqrt(dg2)
+            nf2 = df * df + 2.0 * lam * df * bval[pt] + lam * lam * dd[pt]
+            if not nf2 > 0.0:
+                st = _DIVERGED
+                break
+            nf = math.sqrt(nf2)
+            zn0 = (sfg - fmean[pt] * sg) / (df * dg)
+            zf = ((sfg + lam * q[k]) - (fmean[pt] + lam * dsum[pt] / npx) * sg) / (nf * dg)
+            for m in range(k):
+                rhs[m] = (((q[m] - jsum[pt, m] * gm) / dg - avec[pt, m] * zn0)
+                          - lam * (evec[pt, m] - avec[pt, m] * bval[pt]) / nf) / df
+            rhs[k] = (((q[k] - dsum[pt] * gm) / dg - bval[pt] * zn0)
+                      - lam * (dd[pt] - bval[pt] * bval[pt]) / nf) / df
+            for m in range(k + 1):
+                acc = 0.0
+                for l_ in range(k + 1):
+                    acc += hinv[pt, m, l_] * rhs[l_]
+                stp[m] = acc
+            lam += stp[k]
+            if affine:
+                du, dux, duy, dv, dvx, dvy = stp[0], stp[1], stp[2], stp[3], stp[4], stp[5]
+                a11 = 1.0 + dux
+                a22 = 1.0 + dvy
+                det = a11 * a22 - duy * dvx
+                if not abs(det) > 1e-12:
+                    st = _DIVERGED
+                    break
+                i11 = a22 / det
+                i12 = -duy / det
+                i21 = -dvx / det
+                i22 = a11 / det
+                it1 = -(i11 * du + i12 * dv)
+                it2 = -(i21 * du + i22 * dv)
+                m11 = 1.0 + p[1]
+                m12 = p[2]
+                m21 = p[4]
+                m22 = 1.0 + p[5]
+                p[0] = m11 * it1 + m12 * it2 + p[0]
+                p[3] = m21 * it1 + m22 * it2 + p[3]
+                p[1] = m11 * i11 + m12 * i21 - 1.0
+                p[2] = m11 * i12 + m12 * i22
+                p[4] = m21 * i11 + m22 * i21
+                p[5] = m21 * i12 + m22 * i22 - 1.0
+                norm = math.sqrt(du * du + dv * dv + half * half * (
+                    dux * dux + duy * duy + dvx * dvx + dvy * dvy))
+            else:
+                p[0] -= stp[0]
+                p[1] -= stp[1]
+                norm = math.hypot(stp[0], stp[1])
+            nit = it + 1
+            finite = math.isfinite(lam)
+            for m in range(k):
+                if not math.isfinite(p[m]):
+                    finite = False
+            if not finite or abs(lam) > size:
+                st = _DIVERGED
+                break
+            if norm < tol and abs(stp[k]) < lam_tol:
+                st = _CONVERGED
+                break
+        out_status[pt] = st
+        out_iter[pt] = nit
+        if st == _CONVERGED or st == _MAX_ITERATIONS:
+            for m in range(k):
+                out_p[pt, m] = p[m]
+            out_lam[pt] = lam
+            out_z[pt] = zf
+            out_res2[pt] = 2.0 - 2.0 * zf
+        else:
+            for m in range(k):
+                out_p[pt, m] = np.nan

@@ -1,0 +1,204 @@
+"""Static prediction of u_e(W) for the blur-compensated matcher (issue 18).
+
+With ``Correlator(blur="given")`` the current image is compared with the reference
+blurred by the same centred box (:func:`dicblur.dic.blur_reference`), so the deterministic
+blur-mismatch term of docs/models.md s. 4 vanishes and only noise is left. To first order
+the IC-GN estimate is linear in the noise of both images (docs/dic.md, "Predicted random
+error"), now with the gradients of the *blurred* reference ``f_W``:
+
+- the current image's noise (std ``sigma``) gives ``sigma^2 A^-1`` with
+  ``A = J_c^T J_c - a a^T`` the ZNSSD Fisher matrix of ``f_W``'s subset (translation:
+  ``1 / SSSIG(W)`` along the motion, paper eq. 2 with the blurred image's SSSIG);
+- the reference's noise is blurred with the reference, ``n -> B n`` (``B`` the box), so
+  it enters through ``B J``, the gradients of ``f_W`` blurred once more:
+  ``sigma^2 A^-1 (B J)_perp^T (B J)_perp A^-1`` (translation:
+  ``SSSIG_2(W) / SSSIG(W)^2`` with ``SSSIG_2`` that of ``B f_W``).
+
+At W = 0 both terms are the match-score bound's halves, ``u_e = sqrt(2 sigma^2 / SSSIG)``;
+with blur the second shrinks (the blurred reference is less noisy), so the compensated
+matcher lands *below* the blurred image's static bound ``sqrt(2 sigma^2 / SSSIG(W))``.
+Gradients are the exact derivatives of the engine's cubic B-spline by default (as
+:func:`~dicblur.models.predict_from_pattern`), or central differences.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from numpy.typing import ArrayLike, NDArray
+
+from .._validation import as_image, check_choice, check_odd_subset, check_positive, describe
+from ..dic.compensation import blur_reference
+from ..dic.icgn import raw_jacobian
+from ..dic.interpolation import bspline_coefficients, bspline_gradients
+from ..errors import InputError
+from ..metrics import directional_sssig, image_gradients, subset_centres
+from ._checks import as_blur
+from .pattern import PatternPrediction
+
+__all__ = ["predict_compensated"]
+
+
+def _points(img: NDArray[np.float64], subset: int, step: int | None,
+            points: ArrayLike | None) -> NDArray[np.intp]:
+    half = subset // 2
+    if points is None:
+        if subset + 2 > min(img.shape):
+            raise InputError(f"subset={subset}: larger than the image {img.shape} allows")
+        return np.asarray(subset_centres(img.shape, subset=subset, step=step or subset),
+                          dtype=np.intp)
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
+        raise InputError(f"points={describe(pts)}: expected an (n, 2) array of (row, col) "
+                         "subset centres, n >= 2")
+    pts = pts.astype(np.intp)
+    inside = ((pts[:, 0] >= half) & (pts[:, 0] < img.shape[0] - half)
+              & (pts[:, 1] >= half) & (pts[:, 1] < img.shape[1] - half))
+    if not inside.all():
+        raise InputError(f"points: {int((~inside).sum())} subset(s) leave the image; keep "
+                         f"centres >= {half} px from the border")
+    return pts
+
+
+def _gradients(img: NDArray[np.float64], derivative: str
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(d/drow, d/dcol): exact B-spline derivatives (as the matcher) or central
+    differences (as dicblur.sssig)."""
+    if derivative == "central":
+        gy, gx = image_gradients(img)
+        return gy, gx
+    order = int(derivative[-1])
+    coef = bspline_coefficients(img, order=order, dtype=np.float64)
+    return bspline_gradients(coef, order, img.shape)
+
+
+def _noise_variance(fw: NDArray[np.float64], fww: NDArray[np.float64],
+                    pts: NDArray[np.intp], half: int, shape: str,
+                    e: tuple[float, float], derivative: str) -> NDArray[np.float64]:
+    """Per-subset variance along ``e`` (dy, dx) per unit noise variance, px^2 / GL^2."""
+    size = 2 * half + 1
+    npx = size * size
+    gy, gx = _gradients(fw, derivative)
+    hy, hx = _gradients(fww, derivative)
+    r, c = pts[:, 0] - half, pts[:, 1] - half
+    views = [np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), npx)
+             for a in (fw, gx, gy, hx, hy)]
+    f, gxp, gyp, hxp, hyp = views
+    if shape == "translation":
+        # eq. 2 form (diagonal), as the plain matcher's prediction
+        ge = e[1] * gxp + e[0] * gyp
+        he = e[1] * hxp + e[0] * hyp
+        s1 = np.einsum("ij,ij->i", ge, ge)
+        s2 = np.einsum("ij,ij->i", he, he)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.asarray(1.0 / s1 + s2 / s1 ** 2)
+    fc = f - f.mean(axis=1, keepdims=True)
+    fn = np.sqrt(np.einsum("ij,ij->i", fc, fc))
+    fh = fc / np.where(fn > 0, fn, 1.0)[:, None]
+
+    def perp(jac: NDArray[np.float64]) -> NDArray[np.float64]:
+        jc = jac - jac.mean(axis=1, keepdims=True)
+        a = np.einsum("npk,np->nk", jc, fh)
+        return np.asarray(jc - fh[:, :, None] * a[:, None, :])
+
+    j1 = perp(raw_jacobian(gxp, gyp, half, "affine"))
+    j2 = perp(raw_jacobian(hxp, hyp, half, "affine"))
+    amat = np.matmul(j1.transpose(0, 2, 1), j1)
+    cmat = np.matmul(j2.transpose(0, 2, 1), j2)
+    ainv = np.linalg.inv(amat)
+    cov = ainv + ainv @ cmat @ ainv
+    w = np.zeros(6)
+    w[0], w[3] = e[1], e[0]  # (u, v) along the motion
+    return np.asarray(np.einsum("i,nij,j->n", w, cov, w))
+
+
+def predict_compensated(
+    image: ArrayLike,
+    blur: ArrayLike,
+    *,
+    noise_sigma: float,
+    subset: int,
+    step: int | None = None,
+    points: ArrayLike | None = None,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: str = "translation",
+    derivative: str = "bspline3",
+) -> PatternPrediction:
+    """Predict u_e(W) of the blur-compensated matcher from the static image.
+
+    Parameters
+    ----------
+    image : array_like, shape (rows, cols)
+        Sharp reference image, grey levels.
+    blur : array_like, shape (m,)
+        Blur lengths W (px, >= 0) of linear motion along ``motion``.
+    noise_sigma : float
+        Gaussian noise std (GL) in each image.
+    subset : int
+        Odd subset size, px.
+    step, points
+        Subset grid step (px, default ``subset``) or explicit (n, 2) (row, col) centres.
+    motion : (dy, dx)
+        Motion direction (only the direction matters).
+    shape : {"translation", "affine"}
+        Shape function of the matcher.
+    derivative : {"bspline3", "bspline5", "central"}
+        Image gradients: the exact derivatives of the engine's B-spline (default, as
+        :func:`~dicblur.models.predict_from_pattern`) or central differences (as
+        :func:`dicblur.sssig` and the campaigns' ``u_match_score``).
+
+    Returns
+    -------
+    PatternPrediction
+        ``u_e = u_noise`` (``u_blur = 0``: no mismatch with compensation); ``sssig`` the
+        blurred image's mean SSSIG along the motion, so ``sqrt(2 sigma^2 / sssig)`` is its
+        static bound.
+
+    Examples
+    --------
+    >>> import dicblur
+    >>> from dicblur.models.compensated import predict_compensated
+    >>> img = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=1)
+    >>> p = predict_compensated(img, [0.0, 4.0], noise_sigma=2.0, subset=21, step=10)
+    >>> bool(p.u_e[1] < (2 * 2.0 ** 2 / p.sssig[1]) ** 0.5)
+    True
+    """
+    img = as_image(image, "image", min_size=3)
+    subset = check_odd_subset(subset)
+    sigma = check_positive(noise_sigma, "noise_sigma")
+    shape = check_choice(shape, "shape", ("translation", "affine"))
+    derivative = check_choice(derivative, "derivative", ("bspline3", "bspline5", "central"))
+    w = as_blur(blur, "blur", increasing=False)
+    try:
+        my, mx = (float(x) for x in motion)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"motion={describe(motion)}: expected a direction (dy, dx)") from exc
+    norm = math.hypot(my, mx)
+    if not (math.isfinite(norm) and norm > 0):
+        raise InputError(f"motion={describe(motion)}: expected a non-zero finite (dy, dx)")
+    e = (my / norm, mx / norm)
+    if np.any(w >= subset):
+        raise InputError(f"blur: {float(w.max()):g} px is not shorter than the subset "
+                         f"({subset} px); use a subset larger than the blur")
+    pts = _points(img, subset, step, points)
+    angle = math.degrees(math.atan2(e[0], e[1]))
+    u_noise = np.empty(w.size)
+    sssig = np.empty(w.size)
+    frac = np.empty(w.size)
+    for i, wl in enumerate(w):
+        vec = (wl * e[0], wl * e[1])
+        fw = blur_reference(img, vec)[0]
+        fww = blur_reference(fw, vec)[0]
+        var = _noise_variance(fw, fww, pts, subset // 2, shape, e, derivative)
+        ok = np.isfinite(var) & (var > 0)
+        if ok.sum() < 2:
+            raise InputError(f"image: fewer than two subsets keep an intensity gradient at "
+                             f"W = {wl:g} px; no prediction there")
+        u_noise[i] = sigma * math.sqrt(float(np.mean(var[ok])))
+        sssig[i] = float(directional_sssig(fw, pts, subset=subset, angle=angle).mean())
+        frac[i] = ok.mean()
+    return PatternPrediction(blur=w, u_e=u_noise.copy(), u_noise=u_noise,
+                             u_blur=np.zeros(w.size), sssig=sssig, valid_fraction=frac,
+                             noise_sigma=sigma, subset=subset, shape=shape, motion=e)

@@ -599,18 +599,8 @@ class Correlator:
         k = p.shape[1]
         u = p[:, 0].copy()
         v = p[:, 1 if k == 2 else 3].copy()
-        from .._version import __version__
-
-        info = {"subset": self.subset, "step": self.step, "shape": self.shape,
-                "interpolation": self.interpolation, "initial": method,
-                "max_iterations": self.max_iterations, "tolerance": self.tolerance,
-                "noise_sigma": self.noise_sigma, "min_zncc": self.min_zncc,
-                "max_residual": self.max_residual, "median_test": int(self.median_test),
-                "screen_noise_sigma": None if noise_var is None else float(np.sqrt(noise_var)),
-                "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
-                "grid_shape": (None if self._grid_shape is None
-                               else f"{self._grid_shape[0]}x{self._grid_shape[1]}"),
-                "dicblur_version": __version__}
+        info = self._info_base(method)
+        info["screen_noise_sigma"] = None if noise_var is None else float(np.sqrt(noise_var))
         return DICResult(
             rows=self.rows.copy(), cols=self.cols.copy(), u=u, v=v, params=p, zncc=z,
             iterations=it, status=st,
@@ -784,13 +774,16 @@ class Correlator:
         return replace(res, info=info)
 
     def _info_base(self, method: str) -> dict[str, Any]:
-        from .. import __version__
+        from .._version import __version__
 
         return {"subset": self.subset, "step": self.step, "shape": self.shape,
                 "interpolation": self.interpolation, "initial": method,
                 "max_iterations": self.max_iterations, "tolerance": self.tolerance,
                 "noise_sigma": self.noise_sigma, "min_zncc": self.min_zncc,
+                "max_residual": self.max_residual, "median_test": int(self.median_test),
                 "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
+                "grid_shape": (None if self._grid_shape is None
+                               else f"{self._grid_shape[0]}x{self._grid_shape[1]}"),
                 "dicblur_version": __version__}
 
     def _correlate_given(self, cur: NDArray[np.float64], initial: ArrayLike | None,

@@ -485,7 +485,7 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
               threshold: float, advice: bool, ref_img: NDArray[np.float64]) -> Any:
     import xarray as xr
 
-    from .. import __version__
+    from .._version import __version__
 
     idx = np.argsort(out.frames)
     frames = np.asarray(out.frames, dtype=np.int64)[idx]

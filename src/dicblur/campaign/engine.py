@@ -260,9 +260,9 @@ class _Interrupt:
     started, a comm half closed) leaves it in a state whose clean-up prints tracebacks
     (``AssertionError: Status.init`` from an atexit hook, ``CommClosedError``). Instead,
     SIGINT sets a flag; the runner polls it between steps and then shuts down in order.
-    While the local cluster starts, SIGINT is also blocked in this thread, so the threads
-    and processes it starts inherit the block: its workers never see a terminal's Ctrl-C
-    (sent to the whole process group), and the parent alone decides.
+    The local cluster's worker processes start with SIGINT ignored
+    (:func:`_spawn_ignoring_sigint`): a terminal's Ctrl-C goes to the whole process group,
+    and the parent alone must handle it.
     """
 
     def __init__(self) -> None:
@@ -291,21 +291,50 @@ class _Interrupt:
         if self.flag:
             raise KeyboardInterrupt
 
-    @staticmethod
-    @contextmanager
-    def blocked() -> Iterator[None]:
-        """Block SIGINT in this thread (and what it starts) for the block's duration; a
-        SIGINT arriving meanwhile is delivered (to the flag) when it ends."""
-        import signal
 
-        if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - not POSIX
+
+@contextmanager
+def _spawn_ignoring_sigint() -> Iterator[None]:
+    """Processes spawned by :mod:`multiprocessing` inside the block start with SIGINT
+    ignored (so Python installs no ``KeyboardInterrupt`` handler in them).
+
+    An ignored signal is the one disposition that survives ``exec``; a signal mask does not
+    (``_posixsubprocess`` resets it) and ignoring SIGINT here would lose the user's Ctrl-C.
+    So the spawn executable is, for the block's duration, a two-line ``/bin/sh`` wrapper
+    (``trap '' INT; exec python "$@"``). Falls back to the plain interpreter where the
+    wrapper cannot run (no /bin/sh, a noexec temporary folder).
+    """
+    import multiprocessing.spawn as mp_spawn
+    import shlex
+    import shutil
+    import subprocess
+    import tempfile
+
+    exe = mp_spawn.get_executable()
+    if os.name != "posix" or not os.path.exists("/bin/sh") or not exe:
+        yield
+        return
+    folder = tempfile.mkdtemp(prefix="dicblur-spawn-")
+    try:
+        wrapper = os.path.join(folder, "python")
+        with open(wrapper, "w", encoding="utf-8") as fh:
+            fh.write(f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(os.fsdecode(exe))} \"$@\"\n")
+        os.chmod(wrapper, 0o755)
+        try:
+            ok = subprocess.run([wrapper, "-I", "-S", "-c", "pass"], timeout=60,
+                                capture_output=True).returncode == 0
+        except (OSError, subprocess.SubprocessError):
+            ok = False
+        if not ok:
             yield
             return
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        mp_spawn.set_executable(wrapper)
         try:
             yield
         finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+            mp_spawn.set_executable(exe)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @contextmanager
@@ -378,16 +407,15 @@ def _run_dask(
                        dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
                        if k != "MALLOC_TRIM_THRESHOLD_"}
                 with dask.config.set({"distributed.nanny.pre-spawn-environ": env}), \
-                        interrupt.blocked():
+                        _spawn_ignoring_sigint():
                     cluster = LocalCluster(n_workers=n, threads_per_worker=1,
                                            processes=True, dashboard_address=":0",
                                            silence_logs=logging.CRITICAL)
-                    client = Client(cluster)
+                client = Client(cluster)
                 where = "local"
             else:
                 try:
-                    with interrupt.blocked():
-                        client = Client(scheduler, timeout=f"{connect_timeout}s")
+                    client = Client(scheduler, timeout=f"{connect_timeout}s")
                 except (OSError, TimeoutError) as exc:
                     raise InputError(f"scheduler={scheduler!r}: cannot connect to a Dask "
                                      f"scheduler ({exc}); check the address "

@@ -6,9 +6,10 @@ chunked ``(1, 1, 1, 1, blur_chunk, 1)``, so that one batch of tasks (see
 variable with the same layout marks finished tasks.
 
 Crash safety. The runner writes a finished batch chunk by chunk (each chunk to a
-temporary file, fsynced, renamed over the chunk, so a chunk is either old or new): all
-result variables, then a ``checksum`` chunk (per task, the CRC-32 of its values of every
-variable), the folders fsynced, and the ``done`` chunk last (fsynced too). A task is
+temporary file renamed over the chunk, so a chunk is either old or new): all result
+variables, then a ``checksum`` chunk (per task, the CRC-32 of its values of every
+variable), the ``done`` chunk last, then syncs the file system (``syncfs``; elsewhere an
+fsync of every file and folder) before the next batch. A task is
 *finished* when its ``done`` flag is 1 and its values read back with the stored checksum;
 a flagged task whose chunks are missing, truncated or altered (a power loss before the
 disk wrote them, a full disk, a copy cut short) is *damaged*: :meth:`CampaignStore.scan`
@@ -26,6 +27,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sys
 import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -171,6 +173,32 @@ def _fsync_path(path: str | os.PathLike[str]) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+_SYNCFS: list[Any] = []
+
+
+def _syncfs(path: str | os.PathLike[str]) -> bool:
+    """Flush the whole file system holding ``path`` to disk (Linux ``syncfs``); False where
+    that call does not exist (then the caller fsyncs file by file)."""
+    if not _SYNCFS:
+        fn = None
+        if sys.platform.startswith("linux"):
+            try:
+                import ctypes
+
+                fn = ctypes.CDLL(None, use_errno=True).syncfs
+            except (OSError, AttributeError):
+                fn = None
+        _SYNCFS.append(fn)
+    fn = _SYNCFS[0]
+    if fn is None:
+        return False
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        return bool(fn(fd) == 0)
     finally:
         os.close(fd)
 
@@ -457,9 +485,9 @@ class CampaignStore:
         (Zarr v3 ``bytes`` codec, little endian: the chunk's C-order raw values, edge
         chunks padded with the fill value) to a temporary file renamed over the chunk:
         about 20x cheaper than Zarr's per-array write path, which keeps the engine's
-        per-task overhead small. Each file and its folder are fsynced before the ``done``
-        chunk is written (about 1.5 ms per chunk on a local ext4 disk), so a task flagged
-        done survives a power loss. Other layouts use Zarr's own ``__setitem__`` (as
+        per-task overhead small. The batch ends with one ``syncfs`` of the store's file
+        system (elsewhere: an fsync of each file and folder), so a task flagged done
+        survives a power loss. Other layouts use Zarr's own ``__setitem__`` (as
         durable as Zarr's store; the checksums still detect damage).
         """
         n = len(batch.blur)
@@ -481,13 +509,20 @@ class CampaignStore:
             for name, values in checked.items():  # "done" is last (dict order)
                 self._arrays[name][batch.region] = values
             return
-        folders = {self._write_raw(name, batch, values) for name, values in checked.items()}
-        for folder in folders:  # the renames are durable before the flags exist
-            _fsync_path(folder)
-        _fsync_path(self._write_raw("done", batch, np.ones(n, dtype=np.uint8)))
+        written = [self._write_raw(name, batch, values) for name, values in checked.items()]
+        written.append(self._write_raw("done", batch, np.ones(n, dtype=np.uint8)))
+        # One file-system sync per batch (Linux syncfs: one journal commit) instead of an
+        # fsync per file and folder (measured 160-260 ms per batch of 22 chunks on this
+        # loaded machine, against ~2 ms unsynced). The done chunk is written last, but the
+        # page cache may persist it before the others: the checksums catch that case (the
+        # batch is damaged, and redone), so a flag never vouches for lost values.
+        if not _syncfs(self.path):
+            for target in written:
+                _fsync_path(target)
+                _fsync_path(os.path.dirname(target))
 
     def _write_raw(self, name: str, batch: Batch, values: NDArray[Any]) -> str:
-        """Write one chunk (fsynced temporary file renamed over it); return its folder."""
+        """Write one chunk (temporary file renamed over it); return the chunk's path."""
         arr = self._arrays[name]
         size = arr.chunks[4]
         ip, ia, isub, inoise, b0, _, irep = batch.loc
@@ -498,23 +533,22 @@ class CampaignStore:
         if folder not in self._folders:  # file-system calls dominate the cost: skip repeats
             if not os.path.isdir(folder):
                 os.makedirs(folder, exist_ok=True)
-                # new folders: make their entries durable up to the array's folder
-                top = os.path.join(self.path, name)
-                d = folder
-                while len(d) > len(top):
-                    d = os.path.dirname(d)
-                    _fsync_path(d)
+                if not _syncfs(self.path):  # new folders: durable up to the array's folder
+                    top = os.path.join(self.path, name)
+                    d = folder
+                    while len(d) > len(top):
+                        d = os.path.dirname(d)
+                        _fsync_path(d)
             self._folders.add(folder)
         target = os.path.join(folder, str(key[-1]))
         tmp = os.path.join(folder, f".{key[-1]}.{os.getpid()}.partial")
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         try:
             os.write(fd, chunk.tobytes())
-            os.fsync(fd)
         finally:
             os.close(fd)
         os.replace(tmp, target)
-        return folder
+        return target
 
 
 def _raw_chunks(folder: Path) -> bool:

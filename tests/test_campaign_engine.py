@@ -420,9 +420,9 @@ def test_damaged_stores_give_clear_errors(serial_run, tmp_path):
     torn = tmp_path / "torn.zarr"
     shutil.copytree(path, torn)
     chunk = next(p for p in (torn / "done" / "c").rglob("*") if p.is_file())
-    chunk.write_bytes(b"\x01")  # truncated chunk
-    with pytest.raises(StoreError, match="'done' flags cannot be read"):
-        campaign_status(torn)
+    chunk.write_bytes(b"\x01")  # truncated chunk: its batch is damaged, not an error
+    st = campaign_status(torn)
+    assert st.n_damaged in (1, 2) and st.n_done == 40 - st.n_damaged and not st.complete
     attrs = tmp_path / "attrs.zarr"
     shutil.copytree(path, attrs)
     meta = json.loads((attrs / "zarr.json").read_text())

@@ -14,7 +14,8 @@ import logging
 import os
 import re
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,9 +24,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
+from .lock import StoreLock, lock_holder
 from .spec import CampaignSpec, load_spec
-from .store import CampaignStore
+from .store import CampaignStore, half_created
 from .tasks import Batch, input_hashes, iter_batches, make_pattern
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["CampaignStatus", "RunSummary", "TaskFunction", "campaign_status", "run_campaign"]
 
@@ -123,8 +127,16 @@ def _default_task() -> TaskFunction:
 
 
 def _prepare(spec: CampaignSpec, results: Path) -> tuple[CampaignStore, dict[str, Any]]:
+    """Open (or create) the store; the caller holds its lock."""
     images = {p.name: make_pattern(spec, p) for p in spec.patterns}
     hashes = input_hashes(spec, images)
+    if half_created(results):
+        # Left by an interrupted creation of an older dicblur; it holds no task.
+        logger.warning("results=%r: removing a half-created store (no finished task) and "
+                       "creating it again", str(results))
+        import shutil
+
+        shutil.rmtree(results)
     if results.exists():
         store = CampaignStore.open(results)
         store.check_matches(spec, hashes)
@@ -178,7 +190,8 @@ def run_campaign(
     Raises
     ------
     ConfigError, StoreError
-        On a bad spec, a store holding another campaign or a damaged store, before any
+        On a bad spec, a store holding another campaign, a damaged store or a store that
+        another run is using (its lock, see :mod:`dicblur.campaign.lock`), before any
         task runs. An exception raised by a task is re-raised after the batches already
         finished are stored.
 
@@ -186,7 +199,8 @@ def run_campaign(
     -----
     ``KeyboardInterrupt`` (Ctrl-C) during the run cancels the pending tasks, shuts the
     local cluster down and returns a summary with ``interrupted=True``; every batch
-    finished before is stored and is skipped by the next run.
+    finished before is stored and is skipped by the next run. Finished tasks whose stored
+    chunks are damaged (see :meth:`CampaignStore.scan`) are recomputed.
     """
     t0 = time.perf_counter()
     if scheduler is not None and not serial:
@@ -198,6 +212,24 @@ def run_campaign(
     path = check_output(results, "results", folder=True)
     if not isinstance(spec, CampaignSpec):
         spec = load_spec(spec)
+    with StoreLock(path):
+        return _run_locked(spec, path, t0, scheduler=scheduler, workers=workers,
+                           serial=serial, task=task, progress=progress,
+                           connect_timeout=connect_timeout)
+
+
+def _run_locked(
+    spec: CampaignSpec,
+    path: Path,
+    t0: float,
+    *,
+    scheduler: str | None,
+    workers: int | None,
+    serial: bool,
+    task: TaskFunction | None,
+    progress: ProgressCallback | None,
+    connect_timeout: float,
+) -> RunSummary:
     store, images = _prepare(spec, path)
     fn = task if task is not None else _default_task()
     mask = store.done_mask()
@@ -247,6 +279,124 @@ def run_campaign(
     )
 
 
+class _Interrupt:
+    """Ctrl-C during a Dask run, turned into a flag checked at safe points.
+
+    A ``KeyboardInterrupt`` raised at an arbitrary point inside distributed (a cluster half
+    started, a comm half closed) leaves it in a state whose clean-up prints tracebacks
+    (``AssertionError: Status.init`` from an atexit hook, ``CommClosedError``). Instead,
+    SIGINT sets a flag; the runner polls it between steps and then shuts down in order.
+    The local cluster's worker processes start with SIGINT ignored
+    (:func:`_spawn_ignoring_sigint`): a terminal's Ctrl-C goes to the whole process group,
+    and the parent alone must handle it.
+    """
+
+    def __init__(self) -> None:
+        self.flag = False
+        self._old: Any = None
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        self.flag = True
+
+    def __enter__(self) -> _Interrupt:
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+
+    def check(self) -> None:
+        """Raise ``KeyboardInterrupt`` if Ctrl-C was pressed."""
+        if self.flag:
+            raise KeyboardInterrupt
+
+
+
+@contextmanager
+def _spawn_ignoring_sigint() -> Iterator[None]:
+    """Processes spawned by :mod:`multiprocessing` inside the block start with SIGINT
+    ignored (so Python installs no ``KeyboardInterrupt`` handler in them).
+
+    An ignored signal is the one disposition that survives ``exec``; a signal mask does not
+    (``_posixsubprocess`` resets it) and ignoring SIGINT here would lose the user's Ctrl-C.
+    So the spawn executable is, for the block's duration, a two-line ``/bin/sh`` wrapper
+    (``trap '' INT; exec python "$@"``). Falls back to the plain interpreter where the
+    wrapper cannot run (no /bin/sh, a noexec temporary folder).
+    """
+    import multiprocessing.spawn as mp_spawn
+    import shlex
+    import shutil
+    import subprocess
+    import tempfile
+
+    exe = mp_spawn.get_executable()
+    if os.name != "posix" or not os.path.exists("/bin/sh") or not exe:
+        yield
+        return
+    folder = tempfile.mkdtemp(prefix="dicblur-spawn-")
+    try:
+        wrapper = os.path.join(folder, "python")
+        with open(wrapper, "w", encoding="utf-8") as fh:
+            fh.write(f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(os.fsdecode(exe))} \"$@\"\n")
+        os.chmod(wrapper, 0o755)
+        try:
+            ok = subprocess.run([wrapper, "-I", "-S", "-c", "pass"], timeout=60,
+                                capture_output=True).returncode == 0
+        except (OSError, subprocess.SubprocessError):
+            ok = False
+        if not ok:
+            yield
+            return
+        mp_spawn.set_executable(wrapper)
+        try:
+            yield
+        finally:
+            mp_spawn.set_executable(exe)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@contextmanager
+def _quiet_distributed() -> Iterator[None]:
+    """Silence distributed's (and tornado's, asyncio's) loggers in this process: a shutdown
+    while comms are still open logs ``CommClosedError`` tracebacks that mean nothing to
+    the user."""
+    names = [n for n in list(logging.root.manager.loggerDict)
+             if n.split(".")[0] in ("distributed", "tornado", "asyncio")]
+    names += ["distributed", "tornado", "asyncio"]
+    saved = {n: (logging.getLogger(n).level, logging.getLogger(n).disabled) for n in names}
+    for n in names:
+        logging.getLogger(n).disabled = True
+    try:
+        yield
+    finally:
+        for n, (level, disabled) in saved.items():
+            logging.getLogger(n).setLevel(level)
+            logging.getLogger(n).disabled = disabled
+
+
+def _wait_all(futures: list[Any], interrupt: _Interrupt) -> None:
+    """Wait for futures (re-raising a task's exception), polling for Ctrl-C."""
+    from distributed import wait
+
+    while True:
+        interrupt.check()
+        try:
+            wait(futures, timeout=0.1)
+        except TimeoutError:
+            continue
+        for f in futures:
+            f.result()
+        return
+
+
 def _run_dask(
     spec: CampaignSpec,
     images: Mapping[str, NDArray[np.float64]],
@@ -262,72 +412,99 @@ def _run_dask(
     import dask
     from distributed import Client, LocalCluster, as_completed
 
-    cluster = None
-    if scheduler is None:
-        n = int(workers) if workers is not None else (os.cpu_count() or 1)
-        if n < 1:
-            raise InputError(f"workers={workers!r}: must be >= 1 (or omit it: all cores)")
-        # One single-threaded process per core: the tasks are CPU-bound numpy/numba code
-        # (the Correlator runs with workers=1 inside a task), so processes avoid the GIL.
-        # Dask sets MALLOC_TRIM_THRESHOLD_ in its workers, which disables glibc's dynamic
-        # mmap threshold: every large temporary array (a 512^2 image is 2 MiB) is then a
-        # fresh mmap with page faults, ~25% more CPU per task here. Keep the thread limits,
-        # drop that one.
-        env = {k: v for k, v in
-               dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
-               if k != "MALLOC_TRIM_THRESHOLD_"}
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=logging.ERROR)
-        client = Client(cluster)
-        where = "local"
-    else:
-        try:
-            client = Client(scheduler, timeout=f"{connect_timeout}s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"scheduler={scheduler!r}: cannot connect to a Dask scheduler "
-                             f"({exc}); check the address (tcp://HOST:PORT) and that it "
-                             "runs") from exc
-        where = scheduler
+    n_workers = 0
     interrupted = False
     futures: list[Any] = []
-    try:
-        n_workers = max(1, len(client.scheduler_info(n_workers=-1).get("workers", {})))
-        # Load the task's compiled code (numba cache) on every worker at once, as part of
-        # the start-up, rather than inside each worker's first batch.
-        warm = getattr(fn, "warm_up", None)
-        if callable(warm):
-            client.run(warm)
-        # Each pattern image travels to every worker once, not once per batch.
-        remote = {name: client.scatter(img, broadcast=True, hash=False)
-                  for name, img in images.items()}
-        started[0] = time.perf_counter()
-        by_key: dict[Any, Batch] = {}
-        for b in pending:
-            # Larger blur costs more DIC iterations: start the batches of large W first
-            # (longest-first scheduling shortens the idle tail of the last workers).
-            fut = client.submit(_timed_task, fn, remote[b.pattern], b, spec, pure=False,
-                                priority=b.loc[5],
-                                key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}")
-            by_key[fut.key] = b
-            futures.append(fut)
-        for fut in as_completed(futures):
-            finish(by_key[fut.key], fut.result())
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
+    cluster = client = None
+    with _Interrupt() as interrupt:
         try:
-            client.cancel(futures)
+            if scheduler is None:
+                n = int(workers) if workers is not None else (os.cpu_count() or 1)
+                if n < 1:
+                    raise InputError(f"workers={workers!r}: must be >= 1 (or omit it: all "
+                                     "cores)")
+                # One single-threaded process per core: the tasks are CPU-bound
+                # numpy/numba code (the Correlator runs with workers=1 inside a task), so
+                # processes avoid the GIL. Dask sets MALLOC_TRIM_THRESHOLD_ in its workers,
+                # which disables glibc's dynamic mmap threshold: every large temporary
+                # array (a 512^2 image is 2 MiB) is then a fresh mmap with page faults,
+                # ~25% more CPU per task here. Keep the thread limits, drop that one.
+                env = {k: v for k, v in
+                       dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+                       if k != "MALLOC_TRIM_THRESHOLD_"}
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": env}), \
+                        _spawn_ignoring_sigint():
+                    cluster = LocalCluster(n_workers=n, threads_per_worker=1,
+                                           processes=True, dashboard_address=":0",
+                                           silence_logs=logging.CRITICAL)
+                client = Client(cluster)
+                where = "local"
+            else:
+                try:
+                    client = Client(scheduler, timeout=f"{connect_timeout}s")
+                except (OSError, TimeoutError) as exc:
+                    raise InputError(f"scheduler={scheduler!r}: cannot connect to a Dask "
+                                     f"scheduler ({exc}); check the address "
+                                     "(tcp://HOST:PORT) and that it runs") from exc
+                where = scheduler
+            interrupt.check()
+            info = client.scheduler_info(n_workers=-1).get("workers", {})
+            n_workers = max(1, len(info))
+            # Load the task's compiled code (numba cache) on every worker at once, as part
+            # of the start-up, rather than inside each worker's first batch. A task per
+            # worker (not client.run), so that Ctrl-C can interrupt a long compilation.
+            warm = getattr(fn, "warm_up", None)
+            if callable(warm):
+                _wait_all([client.submit(warm, workers=[addr], allow_other_workers=False,
+                                         pure=False, key=f"dicblur-warm-up-{i}-"
+                                         f"{os.urandom(4).hex()}")
+                           for i, addr in enumerate(info)], interrupt)
+            # Each pattern image travels to every worker once, not once per batch.
+            remote = {name: client.scatter(img, broadcast=True, hash=False)
+                      for name, img in images.items()}
+            interrupt.check()
+            started[0] = time.perf_counter()
+            by_key: dict[Any, Batch] = {}
+            for b in pending:
+                # Larger blur costs more DIC iterations: start the batches of large W first
+                # (longest-first scheduling shortens the idle tail of the last workers).
+                fut = client.submit(_timed_task, fn, remote[b.pattern], b, spec, pure=False,
+                                    priority=b.loc[5],
+                                    key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}")
+                by_key[fut.key] = b
+                futures.append(fut)
+            ready = as_completed(futures)
+            while not ready.is_empty():
+                interrupt.check()
+                batch = ready.next_batch(block=False)
+                if not batch:
+                    time.sleep(0.02)  # a signal sets the flag; sleep resumes (PEP 475)
+                for fut in batch:
+                    finish(by_key[fut.key], fut.result())
+        except KeyboardInterrupt:
+            interrupted = True
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            # In order, quietly: drop the pending tasks, disconnect, stop the workers.
+            with _quiet_distributed():
+                try:
+                    if client is not None:
+                        client.cancel(futures)
+                        client.close()
+                finally:
+                    if cluster is not None:
+                        cluster.close()
     return n_workers, where, interrupted
 
 
 @dataclass(frozen=True)
 class CampaignStatus:
-    """Progress of a stored campaign (see :func:`campaign_status`)."""
+    """Progress of a stored campaign (see :func:`campaign_status`).
+
+    ``n_done`` counts the finished tasks (flagged done and verified against their
+    checksums); ``n_damaged`` the tasks flagged done whose stored chunks are missing,
+    truncated or altered (a rerun recomputes them); ``running`` describes the run holding
+    the store's lock (``"pid 123 on host h since ..."``), or is None.
+    """
 
     path: str
     name: str
@@ -340,10 +517,12 @@ class CampaignStatus:
     input_hashes: Mapping[str, str]
     versions: Mapping[str, str]
     total_task_s: float
+    n_damaged: int = 0
+    running: str | None = None
 
     @property
     def complete(self) -> bool:
-        """Whether every task is stored."""
+        """Whether every task is stored (and none damaged)."""
         return self.n_done == self.n_tasks
 
     def to_dict(self) -> dict[str, Any]:
@@ -354,7 +533,8 @@ class CampaignStatus:
             "dims": dict(self.dims), "done_by_pattern": dict(self.done_by_pattern),
             "tasks_per_pattern": self.tasks_per_pattern,
             "input_hashes": dict(self.input_hashes), "versions": dict(self.versions),
-            "total_task_s": self.total_task_s,
+            "total_task_s": self.total_task_s, "n_damaged": self.n_damaged,
+            "running": self.running,
         }
 
 
@@ -369,13 +549,18 @@ def campaign_status(results: str | os.PathLike[str]) -> CampaignStatus:
     import json
 
     store = CampaignStore.open(results)
-    mask = store.done_mask()
+    scan = store.scan()
+    mask = scan.finished
+    holder = lock_holder(results)
     spec = store.spec_dict()
     names = [p["name"] for p in spec["pattern"]]
     dims = dict(zip(("pattern", "angle", "subset", "noise", "blur", "rep"), mask.shape,
                     strict=True))
     per_pattern = {n: int(mask[i].sum()) for i, n in enumerate(names)}
-    times = store.read("time_s")
+    try:
+        times = store.read("time_s")
+    except Exception:  # a damaged time_s chunk (counted in n_damaged)
+        times = np.full(mask.shape, np.nan)
     return CampaignStatus(
         path=str(results), name=spec["campaign"]["name"],
         spec_hash=str(store.attrs["spec_hash"]), n_tasks=int(mask.size),
@@ -384,4 +569,6 @@ def campaign_status(results: str | os.PathLike[str]) -> CampaignStatus:
         input_hashes=json.loads(store.attrs.get("input_hashes", "{}")),
         versions=json.loads(store.attrs.get("versions", "{}")),
         total_task_s=float(np.nansum(np.where(mask, times, np.nan))),
+        n_damaged=scan.n_damaged,
+        running=holder.describe() if holder is not None else None,
     )

@@ -87,7 +87,7 @@ def run_command(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> int:
     """Run (or resume) the campaign SPEC and store its results in OUT."""
-    from ..campaign import load_spec, run_campaign
+    from ..campaign import campaign_status, load_spec, run_campaign
     from ..campaign.engine import check_scheduler_address
     from ..io import check_output
 
@@ -97,12 +97,29 @@ def run_command(
     if scheduler is not None and not serial:
         check_scheduler_address(scheduler)
     s = load_spec(spec)
-    with _progress_bar(f"campaign {s.name}", not quiet) as progress:
-        # a cluster's workers compile in their own processes: the notice only when serial
-        summary = run_campaign(s, out, scheduler=scheduler, workers=workers, serial=serial,
-                               progress=notice_on_start(progress, s.dic_shape, serial))
+    try:
+        with _progress_bar(f"campaign {s.name}", not quiet) as progress:
+            # a cluster's workers compile in their own processes: the notice only serial
+            summary = run_campaign(s, out, scheduler=scheduler, workers=workers,
+                                   serial=serial,
+                                   progress=notice_on_start(progress, s.dic_shape, serial))
+    except KeyboardInterrupt:  # before the tasks started (patterns, store creation)
+        try:
+            n_done = campaign_status(out).n_done
+        except Exception:
+            n_done = 0
+        return _interrupted(n_done, s.n_tasks)
+    if summary.interrupted:
+        return _interrupted(summary.n_skipped + summary.n_run, summary.n_tasks)
     _print_summary(summary)
-    return 130 if summary.interrupted else 0
+    return 0
+
+
+def _interrupted(n_done: int, n_tasks: int) -> int:
+    """The one line of an interrupted run (stderr); exit code 130."""
+    typer.echo(f"interrupted: {n_done} of {n_tasks} tasks done, rerun the same command to "
+               "resume", err=True)
+    return 130
 
 
 @campaign_app.command("status")
@@ -121,6 +138,9 @@ def status_command(
         "campaign": st.name,
         "tasks done": f"{st.n_done} / {st.n_tasks} ({100.0 * st.n_done / st.n_tasks:.1f}%)",
         "complete": st.complete,
+        "damaged": (f"{st.n_damaged} tasks (rerun the campaign to recompute them)"
+                    if st.n_damaged else "none"),
+        "running": st.running or "no",
         "dims": ", ".join(f"{k}={v}" for k, v in st.dims.items()),
         "spec hash": st.spec_hash[:16],
         "task time (sum)": st.total_task_s,

@@ -51,6 +51,13 @@ _LOW_CORRELATION = int(PointStatus.LOW_CORRELATION)
 #: or flat optimum) would otherwise spend all of ``max_iterations``.
 STALL_ITERATIONS = 8
 
+# Fast-math flags of the kernels: no "nnan"/"ninf" (the status tests `not dg2 > ...`,
+# `math.isfinite(u)` must see NaN and inf) and no "reassoc" (a reassociated reduction is
+# not reproducible: a process compiling the kernels and one loading them from numba's cache
+# differed in the last bits of u_e). "contract" (FMA), "arcp" and "nsz" keep results
+# deterministic for a given machine.
+_FASTMATH = {"contract", "arcp", "nsz"}  # a set: numba accepts no frozenset
+
 # Poles of the B-spline prefilters (Unser 1999, Table I).
 _POLES3 = np.array([math.sqrt(3.0) - 2.0])
 _POLES5 = np.array([
@@ -59,7 +66,7 @@ _POLES5 = np.array([
 ])
 
 
-@nb.njit(parallel=True, fastmath=True, cache=True)
+@nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
 def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
     """In-place B-spline prefilter of every column of ``x`` (recursion down the rows,
     vectorised across a block of columns); mirror (whole-sample symmetric) boundary."""
@@ -128,7 +135,7 @@ def _filter_axis0(x, poles, tol):  # pragma: no cover - compiled
                     xr[j] = z * (xp[j] - xr[j])
 
 
-@nb.njit(parallel=True, fastmath=True, cache=True)
+@nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
 def _filter_axis1(src, dst, poles, tol):  # pragma: no cover - compiled
     """B-spline prefilter of every row of ``src`` into ``dst`` (may differ in dtype).
 
@@ -232,7 +239,7 @@ def prefilter_padded(image: np.ndarray, order: int, out: np.ndarray) -> None:
     _fill_margin(out, rows, cols, PAD)
 
 
-@nb.njit(inline="always", fastmath=True, cache=True)
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
 def _weights3(t, w):  # pragma: no cover - compiled
     t2 = t * t
     t3 = t2 * t
@@ -243,7 +250,7 @@ def _weights3(t, w):  # pragma: no cover - compiled
     w[3] = t3 / 6.0
 
 
-@nb.njit(inline="always", fastmath=True, cache=True)
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
 def _beta5(x):  # pragma: no cover - compiled
     a = abs(x)
     if a < 1.0:
@@ -259,7 +266,7 @@ def _beta5(x):  # pragma: no cover - compiled
     return 0.0
 
 
-@nb.njit(inline="always", fastmath=True, cache=True)
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
 def _weights(t, order, w):  # pragma: no cover - compiled
     if order == 3:
         _weights3(t, w)
@@ -276,7 +283,7 @@ def weights(t, order):  # pragma: no cover - compiled
     return w
 
 
-@nb.njit(inline="always", fastmath=True, cache=True)
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
 def _beta(x, order):  # pragma: no cover - compiled
     """Branch-free centred B-spline (truncated-power form), vectorisable."""
     a = abs(x)
@@ -294,7 +301,7 @@ def _beta(x, order):  # pragma: no cover - compiled
             + np.float32(15.0) * q1 * q1 * p1) * np.float32(1.0 / 120.0)
 
 
-@nb.njit(inline="always", fastmath=True, cache=True)
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
 def _sample(coef, order, y, x):  # pragma: no cover - compiled
     """One spline sample at image position (y, x) (generic path)."""
     taps = order + 1
@@ -315,7 +322,7 @@ def _sample(coef, order, y, x):  # pragma: no cover - compiled
     return g
 
 
-@nb.njit(inline="always", fastmath=True, cache=True)
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
 def _beta3d(x):  # pragma: no cover - compiled
     a = abs(x)
     p2 = max(0.0, 2.0 - a)
@@ -325,7 +332,7 @@ def _beta3d(x):  # pragma: no cover - compiled
 
 # Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
 # their fixed-width (tw, a multiple of 16) loops; inlined into the parfor body they were not.
-@nb.njit(fastmath=True, cache=True)
+@nb.njit(fastmath=_FASTMATH, cache=True)
 def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
                      grow):  # pragma: no cover
     tw = grow.shape[0]
@@ -356,7 +363,7 @@ def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wy
             grow[j] += wya[j] * hrow[j]
 
 
-@nb.njit(inline="always", fastmath=True, cache=True)
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
 def _w5(t):  # pragma: no cover - compiled
     """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
     sh = np.float32(1.0) if t >= np.float32(1.0) else np.float32(0.0)
@@ -372,7 +379,7 @@ def _w5(t):  # pragma: no cover - compiled
     return (ns * w0, ns * w1 + sh * w0, ns * w2 + sh * w1, ns * w3 + sh * w2, sh * w3)
 
 
-@nb.njit(fastmath=True, cache=True)
+@nb.njit(fastmath=_FASTMATH, cache=True)
 def _row_affine_cubic(coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy, r,
                       c0):  # pragma: no cover
     """Cubic affine fast path, one row: 5x5 stencil at contiguous memory, fused sums."""
@@ -413,7 +420,7 @@ def _row_affine_cubic(coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy,
     return s0, s1, s2, s3, s4, s5, s6
 
 
-@nb.njit(fastmath=True, cache=True)
+@nb.njit(fastmath=_FASTMATH, cache=True)
 def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
     """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
     tw = grow.shape[0]
@@ -485,7 +492,7 @@ def flat_lengths(subset: int, order: int) -> tuple[int, int, int]:
     return ng, nh, nh + 32
 
 
-@nb.njit(fastmath=True, cache=True)
+@nb.njit(fastmath=_FASTMATH, cache=True)
 def _load_reference(f, gx, gy, fmean, r0, c0, size, w, fp, gxp, gyp):  # pragma: no cover
     """Reference subset rows (f - fmean, gx, gy), ``w`` px wide, into the flat buffers
     (row width ``w``; the columns >= size are masked out by the sums). Unsigned indices:
@@ -502,7 +509,7 @@ def _load_reference(f, gx, gy, fmean, r0, c0, size, w, fp, gxp, gyp):  # pragma:
             gyp[o + j] = gy[r, cc + j]
 
 
-@nb.njit(parallel=True, fastmath=True, cache=True)
+@nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
 def pack_reference(f, gx, gy, fmean, rows, cols, half, w, status, fpk, gxpk,
                    gypk):  # pragma: no cover - compiled
     """Flat reference subsets of all POIs (rows of ``fpk``, ``gxpk``, ``gypk``, shape
@@ -514,7 +521,7 @@ def pack_reference(f, gx, gy, fmean, rows, cols, half, w, status, fpk, gxpk,
                             fpk[k], gxpk[k], gypk[k])
 
 
-@nb.njit(fastmath=True, cache=True)
+@nb.njit(fastmath=_FASTMATH, cache=True)
 def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, maskf, fp,
                       gxp, gyp):  # pragma: no cover
     """The five sums of one translation IC-GN iteration over the flat subset.
@@ -594,7 +601,7 @@ def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, m
     return s0, s1, s2, s3, s4
 
 
-@nb.njit(fastmath=True, cache=True)
+@nb.njit(fastmath=_FASTMATH, cache=True)
 def _points_translation(todo, m0, m1, source, p0, status_in, coef, himg, wimg, order, w, f,
                         gx, gy, rows, cols, half, hinv, jsum, avec, fmean, fnorm, max_iter,
                         tol, min_zncc, max_step, maskf, cbuf, hbuf, fps, gxps, gyps, fpk, gxpk,
@@ -637,7 +644,7 @@ def _points_translation(todo, m0, m1, source, p0, status_in, coef, himg, wimg, o
                                True, out_p, out_zncc, out_iter, out_status)
 
 
-@nb.njit(fastmath=True, cache=True)
+@nb.njit(fastmath=_FASTMATH, cache=True)
 def _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, cols, half,
                        hinv, jsum, avec, fmean, fnorm, max_iter, tol, min_zncc, max_step,
                        maskf, wx, wy, wxf, wyf, cbuf, hbuf, fp, gxp, gyp, load, out_p,
@@ -749,7 +756,7 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
     return 1.0
 
 
-@nb.njit(parallel=True, fastmath=True, cache=True)
+@nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
 def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hinv, jsum,
                      avec, fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
                      first, second, source, nthr, fpk, gxpk, gypk, out_p, out_zncc,
@@ -803,7 +810,7 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hi
                                 fpk, gxpk, gypk, out_p, out_zncc, out_iter, out_status)
 
 
-@nb.njit(parallel=True, fastmath=True, cache=True)
+@nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
 def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, jsum, avec,
                 fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
                 out_p, out_zncc, out_iter, out_status):  # pragma: no cover - compiled

@@ -1,0 +1,47 @@
+"""The DIC kernels' fast-math flags: NaN/inf semantics kept (status tests by NaN), no
+reassociation (a freshly compiled kernel and one loaded from numba's cache give the same
+bits; tested end to end by test_campaign_interrupts' empty-cache resume)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import dicblur
+from dicblur.dic import kernels
+from dicblur.dic.status import PointStatus
+
+
+def _compiled_kernels():
+    for name in dir(kernels):
+        obj = getattr(kernels, name)
+        if hasattr(obj, "targetoptions") and hasattr(obj, "py_func"):
+            yield name, obj
+
+
+def test_no_kernel_assumes_finite_values_or_reassociates():
+    found = list(_compiled_kernels())
+    assert len(found) >= 15
+    for name, fn in found:
+        fm = fn.targetoptions.get("fastmath", False)
+        flags = {"fast"} if fm is True else set(fm or ())
+        assert not flags & {"fast", "nnan", "ninf", "reassoc"}, (name, flags)
+
+
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_non_finite_subsets_get_a_failure_status(shape):
+    # A float32 overflow (1e200 GL) makes the prefiltered coefficients inf / NaN around it:
+    # the status must come from the NaN tests (`not dg2 > ...`, `math.isfinite(u)`), never
+    # a "converged" NaN displacement.
+    img = dicblur.speckle_pattern((96, 96), speckle_size=4.0, seed=1)
+    cur = img.copy()
+    cur[44:47, 44:47] = 1e200
+    with np.errstate(all="ignore"):
+        res = dicblur.correlate(img, cur, subset=15, step=12, shape=shape)
+    st = np.asarray(res.status)
+    kept = np.isin(st, [PointStatus.CONVERGED, PointStatus.MAX_ITERATIONS,
+                        PointStatus.LOW_CORRELATION])
+    assert (st == PointStatus.DIVERGED).all()
+    assert not kept.any() and np.isnan(res.u).all() and np.isnan(res.v).all()
+    clean = dicblur.correlate(img, img, subset=15, step=12, shape=shape)
+    assert (np.asarray(clean.status) == PointStatus.CONVERGED).all()

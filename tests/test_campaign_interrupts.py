@@ -22,10 +22,9 @@ import numpy as np
 import pytest
 
 from dicblur.campaign import VARIABLES, campaign_status, open_results, run_campaign
+from helpers.campaign import kill_spec, shift_task
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-from campaign_helpers import kill_spec, shift_task  # noqa: E402
 
 COMPARED = [v for v in VARIABLES if v != "time_s"]
 
@@ -168,7 +167,7 @@ def test_normal_local_cluster_runs_print_nothing_on_stderr(tmp_path):
 KILLED = """
 import sys, time
 sys.path.insert(0, {tests!r})
-import campaign_helpers
+import helpers.campaign as campaign_helpers
 from dicblur.campaign import parse_spec, run_campaign
 from dicblur.campaign import store
 

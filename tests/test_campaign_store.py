@@ -30,10 +30,9 @@ from dicblur.campaign import store as store_mod
 from dicblur.campaign.lock import StoreLock, lock_holder, lock_path
 from dicblur.cli import main
 from dicblur.errors import StoreError
+from helpers.campaign import kill_spec, shift_task, small_spec_dict
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-from campaign_helpers import kill_spec, shift_task, small_spec_dict  # noqa: E402
 
 COMPARED = [v for v in VARIABLES if v != "time_s"]
 
@@ -71,7 +70,7 @@ def test_second_runner_is_refused_while_the_first_holds_the_lock(tmp_path):
 RUNNER = """
 import sys, time
 sys.path.insert(0, {tests!r})
-from campaign_helpers import kill_spec, shift_task
+from helpers.campaign import kill_spec, shift_task
 from dicblur.campaign import run_campaign
 from dicblur.errors import StoreError
 

@@ -143,7 +143,8 @@ def test_cli_second_runner_gets_one_line_and_exit_2(tmp_path, capsys):
         rc = main(["campaign", "run", str(spec_path), "-o", str(out), "--serial", "-q"])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err
-    assert err.startswith(f"error: results={str(out)!r}: another campaign run")
+    # the CLI names the option the user typed (-o/--out), not the API's results=
+    assert err.startswith(f"error: --out={str(out)!r}: another campaign run")
 
 
 def test_lock_of_a_killed_runner_does_not_block(tmp_path):

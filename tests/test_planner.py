@@ -198,3 +198,25 @@ def test_moving_two_controls_changes_plot_and_sentence(models, tmp_path):
     page.write_text(text.replace("<body>", "<body data-images-ok='true'>"))
     shot = check_in_browser(page, screenshot=tmp_path / "planner.png", window=(1280, 800))
     assert shot.screenshot is not None and shot.screenshot.stat().st_size > 10_000
+
+
+def test_cli_plan_writes_the_page(tmp_path, capsys):
+    from dicblur.cli import main
+
+    model_path = tmp_path / "model.json"
+    _model().to_json(str(model_path))
+    page = tmp_path / "planner.html"
+    # the page alone: no velocity or scale needed
+    assert main(["plan", str(model_path), "--html", str(page)]) == 0
+    assert "wrote" in capsys.readouterr().out and page.stat().st_size > 10_000
+    # with the other options: the plan is printed and they are the page's starting values
+    assert main(["plan", str(model_path), "--velocity", "200mm/s", "--scale", "0.05mm/px",
+                 "--target", "0.02px", "--noise", "3", "--html", str(page)]) == 0
+    assert "rule of thumb" in capsys.readouterr().out
+    text = page.read_text()
+    assert 'value="200mm/s"' in text and 'value="0.02px"' in text
+    # bad output paths are refused before any work, with exit 2
+    assert main(["plan", str(model_path), "--html", str(tmp_path / "no" / "p.html")]) == 2
+    assert "--html" in capsys.readouterr().err
+    assert main(["plan", str(model_path)]) == 2
+    assert "--velocity" in capsys.readouterr().err

@@ -168,9 +168,8 @@ def planner_html(models: Sequence[Any], *, labels: Sequence[str] | None = None,
         v = fallback if x is None or not math.isfinite(x) else x
         return val(f"{v:g}")
 
-    kind_opts = "".join(
-        f'<option value="{k}">{"noise + blur mismatch" if k == "mismatch" else "power law (paper eq. 19)"}'
-        "</option>" for k in kinds)
+    names = {"mismatch": "noise + blur mismatch", "power_law": "power law (paper eq. 19)"}
+    kind_opts = "".join(f'<option value="{k}">{names[k]}</option>' for k in kinds)
     page_title = title or "dicblur exposure planner"
     body = f"""<h1>{html.escape(page_title)}</h1>
 <p id="sentence" role="status" aria-live="polite">—</p>

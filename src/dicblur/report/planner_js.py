@@ -1,3 +1,4 @@
+# ruff: noqa: E501  (the module is one JavaScript string)
 """The planner page's script (plain ES2017, no library): model evaluation and the UI.
 
 Kept as a Python string so that the page is one self-contained file. The model functions

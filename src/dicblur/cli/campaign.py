@@ -193,7 +193,8 @@ def calibrate_command(
 ) -> int:
     """The paper's blur sweep (W = 0.1..10 px) on IMAGE, then the model fits.
 
-    Writes OUT/model.json, OUT/results.zarr (+ results.csv) and three figures.
+    Writes OUT/model.json, OUT/results.zarr (+ results.csv), three figures and
+    OUT/planner.html (the interactive exposure planner for this calibration).
     """
     from dataclasses import replace
 
@@ -218,6 +219,9 @@ def calibrate_command(
         return 130
     res = replace(res, figures=calibration_figures(res))
     m = res.model
+    from ..report.planner import write_planner
+
+    planner = write_planner([m], out / "planner.html")
     mm = m.mismatch
     dom = m.domain
     print_mapping(
@@ -237,6 +241,7 @@ def calibrate_command(
             "model": str(res.model_path),
             "results": str(res.results_path),
             "figures": ", ".join(p.name for p in res.figures),
+            "planner page": str(planner),
         },
         {"SSSIG_0": "(GL/px)^2", "beta (eq. 18)": "1/px^2", "MBRF = 2 alpha beta": "1/px^2",
          "power law (paper): u_ref = u_e(0)": "px", "mismatch model: c": "px/px^2",

@@ -294,8 +294,9 @@ def predict_command(
 
 def plan_command(
     model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
-    velocity: str = typer.Option(..., "--velocity", help="Target speed, e.g. 120mm/s."),
-    scale: str = typer.Option(..., "--scale", help="Image scale, e.g. 0.05mm/px."),
+    velocity: str | None = typer.Option(None, "--velocity",
+                                        help="Target speed, e.g. 120mm/s."),
+    scale: str | None = typer.Option(None, "--scale", help="Image scale, e.g. 0.05mm/px."),
     target: str | None = typer.Option(None, "--target", help="Largest u_e, e.g. 0.01px."),
     full_well: float | None = typer.Option(None, "--full-well", help="Full well, e-."),
     read_noise: float | None = typer.Option(None, "--read-noise", help="Read noise, e-."),
@@ -312,9 +313,16 @@ def plan_command(
         help="Grey level (of the fitted images) at which shot noise is evaluated."),
     which: str | None = typer.Option(None, "--model", help="mismatch or power_law."),
     plot: Path | None = typer.Option(None, "--plot", help="Write u_e(exposure) figure."),
+    html_out: Path | None = typer.Option(
+        None, "--html", help="Write an interactive planner page (one self-contained HTML "
+        "file; the options given here are its starting values)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """Plan the exposure: longest under --target, or the optimum with a camera."""
+    """Plan the exposure: longest under --target, or the optimum with a camera.
+
+    With --html (alone, or with the other options as starting values), writes a planner
+    page that computes the same answers in the browser as the controls change.
+    """
     import numpy as np
 
     from ..io import check_output, load_image
@@ -327,7 +335,23 @@ def plan_command(
 
     if plot is not None:
         check_output(plot, "--plot")
+    if html_out is not None:
+        check_output(html_out, "--html")
+    if (velocity is None or scale is None) and html_out is None:
+        raise InputError("--velocity, --scale: give both (e.g. --velocity 120mm/s --scale "
+                         "0.05mm/px), or --html planner.html for the interactive page")
     model = BlurUncertaintyModel.from_json(str(model_path))
+    if html_out is not None:
+        from ..report.planner import PlannerDefaults, write_planner
+
+        defaults = PlannerDefaults(
+            velocity=velocity or "120mm/s", scale=scale or "0.05mm/px",
+            target=target or "0.01px", noise=noise, full_well=full_well,
+            read_noise=read_noise, flux=flux)
+        write_planner([model], html_out, labels=None, defaults=defaults)
+        typer.echo(f"wrote {html_out}")
+        if velocity is None or scale is None:
+            return
     if reference is not None and noise_level is not None:
         raise InputError("--reference, --noise-level: give one (the image's level is computed "
                          "from it)")
@@ -357,6 +381,7 @@ def plan_command(
     if noise_level is not None and camera is None:
         raise InputError("--reference/--noise-level: only with a camera (--full-well, "
                          "--read-noise, --flux); with fixed noise give --noise")
+    assert velocity is not None and scale is not None
     plan = plan_exposure(model, velocity=velocity, scale=scale, target=target, camera=camera,
                          sigma=noise, which=which, noise_level=noise_level,
                          mean_level=mean_level)

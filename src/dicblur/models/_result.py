@@ -93,6 +93,12 @@ class FitResult:
     ci_method: str
     extra: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def t_quantile(self) -> float:
+        """Two-sided Student-t quantile of this fit's intervals (level ``confidence``,
+        ``dof`` degrees of freedom): the half-width factor of its prediction intervals."""
+        return t_quantile(self.confidence, self.dof)
+
     def __getitem__(self, name: str) -> float:
         """Value of a free or fixed parameter."""
         if name in self.names:

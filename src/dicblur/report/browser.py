@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..errors import DicblurError
 
-__all__ = ["BrowserCheck", "check_in_browser", "find_browser"]
+__all__ = ["BrowserCheck", "check_in_browser", "evaluate_in_browser", "find_browser"]
 
 _CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 # Flags for a closed network and a root user: no sandbox, no background connections.
@@ -111,3 +111,34 @@ def check_in_browser(
         screenshot=shot,
         browser=browser,
     )
+
+
+def evaluate_in_browser(html_text: str, script: str, *, timeout: float = 120.0) -> str:
+    """Load ``html_text`` in headless Chromium with ``script`` appended, and return the
+    text the script writes into ``<pre id="dicblur-result">`` (created by the caller's
+    script). Used to run a page's own functions on test inputs.
+
+    Raises
+    ------
+    DicblurError
+        If no browser is found, it fails, or the script wrote no result.
+    """
+    browser = find_browser()
+    if browser is None:
+        raise DicblurError(
+            "no Chromium-family browser found on PATH; install Debian's 'chromium' package"
+        )
+    page = html_text.replace("</body>", f"<script>{script}</script></body>")
+    with tempfile.TemporaryDirectory(prefix="dicblur-chromium-") as profile:
+        path = Path(profile) / "page.html"
+        path.write_text(page, encoding="utf-8")
+        base = [browser, *_FLAGS, f"--user-data-dir={profile}/u", "--virtual-time-budget=20000"]
+        dom = _run([*base, "--dump-dom", path.as_uri()], timeout)
+    m = re.search(r'<pre id="dicblur-result">(.*?)</pre>', dom.stdout, re.S)
+    if dom.returncode != 0 or m is None:
+        raise DicblurError(
+            f"browser produced no result (exit {dom.returncode}): {dom.stderr[-400:]}"
+        )
+    import html as _html
+
+    return _html.unescape(m.group(1))

@@ -1,0 +1,222 @@
+"""The interactive planner page (issue #19): same numbers in the browser as in Python.
+
+The page's script evaluates the model itself; these tests run that script in headless
+Chromium on a grid of inputs and compare with ``BlurUncertaintyModel.predict`` and
+``plan_exposure``. They skip when no Chromium is installed (``.ci/run`` installs it).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from dicblur.models import (
+    PoissonGaussianCamera,
+    fit_blur_model,
+    mismatch_model,
+    plan_exposure,
+    sssig_decay,
+)
+from dicblur.report import find_browser
+from dicblur.report.browser import evaluate_in_browser
+from dicblur.report.planner import SIZE_BUDGET, PlannerDefaults, planner_html, write_planner
+
+needs_browser = pytest.mark.skipif(find_browser() is None,
+                                   reason="no Chromium on PATH; .ci/run installs it")
+
+S0, BETA = 2.4e6, 0.03
+
+
+def _model(levels=(2.0, 8.0), seed=1, floor=9e-4):
+    rng = np.random.default_rng(seed)
+    w0 = np.arange(0.0, 6.01, 0.5)
+    w = np.tile(w0, len(levels))
+    sig = np.repeat(levels, w0.size)
+    s = sssig_decay(w, S0, BETA)
+    u = mismatch_model(w, s, sig, c=9e-4, a=1.4, floor=floor) * np.exp(
+        rng.normal(0.0, 0.02, w.size))
+    return fit_blur_model(w, s * np.exp(rng.normal(0.0, 0.005, w.size)), u, noise_sigma=sig,
+                          subset=31, mean_level=120.0,
+                          provenance={"pattern": "synthetic.tif"})
+
+
+@pytest.fixture(scope="module")
+def models():
+    one = _model(levels=(2.0,), seed=3)
+    return [_model(), one]
+
+
+def test_page_is_self_contained_and_small(models, tmp_path):
+    path = write_planner(models, tmp_path / "planner.html")
+    text = path.read_text()
+    assert len(text.encode()) < SIZE_BUDGET
+    assert not re.search(r"(src|href)=['\"]?(https?:)?//", text)  # no network, no CDN
+    assert "dicblur-models" in text and "<svg" in text
+    assert "@media print" in text
+    assert list(tmp_path.iterdir()) == [path]  # atomic write leaves no temporary file
+
+
+JS_PREDICT = """
+var P = window.dicblurPlanner, out = [];
+CASES.forEach(function (c) {
+  var m = P.models[c.model];
+  try {
+    if (c.op === "predict") {
+      var r = P.predict(m, [c.blur], c.sigma, c.kind);
+      out.push({u_e: r.u_e[0], low: r.low[0], high: r.high[0],
+                u_noise: r.u_noise.length ? r.u_noise[0] : null});
+    } else {
+      var q = {velocity: c.velocity, scale: c.scale, target: c.target, sigma: c.sigma,
+               camera: c.camera, kind: c.kind, noise_level: null};
+      var p = P.planExposure(m, q);
+      out.push({exposure: p.exposure, u_e: p.u_e, max_exposure: p.max_exposure,
+                min_exposure: p.min_exposure});
+    }
+  } catch (e) { out.push({error: String(e.message || e)}); }
+});
+var pre = document.createElement("pre");
+pre.id = "dicblur-result";
+pre.textContent = JSON.stringify(out);
+document.body.appendChild(pre);
+"""
+
+
+def _cases(models):
+    rng = np.random.default_rng(7)
+    cases = []
+    for _ in range(160):
+        mi = int(rng.integers(0, len(models)))
+        kind = str(rng.choice(["mismatch", "power_law"]))
+        sigma = None if mi == 1 and kind == "power_law" else float(rng.uniform(0.5, 10))
+        if mi == 1 and kind == "mismatch":
+            sigma = float(rng.uniform(0.5, 10))
+        cases.append({"op": "predict", "model": mi, "kind": kind,
+                      "blur": float(rng.uniform(0, 9)), "sigma": sigma})
+    for _ in range(30):
+        cases.append({"op": "plan", "model": 0, "kind": "mismatch",
+                      "velocity": float(rng.uniform(20, 400)), "scale": 0.05,
+                      "target": float(rng.uniform(0.004, 0.03)),
+                      "sigma": float(rng.uniform(1, 6)), "camera": None})
+    for _ in range(40):
+        cases.append({"op": "plan", "model": 0,
+                      "kind": str(rng.choice(["mismatch", "power_law"])),
+                      "velocity": float(rng.uniform(20, 400)), "scale": 0.05,
+                      "target": float(rng.uniform(0.004, 0.03)), "sigma": None,
+                      "camera": {"full_well": float(rng.uniform(1e4, 4e4)),
+                                 "read_noise": float(rng.uniform(1, 10)),
+                                 "flux": float(10 ** rng.uniform(6, 7.5)),
+                                 "peak_to_mean": 2.0}})
+    return cases
+
+
+def _python(models, c):
+    m = models[c["model"]]
+    try:
+        if c["op"] == "predict":
+            p = m.predict([c["blur"]], c["sigma"], model=c["kind"])
+            return {"u_e": float(p.u_e[0]), "low": float(p.low[0]), "high": float(p.high[0])}
+        cam = None if c["camera"] is None else PoissonGaussianCamera(**c["camera"])
+        p = plan_exposure(m, velocity=c["velocity"], scale=c["scale"], target=c["target"],
+                          sigma=c["sigma"], camera=cam, which=c["kind"])
+        return {"exposure": p.exposure, "u_e": p.u_e, "max_exposure": p.max_exposure,
+                "min_exposure": p.min_exposure}
+    except Exception as exc:  # the page must refuse the same inputs
+        return {"error": str(exc)}
+
+
+@needs_browser
+def test_page_computes_what_python_computes(models):
+    cases = _cases(models)
+    assert len(cases) >= 200
+    text = planner_html(models)
+    got = json.loads(evaluate_in_browser(text, f"var CASES = {json.dumps(cases)};" + JS_PREDICT))
+    assert len(got) == len(cases)
+    n_checked = 0
+    for c, js in zip(cases, got, strict=True):
+        py = _python(models, c)
+        assert ("error" in py) == ("error" in js), (c, py, js)
+        if "error" in py:
+            continue
+        n_checked += 1
+        assert js["u_e"] == pytest.approx(py["u_e"], rel=1e-9, abs=0), (c, py, js)
+        if c["op"] == "predict":
+            assert js["low"] == pytest.approx(py["low"], rel=1e-6)
+            assert js["high"] == pytest.approx(py["high"], rel=1e-6)
+        else:
+            assert js["exposure"] == pytest.approx(py["exposure"], rel=1e-6), (c, py, js)
+            for k in ("max_exposure", "min_exposure"):
+                if py[k] is None:
+                    assert js[k] is None
+                else:
+                    assert js[k] == pytest.approx(py[k], rel=1e-6)
+    assert n_checked >= 200
+
+
+SCRIPT_MOVE = """
+function snap() {
+  return {sentence: document.getElementById("sentence").textContent,
+          curve: document.getElementById("plot").innerHTML,
+          ue: document.getElementById("out-ue").textContent};
+}
+function set(id, v) {
+  var el = document.getElementById(id);
+  el.value = v;
+  el.dispatchEvent(new Event("input", {bubbles: true}));
+}
+window.addEventListener("load", function () {
+  var before = snap();
+  set("velocity", "400mm/s");
+  var mid = snap();
+  set("sigma", "6");
+  var after = snap();
+  var pre = document.createElement("pre");
+  pre.id = "dicblur-result";
+  pre.textContent = JSON.stringify([before, mid, after]);
+  document.body.appendChild(pre);
+});
+"""
+
+
+@needs_browser
+def test_moving_two_controls_changes_plot_and_sentence(models, tmp_path):
+    text = planner_html(models, defaults=PlannerDefaults(velocity="120mm/s", target="0.01px"))
+    before, mid, after = json.loads(evaluate_in_browser(text, SCRIPT_MOVE))
+    assert before["sentence"].startswith("At 120 mm/s, expose at most")
+    assert mid["sentence"].startswith("At 400 mm/s") and mid["curve"] != before["curve"]
+    assert after["ue"] != mid["ue"] and after["curve"] != mid["curve"]
+    # the sentence's exposure is the Python answer
+    plan = plan_exposure(models[0], velocity="120mm/s", scale="0.05mm/px", target="0.01px",
+                         sigma=2.0)
+    assert f"{plan.exposure * 1e3:.3g} ms" in before["sentence"]
+    # screenshot as a test artefact
+    from dicblur.report import check_in_browser
+
+    page = tmp_path / "planner.html"
+    page.write_text(text.replace("<body>", "<body data-images-ok='true'>"))
+    shot = check_in_browser(page, screenshot=tmp_path / "planner.png", window=(1280, 800))
+    assert shot.screenshot is not None and shot.screenshot.stat().st_size > 10_000
+
+
+def test_cli_plan_writes_the_page(tmp_path, capsys):
+    from dicblur.cli import main
+
+    model_path = tmp_path / "model.json"
+    _model().to_json(str(model_path))
+    page = tmp_path / "planner.html"
+    # the page alone: no velocity or scale needed
+    assert main(["plan", str(model_path), "--html", str(page)]) == 0
+    assert "wrote" in capsys.readouterr().out and page.stat().st_size > 10_000
+    # with the other options: the plan is printed and they are the page's starting values
+    assert main(["plan", str(model_path), "--velocity", "200mm/s", "--scale", "0.05mm/px",
+                 "--target", "0.02px", "--noise", "3", "--html", str(page)]) == 0
+    assert "rule of thumb" in capsys.readouterr().out
+    text = page.read_text()
+    assert 'value="200mm/s"' in text and 'value="0.02px"' in text
+    # bad output paths are refused before any work, with exit 2
+    assert main(["plan", str(model_path), "--html", str(tmp_path / "no" / "p.html")]) == 2
+    assert "--html" in capsys.readouterr().err
+    assert main(["plan", str(model_path)]) == 2
+    assert "--velocity" in capsys.readouterr().err

@@ -30,7 +30,7 @@ needs_browser = pytest.mark.skipif(find_browser() is None,
 S0, BETA = 2.4e6, 0.03
 
 
-def _model(levels=(2.0, 8.0), seed=1, floor=9e-4):
+def _model(levels=(2.0, 8.0), seed=1, floor=9e-4, breakdown=None):
     rng = np.random.default_rng(seed)
     w0 = np.arange(0.0, 6.01, 0.5)
     w = np.tile(w0, len(levels))
@@ -38,15 +38,20 @@ def _model(levels=(2.0, 8.0), seed=1, floor=9e-4):
     s = sssig_decay(w, S0, BETA)
     u = mismatch_model(w, s, sig, c=9e-4, a=1.4, floor=floor) * np.exp(
         rng.normal(0.0, 0.02, w.size))
+    extra = {}
+    if breakdown is not None:  # DIC "fails" (< 90 % converged) from W = breakdown on
+        extra["converged_fraction"] = np.where(w >= breakdown, 0.5, 1.0)
     return fit_blur_model(w, s * np.exp(rng.normal(0.0, 0.005, w.size)), u, noise_sigma=sig,
                           subset=31, mean_level=120.0,
-                          provenance={"pattern": "synthetic.tif"})
+                          provenance={"pattern": "synthetic.tif"}, **extra)
 
 
 @pytest.fixture(scope="module")
 def models():
     one = _model(levels=(2.0,), seed=3)
-    return [_model(), one]
+    broken = _model(seed=5, breakdown=4.5)
+    assert broken.domain.breakdown_blur is not None
+    return [_model(), one, broken]
 
 
 def test_page_is_self_contained_and_small(models, tmp_path):
@@ -87,21 +92,23 @@ document.body.appendChild(pre);
 def _cases(models):
     rng = np.random.default_rng(7)
     cases = []
-    for _ in range(160):
+    for _ in range(200):
         mi = int(rng.integers(0, len(models)))
         kind = str(rng.choice(["mismatch", "power_law"]))
-        sigma = None if mi == 1 and kind == "power_law" else float(rng.uniform(0.5, 10))
-        if mi == 1 and kind == "mismatch":
-            sigma = float(rng.uniform(0.5, 10))
+        sigma = float(rng.uniform(0.5, 10))
+        if kind == "power_law" and rng.uniform() < 0.7:
+            # the power law predicts only at its fitted noise (model 0: 2..8 GL, model 1:
+            # 2 GL); elsewhere both sides must refuse
+            sigma = None if mi == 1 else float(rng.uniform(2.0, 8.0))
         cases.append({"op": "predict", "model": mi, "kind": kind,
                       "blur": float(rng.uniform(0, 9)), "sigma": sigma})
     for _ in range(30):
-        cases.append({"op": "plan", "model": 0, "kind": "mismatch",
+        cases.append({"op": "plan", "model": int(rng.choice([0, 2])), "kind": "mismatch",
                       "velocity": float(rng.uniform(20, 400)), "scale": 0.05,
                       "target": float(rng.uniform(0.004, 0.03)),
                       "sigma": float(rng.uniform(1, 6)), "camera": None})
     for _ in range(40):
-        cases.append({"op": "plan", "model": 0,
+        cases.append({"op": "plan", "model": int(rng.choice([0, 2])),
                       "kind": str(rng.choice(["mismatch", "power_law"])),
                       "velocity": float(rng.uniform(20, 400)), "scale": 0.05,
                       "target": float(rng.uniform(0.004, 0.03)), "sigma": None,
@@ -140,8 +147,12 @@ def test_page_computes_what_python_computes(models):
         assert ("error" in py) == ("error" in js), (c, py, js)
         if "error" in py:
             continue
-        n_checked += 1
+        if py["u_e"] != py["u_e"]:  # NaN: no prediction beyond the breakdown W
+            assert js["u_e"] is None, (c, py, js)  # JSON has no NaN: the page gives null
+            n_checked += 1
+            continue
         assert js["u_e"] == pytest.approx(py["u_e"], rel=1e-9, abs=0), (c, py, js)
+        n_checked += 1
         if c["op"] == "predict":
             assert js["low"] == pytest.approx(py["low"], rel=1e-6)
             assert js["high"] == pytest.approx(py["high"], rel=1e-6)
@@ -153,6 +164,8 @@ def test_page_computes_what_python_computes(models):
                 else:
                     assert js[k] == pytest.approx(py[k], rel=1e-6)
     assert n_checked >= 200
+    # the breakdown was exercised: predictions refused beyond it, plans capped at it
+    assert any(c["model"] == 2 and c["op"] == "predict" and c["blur"] >= 4.5 for c in cases)
 
 
 SCRIPT_MOVE = """

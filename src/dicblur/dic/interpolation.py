@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from .._validation import check_choice
+from ..errors import InputError
 from . import kernels
 
 __all__ = [
@@ -111,7 +112,8 @@ def bspline_coefficients(
         margin holds the mirror-symmetric continuation (whole-sample symmetry).
     """
     if order not in (3, 5):
-        raise ValueError(f"order={order}: must be 3 or 5")
+        raise InputError(f"order={order}: the B-spline order must be 3 or 5 (bspline3 or "
+                         "bspline5)")
     img: NDArray[np.floating] = np.asarray(image)
     if img.dtype not in (np.float32, np.float64):
         img = img.astype(np.float64)
@@ -120,7 +122,8 @@ def bspline_coefficients(
     if out is None:
         out = np.empty(shape, dtype=dtype)
     elif out.shape != shape or out.dtype != np.dtype(dtype):
-        raise ValueError(f"out: expected shape {shape} and dtype {np.dtype(dtype)}")
+        raise InputError(f"out: expected an array of shape {shape} and dtype "
+                         f"{np.dtype(dtype)}; pass out=None to allocate one")
     kernels.prefilter_padded(img, order, out)
     return out
 

@@ -185,7 +185,7 @@ print("complete", flush=True)
 """
 
 REAL_SPEC = {
-    "campaign": {"name": "k", "seed": 11, "repetitions": 2},
+    "campaign": {"name": "k", "seed": 11, "repetitions": 4},
     "pattern": [{"name": "p", "generator": "speckle", "shape": [64, 64],
                  "speckle_size": 3.0, "seed": 3}],
     "blur": {"lengths": {"start": 0.0, "stop": 3.0, "step": 0.25}},
@@ -222,7 +222,7 @@ def _kill_and_resume(tmp_path: Path, n_kills: int, *, real_task: bool,
                 while (proc.poll() is None and _done_chunks(out) <= before
                        and time.monotonic() < deadline):
                     time.sleep(0.002)
-                time.sleep(rng.uniform(0.0, 0.05))
+                time.sleep(rng.uniform(0.0, 0.02))
             if proc.poll() is None:
                 proc.kill()
                 kills += 1

@@ -44,7 +44,12 @@ def test_outputs_exist_and_are_consistent(small_run):
     for name in data["figures"]:
         assert (out / "figures" / f"{name}.png").stat().st_size > 1000
         assert (out / "figures" / f"{name}.svg").exists()
-    assert len(data["figures"]) == 11
+    # issue 18: the blur-compensated matcher and the deblur baseline beside the plain one
+    assert "fig13_compensation" in data["figures"]
+    comp = data["compensation"]
+    assert comp["given"][0] == comp["plain"][0]  # W = 0: the same matcher
+    assert comp["given"][-1] < comp["plain"][-1] / 2  # W = 10 px: no mismatch left
+    assert len(data["figures"]) == 12  # 11 + the compensation figure (issue 18)
     assert (out / "campaign" / "study.zarr").is_dir()
     assert (out / "model_p4.json").exists() and (out / "command.txt").exists()
     # Every fitted eq. 18 reproduces the data it was fitted on reasonably (noise-free SSSIG).
@@ -78,7 +83,7 @@ def test_report_opens_in_headless_chromium(small_run):
     settings, res = small_run
     chk = check_in_browser(res.report, screenshot=settings.out / "screenshot.png")
     assert chk.images_ok, "a figure did not load in the browser"
-    assert chk.image_count == 11
+    assert chk.image_count == 12
     assert chk.screenshot is not None and chk.screenshot.stat().st_size > 10_000
 
 

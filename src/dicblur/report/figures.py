@@ -209,3 +209,21 @@ def fig_mismatch(data: Mapping[str, Mapping[str, Any]]) -> Any:
         ax.legend(fontsize=7)
     _layout(fig, rows=len(axes) // 2)
     return fig
+
+
+def fig_compensation(data: Mapping[str, Any]) -> Any:
+    """Beyond the paper (issue 18): u_e vs W with and without blur compensation."""
+    fig, axes = _grid(1)
+    ax = axes[0]
+    w = np.asarray(data["blur"])
+    ax.semilogy(w, data["plain"], "o", ms=3, color=_COLORS[0], label="plain (sharp reference)")
+    ax.semilogy(w, data["deblur"], "s", ms=3, color=_COLORS[1],
+                label="deblurred current (Wiener)")
+    ax.semilogy(w, data["given"], "^", ms=3, color=_COLORS[2], label="blur-compensated")
+    ax.semilogy(w, data["bound"], "-", color="0.3", label=r"static bound, eq. 2 at SSSIG(W)")
+    ax.set_title(str(data["label"]), fontsize=10)
+    ax.set_xlabel("blur W (px)")
+    ax.set_ylabel(r"$u_e$ (px)")
+    ax.legend(fontsize=7)
+    _layout(fig)
+    return fig

@@ -169,7 +169,7 @@ def _write_float_tiff(path: Path, image: np.ndarray) -> None:
 
 def _campaign(
     s: ReproduceSettings, name: str, patterns: list[dict[str, Any]], blur: dict[str, float],
-    noise: tuple[float, ...], progress: Progress | None,
+    noise: tuple[float, ...], progress: Progress | None, *, compensation: str = "none",
 ) -> Any:
     from ..campaign import open_results, parse_spec, run_campaign
 
@@ -180,7 +180,8 @@ def _campaign(
             "blur": {"lengths": blur, "angles": [0.0], "trajectory": "linear",
                      "method": "transfer", "substeps": 100, "boundary": "periodic"},
             "noise": {"model": "per-exposure", "levels": list(noise)},
-            "dic": {"subsets": [s.subset], "step": s.poi_step, "shape": "translation"},
+            "dic": {"subsets": [s.subset], "step": s.poi_step, "shape": "translation",
+                    **({} if compensation == "none" else {"compensation": compensation})},
         },
         base_dir=s.out,
     )
@@ -273,6 +274,22 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     study_patterns = [{"name": p.key, "path": f"patterns/{p.key}.tif"} for p in pats]
     ds, run_study = _campaign(s, "study", study_patterns, blur_grid, s.noise_levels, progress)
     timings["campaign_study"] = time.perf_counter() - t
+
+    # 2b. beyond the paper: the same sweep of pattern #2 with the blur-compensated matcher
+    # and with the deblur baseline (issue 18; main noise level only)
+    t = time.perf_counter()
+    comp_key = pats[1].key
+    comp_runs = {mode: _campaign(s, f"study_{mode}", [study_patterns[1]], blur_grid,
+                                 (s.main_noise,), progress, compensation=mode)
+                 for mode in ("given", "deblur")}
+    compensation = {
+        "pattern": comp_key, "label": pats[1].label,
+        "blur": np.asarray(ds["blur"].values, dtype=np.float64),
+        "plain": series(ds, "u_e", comp_key, s.main_noise),
+        "given": series(comp_runs["given"][0], "u_e", comp_key, s.main_noise),
+        "deblur": series(comp_runs["deblur"][0], "u_e", comp_key, s.main_noise),
+        "bound": series(ds, "u_match_score", comp_key, s.main_noise)}
+    timings["campaign_compensation"] = time.perf_counter() - t
 
     # 3. family for Fig. 11 --------------------------------------------------------------
     t = time.perf_counter()
@@ -427,7 +444,7 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     report_path, figures = write_report(
         out=out, settings=s, ds=ds, pats=pats, static=static, fits=fits, models=models,
         family=fam_rows, pulse=pulse, claims=claims, versions=versions, timings=timings,
-        valid=valid, clock=(t0, t))
+        valid=valid, clock=(t0, t), compensation=compensation)
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     results = {
@@ -442,7 +459,10 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
                            for f in pulse.fits],
                   "verdict": pulse.verdict},
         "claims": claims, "figures": figures, "timings": timings,
-        "campaign_runs": {"study": run_study, "family": run_family},
+        "campaign_runs": {"study": run_study, "family": run_family,
+                          **{f"study_{m}": r[1] for m, r in comp_runs.items()}},
+        "compensation": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                         for k, v in compensation.items()},
     }
     rj = out / "results.json"
     write_text(rj, json.dumps(_clean(results), indent=2))

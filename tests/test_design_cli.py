@@ -25,8 +25,9 @@ def test_design_cli_writes_everything(tmp_path, capsys):
     on_disk = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
     assert summary["files"] == on_disk and any(f.startswith("figures") for f in on_disk)
     for name in ("design.json", "evaluations.csv", "best_pattern.png", "pattern.png",
-                 "pattern.pdf", "pattern.json", "report.html"):
+                 "pattern.pdf", "pattern.json", "report.html", "planner.html"):
         assert (out / name).is_file(), name
+    assert "dicblur-models" in (out / "planner.html").read_text()  # the planner page (#19)
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64") >= 6
     doc = json.loads((out / "design.json").read_text())

@@ -214,6 +214,8 @@ def test_cli_track_writes_dataset_csv_report(tmp_path, tiny):
     assert len(lines) == 1 + 12 * ds.sizes["point"]
     page = (out / "report.html").read_text()
     assert page.count("data:image/png;base64") == 5 and "exposure" in page
+    # the exposure planner for this specimen, next to the report (#19)
+    assert "dicblur-models" in (out / "planner.html").read_text()
 
 
 def test_cli_track_partial_on_bad_frame(tmp_path, capsys):

@@ -257,6 +257,8 @@ def design_command(
             if not chk.images_ok:
                 raise InputError(f"report: {chk.image_count} images, not all decoded in "
                                  f"{chk.browser}")
+    _write_planner_page(cam, out, noise=noise, subset=subset, step=step,
+                        label=f"best pattern ({_in_words(best)}), subset {subset} px")
     summary = result.summary()
     if export is not None:
         summary["speckle_size_mm"] = export.speckle_size_mm
@@ -282,6 +284,25 @@ def design_command(
                       f"{export.speckle_size_mm:.3g} mm")
     console.print(f"{result.n_campaigns} campaigns, {result.n_points} campaign points, "
                   f"{result.wall_s:.1f} s; wrote {len(summary['files'])} files to {out}")
+
+
+def _write_planner_page(image: Any, out: Path, *, noise: float, subset: int, step: int,
+                        label: str) -> None:
+    """OUT/planner.html: the exposure planner for the winning pattern, from its static
+    prediction (no simulation). Everything else is already written, so a failure here is
+    one warning line, not a lost result."""
+    from ..errors import DicblurError
+    from ..models import model_from_pattern
+    from ..report.planner import write_planner
+
+    try:
+        model = model_from_pattern(image, noise_sigma=noise, subset=subset,
+                                   step=max(step, subset // 2),
+                                   provenance={"pattern": "best_pattern.png",
+                                               "source": "dicblur design"})
+        write_planner([model], out / "planner.html", labels=[label])
+    except DicblurError as exc:
+        typer.echo(f"warning: planner page not written ({exc})", err=True)
 
 
 def register(app: typer.Typer) -> None:

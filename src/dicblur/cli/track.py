@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -125,6 +125,9 @@ def track_command(
                              f"{ds.sizes['point']} points (0..{ds.sizes['point'] - 1})")
         written.append(str(write_track_report(ds, out, image=rec.frame(reference),
                                               points=plot_pts)))
+        page = _write_planner_page(ds, rec.frame(reference), out, subset=subset, step=step)
+        if page is not None:
+            written.append(str(page))
     a = ds.attrs
     valid = ds["valid"].values.astype(bool)
     print_mapping(f"track: {recording}", {
@@ -138,6 +141,45 @@ def track_command(
     }, {"exposure": "s", "fps": "Hz", "noise_sigma": "GL"})
     for w in written:
         console.print(f"wrote {w}")
+
+
+def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: int
+                        ) -> Path | None:
+    """OUT/planner.html: the exposure planner for this specimen (the reference frame's
+    static prediction at the recording's noise, motion along its median blur direction),
+    to set the exposure of the next test. The tracking results are already written, so a
+    failure here is one warning line."""
+    import math
+
+    import numpy as np
+
+    from ..errors import DicblurError
+    from ..models import model_from_pattern
+    from ..report.planner import write_planner
+
+    sigma = float(ds.attrs.get("noise_sigma", float("nan")))
+    if not math.isfinite(sigma) or sigma <= 0:
+        return None
+    a = 0.0
+    if "blur_direction" in ds:
+        # the axial mean (a blur has no sign: theta and theta + 180 deg are the same axis),
+        # weighted by the blur length
+        ang = np.radians(np.asarray(ds["blur_direction"].values, dtype=float)).ravel()
+        w = np.asarray(ds["W"].values, dtype=float).ravel()
+        ok = np.isfinite(ang) & np.isfinite(w)
+        if ok.any() and float(w[ok].sum()) > 0:
+            a = 0.5 * float(np.angle(np.sum(w[ok] * np.exp(2j * ang[ok]))))
+    try:
+        model = model_from_pattern(np.asarray(image, dtype=float), noise_sigma=sigma,
+                                   subset=subset, step=max(step, subset // 2),
+                                   motion=(math.sin(a), math.cos(a)),
+                                   provenance={"pattern": "reference frame",
+                                               "source": "dicblur track"})
+        return write_planner([model], out / "planner.html",
+                             labels=[f"this specimen, subset {subset} px"])
+    except DicblurError as exc:
+        typer.echo(f"warning: planner page not written ({exc})", err=True)
+        return None
 
 
 def register(app: typer.Typer) -> None:

@@ -330,20 +330,22 @@ def test_save_image_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
 
 @pytest.mark.parametrize(("argv", "stage"), [
     (["correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "-o",
-      "{o}/missing/f.nc"], "dicblur.cli.correlate.Correlator"),
+      "{o}/missing/f.nc"], "dicblur.dic.Correlator"),
     (["pulse", "-o", "{o}/missing/deeper", "--trials", "10"],
      "dicblur.pulse.study.run_pulse_study"),
     (["fit", "{d}/results.csv", "-o", "{o}/missing/m.json"], "dicblur.cli.models._read_table"),
     (["pattern", "generate", "{o}/missing/x.tif", "--size", "64"],
-     "dicblur.cli.pattern.speckle_pattern"),
+     "dicblur.patterns.speckle_pattern"),
     (["campaign", "run", "{d}/spec.toml", "-o", "{o}/missing/r.zarr", "--serial", "-q"],
-     "dicblur.cli.campaign.load_spec"),
+     "dicblur.campaign.load_spec"),
 ])
 def test_outputs_checked_before_the_work(argv: list[str], stage: str, corpus: Path,
                                          tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                          capsys: pytest.CaptureFixture[str]) -> None:
     def never(*a: object, **k: object) -> None:
         raise AssertionError("the computation started before the output was checked")
+
+    # the CLI imports each stage inside its command: patch the stage where it is defined
 
     monkeypatch.setattr(stage, never)
     args = [a.format(d=corpus, o=tmp_path) for a in argv]

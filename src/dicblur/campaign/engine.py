@@ -232,6 +232,12 @@ def _run_locked(
 ) -> RunSummary:
     store, images = _prepare(spec, path)
     fn = task if task is not None else _default_task()
+    if task is None:
+        from ..dic.cache import compile_kernels
+
+        # every process (this one, the workers, a later resume) then runs the same cached
+        # kernels: bit-identical results however the campaign is interrupted
+        compile_kernels((spec.dic_shape,))
     mask = store.done_mask()
     pending = [b for b in iter_batches(spec) if not mask[b.region].all()]
     n_total = spec.n_tasks

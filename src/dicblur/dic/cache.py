@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-__all__ = ["COMPILE_NOTICE", "kernels_cached"]
+__all__ = ["COMPILE_NOTICE", "compile_kernels", "kernels_cached"]
 
 #: The line the CLI prints on stderr before a cold compile.
 COMPILE_NOTICE = "compiling the DIC kernels, first run only (~20 s)"
@@ -41,4 +41,38 @@ def kernels_cached(shape: Literal["affine", "translation"] = "affine") -> bool:
                 return False
     except Exception:  # numba internals differ: do not guess
         return True
+    return True
+
+
+_COMPILE = """
+import numpy as np
+from dicblur.dic import Correlator
+rng = np.random.default_rng(0)
+img = rng.normal(128.0, 30.0, (64, 64))
+cur = np.roll(img, 1, axis=1)
+for shape in {shapes!r}:
+    c = Correlator(img, subset=11, step=12, shape=shape)
+    c.warmup()
+    c.correlate(cur)  # the FFT-CC initial guess and the retry paths too
+"""
+
+
+def compile_kernels(shapes: tuple[str, ...] = ("translation", "affine"), *,
+                    timeout: float = 1800.0) -> bool:
+    """Compile the DIC kernels of ``shapes`` into numba's cache in a subprocess, if the
+    cache is cold; return whether it compiled.
+
+    Afterwards this process and every worker load the same cached machine code. The
+    kernels reassociate their reductions (fast-math ``reassoc``, see ``kernels``), and a
+    kernel compiled in the process that runs it can differ in the last bits from one loaded
+    from the cache: a campaign resumed on an empty cache would then not be bit-identical.
+    """
+    import subprocess
+    import sys
+
+    cold = tuple(s for s in shapes if not kernels_cached(s))  # type: ignore[arg-type]
+    if not cold:
+        return False
+    subprocess.run([sys.executable, "-c", _COMPILE.format(shapes=cold)], check=True,
+                   timeout=timeout, capture_output=True)
     return True

@@ -52,11 +52,13 @@ _LOW_CORRELATION = int(PointStatus.LOW_CORRELATION)
 STALL_ITERATIONS = 8
 
 # Fast-math flags of the kernels: no "nnan"/"ninf" (the status tests `not dg2 > ...`,
-# `math.isfinite(u)` must see NaN and inf) and no "reassoc" (a reassociated reduction is
-# not reproducible: a process compiling the kernels and one loading them from numba's cache
-# differed in the last bits of u_e). "contract" (FMA), "arcp" and "nsz" keep results
-# deterministic for a given machine.
-_FASTMATH = {"contract", "arcp", "nsz"}  # a set: numba accepts no frozenset
+# `math.isfinite(u)` must see NaN and inf). "reassoc" stays: without it LLVM cannot
+# vectorise the IC-GN reductions (affine 43k -> 179k POI per CPU-s, translation 299k ->
+# 455k, 512^2, subset 21, one thread). A reassociated reduction compiled in one process and
+# the same kernel loaded from numba's cache can differ in the last bits, so every process
+# of a campaign runs cached code: run_campaign compiles a cold cache in a subprocess first
+# (dicblur.dic.cache.compile_kernels), which keeps resumed campaigns bit-identical.
+_FASTMATH = {"contract", "arcp", "nsz", "reassoc", "afn"}  # a set: numba takes no frozenset
 
 # Poles of the B-spline prefilters (Unser 1999, Table I).
 _POLES3 = np.array([math.sqrt(3.0) - 2.0])

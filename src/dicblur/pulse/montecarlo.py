@@ -299,12 +299,13 @@ def derivative_multiplier(length: int, kind: str) -> NDArray[np.complex128]:
     interpolant at the pixels).
     """
     q = 2 * math.pi * np.arange(length // 2 + 1) / length
+    out: NDArray[np.complex128]
     if kind == "bspline":
-        out = 1j * np.sin(q) * 6.0 / (4.0 + 2.0 * np.cos(q))
+        out = (1j * np.sin(q) * 6.0 / (4.0 + 2.0 * np.cos(q))).astype(np.complex128)
     elif kind == "keys":
-        out = 1j * np.sin(q)
+        out = (1j * np.sin(q)).astype(np.complex128)
     else:
-        out = 1j * q
+        out = (1j * q).astype(np.complex128)
         if length % 2 == 0:
             out[-1] = 0.0
     return out
@@ -416,12 +417,13 @@ def estimate_shift(
     period = check_positive(period, "period")
     check_choice(interpolation, "interpolation", ("fourier", "linear", *_ICGN_KINDS))
     check_choice(shifted, "shifted", ("blurred", "reference"))
-    if interpolation in _ICGN_KINDS:
-        def fn(m: NDArray[np.float64], f: NDArray[np.float64], du: float) -> tuple[
-                NDArray[np.float64], NDArray[np.uint8]]:
+    def fn(m: NDArray[np.float64], f: NDArray[np.float64], du: float) -> tuple[
+            NDArray[np.float64], NDArray[np.uint8]]:
+        if interpolation in _ICGN_KINDS:
             return _icgn_shift_estimate(m, f, du, interpolation)
-    else:
-        fn = _fourier_shift_estimate if interpolation == "fourier" else _linear_shift_estimate
+        if interpolation == "fourier":
+            return _fourier_shift_estimate(m, f, du)
+        return _linear_shift_estimate(m, f, du)
     if shifted == "blurred":
         u, st = fn(np.ascontiguousarray(cur), np.ascontiguousarray(ref), period)
         return u, st

@@ -343,11 +343,11 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
                                    contrast=con, subset=s.subset,
                                    c_static=static[k]["c_static"], provenance=prov,
                                    mean_level=float(p.image.mean()))
-        range_notes = [str(c.message).split(". Pass fit_range")[0] for c in caught
-                       if "edge-driven range" in str(c.message)]
-        for c in caught:
-            if "edge-driven range" not in str(c.message):
-                warnings.warn_explicit(c.message, c.category, c.filename, c.lineno)
+        range_notes = [str(wm.message).split(". Pass fit_range")[0] for wm in caught
+                       if "edge-driven range" in str(wm.message)]
+        for wm in caught:
+            if "edge-driven range" not in str(wm.message):
+                warnings.warn_explicit(wm.message, wm.category, wm.filename, wm.lineno)
         allw = np.concatenate([W[ok[lv]] for lv in s.noise_levels])
         allu = np.concatenate([series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
         alls = np.concatenate([series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])

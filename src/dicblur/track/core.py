@@ -214,7 +214,7 @@ def _correlate_frame(corr: Correlator, img: NDArray[np.float64],
 ZNCC_RATIO = 4.0
 
 
-def zncc_flags(zncc: NDArray[np.float64], converged: NDArray[np.bool_], *,
+def zncc_flags(zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *,
                ratio: float = ZNCC_RATIO) -> NDArray[np.bool_]:
     """Converged points whose match is much worse than usual (frames, points).
 
@@ -493,7 +493,7 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     # kinematics needs consecutive frames, so keep the contiguous run around the reference
     u = np.stack(out.u)[idx]
     v = np.stack(out.v)[idx]
-    zn = np.stack(out.zncc)[idx]
+    zn = np.stack(out.zncc).astype(np.float32)[idx]
     st = np.stack(out.status)[idx]
     fb = np.asarray(out.fallback)[idx]
     ref_of = np.asarray(refs, dtype=np.int64)[idx]
@@ -510,19 +510,18 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     low_zncc = zncc_flags(zn, conv)
     contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
 
-    def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         if n_f >= 2 and contiguous:
-            return exposure_motion(np.where(good, u, np.nan), np.where(good, v, np.nan),
-                                   fps=fps, exposure=t_exp, half_window=half_window)
-        nan = np.full((n_f, n_p), np.nan)
+            mu_, mv_ = exposure_motion(np.where(good, u, np.nan), np.where(good, v, np.nan),
+                                       fps=fps, exposure=t_exp, half_window=half_window)
+            return mu_.astype(np.float32), mv_.astype(np.float32)
+        nan = np.full((n_f, n_p), np.nan, np.float32)
         return nan, nan.copy()
 
     if not (n_f >= 2 and contiguous):
         notes.append("fewer than 2 consecutive frames: no blur estimate")
     good = conv & ~outlier & ~low_zncc
     wu, wv = motion(good)
-    uk = np.where(good, u, np.nan)
-    vk = np.where(good, v, np.nan)
     w = np.hypot(wu, wv)
     ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
     # static range: check for motion (it inflates the pairwise-difference noise)
@@ -531,8 +530,8 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
         if sel.sum() >= 2:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                mu = np.nanmedian(uk[sel], axis=1)
-                mv = np.nanmedian(vk[sel], axis=1)
+                mu = np.nanmedian(np.where(good[sel], u[sel], np.nan), axis=1)
+                mv = np.nanmedian(np.where(good[sel], v[sel], np.nan), axis=1)
             spread = float(max(np.nanmax(mu) - np.nanmin(mu), np.nanmax(mv) - np.nanmin(mv)))
             settings["static_motion_px"] = spread
             if spread > STATIC_MOTION_PX:
@@ -592,9 +591,8 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     bias = np.full((n_f, n_p, 2), np.nan, np.float32)
     if noise is not None and inside.any() and n_f >= 2 and contiguous:
         pin = np.flatnonzero(inside)
-        gu = np.where(good, u, np.nan)
-        gv = np.where(good, v, np.nan)
-        k3, axis = exposure_skew(gu[:, pin], gv[:, pin], fps=fps, exposure=t_exp,
+        k3, axis = exposure_skew(np.where(good, u, np.nan)[:, pin],
+                                 np.where(good, v, np.nan)[:, pin], fps=fps, exposure=t_exp,
                                  half_window=half_window)
         skew = build_skew_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
                                 axis=axis, kappa3=k3)

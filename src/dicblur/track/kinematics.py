@@ -137,7 +137,7 @@ def _node_weights(n_frames: int, duty: float, half_window: int
 
 def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
                   half_window: int = 2, block: int = 64
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                  ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Third central moment of the blur kernel of every point in every frame.
 
     The fitted track of :func:`exposure_motion` gives the position at 12 Gauss nodes of
@@ -147,7 +147,7 @@ def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
 
     Returns
     -------
-    kappa3 : ndarray, shape (frames, points)
+    kappa3 : ndarray of float32, shape (frames, points)
         px**3 (NaN where the stencil holds a missing sample).
     axis : ndarray, shape (frames, points)
         Direction of the axis, deg in [0, 180) from +x towards +y.
@@ -156,13 +156,13 @@ def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
     vv = np.asarray(v, dtype=np.float64)
     n_f, n_p = uu.shape
     if n_f < 2:
-        nan = np.full(uu.shape, np.nan)
+        nan = np.full(uu.shape, np.nan, np.float32)
         return nan, nan.copy()
     starts, wts = _node_weights(n_f, exposure * fps, half_window)
     width = wts.shape[2]
     gw = 0.5 * _WEIGHTS
-    k3 = np.full((n_f, n_p), np.nan)
-    axis = np.full((n_f, n_p), np.nan)
+    k3 = np.full((n_f, n_p), np.nan, np.float32)
+    axis = np.full((n_f, n_p), np.nan, np.float32)
     for a in range(0, n_f, block):
         b = np.arange(a, min(a + block, n_f))
         idx = starts[b][:, None] + np.arange(width)[None, :]  # (B, width)

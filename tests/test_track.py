@@ -20,9 +20,11 @@ from dicblur.track import (
 )
 from dicblur.track.synthetic import VibratingTarget
 
-REAL = Path(__file__).resolve().parents[1].parent.parent / "shared" / "data" / "real"
-if not REAL.exists():
-    REAL = Path("/work/shared/data/real")
+# shared/ sits beside the repository (conftest.REAL_DATA); a worktree sits one level lower
+_HERE = Path(__file__).resolve()
+REAL = next((p for p in (_HERE.parents[1].parent / "shared" / "data" / "real",
+                         _HERE.parents[2].parent / "shared" / "data" / "real") if p.exists()),
+            _HERE.parents[1].parent / "shared" / "data" / "real")
 
 
 def _pattern(n=112, seed=1):
@@ -239,7 +241,7 @@ def test_cli_track_partial_on_bad_frame(tmp_path, capsys):
 
 # ---------------------------------------------------------------- real images
 @pytest.mark.skipif(not (REAL / "dicchallenge1_sample3").exists(),
-                    reason="DIC Challenge images not present (/work/shared/data/real)")
+                    reason="DIC Challenge images not present (shared/data/real beside the repo)")
 def test_real_sample3_static_pair(tmp_path):
     """Sample 3: reference and an independent zero-shift image, a noise-floor pair."""
     ds = dicblur.track(str(REAL / "dicchallenge1_sample3" / "*.tif"), exposure="0.1ms",

@@ -591,9 +591,9 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     bias = np.full((n_f, n_p, 2), np.nan, np.float32)
     if noise is not None and inside.any() and n_f >= 2 and contiguous:
         pin = np.flatnonzero(inside)
-        k3, axis = exposure_skew(np.where(good, u, np.nan)[:, pin],
-                                 np.where(good, v, np.nan)[:, pin], fps=fps, exposure=t_exp,
-                                 half_window=half_window)
+        k3, axis = exposure_skew(np.where(good, u, np.nan), np.where(good, v, np.nan),
+                                 fps=fps, exposure=t_exp, half_window=half_window)
+        k3, axis = k3[:, pin], axis[:, pin]
         skew = build_skew_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
                                 axis=axis, kappa3=k3)
         for a in range(0, n_f, 128):

@@ -40,6 +40,29 @@ def _window_average_row(tau: NDArray[np.float64], a: float, degree: int
     return np.asarray((hi - lo) / ((p + 1) * 2 * a))
 
 
+def _rise_weights(n_frames: int, duty: float, half_window: int
+                  ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Per frame: stencil start and the weights (width,) of the rise over its window."""
+    if n_frames < 2:
+        raise InputError(f"n_frames={n_frames}: the motion needs at least 2 frames")
+    if not 0 <= duty <= 1 or not math.isfinite(duty):
+        raise InputError(f"duty={duty!r}: exposure x frame rate must lie in [0, 1]")
+    width = min(2 * half_window + 1, n_frames)
+    degree = width - 1
+    a = 0.5 * duty
+    # rise over the window of the polynomial sum c_p t**p: sum c_p (a**p - (-a)**p)
+    rise = np.array([a ** p - (-a) ** p for p in range(degree + 1)])
+    starts = np.empty(n_frames, np.intp)
+    wts = np.empty((n_frames, width))
+    for k in range(n_frames):
+        start = min(max(k - width // 2, 0), n_frames - width)
+        tau = np.arange(start, start + width, dtype=np.float64) - k
+        # exact interpolation of the window averages: c = A^-1 u
+        starts[k] = start
+        wts[k] = rise @ np.linalg.inv(_window_average_row(tau, a, degree))
+    return starts, wts
+
+
 def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray[np.float64]:
     """Matrix ``M`` (n_frames, n_frames) with ``W = M @ u`` the motion during each exposure.
 
@@ -56,29 +79,19 @@ def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray
     Returns
     -------
     ndarray, shape (n_frames, n_frames)
-        Banded weights (px per px of displacement).
+        Banded weights (px per px of displacement); :func:`exposure_motion` applies the
+        band without forming the matrix.
     """
-    if n_frames < 2:
-        raise InputError(f"n_frames={n_frames}: the motion needs at least 2 frames")
-    if not 0 <= duty <= 1 or not math.isfinite(duty):
-        raise InputError(f"duty={duty!r}: exposure x frame rate must lie in [0, 1]")
-    width = min(2 * half_window + 1, n_frames)
-    degree = width - 1
-    a = 0.5 * duty
+    starts, wts = _rise_weights(n_frames, duty, half_window)
     m = np.zeros((n_frames, n_frames))
-    # rise over the window of the polynomial sum c_p t**p: sum c_p (a**p - (-a)**p)
-    rise = np.array([a ** p - (-a) ** p for p in range(degree + 1)])
     for k in range(n_frames):
-        start = min(max(k - width // 2, 0), n_frames - width)
-        tau = np.arange(start, start + width, dtype=np.float64) - k
-        A = _window_average_row(tau, a, degree)
-        # exact interpolation of the window averages: c = A^-1 u
-        m[k, start:start + width] = rise @ np.linalg.inv(A)
+        m[k, starts[k]:starts[k] + wts.shape[1]] = wts[k]
     return m
 
 
 def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
-                    half_window: int = 2) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                    half_window: int = 2, block: int = 1024
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Blur vector ``(W_u, W_v)`` of every point in every frame from its track.
 
     Parameters
@@ -92,6 +105,8 @@ def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
         Exposure time, s (<= 1 / fps).
     half_window : int
         Frames each side in the local fit (see :func:`blur_weights`).
+    block : int
+        Points per pass (bounds the temporaries of long recordings).
 
     Returns
     -------
@@ -103,14 +118,19 @@ def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
     if uu.ndim != 2 or uu.shape != vv.shape:
         raise InputError(f"u, v: expected two (frames, points) arrays of one shape, got "
                          f"{uu.shape} and {vv.shape}")
-    m = blur_weights(uu.shape[0], exposure * fps, half_window=half_window)
-    # a gap anywhere in a frame's stencil leaves its blur unknown (filling the gap by
-    # interpolation in time under-estimates fast motion by several px)
-    ok = np.isfinite(uu) & np.isfinite(vv)
-    complete = (np.abs(m) > 0).astype(np.float64) @ (~ok).astype(np.float64) == 0
-    wu = m @ np.where(ok, uu, 0.0)
-    wv = m @ np.where(ok, vv, 0.0)
-    return np.where(complete, wu, np.nan), np.where(complete, wv, np.nan)
+    starts, wts = _rise_weights(uu.shape[0], exposure * fps, half_window)
+    idx = starts[:, None] + np.arange(wts.shape[1])[None, :]  # (frames, width)
+    out = (np.empty(uu.shape), np.empty(vv.shape))
+    for a in range(0, uu.shape[1], block):
+        b = slice(a, a + block)
+        su, sv = uu[:, b][idx], vv[:, b][idx]  # (frames, width, block)
+        # a gap anywhere in a frame's stencil leaves its blur unknown (filling the gap by
+        # interpolation in time under-estimates fast motion by several px)
+        complete = (np.isfinite(su) & np.isfinite(sv)).all(axis=1)
+        for o, st in zip(out, (su, sv), strict=True):
+            o[:, b] = np.where(complete, np.einsum("fw,fwn->fn", wts, np.nan_to_num(st)),
+                               np.nan)
+    return out
 
 
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(12)

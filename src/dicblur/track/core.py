@@ -491,14 +491,20 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     frames = np.asarray(out.frames, dtype=np.int64)[idx]
     # frames tracked may have a gap only at the start (backwards part not reached): the
     # kinematics needs consecutive frames, so keep the contiguous run around the reference
-    u = np.stack(out.u)[idx]
-    v = np.stack(out.v)[idx]
-    zn = np.stack(out.zncc).astype(np.float32)[idx]
-    st = np.stack(out.status)[idx]
+    def stacked(lst: list[Any], dtype: Any) -> Any:
+        """Frames in order, one copy; the list is emptied (memory of long recordings)."""
+        a = np.empty((len(lst), *np.shape(lst[0])), dtype)
+        for i, j in enumerate(idx):
+            a[i] = lst[j]
+        lst.clear()
+        return a
+
+    u = stacked(out.u, np.float64)
+    v = stacked(out.v, np.float64)
+    zn = stacked(out.zncc, np.float32)
+    st = stacked(out.status, np.uint8)
     fb = np.asarray(out.fallback)[idx]
     ref_of = np.asarray(refs, dtype=np.int64)[idx]
-    for lst in (out.u, out.v, out.zncc, out.status):
-        lst.clear()  # the stacked copies replace them (memory of long recordings)
     n_f, n_p = u.shape
     conv = st == PointStatus.CONVERGED
     gshape = _grid_shape(corr.rows, corr.cols)
@@ -599,6 +605,7 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
         for a in range(0, n_f, 128):
             b = slice(a, a + 128)
             bias[b, pin] = skew.bias(k3[b], axis[b])
+        del k3, axis
     settings["prediction_time_s"] = time.perf_counter() - t0
     # after a reference renewal the increments add to the renewal frame's displacement:
     # its predicted variance carries over (into the noise part: a random error)
@@ -645,12 +652,12 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     data = {
         "u": (fr, u, {"units": "px", "long_name": "displacement along x"}),
         "v": (fr, v, {"units": "px", "long_name": "displacement along y"}),
-        "blur_u": (fr, wu.astype(np.float32),
+        "blur_u": (fr, np.asarray(wu, np.float32),
                    {"units": "px", "long_name": "motion along x during the exposure"}),
-        "blur_v": (fr, wv.astype(np.float32),
+        "blur_v": (fr, np.asarray(wv, np.float32),
                    {"units": "px", "long_name": "motion along y during the exposure"}),
-        "W": (fr, w.astype(np.float32), {"units": "px", "long_name": "blur length"}),
-        "blur_direction": (fr, ang.astype(np.float32), {"units": "deg",
+        "W": (fr, np.asarray(w, np.float32), {"units": "px", "long_name": "blur length"}),
+        "blur_direction": (fr, np.asarray(ang, np.float32), {"units": "deg",
                                      "long_name": "blur direction from +x towards +y"}),
         "sigma_u": (fr, sigma_u, pu), "sigma_v": (fr, sigma_v, pu),
         **{k: (fr, a, pu) for k, a in sig.items()},
@@ -659,7 +666,7 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
         "bias_v": (fr, bias[..., 1], {"units": "px", "long_name": "predicted bias of an "
                                       "accelerating blur (kernel skew), along y"}),
         "status": (fr, st, {"legend": attrs["status_legend"]}),
-        "zncc": (fr, zn.astype(np.float32)),
+        "zncc": (fr, zn),
         "outlier": (fr, outlier.astype(np.uint8),
                     {"long_name": "gross error: normalised median test (Westerweel & "
                      "Scarano 2005) or ZNCC far below the point's usual"}),

@@ -350,3 +350,18 @@ def test_kernel_skew_from_track_and_its_bias():
     pred = np.mean(kappa3 * q[ok, 0])
     assert np.all(q[ok, 0] < 0)  # one sign for every subset
     assert abs(pred - meas) < 0.3 * abs(meas)
+
+
+def test_reference_in_the_middle_tracks_backwards(tiny):
+    tgt, _ = tiny
+    rec = tgt.recording(16)
+    ds = dicblur.track(rec, static="0:4", subset=21, step=12, shape="translation",
+                       reference=9, advice=False)
+    assert list(ds["frame"].values) == list(range(16))
+    tu, tv, _, _ = tgt.truth(ds["frame"].values)
+    valid = ds["valid"].values.astype(bool)
+    eu = ds["u"].values - (tu - tu[9])[:, None]
+    ev = ds["v"].values - (tv - tv[9])[:, None]
+    assert valid[:9].mean() > 0.6
+    assert np.nanmax(np.abs(np.where(valid, eu, np.nan))) < 0.25
+    assert np.nanmax(np.abs(np.where(valid, ev, np.nan))) < 0.25

@@ -369,6 +369,7 @@ def track(
     out = _Tracked([], [], [], [], [], [])
     refs: list[int] = []
     hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    ref_field: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     base = np.zeros((n_pts, 2))  # displacement of the current reference's POIs (px)
     ref_now, ref_share = reference, 1.0
     spectrum = {reference: window_spectrum(ref_img)}
@@ -379,7 +380,7 @@ def track(
     try:
         for k in order:
             if k == reference - 1:  # backwards from the reference, on the first one
-                hist = hist[:1]
+                hist = [ref_field] if ref_field is not None else []
                 corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
                 ref_img_now = ref_img
             img = rec.frame(k)
@@ -434,6 +435,9 @@ def track(
             refs.append(ref_now)
             good = res.status == PointStatus.CONVERGED
             hist.append((np.where(good, out.u[-1], np.nan), np.where(good, out.v[-1], np.nan)))
+            if k == reference:
+                ref_field = hist[-1]
+            del hist[:-3]  # the extrapolation uses the last three
             prev = (k, img)
             if progress is not None:
                 progress(len(out.frames), len(order))

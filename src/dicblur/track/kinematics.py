@@ -90,7 +90,7 @@ def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray
 
 
 def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
-                    half_window: int = 2, block: int = 1024
+                    half_window: int = 2, block: int = 128
                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Blur vector ``(W_u, W_v)`` of every point in every frame from its track.
 
@@ -106,7 +106,8 @@ def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
     half_window : int
         Frames each side in the local fit (see :func:`blur_weights`).
     block : int
-        Points per pass (bounds the temporaries of long recordings).
+        Points per pass (the stencils of a pass take frames x (2 h + 1) x block x 8 bytes
+        per component).
 
     Returns
     -------

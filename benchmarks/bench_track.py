@@ -22,7 +22,8 @@ Speed: a 1,000-frame recording (512^2, 8-bit Photron .mraw written here, read la
 tracked at subset 21, step 10 (2,401 POIs): frames/s of the tracking loop, POI/s, and
 the end-to-end time with the noise, blur and sigma prediction and the advice.
 
-Memory (``--memory``): peak RSS of tracking a 2,000-frame 1024^2 .mraw at step 20.
+Memory (``--memory`` or ``--part memory``): peak RSS of tracking a 2,000-frame 1024^2
+.mraw at step 20 (2,601 POIs, translation, no advice) in a child process.
 
 Run: ``NUMBA_NUM_THREADS=2 .venv/bin/python benchmarks/bench_track.py [--quick] [--memory]``
 """
@@ -254,8 +255,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--memory", action="store_true")
-    ap.add_argument("--part", choices=("all", "accuracy", "speed"), default="all",
-                    help="accuracy -> results/track.json, speed -> results/track_speed.json")
+    ap.add_argument("--part", choices=("all", "accuracy", "speed", "memory"), default="all",
+                    help="accuracy -> results/track.json, speed (and --memory) -> "
+                    "results/track_speed.json; memory alone -> results/track_memory.json")
     ap.add_argument("--memory-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.memory_child:
@@ -292,12 +294,22 @@ def main() -> None:
             out["speed"] = [speed(sn, sf, 10, "affine", Path(tmp)),
                             speed(sn, sf // 3, 10, "translation", Path(tmp))]
             if args.memory:
-                head = _write_mraw(Path(tmp) / "mem", 1024, 2000, 0.2e-3)
-                r = subprocess.run([sys.executable, __file__, "--memory-child", str(head),
-                                    "20"], capture_output=True, text=True, check=True)
-                out["memory"] = json.loads(r.stdout.strip().splitlines()[-1])
-                print(f"memory: {out['memory']}")
+                out["memory"] = _memory(Path(tmp))
         _write(OUT.with_name(f"track_speed{tag}.json"), out)
+    if args.part == "memory":
+        with tempfile.TemporaryDirectory(dir="/tmp") as tmp:
+            mem = {k: res[k] for k in ("machine", "commit", "version")}
+            mem["memory"] = _memory(Path(tmp))
+        _write(OUT.with_name("track_memory.json"), mem)
+
+
+def _memory(folder: Path) -> dict:
+    head = _write_mraw(folder / "mem", 1024, 2000, 0.2e-3)
+    r = subprocess.run([sys.executable, __file__, "--memory-child", str(head), "20"],
+                       capture_output=True, text=True, check=True)
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    print(f"memory: {out}")
+    return out
 
 
 def _write(path: Path, data: dict) -> None:

@@ -268,8 +268,12 @@ def _mraw(path: Path) -> Recording:
         if not data.exists():
             raise ImageReadError(f"recording={str(path)!r}: the data file {data.name} is "
                                  "missing; keep it next to the header")
-    import pyMRAW
-
+    try:
+        import pyMRAW
+    except ImportError:
+        raise ImageReadError(f"recording={str(path)!r}: reading Photron .cih/.mraw files "
+                             "needs pyMRAW (GPL-3.0, not installed with dicblur): pip install "
+                             "'dicblur[photron]'") from None
     try:
         cih = pyMRAW.get_cih(str(head))
         n = int(cih["Total Frame"])

@@ -214,7 +214,7 @@ def _correlate_frame(corr: Correlator, img: NDArray[np.float64],
 ZNCC_RATIO = 4.0
 
 
-def zncc_flags(zncc: NDArray[np.float64], converged: NDArray[np.bool_], *,
+def zncc_flags(zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *,
                ratio: float = ZNCC_RATIO) -> NDArray[np.bool_]:
     """Converged points whose match is much worse than usual (frames, points).
 
@@ -369,6 +369,7 @@ def track(
     out = _Tracked([], [], [], [], [], [])
     refs: list[int] = []
     hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    ref_field: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     base = np.zeros((n_pts, 2))  # displacement of the current reference's POIs (px)
     ref_now, ref_share = reference, 1.0
     spectrum = {reference: window_spectrum(ref_img)}
@@ -379,7 +380,7 @@ def track(
     try:
         for k in order:
             if k == reference - 1:  # backwards from the reference, on the first one
-                hist = hist[:1]
+                hist = [ref_field] if ref_field is not None else []
                 corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
                 ref_img_now = ref_img
             img = rec.frame(k)
@@ -434,6 +435,9 @@ def track(
             refs.append(ref_now)
             good = res.status == PointStatus.CONVERGED
             hist.append((np.where(good, out.u[-1], np.nan), np.where(good, out.v[-1], np.nan)))
+            if k == reference:
+                ref_field = hist[-1]
+            del hist[:-3]  # the extrapolation uses the last three
             prev = (k, img)
             if progress is not None:
                 progress(len(out.frames), len(order))
@@ -491,14 +495,20 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     frames = np.asarray(out.frames, dtype=np.int64)[idx]
     # frames tracked may have a gap only at the start (backwards part not reached): the
     # kinematics needs consecutive frames, so keep the contiguous run around the reference
-    u = np.stack(out.u)[idx]
-    v = np.stack(out.v)[idx]
-    zn = np.stack(out.zncc)[idx]
-    st = np.stack(out.status)[idx]
+    def stacked(lst: list[Any], dtype: Any) -> Any:
+        """Frames in order, one copy; the list is emptied (memory of long recordings)."""
+        a = np.empty((len(lst), *np.shape(lst[0])), dtype)
+        for i, j in enumerate(idx):
+            a[i] = lst[j]
+        lst.clear()
+        return a
+
+    u = stacked(out.u, np.float64)
+    v = stacked(out.v, np.float64)
+    zn = stacked(out.zncc, np.float32)
+    st = stacked(out.status, np.uint8)
     fb = np.asarray(out.fallback)[idx]
     ref_of = np.asarray(refs, dtype=np.int64)[idx]
-    for lst in (out.u, out.v, out.zncc, out.status):
-        lst.clear()  # the stacked copies replace them (memory of long recordings)
     n_f, n_p = u.shape
     conv = st == PointStatus.CONVERGED
     gshape = _grid_shape(corr.rows, corr.cols)
@@ -510,19 +520,18 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     low_zncc = zncc_flags(zn, conv)
     contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
 
-    def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         if n_f >= 2 and contiguous:
-            return exposure_motion(np.where(good, u, np.nan), np.where(good, v, np.nan),
-                                   fps=fps, exposure=t_exp, half_window=half_window)
-        nan = np.full((n_f, n_p), np.nan)
+            mu_, mv_ = exposure_motion(np.where(good, u, np.nan), np.where(good, v, np.nan),
+                                       fps=fps, exposure=t_exp, half_window=half_window)
+            return mu_.astype(np.float32), mv_.astype(np.float32)
+        nan = np.full((n_f, n_p), np.nan, np.float32)
         return nan, nan.copy()
 
     if not (n_f >= 2 and contiguous):
         notes.append("fewer than 2 consecutive frames: no blur estimate")
     good = conv & ~outlier & ~low_zncc
     wu, wv = motion(good)
-    uk = np.where(good, u, np.nan)
-    vk = np.where(good, v, np.nan)
     w = np.hypot(wu, wv)
     ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
     # static range: check for motion (it inflates the pairwise-difference noise)
@@ -531,8 +540,8 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
         if sel.sum() >= 2:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                mu = np.nanmedian(uk[sel], axis=1)
-                mv = np.nanmedian(vk[sel], axis=1)
+                mu = np.nanmedian(np.where(good[sel], u[sel], np.nan), axis=1)
+                mv = np.nanmedian(np.where(good[sel], v[sel], np.nan), axis=1)
             spread = float(max(np.nanmax(mu) - np.nanmin(mu), np.nanmax(mv) - np.nanmin(mv)))
             settings["static_motion_px"] = spread
             if spread > STATIC_MOTION_PX:
@@ -592,15 +601,15 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     bias = np.full((n_f, n_p, 2), np.nan, np.float32)
     if noise is not None and inside.any() and n_f >= 2 and contiguous:
         pin = np.flatnonzero(inside)
-        gu = np.where(good, u, np.nan)
-        gv = np.where(good, v, np.nan)
-        k3, axis = exposure_skew(gu[:, pin], gv[:, pin], fps=fps, exposure=t_exp,
-                                 half_window=half_window)
+        k3, axis = exposure_skew(np.where(good, u, np.nan), np.where(good, v, np.nan),
+                                 fps=fps, exposure=t_exp, half_window=half_window)
+        k3, axis = k3[:, pin], axis[:, pin]
         skew = build_skew_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
                                 axis=axis, kappa3=k3)
         for a in range(0, n_f, 128):
             b = slice(a, a + 128)
             bias[b, pin] = skew.bias(k3[b], axis[b])
+        del k3, axis
     settings["prediction_time_s"] = time.perf_counter() - t0
     # after a reference renewal the increments add to the renewal frame's displacement:
     # its predicted variance carries over (into the noise part: a random error)
@@ -647,12 +656,12 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     data = {
         "u": (fr, u, {"units": "px", "long_name": "displacement along x"}),
         "v": (fr, v, {"units": "px", "long_name": "displacement along y"}),
-        "blur_u": (fr, wu.astype(np.float32),
+        "blur_u": (fr, np.asarray(wu, np.float32),
                    {"units": "px", "long_name": "motion along x during the exposure"}),
-        "blur_v": (fr, wv.astype(np.float32),
+        "blur_v": (fr, np.asarray(wv, np.float32),
                    {"units": "px", "long_name": "motion along y during the exposure"}),
-        "W": (fr, w.astype(np.float32), {"units": "px", "long_name": "blur length"}),
-        "blur_direction": (fr, ang.astype(np.float32), {"units": "deg",
+        "W": (fr, np.asarray(w, np.float32), {"units": "px", "long_name": "blur length"}),
+        "blur_direction": (fr, np.asarray(ang, np.float32), {"units": "deg",
                                      "long_name": "blur direction from +x towards +y"}),
         "sigma_u": (fr, sigma_u, pu), "sigma_v": (fr, sigma_v, pu),
         **{k: (fr, a, pu) for k, a in sig.items()},
@@ -661,7 +670,7 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
         "bias_v": (fr, bias[..., 1], {"units": "px", "long_name": "predicted bias of an "
                                       "accelerating blur (kernel skew), along y"}),
         "status": (fr, st, {"legend": attrs["status_legend"]}),
-        "zncc": (fr, zn.astype(np.float32)),
+        "zncc": (fr, zn),
         "outlier": (fr, outlier.astype(np.uint8),
                     {"long_name": "gross error: normalised median test (Westerweel & "
                      "Scarano 2005) or ZNCC far below the point's usual"}),

@@ -40,6 +40,29 @@ def _window_average_row(tau: NDArray[np.float64], a: float, degree: int
     return np.asarray((hi - lo) / ((p + 1) * 2 * a))
 
 
+def _rise_weights(n_frames: int, duty: float, half_window: int
+                  ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Per frame: stencil start and the weights (width,) of the rise over its window."""
+    if n_frames < 2:
+        raise InputError(f"n_frames={n_frames}: the motion needs at least 2 frames")
+    if not 0 <= duty <= 1 or not math.isfinite(duty):
+        raise InputError(f"duty={duty!r}: exposure x frame rate must lie in [0, 1]")
+    width = min(2 * half_window + 1, n_frames)
+    degree = width - 1
+    a = 0.5 * duty
+    # rise over the window of the polynomial sum c_p t**p: sum c_p (a**p - (-a)**p)
+    rise = np.array([a ** p - (-a) ** p for p in range(degree + 1)])
+    starts = np.empty(n_frames, np.intp)
+    wts = np.empty((n_frames, width))
+    for k in range(n_frames):
+        start = min(max(k - width // 2, 0), n_frames - width)
+        tau = np.arange(start, start + width, dtype=np.float64) - k
+        # exact interpolation of the window averages: c = A^-1 u
+        starts[k] = start
+        wts[k] = rise @ np.linalg.inv(_window_average_row(tau, a, degree))
+    return starts, wts
+
+
 def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray[np.float64]:
     """Matrix ``M`` (n_frames, n_frames) with ``W = M @ u`` the motion during each exposure.
 
@@ -56,29 +79,19 @@ def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray
     Returns
     -------
     ndarray, shape (n_frames, n_frames)
-        Banded weights (px per px of displacement).
+        Banded weights (px per px of displacement); :func:`exposure_motion` applies the
+        band without forming the matrix.
     """
-    if n_frames < 2:
-        raise InputError(f"n_frames={n_frames}: the motion needs at least 2 frames")
-    if not 0 <= duty <= 1 or not math.isfinite(duty):
-        raise InputError(f"duty={duty!r}: exposure x frame rate must lie in [0, 1]")
-    width = min(2 * half_window + 1, n_frames)
-    degree = width - 1
-    a = 0.5 * duty
+    starts, wts = _rise_weights(n_frames, duty, half_window)
     m = np.zeros((n_frames, n_frames))
-    # rise over the window of the polynomial sum c_p t**p: sum c_p (a**p - (-a)**p)
-    rise = np.array([a ** p - (-a) ** p for p in range(degree + 1)])
     for k in range(n_frames):
-        start = min(max(k - width // 2, 0), n_frames - width)
-        tau = np.arange(start, start + width, dtype=np.float64) - k
-        A = _window_average_row(tau, a, degree)
-        # exact interpolation of the window averages: c = A^-1 u
-        m[k, start:start + width] = rise @ np.linalg.inv(A)
+        m[k, starts[k]:starts[k] + wts.shape[1]] = wts[k]
     return m
 
 
 def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
-                    half_window: int = 2) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                    half_window: int = 2, block: int = 128
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Blur vector ``(W_u, W_v)`` of every point in every frame from its track.
 
     Parameters
@@ -92,6 +105,9 @@ def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
         Exposure time, s (<= 1 / fps).
     half_window : int
         Frames each side in the local fit (see :func:`blur_weights`).
+    block : int
+        Points per pass (the stencils of a pass take frames x (2 h + 1) x block x 8 bytes
+        per component).
 
     Returns
     -------
@@ -103,14 +119,19 @@ def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
     if uu.ndim != 2 or uu.shape != vv.shape:
         raise InputError(f"u, v: expected two (frames, points) arrays of one shape, got "
                          f"{uu.shape} and {vv.shape}")
-    m = blur_weights(uu.shape[0], exposure * fps, half_window=half_window)
-    # a gap anywhere in a frame's stencil leaves its blur unknown (filling the gap by
-    # interpolation in time under-estimates fast motion by several px)
-    ok = np.isfinite(uu) & np.isfinite(vv)
-    complete = (np.abs(m) > 0).astype(np.float64) @ (~ok).astype(np.float64) == 0
-    wu = m @ np.where(ok, uu, 0.0)
-    wv = m @ np.where(ok, vv, 0.0)
-    return np.where(complete, wu, np.nan), np.where(complete, wv, np.nan)
+    starts, wts = _rise_weights(uu.shape[0], exposure * fps, half_window)
+    idx = starts[:, None] + np.arange(wts.shape[1])[None, :]  # (frames, width)
+    out = (np.empty(uu.shape), np.empty(vv.shape))
+    for a in range(0, uu.shape[1], block):
+        b = slice(a, a + block)
+        su, sv = uu[:, b][idx], vv[:, b][idx]  # (frames, width, block)
+        # a gap anywhere in a frame's stencil leaves its blur unknown (filling the gap by
+        # interpolation in time under-estimates fast motion by several px)
+        complete = (np.isfinite(su) & np.isfinite(sv)).all(axis=1)
+        for o, st in zip(out, (su, sv), strict=True):
+            o[:, b] = np.where(complete, np.einsum("fw,fwn->fn", wts, np.nan_to_num(st)),
+                               np.nan)
+    return out
 
 
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(12)
@@ -137,7 +158,7 @@ def _node_weights(n_frames: int, duty: float, half_window: int
 
 def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
                   half_window: int = 2, block: int = 64
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                  ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Third central moment of the blur kernel of every point in every frame.
 
     The fitted track of :func:`exposure_motion` gives the position at 12 Gauss nodes of
@@ -147,7 +168,7 @@ def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
 
     Returns
     -------
-    kappa3 : ndarray, shape (frames, points)
+    kappa3 : ndarray of float32, shape (frames, points)
         px**3 (NaN where the stencil holds a missing sample).
     axis : ndarray, shape (frames, points)
         Direction of the axis, deg in [0, 180) from +x towards +y.
@@ -156,13 +177,13 @@ def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
     vv = np.asarray(v, dtype=np.float64)
     n_f, n_p = uu.shape
     if n_f < 2:
-        nan = np.full(uu.shape, np.nan)
+        nan = np.full(uu.shape, np.nan, np.float32)
         return nan, nan.copy()
     starts, wts = _node_weights(n_f, exposure * fps, half_window)
     width = wts.shape[2]
     gw = 0.5 * _WEIGHTS
-    k3 = np.full((n_f, n_p), np.nan)
-    axis = np.full((n_f, n_p), np.nan)
+    k3 = np.full((n_f, n_p), np.nan, np.float32)
+    axis = np.full((n_f, n_p), np.nan, np.float32)
     for a in range(0, n_f, block):
         b = np.arange(a, min(a + block, n_f))
         idx = starts[b][:, None] + np.arange(width)[None, :]  # (B, width)

@@ -61,7 +61,7 @@ class BlurTable:
     available: NDArray[np.bool_]
     values: NDArray[np.float64]
 
-    def lookup(self, w: NDArray[np.float64], angle: NDArray[np.float64]
+    def lookup(self, w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
                ) -> NDArray[np.float64]:
         """Interpolated ``(xi_u, xi_v, c_uu, c_vv)`` at ``w`` (px) and ``angle`` (deg), both
         shape (frames, points); returns shape (frames, points, 4) (NaN where ``w`` is NaN
@@ -103,8 +103,8 @@ class BlurTable:
 
 
 def build_blur_table(reference: NDArray[np.float64], centres: NDArray[np.intp], *,
-                     subset: int, shape: str, blur: NDArray[np.float64],
-                     angle: NDArray[np.float64], min_blur: float = 0.5) -> BlurTable:
+                     subset: int, shape: str, blur: NDArray[np.floating[Any]],
+                     angle: NDArray[np.floating[Any]], min_blur: float = 0.5) -> BlurTable:
     """Tabulate the blur response of every point for the blur vectors that occur.
 
     Parameters
@@ -264,7 +264,7 @@ def subset_levels(reference: NDArray[np.float64], centres: NDArray[np.intp], sub
 
 
 def _angle_interp(values: NDArray[np.float64], available: NDArray[np.bool_],
-                  angle: NDArray[np.float64]) -> NDArray[np.float64]:
+                  angle: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
     """``values`` (a, n, c) on the direction nodes, linearly interpolated at ``angle``
     (frames, n) deg; a missing node is replaced by the nearest computed one."""
     a = values.shape[0]
@@ -296,7 +296,7 @@ class SkewTable:
     available: NDArray[np.bool_]
     values: NDArray[np.float64]
 
-    def bias(self, kappa3: NDArray[np.float64], axis: NDArray[np.float64]
+    def bias(self, kappa3: NDArray[np.floating[Any]], axis: NDArray[np.floating[Any]]
              ) -> NDArray[np.float64]:
         """Predicted shift ``(u, v)`` (frames, points, 2), px, of kernels with third
         moment ``kappa3`` (px**3) along ``axis`` (deg)."""
@@ -305,8 +305,8 @@ class SkewTable:
 
 
 def build_skew_table(reference: NDArray[np.float64], centres: NDArray[np.intp], *,
-                     subset: int, shape: str, axis: NDArray[np.float64],
-                     kappa3: NDArray[np.float64], min_fraction: float = 0.05) -> SkewTable:
+                     subset: int, shape: str, axis: NDArray[np.floating[Any]],
+                     kappa3: NDArray[np.floating[Any]], min_fraction: float = 0.05) -> SkewTable:
     """Compute the skew coefficients at the direction nodes around every axis whose
     ``|kappa3|`` exceeds ``min_fraction`` of the largest (at least one node)."""
     from .._blur_sensitivity import subset_skew_coefficients

@@ -42,14 +42,14 @@ def git_commit() -> dict[str, Any]:
 
     def git(*args: str) -> str | None:
         try:
-            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
-                                  check=True, timeout=10).stdout.strip()
+            return subprocess.run(
+                ["git", *args], cwd=ROOT, capture_output=True, text=True, check=True, timeout=10
+            ).stdout.strip()
         except (OSError, subprocess.SubprocessError):
             return None
 
     status = git("status", "--porcelain", "--untracked-files=no")
-    return {"commit": git("rev-parse", "HEAD"),
-            "dirty": None if status is None else bool(status)}
+    return {"commit": git("rev-parse", "HEAD"), "dirty": None if status is None else bool(status)}
 
 
 def dicblur_version() -> str | None:
@@ -68,8 +68,10 @@ def machine() -> dict[str, Any]:
         "processor": platform.processor() or platform.machine(),
         "cpus": os.cpu_count(),
         "python": platform.python_version(),
-        "threads": {k: os.environ.get(k) for k in
-                    ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")},
+        "threads": {
+            k: os.environ.get(k)
+            for k in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+        },
     }
 
 
@@ -96,8 +98,11 @@ class Run:
 
     def record(self, result: dict[str, Any]) -> dict[str, Any]:
         """``result`` plus the ``provenance`` block and the run's wall time."""
-        return {**result, "provenance": provenance(self.load_start),
-                "run_wall_s": round(time.perf_counter() - self.t0, 3)}
+        return {
+            **result,
+            "provenance": provenance(self.load_start),
+            "run_wall_s": round(time.perf_counter() - self.t0, 3),
+        }
 
     def write(self, result: dict[str, Any], path: Path | str | None = None) -> Path:
         """Write ``result`` (with provenance) as JSON; default ``results/<name>.json``."""

@@ -22,9 +22,19 @@ out.mkdir(exist_ok=True)
 best = float("inf")
 for _ in range(repeats):
     t0 = time.perf_counter()
-    dic.calculate_2d(ref, cur, mask, seed=[(ref.shape[1] // 2, ref.shape[0] // 2)],
-                     subset_size=21, subset_step=10, shape_function=shape,
-                     num_threads=threads, output_basepath=str(out), print_level=0,
-                     precision=1e-4, threshold=0.6)
+    dic.calculate_2d(
+        ref,
+        cur,
+        mask,
+        seed=[(ref.shape[1] // 2, ref.shape[0] // 2)],
+        subset_size=21,
+        subset_step=10,
+        shape_function=shape,
+        num_threads=threads,
+        output_basepath=str(out),
+        print_level=0,
+        precision=1e-4,
+        threshold=0.6,
+    )
     best = min(best, time.perf_counter() - t0)
 print(best)

@@ -39,8 +39,9 @@ def measure(label: str, shapes: list[str], calls: int = 40) -> None:
     rng = np.random.default_rng(1)
     ky = np.fft.fftfreq(512)[:, None]
     kx = np.fft.rfftfreq(512)[None, :]
-    shifted = np.fft.irfft2(np.fft.rfft2(img) * np.exp(-2j * np.pi * (kx * 0.3 - ky * 0.2)),
-                            s=img.shape)
+    shifted = np.fft.irfft2(
+        np.fft.rfft2(img) * np.exp(-2j * np.pi * (kx * 0.3 - ky * 0.2)), s=img.shape
+    )
     ref = img + rng.normal(0, 2, img.shape)
     cur = shifted + rng.normal(0, 2, img.shape)
     for shape in shapes:
@@ -52,14 +53,22 @@ def measure(label: str, shapes: list[str], calls: int = 40) -> None:
             t0 = time.perf_counter()
             res = corr.correlate(cur)
             best = min(best, time.perf_counter() - t0)
-        print(f"{label}: {shape} {len(res.u) / best:,.0f} POI/s, "
-              f"mean iterations {float(np.mean(res.iterations)):.2f}", flush=True)
+        print(
+            f"{label}: {shape} {len(res.u) / best:,.0f} POI/s, "
+            f"mean iterations {float(np.mean(res.iterations)):.2f}",
+            flush=True,
+        )
 
 
 def _run(src: Path, label: str, shapes: list[str]) -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(src))
-    out = subprocess.run([sys.executable, str(HERE), label, "--shape", ",".join(shapes)],
-                         env=env, check=True, capture_output=True, text=True).stdout
+    out = subprocess.run(
+        [sys.executable, str(HERE), label, "--shape", ",".join(shapes)],
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     rates = {}
     for line in out.splitlines():
         _, rest = line.split(": ", 1)
@@ -82,22 +91,28 @@ def ab(before: Path, rounds: int, shapes: list[str]) -> None:
     for shape in shapes:
         b = float(np.median(res["before"][shape]))
         a = float(np.median(res["after"][shape]))
-        print(f"{shape}: before median {b:,.0f} (max {max(res['before'][shape]):,.0f}) | "
-              f"after median {a:,.0f} (max {max(res['after'][shape]):,.0f}) POI/s | "
-              f"ratio of medians {a / b:.2f}")
+        print(
+            f"{shape}: before median {b:,.0f} (max {max(res['before'][shape]):,.0f}) | "
+            f"after median {a:,.0f} (max {max(res['after'][shape]):,.0f}) POI/s | "
+            f"ratio of medians {a / b:.2f}"
+        )
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("label", nargs="?", default="run")
-    ap.add_argument("--shape", default="translation",
-                    help="translation, affine, both, or a comma list")
-    ap.add_argument("--ab", type=Path, default=None,
-                    help="src directory of the 'before' tree: alternate it with this tree")
+    ap.add_argument(
+        "--shape", default="translation", help="translation, affine, both, or a comma list"
+    )
+    ap.add_argument(
+        "--ab",
+        type=Path,
+        default=None,
+        help="src directory of the 'before' tree: alternate it with this tree",
+    )
     ap.add_argument("--rounds", type=int, default=6)
     args = ap.parse_args()
-    shapes = (["translation", "affine"] if args.shape == "both"
-              else args.shape.split(","))
+    shapes = ["translation", "affine"] if args.shape == "both" else args.shape.split(",")
     if args.ab is not None:
         ab(args.ab, args.rounds, shapes)
     else:

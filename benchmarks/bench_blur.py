@@ -61,27 +61,32 @@ def speed(sizes: list[int], repeats: int) -> list[dict]:
             loop_repeats,
         )
         diff = float(np.abs(fast - slow).max())
-        rows.append({
-            "size": n,
-            "substeps": SUBSTEPS,
-            "motion_dy_dx": list(MOTION),
-            "loop_s": t_loop,
-            "fft_s": t_fft,
-            "speedup": t_loop / t_fft,
-            "loop_cpu_s": c_loop,
-            "fft_cpu_s": c_fft,
-            "speedup_cpu": c_loop / c_fft,
-            "max_abs_diff": diff,
-            "max_abs_diff_over_range": diff / grey_range,
-        })
+        rows.append(
+            {
+                "size": n,
+                "substeps": SUBSTEPS,
+                "motion_dy_dx": list(MOTION),
+                "loop_s": t_loop,
+                "fft_s": t_fft,
+                "speedup": t_loop / t_fft,
+                "loop_cpu_s": c_loop,
+                "fft_cpu_s": c_fft,
+                "speedup_cpu": c_loop / c_fft,
+                "max_abs_diff": diff,
+                "max_abs_diff_over_range": diff / grey_range,
+            }
+        )
     return rows
 
 
 def _smooth_fine(n: int, ss: int) -> np.ndarray:
     c = (np.arange(n * ss) + 0.5) / ss / n
     y, x = np.meshgrid(c, c, indexing="ij")
-    return (128 + 60 * np.sin(2 * np.pi * (3 * x + 2 * y) + 0.3)
-            + 40 * np.cos(2 * np.pi * (5 * x - 4 * y)))
+    return (
+        128
+        + 60 * np.sin(2 * np.pi * (3 * x + 2 * y) + 0.3)
+        + 40 * np.cos(2 * np.pi * (5 * x - 4 * y))
+    )
 
 
 def rendering(n: int = 64) -> list[dict]:
@@ -96,13 +101,15 @@ def rendering(n: int = 64) -> list[dict]:
             diff = render_blurred(fine, MOTION, supersample=ss) - motion_blur(
                 camera, MOTION, substeps=None
             )
-            rows.append({
-                "pattern": kind,
-                "supersample": ss,
-                "rms_diff_gl": float(np.sqrt(np.mean(diff**2))),
-                "max_diff_gl": float(np.abs(diff).max()),
-                "grey_range": float(np.ptp(camera)),
-            })
+            rows.append(
+                {
+                    "pattern": kind,
+                    "supersample": ss,
+                    "rms_diff_gl": float(np.sqrt(np.mean(diff**2))),
+                    "max_diff_gl": float(np.abs(diff).max()),
+                    "grey_range": float(np.ptp(camera)),
+                }
+            )
     return rows
 
 
@@ -114,36 +121,49 @@ def main() -> None:
     load = os.getloadavg()
     speed_rows = speed(args.sizes, args.repeats)
     print(f"motion_blur vs literal Algorithm 1, K = {SUBSTEPS}, motion (dy, dx) = {MOTION} px")
-    print(f"{'size':>6} {'loop s':>9} {'fft s':>9} {'speedup':>8} {'loop cpu':>9} "
-          f"{'fft cpu':>9} {'cpu x':>7} {'max|diff|':>10} {'/range':>9}")
+    print(
+        f"{'size':>6} {'loop s':>9} {'fft s':>9} {'speedup':>8} {'loop cpu':>9} "
+        f"{'fft cpu':>9} {'cpu x':>7} {'max|diff|':>10} {'/range':>9}"
+    )
     for r in speed_rows:
-        print(f"{r['size']:>6} {r['loop_s']:>9.3f} {r['fft_s']:>9.4f} {r['speedup']:>8.1f} "
-              f"{r['loop_cpu_s']:>9.3f} {r['fft_cpu_s']:>9.4f} {r['speedup_cpu']:>7.1f} "
-              f"{r['max_abs_diff']:>10.2e} {r['max_abs_diff_over_range']:>9.2e}")
+        print(
+            f"{r['size']:>6} {r['loop_s']:>9.3f} {r['fft_s']:>9.4f} {r['speedup']:>8.1f} "
+            f"{r['loop_cpu_s']:>9.3f} {r['fft_cpu_s']:>9.4f} {r['speedup_cpu']:>7.1f} "
+            f"{r['max_abs_diff']:>10.2e} {r['max_abs_diff_over_range']:>9.2e}"
+        )
     render_rows = rendering()
     print("\nrender_blurred vs motion_blur(continuous) on 64x64 px, same motion")
     print(f"{'pattern':>20} {'ss':>3} {'rms GL':>8} {'max GL':>8}")
     for r in render_rows:
-        print(f"{r['pattern']:>20} {r['supersample']:>3} {r['rms_diff_gl']:>8.3f} "
-              f"{r['max_diff_gl']:>8.3f}")
+        print(
+            f"{r['pattern']:>20} {r['supersample']:>3} {r['rms_diff_gl']:>8.3f} "
+            f"{r['max_diff_gl']:>8.3f}"
+        )
     end = os.getloadavg()
-    print(f"\nload average at start: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}, at end "
-          f"{end[0]:.2f} ({os.cpu_count()} cpus)")
+    print(
+        f"\nload average at start: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}, at end "
+        f"{end[0]:.2f} ({os.cpu_count()} cpus)"
+    )
     out = Path(__file__).resolve().parent / "results" / "blur.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({
-        "provenance": provenance(),
-        "benchmark": "blur",
-        "dicblur_version": dicblur.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "machine": platform.machine(),
-        "cpus": os.cpu_count(),
-        "load_average_start": load,
-        "load_average_end": end,
-        "speed": speed_rows,
-        "rendering": render_rows,
-    }, indent=2))
+    out.write_text(
+        json.dumps(
+            {
+                "provenance": provenance(),
+                "benchmark": "blur",
+                "dicblur_version": dicblur.__version__,
+                "numpy": np.__version__,
+                "python": platform.python_version(),
+                "machine": platform.machine(),
+                "cpus": os.cpu_count(),
+                "load_average_start": load,
+                "load_average_end": end,
+                "speed": speed_rows,
+                "rendering": render_rows,
+            },
+            indent=2,
+        )
+    )
     print(f"wrote {out}")
 
 

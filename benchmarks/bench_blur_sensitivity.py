@@ -44,12 +44,18 @@ REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
 
 def _centred_blur(img: np.ndarray, wl: float, boundary: str) -> np.ndarray:
-    return dicblur.motion_blur(img, None, substeps=None, boundary=boundary,
-                               trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1))
+    return dicblur.motion_blur(
+        img,
+        None,
+        substeps=None,
+        boundary=boundary,
+        trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1),
+    )
 
 
-def case(size: float, seed: int, shape: str, blurs: np.ndarray,
-         image: np.ndarray | None = None) -> dict:
+def case(
+    size: float, seed: int, shape: str, blurs: np.ndarray, image: np.ndarray | None = None
+) -> dict:
     if image is None:
         img = dicblur.speckle_pattern((192, 192), speckle_size=size, softness=0.5, seed=seed)
         boundary = "periodic"
@@ -75,10 +81,21 @@ def case(size: float, seed: int, shape: str, blurs: np.ndarray,
     c_model = fit_mismatch(w, np.array(s)[fit_w], u, next_term="auto")["c"]
     c_log = float(np.exp(np.mean(np.log(u / w**2))))
     c_ls = float(np.sum(u * w**2) / np.sum(w**4))
-    return {"speckle_size": size, "seed": seed, "shape": shape, "c_static": c,
-            "c_static_spectral_ssd": c_old, "c_model": c_model, "c_log": c_log,
-            "c_ls": c_ls, "blur": blurs.tolist(), "u_e": u_e, "curve": curve.tolist(),
-            "converged_fraction": conv, "curve_valid_fraction": cv.valid_fraction.tolist()}
+    return {
+        "speckle_size": size,
+        "seed": seed,
+        "shape": shape,
+        "c_static": c,
+        "c_static_spectral_ssd": c_old,
+        "c_model": c_model,
+        "c_log": c_log,
+        "c_ls": c_ls,
+        "blur": blurs.tolist(),
+        "u_e": u_e,
+        "curve": curve.tolist(),
+        "converged_fraction": conv,
+        "curve_valid_fraction": cv.valid_fraction.tolist(),
+    }
 
 
 def noisy_case(size: float, shape: str, sigma: float = 2.0, reps: int = 6) -> dict:
@@ -87,37 +104,59 @@ def noisy_case(size: float, shape: str, sigma: float = 2.0, reps: int = 6) -> di
     ref = dicblur.correlate(img, img, subset=21, step=10, shape=shape)
     pts = np.stack([ref.rows, ref.cols], axis=1)
     blurs = np.array([0.0, 0.5, 1.0, 2.0, 3.0, 4.0])
-    pred = dicblur.predict_from_pattern(img, blurs, noise_sigma=sigma, subset=21, points=pts,
-                                        shape=shape, boundary="periodic")
+    pred = dicblur.predict_from_pattern(
+        img, blurs, noise_sigma=sigma, subset=21, points=pts, shape=shape, boundary="periodic"
+    )
     rng = np.random.default_rng(1)
     measured = []
     for wl in blurs:
         cur = _centred_blur(img, float(wl), "periodic") if wl > 0 else img
         u = []
         for _ in range(reps):
-            res = dicblur.correlate(img + rng.normal(0, sigma, img.shape),
-                                    cur + rng.normal(0, sigma, img.shape),
-                                    subset=21, step=10, shape=shape)
+            res = dicblur.correlate(
+                img + rng.normal(0, sigma, img.shape),
+                cur + rng.normal(0, sigma, img.shape),
+                subset=21,
+                step=10,
+                shape=shape,
+            )
             u.append(float(np.std(res.u[res.converged])))
         measured.append(float(np.mean(u)))
-    return {"speckle_size": size, "shape": shape, "noise": sigma, "reps": reps,
-            "blur": blurs.tolist(), "measured_u_e": measured, "predicted_u_e": pred.u_e.tolist(),
-            "predicted_u_noise": pred.u_noise.tolist(), "predicted_u_blur": pred.u_blur.tolist()}
+    return {
+        "speckle_size": size,
+        "shape": shape,
+        "noise": sigma,
+        "reps": reps,
+        "blur": blurs.tolist(),
+        "measured_u_e": measured,
+        "predicted_u_e": pred.u_e.tolist(),
+        "predicted_u_noise": pred.u_noise.tolist(),
+        "predicted_u_blur": pred.u_blur.tolist(),
+    }
 
 
 def speed() -> list[dict]:
     img = dicblur.speckle_pattern((512, 512), speckle_size=4.0, seed=1)
     rows = []
     for name, fn in (
-        ("blur_sensitivity 512x512, subset 31, step 10, translation",
-         lambda: blur_sensitivity(img, subset=31, step=10)),
-        ("blur_sensitivity 512x512, subset 31, step 10, affine",
-         lambda: blur_sensitivity(img, subset=31, step=10, shape="affine")),
-        ("blur_mismatch_curve 512x512, 8 blur lengths, translation",
-         lambda: blur_mismatch_curve(img, np.arange(1.0, 9.0), subset=31, step=10)),
-        ("predict_from_pattern 512x512, 8 blur lengths, translation",
-         lambda: dicblur.predict_from_pattern(img, np.arange(1.0, 9.0), noise_sigma=2.0,
-                                              subset=31, step=10)),
+        (
+            "blur_sensitivity 512x512, subset 31, step 10, translation",
+            lambda: blur_sensitivity(img, subset=31, step=10),
+        ),
+        (
+            "blur_sensitivity 512x512, subset 31, step 10, affine",
+            lambda: blur_sensitivity(img, subset=31, step=10, shape="affine"),
+        ),
+        (
+            "blur_mismatch_curve 512x512, 8 blur lengths, translation",
+            lambda: blur_mismatch_curve(img, np.arange(1.0, 9.0), subset=31, step=10),
+        ),
+        (
+            "predict_from_pattern 512x512, 8 blur lengths, translation",
+            lambda: dicblur.predict_from_pattern(
+                img, np.arange(1.0, 9.0), noise_sigma=2.0, subset=31, step=10
+            ),
+        ),
     ):
         fn()
         best = min(_timed(fn) for _ in range(3))
@@ -138,27 +177,38 @@ def main() -> None:
     blurs = np.array([0.25, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 6.0, 8.0])
     sizes = (3.0, 8.0) if args.quick else (3.0, 4.0, 6.0, 8.0)
     seeds = (7,) if args.quick else (7, 11)
-    rows = [case(size, seed, shape, blurs) for seed in seeds for size in sizes
-            for shape in ("translation", "affine")]
+    rows = [
+        case(size, seed, shape, blurs)
+        for seed in seeds
+        for size in sizes
+        for shape in ("translation", "affine")
+    ]
     sample3 = REAL / "dicchallenge1_sample3" / "Sample3_Reference.tif"
     if sample3.is_file():  # seed 0 and speckle size 0 in the tables: DIC Challenge Sample 3
         img = dicblur.load_image(sample3).astype(np.float64)
         rows += [case(0.0, 0, shape, blurs, image=img) for shape in ("translation", "affine")]
     else:
         print(f"(Sample 3 rows skipped: {sample3} absent)")
-    print("fitted c / static c over W = 0.5..4 px (static: spline gradients + ZNSSD; "
-          "'old': spectral + SSD)")
-    print(f"{'seed':>4s} {'speckle':>7s} {'shape':>11s} {'c static':>10s} {'model':>6s} "
-          f"{'log':>6s} {'LS':>6s} {'old':>6s}")
+    print(
+        "fitted c / static c over W = 0.5..4 px (static: spline gradients + ZNSSD; "
+        "'old': spectral + SSD)"
+    )
+    print(
+        f"{'seed':>4s} {'speckle':>7s} {'shape':>11s} {'c static':>10s} {'model':>6s} "
+        f"{'log':>6s} {'LS':>6s} {'old':>6s}"
+    )
     for r in rows:
         c = r["c_static"]
-        print(f"{r['seed']:4d} {r['speckle_size']:7.1f} {r['shape']:>11s} {c:10.3e} "
-              f"{r['c_model'] / c:6.3f} {r['c_log'] / c:6.3f} {r['c_ls'] / c:6.3f} "
-              f"{r['c_model'] / r['c_static_spectral_ssd']:6.3f}")
-    print("\nstatic prediction / measured u_e at each W (c W^2 above, curve below; u_e over "
-          "converged POIs, the curve over subsets that do not break down)")
-    print(f"{'seed':>4s} {'speckle':>7s} {'shape':>11s} "
-          + " ".join(f"{w:6.2f}" for w in blurs))
+        print(
+            f"{r['seed']:4d} {r['speckle_size']:7.1f} {r['shape']:>11s} {c:10.3e} "
+            f"{r['c_model'] / c:6.3f} {r['c_log'] / c:6.3f} {r['c_ls'] / c:6.3f} "
+            f"{r['c_model'] / r['c_static_spectral_ssd']:6.3f}"
+        )
+    print(
+        "\nstatic prediction / measured u_e at each W (c W^2 above, curve below; u_e over "
+        "converged POIs, the curve over subsets that do not break down)"
+    )
+    print(f"{'seed':>4s} {'speckle':>7s} {'shape':>11s} " + " ".join(f"{w:6.2f}" for w in blurs))
     for r in rows:
         ue = np.array(r["u_e"])
         lead = r["c_static"] * blurs**2 / ue
@@ -168,11 +218,12 @@ def main() -> None:
         print(" " * len(head) + " ".join(f"{x:6.3f}" for x in cur))
     print("\nconverged fraction of DIC / valid fraction of the curve at W = 6, 8 px")
     for r in rows:
-        print(f"{r['seed']:4d} {r['speckle_size']:7.1f} {r['shape']:>11s} "
-              f"{r['converged_fraction'][-2]:.3f}/{r['curve_valid_fraction'][-2]:.3f} "
-              f"{r['converged_fraction'][-1]:.3f}/{r['curve_valid_fraction'][-1]:.3f}")
-    noisy = [noisy_case(size, shape) for size in (3.0, 6.0)
-             for shape in ("translation", "affine")]
+        print(
+            f"{r['seed']:4d} {r['speckle_size']:7.1f} {r['shape']:>11s} "
+            f"{r['converged_fraction'][-2]:.3f}/{r['curve_valid_fraction'][-2]:.3f} "
+            f"{r['converged_fraction'][-1]:.3f}/{r['curve_valid_fraction'][-1]:.3f}"
+        )
+    noisy = [noisy_case(size, shape) for size in (3.0, 6.0) for shape in ("translation", "affine")]
     print("\npredict_from_pattern / noisy IC-GN u_e (noise 2 GL, 256x256, subset 21, 6 reps)")
     print(f"{'speckle':>7s} {'shape':>11s} " + " ".join(f"{w:6.2f}" for w in noisy[0]["blur"]))
     for r in noisy:
@@ -183,11 +234,22 @@ def main() -> None:
     for r in sp:
         print(f"{r['case']:60s} {r['seconds']:8.4f}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps({
-        "provenance": provenance(),
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                    "load": os.getloadavg()},
-        "cases": rows, "noisy": noisy, "speed": sp}, indent=1))
+    OUT.write_text(
+        json.dumps(
+            {
+                "provenance": provenance(),
+                "machine": {
+                    "python": platform.python_version(),
+                    "cpus": os.cpu_count(),
+                    "load": os.getloadavg(),
+                },
+                "cases": rows,
+                "noisy": noisy,
+                "speed": sp,
+            },
+            indent=1,
+        )
+    )
     print(f"wrote {OUT}")
 
 

@@ -59,8 +59,12 @@ def _patterns() -> list[tuple[str, np.ndarray]]:
     if SAMPLE3.exists():
         out.append(("sample3", dicblur.load_image(SAMPLE3)))
     for seed in (11, 12):
-        out.append((f"speckle{seed}", dicblur.speckle_pattern(
-            (256, 256), speckle_size=4.0, softness=0.5, seed=seed)))
+        out.append(
+            (
+                f"speckle{seed}",
+                dicblur.speckle_pattern((256, 256), speckle_size=4.0, softness=0.5, seed=seed),
+            )
+        )
     return out
 
 
@@ -69,11 +73,10 @@ def _vector(w: float, angle: float) -> np.ndarray:
     return w * np.array([math.sin(a), math.cos(a)])
 
 
-def _bounds(blurred: np.ndarray, pts: np.ndarray, angle: float, shape: str
-            ) -> tuple[float, float]:
+def _bounds(blurred: np.ndarray, pts: np.ndarray, angle: float, shape: str) -> tuple[float, float]:
     """Eq. 2 bound and (affine) the Fisher bound along the motion, RMS over the POIs."""
     s = directional_sssig(blurred, pts, subset=SUBSET, angle=angle)
-    eq2 = math.sqrt(float(np.mean(2 * SIGMA ** 2 / s)))
+    eq2 = math.sqrt(float(np.mean(2 * SIGMA**2 / s)))
     if shape != "affine":
         return eq2, eq2
     gy, gx = image_gradients(blurred)
@@ -81,28 +84,38 @@ def _bounds(blurred: np.ndarray, pts: np.ndarray, angle: float, shape: str
     a = math.radians(angle)
     e = np.array([math.cos(a), math.sin(a)])  # (u, v) weights
     cuv = prep.cov_unit[:, [0, 3]][:, :, [0, 3]]
-    var = SIGMA ** 2 * np.einsum("i,nij,j->n", e, cuv, e)
+    var = SIGMA**2 * np.einsum("i,nij,j->n", e, cuv, e)
     return eq2, math.sqrt(float(np.mean(var)))
 
 
-def accuracy(patterns: list[tuple[str, np.ndarray]], blurs: list[float], angles: list[float],
-             shapes: list[str], reps: int) -> list[dict]:
+def accuracy(
+    patterns: list[tuple[str, np.ndarray]],
+    blurs: list[float],
+    angles: list[float],
+    shapes: list[str],
+    reps: int,
+) -> list[dict]:
     rows = []
     for name, ref in patterns:
         n = ref.shape[0]
         roi = (MARGIN, n - MARGIN, MARGIN, n - MARGIN)
         step = 16 if n > 300 else 12
         for shape in shapes:
-            kw = {"subset": SUBSET, "step": step, "shape": shape, "roi": roi,
-                  "noise_sigma": SIGMA}
+            kw = {"subset": SUBSET, "step": step, "shape": shape, "roi": roi, "noise_sigma": SIGMA}
             grid = Correlator(ref, **kw)
             grid_pts = np.stack([grid.rows, grid.cols], axis=1)
             for angle in angles:
                 a = math.radians(angle)
                 t0 = time.perf_counter()
-                pred = predict_compensated(ref, blurs, noise_sigma=SIGMA, subset=SUBSET,
-                                           points=grid_pts, motion=(math.sin(a), math.cos(a)),
-                                           shape=shape)
+                pred = predict_compensated(
+                    ref,
+                    blurs,
+                    noise_sigma=SIGMA,
+                    subset=SUBSET,
+                    points=grid_pts,
+                    motion=(math.sin(a), math.cos(a)),
+                    shape=shape,
+                )
                 t_pred = time.perf_counter() - t0
                 for j, w in enumerate(blurs):
                     x = _vector(w, angle)
@@ -111,17 +124,19 @@ def accuracy(patterns: list[tuple[str, np.ndarray]], blurs: list[float], angles:
                     ca, sa = math.cos(a), math.sin(a)
                     truth = x[1] / 2 * ca + x[0] / 2 * sa
                     rng = np.random.default_rng(zlib.crc32(f"{name}/{shape}/{angle}/{w}".encode()))
-                    acc: dict[str, list] = {m: [] for m in ("plain", "given", "deblur",
-                                                            "estimate")}
+                    acc: dict[str, list] = {m: [] for m in ("plain", "given", "deblur", "estimate")}
                     lengths: list[np.ndarray] = []
                     t_method = dict.fromkeys(acc, 0.0)
                     pts = None
                     for _ in range(reps):
                         r_noisy = ref + rng.normal(0, SIGMA, ref.shape)
                         c_noisy = blurred + rng.normal(0, SIGMA, ref.shape)
-                        corr = {m: Correlator(r_noisy, **kw,
-                                              blur="none" if m in ("plain", "deblur") else m)
-                                for m in acc}
+                        corr = {
+                            m: Correlator(
+                                r_noisy, **kw, blur="none" if m in ("plain", "deblur") else m
+                            )
+                            for m in acc
+                        }
                         for m, c in corr.items():
                             t0 = time.perf_counter()
                             if m == "plain":
@@ -138,16 +153,27 @@ def accuracy(patterns: list[tuple[str, np.ndarray]], blurs: list[float], angles:
                             t_method[m] += time.perf_counter() - t0
                             ok = res.converged
                             along = res.u * ca + res.v * sa
-                            acc[m].append((float(np.std(along[ok], ddof=1)),
-                                           float(np.mean(along[ok])) - truth,
-                                           float(ok.mean())))
+                            acc[m].append(
+                                (
+                                    float(np.std(along[ok], ddof=1)),
+                                    float(np.mean(along[ok])) - truth,
+                                    float(ok.mean()),
+                                )
+                            )
                             pts = np.stack([res.rows, res.cols], axis=1)
                     assert pts is not None
                     eq2, fisher = _bounds(blurred, pts, angle, shape)
-                    row = {"pattern": name, "shape": shape, "angle": angle, "blur": w,
-                           "bound_eq2": eq2, "bound_fisher": fisher, "n_points": len(pts),
-                           "u_e_predicted_given": float(pred.u_e[j]),
-                           "seconds_prediction": t_pred / len(blurs)}
+                    row = {
+                        "pattern": name,
+                        "shape": shape,
+                        "angle": angle,
+                        "blur": w,
+                        "bound_eq2": eq2,
+                        "bound_fisher": fisher,
+                        "n_points": len(pts),
+                        "u_e_predicted_given": float(pred.u_e[j]),
+                        "seconds_prediction": t_pred / len(blurs),
+                    }
                     for m, vals in acc.items():
                         arr = np.array(vals)
                         row[f"u_e_{m}"] = float(np.sqrt(np.mean(arr[:, 0] ** 2)))
@@ -159,14 +185,17 @@ def accuracy(patterns: list[tuple[str, np.ndarray]], blurs: list[float], angles:
                     row["blur_length_std"] = float(np.std(ls, ddof=1)) if ls.size > 1 else None
                     row["blur_identified"] = ls.size / (reps * len(pts))
                     rows.append(row)
-                    print(f"{name:10s} {shape:11s} {angle:4.0f} {w:5.1f} | bound "
-                          f"{eq2:.4f} {fisher:.4f} pred {pred.u_e[j]:.4f} | u_e plain "
-                          f"{row['u_e_plain']:.4f} given "
-                          f"{row['u_e_given']:.4f} deblur {row['u_e_deblur']:.4f} est "
-                          f"{row['u_e_estimate']:.4f} | bias given {row['bias_given']:+.4f}"
-                          f" est {row['bias_estimate']:+.4f} | W_est "
-                          f"{row['blur_length_mean'] or float('nan'):.3f} +- "
-                          f"{row['blur_length_std'] or float('nan'):.3f}", flush=True)
+                    print(
+                        f"{name:10s} {shape:11s} {angle:4.0f} {w:5.1f} | bound "
+                        f"{eq2:.4f} {fisher:.4f} pred {pred.u_e[j]:.4f} | u_e plain "
+                        f"{row['u_e_plain']:.4f} given "
+                        f"{row['u_e_given']:.4f} deblur {row['u_e_deblur']:.4f} est "
+                        f"{row['u_e_estimate']:.4f} | bias given {row['bias_given']:+.4f}"
+                        f" est {row['bias_estimate']:+.4f} | W_est "
+                        f"{row['blur_length_mean'] or float('nan'):.3f} +- "
+                        f"{row['blur_length_std'] or float('nan'):.3f}",
+                        flush=True,
+                    )
     return rows
 
 
@@ -175,15 +204,19 @@ def speed(ref: np.ndarray, repeat: int) -> list[dict]:
     roi = (MARGIN, n - MARGIN, MARGIN, n - MARGIN)
     x = _vector(8.0, 0.0)
     rng = np.random.default_rng(3)
-    cur = motion_blur(ref, x, substeps=100, boundary="reflect") + rng.normal(0, SIGMA,
-                                                                                ref.shape)
+    cur = motion_blur(ref, x, substeps=100, boundary="reflect") + rng.normal(0, SIGMA, ref.shape)
     r_noisy = ref + rng.normal(0, SIGMA, ref.shape)
-    return [_speed_one(shape, r_noisy, cur, x, roi, repeat)
-            for shape in ("translation", "affine")]
+    return [_speed_one(shape, r_noisy, cur, x, roi, repeat) for shape in ("translation", "affine")]
 
 
-def _speed_one(shape: str, r_noisy: np.ndarray, cur: np.ndarray, x: np.ndarray,
-               roi: tuple[int, int, int, int], repeat: int) -> dict:
+def _speed_one(
+    shape: str,
+    r_noisy: np.ndarray,
+    cur: np.ndarray,
+    x: np.ndarray,
+    roi: tuple[int, int, int, int],
+    repeat: int,
+) -> dict:
     kw = {"subset": SUBSET, "step": 8, "shape": shape, "roi": roi}
     plain = Correlator(r_noisy, **kw)
     plain.warmup()
@@ -201,11 +234,14 @@ def _speed_one(shape: str, r_noisy: np.ndarray, cur: np.ndarray, x: np.ndarray,
 
     # interleaved, best of `repeat` (the machine is shared: the minimum is the least
     # disturbed run); the cold timings exclude the sharp reference's preparation
-    fns = {"plain": lambda: plain.correlate(cur),
-           "given": lambda: given.correlate(cur, blur_vector=x),
-           "estimate": lambda: est.correlate(cur, blur_angle=0.0),
-           "prep": lambda: Correlator(r_noisy, **kw), "given_cold": cold_given,
-           "estimate_cold": cold_est}
+    fns = {
+        "plain": lambda: plain.correlate(cur),
+        "given": lambda: given.correlate(cur, blur_vector=x),
+        "estimate": lambda: est.correlate(cur, blur_angle=0.0),
+        "prep": lambda: Correlator(r_noisy, **kw),
+        "given_cold": cold_given,
+        "estimate_cold": cold_est,
+    }
     best = dict.fromkeys(fns, np.inf)
     for _ in range(repeat):
         for name, fn in fns.items():
@@ -215,21 +251,30 @@ def _speed_one(shape: str, r_noisy: np.ndarray, cur: np.ndarray, x: np.ndarray,
     t_plain, t_given, t_est = best["plain"], best["given"], best["estimate"]
     t_given_cold = best["given_cold"] - best["prep"]
     t_est_cold = best["estimate_cold"] - best["prep"]
-    row = {"shape": shape, "n_points": npts, "plain_poi_s": npts / t_plain,
-           "given_poi_s": npts / t_given, "given_cold_poi_s": npts / t_given_cold,
-           "estimate_poi_s": npts / t_est, "estimate_cold_poi_s": npts / t_est_cold}
+    row = {
+        "shape": shape,
+        "n_points": npts,
+        "plain_poi_s": npts / t_plain,
+        "given_poi_s": npts / t_given,
+        "given_cold_poi_s": npts / t_given_cold,
+        "estimate_poi_s": npts / t_est,
+        "estimate_cold_poi_s": npts / t_est_cold,
+    }
     row["given_ratio"] = row["given_poi_s"] / row["plain_poi_s"]
     row["estimate_ratio"] = row["estimate_poi_s"] / row["plain_poi_s"]
-    print(f"speed {shape:11s} {npts} POIs: plain {row['plain_poi_s']:.0f} POI/s, given "
-          f"{row['given_poi_s']:.0f} ({row['given_ratio']:.2f}x; cold "
-          f"{row['given_cold_poi_s']:.0f}), estimate {row['estimate_poi_s']:.0f} "
-          f"({row['estimate_ratio']:.2f}x; cold {row['estimate_cold_poi_s']:.0f})",
-          flush=True)
+    print(
+        f"speed {shape:11s} {npts} POIs: plain {row['plain_poi_s']:.0f} POI/s, given "
+        f"{row['given_poi_s']:.0f} ({row['given_ratio']:.2f}x; cold "
+        f"{row['given_cold_poi_s']:.0f}), estimate {row['estimate_poi_s']:.0f} "
+        f"({row['estimate_ratio']:.2f}x; cold {row['estimate_cold_poi_s']:.0f})",
+        flush=True,
+    )
     return row
 
 
 def summary(rows: list[dict]) -> dict:
     """The issue's targets, each over every (pattern, shape, angle) case."""
+
     def ratio(r: dict, m: str) -> float:
         b = r["bound_eq2"] if r["shape"] == "translation" else r["bound_fisher"]
         return r[f"u_e_{m}"] / b
@@ -243,20 +288,28 @@ def summary(rows: list[dict]) -> dict:
         "deblur_over_given_at_8_min": min(r["u_e_deblur"] / r["u_e_given"] for r in at8),
         "plain_over_given_at_8_min": min(r["u_e_plain"] / r["u_e_given"] for r in at8),
         "estimate_length_std_at_4_max": max(r["blur_length_std"] or np.nan for r in at4),
-        "estimate_length_bias_at_4_max": max(abs((r["blur_length_mean"] or np.nan) - 4)
-                                             for r in at4),
+        "estimate_length_bias_at_4_max": max(
+            abs((r["blur_length_mean"] or np.nan) - 4) for r in at4
+        ),
         "predicted_given_max_rel_error_w_le_8": max(
-            abs(r["u_e_predicted_given"] / r["u_e_given"] - 1) for r in le8),
+            abs(r["u_e_predicted_given"] / r["u_e_given"] - 1) for r in le8
+        ),
         "estimate_max_ratio_to_bound_w_le_8": max(
-            ratio(r, "estimate") for r in le8 if r["blur"] > 0),
+            ratio(r, "estimate") for r in le8 if r["blur"] > 0
+        ),
         "bound_used": "eq. 2 (translation), affine Fisher bound (affine)",
     }
 
 
 def _commit() -> str | None:
     try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                              check=True, cwd=Path(__file__).parent).stdout.strip()
+        return subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).parent,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return None
 
@@ -264,8 +317,11 @@ def _commit() -> str | None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--speed-only", action="store_true",
-                    help="only the speed table (writes compensation_speed.json)")
+    ap.add_argument(
+        "--speed-only",
+        action="store_true",
+        help="only the speed table (writes compensation_speed.json)",
+    )
     args = ap.parse_args()
     load0 = os.getloadavg()
     commit = _commit()  # at the start: the code this run imported
@@ -273,12 +329,24 @@ def main() -> None:
     if args.speed_only:
         sp = speed(pats[0][1], 5)
         path = OUT.with_name("compensation_speed.json")
-        path.write_text(json.dumps({
-            "commit": commit, "version": dicblur.__version__,
-            "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
+        path.write_text(
+            json.dumps(
+                {
+                    "commit": commit,
+                    "version": dicblur.__version__,
+                    "machine": {
+                        "python": platform.python_version(),
+                        "cpus": os.cpu_count(),
                         "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
-                        "load_start": load0, "load_end": os.getloadavg()},
-            "pattern": pats[0][0], "speed": sp}, indent=1))
+                        "load_start": load0,
+                        "load_end": os.getloadavg(),
+                    },
+                    "pattern": pats[0][0],
+                    "speed": sp,
+                },
+                indent=1,
+            )
+        )
         print(f"wrote {path}")
         return
     if args.quick:
@@ -286,20 +354,35 @@ def main() -> None:
     blurs = [0.0, 4.0, 8.0] if args.quick else [0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
     t0 = time.perf_counter()
     sp = speed(pats[0][1], 3 if args.quick else 5)
-    rows = accuracy(pats, blurs, [0.0, 30.0], ["translation", "affine"],
-                    reps=1 if args.quick else 2)
+    rows = accuracy(
+        pats, blurs, [0.0, 30.0], ["translation", "affine"], reps=1 if args.quick else 2
+    )
     summ = summary(rows)
     print("\ntargets:")
     for k, v in summ.items():
         print(f"  {k}: {v if isinstance(v, str) else round(v, 4)}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps({
-        "commit": commit, "version": dicblur.__version__,
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
+    OUT.write_text(
+        json.dumps(
+            {
+                "commit": commit,
+                "version": dicblur.__version__,
+                "machine": {
+                    "python": platform.python_version(),
+                    "cpus": os.cpu_count(),
                     "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
-                    "load_start": load0, "load_end": os.getloadavg()},
-        "quick": args.quick, "seconds": time.perf_counter() - t0, "speed": sp,
-        "accuracy": rows, "summary": summ}, indent=1))
+                    "load_start": load0,
+                    "load_end": os.getloadavg(),
+                },
+                "quick": args.quick,
+                "seconds": time.perf_counter() - t0,
+                "speed": sp,
+                "accuracy": rows,
+                "summary": summ,
+            },
+            indent=1,
+        )
+    )
     print(f"wrote {OUT} ({time.perf_counter() - t0:.0f} s)")
 
 

@@ -60,15 +60,17 @@ def case(which: str, seed: int):
         s = sssig_decay(w, S0, BETA)
         truth = {"a": 2.0, "c": 3e-4}
         u = mismatch_model(w, s, 2.0, **truth) * np.exp(rng.normal(0, 0.05, w.size))
-        return truth, fit_mismatch(w, s, u, noise_sigma=2.0, next_term=False, floor=False,
-                                   noise_blur=False, cross=False)
+        return truth, fit_mismatch(
+            w, s, u, noise_sigma=2.0, next_term=False, floor=False, noise_blur=False, cross=False
+        )
     w1 = np.arange(0.0, 6.01, 0.5)
     w, sig = np.tile(w1, 2), np.repeat([2.0, 8.0], w1.size)
     s = sssig_decay(w, S0, BETA)
     truth = {"a": 1.4, "floor": 1e-3, "cross": 1e-3, "c": 3e-4}
     u = mismatch_model(w, s, sig, **truth) * np.exp(rng.normal(0, 0.05, w.size))
-    return truth, fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True,
-                               noise_blur=False, cross=True)
+    return truth, fit_mismatch(
+        w, s, u, noise_sigma=sig, next_term=False, floor=True, noise_blur=False, cross=True
+    )
 
 
 def run(n: int) -> dict:
@@ -85,10 +87,14 @@ def run(n: int) -> dict:
                 hits[name] = hits.get(name, 0) + int(p.low <= value <= p.high)
         cov = {k: v / n for k, v in hits.items()}
         # binomial standard error of a 95 % coverage estimate
-        out[which] = {"coverage": cov, "ci_methods": methods, "n": n,
-                      "se_at_95": float(np.sqrt(0.95 * 0.05 / n)),
-                      "ok": all(0.90 <= c <= 0.99 for c in cov.values()),
-                      "time_s": time.perf_counter() - t0}
+        out[which] = {
+            "coverage": cov,
+            "ci_methods": methods,
+            "n": n,
+            "se_at_95": float(np.sqrt(0.95 * 0.05 / n)),
+            "ok": all(0.90 <= c <= 0.99 for c in cov.values()),
+            "time_s": time.perf_counter() - t0,
+        }
     return out
 
 
@@ -103,14 +109,26 @@ def main() -> None:
             print(f"{which:16s} {name:9s} {100 * c:8.1f}%  {r['ci_methods']}")
     print(f"(binomial se at 95 %: {100 * res['power_law']['se_at_95']:.1f} %)")
     try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).parent, check=False).stdout.strip()
+        commit = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            check=False,
+        ).stdout.strip()
     except OSError:
         commit = None
-    doc = {"results": res,
-           "commit": commit, "version": dicblur.__version__,
-           "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                       "load": os.getloadavg(), "platform": platform.platform()}}
+    doc = {
+        "results": res,
+        "commit": commit,
+        "version": dicblur.__version__,
+        "machine": {
+            "python": platform.python_version(),
+            "cpus": os.cpu_count(),
+            "load": os.getloadavg(),
+            "platform": platform.platform(),
+        },
+    }
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(doc, indent=1))
     print(f"wrote {OUT}")

@@ -50,10 +50,16 @@ def fourier_shift(image: np.ndarray, dy: float, dx: float) -> np.ndarray:
     return np.fft.ifft2(np.fft.fft2(image) * np.exp(-2j * np.pi * (ky * dy + kx * dx))).real
 
 
-def blobs(shape: tuple[int, int], *, density: float = 0.008,
-          sigma: tuple[float, float] = (2.0, 3.0), amplitude: tuple[float, float] = (50, 300),
-          background: float = 10.0, clip: tuple[float, float] = (10.0, 245.0),
-          seed: int = 3) -> np.ndarray:
+def blobs(
+    shape: tuple[int, int],
+    *,
+    density: float = 0.008,
+    sigma: tuple[float, float] = (2.0, 3.0),
+    amplitude: tuple[float, float] = (50, 300),
+    background: float = 10.0,
+    clip: tuple[float, float] = (10.0, 245.0),
+    seed: int = 3,
+) -> np.ndarray:
     """Sum of isotropic Gaussian blobs at uniform random centres, clipped (GL)."""
     rng = np.random.default_rng(seed)
     h, w = shape
@@ -67,7 +73,7 @@ def blobs(shape: tuple[int, int], *, density: float = 0.008,
         x0, x1 = max(0, int(x) - r), min(w, int(x) + r + 1)
         yy = np.arange(y0, y1)[:, None] - y
         xx = np.arange(x0, x1)[None, :] - x
-        img[y0:y1, x0:x1] += a * np.exp(-(yy ** 2 + xx ** 2) / (2 * s * s))
+        img[y0:y1, x0:x1] += a * np.exp(-(yy**2 + xx**2) / (2 * s * s))
     return np.clip(img, *clip)
 
 
@@ -79,8 +85,11 @@ def load() -> float:
 
 
 def make_pair(name: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    img = (blobs((512, 512)) if name == "blobs"
-           else speckle_pattern((512, 512), speckle_size=4, softness=1.0, seed=seed))
+    img = (
+        blobs((512, 512))
+        if name == "blobs"
+        else speckle_pattern((512, 512), speckle_size=4, softness=1.0, seed=seed)
+    )
     rng = np.random.default_rng([seed, 99])
     ref = img + rng.normal(0, 2.0, img.shape)
     cur = fourier_shift(img, TRUE_V, TRUE_U) + rng.normal(0, 2.0, img.shape)
@@ -108,17 +117,25 @@ def main(argv: list[str] | None = None) -> int:
     import numba
 
     numba.set_num_threads(min(args.workers, numba.config.NUMBA_NUM_THREADS))
-    record: dict = {"command": "benchmarks/bench_dic_robust.py " + " ".join(argv or sys.argv[1:]),
-                    "machine": platform.processor() or platform.machine(),
-                    "cpu_count": os.cpu_count(), "workers": args.workers,
-                    "load_start": load(), "dicblur": dicblur.__version__,
-                    "dicblur_path": str(Path(dicblur.__file__).parent)}
+    record: dict = {
+        "command": "benchmarks/bench_dic_robust.py " + " ".join(argv or sys.argv[1:]),
+        "machine": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "workers": args.workers,
+        "load_start": load(),
+        "dicblur": dicblur.__version__,
+        "dicblur_path": str(Path(dicblur.__file__).parent),
+    }
     pairs = {name: make_pair(name, args.seed) for name in ("clean", "blobs")}
     results: dict = {}
     for shape in ("translation", "affine"):
-        cors = {name: (correlator(ref, shape, args.workers, not args.no_screen),
-                       correlator(ref, shape, 1, not args.no_screen))
-                for name, (ref, _) in pairs.items()}
+        cors = {
+            name: (
+                correlator(ref, shape, args.workers, not args.no_screen),
+                correlator(ref, shape, 1, not args.no_screen),
+            )
+            for name, (ref, _) in pairs.items()
+        }
         wall: dict[str, list[float]] = {n: [] for n in pairs}
         cpu: dict[str, list[float]] = {n: [] for n in pairs}
         res = {}
@@ -152,36 +169,46 @@ def main(argv: list[str] | None = None) -> int:
                 "mean_iterations": float(r.iterations.mean()),
                 "mean_iterations_converged": float(r.iterations[ok].mean()),
                 # share of all IC-GN iterations spent on POIs that end not CONVERGED
-                "failing_iteration_share": float(r.iterations[~ok].sum()
-                                                 / max(1, r.iterations.sum())),
+                "failing_iteration_share": float(
+                    r.iterations[~ok].sum() / max(1, r.iterations.sum())
+                ),
                 "max_iterations_used": int(r.iterations.max()),
                 "status_counts": r.status_counts(),
             }
         for key in ("poi_per_s", "poi_per_cpu_s_1thread"):
-            results[f"ratio_{shape}_{key}"] = (results[f"blobs_{shape}"][key]
-                                              / results[f"clean_{shape}"][key])
+            results[f"ratio_{shape}_{key}"] = (
+                results[f"blobs_{shape}"][key] / results[f"clean_{shape}"][key]
+            )
     record["load_end"] = load()
     record["results"] = results
-    print(f"512x512, subset 21, step 10, noise 2 GL, (u, v) = ({TRUE_U}, {TRUE_V}) px, "
-          f"{args.workers} threads, screening {'off' if args.no_screen else 'on'}; "
-          f"load {record['load_start']:.1f} -> {record['load_end']:.1f}")
-    print(f"{'case':20s} {'POI/s':>9s} {'POI/CPU-s':>10s} {'wrong %':>8s} {'gross %':>8s} "
-          f"{'flagged %':>9s} {'flag-ok %':>9s} {'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
-          "  statuses")
+    print(
+        f"512x512, subset 21, step 10, noise 2 GL, (u, v) = ({TRUE_U}, {TRUE_V}) px, "
+        f"{args.workers} threads, screening {'off' if args.no_screen else 'on'}; "
+        f"load {record['load_start']:.1f} -> {record['load_end']:.1f}"
+    )
+    print(
+        f"{'case':20s} {'POI/s':>9s} {'POI/CPU-s':>10s} {'wrong %':>8s} {'gross %':>8s} "
+        f"{'flagged %':>9s} {'flag-ok %':>9s} {'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
+        "  statuses"
+    )
     for shape in ("translation", "affine"):
         for name in ("clean", "blobs"):
             s = results[f"{name}_{shape}"]
             counts = {k: v for k, v in s["status_counts"].items() if v}
-            print(f"{name + ' ' + shape:20s} {s['poi_per_s']:9.0f} "
-                  f"{s['poi_per_cpu_s_1thread']:10.0f} "
-                  f"{100 * s['wrong_unflagged_fraction']:8.2f} "
-                  f"{100 * s['gross_unflagged_fraction']:8.2f} "
-                  f"{100 * s['flagged_fraction']:9.2f} "
-                  f"{100 * s['flagged_but_right_fraction']:9.2f} "
-                  f"{s['mean_iterations']:8.2f} {s['mean_iterations_converged']:6.2f} "
-                  f"{100 * s['failing_iteration_share']:9.1f}  {counts}")
-        print(f"  blobs / clean ({shape}): wall {results[f'ratio_{shape}_poi_per_s']:.2f}, "
-              f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}")
+            print(
+                f"{name + ' ' + shape:20s} {s['poi_per_s']:9.0f} "
+                f"{s['poi_per_cpu_s_1thread']:10.0f} "
+                f"{100 * s['wrong_unflagged_fraction']:8.2f} "
+                f"{100 * s['gross_unflagged_fraction']:8.2f} "
+                f"{100 * s['flagged_fraction']:9.2f} "
+                f"{100 * s['flagged_but_right_fraction']:9.2f} "
+                f"{s['mean_iterations']:8.2f} {s['mean_iterations_converged']:6.2f} "
+                f"{100 * s['failing_iteration_share']:9.1f}  {counts}"
+            )
+        print(
+            f"  blobs / clean ({shape}): wall {results[f'ratio_{shape}_poi_per_s']:.2f}, "
+            f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}"
+        )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(record, indent=2))

@@ -52,26 +52,37 @@ def _series(ds, var: str, p: str, lv: float) -> np.ndarray:
 
 def _errors(pred: np.ndarray, meas: np.ndarray) -> dict:
     lr = np.log(pred / meas)
-    return {"rms_log": float(np.sqrt(np.mean(lr**2))) if lr.size else float("nan"),
-            "max_rel": float(np.max(np.abs(pred / meas - 1))) if lr.size else float("nan"),
-            "n": int(lr.size)}
+    return {
+        "rms_log": float(np.sqrt(np.mean(lr**2))) if lr.size else float("nan"),
+        "max_rel": float(np.max(np.abs(pred / meas - 1))) if lr.size else float("nan"),
+        "n": int(lr.size),
+    }
 
 
-def _static_terms(img: np.ndarray, w: np.ndarray, subset: int, step: int
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
+def _static_terms(
+    img: np.ndarray, w: np.ndarray, subset: int, step: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
     """Per W at the campaign's sub-pixel offset W/2 mod 1: first-order noise variance per
     GL^2, the interaction per GL^4, the noise-free variance; and the breakdown W."""
     n1, n2, b2 = (np.zeros(w.size) for _ in range(3))
     for j, wl in enumerate(w):
-        pr = predict_from_pattern(img, [wl], noise_sigma=1.0, subset=subset, step=step,
-                                  boundary="periodic", subpixel=float((wl / 2) % 1.0))
+        pr = predict_from_pattern(
+            img,
+            [wl],
+            noise_sigma=1.0,
+            subset=subset,
+            step=step,
+            boundary="periodic",
+            subpixel=float((wl / 2) % 1.0),
+        )
         assert pr.u_noise_reference is not None and pr.u_noise_current is not None
         assert pr.u_noise_interaction is not None
         n1[j] = pr.u_noise_reference[0] ** 2 + pr.u_noise_current[0] ** 2
         n2[j] = pr.u_noise_interaction[0] ** 2
         b2[j] = pr.u_blur[0] ** 2
-    aligned = predict_from_pattern(img, w, noise_sigma=1.0, subset=subset, step=step,
-                                   boundary="periodic")
+    aligned = predict_from_pattern(
+        img, w, noise_sigma=1.0, subset=subset, step=step, boundary="periodic"
+    )
     return n1, n2, b2, aligned.valid_fraction, aligned.breakdown_blur
 
 
@@ -80,8 +91,7 @@ def _scaled(k: np.ndarray, noise: np.ndarray, blur2: np.ndarray) -> np.ndarray:
     return np.sqrt(k[0] * noise + k[1] ** 2 * blur2)
 
 
-def _log_resid(k: np.ndarray, noise: np.ndarray, blur2: np.ndarray, u: np.ndarray
-               ) -> np.ndarray:
+def _log_resid(k: np.ndarray, noise: np.ndarray, blur2: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.log(_scaled(k, noise, blur2) / u)
 
 
@@ -91,8 +101,19 @@ def main() -> None:
     args = ap.parse_args()
     folder: Path = args.reproduce
     if not (folder / "campaign" / "study.zarr").exists():
-        subprocess.run([sys.executable, "-m", "dicblur", "reproduce", "--quick", "--serial",
-                        "-o", str(folder)], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "dicblur",
+                "reproduce",
+                "--quick",
+                "--serial",
+                "-o",
+                str(folder),
+            ],
+            check=True,
+        )
     import xarray as xr
 
     with warnings.catch_warnings():
@@ -103,10 +124,13 @@ def main() -> None:
     levels = [float(v) for v in ds["noise"].values]
     w_all = np.asarray(ds["blur"].values, dtype=np.float64)
     rows = []
-    print(f"{'pattern':>7s} {'breakdown':>9s} | rms log error (max rel) below the breakdown W"
-          " | all W")
-    print(f"{'':>7s} {'W px':>9s} | {'static':>14s} {'mismatch':>14s} {'scaled':>14s} | "
-          f"{'static':>6s} {'mismatch':>8s} {'scaled':>6s}")
+    print(
+        f"{'pattern':>7s} {'breakdown':>9s} | rms log error (max rel) below the breakdown W | all W"
+    )
+    print(
+        f"{'':>7s} {'W px':>9s} | {'static':>14s} {'mismatch':>14s} {'scaled':>14s} | "
+        f"{'static':>6s} {'mismatch':>8s} {'scaled':>6s}"
+    )
     for p in [str(v) for v in ds["pattern"].values]:
         img = dicblur.load_image(folder / "patterns" / f"{p}.tif").astype(np.float64)
         n1, n2, b2, frac, brk = _static_terms(img, w_all, subset, step)
@@ -117,8 +141,9 @@ def main() -> None:
             uu.append(_series(ds, "u_e", p, lv)[ok])
             nn.append(np.full(int(ok.sum()), lv))
             ss.append(_series(ds, "sssig", p, lv)[ok])
-            cc.append((_series(ds, "rms_contrast_ref", p, lv)
-                       / _series(ds, "rms_contrast", p, lv))[ok])
+            cc.append(
+                (_series(ds, "rms_contrast_ref", p, lv) / _series(ds, "rms_contrast", p, lv))[ok]
+            )
         w, u, sig, s, cr = (np.concatenate(a) for a in (ww, uu, nn, ss, cc))
         idx = np.searchsorted(w_all, w)
         static = np.sqrt(sig**2 * n1[idx] + sig**4 * n2[idx] + b2[idx])
@@ -135,43 +160,70 @@ def main() -> None:
 
         noise_part = sig**2 * n1[idx] + sig**4 * n2[idx]
         fit = optimize.least_squares(
-            _log_resid, x0=[1.0, 1.0], bounds=([1e-6, 1e-6], [np.inf, np.inf]),
-            args=(noise_part[train], b2[idx][train], u[train]))
+            _log_resid,
+            x0=[1.0, 1.0],
+            bounds=([1e-6, 1e-6], [np.inf, np.inf]),
+            args=(noise_part[train], b2[idx][train], u[train]),
+        )
         scaled = _scaled(fit.x, noise_part, b2[idx])
         row = {
-            "pattern": p, "breakdown_blur": brk, "valid_fraction": frac.tolist(),
-            "blur": w_all.tolist(), "scales": fit.x.tolist(),
-            "train_max_blur": comp["train_max_blur"], "holdout_noise": comp["holdout_noise"],
+            "pattern": p,
+            "breakdown_blur": brk,
+            "valid_fraction": frac.tolist(),
+            "blur": w_all.tolist(),
+            "scales": fit.x.tolist(),
+            "train_max_blur": comp["train_max_blur"],
+            "holdout_noise": comp["holdout_noise"],
             "static_below": _errors(static[below], u[below]),
             "static_all": _errors(static, u),
             "mismatch_test_below": _errors(mis_ratio[tb], np.ones(int(tb.sum()))),
             "mismatch_test_all": _errors(mis_ratio, np.ones(mis_ratio.size)),
             "scaled_test_below": _errors(scaled[test & below], u[test & below]),
             "scaled_test_all": _errors(scaled[test], u[test]),
-            "measured": {"blur": w.tolist(), "noise": sig.tolist(), "u_e": u.tolist(),
-                         "static": static.tolist(), "scaled": scaled.tolist()},
+            "measured": {
+                "blur": w.tolist(),
+                "noise": sig.tolist(),
+                "u_e": u.tolist(),
+                "static": static.tolist(),
+                "scaled": scaled.tolist(),
+            },
         }
         rows.append(row)
 
         def cell(e: dict) -> str:
             return f"{e['rms_log']:6.3f} ({e['max_rel']:5.2f})"
 
-        print(f"{p:>7s} {'-' if brk is None else f'{brk:g}':>9s} | "
-              f"{cell(row['static_below'])} {cell(row['mismatch_test_below'])} "
-              f"{cell(row['scaled_test_below'])} | {row['static_all']['rms_log']:6.3f} "
-              f"{row['mismatch_test_all']['rms_log']:8.3f} "
-              f"{row['scaled_test_all']['rms_log']:6.3f}", flush=True)
+        print(
+            f"{p:>7s} {'-' if brk is None else f'{brk:g}':>9s} | "
+            f"{cell(row['static_below'])} {cell(row['mismatch_test_below'])} "
+            f"{cell(row['scaled_test_below'])} | {row['static_all']['rms_log']:6.3f} "
+            f"{row['mismatch_test_all']['rms_log']:8.3f} "
+            f"{row['scaled_test_all']['rms_log']:6.3f}",
+            flush=True,
+        )
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, check=False).stdout.strip()
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+        ).stdout.strip()
     except OSError:
         commit = ""
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps({
-        "commit": commit, "version": dicblur.__version__,
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                    "load": os.getloadavg()},
-        "reproduce": str(folder), "rows": rows}, indent=1))
+    OUT.write_text(
+        json.dumps(
+            {
+                "commit": commit,
+                "version": dicblur.__version__,
+                "machine": {
+                    "python": platform.python_version(),
+                    "cpus": os.cpu_count(),
+                    "load": os.getloadavg(),
+                },
+                "reproduce": str(folder),
+                "rows": rows,
+            },
+            indent=1,
+        )
+    )
     print(f"wrote {OUT}")
 
 

@@ -58,26 +58,46 @@ def part_a() -> list[dict]:
     rows = []
     for shape in ("translation", "affine"):
         t = _best(lambda shape=shape: blur_sensitivity(img, subset=31, step=10, shape=shape))
-        rows.append({"case": f"blur_sensitivity 512x512, subset 31, step 10, {shape}",
-                     "seconds": t})
+        rows.append(
+            {"case": f"blur_sensitivity 512x512, subset 31, step 10, {shape}", "seconds": t}
+        )
     t_on = _best(lambda: dicblur.pattern_metrics(img, subset=31))
     t_off = _best(lambda: dicblur.pattern_metrics(img, subset=31, blur_sensitivity=False))
-    rows.append({"case": "pattern_metrics 512x512 with c / without c", "seconds": t_on,
-                 "ratio": t_on / t_off})
+    rows.append(
+        {
+            "case": "pattern_metrics 512x512 with c / without c",
+            "seconds": t_on,
+            "ratio": t_on / t_off,
+        }
+    )
     w = np.arange(0.0, 10.01, 0.5)
     rng = np.random.default_rng(0)
     s = sssig_decay(w, 1.85e5, 0.022)
     u = mismatch_model(w, s, 2.0, c=7e-4) * np.exp(rng.normal(0, 0.02, w.size))
-    rows.append({"case": "fit_blur_model 21 points, covariance CIs (+ comparison)",
-                 "seconds": _best(lambda: fit_blur_model(w, s, u, noise_sigma=2.0))})
-    rows.append({"case": "fit_blur_model 21 points, bootstrap 500",
-                 "seconds": _best(lambda: fit_blur_model(w, s, u, noise_sigma=2.0,
-                                                         ci="bootstrap", seed=0), 1)})
+    rows.append(
+        {
+            "case": "fit_blur_model 21 points, covariance CIs (+ comparison)",
+            "seconds": _best(lambda: fit_blur_model(w, s, u, noise_sigma=2.0)),
+        }
+    )
+    rows.append(
+        {
+            "case": "fit_blur_model 21 points, bootstrap 500",
+            "seconds": _best(
+                lambda: fit_blur_model(w, s, u, noise_sigma=2.0, ci="bootstrap", seed=0), 1
+            ),
+        }
+    )
     model = fit_blur_model(w, s, u, noise_sigma=2.0, mean_level=127.5)
     cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)
-    rows.append({"case": "plan_exposure with a Poisson-Gaussian camera",
-                 "seconds": _best(lambda: plan_exposure(model, velocity="120mm/s",
-                                                        scale="0.05mm/px", camera=cam))})
+    rows.append(
+        {
+            "case": "plan_exposure with a Poisson-Gaussian camera",
+            "seconds": _best(
+                lambda: plan_exposure(model, velocity="120mm/s", scale="0.05mm/px", camera=cam)
+            ),
+        }
+    )
     return rows
 
 
@@ -101,11 +121,18 @@ def part_c(quick: bool) -> list[dict]:
         spec = np.fft.fft2(img)
         ky = np.fft.fftfreq(n)[:, None]
         kx = np.fft.fftfreq(n)[None, :]
-        cent = np.array([[r, c] for r in range(h + 1, n - h - 1, 10)
-                         for c in range(h + 1, n - h - 1, 10)])
+        cent = np.array(
+            [[r, c] for r in range(h + 1, n - h - 1, 10) for c in range(h + 1, n - h - 1, 10)]
+        )
         # exact interpolation in the brute force: true gradients, SSD on the static side
-        pred = blur_sensitivity(img, subset=sub, points=cent, boundary="periodic",
-                                derivative="spectral", criterion="ssd").c
+        pred = blur_sensitivity(
+            img,
+            subset=sub,
+            points=cent,
+            boundary="periodic",
+            derivative="spectral",
+            criterion="ssd",
+        ).c
         u_e = []
         for wl in blurs:
             blurred = spec * np.sinc(wl * kx)
@@ -121,10 +148,17 @@ def part_c(quick: bool) -> list[dict]:
                 xs.append(optimize.least_squares(resid, [0.0, 0.0], xtol=1e-10).x[0])
             u_e.append(float(np.std(xs)))
         c_pure, c_lead = _fit_c(blurs, np.array(u_e))
-        rows.append({"speckle_size": size, "c_static": pred, "c_fit": c_pure,
-                     "c_fit_leading": c_lead, "ratio": c_pure / pred,
-                     "ratio_leading": c_lead / pred,
-                     "u_e": dict(zip(map(float, blurs), u_e, strict=True))})
+        rows.append(
+            {
+                "speckle_size": size,
+                "c_static": pred,
+                "c_fit": c_pure,
+                "c_fit_leading": c_lead,
+                "ratio": c_pure / pred,
+                "ratio_leading": c_lead / pred,
+                "u_e": dict(zip(map(float, blurs), u_e, strict=True)),
+            }
+        )
     return rows
 
 
@@ -138,7 +172,7 @@ def part_e(quick: bool) -> list[dict] | None:
     from dicblur.models import compare_models
 
     out = []
-    for size in ((4.0,) if quick else (3.0, 6.0)):
+    for size in (4.0,) if quick else (3.0, 6.0):
         img = dicblur.speckle_pattern((192, 192), speckle_size=size, softness=0.5, seed=7)
         w_all, s_all, u_all, n_all = [], [], [], []
         for noise in (1.0, 2.0, 4.0):
@@ -146,9 +180,13 @@ def part_e(quick: bool) -> list[dict] | None:
                 blurred = motion_blur(img, (0.0, float(wl)), substeps=None) if wl else img
                 v = []
                 for r in range(2):
-                    res = correlate(add_gaussian_noise(img, noise, seed=100 * i + r),
-                                    add_gaussian_noise(blurred, noise, seed=100 * i + r + 50),
-                                    subset=31, step=12, shape="affine")
+                    res = correlate(
+                        add_gaussian_noise(img, noise, seed=100 * i + r),
+                        add_gaussian_noise(blurred, noise, seed=100 * i + r + 50),
+                        subset=31,
+                        step=12,
+                        shape="affine",
+                    )
                     v.append(float(np.std(res.u[res.converged])))
                 w_all.append(float(wl))
                 n_all.append(noise)
@@ -165,9 +203,12 @@ PARTS = ("speed", "c", "comparison")
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", choices=PARTS, action="append",
-                    help="run only this part (repeatable); the other sections of the JSON "
-                         "file are kept")
+    ap.add_argument(
+        "--only",
+        choices=PARTS,
+        action="append",
+        help="run only this part (repeatable); the other sections of the JSON file are kept",
+    )
     args = ap.parse_args()
     run = set(args.only or PARTS)
     old = json.loads(OUT.read_text()) if OUT.exists() and args.only else {}
@@ -182,11 +223,15 @@ def main() -> None:
     if "c" in run:
         cc = part_c(args.quick)
         print("\nstatic c vs brute-force SSD minima (translation, exact box blur, W <= 4 px)")
-        print(f"{'speckle px':>10s} {'c static':>10s} {'c fit':>10s} {'ratio':>6s} "
-              f"{'c lead':>10s} {'ratio':>6s}")
+        print(
+            f"{'speckle px':>10s} {'c static':>10s} {'c fit':>10s} {'ratio':>6s} "
+            f"{'c lead':>10s} {'ratio':>6s}"
+        )
         for r in cc:
-            print(f"{r['speckle_size']:10.1f} {r['c_static']:10.3e} {r['c_fit']:10.3e} "
-                  f"{r['ratio']:6.3f} {r['c_fit_leading']:10.3e} {r['ratio_leading']:6.3f}")
+            print(
+                f"{r['speckle_size']:10.1f} {r['c_static']:10.3e} {r['c_fit']:10.3e} "
+                f"{r['ratio']:6.3f} {r['c_fit_leading']:10.3e} {r['ratio_leading']:6.3f}"
+            )
         res["c_vs_bruteforce_ssd"] = cc
     if "comparison" in run:
         e = part_e(args.quick)
@@ -194,19 +239,26 @@ def main() -> None:
             print("part E (model comparison on DIC data): pending, dicblur.dic absent")
         else:
             print("\nheld-out comparison on DIC data (train W <= 5 px, noise 1, 2 GL)")
-            print(f"{'speckle px':>10s} {'n test':>6s} {'rms log pl':>10s} "
-                  f"{'rms log mm':>10s} {'max pl':>7s} {'max mm':>7s} better")
+            print(
+                f"{'speckle px':>10s} {'n test':>6s} {'rms log pl':>10s} "
+                f"{'rms log mm':>10s} {'max pl':>7s} {'max mm':>7s} better"
+            )
             for r in e:
-                print(f"{r['speckle_size']:10.1f} {r['n_test']:6d} "
-                      f"{r['rms_log_error']['power_law']:10.3f} "
-                      f"{r['rms_log_error']['mismatch']:10.3f} "
-                      f"{r['max_rel_error']['power_law']:7.2f} "
-                      f"{r['max_rel_error']['mismatch']:7.2f} {r['better']}")
+                print(
+                    f"{r['speckle_size']:10.1f} {r['n_test']:6d} "
+                    f"{r['rms_log_error']['power_law']:10.3f} "
+                    f"{r['rms_log_error']['mismatch']:10.3f} "
+                    f"{r['max_rel_error']['power_law']:7.2f} "
+                    f"{r['max_rel_error']['mismatch']:7.2f} {r['better']}"
+                )
         res["comparison_on_dic"] = e
     OUT.parent.mkdir(parents=True, exist_ok=True)
     out = {**old, **res}
-    out["machine"] = {"python": platform.python_version(), "cpus": os.cpu_count(),
-                      "load": os.getloadavg()}
+    out["machine"] = {
+        "python": platform.python_version(),
+        "cpus": os.cpu_count(),
+        "load": os.getloadavg(),
+    }
     if args.only:
         out["machine"]["parts_run"] = sorted(run)
     OUT.write_text(json.dumps({**out, "provenance": provenance()}, indent=1))

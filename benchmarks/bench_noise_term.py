@@ -46,17 +46,31 @@ from dicblur.models import predict_from_pattern
 
 OUT = Path(__file__).resolve().parent / "results" / "noise_term.json"
 # /work/shared/data/real next to the checkout (main or a worktree under /work/wt)
-REAL = next((p / "shared" / "data" / "real" for p in Path(__file__).resolve().parents
-             if (p / "shared" / "data" / "real").is_dir()), Path("shared/data/real"))
+REAL = next(
+    (
+        p / "shared" / "data" / "real"
+        for p in Path(__file__).resolve().parents
+        if (p / "shared" / "data" / "real").is_dir()
+    ),
+    Path("shared/data/real"),
+)
 SUBSET = 31
 OPTS = {"subset": SUBSET, "shape": "translation"}
 
 
 def _patterns() -> list[tuple[str, np.ndarray, str]]:
-    out = [("speckle 4 px", dicblur.speckle_pattern((256, 256), speckle_size=4.0,
-                                                    softness=0.5, seed=3), "periodic"),
-           ("speckle 6 px soft", dicblur.speckle_pattern((256, 256), speckle_size=6.0,
-                                                         softness=1.0, seed=5), "periodic")]
+    out = [
+        (
+            "speckle 4 px",
+            dicblur.speckle_pattern((256, 256), speckle_size=4.0, softness=0.5, seed=3),
+            "periodic",
+        ),
+        (
+            "speckle 6 px soft",
+            dicblur.speckle_pattern((256, 256), speckle_size=6.0, softness=1.0, seed=5),
+            "periodic",
+        ),
+    ]
     sample3 = REAL / "dicchallenge1_sample3" / "Sample3_Reference.tif"
     if sample3.is_file():
         img = dicblur.load_image(sample3).astype(np.float64)
@@ -70,8 +84,13 @@ def _patterns() -> list[tuple[str, np.ndarray, str]]:
 def _centred_blur(img: np.ndarray, wl: float, boundary: str) -> np.ndarray:
     if wl == 0:
         return img.copy()
-    return dicblur.motion_blur(img, None, substeps=None, boundary=boundary,
-                               trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1))
+    return dicblur.motion_blur(
+        img,
+        None,
+        substeps=None,
+        boundary=boundary,
+        trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1),
+    )
 
 
 def _se(v: np.ndarray, reps: int) -> float:
@@ -80,8 +99,16 @@ def _se(v: np.ndarray, reps: int) -> float:
     return float(np.sqrt(np.sum(v**2) * 2.0 / (reps - 1)) / len(v))
 
 
-def case(name: str, img: np.ndarray, boundary: str, sigma: float, w: float, reps: int,
-         step: int, rng: np.random.Generator) -> dict:
+def case(
+    name: str,
+    img: np.ndarray,
+    boundary: str,
+    sigma: float,
+    w: float,
+    reps: int,
+    step: int,
+    rng: np.random.Generator,
+) -> dict:
     cur = _centred_blur(img, w, boundary)
     c0 = dicblur.Correlator(img, step=step, **OPTS)
     pts = np.stack([c0.rows, c0.cols], axis=1)
@@ -94,17 +121,23 @@ def case(name: str, img: np.ndarray, boundary: str, sigma: float, w: float, reps
         ok &= res.converged
         runs["current"].append(res.u)
         for which in ("reference", "both"):
-            c = dicblur.Correlator(img + rng.normal(0.0, sigma, img.shape), points=pts,
-                                   **OPTS)
-            res = c.correlate(cur if which == "reference"
-                              else cur + rng.normal(0.0, sigma, cur.shape))
+            c = dicblur.Correlator(img + rng.normal(0.0, sigma, img.shape), points=pts, **OPTS)
+            res = c.correlate(
+                cur if which == "reference" else cur + rng.normal(0.0, sigma, cur.shape)
+            )
             ok &= res.converged
             runs[which].append(res.u)
     seconds = time.perf_counter() - t0
     meas = {k: np.var(np.array(v)[:, ok], axis=0) for k, v in runs.items()}
     row = {
-        "pattern": name, "noise": sigma, "blur": w, "reps": reps, "n_poi": int(ok.sum()),
-        "n_poi_grid": len(pts), "points": pts[ok].tolist(), "seconds": seconds,
+        "pattern": name,
+        "noise": sigma,
+        "blur": w,
+        "reps": reps,
+        "n_poi": int(ok.sum()),
+        "n_poi_grid": len(pts),
+        "points": pts[ok].tolist(),
+        "seconds": seconds,
         "mc_reference": float(meas["reference"].mean()),
         "mc_current": float(meas["current"].mean()),
         "mc_both": float(meas["both"].mean()),
@@ -118,26 +151,44 @@ def predict(img: np.ndarray, boundary: str, row: dict) -> dict:
     pts = np.asarray(row["points"], dtype=np.intp)
     sigma, w = row["noise"], row["blur"]
     # every POI the Monte Carlo kept (no breakdown test: same POIs on both sides)
-    pr = predict_from_pattern(img, [w], noise_sigma=sigma, points=pts, boundary=boundary,
-                              min_contraction=0.0, **OPTS)
+    pr = predict_from_pattern(
+        img, [w], noise_sigma=sigma, points=pts, boundary=boundary, min_contraction=0.0, **OPTS
+    )
     assert pr.u_noise_reference is not None and pr.u_noise_current is not None
     assert pr.u_noise_interaction is not None
-    old = _shifts_and_variance(img, [w], pts, SUBSET, motion=(0.0, 1.0),
-                               shape="translation", derivative="bspline3", boundary=boundary,
-                               criterion="znssd", max_shift=np.inf, chunk=256, variance=True,
-                               complete=False)[1]
+    old = _shifts_and_variance(
+        img,
+        [w],
+        pts,
+        SUBSET,
+        motion=(0.0, 1.0),
+        shape="translation",
+        derivative="bspline3",
+        boundary=boundary,
+        criterion="znssd",
+        max_shift=np.inf,
+        chunk=256,
+        variance=True,
+        complete=False,
+    )[1]
     assert old is not None
-    return {"pred_reference": float(pr.u_noise_reference[0] ** 2),
-            "pred_current": float(pr.u_noise_current[0] ** 2),
-            "pred_interaction": float(pr.u_noise_interaction[0] ** 2),
-            "old_reference": float(sigma**2 * np.nanmean(old[0, 0]))}
+    return {
+        "pred_reference": float(pr.u_noise_reference[0] ** 2),
+        "pred_current": float(pr.u_noise_current[0] ** 2),
+        "pred_interaction": float(pr.u_noise_interaction[0] ** 2),
+        "old_reference": float(sigma**2 * np.nanmean(old[0, 0])),
+    }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--predict-only", metavar="JSON", default=None,
-                    help="reuse the Monte Carlo of an earlier run, recompute the predictions")
+    ap.add_argument(
+        "--predict-only",
+        metavar="JSON",
+        default=None,
+        help="reuse the Monte Carlo of an earlier run, recompute the predictions",
+    )
     args = ap.parse_args()
     prior = None
     if args.predict_only:
@@ -148,18 +199,25 @@ def main() -> None:
     noises = [2.0] if args.quick else [2.0, 8.0]
     rng = np.random.default_rng(20261201)
     rows = []
-    print("noise term, predicted / Monte Carlo of the engine (variances, px^2); "
-          f"{reps} realisations per run")
-    print(f"{'pattern':>18s} {'GL':>3s} {'W':>3s} {'POIs':>4s} {'ref':>6s} {'cur':>6s} "
-          f"{'total':>6s} {'both':>6s} {'old ref':>7s} {'old tot':>7s} {'MC se':>6s}")
+    print(
+        "noise term, predicted / Monte Carlo of the engine (variances, px^2); "
+        f"{reps} realisations per run"
+    )
+    print(
+        f"{'pattern':>18s} {'GL':>3s} {'W':>3s} {'POIs':>4s} {'ref':>6s} {'cur':>6s} "
+        f"{'total':>6s} {'both':>6s} {'old ref':>7s} {'old tot':>7s} {'MC se':>6s}"
+    )
     for name, img, boundary in _patterns():
         for sigma in noises:
             for w in blurs:
                 if prior is None:
                     r = case(name, img, boundary, sigma, w, reps, 32, rng)
                 else:
-                    old_rows = [q for q in prior["rows"] if q["pattern"] == name
-                                and q["noise"] == sigma and q["blur"] == w]
+                    old_rows = [
+                        q
+                        for q in prior["rows"]
+                        if q["pattern"] == name and q["noise"] == sigma and q["blur"] == w
+                    ]
                     if not old_rows:
                         continue
                     r = old_rows[0]
@@ -173,32 +231,61 @@ def main() -> None:
                 mt = r["mc_reference"] + r["mc_current"]
                 ot = r["old_reference"] + r["pred_current"]
                 pb = pt + r["pred_interaction"]
-                print(f"{name:>18s} {sigma:3g} {w:3g} {r['n_poi']:4d} "
-                      f"{r['pred_reference'] / r['mc_reference']:6.3f} "
-                      f"{r['pred_current'] / r['mc_current']:6.3f} {pt / mt:6.3f} "
-                      f"{pb / r['mc_both']:6.3f} {r['old_reference'] / r['mc_reference']:7.3f} "
-                      f"{ot / mt:7.3f} {r['mc_se']['reference'] / r['mc_reference']:6.3f}",
-                      flush=True)
-    worst = {k: max(abs(f(r) - 1) for r in rows) for k, f in (
-        ("reference", lambda r: r["pred_reference"] / r["mc_reference"]),
-        ("current", lambda r: r["pred_current"] / r["mc_current"]),
-        ("total", lambda r: (r["pred_reference"] + r["pred_current"])
-         / (r["mc_reference"] + r["mc_current"])),
-        ("both", lambda r: (r["pred_reference"] + r["pred_current"] + r["pred_interaction"])
-         / r["mc_both"]))}
-    print("largest |predicted / measured - 1|: " + ", ".join(
-        f"{k} {v:.3f}" for k, v in worst.items()))
+                print(
+                    f"{name:>18s} {sigma:3g} {w:3g} {r['n_poi']:4d} "
+                    f"{r['pred_reference'] / r['mc_reference']:6.3f} "
+                    f"{r['pred_current'] / r['mc_current']:6.3f} {pt / mt:6.3f} "
+                    f"{pb / r['mc_both']:6.3f} {r['old_reference'] / r['mc_reference']:7.3f} "
+                    f"{ot / mt:7.3f} {r['mc_se']['reference'] / r['mc_reference']:6.3f}",
+                    flush=True,
+                )
+    worst = {
+        k: max(abs(f(r) - 1) for r in rows)
+        for k, f in (
+            ("reference", lambda r: r["pred_reference"] / r["mc_reference"]),
+            ("current", lambda r: r["pred_current"] / r["mc_current"]),
+            (
+                "total",
+                lambda r: (
+                    (r["pred_reference"] + r["pred_current"])
+                    / (r["mc_reference"] + r["mc_current"])
+                ),
+            ),
+            (
+                "both",
+                lambda r: (
+                    (r["pred_reference"] + r["pred_current"] + r["pred_interaction"]) / r["mc_both"]
+                ),
+            ),
+        )
+    }
+    print(
+        "largest |predicted / measured - 1|: " + ", ".join(f"{k} {v:.3f}" for k, v in worst.items())
+    )
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, check=False).stdout.strip()
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+        ).stdout.strip()
     except OSError:
         commit = ""
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps({
-        "commit": commit, "version": dicblur.__version__,
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                    "load": os.getloadavg()},
-        "quick": args.quick, "worst": worst, "rows": rows}, indent=1))
+    OUT.write_text(
+        json.dumps(
+            {
+                "commit": commit,
+                "version": dicblur.__version__,
+                "machine": {
+                    "python": platform.python_version(),
+                    "cpus": os.cpu_count(),
+                    "load": os.getloadavg(),
+                },
+                "quick": args.quick,
+                "worst": worst,
+                "rows": rows,
+            },
+            indent=1,
+        )
+    )
     print(f"wrote {OUT}")
 
 

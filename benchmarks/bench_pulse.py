@@ -45,11 +45,20 @@ def main() -> int:
         ("linear interpolation", {"interpolation": "linear"}),
         ("analytic (oracle) interpolation", {"interpolation": "analytic"}),
     ):
-        reps = [_time(widths=PAPER_WIDTHS, trials=args.trials, seed=1, **kw)
-                for _ in range(args.repeats)]
-        rows.append({"variant": name, "widths": len(PAPER_WIDTHS), "trials": args.trials,
-                     "seconds_min": min(reps), "seconds_median": statistics.median(reps),
-                     "repeats": reps})
+        reps = [
+            _time(widths=PAPER_WIDTHS, trials=args.trials, seed=1, **kw)
+            for _ in range(args.repeats)
+        ]
+        rows.append(
+            {
+                "variant": name,
+                "widths": len(PAPER_WIDTHS),
+                "trials": args.trials,
+                "seconds_min": min(reps),
+                "seconds_median": statistics.median(reps),
+                "repeats": reps,
+            }
+        )
     # noise generation alone (as the default draws it: spectra from float32 normals)
     t0 = time.perf_counter()
     for child in np.random.SeedSequence(1).spawn(len(PAPER_WIDTHS)):
@@ -66,23 +75,32 @@ def main() -> int:
         "noise_generation_s": noise_s,
         "rows": rows,
         "target_met": rows[0]["seconds_median"] <= 10.0,
-        "machine": {"cpu_count": os.cpu_count(), "numba_threads": numba.get_num_threads(),
-                    "python": platform.python_version(), "numpy": np.__version__,
-                    "numba": numba.__version__, "loadavg_before": load_before,
-                    "loadavg_after": load_after},
+        "machine": {
+            "cpu_count": os.cpu_count(),
+            "numba_threads": numba.get_num_threads(),
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "numba": numba.__version__,
+            "loadavg_before": load_before,
+            "loadavg_after": load_after,
+        },
         "dicblur_version": __version__,
     }
     out = Path(__file__).resolve().parent / "results" / "pulse.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({**result, "provenance": provenance()}, indent=2))
-    print(f"pulse Monte Carlo, {args.trials} trials x {len(PAPER_WIDTHS)} widths, "
-          f"{args.repeats} repeats; load avg {load_before[0]:.2f} -> {load_after[0]:.2f} "
-          f"on {os.cpu_count()} cores")
+    print(
+        f"pulse Monte Carlo, {args.trials} trials x {len(PAPER_WIDTHS)} widths, "
+        f"{args.repeats} repeats; load avg {load_before[0]:.2f} -> {load_after[0]:.2f} "
+        f"on {os.cpu_count()} cores"
+    )
     print(f"{'variant':36s} {'min s':>8s} {'median s':>9s}")
     for r in rows:
         print(f"{r['variant']:36s} {r['seconds_min']:8.2f} {r['seconds_median']:9.2f}")
-    print(f"cold first call (kernel load): {cold:.2f} s; noise generation alone: "
-          f"{noise_s:.2f} s; target met: {result['target_met']}")
+    print(
+        f"cold first call (kernel load): {cold:.2f} s; noise generation alone: "
+        f"{noise_s:.2f} s; target met: {result['target_met']}"
+    )
     print(f"wrote {out}")
     return 0
 

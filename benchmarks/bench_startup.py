@@ -26,13 +26,15 @@ import time
 
 from _harness import Run
 
-COUNT = ("import json, sys; print(json.dumps([len(sys.modules), "
-         "len([m for m in sys.modules if m.startswith('dicblur')])]), file=sys.stderr)")
+COUNT = (
+    "import json, sys; print(json.dumps([len(sys.modules), "
+    "len([m for m in sys.modules if m.startswith('dicblur')])]), file=sys.stderr)"
+)
 CASES = {
     "import dicblur": "import dicblur",
     "import dicblur.dic": "import dicblur.dic",
     "dicblur --version": "import sys; sys.argv = ['dicblur', '--version']; "
-                         "from dicblur.cli import main; main(['--version'])",
+    "from dicblur.cli import main; main(['--version'])",
     "dicblur --help": "from dicblur.cli import main; main(['--help'])",
 }
 
@@ -40,8 +42,13 @@ CASES = {
 def run_case(code: str, env: dict[str, str]) -> tuple[float, float, list[int]]:
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", f"{code}\n{COUNT}"], env=env,
-                          capture_output=True, text=True, check=True)
+    proc = subprocess.run(
+        [sys.executable, "-c", f"{code}\n{COUNT}"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -69,13 +76,19 @@ def main() -> None:
             w, c, counts = run_case(code, env)
             walls.append(w)
             cpus.append(c)
-        row = {"case": name, "wall_median_s": round(statistics.median(walls), 3),
-               "wall_min_s": round(min(walls), 3),
-               "cpu_median_s": round(statistics.median(cpus), 3),
-               "modules": counts[0], "dicblur_modules": counts[1]}
+        row = {
+            "case": name,
+            "wall_median_s": round(statistics.median(walls), 3),
+            "wall_min_s": round(min(walls), 3),
+            "cpu_median_s": round(statistics.median(cpus), 3),
+            "modules": counts[0],
+            "dicblur_modules": counts[1],
+        }
         rows.append(row)
-        print(f"| {name} | {row['wall_median_s']:.3f} | {row['cpu_median_s']:.3f} | "
-              f"{counts[0]} | {counts[1]} |")
+        print(
+            f"| {name} | {row['wall_median_s']:.3f} | {row['cpu_median_s']:.3f} | "
+            f"{counts[0]} | {counts[1]} |"
+        )
     out = run.write({"src": opts.src, "repeats": opts.repeats, "cases": rows})
     print(f"load {run.load_start} -> {run.record({})['provenance']['load_end']}; wrote {out}")
 

@@ -54,8 +54,13 @@ OUT = Path(__file__).resolve().parent / "results" / "track.json"
 
 def _commit() -> str:
     try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, cwd=Path(__file__).parent, check=False).stdout.strip()
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            check=False,
+        ).stdout.strip()
     except OSError:
         return "unknown"
 
@@ -65,8 +70,9 @@ def _pattern(n: int, seed: int = 1) -> np.ndarray:
     return 30 + 180 * (p - p.min()) / (p.max() - p.min())
 
 
-def _with_debris(tgt: VibratingTarget, n_frames: int, share: float, seed: int
-                 ) -> tuple[Recording, set[int]]:
+def _with_debris(
+    tgt: VibratingTarget, n_frames: int, share: float, seed: int
+) -> tuple[Recording, set[int]]:
     rng = np.random.default_rng(seed)
     moving = np.arange(tgt.static, n_frames)
     hit = set(rng.choice(moving, max(1, round(share * moving.size)), replace=False).tolist())
@@ -77,27 +83,50 @@ def _with_debris(tgt: VibratingTarget, n_frames: int, share: float, seed: int
     def read(k: int) -> np.ndarray:
         img = tgt.render(k)
         for r, c in spots.get(k, []):
-            img[r:r + 24, c:c + 24] = foreign[r:r + 24, c:c + 24]
+            img[r : r + 24, c : c + 24] = foreign[r : r + 24, c : c + 24]
         return img
 
-    rec = Recording(source="vibrating target + debris", kind="synthetic", n_frames=n_frames,
-                    shape=tgt.pattern.shape, bit_depth=8, fps=tgt.fps,
-                    exposure=tgt.exposure, names=[f"frame {i}" for i in range(n_frames)],
-                    _read=read)
+    rec = Recording(
+        source="vibrating target + debris",
+        kind="synthetic",
+        n_frames=n_frames,
+        shape=tgt.pattern.shape,
+        bit_depth=8,
+        fps=tgt.fps,
+        exposure=tgt.exposure,
+        names=[f"frame {i}" for i in range(n_frames)],
+        _read=read,
+    )
     return rec, hit
 
 
 def accuracy(n: int, n_frames: int, exposures: list[float], shape: str) -> dict:
     pat = _pattern(n)
-    pooled: dict[str, list[np.ndarray]] = {k: [] for k in
-                                           ("w", "du", "dv", "eu", "ev", "su", "sv",
-                                            "bu", "bv")}
-    gross = {"n_gross": 0, "caught": 0, "n_clean": 0, "false": 0, "n_gross_raw": 0,
-             "caught_raw": 0, "n_gross_bias": 0, "caught_bias": 0}
+    pooled: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("w", "du", "dv", "eu", "ev", "su", "sv", "bu", "bv")
+    }
+    gross = {
+        "n_gross": 0,
+        "caught": 0,
+        "n_clean": 0,
+        "false": 0,
+        "n_gross_raw": 0,
+        "caught_raw": 0,
+        "n_gross_bias": 0,
+        "caught_bias": 0,
+    }
     runs = []
     for i, t in enumerate(exposures):
-        tgt = VibratingTarget(pat, fps=2000.0, exposure=t, amplitude=10.0, frequency=200.0,
-                              angle=20.0, static=10, seed=10 + i)
+        tgt = VibratingTarget(
+            pat,
+            fps=2000.0,
+            exposure=t,
+            amplitude=10.0,
+            frequency=200.0,
+            angle=20.0,
+            static=10,
+            seed=10 + i,
+        )
         rec, _ = _with_debris(tgt, n_frames, 0.03, seed=i)
         t0 = time.perf_counter()
         ds = dicblur.track(rec, static="0:10", subset=21, step=10, shape=shape)  # type: ignore[arg-type]
@@ -124,11 +153,21 @@ def accuracy(n: int, n_frames: int, exposures: list[float], shape: str) -> dict:
             # accelerating blur, the same for every point, is not in sigma: see docs)
             z = np.fmax(np.abs(eu - mu) / su, np.abs(ev - mv) / sv)
             # the error about the predicted bias of the accelerating blur
-            z_b = np.fmax(np.abs(eu - np.nan_to_num(ds["bias_u"].values)) / su,
-                          np.abs(ev - np.nan_to_num(ds["bias_v"].values)) / sv)
-        for key, arr in (("w", w_true), ("du", eu - mu), ("dv", ev - mv), ("eu", eu),
-                         ("ev", ev), ("su", su), ("sv", sv), ("bu", ds["bias_u"].values),
-                         ("bv", ds["bias_v"].values)):
+            z_b = np.fmax(
+                np.abs(eu - np.nan_to_num(ds["bias_u"].values)) / su,
+                np.abs(ev - np.nan_to_num(ds["bias_v"].values)) / sv,
+            )
+        for key, arr in (
+            ("w", w_true),
+            ("du", eu - mu),
+            ("dv", ev - mv),
+            ("eu", eu),
+            ("ev", ev),
+            ("su", su),
+            ("sv", sv),
+            ("bu", ds["bias_u"].values),
+            ("bv", ds["bias_v"].values),
+        ):
             pooled[key].append(arr[valid])
         has_sigma = np.isfinite(su) & np.isfinite(sv) & np.isfinite(eu) & np.isfinite(ev)
         g_raw = has_sigma & np.isfinite(z_raw) & (z_raw > 10)
@@ -145,16 +184,25 @@ def accuracy(n: int, n_frames: int, exposures: list[float], shape: str) -> dict:
         gross["false"] += int((clean & out).sum())
         w_meas = np.nanmedian(np.where(valid, ds["W"].values, np.nan), axis=1)
         inner = slice(13, -3)
-        runs.append({"exposure": t, "peak_W": float(np.hypot(bu, bv).max()),
-                     "W_error_max": float(np.nanmax(np.abs(w_meas - np.hypot(bu, bv))[inner])),
-                     "valid_share": float(valid.mean()), "wall_s": wall,
-                     "tracking_s": float(ds.attrs["tracking_time_s"]),
-                     "prediction_s": float(ds.attrs["prediction_time_s"]),
-                     "noise_sigma": float(ds.attrs["noise_sigma"]),
-                     "advice": ds.attrs.get("advice_sentence", "")})
-        print(f"exposure {t * 1e3:.2f} ms: peak W {runs[-1]['peak_W']:.2f} px, W error "
-              f"{runs[-1]['W_error_max']:.3f} px, valid {runs[-1]['valid_share']:.3f}, "
-              f"{wall:.1f} s", flush=True)
+        runs.append(
+            {
+                "exposure": t,
+                "peak_W": float(np.hypot(bu, bv).max()),
+                "W_error_max": float(np.nanmax(np.abs(w_meas - np.hypot(bu, bv))[inner])),
+                "valid_share": float(valid.mean()),
+                "wall_s": wall,
+                "tracking_s": float(ds.attrs["tracking_time_s"]),
+                "prediction_s": float(ds.attrs["prediction_time_s"]),
+                "noise_sigma": float(ds.attrs["noise_sigma"]),
+                "advice": ds.attrs.get("advice_sentence", ""),
+            }
+        )
+        print(
+            f"exposure {t * 1e3:.2f} ms: peak W {runs[-1]['peak_W']:.2f} px, W error "
+            f"{runs[-1]['W_error_max']:.3f} px, valid {runs[-1]['valid_share']:.3f}, "
+            f"{wall:.1f} s",
+            flush=True,
+        )
     cat = {k: np.concatenate(v) for k, v in pooled.items()}
     rows = []
     for lo in np.arange(0.0, 6.0, 0.5):
@@ -167,25 +215,45 @@ def accuracy(n: int, n_frames: int, exposures: list[float], shape: str) -> dict:
             std = float(np.sqrt(np.mean(cat["d" + c][sel] ** 2)))
             rms = float(np.sqrt(np.mean(cat["e" + c][sel] ** 2)))
             res_b = cat["e" + c][sel] - np.nan_to_num(cat["b" + c][sel])
-            rms_b = float(np.sqrt(np.mean(res_b ** 2)))
-            row.update({f"pred_{c}": pred, f"std_{c}": std, f"rms_{c}": rms,
-                        f"ratio_{c}": pred / std, f"rms_minus_bias_{c}": rms_b})
+            rms_b = float(np.sqrt(np.mean(res_b**2)))
+            row.update(
+                {
+                    f"pred_{c}": pred,
+                    f"std_{c}": std,
+                    f"rms_{c}": rms,
+                    f"ratio_{c}": pred / std,
+                    f"rms_minus_bias_{c}": rms_b,
+                }
+            )
         rows.append(row)
     g = gross
-    return {"runs": runs, "bins": rows,
-            "gross": {**g, "catch_rate": g["caught"] / g["n_gross"] if g["n_gross"] else None,
-                      "catch_rate_raw": (g["caught_raw"] / g["n_gross_raw"]
-                                         if g["n_gross_raw"] else None),
-                      "catch_rate_bias": (g["caught_bias"] / g["n_gross_bias"]
-                                          if g["n_gross_bias"] else None),
-                      "false_rate": g["false"] / g["n_clean"] if g["n_clean"] else None}}
+    return {
+        "runs": runs,
+        "bins": rows,
+        "gross": {
+            **g,
+            "catch_rate": g["caught"] / g["n_gross"] if g["n_gross"] else None,
+            "catch_rate_raw": (g["caught_raw"] / g["n_gross_raw"] if g["n_gross_raw"] else None),
+            "catch_rate_bias": (
+                g["caught_bias"] / g["n_gross_bias"] if g["n_gross_bias"] else None
+            ),
+            "false_rate": g["false"] / g["n_clean"] if g["n_clean"] else None,
+        },
+    }
 
 
 def _write_mraw(path: Path, n: int, n_frames: int, exposure: float) -> Path:
     """A periodic recording as 8-bit .mraw: the 10 blurred phases of one cycle rendered
     once, camera noise drawn per frame."""
-    tgt = VibratingTarget(_pattern(n), fps=2000.0, exposure=exposure, amplitude=10.0,
-                          frequency=200.0, angle=20.0, static=10)
+    tgt = VibratingTarget(
+        _pattern(n),
+        fps=2000.0,
+        exposure=exposure,
+        amplitude=10.0,
+        frequency=200.0,
+        angle=20.0,
+        static=10,
+    )
     from dicblur.blur import motion_blur
 
     dy, dx = math.sin(math.radians(20.0)), math.cos(math.radians(20.0))
@@ -204,11 +272,25 @@ def _write_mraw(path: Path, n: int, n_frames: int, exposure: float) -> Path:
             img = tgt.pattern if k < 10 else phases[k % 10]
             fh.write(tgt.camera.capture(img, rng=rng).astype(np.uint8).tobytes())
     head = path.with_suffix(".cih")
-    head.write_text("#Camera Information Header\n" + "".join(f"{k} : {v}\n" for k, v in {
-        "Record Rate(fps)": 2000, "Shutter Speed(s)": exposure, "Total Frame": n_frames,
-        "Original Total Frame": n_frames, "Image Width": n, "Image Height": n,
-        "Color Type": "Mono", "Color Bit": 8, "File Format": "MRaw",
-        "EffectiveBit Depth": 8, "EffectiveBit Side": "Lower"}.items()))
+    head.write_text(
+        "#Camera Information Header\n"
+        + "".join(
+            f"{k} : {v}\n"
+            for k, v in {
+                "Record Rate(fps)": 2000,
+                "Shutter Speed(s)": exposure,
+                "Total Frame": n_frames,
+                "Original Total Frame": n_frames,
+                "Image Width": n,
+                "Image Height": n,
+                "Color Type": "Mono",
+                "Color Bit": 8,
+                "File Format": "MRaw",
+                "EffectiveBit Depth": 8,
+                "EffectiveBit Side": "Lower",
+            }.items()
+        )
+    )
     return head
 
 
@@ -224,40 +306,64 @@ def speed(n: int, n_frames: int, step: int, shape: str, folder: Path) -> dict:
     cpu = time.process_time() - c0
     tr = float(ds.attrs["tracking_time_s"])
     n_p = ds.sizes["point"]
-    out = {"size": n, "frames": n_frames, "points": n_p, "shape": shape, "step": step,
-           "tracking_s": tr, "frames_per_s": n_frames / tr, "poi_per_s": n_frames * n_p / tr,
-           "end_to_end_s": wall, "end_to_end_frames_per_s": n_frames / wall,
-           "cpu_s": cpu, "frames_per_cpu_s": n_frames / cpu,
-           "poi_per_cpu_s": n_frames * n_p / cpu,
-           "prediction_s": float(ds.attrs["prediction_time_s"]),
-           "load_start": load0, "load_end": os.getloadavg()[0],
-           "valid_share": float(ds["valid"].values.mean())}
-    print(f"speed {n}^2 x {n_frames} frames, {n_p} POIs ({shape}): tracking "
-          f"{out['frames_per_s']:.1f} frames/s = {out['poi_per_s']:.0f} POI/s; end to end "
-          f"{wall:.1f} s ({out['end_to_end_frames_per_s']:.1f} frames/s; prediction "
-          f"{out['prediction_s']:.1f} s); CPU {cpu:.1f} s = {out['frames_per_cpu_s']:.1f} "
-          f"frames per CPU-s; load {load0:.1f} -> {out['load_end']:.1f}",
-          flush=True)
+    out = {
+        "size": n,
+        "frames": n_frames,
+        "points": n_p,
+        "shape": shape,
+        "step": step,
+        "tracking_s": tr,
+        "frames_per_s": n_frames / tr,
+        "poi_per_s": n_frames * n_p / tr,
+        "end_to_end_s": wall,
+        "end_to_end_frames_per_s": n_frames / wall,
+        "cpu_s": cpu,
+        "frames_per_cpu_s": n_frames / cpu,
+        "poi_per_cpu_s": n_frames * n_p / cpu,
+        "prediction_s": float(ds.attrs["prediction_time_s"]),
+        "load_start": load0,
+        "load_end": os.getloadavg()[0],
+        "valid_share": float(ds["valid"].values.mean()),
+    }
+    print(
+        f"speed {n}^2 x {n_frames} frames, {n_p} POIs ({shape}): tracking "
+        f"{out['frames_per_s']:.1f} frames/s = {out['poi_per_s']:.0f} POI/s; end to end "
+        f"{wall:.1f} s ({out['end_to_end_frames_per_s']:.1f} frames/s; prediction "
+        f"{out['prediction_s']:.1f} s); CPU {cpu:.1f} s = {out['frames_per_cpu_s']:.1f} "
+        f"frames per CPU-s; load {load0:.1f} -> {out['load_end']:.1f}",
+        flush=True,
+    )
     return out
 
 
 def memory_child(head: str, step: int) -> None:
     rec = open_recording(head)
     t0 = time.perf_counter()
-    ds = dicblur.track(rec, static="0:10", subset=21, step=step, shape="translation",
-                       advice=False)
+    ds = dicblur.track(rec, static="0:10", subset=21, step=step, shape="translation", advice=False)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    print(json.dumps({"peak_rss_mb": peak, "frames": ds.sizes["frame"],
-                      "points": ds.sizes["point"], "seconds": time.perf_counter() - t0}))
+    print(
+        json.dumps(
+            {
+                "peak_rss_mb": peak,
+                "frames": ds.sizes["frame"],
+                "points": ds.sizes["point"],
+                "seconds": time.perf_counter() - t0,
+            }
+        )
+    )
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--memory", action="store_true")
-    ap.add_argument("--part", choices=("all", "accuracy", "speed", "memory"), default="all",
-                    help="accuracy -> results/track.json, speed (and --memory) -> "
-                    "results/track_speed.json; memory alone -> results/track_memory.json")
+    ap.add_argument(
+        "--part",
+        choices=("all", "accuracy", "speed", "memory"),
+        default="all",
+        help="accuracy -> results/track.json, speed (and --memory) -> "
+        "results/track_speed.json; memory alone -> results/track_memory.json",
+    )
     ap.add_argument("--memory-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.memory_child:
@@ -265,34 +371,49 @@ def main() -> None:
         return
     n, frames = (256, 40) if args.quick else (512, 60)
     exposures = [0.1e-3, 0.25e-3, 0.45e-3] if args.quick else [0.1e-3, 0.2e-3, 0.3e-3, 0.45e-3]
-    res: dict = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                             "load": os.getloadavg(),
-                             "numba_threads": os.environ.get("NUMBA_NUM_THREADS")},
-                 "commit": _commit(), "version": dicblur.__version__, "quick": args.quick}
+    res: dict = {
+        "machine": {
+            "python": platform.python_version(),
+            "cpus": os.cpu_count(),
+            "load": os.getloadavg(),
+            "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
+        },
+        "commit": _commit(),
+        "version": dicblur.__version__,
+        "quick": args.quick,
+    }
     tag = "_quick" if args.quick else ""
     if args.part in ("all", "accuracy"):
         res["accuracy"] = accuracy(n, frames, exposures, "affine")
-        print("\n| W (px) | n | pred u | std u | ratio u | rms u | rms u - bias | pred v | "
-              "std v | ratio v | rms v | rms v - bias |")
+        print(
+            "\n| W (px) | n | pred u | std u | ratio u | rms u | rms u - bias | pred v | "
+            "std v | ratio v | rms v | rms v - bias |"
+        )
         print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in res["accuracy"]["bins"]:
-            print(f"| {r['W_lo']:.1f}-{r['W_hi']:.1f} | {r['n']} | {r['pred_u']:.4f} | "
-                  f"{r['std_u']:.4f} | {r['ratio_u']:.3f} | {r['rms_u']:.4f} | "
-                  f"{r['rms_minus_bias_u']:.4f} | {r['pred_v']:.4f} | {r['std_v']:.4f} | "
-                  f"{r['ratio_v']:.3f} | {r['rms_v']:.4f} | {r['rms_minus_bias_v']:.4f} |")
+            print(
+                f"| {r['W_lo']:.1f}-{r['W_hi']:.1f} | {r['n']} | {r['pred_u']:.4f} | "
+                f"{r['std_u']:.4f} | {r['ratio_u']:.3f} | {r['rms_u']:.4f} | "
+                f"{r['rms_minus_bias_u']:.4f} | {r['pred_v']:.4f} | {r['std_v']:.4f} | "
+                f"{r['ratio_v']:.3f} | {r['rms_v']:.4f} | {r['rms_minus_bias_v']:.4f} |"
+            )
         g = res["accuracy"]["gross"]
-        print(f"\ngross errors > 10 sigma (about the frame's common offset): {g['n_gross']}, "
-              f"caught {g['catch_rate']}; false flags {g['false']} of {g['n_clean']} "
-              f"({g['false_rate']}); raw errors > 10 sigma: {g['n_gross_raw']}, caught "
-              f"{g['catch_rate_raw']}; about the predicted bias: {g['n_gross_bias']}, "
-              f"caught {g['catch_rate_bias']}")
+        print(
+            f"\ngross errors > 10 sigma (about the frame's common offset): {g['n_gross']}, "
+            f"caught {g['catch_rate']}; false flags {g['false']} of {g['n_clean']} "
+            f"({g['false_rate']}); raw errors > 10 sigma: {g['n_gross_raw']}, caught "
+            f"{g['catch_rate_raw']}; about the predicted bias: {g['n_gross_bias']}, "
+            f"caught {g['catch_rate_bias']}"
+        )
         _write(OUT.with_name(f"track{tag}.json"), res)
     if args.part in ("all", "speed"):
         out: dict = {k: res[k] for k in ("machine", "commit", "version", "quick")}
         with tempfile.TemporaryDirectory(dir="/tmp") as tmp:
             sn, sf = (256, 200) if args.quick else (512, 1000)
-            out["speed"] = [speed(sn, sf, 10, "affine", Path(tmp)),
-                            speed(sn, sf // 3, 10, "translation", Path(tmp))]
+            out["speed"] = [
+                speed(sn, sf, 10, "affine", Path(tmp)),
+                speed(sn, sf // 3, 10, "translation", Path(tmp)),
+            ]
             if args.memory:
                 out["memory"] = _memory(Path(tmp))
         _write(OUT.with_name(f"track_speed{tag}.json"), out)
@@ -305,8 +426,12 @@ def main() -> None:
 
 def _memory(folder: Path) -> dict:
     head = _write_mraw(folder / "mem", 1024, 2000, 0.2e-3)
-    r = subprocess.run([sys.executable, __file__, "--memory-child", str(head), "20"],
-                       capture_output=True, text=True, check=True)
+    r = subprocess.run(
+        [sys.executable, __file__, "--memory-child", str(head), "20"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     out = json.loads(r.stdout.strip().splitlines()[-1])
     print(f"memory: {out}")
     return out

@@ -51,11 +51,19 @@ def _cli_json(args: list[str]) -> dict:
     return json.loads(buf.getvalue())
 
 
-def _direct(work: Path, tag: str, *, noise: float, blur: float, size: int, reps: int
-            ) -> tuple[float, float]:
+def _direct(
+    work: Path, tag: str, *, noise: float, blur: float, size: int, reps: int
+) -> tuple[float, float]:
     """RMS u_e over repetitions and its standard error, same pattern (seed 1)."""
-    spec = calibration_spec("paper4", noise=noise, subset=21, size=(size, size),
-                            blur=[float(blur)], repetitions=reps, seed=1)
+    spec = calibration_spec(
+        "paper4",
+        noise=noise,
+        subset=21,
+        size=(size, size),
+        blur=[float(blur)],
+        repetitions=reps,
+        seed=1,
+    )
     run_campaign(spec, work / f"{tag}.zarr", serial=True)
     u = open_results(work / f"{tag}.zarr")["u_e"].values.ravel()
     rms = float(np.sqrt(np.mean(u**2)))
@@ -66,9 +74,24 @@ def run(size: int, reps: int, work: Path) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     t0 = time.perf_counter()
-    code = cli(["calibrate", "paper4", "--size", f"{size}x{size}", "--noise", "2",
-                "--subset", "21", "--blur", "0:8:0.5", "-o", str(work / "cal"), "--serial",
-                "-q"])
+    code = cli(
+        [
+            "calibrate",
+            "paper4",
+            "--size",
+            f"{size}x{size}",
+            "--noise",
+            "2",
+            "--subset",
+            "21",
+            "--blur",
+            "0:8:0.5",
+            "-o",
+            str(work / "cal"),
+            "--serial",
+            "-q",
+        ]
+    )
     if code != 0:
         raise SystemExit(f"calibrate exited with {code}")
     t_cal = time.perf_counter() - t0
@@ -76,30 +99,65 @@ def run(size: int, reps: int, work: Path) -> dict:
     m = BlurUncertaintyModel.from_json(model_path)
     rows = []
     for noise in (1.0, 4.0):
-        pred = _cli_json(["predict", model_path, "--blur", "3", "--noise", f"{noise:g}",
-                          "--json"])["predictions"][0]["u_e_px"]
+        pred = _cli_json(["predict", model_path, "--blur", "3", "--noise", f"{noise:g}", "--json"])[
+            "predictions"
+        ][0]["u_e_px"]
         meas, se = _direct(work, f"n{noise:g}", noise=noise, blur=3.0, size=size, reps=reps)
-        rows.append({"case": f"predict W=3 px, noise {noise:g} GL", "predicted": pred,
-                     "simulated": meas, "simulated_se": se, "ratio": pred / meas})
-    plan = _cli_json(["plan", model_path, "--velocity", "120mm/s", "--scale", "0.05mm/px",
-                      "--full-well", "20000", "--read-noise", "5", "--flux", "4e6", "--json"])
+        rows.append(
+            {
+                "case": f"predict W=3 px, noise {noise:g} GL",
+                "predicted": pred,
+                "simulated": meas,
+                "simulated_se": se,
+                "ratio": pred / meas,
+            }
+        )
+    plan = _cli_json(
+        [
+            "plan",
+            model_path,
+            "--velocity",
+            "120mm/s",
+            "--scale",
+            "0.05mm/px",
+            "--full-well",
+            "20000",
+            "--read-noise",
+            "5",
+            "--flux",
+            "4e6",
+            "--json",
+        ]
+    )
     cam = PoissonGaussianCamera(**CAMERA)
     sigma = float(cam.noise_gl(plan["exposure"], m.mean_level))
     meas, se = _direct(work, "plan", noise=sigma, blur=plan["blur"], size=size, reps=reps)
-    rows.append({"case": f"camera plan optimum {plan['exposure'] * 1e3:.3g} ms, W "
-                         f"{plan['blur']:.3g} px, noise {sigma:.3g} GL",
-                 "predicted": plan["u_e"], "simulated": meas, "simulated_se": se,
-                 "ratio": plan["u_e"] / meas})
+    rows.append(
+        {
+            "case": f"camera plan optimum {plan['exposure'] * 1e3:.3g} ms, W "
+            f"{plan['blur']:.3g} px, noise {sigma:.3g} GL",
+            "predicted": plan["u_e"],
+            "simulated": meas,
+            "simulated_se": se,
+            "ratio": plan["u_e"] / meas,
+        }
+    )
     with contextlib.redirect_stderr(io.StringIO()) as err:
-        refused = cli(["predict", model_path, "--blur", "3", "--noise", "4", "--model",
-                       "power_law"])
-    return {"size": size, "reps": reps, "calibrate_s": t_cal, "default": m.default,
-            "domain": m.domain.to_dict() if m.domain else None,
-            "plan": {k: plan[k] for k in ("exposure", "blur", "u_e", "inside_domain",
-                                          "notes")},
-            "rows": rows, "power_law_refused": refused == 2,
-            "power_law_message": err.getvalue().strip(),
-            "ok": all(abs(r["ratio"] - 1) <= 0.10 for r in rows) and refused == 2}
+        refused = cli(
+            ["predict", model_path, "--blur", "3", "--noise", "4", "--model", "power_law"]
+        )
+    return {
+        "size": size,
+        "reps": reps,
+        "calibrate_s": t_cal,
+        "default": m.default,
+        "domain": m.domain.to_dict() if m.domain else None,
+        "plan": {k: plan[k] for k in ("exposure", "blur", "u_e", "inside_domain", "notes")},
+        "rows": rows,
+        "power_law_refused": refused == 2,
+        "power_law_message": err.getvalue().strip(),
+        "ok": all(abs(r["ratio"] - 1) <= 0.10 for r in rows) and refused == 2,
+    }
 
 
 def main() -> None:
@@ -112,15 +170,26 @@ def main() -> None:
     print(f"calibrate {args.size}^2: {res['calibrate_s']:.0f} s, default {res['default']}")
     print(f"{'case':58s} {'predicted':>10s} {'simulated':>10s} {'ratio':>7s}")
     for r in res["rows"]:
-        print(f"{r['case']:58s} {r['predicted']:10.4g} {r['simulated']:10.4g} "
-              f"{r['ratio']:7.3f}")
-    print(f"power law at noise 4 refused: {res['power_law_refused']} "
-          f"({res['power_law_message']})")
-    commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                            cwd=Path(__file__).parent, check=False).stdout.strip()
-    doc = {"results": res, "commit": commit, "version": dicblur.__version__,
-           "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                       "load": os.getloadavg(), "platform": platform.platform()}}
+        print(f"{r['case']:58s} {r['predicted']:10.4g} {r['simulated']:10.4g} {r['ratio']:7.3f}")
+    print(f"power law at noise 4 refused: {res['power_law_refused']} ({res['power_law_message']})")
+    commit = subprocess.run(
+        ["git", "rev-parse", "HEAD"],
+        capture_output=True,
+        text=True,
+        cwd=Path(__file__).parent,
+        check=False,
+    ).stdout.strip()
+    doc = {
+        "results": res,
+        "commit": commit,
+        "version": dicblur.__version__,
+        "machine": {
+            "python": platform.python_version(),
+            "cpus": os.cpu_count(),
+            "load": os.getloadavg(),
+            "platform": platform.platform(),
+        },
+    }
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(doc, indent=1))
     print(f"wrote {OUT}")

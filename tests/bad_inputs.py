@@ -16,30 +16,41 @@ from pathlib import Path
 import numpy as np
 
 
-def png_bytes(width: int, height: int, data: bytes | None = None, *,
-              color_type: int = 0, bit_depth: int = 8) -> bytes:
+def png_bytes(
+    width: int, height: int, data: bytes | None = None, *, color_type: int = 0, bit_depth: int = 8
+) -> bytes:
     """A PNG file whose IHDR declares ``width x height``, with ``data`` as its IDAT."""
 
     def chunk(kind: bytes, body: bytes) -> bytes:
-        return (struct.pack(">I", len(body)) + kind + body
-                + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF))
+        return (
+            struct.pack(">I", len(body))
+            + kind
+            + body
+            + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+        )
 
     ihdr = struct.pack(">IIBBBBB", width, height, bit_depth, color_type, 0, 0, 0)
     if data is None:
         # a few compressed rows of zeros: the stream ends long before the declared size
         data = zlib.compress(b"\0" * (width + 1) * 4, 9)
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data)
-            + chunk(b"IEND", b""))
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b"")
 
 
-def tiff_bytes(width: int, height: int, *, bits: int = 8, compression: int = 8,
-               data: bytes | None = None) -> bytes:
+def tiff_bytes(
+    width: int, height: int, *, bits: int = 8, compression: int = 8, data: bytes | None = None
+) -> bytes:
     """A little-endian single-strip grey TIFF declaring ``width x height``."""
     if data is None:
         data = zlib.compress(b"\0" * 4096, 9)
     tags = [  # (tag, type, count, value) with type 3 = SHORT, 4 = LONG
-        (256, 4, 1, width), (257, 4, 1, height), (258, 3, 1, bits), (259, 3, 1, compression),
-        (262, 3, 1, 1), (273, 4, 1, 0), (277, 3, 1, 1), (278, 4, 1, height),
+        (256, 4, 1, width),
+        (257, 4, 1, height),
+        (258, 3, 1, bits),
+        (259, 3, 1, compression),
+        (262, 3, 1, 1),
+        (273, 4, 1, 0),
+        (277, 3, 1, 1),
+        (278, 4, 1, height),
         (279, 4, 1, len(data)),
     ]
     ifd_offset = 8
@@ -112,8 +123,9 @@ def build_corpus(folder: Path) -> Path:
     pim.putpalette([int(v) // 257 for v in np.repeat(ramp, 3)])
     pim.save(folder / "palette.png")
     five = np.stack([good8] * 5, axis=-1)
-    tifffile.imwrite(folder / "five_channels.tif", five, photometric="minisblack",
-                     planarconfig="contig")
+    tifffile.imwrite(
+        folder / "five_channels.tif", five, photometric="minisblack", planarconfig="contig"
+    )
     f = good.astype(np.float32)
     f[3, 4] = np.nan
     tifffile.imwrite(folder / "nan.tif", f)
@@ -121,16 +133,19 @@ def build_corpus(folder: Path) -> Path:
     f[5, 5] = np.inf
     tifffile.imwrite(folder / "inf.tif", f)
     tifffile.imwrite(folder / "huge.tif", good * 1e298)  # values near 1e300
-    tifffile.imwrite(folder / "constant.tif", np.full((64, 64), 128, np.uint8),
-                     photometric="minisblack")
+    tifffile.imwrite(
+        folder / "constant.tif", np.full((64, 64), 128, np.uint8), photometric="minisblack"
+    )
     tifffile.imwrite(folder / "tiny.tif", good8[:3, :3], photometric="minisblack")
     tifffile.imwrite(folder / "row.tif", good8[:1, :], photometric="minisblack")
     tifffile.imwrite(folder / "complex.tif", good.astype(np.complex64))
     # one scene at two bit depths (8-bit and the same grey levels scaled to 16 bits)
-    tifffile.imwrite(folder / "scene16.tif", (good8.astype(np.uint16) * 257),
-                     photometric="minisblack")
-    tifffile.imwrite(folder / "bigger.tif", np.rint(speckle((80, 80))).astype(np.uint8),
-                     photometric="minisblack")
+    tifffile.imwrite(
+        folder / "scene16.tif", (good8.astype(np.uint16) * 257), photometric="minisblack"
+    )
+    tifffile.imwrite(
+        folder / "bigger.tif", np.rint(speckle((80, 80))).astype(np.uint8), photometric="minisblack"
+    )
     # --- model JSON --------------------------------------------------------------------
     model = _valid_model_dict(folder)
     (folder / "model.json").write_text(json.dumps(model))
@@ -164,8 +179,11 @@ def build_corpus(folder: Path) -> Path:
     s = 1.8e5 * np.exp(-0.02 * w * w)
     u = 0.01 * (1 + 0.01 * w * w)
 
-    def table(name: str, u_e: list[object], header: tuple[str, ...] = ("blur", "sssig", "u_e"),
-              ) -> None:
+    def table(
+        name: str,
+        u_e: list[object],
+        header: tuple[str, ...] = ("blur", "sssig", "u_e"),
+    ) -> None:
         with (folder / name).open("w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow(header)
@@ -204,10 +222,17 @@ subsets = [{subset}]
 step = 8
 """
 
-    def spec(name: str, *, reps: object = 1, pattern: str = 'generator = "speckle"\n'
-             'shape = [64, 64]', lengths: str = "[0.0, 1.0]", subset: int = 15) -> None:
-        (folder / name).write_text(base.format(reps=reps, pattern=pattern, lengths=lengths,
-                                               subset=subset))
+    def spec(
+        name: str,
+        *,
+        reps: object = 1,
+        pattern: str = 'generator = "speckle"\nshape = [64, 64]',
+        lengths: str = "[0.0, 1.0]",
+        subset: int = 15,
+    ) -> None:
+        (folder / name).write_text(
+            base.format(reps=reps, pattern=pattern, lengths=lengths, subset=subset)
+        )
 
     spec("spec.toml")
     spec("spec_reps.toml", reps="1e9")

@@ -37,11 +37,14 @@ def lint(src_parent: Path | None = None) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ)
     if src_parent is not None:
         env["PYTHONPATH"] = str(src_parent)
-    code = ("import sys; from importlinter.cli import lint_imports; "
-            f"sys.exit(lint_imports(config_filename={str(ROOT / 'pyproject.toml')!r}, "
-            "no_cache=True, no_logo=True))")
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          cwd=ROOT, env=env, timeout=300)
+    code = (
+        "import sys; from importlinter.cli import lint_imports; "
+        f"sys.exit(lint_imports(config_filename={str(ROOT / 'pyproject.toml')!r}, "
+        "no_cache=True, no_logo=True))"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300
+    )
 
 
 def test_import_contracts_hold():
@@ -96,9 +99,13 @@ def test_the_library_never_picks_a_matplotlib_backend_or_uses_pyplot():
                 assert not any(a.name == "matplotlib.pyplot" for a in node.names), path
             elif isinstance(node, ast.ImportFrom):
                 assert node.module != "matplotlib.pyplot", path
-                assert not (node.module == "matplotlib"
-                            and any(a.name == "pyplot" for a in node.names)), path
+                assert not (
+                    node.module == "matplotlib" and any(a.name == "pyplot" for a in node.names)
+                ), path
             elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
                 owner = node.func.value
-                assert not (node.func.attr == "use" and isinstance(owner, ast.Name)
-                            and owner.id == "matplotlib"), f"{path}:{node.lineno}"
+                assert not (
+                    node.func.attr == "use"
+                    and isinstance(owner, ast.Name)
+                    and owner.id == "matplotlib"
+                ), f"{path}:{node.lineno}"

@@ -22,8 +22,8 @@ from dicblur.cli import main
 class Case:
     id: str
     argv: tuple[str, ...]
-    must: tuple[str, ...] = ()          # substrings of the error line
-    must_not: tuple[str, ...] = ()      # substrings it must not contain
+    must: tuple[str, ...] = ()  # substrings of the error line
+    must_not: tuple[str, ...] = ()  # substrings it must not contain
     dirs: tuple[str, ...] = field(default=())  # folders to create in the output folder
 
     def args(self, corpus: Path, out: Path, store: Path) -> list[str]:
@@ -52,39 +52,85 @@ BAD_IMAGES = {
     "complex": ("{d}/complex.tif", ""),
 }
 # every bad image through `pattern metrics`; the decoding ones through the other readers
-_DECODE = ("missing", "empty", "truncated-tif", "bomb-png", "bomb-tif", "five-channels",
-           "nan", "huge-values")
+_DECODE = (
+    "missing",
+    "empty",
+    "truncated-tif",
+    "bomb-png",
+    "bomb-tif",
+    "five-channels",
+    "nan",
+    "huge-values",
+)
 _NO_GOOD = ("subset <= 1", "subset <= 0", "subset <= -")
 
 CASES: list[Case] = []
 for key, (path, text) in BAD_IMAGES.items():
-    CASES.append(Case(f"metrics-{key}", ("pattern", "metrics", path, "--subset", "21"),
-                      must=(text,) if text else (), must_not=_NO_GOOD))
+    CASES.append(
+        Case(
+            f"metrics-{key}",
+            ("pattern", "metrics", path, "--subset", "21"),
+            must=(text,) if text else (),
+            must_not=_NO_GOOD,
+        )
+    )
 for key in _DECODE:
     path, text = BAD_IMAGES[key]
     must = (text,) if text else ()
     CASES += [
         Case(f"blur-{key}", ("blur", path, "{o}/out.tif", "--length", "2"), must=must),
-        Case(f"predict-image-{key}", ("pattern", "predict", path, "--noise", "2",
-                                      "--subset", "21", "-o", "{o}/m.json"), must=must),
+        Case(
+            f"predict-image-{key}",
+            ("pattern", "predict", path, "--noise", "2", "--subset", "21", "-o", "{o}/m.json"),
+            must=must,
+        ),
     ]
 for key in ("missing", "bomb-tif", "five-channels", "constant", "huge-values", "tiny-3x3"):
     path, text = BAD_IMAGES[key]
-    CASES.append(Case(f"correlate-{key}", ("correlate", path, "{d}/good.tif", "--subset",
-                                           "21", "-o", "{o}/f.nc"),
-                      must=(text,) if text else (), must_not=_NO_GOOD))
+    CASES.append(
+        Case(
+            f"correlate-{key}",
+            ("correlate", path, "{d}/good.tif", "--subset", "21", "-o", "{o}/f.nc"),
+            must=(text,) if text else (),
+            must_not=_NO_GOOD,
+        )
+    )
 for key in ("bomb-png", "nan", "text-tif"):
     path, text = BAD_IMAGES[key]
-    CASES.append(Case(f"noise-{key}", ("noise", "{d}/good.tif", path),
-                      must=(text,) if text else ()))
+    CASES.append(
+        Case(f"noise-{key}", ("noise", "{d}/good.tif", path), must=(text,) if text else ())
+    )
 for key in ("constant", "bomb-tif"):
     path, text = BAD_IMAGES[key]
-    CASES.append(Case(f"plan-reference-{key}", (
-        "plan", "{d}/model.json", "--velocity", "120mm/s", "--scale", "0.05mm/px",
-        "--full-well", "20000", "--read-noise", "5", "--flux", "4e6", "--reference", path),
-        must=(text,)))
-    CASES.append(Case(f"calibrate-{key}", ("calibrate", path, "-o", "{o}/cal", "--serial",
-                                           "--quiet"), must=(text,)))
+    CASES.append(
+        Case(
+            f"plan-reference-{key}",
+            (
+                "plan",
+                "{d}/model.json",
+                "--velocity",
+                "120mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--full-well",
+                "20000",
+                "--read-noise",
+                "5",
+                "--flux",
+                "4e6",
+                "--reference",
+                path,
+            ),
+            must=(text,),
+        )
+    )
+    CASES.append(
+        Case(
+            f"calibrate-{key}",
+            ("calibrate", path, "-o", "{o}/cal", "--serial", "--quiet"),
+            must=(text,),
+        )
+    )
 CASES += [
     Case("noise-bit-depths", ("noise", "{d}/good.tif", "{d}/scene16.tif"), must=("bit",)),
     Case("noise-shapes", ("noise", "{d}/good.tif", "{d}/bigger.tif"), must=("shape",)),
@@ -108,11 +154,29 @@ BAD_MODELS = {
 }
 for key, path in BAD_MODELS.items():
     CASES += [
-        Case(f"predict-model-{key}", ("predict", path, "--blur", "2", "--noise", "2"),
-             must=("model",)),
-        Case(f"plan-model-{key}", ("plan", path, "--velocity", "120mm/s", "--scale",
-                                   "0.05mm/px", "--target", "0.01px", "--noise", "2",
-                                   "--plot", "{o}/plan.png"), must=("model",)),
+        Case(
+            f"predict-model-{key}",
+            ("predict", path, "--blur", "2", "--noise", "2"),
+            must=("model",),
+        ),
+        Case(
+            f"plan-model-{key}",
+            (
+                "plan",
+                path,
+                "--velocity",
+                "120mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--target",
+                "0.01px",
+                "--noise",
+                "2",
+                "--plot",
+                "{o}/plan.png",
+            ),
+            must=("model",),
+        ),
     ]
 
 BAD_TABLES = {
@@ -150,13 +214,26 @@ BAD_SPECS = {
     "missing": ("no_such_spec.toml", "no such file"),
 }
 for key, (name, text) in BAD_SPECS.items():
-    CASES.append(Case(f"campaign-run-{key}", ("campaign", "run", "{d}/" + name, "-o",
-                                              "{o}/r.zarr", "--serial", "-q"), must=(text,)))
-CASES.append(Case("campaign-run-scheduler", ("campaign", "run", "{d}/spec.toml", "-o",
-                                             "{o}/r.zarr", "--scheduler", "notaurl", "-q"),
-                  must=("--scheduler",)))
-for key, path in {"not-a-store": "{d}/notastore.zarr", "a-file": "{d}/file.zarr",
-                  "bad-metadata": "{d}/badmeta.zarr", "missing": "{d}/none.zarr"}.items():
+    CASES.append(
+        Case(
+            f"campaign-run-{key}",
+            ("campaign", "run", "{d}/" + name, "-o", "{o}/r.zarr", "--serial", "-q"),
+            must=(text,),
+        )
+    )
+CASES.append(
+    Case(
+        "campaign-run-scheduler",
+        ("campaign", "run", "{d}/spec.toml", "-o", "{o}/r.zarr", "--scheduler", "notaurl", "-q"),
+        must=("--scheduler",),
+    )
+)
+for key, path in {
+    "not-a-store": "{d}/notastore.zarr",
+    "a-file": "{d}/file.zarr",
+    "bad-metadata": "{d}/badmeta.zarr",
+    "missing": "{d}/none.zarr",
+}.items():
     CASES += [
         Case(f"status-{key}", ("campaign", "status", path)),
         Case(f"export-{key}", ("campaign", "export", path, "--csv", "{o}/x.csv")),
@@ -164,106 +241,279 @@ for key, path in {"not-a-store": "{d}/notastore.zarr", "a-file": "{d}/file.zarr"
 
 # outputs: a missing folder or a directory is refused before any computation
 CASES += [
-    Case("out-generate-missing-dir", ("pattern", "generate", "{o}/missing/x.tif", "--size",
-                                      "64"), must=("does not exist",)),
-    Case("out-generate-directory", ("pattern", "generate", "{o}/adir.tif", "--size", "64"),
-         must=("directory",), dirs=("adir.tif",)),
-    Case("out-generate-extension", ("pattern", "generate", "{o}/x.jpg", "--size", "64"),
-         must=(".jpg",)),
-    Case("out-blur-missing-dir", ("blur", "{d}/good.tif", "{o}/missing/x.tif", "--length",
-                                  "2"), must=("does not exist",)),
-    Case("out-blur-directory", ("blur", "{d}/good.tif", "{o}/adir.tif", "--length", "2"),
-         must=("directory",), dirs=("adir.tif",)),
-    Case("out-correlate-missing-dir", ("correlate", "{d}/good.tif", "{d}/good2.tif",
-                                       "--subset", "21", "-o", "{o}/missing/f.nc"),
-         must=("does not exist",)),
-    Case("out-correlate-directory", ("correlate", "{d}/good.tif", "{d}/good2.tif",
-                                     "--subset", "21", "-o", "{o}/adir.csv"),
-         must=("directory",), dirs=("adir.csv",)),
-    Case("out-fit-missing-dir", ("fit", "{d}/results.csv", "-o", "{o}/missing/m.json"),
-         must=("does not exist",)),
-    Case("out-fit-directory", ("fit", "{d}/results.csv", "-o", "{o}/adir.json"),
-         must=("directory",), dirs=("adir.json",)),
-    Case("out-pattern-predict-missing-dir", ("pattern", "predict", "{d}/good.tif", "--noise",
-                                             "2", "--subset", "21", "-o",
-                                             "{o}/missing/m.json"), must=("does not exist",)),
-    Case("out-plan-plot-missing-dir", ("plan", "{d}/model.json", "--velocity", "120mm/s",
-                                       "--scale", "0.05mm/px", "--target", "0.01px",
-                                       "--noise", "2", "--plot", "{o}/missing/p.png"),
-         must=("does not exist",)),
-    Case("out-plan-plot-directory", ("plan", "{d}/model.json", "--velocity", "120mm/s",
-                                     "--scale", "0.05mm/px", "--target", "0.01px", "--noise",
-                                     "2", "--plot", "{o}/adir.png"), must=("directory",),
-         dirs=("adir.png",)),
-    Case("out-export-missing-dir", ("campaign", "export", "{s}", "--csv",
-                                    "{o}/missing/x.csv"), must=("does not exist",)),
-    Case("out-export-directory", ("campaign", "export", "{s}", "--csv", "{o}/adir.csv"),
-         must=("directory",), dirs=("adir.csv",)),
-    Case("out-campaign-run-missing-dir", ("campaign", "run", "{d}/spec.toml", "-o",
-                                          "{o}/missing/r.zarr", "--serial", "-q"),
-         must=("does not exist",)),
-    Case("out-campaign-run-a-file", ("campaign", "run", "{d}/spec.toml", "-o",
-                                     "{d}/good.tif", "--serial", "-q"), must=("not a",)),
-    Case("out-pulse-missing-parent", ("pulse", "-o", "{o}/missing/deeper", "--trials", "10"),
-         must=("does not exist",)),
-    Case("out-pulse-a-file", ("pulse", "-o", "{d}/good.tif", "--trials", "10"),
-         must=("not a folder",)),
-    Case("out-calibrate-missing-parent", ("calibrate", "{d}/good.tif", "-o",
-                                          "{o}/missing/deeper", "--serial", "-q"),
-         must=("does not exist",)),
-    Case("out-design-missing-parent", ("design", "--blur", "3", "-o", "{o}/missing/deeper"),
-         must=("does not exist",)),
-    Case("out-reproduce-missing-parent", ("reproduce", "--quick", "--out",
-                                          "{o}/missing/deeper"), must=("does not exist",)),
+    Case(
+        "out-generate-missing-dir",
+        ("pattern", "generate", "{o}/missing/x.tif", "--size", "64"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-generate-directory",
+        ("pattern", "generate", "{o}/adir.tif", "--size", "64"),
+        must=("directory",),
+        dirs=("adir.tif",),
+    ),
+    Case(
+        "out-generate-extension",
+        ("pattern", "generate", "{o}/x.jpg", "--size", "64"),
+        must=(".jpg",),
+    ),
+    Case(
+        "out-blur-missing-dir",
+        ("blur", "{d}/good.tif", "{o}/missing/x.tif", "--length", "2"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-blur-directory",
+        ("blur", "{d}/good.tif", "{o}/adir.tif", "--length", "2"),
+        must=("directory",),
+        dirs=("adir.tif",),
+    ),
+    Case(
+        "out-correlate-missing-dir",
+        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "-o", "{o}/missing/f.nc"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-correlate-directory",
+        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "-o", "{o}/adir.csv"),
+        must=("directory",),
+        dirs=("adir.csv",),
+    ),
+    Case(
+        "out-fit-missing-dir",
+        ("fit", "{d}/results.csv", "-o", "{o}/missing/m.json"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-fit-directory",
+        ("fit", "{d}/results.csv", "-o", "{o}/adir.json"),
+        must=("directory",),
+        dirs=("adir.json",),
+    ),
+    Case(
+        "out-pattern-predict-missing-dir",
+        (
+            "pattern",
+            "predict",
+            "{d}/good.tif",
+            "--noise",
+            "2",
+            "--subset",
+            "21",
+            "-o",
+            "{o}/missing/m.json",
+        ),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-plan-plot-missing-dir",
+        (
+            "plan",
+            "{d}/model.json",
+            "--velocity",
+            "120mm/s",
+            "--scale",
+            "0.05mm/px",
+            "--target",
+            "0.01px",
+            "--noise",
+            "2",
+            "--plot",
+            "{o}/missing/p.png",
+        ),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-plan-plot-directory",
+        (
+            "plan",
+            "{d}/model.json",
+            "--velocity",
+            "120mm/s",
+            "--scale",
+            "0.05mm/px",
+            "--target",
+            "0.01px",
+            "--noise",
+            "2",
+            "--plot",
+            "{o}/adir.png",
+        ),
+        must=("directory",),
+        dirs=("adir.png",),
+    ),
+    Case(
+        "out-export-missing-dir",
+        ("campaign", "export", "{s}", "--csv", "{o}/missing/x.csv"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-export-directory",
+        ("campaign", "export", "{s}", "--csv", "{o}/adir.csv"),
+        must=("directory",),
+        dirs=("adir.csv",),
+    ),
+    Case(
+        "out-campaign-run-missing-dir",
+        ("campaign", "run", "{d}/spec.toml", "-o", "{o}/missing/r.zarr", "--serial", "-q"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-campaign-run-a-file",
+        ("campaign", "run", "{d}/spec.toml", "-o", "{d}/good.tif", "--serial", "-q"),
+        must=("not a",),
+    ),
+    Case(
+        "out-pulse-missing-parent",
+        ("pulse", "-o", "{o}/missing/deeper", "--trials", "10"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-pulse-a-file",
+        ("pulse", "-o", "{d}/good.tif", "--trials", "10"),
+        must=("not a folder",),
+    ),
+    Case(
+        "out-calibrate-missing-parent",
+        ("calibrate", "{d}/good.tif", "-o", "{o}/missing/deeper", "--serial", "-q"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-design-missing-parent",
+        ("design", "--blur", "3", "-o", "{o}/missing/deeper"),
+        must=("does not exist",),
+    ),
+    Case(
+        "out-reproduce-missing-parent",
+        ("reproduce", "--quick", "--out", "{o}/missing/deeper"),
+        must=("does not exist",),
+    ),
 ]
 
 # option values: refused, and the message names the option as typed
 CASES += [
-    Case("blur-negative-length", ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "-1"),
-         must=("--length",)),
-    Case("blur-start-speed", ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2",
-                              "--trajectory", "acceleration", "--start-speed", "-3"),
-         must=("--start-speed", "0..2")),
-    Case("blur-substeps-0", ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2",
-                             "--substeps", "0"), must=("--substeps", "--continuous"),
-         must_not=("None",)),
-    Case("blur-negative-noise", ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2",
-                                 "--noise", "-1"), must=("--noise",),
-         must_not=("sigma=", "np.float64")),
-    Case("blur-bit-depth", ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2",
-                            "--bit-depth", "12"), must=("--bit-depth",)),
-    Case("generate-huge-size", ("pattern", "generate", "{o}/x.tif", "--size",
-                                "100000x100000"), must=("--max-pixels",)),
-    Case("generate-negative-seed", ("pattern", "generate", "{o}/x.tif", "--size", "64",
-                                    "--seed", "-1"), must=("--seed",)),
-    Case("generate-bit-depth", ("pattern", "generate", "{o}/x.tif", "--size", "64",
-                                "--bit-depth", "12"), must=("--bit-depth",),
-         must_not=("bit_depth=",)),
-    Case("generate-speckle-size", ("pattern", "generate", "{o}/x.tif", "--size", "64",
-                                   "--speckle-size", "-2"), must=("--speckle-size",)),
-    Case("generate-supersample", ("pattern", "generate", "{o}/x.tif", "--size", "4000",
-                                  "--supersample", "8"), must=("--max-pixels",)),
-    Case("metrics-negative-noise", ("pattern", "metrics", "{d}/good.tif", "--subset", "21",
-                                    "--noise", "-2"), must=("--noise",),
-         must_not=("noise_sigma=",)),
-    Case("metrics-even-subset", ("pattern", "metrics", "{d}/good.tif", "--subset", "20"),
-         must=("--subset",)),
-    Case("predict-negative-blur", ("predict", "{d}/model.json", "--blur", "-1", "--noise",
-                                   "2"), must=("--blur",), must_not=("np.float64",)),
-    Case("predict-negative-noise", ("predict", "{d}/model.json", "--blur", "1", "--noise",
-                                    "-1"), must=("--noise",), must_not=("sigma=",)),
-    Case("plan-velocity-text", ("plan", "{d}/model.json", "--velocity", "fast", "--scale",
-                                "0.05mm/px", "--target", "0.01px", "--noise", "2"),
-         must=("--velocity",)),
-    Case("correlate-even-subset", ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset",
-                                   "20"), must=("--subset",)),
-    Case("correlate-step-0", ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21",
-                              "--step", "0"), must=("--step",)),
-    Case("pattern-predict-subpixel", ("pattern", "predict", "{d}/good.tif", "--noise", "2",
-                                      "--subset", "21", "--subpixel", "7"),
-         must=("--subpixel",)),
-    Case("max-pixels-bad", ("--max-pixels", "0", "pattern", "metrics", "{d}/good.tif"),
-         must=("--max-pixels",)),
+    Case(
+        "blur-negative-length",
+        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "-1"),
+        must=("--length",),
+    ),
+    Case(
+        "blur-start-speed",
+        (
+            "blur",
+            "{d}/good.tif",
+            "{o}/x.tif",
+            "--length",
+            "2",
+            "--trajectory",
+            "acceleration",
+            "--start-speed",
+            "-3",
+        ),
+        must=("--start-speed", "0..2"),
+    ),
+    Case(
+        "blur-substeps-0",
+        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2", "--substeps", "0"),
+        must=("--substeps", "--continuous"),
+        must_not=("None",),
+    ),
+    Case(
+        "blur-negative-noise",
+        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2", "--noise", "-1"),
+        must=("--noise",),
+        must_not=("sigma=", "np.float64"),
+    ),
+    Case(
+        "blur-bit-depth",
+        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2", "--bit-depth", "12"),
+        must=("--bit-depth",),
+    ),
+    Case(
+        "generate-huge-size",
+        ("pattern", "generate", "{o}/x.tif", "--size", "100000x100000"),
+        must=("--max-pixels",),
+    ),
+    Case(
+        "generate-negative-seed",
+        ("pattern", "generate", "{o}/x.tif", "--size", "64", "--seed", "-1"),
+        must=("--seed",),
+    ),
+    Case(
+        "generate-bit-depth",
+        ("pattern", "generate", "{o}/x.tif", "--size", "64", "--bit-depth", "12"),
+        must=("--bit-depth",),
+        must_not=("bit_depth=",),
+    ),
+    Case(
+        "generate-speckle-size",
+        ("pattern", "generate", "{o}/x.tif", "--size", "64", "--speckle-size", "-2"),
+        must=("--speckle-size",),
+    ),
+    Case(
+        "generate-supersample",
+        ("pattern", "generate", "{o}/x.tif", "--size", "4000", "--supersample", "8"),
+        must=("--max-pixels",),
+    ),
+    Case(
+        "metrics-negative-noise",
+        ("pattern", "metrics", "{d}/good.tif", "--subset", "21", "--noise", "-2"),
+        must=("--noise",),
+        must_not=("noise_sigma=",),
+    ),
+    Case(
+        "metrics-even-subset",
+        ("pattern", "metrics", "{d}/good.tif", "--subset", "20"),
+        must=("--subset",),
+    ),
+    Case(
+        "predict-negative-blur",
+        ("predict", "{d}/model.json", "--blur", "-1", "--noise", "2"),
+        must=("--blur",),
+        must_not=("np.float64",),
+    ),
+    Case(
+        "predict-negative-noise",
+        ("predict", "{d}/model.json", "--blur", "1", "--noise", "-1"),
+        must=("--noise",),
+        must_not=("sigma=",),
+    ),
+    Case(
+        "plan-velocity-text",
+        (
+            "plan",
+            "{d}/model.json",
+            "--velocity",
+            "fast",
+            "--scale",
+            "0.05mm/px",
+            "--target",
+            "0.01px",
+            "--noise",
+            "2",
+        ),
+        must=("--velocity",),
+    ),
+    Case(
+        "correlate-even-subset",
+        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "20"),
+        must=("--subset",),
+    ),
+    Case(
+        "correlate-step-0",
+        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "--step", "0"),
+        must=("--step",),
+    ),
+    Case(
+        "pattern-predict-subpixel",
+        ("pattern", "predict", "{d}/good.tif", "--noise", "2", "--subset", "21", "--subpixel", "7"),
+        must=("--subpixel",),
+    ),
+    Case(
+        "max-pixels-bad",
+        ("--max-pixels", "0", "pattern", "metrics", "{d}/good.tif"),
+        must=("--max-pixels",),
+    ),
 ]
 
 
@@ -295,8 +545,9 @@ def test_corpus_is_large_enough() -> None:
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_bad_input(case: Case, corpus: Path, store: Path, tmp_path: Path,
-                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_input(
+    case: Case, corpus: Path, store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "out"
     out.mkdir()
     for d in case.dirs:

@@ -68,8 +68,10 @@ def test_fft_equals_literal_loop(pattern: np.ndarray, motion, shape) -> None:
     assert np.abs(fast - loop).max() <= 1e-12 * rng
 
 
-@pytest.mark.parametrize(("motion", "substeps"), [((12.3, -10.8), 5), ((0.3, 0.45), 1),
-                                                 ((-250.3, 120.9), 100), ((7.0, 0.5), 7)])
+@pytest.mark.parametrize(
+    ("motion", "substeps"),
+    [((12.3, -10.8), 5), ((0.3, 0.45), 1), ((-250.3, 120.9), 100), ((7.0, 0.5), 7)],
+)
 def test_fft_equals_loop_for_few_substeps(pattern: np.ndarray, motion, substeps) -> None:
     # |dy| + |dx| > K leaves the compiled kernel's range: the range-reduced closed form
     # is used instead (and at K = 7 with |dy| + |dx| = 7.5, its boundary).
@@ -215,15 +217,15 @@ def test_sine_full_cycles_equal_bessel_j0(amp, cycles) -> None:
     ky, kx = 3, 4
     b = 2 * np.pi * (ky / shape[0] * amp[0] + kx / shape[1] * amp[1])
     img = _cosine(shape, ky, kx)
-    out = motion_blur(img, amp, substeps=None,
-                      trajectory=SineMotion(cycles=cycles, phase=0.4))
+    out = motion_blur(img, amp, substeps=None, trajectory=SineMotion(cycles=cycles, phase=0.4))
     assert_allclose(out, special.j0(b) * img, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("substeps", [100, None])
 def test_zero_amplitude_sine_is_identity(pattern: np.ndarray, substeps) -> None:
-    out = motion_blur(pattern, (0.0, 0.0), substeps=substeps,
-                      trajectory=SineMotion(cycles=3.3, phase=1.0))
+    out = motion_blur(
+        pattern, (0.0, 0.0), substeps=substeps, trajectory=SineMotion(cycles=3.3, phase=1.0)
+    )
     assert_allclose(out, pattern, rtol=0, atol=1e-10)
 
 
@@ -271,8 +273,7 @@ def test_reflect_removes_wraparound_on_ramp() -> None:
 
 def test_reflect_loop_equals_fft(pattern: np.ndarray) -> None:
     a = motion_blur(pattern[:40, :30], (1.7, -2.2), boundary="reflect", substeps=30)
-    b = motion_blur(pattern[:40, :30], (1.7, -2.2), boundary="reflect", substeps=30,
-                    method="loop")
+    b = motion_blur(pattern[:40, :30], (1.7, -2.2), boundary="reflect", substeps=30, method="loop")
     assert np.abs(a - b).max() <= 1e-12 * np.ptp(pattern)
 
 
@@ -285,8 +286,11 @@ def test_valid_region_negative_motion() -> None:
 def _smooth_fine(n: int, ss: int) -> np.ndarray:
     c = (np.arange(n * ss) + 0.5) / ss / n
     y, x = np.meshgrid(c, c, indexing="ij")
-    return (128 + 60 * np.sin(2 * np.pi * (3 * x + 2 * y) + 0.3)
-            + 40 * np.cos(2 * np.pi * (5 * x - 4 * y)))
+    return (
+        128
+        + 60 * np.sin(2 * np.pi * (3 * x + 2 * y) + 0.3)
+        + 40 * np.cos(2 * np.pi * (5 * x - 4 * y))
+    )
 
 
 def test_render_converges_to_fourier_for_smooth_pattern() -> None:
@@ -306,8 +310,7 @@ def test_render_differs_from_fourier_for_hard_edges() -> None:
     n, ss, motion = 32, 8, (1.3, 2.7)
     fine = speckle_pattern((n * ss, n * ss), speckle_size=3 * ss, seed=1)
     camera = fine.reshape(n, ss, n, ss).mean(axis=(1, 3))
-    diff = render_blurred(fine, motion, supersample=ss) - motion_blur(camera, motion,
-                                                                       substeps=None)
+    diff = render_blurred(fine, motion, supersample=ss) - motion_blur(camera, motion, substeps=None)
     assert np.sqrt(np.mean(diff**2)) > 2.0
 
 
@@ -369,19 +372,44 @@ def test_cli_blur_writes_image_and_is_reproducible(tmp_path, capsys) -> None:
     save_image(src, speckle_pattern((48, 48), speckle_size=4, softness=0.5, seed=1))
     outs = []
     for name in ("a.tif", "b.tif"):
-        rc = main(["blur", str(src), str(tmp_path / name), "--length", "3.5", "--angle", "30",
-                   "--noise", "2", "--seed", "7"])
+        rc = main(
+            [
+                "blur",
+                str(src),
+                str(tmp_path / name),
+                "--length",
+                "3.5",
+                "--angle",
+                "30",
+                "--noise",
+                "2",
+                "--seed",
+                "7",
+            ]
+        )
         assert rc == 0
         outs.append((tmp_path / name).read_bytes())
     assert outs[0] == outs[1]
     meta = json.loads((tmp_path / "a.tif.json").read_text())
     assert_allclose(meta["motion_dy_dx_px"], [1.75, 3.5 * math.cos(math.pi / 6)])
     # Noise-free, no quantisation beyond 8 bits: equals the library call, rounded.
-    rc = main(["blur", str(src), str(tmp_path / "c.tif"), "--length", "2", "--trajectory",
-               "sine", "--cycles", "0.5"])
+    rc = main(
+        [
+            "blur",
+            str(src),
+            str(tmp_path / "c.tif"),
+            "--length",
+            "2",
+            "--trajectory",
+            "sine",
+            "--cycles",
+            "0.5",
+        ]
+    )
     assert rc == 0
-    expected = np.clip(np.rint(motion_blur(load_image(src), (0.0, 2.0),
-                                           trajectory=SineMotion(cycles=0.5))), 0, 255)
+    expected = np.clip(
+        np.rint(motion_blur(load_image(src), (0.0, 2.0), trajectory=SineMotion(cycles=0.5))), 0, 255
+    )
     assert_allclose(load_image(tmp_path / "c.tif"), expected)
     capsys.readouterr()
 

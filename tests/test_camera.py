@@ -23,8 +23,9 @@ def test_per_subframe_equals_literal_average_of_noisy_subframes() -> None:
     rng = np.random.default_rng(5)
     k, sigma = 100, 2.0
     literal = np.mean([rng.normal(0.0, sigma, (256, 256)) for _ in range(k + 1)], axis=0)
-    single = add_gaussian_noise(np.zeros((256, 256)), sigma, model="per-subframe",
-                                substeps=k, seed=6)
+    single = add_gaussian_noise(
+        np.zeros((256, 256)), sigma, model="per-subframe", substeps=k, seed=6
+    )
     assert np.std(literal) == pytest.approx(np.std(single), rel=0.03)
 
 

@@ -13,8 +13,14 @@ from dicblur.campaign.calibrate import calibrate, calibration_spec
 from dicblur.cli import main
 from dicblur.errors import InputError
 
-REAL = (Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
-        / "dicchallenge1_sample3" / "Sample3_Reference.tif")
+REAL = (
+    Path(__file__).resolve().parents[1].parent
+    / "shared"
+    / "data"
+    / "real"
+    / "dicchallenge1_sample3"
+    / "Sample3_Reference.tif"
+)
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
@@ -33,8 +39,24 @@ def test_calibration_spec_is_the_papers_sweep(tmp_path):
 @pytest.mark.slow
 def test_calibrate_generated_pattern(tmp_path, capsys):
     out = tmp_path / "calib"
-    code = main(["calibrate", "paper4", "--size", "128x128", "--noise", "2",
-                 "--subset", "21", "--blur", "0:6:0.5", "-o", str(out), "--serial", "-q"])
+    code = main(
+        [
+            "calibrate",
+            "paper4",
+            "--size",
+            "128x128",
+            "--noise",
+            "2",
+            "--subset",
+            "21",
+            "--blur",
+            "0:6:0.5",
+            "-o",
+            str(out),
+            "--serial",
+            "-q",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "R^2 of the SSSIG fit" in text
@@ -55,8 +77,15 @@ def test_calibrate_generated_pattern(tmp_path, capsys):
     assert r2 == pytest.approx(m.decay.r2, abs=1e-6)
     assert m.decay["sssig0"] == pytest.approx(s[0], rel=0.1)
     # rerun resumes: nothing left to compute, same model
-    again = calibrate("paper4", out, noise=2.0, subset=21, size=(128, 128),
-                      blur={"start": 0.0, "stop": 6.0, "step": 0.5}, serial=True)
+    again = calibrate(
+        "paper4",
+        out,
+        noise=2.0,
+        subset=21,
+        size=(128, 128),
+        blur={"start": 0.0, "stop": 6.0, "step": 0.5},
+        serial=True,
+    )
     assert again is not None and again.figures == ()  # the campaign stage draws nothing
     assert again.model.decay["beta"] == pytest.approx(m.decay["beta"], rel=1e-12)
 
@@ -69,8 +98,10 @@ def test_calibrate_dic_challenge_sample3(tmp_path):
 
     res = calibrate(REAL, tmp_path / "s3", noise=2.0, subset=31, workers=2)
     assert res is not None
-    print(f"Sample 3: SSSIG decay (eq. 18) R^2 = {res.sssig_r2:.4f}, beta = "
-          f"{res.model.decay['beta']:.4g} 1/px^2, alpha = {res.model.alpha:.3f}")
+    print(
+        f"Sample 3: SSSIG decay (eq. 18) R^2 = {res.sssig_r2:.4f}, beta = "
+        f"{res.model.decay['beta']:.4g} 1/px^2, alpha = {res.model.alpha:.3f}"
+    )
     assert res.sssig_r2 > 0.92  # the paper's figure for its patterns #2-#4
     figures = calibration_figures(res)
     assert len(figures) == 3 and all(p.is_file() for p in figures)

@@ -49,22 +49,51 @@ def dask_cluster(tmp_path_factory):
     # The scheduler and the worker must import what the client sends (Dask pickles
     # importable functions by reference): put tests/ on their path, as a deployment
     # installs the same environment everywhere.
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join([str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]),
+    )
     procs: list[subprocess.Popen] = []
     sched_log = open(logs / "scheduler.log", "w")  # closed in finally
     worker_log = open(logs / "worker.log", "w")
     try:
-        procs.append(subprocess.Popen(
-            [str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
-             "--no-dashboard"],
-            stdout=sched_log, stderr=subprocess.STDOUT,
-            start_new_session=True, env=env))
-        procs.append(subprocess.Popen(
-            [str(BIN / "dask"), "worker", address, "--nworkers", "1", "--nthreads", "1",
-             "--host", "127.0.0.1", "--no-dashboard"],
-            stdout=worker_log, stderr=subprocess.STDOUT,
-            start_new_session=True, env=env))
+        procs.append(
+            subprocess.Popen(
+                [
+                    str(BIN / "dask"),
+                    "scheduler",
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    str(port),
+                    "--no-dashboard",
+                ],
+                stdout=sched_log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                env=env,
+            )
+        )
+        procs.append(
+            subprocess.Popen(
+                [
+                    str(BIN / "dask"),
+                    "worker",
+                    address,
+                    "--nworkers",
+                    "1",
+                    "--nthreads",
+                    "1",
+                    "--host",
+                    "127.0.0.1",
+                    "--no-dashboard",
+                ],
+                stdout=worker_log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                env=env,
+            )
+        )
         from distributed import Client
 
         deadline = time.monotonic() + 60
@@ -76,9 +105,11 @@ def dask_cluster(tmp_path_factory):
             except OSError:
                 pass
             if time.monotonic() > deadline or any(p.poll() is not None for p in procs):
-                pytest.fail("dask cluster did not start:\n"
-                            + (logs / "scheduler.log").read_text()
-                            + (logs / "worker.log").read_text())
+                pytest.fail(
+                    "dask cluster did not start:\n"
+                    + (logs / "scheduler.log").read_text()
+                    + (logs / "worker.log").read_text()
+                )
             time.sleep(0.3)
         yield address
     finally:
@@ -92,8 +123,7 @@ def dask_cluster(tmp_path_factory):
 @pytest.mark.numba_cache
 def test_external_cluster_equals_serial(dask_cluster, tmp_path):
     spec = parse_spec(small_spec_dict())
-    remote = run_campaign(spec, tmp_path / "remote.zarr", scheduler=dask_cluster,
-                          task=shift_task)
+    remote = run_campaign(spec, tmp_path / "remote.zarr", scheduler=dask_cluster, task=shift_task)
     assert remote.complete and remote.scheduler == dask_cluster and remote.workers == 1
     run_campaign(spec, tmp_path / "serial.zarr", serial=True, task=shift_task)
     a, b = open_results(tmp_path / "remote.zarr"), open_results(tmp_path / "serial.zarr")
@@ -109,8 +139,9 @@ def test_cli_run_through_scheduler_equals_serial(dask_cluster, tmp_path, capsys)
     spec_path = tmp_path / "s.toml"
     spec_path.write_text(SPEC_TOML)
     out = tmp_path / "remote.zarr"
-    code = main(["campaign", "run", str(spec_path), "-o", str(out), "--scheduler",
-                 dask_cluster, "-q"])
+    code = main(
+        ["campaign", "run", str(spec_path), "-o", str(out), "--scheduler", dask_cluster, "-q"]
+    )
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "tasks" in text and dask_cluster in text
@@ -128,11 +159,18 @@ def test_unreachable_scheduler_is_a_clear_error(tmp_path):
     from dicblur.errors import InputError
 
     port = _free_port()
-    with pytest.raises(InputError, match=r"scheduler='tcp://127\.0\.0\.1:\d+': cannot "
-                       "connect"):
-        run_campaign(parse_spec(small_spec_dict()), tmp_path / "r.zarr",
-                     scheduler=f"tcp://127.0.0.1:{port}", task=shift_task,
-                     connect_timeout=1.0)
+    with pytest.raises(
+        InputError,
+        match=r"scheduler='tcp://127\.0\.0\.1:\d+': cannot "
+        "connect",
+    ):
+        run_campaign(
+            parse_spec(small_spec_dict()),
+            tmp_path / "r.zarr",
+            scheduler=f"tcp://127.0.0.1:{port}",
+            task=shift_task,
+            connect_timeout=1.0,
+        )
 
 
 SPEC_TOML = """

@@ -57,8 +57,7 @@ def assert_same_results(a, b):
 def test_spec_defaults_and_dims():
     spec = parse_spec(small_spec_dict())
     assert spec.blur == (0.0, 0.5, 1.0, 1.5, 2.0)
-    assert spec.dims == {"pattern": 2, "angle": 1, "subset": 1, "noise": 2, "blur": 5,
-                         "rep": 2}
+    assert spec.dims == {"pattern": 2, "angle": 1, "subset": 1, "noise": 2, "blur": 5, "rep": 2}
     assert spec.n_tasks == 40
     batches = list(iter_batches(spec))
     # blur_chunk 2 over 5 values: 3 batches per (pattern, noise, rep)
@@ -77,7 +76,8 @@ def test_spec_hash_ignores_spelling_not_content(tmp_path):
     c = parse_spec(small_spec_dict(blur__lengths=[0, 0.5, 1.0, 1.5, 2.5]))
     assert a.content_hash() != c.content_hash()
     toml = tmp_path / "s.toml"
-    toml.write_text(textwrap.dedent("""
+    toml.write_text(
+        textwrap.dedent("""
         # a comment
         [campaign]
         seed = 7
@@ -104,13 +104,13 @@ def test_spec_hash_ignores_spelling_not_content(tmp_path):
         step = 8
         [run]
         blur_chunk = 2
-    """))
+    """)
+    )
     assert load_spec(toml).content_hash() == a.content_hash()
 
 
 def test_range_grid_is_exact():
-    spec = parse_spec(small_spec_dict(blur__lengths={"start": 0.1, "stop": 10.0,
-                                                     "step": 0.1}))
+    spec = parse_spec(small_spec_dict(blur__lengths={"start": 0.1, "stop": 10.0, "step": 0.1}))
     assert len(spec.blur) == 100
     assert spec.blur[2] == 0.3 and spec.blur[-1] == 10.0
 
@@ -208,14 +208,14 @@ def test_directional_sssig_against_metrics_and_closed_form():
     sx = directional_sssig(img, pts, subset=11, angle=0.0)
     sy = directional_sssig(img, pts, subset=11, angle=90.0)
     np.testing.assert_allclose(sx, dicblur.sssig(img, subset=11, points=pts), rtol=1e-12)
-    np.testing.assert_allclose(sy, dicblur.sssig(img, subset=11, points=pts,
-                                                 direction="y"), rtol=1e-12)
+    np.testing.assert_allclose(
+        sy, dicblur.sssig(img, subset=11, points=pts, direction="y"), rtol=1e-12
+    )
     # 45 degrees: explicit sum of (fx + fy)^2 / 2 over each subset
     gy, gx = dicblur.image_gradients(img)
     g = (gx + gy) / np.sqrt(2.0)
-    want = [np.sum(g[r - 5:r + 6, c - 5:c + 6] ** 2) for r, c in pts]
-    np.testing.assert_allclose(directional_sssig(img, pts, subset=11, angle=45.0), want,
-                               rtol=1e-10)
+    want = [np.sum(g[r - 5 : r + 6, c - 5 : c + 6] ** 2) for r, c in pts]
+    np.testing.assert_allclose(directional_sssig(img, pts, subset=11, angle=45.0), want, rtol=1e-10)
 
 
 # -- runs, resume, storage ----------------------------------------------------------------------
@@ -232,15 +232,24 @@ def test_serial_run_stores_every_task(serial_run):
     path, summary = serial_run
     assert summary.complete and summary.n_run == 40 and summary.n_skipped == 0
     ds = open_results(path)
-    assert dict(ds.sizes) == {"pattern": 2, "angle": 1, "subset": 1, "noise": 2, "blur": 5,
-                              "rep": 2}
+    assert dict(ds.sizes) == {
+        "pattern": 2,
+        "angle": 1,
+        "subset": 1,
+        "noise": 2,
+        "blur": 5,
+        "rep": 2,
+    }
     assert (ds["done"] == 1).all()
     for name in VARIABLES:
         assert np.isfinite(ds[name].values).all(), name
     # spot check one task against a direct call of the task function
     spec = parse_spec(small_spec_dict())
-    b = next(x for x in iter_batches(spec) if x.pattern == "b" and x.noise == 2.0
-             and x.rep == 1 and 1.5 in x.blur)
+    b = next(
+        x
+        for x in iter_batches(spec)
+        if x.pattern == "b" and x.noise == 2.0 and x.rep == 1 and 1.5 in x.blur
+    )
     direct = shift_task(dicblur.paper_pattern4((64, 64), seed=2), b, spec)
     j = b.blur.index(1.5)
     got = ds.sel(pattern="b", noise=2.0, rep=1, blur=1.5).isel(angle=0, subset=0)
@@ -256,8 +265,7 @@ def test_rerun_skips_finished_tasks(serial_run, tmp_path):
     path, _ = serial_run
     copy_path = tmp_path / "copy.zarr"
     shutil.copytree(path, copy_path)
-    again = run_campaign(parse_spec(small_spec_dict()), copy_path, serial=True,
-                         task=shift_task)
+    again = run_campaign(parse_spec(small_spec_dict()), copy_path, serial=True, task=shift_task)
     assert again.n_run == 0 and again.n_skipped == 40 and again.complete
     st = campaign_status(copy_path)
     assert st.complete and st.n_done == 40 and st.done_by_pattern == {"a": 20, "b": 20}
@@ -270,8 +278,9 @@ def test_local_cluster_equals_serial(serial_run, tmp_path):
 
     cloudpickle.register_pickle_by_value(campaign_helpers)  # workers cannot import tests/
     path, _ = serial_run
-    summary = run_campaign(parse_spec(small_spec_dict()), tmp_path / "dask.zarr",
-                           workers=2, task=shift_task)
+    summary = run_campaign(
+        parse_spec(small_spec_dict()), tmp_path / "dask.zarr", workers=2, task=shift_task
+    )
     assert summary.workers == 2 and summary.scheduler == "local" and summary.complete
     assert_same_results(open_results(path), open_results(tmp_path / "dask.zarr"))
 
@@ -337,8 +346,12 @@ def test_sigkill_at_random_point_then_resume_is_bit_identical(tmp_path):
     out = tmp_path / "killed.zarr"
     script = tmp_path / "runner.py"
     script.write_text(RUNNER.format(out=str(out)))
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(  # tests/ for the helpers package
-        [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(  # tests/ for the helpers package
+            [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]
+        ),
+    )
     proc = subprocess.Popen([sys.executable, str(script)], stderr=subprocess.PIPE, env=env)
     try:
         done_dir = out / "done" / "c"
@@ -459,8 +472,11 @@ def test_export_csv_one_row_per_finished_task(serial_run, tmp_path):
     assert len(rows) == 40
     assert list(rows[0])[:6] == ["pattern", "angle", "subset", "noise", "blur", "rep"]
     ds = open_results(path)
-    r = next(x for x in rows if x["pattern"] == "a" and x["blur"] == "1.0"
-             and x["noise"] == "2.0" and x["rep"] == "0")
+    r = next(
+        x
+        for x in rows
+        if x["pattern"] == "a" and x["blur"] == "1.0" and x["noise"] == "2.0" and x["rep"] == "0"
+    )
     want = ds.sel(pattern="a", blur=1.0, noise=2.0, rep=0).isel(angle=0, subset=0)
     for name in VARIABLES:
         assert float(r[name]) == float(want[name]), name

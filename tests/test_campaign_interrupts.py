@@ -83,16 +83,33 @@ def _cli_run(tmp_path: Path, phase: str, *, group: bool) -> tuple[int, str, Path
     out = tmp_path / "r.zarr"
     env = dict(os.environ, NUMBA_NUM_THREADS="1")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "dicblur", "campaign", "run", str(spec), "-o", str(out),
-         "--workers", "2", "-q"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, start_new_session=True)
+        [
+            sys.executable,
+            "-m",
+            "dicblur",
+            "campaign",
+            "run",
+            str(spec),
+            "-o",
+            str(out),
+            "--workers",
+            "2",
+            "-q",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 240
         while proc.poll() is None and time.monotonic() < deadline:
-            if (phase == "none"
-                    or (phase == "startup" and out.exists())  # store made, cluster starting
-                    or (phase == "submitted" and _has_workers(proc.pid))
-                    or (phase == "running" and _done_chunks(out) >= 2)):
+            if (
+                phase == "none"
+                or (phase == "startup" and out.exists())  # store made, cluster starting
+                or (phase == "submitted" and _has_workers(proc.pid))
+                or (phase == "running" and _done_chunks(out) >= 2)
+            ):
                 break
             time.sleep(0.01)
         if phase == "submitted":
@@ -114,8 +131,9 @@ def _cli_run(tmp_path: Path, phase: str, *, group: bool) -> tuple[int, str, Path
 def _assert_one_interrupt_line(rc: int, err: str, out: Path) -> None:
     n_done = campaign_status(out).n_done if out.exists() else 0
     assert rc == 130, err[-3000:]
-    assert err == (f"interrupted: {n_done} of 96 tasks done, rerun the same command to "
-                   "resume\n"), err[-3000:]
+    assert err == (f"interrupted: {n_done} of 96 tasks done, rerun the same command to resume\n"), (
+        err[-3000:]
+    )
 
 
 def test_sigint_during_cluster_start_up(tmp_path):
@@ -146,8 +164,10 @@ def test_terminal_ctrl_c_while_running_then_resume(tmp_path):
     assert 0 < n < 96
     from dicblur.cli import main
 
-    assert main(["campaign", "run", str(tmp_path / "spec.toml"), "-o", str(out),
-                 "--serial", "-q"]) == 0
+    assert (
+        main(["campaign", "run", str(tmp_path / "spec.toml"), "-o", str(out), "--serial", "-q"])
+        == 0
+    )
     assert campaign_status(out).complete
 
 
@@ -186,8 +206,9 @@ print("complete", flush=True)
 
 REAL_SPEC = {
     "campaign": {"name": "k", "seed": 11, "repetitions": 4},
-    "pattern": [{"name": "p", "generator": "speckle", "shape": [64, 64],
-                 "speckle_size": 3.0, "seed": 3}],
+    "pattern": [
+        {"name": "p", "generator": "speckle", "shape": [64, 64], "speckle_size": 3.0, "seed": 3}
+    ],
     "blur": {"lengths": {"start": 0.0, "stop": 3.0, "step": 0.25}},
     "noise": {"model": "per-exposure", "levels": [2.0]},
     "dic": {"subsets": [15], "step": 6},
@@ -195,22 +216,27 @@ REAL_SPEC = {
 }
 
 
-def _kill_and_resume(tmp_path: Path, n_kills: int, *, real_task: bool,
-                     cache: Path | None, seed: int) -> Path:
+def _kill_and_resume(
+    tmp_path: Path, n_kills: int, *, real_task: bool, cache: Path | None, seed: int
+) -> Path:
     """Kill a serial run ``n_kills`` times (the first kill during the store's creation, the
     others at random points), then let it finish; returns the store."""
     rng = random.Random(seed)
     out = tmp_path / "killed.zarr"
     script = tmp_path / "killed.py"
-    script.write_text(KILLED.format(tests=str(HERE), out=str(out), creation_s=0.5,
-                                    spec=REAL_SPEC, real_task=real_task))
+    script.write_text(
+        KILLED.format(
+            tests=str(HERE), out=str(out), creation_s=0.5, spec=REAL_SPEC, real_task=real_task
+        )
+    )
     env = dict(os.environ, NUMBA_NUM_THREADS="1")
     if cache is not None:
         env["NUMBA_CACHE_DIR"] = str(cache)
     kills = 0
     while True:
-        proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, env=env)
+        proc = subprocess.Popen(
+            [sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env
+        )
         assert proc.stdout is not None
         if kills < n_kills:
             if kills == 0:  # during the creation (stretched to 0.5 s by the script)
@@ -219,8 +245,11 @@ def _kill_and_resume(tmp_path: Path, n_kills: int, *, real_task: bool,
             else:  # a random moment after the next batch is stored
                 before = _done_chunks(out)
                 deadline = time.monotonic() + 900
-                while (proc.poll() is None and _done_chunks(out) <= before
-                       and time.monotonic() < deadline):
+                while (
+                    proc.poll() is None
+                    and _done_chunks(out) <= before
+                    and time.monotonic() < deadline
+                ):
                     time.sleep(0.002)
                 time.sleep(rng.uniform(0.0, 0.02))
             if proc.poll() is None:
@@ -258,7 +287,10 @@ def test_ten_kills_on_an_empty_numba_cache_resume_bit_identical(tmp_path):
     ref = tmp_path / "ref.zarr"
     script = tmp_path / "ref.py"
     script.write_text(textwrap.dedent(REFERENCE.format(spec=REAL_SPEC, out=str(ref))))
-    subprocess.run([sys.executable, str(script)], check=True, timeout=1800,
-                   env=dict(os.environ, NUMBA_NUM_THREADS="1",
-                            NUMBA_CACHE_DIR=str(tmp_path / "cache2")))
+    subprocess.run(
+        [sys.executable, str(script)],
+        check=True,
+        timeout=1800,
+        env=dict(os.environ, NUMBA_NUM_THREADS="1", NUMBA_CACHE_DIR=str(tmp_path / "cache2")),
+    )
     assert_same_results(open_results(ref), open_results(out))

@@ -27,8 +27,9 @@ KX, KY = 15, 5
 def sinusoid() -> np.ndarray:
     """f = 128 + 50 sin(2 pi KX x / N) + 50 sin(2 pi KY y / N + 0.3), grey levels."""
     y, x = np.mgrid[0:N, 0:N].astype(float)
-    return (128.0 + 50.0 * np.sin(2 * np.pi * KX * x / N)
-            + 50.0 * np.sin(2 * np.pi * KY * y / N + 0.3))
+    return (
+        128.0 + 50.0 * np.sin(2 * np.pi * KX * x / N) + 50.0 * np.sin(2 * np.pi * KY * y / N + 0.3)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -40,13 +41,15 @@ def sinusoid_file(tmp_path_factory):
 
 
 def sinusoid_spec(path, *, angle: float, noise: float) -> dicblur.CampaignSpec:
-    return parse_spec({
-        "campaign": {"seed": 11},
-        "pattern": [{"name": "sin", "path": str(path)}],
-        "blur": {"lengths": [0.0, 1.0, 2.5], "angles": [angle], "substeps": 0},
-        "noise": {"model": "per-exposure", "levels": [noise]},
-        "dic": {"subsets": [21], "step": 7},
-    })
+    return parse_spec(
+        {
+            "campaign": {"seed": 11},
+            "pattern": [{"name": "sin", "path": str(path)}],
+            "blur": {"lengths": [0.0, 1.0, 2.5], "angles": [angle], "substeps": 0},
+            "noise": {"model": "per-exposure", "levels": [noise]},
+            "dic": {"subsets": [21], "step": 7},
+        }
+    )
 
 
 @pytest.mark.parametrize(("angle", "period"), [(0.0, N / KX), (90.0, N / KY)])
@@ -62,8 +65,7 @@ def test_sinusoid_matches_closed_forms(sinusoid_file, angle, period):
     (batch,) = iter_batches(spec)
     out = simulate_batch(image, batch, spec)
     w = np.array(batch.blur)
-    np.testing.assert_allclose(out["sssig"] / out["sssig_ref"], np.sinc(w / period) ** 2,
-                               rtol=1e-6)
+    np.testing.assert_allclose(out["sssig"] / out["sssig_ref"], np.sinc(w / period) ** 2, rtol=1e-6)
     assert (out["converged_fraction"] == 1.0).all()
     assert np.all(np.abs(out["bias"]) < 0.01), out["bias"]
     # random error at W = 0 against the match-score model (eq. 2), noise in both images
@@ -75,28 +77,40 @@ def test_sinusoid_matches_closed_forms(sinusoid_file, angle, period):
 
 
 def test_per_subframe_noise_is_the_papers(sinusoid_file):
-    spec = parse_spec({
-        "campaign": {"seed": 11},
-        "pattern": [{"name": "sin", "path": str(sinusoid_file)}],
-        "blur": {"lengths": [1.0], "substeps": 100},
-        "noise": {"model": "per-subframe", "levels": [400.0]},
-        "dic": {"subsets": [21], "step": 6},
-    })
+    spec = parse_spec(
+        {
+            "campaign": {"seed": 11},
+            "pattern": [{"name": "sin", "path": str(sinusoid_file)}],
+            "blur": {"lengths": [1.0], "substeps": 100},
+            "noise": {"model": "per-subframe", "levels": [400.0]},
+            "dic": {"subsets": [21], "step": 6},
+        }
+    )
     (batch,) = iter_batches(spec)
     out = simulate_batch(make_pattern(spec, spec.patterns[0]), batch, spec)
     assert out["noise_effective"][0] == pytest.approx(400.0 / math.sqrt(101.0))
 
 
 def small_real_spec(**blur: object) -> dicblur.CampaignSpec:
-    return parse_spec({
-        "campaign": {"seed": 5, "repetitions": 2},
-        "pattern": [{"name": "p", "generator": "speckle", "shape": [64, 64],
-                     "speckle_size": 4.0, "softness": 0.7, "seed": 3}],
-        "blur": {"lengths": [0.0, 1.5, 3.0], "angles": [0.0, 30.0], **blur},
-        "noise": {"model": "per-exposure", "levels": [2.0]},
-        "dic": {"subsets": [21], "step": 10},
-        "run": {"blur_chunk": 2},
-    })
+    return parse_spec(
+        {
+            "campaign": {"seed": 5, "repetitions": 2},
+            "pattern": [
+                {
+                    "name": "p",
+                    "generator": "speckle",
+                    "shape": [64, 64],
+                    "speckle_size": 4.0,
+                    "softness": 0.7,
+                    "seed": 3,
+                }
+            ],
+            "blur": {"lengths": [0.0, 1.5, 3.0], "angles": [0.0, 30.0], **blur},
+            "noise": {"model": "per-exposure", "levels": [2.0]},
+            "dic": {"subsets": [21], "step": 10},
+            "run": {"blur_chunk": 2},
+        }
+    )
 
 
 @pytest.mark.slow
@@ -121,13 +135,15 @@ def test_reflect_boundary_uses_trustworthy_points(tmp_path):
     img = dicblur.speckle_pattern((80, 80), speckle_size=4, softness=0.7, seed=9)
     path = tmp_path / "p.tif"
     dicblur.save_image(path, img * 200.0, bit_depth=16)
-    spec = parse_spec({
-        "campaign": {"seed": 1},
-        "pattern": [{"name": "p", "path": str(path)}],
-        "blur": {"lengths": [0.0, 6.0], "boundary": "reflect"},
-        "noise": {"model": "per-exposure", "levels": [100.0]},
-        "dic": {"subsets": [21], "step": 10},
-    })
+    spec = parse_spec(
+        {
+            "campaign": {"seed": 1},
+            "pattern": [{"name": "p", "path": str(path)}],
+            "blur": {"lengths": [0.0, 6.0], "boundary": "reflect"},
+            "noise": {"model": "per-exposure", "levels": [100.0]},
+            "dic": {"subsets": [21], "step": 10},
+        }
+    )
     (batch,) = iter_batches(spec)
     out = simulate_batch(make_pattern(spec, spec.patterns[0]), batch, spec)
     all_points = dicblur.subset_centres((80, 80), subset=21, step=10)
@@ -153,21 +169,37 @@ def test_blurred_image_metrics_equal_the_metrics_module(sinusoid_file):
     assert out["mig"][2] == pytest.approx(dicblur.mig(blurred), rel=1e-12)
     assert out["contrast"][2] == pytest.approx(dicblur.michelson_contrast(blurred), rel=1e-12)
     pts = dicblur.subset_centres(image.shape, subset=21, step=7)
-    assert out["sssig"][2] == pytest.approx(dicblur.sssig(blurred, subset=21,
-                                                          points=pts).mean(), rel=1e-12)
+    assert out["sssig"][2] == pytest.approx(
+        dicblur.sssig(blurred, subset=21, points=pts).mean(), rel=1e-12
+    )
     assert out["mig_ref"][0] == pytest.approx(dicblur.mig(image), rel=1e-12)
 
 
 def _smooth_spec(method: str) -> dicblur.CampaignSpec:
-    return parse_spec({
-        "campaign": {"seed": 5, "repetitions": 2},
-        "pattern": [{"name": "p", "generator": "speckle", "shape": [64, 64],
-                     "speckle_size": 8.0, "softness": 2.0, "seed": 3}],
-        "blur": {"lengths": [0.0, 2.0, 4.0], "angles": [0.0, 30.0], "method": method,
-                 "supersample": 4, "substeps": 64},
-        "noise": {"model": "per-exposure", "levels": [1.0]},
-        "dic": {"subsets": [21], "step": 10},
-    })
+    return parse_spec(
+        {
+            "campaign": {"seed": 5, "repetitions": 2},
+            "pattern": [
+                {
+                    "name": "p",
+                    "generator": "speckle",
+                    "shape": [64, 64],
+                    "speckle_size": 8.0,
+                    "softness": 2.0,
+                    "seed": 3,
+                }
+            ],
+            "blur": {
+                "lengths": [0.0, 2.0, 4.0],
+                "angles": [0.0, 30.0],
+                "method": method,
+                "supersample": 4,
+                "substeps": 64,
+            },
+            "noise": {"model": "per-exposure", "levels": [1.0]},
+            "dic": {"subsets": [21], "step": 10},
+        }
+    )
 
 
 def test_rendered_method_agrees_with_the_transfer_method(tmp_path):
@@ -193,4 +225,5 @@ def test_rendered_method_agrees_with_the_transfer_method(tmp_path):
     # mismatch term of the two different reference images differs, up to 2x at W = 4 px)
     # (mean over angles and repetitions: each u_e is a std over 25 POIs, +-14 %)
     assert float(r["u_e"].isel(blur=0).mean()) == pytest.approx(
-        float(t["u_e"].isel(blur=0).mean()), rel=0.3)
+        float(t["u_e"].isel(blur=0).mean()), rel=0.3
+    )

@@ -58,13 +58,15 @@ def test_second_runner_is_refused_while_the_first_holds_the_lock(tmp_path):
         assert lock.held and lock_path(out).exists()
         holder = lock_holder(out)
         assert holder is not None and holder.pid == os.getpid()
-        with pytest.raises(StoreError, match=r"another campaign run is using this store "
-                           rf"\(pid {os.getpid()} on host .* since .*UTC\); wait"):
+        with pytest.raises(
+            StoreError,
+            match=r"another campaign run is using this store "
+            rf"\(pid {os.getpid()} on host .* since .*UTC\); wait",
+        ):
             run_campaign(parse_spec(small_spec_dict()), out, serial=True, task=shift_task)
         assert not out.exists()  # refused before creating anything
     assert not lock_path(out).exists() and lock_holder(out) is None
-    assert run_campaign(parse_spec(small_spec_dict()), out, serial=True,
-                        task=shift_task).complete
+    assert run_campaign(parse_spec(small_spec_dict()), out, serial=True, task=shift_task).complete
 
 
 RUNNER = """
@@ -98,8 +100,9 @@ def test_two_concurrent_runners_on_a_new_store(tmp_path):
     # computed every task.
     out = tmp_path / "new.zarr"
     cmd = _runner(tmp_path, out, delay=0.01)
-    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-             for _ in range(2)]
+    procs = [
+        subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE) for _ in range(2)
+    ]
     res = [p.communicate(timeout=300) for p in procs]
     codes = sorted(p.returncode for p in procs)
     assert codes == [0, 3], [r[1].decode()[-2000:] for r in res]
@@ -121,10 +124,10 @@ def test_second_runner_on_an_existing_store_computes_nothing(tmp_path):
         if done >= 8:
             raise KeyboardInterrupt
 
-    assert run_campaign(kill_spec(), out, serial=True, task=shift_task,
-                        progress=stop).interrupted
-    first = subprocess.Popen(_runner(tmp_path, out, delay=0.02), stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE)
+    assert run_campaign(kill_spec(), out, serial=True, task=shift_task, progress=stop).interrupted
+    first = subprocess.Popen(
+        _runner(tmp_path, out, delay=0.02), stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
     deadline = time.monotonic() + 120
     while lock_holder(out) is None and first.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
@@ -150,9 +153,11 @@ def test_cli_second_runner_gets_one_line_and_exit_2(tmp_path, capsys):
 def test_lock_of_a_killed_runner_does_not_block(tmp_path):
     # The holder dies by SIGKILL (no clean-up): the OS drops its flock, the file stays.
     out = tmp_path / "k.zarr"
-    code = ("import sys, time; from dicblur.campaign.lock import StoreLock; "
-            f"l = StoreLock({str(out)!r}); l.acquire(); print('locked', flush=True); "
-            "time.sleep(60)")
+    code = (
+        "import sys, time; from dicblur.campaign.lock import StoreLock; "
+        f"l = StoreLock({str(out)!r}); l.acquire(); print('locked', flush=True); "
+        "time.sleep(60)"
+    )
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)
     assert proc.stdout is not None and proc.stdout.readline().strip() == b"locked"
     assert lock_holder(out) is not None and lock_holder(out).pid == proc.pid
@@ -160,8 +165,7 @@ def test_lock_of_a_killed_runner_does_not_block(tmp_path):
     proc.wait(timeout=10)
     proc.stdout.close()
     assert lock_path(out).exists() and lock_holder(out) is None  # stale: not held
-    assert run_campaign(parse_spec(small_spec_dict()), out, serial=True,
-                        task=shift_task).complete
+    assert run_campaign(parse_spec(small_spec_dict()), out, serial=True, task=shift_task).complete
     assert not lock_path(out).exists()
 
 
@@ -189,8 +193,7 @@ def test_crash_during_creation_leaves_nothing_that_blocks(tmp_path, monkeypatch)
         run_campaign(parse_spec(small_spec_dict()), out, serial=True, task=shift_task)
     assert not out.exists() and (tmp_path / "c.zarr.creating").exists()
     monkeypatch.undo()
-    assert run_campaign(parse_spec(small_spec_dict()), out, serial=True,
-                        task=shift_task).complete
+    assert run_campaign(parse_spec(small_spec_dict()), out, serial=True, task=shift_task).complete
     assert not (tmp_path / "c.zarr.creating").exists()
 
 
@@ -206,8 +209,7 @@ def test_half_created_store_is_recreated_and_status_says_so(reference, tmp_path)
     (half / "zarr.json").write_text(json.dumps(meta))
     with pytest.raises(StoreError, match=r"half-created store .* run the campaign again"):
         campaign_status(half)
-    summary = run_campaign(parse_spec(small_spec_dict()), half, serial=True,
-                           task=shift_task)
+    summary = run_campaign(parse_spec(small_spec_dict()), half, serial=True, task=shift_task)
     assert summary.complete and summary.n_run == 40
     assert_same_results(open_results(reference), open_results(half))
 
@@ -225,8 +227,11 @@ def test_foreign_folder_is_not_deleted(tmp_path):
 
 
 def _chunk(store: Path, name: str) -> Path:
-    return next(p for p in sorted((store / name / "c").rglob("*")) if p.is_file()
-                and not p.name.startswith("."))
+    return next(
+        p
+        for p in sorted((store / name / "c").rglob("*"))
+        if p.is_file() and not p.name.startswith(".")
+    )
 
 
 @pytest.mark.parametrize("damage", ["truncate", "flip", "delete", "truncate-checksum"])
@@ -271,8 +276,13 @@ def test_every_batch_is_synced_to_disk(tmp_path, monkeypatch, syncfs):
     # Before: nothing was fsynced (a power loss could keep the flags and lose the values).
     spec = parse_spec(small_spec_dict())
     out = tmp_path / "f.zarr"
-    run_campaign(spec, out, serial=True, task=shift_task,
-                 progress=lambda d, t: (_ for _ in ()).throw(KeyboardInterrupt) if d else 0)
+    run_campaign(
+        spec,
+        out,
+        serial=True,
+        task=shift_task,
+        progress=lambda d, t: (_ for _ in ()).throw(KeyboardInterrupt) if d else 0,
+    )
     store = CampaignStore.open(out)
     key = "/".join(map(str, (0, 0, 0, 0, 0, 0)))
     files = [f"{name}/c/{key}" for name in (*VARIABLES, "checksum", "done")]
@@ -289,8 +299,9 @@ def test_every_batch_is_synced_to_disk(tmp_path, monkeypatch, syncfs):
     real_fsync = os.fsync
 
     def fsync(fd):
-        events.append(("fsync", os.path.relpath(os.readlink(f"/proc/self/fd/{fd}"),
-                                                os.path.realpath(out))))
+        events.append(
+            ("fsync", os.path.relpath(os.readlink(f"/proc/self/fd/{fd}"), os.path.realpath(out)))
+        )
         real_fsync(fd)
 
     monkeypatch.setattr(store_mod, "_syncfs", fake_syncfs)
@@ -318,8 +329,7 @@ def test_layout_1_store_is_still_read_and_resumed(reference, tmp_path):
     assert campaign_status(old).complete
     _chunk(old, "mig").write_bytes(b"\0\0")
     assert campaign_status(old).n_damaged == 2
-    assert run_campaign(parse_spec(small_spec_dict()), old, serial=True,
-                        task=shift_task).n_run == 2
+    assert run_campaign(parse_spec(small_spec_dict()), old, serial=True, task=shift_task).n_run == 2
     assert_same_results(open_results(reference), open_results(old))
 
 
@@ -327,8 +337,11 @@ def _toml(d: dict) -> str:
     lines: list[str] = []
 
     def val(v):
-        return json.dumps(v) if not isinstance(v, dict) else (
-            "{ " + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + " }")
+        return (
+            json.dumps(v)
+            if not isinstance(v, dict)
+            else ("{ " + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + " }")
+        )
 
     for sec, body in d.items():
         if sec == "pattern":

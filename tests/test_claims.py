@@ -22,11 +22,13 @@ from dicblur.report.html import markdown_to_html
 def test_no_claim_has_a_constant_verdict():
     """Every _claim(...) call computes its verdict (6th argument): no string literal."""
     tree = ast.parse(inspect.getsource(claims))
-    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call)
-             and getattr(n.func, "id", None) == "_claim"]
+    calls = [
+        n
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and getattr(n.func, "id", None) == "_claim"
+    ]
     assert len(calls) >= 21
-    literal = [ast.literal_eval(c.args[0]) for c in calls
-               if isinstance(c.args[5], ast.Constant)]
+    literal = [ast.literal_eval(c.args[0]) for c in calls if isinstance(c.args[5], ast.Constant)]
     assert literal == [], f"claims with a hard-coded verdict: {literal}"
 
 
@@ -36,14 +38,17 @@ def test_no_internal_wording_in_claims():
         assert word not in src
 
 
-@pytest.mark.parametrize(("low", "high", "accept", "verdict"), [
-    (0.9, 1.1, (0.85, 1.15), "agrees"),
-    (0.8, 1.1, (0.85, 1.15), "inconclusive"),
-    (1.2, 1.4, (0.85, 1.15), "differs"),
-    (0.2, 0.6, (0.0, 1.0), "agrees"),
-    (0.7, 1.3, (0.0, 1.0), "inconclusive"),
-    (float("nan"), 1.0, (0.0, 1.0), "inconclusive"),
-])
+@pytest.mark.parametrize(
+    ("low", "high", "accept", "verdict"),
+    [
+        (0.9, 1.1, (0.85, 1.15), "agrees"),
+        (0.8, 1.1, (0.85, 1.15), "inconclusive"),
+        (1.2, 1.4, (0.85, 1.15), "differs"),
+        (0.2, 0.6, (0.0, 1.0), "agrees"),
+        (0.7, 1.3, (0.0, 1.0), "inconclusive"),
+        (float("nan"), 1.0, (0.0, 1.0), "inconclusive"),
+    ],
+)
 def test_judge_interval(low, high, accept, verdict):
     assert judge_interval(low, high, accept=accept) == verdict
 

@@ -31,9 +31,10 @@ def commands() -> dict[str, object]:
 def test_help_lists_every_command_in_pipeline_order_with_a_full_line(capsys):
     assert main(["--help"]) == 0
     text = capsys.readouterr().out
-    listing = text[text.index("Commands:"):].splitlines()[1:]
-    names = [line.split()[0] for line in listing if line.startswith("  ") and
-             not line.startswith("   ")]
+    listing = text[text.index("Commands:") :].splitlines()[1:]
+    names = [
+        line.split()[0] for line in listing if line.startswith("  ") and not line.startswith("   ")
+    ]
     assert names == list(PIPELINE)
     for line in listing:
         assert not line.rstrip().endswith("..."), line  # nothing cut short
@@ -52,6 +53,9 @@ def test_usage_lines_have_no_template_placeholders(path, capsys):
 def test_every_output_option_is_dash_o_and_double_dash_out():
     for path, cmd in commands().items():
         for param in cmd.params:
-            if param.name == "out" and getattr(param, "opts", None) and \
-                    param.param_type_name == "option":
+            if (
+                param.name == "out"
+                and getattr(param, "opts", None)
+                and param.param_type_name == "option"
+            ):
                 assert {"-o", "--out"} <= set(param.opts), path

@@ -9,14 +9,31 @@ from dicblur.cli import main
 
 def test_generate_and_metrics(tmp_path, capsys):
     out = tmp_path / "p.tif"
-    assert main(["pattern", "generate", str(out), "--size", "96x128", "--speckle-size", "4",
-                 "--seed", "1", "--softness", "0.5"]) == 0
+    assert (
+        main(
+            [
+                "pattern",
+                "generate",
+                str(out),
+                "--size",
+                "96x128",
+                "--speckle-size",
+                "4",
+                "--seed",
+                "1",
+                "--softness",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     img = load_image(out)
     assert img.shape == (96, 128)
     settings = json.loads((tmp_path / "p.tif.json").read_text())
     assert settings["generator"]["seed"] == 1
-    expected = np.clip(np.rint(speckle_pattern((96, 128), speckle_size=4, softness=0.5, seed=1)),
-                       0, 255)
+    expected = np.clip(
+        np.rint(speckle_pattern((96, 128), speckle_size=4, softness=0.5, seed=1)), 0, 255
+    )
     np.testing.assert_array_equal(img, expected)
     capsys.readouterr()
     assert main(["pattern", "metrics", str(out), "--subset", "21", "--noise", "2", "--json"]) == 0
@@ -25,11 +42,39 @@ def test_generate_and_metrics(tmp_path, capsys):
 
 
 def test_generate_16bit_and_preset(tmp_path):
-    assert main(["pattern", "generate", str(tmp_path / "p.png"), "--size", "64",
-                 "--bit-depth", "16", "--seed", "2"]) == 0
+    assert (
+        main(
+            [
+                "pattern",
+                "generate",
+                str(tmp_path / "p.png"),
+                "--size",
+                "64",
+                "--bit-depth",
+                "16",
+                "--seed",
+                "2",
+            ]
+        )
+        == 0
+    )
     assert load_image(tmp_path / "p.png").max() == 65535
-    assert main(["pattern", "generate", str(tmp_path / "q.png"), "--size", "64",
-                 "--preset", "paper4", "--seed", "2"]) == 0
+    assert (
+        main(
+            [
+                "pattern",
+                "generate",
+                str(tmp_path / "q.png"),
+                "--size",
+                "64",
+                "--preset",
+                "paper4",
+                "--seed",
+                "2",
+            ]
+        )
+        == 0
+    )
 
 
 def test_noise_command(tmp_path, capsys):
@@ -76,8 +121,9 @@ def test_cli_errors_exit_2_without_traceback(tmp_path, capsys, argv):
 def _saved_pattern(tmp_path, size: int, seed: int):
     """An 8-bit PNG of a generated pattern and the grey levels it holds."""
     out = tmp_path / "p.png"
-    img = np.clip(np.rint(speckle_pattern((size, size), speckle_size=4, softness=0.5,
-                                          seed=seed)), 0, 255)
+    img = np.clip(
+        np.rint(speckle_pattern((size, size), speckle_size=4, softness=0.5, seed=seed)), 0, 255
+    )
     save_image(out, img)
     return out, img
 
@@ -90,11 +136,29 @@ def test_predict_from_the_static_image(tmp_path, capsys):
     import dicblur
 
     out, img = _saved_pattern(tmp_path, 128, 2)
-    assert main([*PREDICT, str(out), *NOISE_SUBSET, "--blur", "0", "--blur", "2",
-                 "--angle", "90", "--json", "-o", str(tmp_path / "m.json")]) == 0
+    assert (
+        main(
+            [
+                *PREDICT,
+                str(out),
+                *NOISE_SUBSET,
+                "--blur",
+                "0",
+                "--blur",
+                "2",
+                "--angle",
+                "90",
+                "--json",
+                "-o",
+                str(tmp_path / "m.json"),
+            ]
+        )
+        == 0
+    )
     data = json.loads(capsys.readouterr().out.split("\nwrote")[0])
-    want = dicblur.predict_from_pattern(img, [0.0, 2.0], noise_sigma=2.0, subset=21,
-                                        motion=(1.0, 0.0))
+    want = dicblur.predict_from_pattern(
+        img, [0.0, 2.0], noise_sigma=2.0, subset=21, motion=(1.0, 0.0)
+    )
     np.testing.assert_allclose(data["u_e"], want.u_e, rtol=1e-6)
     model = dicblur.BlurUncertaintyModel.from_json(str(tmp_path / "m.json"))
     assert model.provenance["image"] == str(out)
@@ -106,11 +170,25 @@ def test_predict_with_the_subpixel_position(tmp_path, capsys):
     import dicblur
 
     out, img = _saved_pattern(tmp_path, 96, 4)
-    assert main([*PREDICT, str(out), *NOISE_SUBSET, "--blur", "0", "--blur", "1",
-                 "--subpixel", "0.5", "--json"]) == 0
+    assert (
+        main(
+            [
+                *PREDICT,
+                str(out),
+                *NOISE_SUBSET,
+                "--blur",
+                "0",
+                "--blur",
+                "1",
+                "--subpixel",
+                "0.5",
+                "--json",
+            ]
+        )
+        == 0
+    )
     data = json.loads(capsys.readouterr().out)
-    want = dicblur.predict_from_pattern(img, [0.0, 1.0], noise_sigma=2.0, subset=21,
-                                        subpixel=0.5)
+    want = dicblur.predict_from_pattern(img, [0.0, 1.0], noise_sigma=2.0, subset=21, subpixel=0.5)
     np.testing.assert_allclose(data["u_blur"], want.u_blur, rtol=1e-6)
     assert data["u_blur"][0] > 0 and data["subpixel"] == 0.5
     assert main([*PREDICT, str(out), *NOISE_SUBSET, "--subpixel", "half"]) == 2
@@ -120,8 +198,9 @@ def test_predict_with_the_subpixel_position(tmp_path, capsys):
 def test_predict_says_where_dic_breaks_down(tmp_path, capsys):
     import dicblur
 
-    img = dicblur.speckle_pattern((128, 128), speckle_size=2.0, density=0.5, softness=0.9,
-                                  levels=(55.0, 135.0), seed=3)
+    img = dicblur.speckle_pattern(
+        (128, 128), speckle_size=2.0, density=0.5, softness=0.9, levels=(55.0, 135.0), seed=3
+    )
     out = tmp_path / "fine.tif"
     save_image(out, img)
     blur = [a for w in ("0", "4", "8", "10") for a in ("--blur", w)]

@@ -31,14 +31,16 @@ SMALL = {"noise": 2.0, "subset": 31, "step": 10, "image_size": 128, "realisation
 
 
 def small_family(grid=(3, 1, 2)) -> PatternFamily:
-    return PatternFamily(speckle_size=(2.0, 8.0), density=(0.5, 0.5), softness=(0.0, 1.5),
-                         grid=grid)
+    return PatternFamily(
+        speckle_size=(2.0, 8.0), density=(0.5, 0.5), softness=(0.0, 1.5), grid=grid
+    )
 
 
 # --------------------------------------------------------------------------- family
 def test_family_grid_and_unit_mapping():
-    fam = PatternFamily(speckle_size=(2.0, 8.0), density=(0.3, 0.7), softness=(0.0, 2.0),
-                        grid=(3, 2, 3))
+    fam = PatternFamily(
+        speckle_size=(2.0, 8.0), density=(0.3, 0.7), softness=(0.0, 2.0), grid=(3, 2, 3)
+    )
     np.testing.assert_allclose(fam.axis(0), [2.0, 4.0, 8.0])  # geometric
     np.testing.assert_allclose(fam.axis(2), [0.0, 1.0, 2.0])
     cands = fam.grid_candidates()
@@ -50,12 +52,15 @@ def test_family_grid_and_unit_mapping():
     assert fam.from_unit([2.0, -1.0, 0.5]).key() == Candidate(8.0, 0.3, 1.0).key()
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"speckle_size": (5.0, 3.0)}, "speckle_size"),
-    ({"density": (0.0, 0.5)}, "density"),
-    ({"softness": (-1.0, 1.0)}, "softness"),
-    ({"grid": (3, 0, 2)}, "grid"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"speckle_size": (5.0, 3.0)}, "speckle_size"),
+        ({"density": (0.0, 0.5)}, "density"),
+        ({"softness": (-1.0, 1.0)}, "softness"),
+        ({"grid": (3, 0, 2)}, "grid"),
+    ],
+)
 def test_family_bad_bounds(kwargs, match):
     with pytest.raises(InputError, match=match):
         PatternFamily(**kwargs)
@@ -96,21 +101,24 @@ def test_sine_blur_distribution_matches_sampled_phases():
     assert len(p.blurs) == 41 and p.fit_blurs[-1] == pytest.approx(1.25 * w.max(), abs=1e-3)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"blur_range": (5.0, 1.0)}, "inverted"),
-    ({"blur": -1.0}, ">= 0"),
-    ({"blur_range": (-1.0, 2.0)}, ">= 0"),
-    ({"blur": float("nan")}, "blur"),
-    ({"blur": 3.0, "blur_range": (0.0, 5.0)}, "exactly one"),
-    ({}, "exactly one"),
-    ({"velocity": 10.0, "exposure": 1e-3}, "all three"),
-    ({"blur": 3.0, "noise": 0.0}, "noise"),
-    ({"blur": 3.0, "subset": 30}, "subset"),
-    ({"blur": 3.0, "image_size": 64}, "image_size"),
-    ({"blur": 3.0, "dic_shape": "quadratic"}, "dic_shape"),
-    ({"blur": 80.0}, "quarter"),
-    ({"blurs": [1.0, 2.0], "weights": [0.0, 0.0]}, "weights"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"blur_range": (5.0, 1.0)}, "inverted"),
+        ({"blur": -1.0}, ">= 0"),
+        ({"blur_range": (-1.0, 2.0)}, ">= 0"),
+        ({"blur": float("nan")}, "blur"),
+        ({"blur": 3.0, "blur_range": (0.0, 5.0)}, "exactly one"),
+        ({}, "exactly one"),
+        ({"velocity": 10.0, "exposure": 1e-3}, "all three"),
+        ({"blur": 3.0, "noise": 0.0}, "noise"),
+        ({"blur": 3.0, "subset": 30}, "subset"),
+        ({"blur": 3.0, "image_size": 64}, "image_size"),
+        ({"blur": 3.0, "dic_shape": "quadratic"}, "dic_shape"),
+        ({"blur": 80.0}, "quarter"),
+        ({"blurs": [1.0, 2.0], "weights": [0.0, 0.0]}, "weights"),
+    ],
+)
 def test_problem_bad_input(kwargs, match):
     with pytest.raises(InputError, match=match):
         design_problem(**kwargs)
@@ -152,8 +160,12 @@ def test_measurement_is_the_campaign_engines(tmp_path):
     campaign.run_campaign(campaign_spec(cand, p), tmp_path / "c.zarr", serial=True)
     ds = campaign.open_results(tmp_path / "c.zarr")
     for name in ("u_e", "sssig", "mig_ref"):
-        stored = ds[name].squeeze(["angle", "subset", "noise", "rep"]).transpose(
-            "pattern", "blur").values
+        stored = (
+            ds[name]
+            .squeeze(["angle", "subset", "noise", "rep"])
+            .transpose("pattern", "blur")
+            .values
+        )
         np.testing.assert_array_equal(stored, m[name])
 
 
@@ -195,18 +207,24 @@ def test_design_beats_default_by_more_than_measurement_uncertainty():
 
 def _fake_evaluation(c: Candidate, problem, *, stage="grid") -> Evaluation:
     # A smooth bowl with its minimum at D = 5, p = 0.45, s = 0.8 (inside the bounds).
-    f = 1e-3 * (1 + (math.log(c.speckle_size / 5.0)) ** 2 + 4 * (c.density - 0.45) ** 2
-                + 0.5 * (c.softness - 0.8) ** 2)
+    f = 1e-3 * (
+        1
+        + (math.log(c.speckle_size / 5.0)) ** 2
+        + 4 * (c.density - 0.45) ** 2
+        + 0.5 * (c.softness - 0.8) ** 2
+    )
     nan = float("nan")
-    return Evaluation(c, stage, f, (f,), (0.0,), (f,), (1.0,), nan, nan, nan, nan, nan, nan,
-                      nan, f, True, 1, 0.0)
+    return Evaluation(
+        c, stage, f, (f,), (0.0,), (f,), (1.0,), nan, nan, nan, nan, nan, nan, nan, f, True, 1, 0.0
+    )
 
 
 def test_refinement_finds_interior_optimum(monkeypatch):
     """Grid + bounded Nelder-Mead finds a known optimum in tens of evaluations."""
     monkeypatch.setattr(search_mod, "evaluate_candidate", _fake_evaluation)
-    fam = PatternFamily(speckle_size=(2.0, 10.0), density=(0.3, 0.7), softness=(0.0, 2.0),
-                        grid=(3, 3, 3))
+    fam = PatternFamily(
+        speckle_size=(2.0, 10.0), density=(0.3, 0.7), softness=(0.0, 2.0), grid=(3, 3, 3)
+    )
     p = design_problem(blur=3.0)
     r = design_pattern(p, fam, max_refine=30, confirm_realisations=0)
     b = r.best.candidate
@@ -254,16 +272,19 @@ def test_export_physical_size_and_dpi(tmp_path):
     np.testing.assert_array_equal(regenerate(e.settings), arr)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"dpi": 0}, "dpi"),
-    ({"dpi": -300}, "dpi"),
-    ({"size_mm": 0.0}, "size_mm"),
-    ({"size_mm": (10.0, -5.0)}, "size_mm"),
-    ({"scale": 0.0}, "scale"),
-    ({"dpi": 50}, "dpi >= "),                 # 0.3 mm speckle < 1 dot at 50 dpi
-    ({"size_mm": 0.5}, "larger area"),
-    ({"size_mm": 1000.0, "dpi": 1200}, "max_pixels"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"dpi": 0}, "dpi"),
+        ({"dpi": -300}, "dpi"),
+        ({"size_mm": 0.0}, "size_mm"),
+        ({"size_mm": (10.0, -5.0)}, "size_mm"),
+        ({"scale": 0.0}, "scale"),
+        ({"dpi": 50}, "dpi >= "),  # 0.3 mm speckle < 1 dot at 50 dpi
+        ({"size_mm": 0.5}, "larger area"),
+        ({"size_mm": 1000.0, "dpi": 1200}, "max_pixels"),
+    ],
+)
 def test_export_bad_input(tmp_path, kwargs, match):
     args = {"scale": 0.1, "size_mm": 20.0, "dpi": 300} | kwargs
     with pytest.raises(InputError, match=match):

@@ -37,8 +37,9 @@ def test_subpixel_translation(ref128, shape, interp):
     cur = fourier_shift(ref128, -0.2, 0.3)
     # keep subsets 6 px off the border: the mirror boundary of the spline prefilter is not
     # the periodic continuation of a Fourier-shifted image (edge error ~0.01 px)
-    res = correlate(ref128, cur, subset=21, step=15, shape=shape, interpolation=interp,
-                    roi=(6, 122, 6, 122))
+    res = correlate(
+        ref128, cur, subset=21, step=15, shape=shape, interpolation=interp, roi=(6, 122, 6, 122)
+    )
     assert res.converged.all()
     assert_allclose(res.u, 0.3, atol=0.01)
     assert_allclose(res.v, -0.2, atol=0.01)
@@ -62,8 +63,7 @@ def test_affine_strain_and_rotation():
     grads = np.median(res.params[:, [1, 2, 4, 5]], axis=0)
     assert_allclose(grads, [a[0, 0] - 1, a[0, 1], a[1, 0], a[1, 1] - 1], atol=1e-3)
     # the translation shape cannot follow the rotation as well: larger residual
-    res_t = correlate(ref, cur, subset=25, step=20, shape="translation",
-                      roi=(20, 140, 20, 140))
+    res_t = correlate(ref, cur, subset=25, step=20, shape="translation", roi=(20, 140, 20, 140))
     assert np.std(res_t.u - du) > np.std(res.u - du)
 
 
@@ -88,8 +88,15 @@ def test_subset_fftcc_finds_half_subset_and_more(ref128):
     u, v, z = subset_fftcc(ref128, cur, rows, cols, 10)
     assert_allclose(u, 11) and assert_allclose(v, 0)
     assert np.all(z > 0.99)
-    u2, v2, _ = subset_fftcc(ref128, np.roll(ref128, (-12, 0), axis=(0, 1)), rows, cols, 10,
-                             guess_u=np.zeros(3), guess_v=np.full(3, -3.0))
+    u2, v2, _ = subset_fftcc(
+        ref128,
+        np.roll(ref128, (-12, 0), axis=(0, 1)),
+        rows,
+        cols,
+        10,
+        guess_u=np.zeros(3),
+        guess_v=np.full(3, -3.0),
+    )
     assert_allclose(v2, -12) and assert_allclose(u2, 0)
     res = correlate(ref128, cur, subset=21, step=20, shape="translation", initial="subset")
     assert_allclose(res.u[res.converged], 11.0, atol=1e-3)
@@ -110,8 +117,7 @@ def test_normalised_random_error_is_one(shape):
     assert 0.9 <= s["normalised_std_u"] <= 1.1
     assert 0.9 <= s["normalised_std_v"] <= 1.1
     if shape == "affine":  # four more parameters: the bound is larger than eq. 2
-        res_t = correlate(ref_n, cur, subset=21, step=10, shape="translation",
-                          noise_sigma=2.0)
+        res_t = correlate(ref_n, cur, subset=21, step=10, shape="translation", noise_sigma=2.0)
         assert np.all(res.predicted_sigma_u > res_t.predicted_sigma_u)
 
 
@@ -130,13 +136,18 @@ def test_statuses_low_texture_and_out_of_bounds(ref128):
     pts = np.array([[64, 20], [64, 90], [5, 90], [64, 125]])
     corr = Correlator(ref, points=pts, subset=21, shape="affine", noise_sigma=1.0)
     res = corr.correlate(np.roll(ref, 1, axis=1))
-    assert res.status.tolist() == [PointStatus.LOW_TEXTURE, PointStatus.CONVERGED,
-                                   PointStatus.OUT_OF_BOUNDS, PointStatus.OUT_OF_BOUNDS]
+    assert res.status.tolist() == [
+        PointStatus.LOW_TEXTURE,
+        PointStatus.CONVERGED,
+        PointStatus.OUT_OF_BOUNDS,
+        PointStatus.OUT_OF_BOUNDS,
+    ]
     assert np.isnan(res.u[[0, 2, 3]]).all() and np.isfinite(res.u[1])
     assert np.isnan(res.predicted_sigma_u[[0, 2, 3]]).all()
     # a displacement that carries the subset out of the current image
     res2 = Correlator(ref128, points=[[64, 100]], subset=21, shape="translation").correlate(
-        ref128, initial=[30.0, 0.0])
+        ref128, initial=[30.0, 0.0]
+    )
     assert res2.status[0] == PointStatus.OUT_OF_BOUNDS
 
 
@@ -182,8 +193,12 @@ def test_bad_inputs(ref128):
     with pytest.raises(InputError, match="noise_sigma="):
         Correlator(ref128, noise_sigma=-1.0)
     # integer images are fine
-    res = correlate(ref128.astype(np.uint8), np.roll(ref128, 1, 1).astype(np.uint8), step=40,
-                    shape="translation")
+    res = correlate(
+        ref128.astype(np.uint8),
+        np.roll(ref128, 1, 1).astype(np.uint8),
+        step=40,
+        shape="translation",
+    )
     assert_allclose(res.u[res.converged], 1.0, atol=1e-3)
 
 

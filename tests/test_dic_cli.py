@@ -18,9 +18,23 @@ def test_correlate_cli_csv_and_netcdf(tmp_path, capsys):
     save_image(tmp_path / "ref.tif", ref, bit_depth=16)
     save_image(tmp_path / "cur.tif", cur, bit_depth=16)
     out = tmp_path / "field.csv"
-    code = main(["correlate", str(tmp_path / "ref.tif"), str(tmp_path / "cur.tif"),
-                 "--subset", "21", "--step", "20", "--shape", "translation", "--noise", "2",
-                 "-o", str(out)])
+    code = main(
+        [
+            "correlate",
+            str(tmp_path / "ref.tif"),
+            str(tmp_path / "cur.tif"),
+            "--subset",
+            "21",
+            "--step",
+            "20",
+            "--shape",
+            "translation",
+            "--noise",
+            "2",
+            "-o",
+            str(out),
+        ]
+    )
     text = capsys.readouterr().out
     assert code == 0
     assert "mean_u" in text and "predicted_sigma_u" in text and "points_per_s" in text
@@ -28,19 +42,34 @@ def test_correlate_cli_csv_and_netcdf(tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     u = np.array([float(r["u"]) for r in rows if r["status_name"] == "converged"])
     assert len(u) > 0 and np.allclose(u, 1.0, atol=0.02)
-    code = main(["correlate", str(tmp_path / "ref.tif"), str(tmp_path / "cur.tif"),
-                 "--step", "30", "-o", str(tmp_path / "field.nc")])
+    code = main(
+        [
+            "correlate",
+            str(tmp_path / "ref.tif"),
+            str(tmp_path / "cur.tif"),
+            "--step",
+            "30",
+            "-o",
+            str(tmp_path / "field.nc"),
+        ]
+    )
     assert code == 0 and (tmp_path / "field.nc").exists()
 
 
 def test_correlate_cli_errors(tmp_path, capsys):
     ref = pattern(64, seed=1)
     save_image(tmp_path / "a.tif", ref)
-    code = main(["correlate", str(tmp_path / "a.tif"), str(tmp_path / "a.tif"), "-o",
-                 str(tmp_path / "x.json")])
+    code = main(
+        [
+            "correlate",
+            str(tmp_path / "a.tif"),
+            str(tmp_path / "a.tif"),
+            "-o",
+            str(tmp_path / "x.json"),
+        ]
+    )
     assert code == 2 and "--out" in capsys.readouterr().err
-    code = main(["correlate", str(tmp_path / "a.tif"), str(tmp_path / "a.tif"),
-                 "--subset", "20"])
+    code = main(["correlate", str(tmp_path / "a.tif"), str(tmp_path / "a.tif"), "--subset", "20"])
     assert code == 2 and "subset=20" in capsys.readouterr().err
 
 
@@ -50,11 +79,19 @@ def test_cold_kernel_cache_is_detected_without_compiling(tmp_path):
     import subprocess
     import sys
 
-    code = ("from dicblur.dic.cache import kernels_cached; "
-            "print(kernels_cached('affine'), kernels_cached('translation'))")
+    code = (
+        "from dicblur.dic.cache import kernels_cached; "
+        "print(kernels_cached('affine'), kernels_cached('translation'))"
+    )
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                         text=True, check=True, timeout=300).stdout.split()
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=300,
+    ).stdout.split()
     assert out == ["False", "False"]
 
 
@@ -63,8 +100,15 @@ def test_correlate_says_when_it_compiles(tmp_path, capsys, monkeypatch):
 
     ref = pattern(64, seed=3)
     save_image(tmp_path / "a.tif", ref, bit_depth=16)
-    args = ["correlate", str(tmp_path / "a.tif"), str(tmp_path / "a.tif"), "--shape",
-            "translation", "--step", "30"]
+    args = [
+        "correlate",
+        str(tmp_path / "a.tif"),
+        str(tmp_path / "a.tif"),
+        "--shape",
+        "translation",
+        "--step",
+        "30",
+    ]
     asked = []
     monkeypatch.setattr(cache, "kernels_cached", lambda shape: asked.append(shape) or False)
     assert main(args) == 0
@@ -87,8 +131,18 @@ def test_first_correlate_after_install_prints_one_line_then_none(tmp_path):
     ref = pattern(64, seed=3)
     save_image(tmp_path / "a.tif", ref, bit_depth=16)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
-    cmd = [sys.executable, "-m", "dicblur", "correlate", str(tmp_path / "a.tif"),
-           str(tmp_path / "a.tif"), "--shape", "translation", "--step", "30"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "dicblur",
+        "correlate",
+        str(tmp_path / "a.tif"),
+        str(tmp_path / "a.tif"),
+        "--shape",
+        "translation",
+        "--step",
+        "30",
+    ]
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
     assert first.returncode == 0, first.stderr
     assert first.stderr.count(COMPILE_NOTICE) == 1

@@ -23,8 +23,9 @@ def ref() -> np.ndarray:
 
 def _blurred(ref: np.ndarray, d0: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Target moving from d0 to d0 + x (dy, dx px) during the exposure, continuous."""
-    return motion_blur(ref, None, substeps=None,
-                       trajectory=lambda t: d0[None, :] + t[:, None] * x[None, :])
+    return motion_blur(
+        ref, None, substeps=None, trajectory=lambda t: d0[None, :] + t[:, None] * x[None, :]
+    )
 
 
 def _vector(length: float, angle_deg: float) -> np.ndarray:
@@ -130,21 +131,27 @@ def test_estimate_recovers_blur(ref: np.ndarray, shape: str) -> None:
 
 def test_estimate_flags_unidentifiable_blur() -> None:
     rng = np.random.default_rng(5)
-    kw = {"subset": 21, "step": 10, "shape": "translation", "blur": "estimate",
-          "max_blur_sigma": 0.1}
+    kw = {
+        "subset": 21,
+        "step": 10,
+        "shape": "translation",
+        "blur": "estimate",
+        "max_blur_sigma": 0.1,
+    }
     out = []
     for contrast in (1.0, 0.1):
-        ref = dicblur.speckle_pattern((128, 128), speckle_size=5, seed=4, softness=1.0,
-                                      contrast=contrast)
+        ref = dicblur.speckle_pattern(
+            (128, 128), speckle_size=5, seed=4, softness=1.0, contrast=contrast
+        )
         x = np.array([0.0, 4.0])
         cur = _blurred(ref, np.array([0.0, -2.0]), x) + rng.normal(0.0, 2.0, ref.shape)
-        res = Correlator(ref + rng.normal(0.0, 2.0, ref.shape), **kw).correlate(
-            cur, blur_vector=x)
+        res = Correlator(ref + rng.normal(0.0, 2.0, ref.shape), **kw).correlate(cur, blur_vector=x)
         assert res.blur_identified is not None and res.blur_sigma is not None
         assert res.blur_length is not None
         ok = np.isfinite(res.blur_length)
-        out.append((res.blur_identified.mean(), np.std(res.blur_length[ok]),
-                    np.mean(res.blur_sigma[ok])))
+        out.append(
+            (res.blur_identified.mean(), np.std(res.blur_length[ok]), np.mean(res.blur_sigma[ok]))
+        )
     assert out[0][0] > 0.9  # 255 GL contrast: the blur length is measured per subset
     assert out[1][0] < 0.2  # 25 GL contrast against 2 GL noise: too little texture
     # the stated standard error is the scatter of the estimates
@@ -162,8 +169,13 @@ def test_blur_reference_derivative_and_model() -> None:
     assert d is not None
     assert np.abs((bp - bm) / (2 * h) - d).max() < 1e-5 * np.abs(d).max()
     # the centred box is Algorithm 1 (continuous) from -X/2 to +X/2, mirror boundary
-    alg = motion_blur(img, None, substeps=None, boundary="reflect",
-                      trajectory=lambda t: (t[:, None] - 0.5) * x[None, :])
+    alg = motion_blur(
+        img,
+        None,
+        substeps=None,
+        boundary="reflect",
+        trajectory=lambda t: (t[:, None] - 0.5) * x[None, :],
+    )
     assert np.abs(b - alg).max() < 1e-9
 
 
@@ -173,8 +185,7 @@ def test_deblur_wiener_restores() -> None:
     blurred, _ = blur_reference(img, x)
     inner = (slice(12, -12), slice(12, -12))
     restored = deblur_wiener(blurred, x, 0.5)
-    assert (np.abs(restored - img)[inner].std()
-            < 0.3 * np.abs(blurred - img)[inner].std())
+    assert np.abs(restored - img)[inner].std() < 0.3 * np.abs(blurred - img)[inner].std()
     assert np.array_equal(deblur_wiener(img, (0.0, 0.0), 1.0), img)
     with pytest.raises(InputError, match="noise_sigma"):
         deblur_wiener(img, x, -1.0)
@@ -188,11 +199,22 @@ def test_correlate_cli_blur_compensation(ref: np.ndarray, tmp_path, capsys) -> N
     cur = _blurred(ref, np.array([1.0, 2.0]) - x / 2, x)
     save_image(tmp_path / "ref.tif", ref, bit_depth=16)
     save_image(tmp_path / "cur.tif", cur, bit_depth=16)
-    base = ["correlate", str(tmp_path / "ref.tif"), str(tmp_path / "cur.tif"),
-            "--subset", "31", "--step", "16", "--shape", "translation"]
+    base = [
+        "correlate",
+        str(tmp_path / "ref.tif"),
+        str(tmp_path / "cur.tif"),
+        "--subset",
+        "31",
+        "--step",
+        "16",
+        "--shape",
+        "translation",
+    ]
     out = tmp_path / "field.csv"
-    assert main([*base, "--blur-compensation", "given", "--blur", "5", "--angle", "0",
-                 "-o", str(out)]) == 0
+    assert (
+        main([*base, "--blur-compensation", "given", "--blur", "5", "--angle", "0", "-o", str(out)])
+        == 0
+    )
     import csv
 
     with out.open() as fh:
@@ -203,11 +225,13 @@ def test_correlate_cli_blur_compensation(ref: np.ndarray, tmp_path, capsys) -> N
     capsys.readouterr()
     assert main([*base, "--blur-compensation", "estimate", "--angle", "0"]) == 0
     assert "blur_length_mean" in capsys.readouterr().out
-    for extra, needle in ((["--blur-compensation", "given"], "--blur"),
-                          (["--blur-compensation", "given", "--blur", "-3"], "--blur=-3"),
-                          (["--blur-compensation", "sometimes"], "--blur-compensation"),
-                          (["--blur", "3"], "only used with"),
-                          (["--blur-compensation", "given", "--blur", "40"], "subset")):
+    for extra, needle in (
+        (["--blur-compensation", "given"], "--blur"),
+        (["--blur-compensation", "given", "--blur", "-3"], "--blur=-3"),
+        (["--blur-compensation", "sometimes"], "--blur-compensation"),
+        (["--blur", "3"], "only used with"),
+        (["--blur-compensation", "given", "--blur", "40"], "subset"),
+    ):
         assert main([*base, *extra]) == 2
         assert needle in capsys.readouterr().err
 
@@ -217,8 +241,9 @@ def test_predict_compensated_zero_blur_is_match_score_bound() -> None:
     from dicblur.models.compensated import predict_compensated
 
     img = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=8, softness=0.5)
-    p = predict_compensated(img, [0.0, 4.0], noise_sigma=2.0, subset=21, step=10,
-                            derivative="central")
+    p = predict_compensated(
+        img, [0.0, 4.0], noise_sigma=2.0, subset=21, step=10, derivative="central"
+    )
     pts = np.asarray(dicblur.subset_centres(img.shape, subset=21, step=10))
     s = directional_sssig(img, pts, subset=21, angle=0.0)
     assert p.u_e[0] == pytest.approx(math.sqrt(np.mean(2 * 4.0 / s)), rel=1e-12)
@@ -235,15 +260,22 @@ def test_predict_compensated_against_monte_carlo() -> None:
     img = dicblur.speckle_pattern((128, 128), speckle_size=4, seed=9, softness=0.5)
     x = np.array([0.0, 6.0])
     cur = _blurred(img, np.array([0.0, -3.0]), x)
-    c = Correlator(img, subset=21, step=6, roi=(10, 118, 10, 118), shape="translation",
-                   blur="given")
+    c = Correlator(
+        img, subset=21, step=6, roi=(10, 118, 10, 118), shape="translation", blur="given"
+    )
     pts = np.stack([c.rows, c.cols], axis=1)
     pred = predict_compensated(img, [6.0], noise_sigma=2.0, subset=21, points=pts)
     rng = np.random.default_rng(2)
     var = []
     for _ in range(4):
-        cc = Correlator(img + rng.normal(0, 2.0, img.shape), subset=21, step=6,
-                        roi=(10, 118, 10, 118), shape="translation", blur="given")
+        cc = Correlator(
+            img + rng.normal(0, 2.0, img.shape),
+            subset=21,
+            step=6,
+            roi=(10, 118, 10, 118),
+            shape="translation",
+            blur="given",
+        )
         r = cc.correlate(cur + rng.normal(0, 2.0, img.shape), blur_vector=x)
         var.append(np.var(r.u[r.converged], ddof=1))
     measured = math.sqrt(np.mean(var))
@@ -259,13 +291,15 @@ def test_campaign_sweeps_with_compensation(tmp_path) -> None:
     dicblur.save_image(path, img * 200.0, bit_depth=16)
 
     def spec(**dic: object) -> dicblur.CampaignSpec:
-        return parse_spec({
-            "campaign": {"seed": 1},
-            "pattern": [{"name": "p", "path": str(path)}],
-            "blur": {"lengths": [0.0, 6.0], "boundary": "reflect"},
-            "noise": {"model": "per-exposure", "levels": [2.0]},
-            "dic": {"subsets": [21], "step": 8, **dic},
-        })
+        return parse_spec(
+            {
+                "campaign": {"seed": 1},
+                "pattern": [{"name": "p", "path": str(path)}],
+                "blur": {"lengths": [0.0, 6.0], "boundary": "reflect"},
+                "noise": {"model": "per-exposure", "levels": [2.0]},
+                "dic": {"subsets": [21], "step": 8, **dic},
+            }
+        )
 
     plain, comp = spec(), spec(compensation="given")
     assert plain.content_hash() == spec(compensation="none").content_hash()
@@ -285,9 +319,14 @@ def test_campaign_sweeps_with_compensation(tmp_path) -> None:
     with pytest.raises(ConfigError, match=r"dic\.compensation"):
         spec(compensation="sometimes")
     with pytest.raises(ConfigError, match="subsets larger"):
-        parse_spec({"campaign": {"seed": 1}, "pattern": [{"name": "p", "path": str(path)}],
-                    "blur": {"lengths": [0.0, 30.0]}, "dic": {"subsets": [21],
-                                                               "compensation": "given"}})
+        parse_spec(
+            {
+                "campaign": {"seed": 1},
+                "pattern": [{"name": "p", "path": str(path)}],
+                "blur": {"lengths": [0.0, 30.0]},
+                "dic": {"subsets": [21], "compensation": "given"},
+            }
+        )
 
 
 def test_pattern_predict_cli_compensation(tmp_path, capsys) -> None:
@@ -298,8 +337,21 @@ def test_pattern_predict_cli_compensation(tmp_path, capsys) -> None:
 
     img = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=8, softness=0.5)
     save_image(tmp_path / "p.tif", img, bit_depth=16)
-    args = ["pattern", "predict", str(tmp_path / "p.tif"), "--noise", "2", "--subset", "21",
-            "--step", "10", "--blur", "0", "--blur", "6"]
+    args = [
+        "pattern",
+        "predict",
+        str(tmp_path / "p.tif"),
+        "--noise",
+        "2",
+        "--subset",
+        "21",
+        "--step",
+        "10",
+        "--blur",
+        "0",
+        "--blur",
+        "6",
+    ]
     assert main([*args, "--compensation", "given", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["gain"][0] == pytest.approx(1.0, rel=0.03)  # no blur: the same matcher

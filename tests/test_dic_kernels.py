@@ -19,10 +19,10 @@ def test_prefilter_matches_scipy(order, shape):
     img = np.random.default_rng(0).normal(100, 30, shape)
     c = itp.bspline_coefficients(img, order=order, dtype=np.float64)
     ref = ndimage.spline_filter(img, order=order, mode="mirror")
-    assert_allclose(c[itp.PAD:-itp.PAD, itp.PAD:-itp.PAD], ref, atol=1e-9 * 100)
+    assert_allclose(c[itp.PAD : -itp.PAD, itp.PAD : -itp.PAD], ref, atol=1e-9 * 100)
     # the margin is the mirror continuation (whole-sample symmetry)
-    assert_allclose(c[itp.PAD - 2, itp.PAD:-itp.PAD], ref[2])
-    assert_allclose(c[itp.PAD:-itp.PAD, -itp.PAD], ref[:, -2])
+    assert_allclose(c[itp.PAD - 2, itp.PAD : -itp.PAD], ref[2])
+    assert_allclose(c[itp.PAD : -itp.PAD, -itp.PAD], ref[:, -2])
 
 
 @pytest.mark.slow
@@ -61,10 +61,14 @@ def test_spline_gradients_are_derivatives(order):
     gy, gx = itp.bspline_gradients(c, order, img.shape)
     yy, xx = np.mgrid[10:38, 10:38].astype(float)
     h = 1e-5
-    num_x = (itp.interpolate_reference(c, yy, xx + h, order)
-             - itp.interpolate_reference(c, yy, xx - h, order)) / (2 * h)
-    num_y = (itp.interpolate_reference(c, yy + h, xx, order)
-             - itp.interpolate_reference(c, yy - h, xx, order)) / (2 * h)
+    num_x = (
+        itp.interpolate_reference(c, yy, xx + h, order)
+        - itp.interpolate_reference(c, yy, xx - h, order)
+    ) / (2 * h)
+    num_y = (
+        itp.interpolate_reference(c, yy + h, xx, order)
+        - itp.interpolate_reference(c, yy - h, xx, order)
+    ) / (2 * h)
     assert_allclose(gx[10:38, 10:38], num_x, atol=1e-4)
     assert_allclose(gy[10:38, 10:38], num_y, atol=1e-4)
 
@@ -87,14 +91,14 @@ def test_icgn_kernels_match_reference(shape, interp):
     ref = pattern(96, seed=3)
     cur = fourier_shift(ref, -0.37, 0.61)
     order = int(interp[-1])
-    corr = Correlator(ref, subset=21, step=25, shape=shape, interpolation=interp,
-                      initial="zero")
+    corr = Correlator(ref, subset=21, step=25, shape=shape, interpolation=interp, initial="zero")
     res = corr.correlate(cur)
     gx, gy, cc = _spline_setup(ref, cur, order)
     for k in range(0, len(res), 2):
         p0 = np.zeros(res.params.shape[1])
-        p, z, it, ok = icgn_reference(ref, gx, gy, cc, order, int(res.rows[k]),
-                                      int(res.cols[k]), 10, shape, p0)
+        p, z, it, ok = icgn_reference(
+            ref, gx, gy, cc, order, int(res.rows[k]), int(res.cols[k]), 10, shape, p0
+        )
         assert ok and res.status[k] == 0
         assert_allclose(res.params[k], p, atol=2e-4)  # float32 kernel vs float64 reference
         assert res.zncc[k] == pytest.approx(z, abs=1e-4)
@@ -107,15 +111,16 @@ def test_affine_generic_path_matches_reference():
     ref = pattern(96, seed=4)
     a = np.array([[1.07, 0.0], [0.0, 0.96]])
     cur = affine_warp(ref, a)
-    corr = Correlator(ref, points=[[48, 48], [40, 56]], subset=21, shape="affine",
-                      initial="zero")
+    corr = Correlator(ref, points=[[48, 48], [40, 56]], subset=21, shape="affine", initial="zero")
     gx, gy, cc = _spline_setup(ref, cur, 3)
     c = 47.5
     coef = _pad_coef(corr, cur)
     for k in range(2):
         r, col = int(corr.rows[k]), int(corr.cols[k])
-        guess = np.array([(a[0, 0] - 1) * (col - c), 0.07, 0.0, (a[1, 1] - 1) * (r - c), 0.0,
-                          -0.04]) * 0.9
+        guess = (
+            np.array([(a[0, 0] - 1) * (col - c), 0.07, 0.0, (a[1, 1] - 1) * (r - c), 0.0, -0.04])
+            * 0.9
+        )
         p_k, _, _, st_k = corr._run_icgn(coef, guess[None], corr._status0[[k]], np.array([k]))
         p, _, _, ok = icgn_reference(ref, gx, gy, cc, 3, r, col, 10, "affine", guess)
         assert ok and st_k[0] == 0
@@ -126,8 +131,7 @@ def test_affine_generic_path_matches_reference():
 def _pad_coef(corr, cur):
     buf = np.zeros_like(corr._coef_buf)
     cols = cur.shape[1]
-    itp.bspline_coefficients(cur, order=3, dtype=np.float32,
-                             out=buf[:, :cols + 2 * itp.PAD])
+    itp.bspline_coefficients(cur, order=3, dtype=np.float32, out=buf[:, : cols + 2 * itp.PAD])
     return buf
 
 
@@ -153,13 +157,25 @@ def test_icgn_converges_against_a_strongly_blurred_image():
 
 def test_aitken_kernel_matches_reference_on_slow_convergence():
     ref, cur = _blurred_pair()
-    corr = Correlator(ref, points=[[64, 64], [50, 70], [80, 50]], subset=31,
-                      shape="translation", initial="zero")
+    corr = Correlator(
+        ref, points=[[64, 64], [50, 70], [80, 50]], subset=31, shape="translation", initial="zero"
+    )
     res = corr.correlate(cur)
     gx, gy, cc = _spline_setup(ref, cur, 3)
     for k in range(3):
-        p, _, it, ok = icgn_reference(ref, gx, gy, cc, 3, int(res.rows[k]), int(res.cols[k]),
-                                      15, "translation", np.zeros(2), max_iterations=200)
+        p, _, it, ok = icgn_reference(
+            ref,
+            gx,
+            gy,
+            cc,
+            3,
+            int(res.rows[k]),
+            int(res.cols[k]),
+            15,
+            "translation",
+            np.zeros(2),
+            max_iterations=200,
+        )
         assert ok and res.status[k] == 0
         assert it > 3  # a slow case: the step gain is exercised
         assert_allclose(res.params[k], p, atol=2e-3)
@@ -190,17 +206,20 @@ def test_affine_step_gain_speeds_up_a_strongly_blurred_image():
     ref = speckle_pattern((128, 128), speckle_size=4, seed=5)
     cur = motion_blur(ref, (0.0, 10.0))
     pts = [[64, 64], [50, 70], [80, 50], [40, 40]]
-    corr = Correlator(ref, points=pts, subset=31, shape="affine", initial="zero",
-                      max_iterations=200)
+    corr = Correlator(
+        ref, points=pts, subset=31, shape="affine", initial="zero", max_iterations=200
+    )
     res = corr.correlate(cur)
     gx, gy, cc = _spline_setup(ref, cur, 3)
     with_gain, plain = [], []
     for k in range(len(pts)):
         r, c = int(res.rows[k]), int(res.cols[k])
-        p, _, it, ok = icgn_reference(ref, gx, gy, cc, 3, r, c, 15, "affine", np.zeros(6),
-                                      max_iterations=200)
-        _, _, it0, ok0 = icgn_reference(ref, gx, gy, cc, 3, r, c, 15, "affine", np.zeros(6),
-                                        max_iterations=200, step_gain=False)
+        p, _, it, ok = icgn_reference(
+            ref, gx, gy, cc, 3, r, c, 15, "affine", np.zeros(6), max_iterations=200
+        )
+        _, _, it0, ok0 = icgn_reference(
+            ref, gx, gy, cc, 3, r, c, 15, "affine", np.zeros(6), max_iterations=200, step_gain=False
+        )
         assert ok and res.status[k] == 0
         assert abs(int(res.iterations[k]) - it) <= 2
         assert_allclose(res.params[k, [0, 3]], p[[0, 3]], atol=2e-3)

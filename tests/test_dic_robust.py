@@ -32,8 +32,9 @@ def test_blob_image_false_convergence_is_flagged(blob_pair, shape):
     # before: 0.71 % (translation) and 3.4 % (affine) of the POIs came back CONVERGED more
     # than 0.1 px from the truth, up to 60 predicted sigmas off, and up to 100 iterations
     ref, cur = blob_pair
-    res = Correlator(ref, subset=21, step=10, shape=shape, noise_sigma=2.0,
-                     median_test=True).correlate(cur)
+    res = Correlator(
+        ref, subset=21, step=10, shape=shape, noise_sigma=2.0, median_test=True
+    ).correlate(cur)
     err = np.hypot(res.u - TRUE_U, res.v - TRUE_V)
     wrong = res.converged & (err > 0.1)
     pred = np.hypot(res.predicted_sigma_u, res.predicted_sigma_v)
@@ -58,8 +59,9 @@ def test_clean_pattern_has_no_false_flags(shape):
     rng = np.random.default_rng(2)
     ref = img + rng.normal(0, 2, img.shape)
     cur = fourier_shift(img, TRUE_V, TRUE_U) + rng.normal(0, 2, img.shape)
-    res = Correlator(ref, subset=21, step=10, shape=shape, noise_sigma=2.0,
-                     median_test=True).correlate(cur)
+    res = Correlator(
+        ref, subset=21, step=10, shape=shape, noise_sigma=2.0, median_test=True
+    ).correlate(cur)
     assert res.converged.all()
     assert res.info["screen_noise_sigma"] == pytest.approx(2.0)
 
@@ -70,9 +72,8 @@ def test_high_residual_flags_a_local_change():
     ref = img + rng.normal(0, 2, img.shape)
     cur = fourier_shift(img, 0.0, 0.4) + rng.normal(0, 2, img.shape)
     yy, xx = np.mgrid[0:192, 0:192]
-    cur = cur + 40.0 * np.exp(-((yy - 96.0) ** 2 + (xx - 96.0) ** 2) / (2 * 4.0 ** 2))
-    res = Correlator(ref, subset=21, step=8, shape="translation",
-                     noise_sigma=2.0).correlate(cur)
+    cur = cur + 40.0 * np.exp(-((yy - 96.0) ** 2 + (xx - 96.0) ** 2) / (2 * 4.0**2))
+    res = Correlator(ref, subset=21, step=8, shape="translation", noise_sigma=2.0).correlate(cur)
     near = np.hypot(res.rows - 96, res.cols - 96) <= 4
     far = np.hypot(res.rows - 96, res.cols - 96) > 30
     assert np.all(res.status[near] == PointStatus.HIGH_RESIDUAL)
@@ -119,8 +120,9 @@ def test_median_test_needs_a_grid():
 def test_statuses_reach_csv_xarray_and_cli(tmp_path, capsys, blob_pair):
     ref, cur = blob_pair
     ref, cur = ref[:256, :256], cur[:256, :256]
-    res = Correlator(ref, subset=21, step=10, shape="affine", noise_sigma=2.0,
-                     median_test=True).correlate(cur)
+    res = Correlator(
+        ref, subset=21, step=10, shape="affine", noise_sigma=2.0, median_test=True
+    ).correlate(cur)
     assert np.isin(res.status, FLAGS).any()
     res.to_csv(tmp_path / "f.csv")
     with (tmp_path / "f.csv").open() as fh:
@@ -131,8 +133,16 @@ def test_statuses_reach_csv_xarray_and_cli(tmp_path, capsys, blob_pair):
     assert "6=HIGH_RESIDUAL" in legend and "7=OUTLIER" in legend
     save_image(tmp_path / "r.tif", np.clip(ref, 0, 255), bit_depth=16)
     save_image(tmp_path / "c.tif", np.clip(cur, 0, 255), bit_depth=16)
-    code = main(["correlate", str(tmp_path / "r.tif"), str(tmp_path / "c.tif"), "--noise",
-                 "2", "--median-test"])
+    code = main(
+        [
+            "correlate",
+            str(tmp_path / "r.tif"),
+            str(tmp_path / "c.tif"),
+            "--noise",
+            "2",
+            "--median-test",
+        ]
+    )
     text = capsys.readouterr().out
     assert code == 0 and "n_outlier" in text and "n_high_residual" in text
 
@@ -146,8 +156,12 @@ def _median_test_reference(u, v, valid, eps, thr, min_nb):
         for x in range(nx):
             if not valid[y, x]:
                 continue
-            nb = [(yy, xx) for yy in range(y - 1, y + 2) for xx in range(x - 1, x + 2)
-                  if (yy, xx) != (y, x) and 0 <= yy < ny and 0 <= xx < nx and valid[yy, xx]]
+            nb = [
+                (yy, xx)
+                for yy in range(y - 1, y + 2)
+                for xx in range(x - 1, x + 2)
+                if (yy, xx) != (y, x) and 0 <= yy < ny and 0 <= xx < nx and valid[yy, xx]
+            ]
             if len(nb) < min_nb:
                 continue
             for a in (u, v):
@@ -174,8 +188,7 @@ def test_median_test_finds_planted_outliers():
     out = normalized_median_test(u, v, (ny, nx))
     assert set(zip(*np.nonzero(out), strict=True)) == set(planted)
     # flat row-major input gives the same, flat
-    assert np.array_equal(normalized_median_test(u.ravel(), v.ravel(), (ny, nx)),
-                          out.ravel())
+    assert np.array_equal(normalized_median_test(u.ravel(), v.ravel(), (ny, nx)), out.ravel())
     # an invalid outlier is neither tested nor used as a neighbour
     valid = np.ones((ny, nx), bool)
     valid[12, 12] = False
@@ -194,8 +207,9 @@ def test_median_test_matches_the_definition():
         valid = rng.random((ny, nx)) > 0.15
         u[~valid & (rng.random((ny, nx)) < 0.5)] = np.nan
         eps, thr, mn = [(0.1, 2.0, 3), (0.0, 2.0, 1), (0.05, 1.5, 5)][trial % 3]
-        got = normalized_median_test(u, v, (ny, nx), valid=valid, eps=eps, threshold=thr,
-                                     min_neighbours=mn)
+        got = normalized_median_test(
+            u, v, (ny, nx), valid=valid, eps=eps, threshold=thr, min_neighbours=mn
+        )
         ok = valid & np.isfinite(u)
         want = _median_test_reference(u, v, ok, eps, thr, mn)
         assert np.array_equal(got, want), trial

@@ -10,15 +10,28 @@ from importlib.metadata import version
 
 import pytest
 
-HEAVY = ("numpy", "scipy", "numba", "xarray", "pandas", "dask", "distributed", "zarr",
-         "matplotlib", "PIL", "tifffile", "imageio")
+HEAVY = (
+    "numpy",
+    "scipy",
+    "numba",
+    "xarray",
+    "pandas",
+    "dask",
+    "distributed",
+    "zarr",
+    "matplotlib",
+    "PIL",
+    "tifffile",
+    "imageio",
+)
 
 
 def imported_after(code: str) -> set[str]:
     """Modules present in ``sys.modules`` after running ``code`` in a new interpreter."""
     probe = f"{code}\nimport json, sys\nprint(json.dumps(sorted(sys.modules)))"
-    proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
-                          check=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, timeout=300
+    )
     return set(json.loads(proc.stdout.strip().splitlines()[-1]))
 
 
@@ -49,7 +62,8 @@ def test_cli_version_and_help_import_only_the_cli(argv):
     assert not top(mods) & set(HEAVY)
     ours = {m for m in mods if m.startswith("dicblur")}
     assert ours - {"dicblur", "dicblur._version", "dicblur.errors"} == {
-        m for m in ours if m.startswith("dicblur.cli")}
+        m for m in ours if m.startswith("dicblur.cli")
+    }
 
 
 def test_version_is_the_installed_metadata(capsys):

@@ -55,8 +55,11 @@ def test_static_models_closed_forms():
     got = match_score_uncertainty(s, sig)
     assert got.shape == (2, 2)
     np.testing.assert_allclose(got, np.sqrt(2 * sig**2 / s), rtol=1e-14)
-    np.testing.assert_allclose(pan_uncertainty([2.0, 4.0], 3.0, 21),
-                               math.sqrt(2) * 3.0 / (21 * np.array([2.0, 4.0])), rtol=1e-14)
+    np.testing.assert_allclose(
+        pan_uncertainty([2.0, 4.0], 3.0, 21),
+        math.sqrt(2) * 3.0 / (21 * np.array([2.0, 4.0])),
+        rtol=1e-14,
+    )
 
 
 # ----------------------------------------------------------------------------- fits
@@ -129,8 +132,7 @@ def test_noise_exponents_fitted_with_several_levels():
     assert pl.names == ("u_ref", "alpha", "kappa")
     k = pl.parameter("kappa")
     assert k.low <= 2 * alpha <= k.high
-    um = mismatch_model(w, s, sig, c=5e-4, a=2.0, gamma=1.0) * np.exp(
-        rng.normal(0, 0.01, w.size))
+    um = mismatch_model(w, s, sig, c=5e-4, a=2.0, gamma=1.0) * np.exp(rng.normal(0, 0.01, w.size))
     mm = fit_mismatch(w, s, um, noise_sigma=sig, next_term=False)
     g = mm.parameter("gamma")
     assert mm.names == ("a", "gamma", "c") and g.low <= 1.0 <= g.high
@@ -193,8 +195,11 @@ def test_taylor_vs_exact_at_small_w():
 
 def test_pan_variant():
     mig0, n = 12.0, 21
-    np.testing.assert_allclose(combined_pan_model(W, ETA, ALPHA, BETA, mig0=mig0, subset=n),
-                               combined_model(W, ETA, ALPHA, n**2 * mig0**2, BETA), rtol=1e-14)
+    np.testing.assert_allclose(
+        combined_pan_model(W, ETA, ALPHA, BETA, mig0=mig0, subset=n),
+        combined_model(W, ETA, ALPHA, n**2 * mig0**2, BETA),
+        rtol=1e-14,
+    )
 
 
 # ----------------------------------------------------------------------------- the model value
@@ -205,8 +210,16 @@ def model() -> BlurUncertaintyModel:
     rng = np.random.default_rng(0)
     s = sssig_decay(W, S0, BETA) * np.exp(rng.normal(0, 0.01, W.size))
     u = mismatch_model(W, s, 2.0, c=7e-4) * np.exp(rng.normal(0, 0.02, W.size))
-    return fit_blur_model(W, s, u, noise_sigma=2.0, subset=31, mean_level=120.0,
-                          c_static=6.8e-4, provenance={"pattern": "synthetic", "seed": (0, 1)})
+    return fit_blur_model(
+        W,
+        s,
+        u,
+        noise_sigma=2.0,
+        subset=31,
+        mean_level=120.0,
+        c_static=6.8e-4,
+        provenance={"pattern": "synthetic", "seed": (0, 1)},
+    )
 
 
 def test_model_value(model):
@@ -214,8 +227,7 @@ def test_model_value(model):
     assert model.comparison is not None and model.comparison["better"] == "mismatch"
     assert model.mbrf == pytest.approx(2 * model.alpha * model.beta)
     pred = model.predict([0.0, 2.0, 4.0, 8.0])
-    truth = mismatch_model([0.0, 2.0, 4.0, 8.0], sssig_decay([0, 2, 4, 8.0], S0, BETA), 2.0,
-                           c=7e-4)
+    truth = mismatch_model([0.0, 2.0, 4.0, 8.0], sssig_decay([0, 2, 4, 8.0], S0, BETA), 2.0, c=7e-4)
     assert np.all((pred.low <= truth) & (truth <= pred.high))
     np.testing.assert_allclose(pred.u_e**2, pred.u_noise**2 + pred.u_blur**2, rtol=1e-10)
     # at another noise the noise term scales with sigma (gamma = 1) and the blur term not
@@ -283,8 +295,12 @@ def test_units():
     assert parse_quantity("0.05mm/px", "scale") == pytest.approx(0.05)
     assert parse_quantity("0.5um", "blur", scale=0.05) == pytest.approx(0.01)
     assert parse_quantity(3.0, "blur") == 3.0
-    for bad, kind in (("12 furlongs/s", "velocity"), ("fast", "velocity"), ("1mm", "time"),
-                      ("0.5um", "blur")):
+    for bad, kind in (
+        ("12 furlongs/s", "velocity"),
+        ("fast", "velocity"),
+        ("1mm", "time"),
+        ("0.5um", "blur"),
+    ):
         with pytest.raises(InputError):
             parse_quantity(bad, kind)  # type: ignore[arg-type]
 
@@ -300,10 +316,8 @@ def test_plan_fixed_noise(model):
 def _noiseless(kind: str, beta: float) -> BlurUncertaintyModel:
     w = np.arange(0.0, 8.01, 1.0)
     s = sssig_decay(w, S0, beta)
-    u = (mismatch_model(w, s, 2.0, c=7e-4) if kind == "mismatch"
-         else 0.02 * (s / 4.0) ** (-0.7))
-    return fit_blur_model(w, s, u, noise_sigma=2.0, mean_level=100.0, default=kind,
-                          next_term=False)
+    u = mismatch_model(w, s, 2.0, c=7e-4) if kind == "mismatch" else 0.02 * (s / 4.0) ** (-0.7)
+    return fit_blur_model(w, s, u, noise_sigma=2.0, mean_level=100.0, default=kind, next_term=False)
 
 
 def test_plan_power_law_with_camera_refused():
@@ -353,8 +367,9 @@ def test_camera_adapter_matches_camera_noise():
     assert expect == pytest.approx(math.sqrt(0.02 * level + 1.5**2), rel=1e-12)
     assert frames.std() == pytest.approx(expect, rel=0.02)
     with pytest.raises(InputError, match="shot noise"):
-        PoissonGaussianCamera.from_camera(dicblur.Camera(read_noise=1.0, bit_depth=None),
-                                          nominal_exposure=1e-3, mean_level=level)
+        PoissonGaussianCamera.from_camera(
+            dicblur.Camera(read_noise=1.0, bit_depth=None), nominal_exposure=1e-3, mean_level=level
+        )
 
 
 # ----------------------------------------------------------------------------- static c
@@ -376,12 +391,16 @@ def _znssd_resid(g, ref):
     return a - b
 
 
-@pytest.mark.parametrize(("shape", "motion", "criterion"),
-                         [("translation", (0.0, 1.0), "ssd"),
-                          ("translation", (1.0, 1.0), "ssd"),
-                          ("affine", (0.0, 1.0), "ssd"),
-                          ("translation", (1.0, 1.0), "znssd"),
-                          ("affine", (0.0, 1.0), "znssd")])
+@pytest.mark.parametrize(
+    ("shape", "motion", "criterion"),
+    [
+        ("translation", (0.0, 1.0), "ssd"),
+        ("translation", (1.0, 1.0), "ssd"),
+        ("affine", (0.0, 1.0), "ssd"),
+        ("translation", (1.0, 1.0), "znssd"),
+        ("affine", (0.0, 1.0), "znssd"),
+    ],
+)
 def test_static_c_matches_brute_force_minimum(shape, motion, criterion):
     # exact (Fourier) interpolation in the brute force, so the static side uses the true
     # (spectral) derivatives; the spline-gradient default is checked against IC-GN in
@@ -396,12 +415,20 @@ def test_static_c_matches_brute_force_minimum(shape, motion, criterion):
     spec_b = np.fft.fft2(img) * np.sinc(wlen * (d[0] * ky + d[1] * kx))
     sub, h = 15, 7
     centres = np.array([[12, 12], [12, 34], [34, 20], [30, 34]])
-    bs = blur_sensitivity(img, subset=sub, points=centres, motion=motion, shape=shape,
-                          boundary="periodic", derivative="spectral", criterion=criterion)
+    bs = blur_sensitivity(
+        img,
+        subset=sub,
+        points=centres,
+        motion=motion,
+        shape=shape,
+        boundary="periodic",
+        derivative="spectral",
+        criterion=criterion,
+    )
     oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
     oy, ox = oy.ravel(), ox.ravel()
     for i, (r, c) in enumerate(centres):
-        ref = img[r - h:r + h + 1, c - h:c + h + 1].ravel()
+        ref = img[r - h : r + h + 1, c - h : c + h + 1].ravel()
 
         def resid(p, r=r, c=c, ref=ref):
             if shape == "translation":
@@ -419,10 +446,14 @@ def test_static_c_matches_brute_force_minimum(shape, motion, criterion):
         assert along == pytest.approx(bs.k[i] * wlen**2, rel=0.05, abs=0.03 * bs.c * wlen**2)
 
 
-
-@pytest.mark.parametrize(("shape", "motion", "wlen"), [("translation", (0.0, 1.0), 3.0),
-                                                       ("affine", (1.0, 2.0), 3.0),
-                                                       ("translation", (1.0, 0.0), 5.0)])
+@pytest.mark.parametrize(
+    ("shape", "motion", "wlen"),
+    [
+        ("translation", (0.0, 1.0), 3.0),
+        ("affine", (1.0, 2.0), 3.0),
+        ("translation", (1.0, 0.0), 5.0),
+    ],
+)
 def test_mismatch_curve_matches_the_icgn_fixed_point_at_finite_blur(shape, motion, wlen):
     # W of the order of the speckle size, where c W**2 is off by 10-40 %. IC-GN stops where
     # sum J_f^T [f_hat - g_hat(W(x; p))] = 0 (J_f: reference gradients), which is not the
@@ -439,8 +470,16 @@ def test_mismatch_curve_matches_the_icgn_fixed_point_at_finite_blur(shape, motio
     fy = np.fft.ifft2(spec * 2j * np.pi * ky).real
     sub, h = 15, 7
     centres = np.array([[12, 12], [12, 34], [34, 20], [30, 34]])
-    curve = blur_mismatch_curve(img, [wlen], subset=sub, points=centres, motion=motion,
-                                shape=shape, boundary="periodic", derivative="spectral")
+    curve = blur_mismatch_curve(
+        img,
+        [wlen],
+        subset=sub,
+        points=centres,
+        motion=motion,
+        shape=shape,
+        boundary="periodic",
+        derivative="spectral",
+    )
     oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
     oy, ox = oy.ravel(), ox.ravel()
     for i, (r, c) in enumerate(centres):
@@ -472,13 +511,19 @@ def test_mismatch_curve_matches_the_icgn_fixed_point_at_finite_blur(shape, motio
 # "central" is left out: its leading order uses the second difference for f_dd, while the
 # curve blurs the image exactly
 @pytest.mark.parametrize("derivative", ["bspline3", "bspline5", "spectral"])
-@pytest.mark.parametrize(("shape", "criterion"), [("translation", "znssd"),
-                                                  ("affine", "znssd"),
-                                                  ("affine", "ssd")])
+@pytest.mark.parametrize(
+    ("shape", "criterion"), [("translation", "znssd"), ("affine", "znssd"), ("affine", "ssd")]
+)
 def test_mismatch_curve_tends_to_leading_order(derivative, shape, criterion):
     img = dicblur.speckle_pattern((96, 96), speckle_size=4.0, seed=5)
-    kw = dict(subset=21, step=15, motion=(1.0, 1.0), shape=shape, derivative=derivative,
-              criterion=criterion)
+    kw = dict(
+        subset=21,
+        step=15,
+        motion=(1.0, 1.0),
+        shape=shape,
+        derivative=derivative,
+        criterion=criterion,
+    )
     bs = blur_sensitivity(img, **kw)
     w = np.array([0.0, 0.02, 0.04])
     curve = blur_mismatch_curve(img, w, **kw)
@@ -491,7 +536,6 @@ def test_mismatch_curve_tends_to_leading_order(derivative, shape, criterion):
     assert curve.u_blur[1] == pytest.approx(np.std(curve.shifts[1]))
     assert curve.mean[1] == pytest.approx(np.mean(curve.shifts[1]))
     assert curve.motion == pytest.approx((1 / math.sqrt(2), 1 / math.sqrt(2)))
-
 
 
 def test_mismatch_curve_leaves_out_broken_down_subsets():
@@ -510,6 +554,7 @@ def test_mismatch_curve_leaves_out_broken_down_subsets():
     assert every.u_blur[1] > cv.u_blur[1]
     np.testing.assert_array_equal(every.shifts[0], cv.shifts[0])
 
+
 def test_blur_sensitivity_options_are_checked():
     img = dicblur.speckle_pattern((64, 64), speckle_size=4.0, seed=5)
     with pytest.raises(InputError, match="derivative='cubic'"):
@@ -523,13 +568,15 @@ def test_blur_sensitivity_options_are_checked():
     with pytest.raises(InputError, match="fewer than two subsets"):
         blur_mismatch_curve(np.full((64, 64), 9.0), [1.0], subset=21)
 
+
 def test_blur_sensitivity_consistency():
     img = dicblur.speckle_pattern((128, 128), speckle_size=4.0, seed=2)
     pm = dicblur.pattern_metrics(img, subset=21)
     bs = blur_sensitivity(img, subset=21)
     assert pm.blur_sensitivity_c == pytest.approx(bs.c, rel=1e-12)
-    assert dicblur.pattern_metrics(img, subset=21, blur_sensitivity=False).blur_sensitivity_c \
-        is None
+    assert (
+        dicblur.pattern_metrics(img, subset=21, blur_sensitivity=False).blur_sensitivity_c is None
+    )
     # intensity scaling does not change c; nor does the sign of the image
     assert blur_sensitivity(-img, subset=21).c == pytest.approx(bs.c, rel=1e-9)
 
@@ -539,18 +586,20 @@ def test_translation_form_reduces_to_the_1d_formula():
     # k_i = -sum(f_x f_xx) / (24 sum(f_x^2)) (paper-brief s. 10), central differences
     rng = np.random.default_rng(0)
     n = 64
-    p = np.convolve(np.tile(rng.normal(0, 50, n), 3), np.ones(5) / 5, mode="same")[n:2 * n]
+    p = np.convolve(np.tile(rng.normal(0, 50, n), 3), np.ones(5) / 5, mode="same")[n : 2 * n]
     q = 30 * np.cos(2 * np.pi * np.arange(n) / 16)
     img = p[None, :] + q[:, None]
     centres = np.array([[16, 20], [32, 31], [48, 45]])
-    k = blur_sensitivity(img, subset=15, points=centres, derivative="central",
-                         boundary="periodic", criterion="ssd").k
+    k = blur_sensitivity(
+        img, subset=15, points=centres, derivative="central", boundary="periodic", criterion="ssd"
+    ).k
     px = 0.5 * (np.roll(p, -1) - np.roll(p, 1))
     pxx = np.roll(p, -1) - 2 * p + np.roll(p, 1)
     for i, (_, c) in enumerate(centres):
         sl = slice(c - 7, c + 8)
-        assert k[i] == pytest.approx(-np.sum(px[sl] * pxx[sl]) / (24 * np.sum(px[sl] ** 2)),
-                                     rel=1e-9)
+        assert k[i] == pytest.approx(
+            -np.sum(px[sl] * pxx[sl]) / (24 * np.sum(px[sl] ** 2)), rel=1e-9
+        )
 
 
 def test_intensity_scaling_invariance():
@@ -611,9 +660,15 @@ def test_pattern_noise_variance_matches_monte_carlo_of_the_fixed_point():
     ky = np.fft.fftfreq(n)[:, None]
     blurred = np.fft.ifft2(np.fft.fft2(img) * np.sinc(wlen * kx)).real
     r, c = 24, 24
-    pred = predict_from_pattern(img, [wlen], noise_sigma=sigma, subset=sub,
-                                points=[[r, c]] * 2, boundary="periodic",
-                                derivative="spectral")
+    pred = predict_from_pattern(
+        img,
+        [wlen],
+        noise_sigma=sigma,
+        subset=sub,
+        points=[[r, c]] * 2,
+        boundary="periodic",
+        derivative="spectral",
+    )
     oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
     oy, ox = oy.ravel(), ox.ravel()
     sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
@@ -646,8 +701,7 @@ def test_model_from_pattern_follows_the_prediction_and_plans():
     pred = predict_from_pattern(img, w, noise_sigma=2.0, subset=21, step=10)
     assert np.all(np.diff(pred.u_e[2:]) > 0)  # the mismatch takes over
     np.testing.assert_allclose(pred.u_e, np.hypot(pred.u_noise, pred.u_blur))
-    assert pred.sssig[0] == pytest.approx(
-        dicblur.sssig(img, subset=21, step=10).mean(), rel=1e-9)
+    assert pred.sssig[0] == pytest.approx(dicblur.sssig(img, subset=21, step=10).mean(), rel=1e-9)
     model = model_from_pattern(img, noise_sigma=2.0, subset=21, step=10, blur=w)
     assert model.provenance["source"] == "static prediction"
     assert model.noise_sigma == 2.0
@@ -676,8 +730,9 @@ def test_interpolated_noise_covariance_matches_simulation():
         assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
         interp = _interpolated_at(noise, "periodic", 0.0, t, order)[0]
         # the interpolant at x + t of noise moved by t: a filtered copy of the same noise
-        emp = [np.mean(interp[:, 8:-8] * interp[:, 8 + k:interp.shape[1] - 8 + k])
-               for k in range(4)]
+        emp = [
+            np.mean(interp[:, 8:-8] * interp[:, 8 + k : interp.shape[1] - 8 + k]) for k in range(4)
+        ]
         np.testing.assert_allclose(emp, cov[0, :4], atol=0.01)
     assert np.allclose(_interpolated_noise_covariance(0.0, 3, 4), np.eye(4), atol=1e-12)
 
@@ -692,7 +747,8 @@ def test_subpixel_options_of_the_static_prediction():
     # the interpolant filters the current image's noise most at half a pixel
     assert half.u_noise[0] < avg.u_noise[0] < aligned.u_noise[0]
     assert predict_from_pattern(img, [0.0], subpixel=0.0, **kw).u_e[0] == pytest.approx(
-        aligned.u_e[0], rel=1e-9)
+        aligned.u_e[0], rel=1e-9
+    )
     for bad in (1.0, -0.1, "half", float("nan"), True):
         with pytest.raises(InputError, match="subpixel"):
             predict_from_pattern(img, [0.0], subpixel=bad, **kw)  # type: ignore[arg-type]

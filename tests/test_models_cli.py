@@ -19,15 +19,17 @@ def results_csv(tmp_path):
     w = np.arange(0.0, 10.01, 1.0)
     with path.open("w", newline="") as fh:
         out = csv.writer(fh)
-        out.writerow(["pattern", "noise", "blur", "rep", "sssig", "u_e", "contrast_ref",
-                      "contrast"])
+        out.writerow(
+            ["pattern", "noise", "blur", "rep", "sssig", "u_e", "contrast_ref", "contrast"]
+        )
         for noise in (1.0, 2.0):
             for rep in range(2):
                 s = sssig_decay(w, 1.85e5, 0.022)
                 u = mismatch_model(w, s, noise, c=7e-4) * np.exp(rng.normal(0, 0.02, w.size))
                 for row in zip(w, s, u, strict=True):
-                    out.writerow(["p1", noise, row[0], rep, row[1], row[2], 0.9,
-                                  0.9 / (1 + 0.01 * row[0])])
+                    out.writerow(
+                        ["p1", noise, row[0], rep, row[1], row[2], 0.9, 0.9 / (1 + 0.01 * row[0])]
+                    )
     return path
 
 
@@ -45,18 +47,68 @@ def test_fit_predict_plan(results_csv, tmp_path, capsys):
     expect = model.predict([3.0], 2.0).u_e[0]
     assert got["predictions"][0]["u_e_px"] == pytest.approx(expect, rel=1e-12)
     # 120 mm/s x 1 ms / 0.05 mm/px = 2.4 px
-    assert main(["predict", str(model_path), "--velocity", "120mm/s", "--exposure", "1ms",
-                 "--scale", "0.05mm/px", "--noise", "2", "--json"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                str(model_path),
+                "--velocity",
+                "120mm/s",
+                "--exposure",
+                "1ms",
+                "--scale",
+                "0.05mm/px",
+                "--noise",
+                "2",
+                "--json",
+            ]
+        )
+        == 0
+    )
     got = json.loads(capsys.readouterr().out)
     assert got["predictions"][0]["blur_px"] == pytest.approx(2.4)
 
-    assert main(["plan", str(model_path), "--velocity", "120mm/s", "--scale", "0.05mm/px",
-                 "--target", "0.01px", "--noise", "2"]) == 0
+    assert (
+        main(
+            [
+                "plan",
+                str(model_path),
+                "--velocity",
+                "120mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--target",
+                "0.01px",
+                "--noise",
+                "2",
+            ]
+        )
+        == 0
+    )
     assert "rule of thumb" in capsys.readouterr().out
     fig = tmp_path / "plan.png"
-    assert main(["plan", str(model_path), "--velocity", "120mm/s", "--scale", "20px/mm",
-                 "--full-well", "20000", "--read-noise", "5", "--flux", "4e6", "--plot",
-                 str(fig), "--json"]) == 0
+    assert (
+        main(
+            [
+                "plan",
+                str(model_path),
+                "--velocity",
+                "120mm/s",
+                "--scale",
+                "20px/mm",
+                "--full-well",
+                "20000",
+                "--read-noise",
+                "5",
+                "--flux",
+                "4e6",
+                "--plot",
+                str(fig),
+                "--json",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     plan = json.loads(text[: text.rindex("}") + 1])
     assert plan["optimal"] and plan["exposure"] > 0
@@ -70,8 +122,7 @@ def test_fit_takes_the_papers_column_names_in_any_case(results_csv, tmp_path, ca
     paper = tmp_path / "paper.csv"
     paper.write_text("\n".join([header, *rows[1:]]) + "\n")
     assert main(["fit", str(results_csv), "-o", str(tmp_path / "a.json")]) == 0
-    assert main(["fit", str(paper), "-o", str(tmp_path / "b.json"), "--select",
-                 "PATTERN=p1"]) == 0
+    assert main(["fit", str(paper), "-o", str(tmp_path / "b.json"), "--select", "PATTERN=p1"]) == 0
     a = BlurUncertaintyModel.from_json(str(tmp_path / "a.json"))
     b = BlurUncertaintyModel.from_json(str(tmp_path / "b.json"))
     assert b.decay["beta"] == a.decay["beta"] and b.mismatch["c"] == a.mismatch["c"]
@@ -84,6 +135,7 @@ def test_fit_takes_the_papers_column_names_in_any_case(results_csv, tmp_path, ca
 
 def test_fit_from_netcdf(tmp_path, capsys):
     import xarray as xr
+
     w = np.arange(0.0, 8.01, 1.0)
     s = sssig_decay(w, 1e5, 0.03)
     u = mismatch_model(w, s, 2.0, c=5e-4)
@@ -99,6 +151,7 @@ def test_fit_from_netcdf(tmp_path, capsys):
 def test_fit_from_campaign_zarr(tmp_path, capsys):
     # the campaign layout: dims (pattern, angle, subset, noise, blur, rep), effective noise
     import xarray as xr
+
     w = np.arange(0.0, 8.01, 1.0)
     s = sssig_decay(w, 1e5, 0.03)
     dims = ("pattern", "angle", "subset", "noise", "blur", "rep")
@@ -109,11 +162,20 @@ def test_fit_from_campaign_zarr(tmp_path, capsys):
         for j in range(2):
             u[p, 0, 0, j] = mismatch_model(w, s, eff[j], c=5e-4 * (p + 1))[:, None]
     ds = xr.Dataset(
-        {"u_e": (dims, u), "sssig": (dims, np.broadcast_to(s[:, None], shape)),
-         "noise_effective": (dims, np.broadcast_to(eff[None, None, None, :, None, None],
-                                                   shape))},
-        coords={"pattern": ["a", "b"], "angle": [0.0], "subset": [31], "noise": [1.0, 2.0],
-                "blur": w, "rep": [0, 1]})
+        {
+            "u_e": (dims, u),
+            "sssig": (dims, np.broadcast_to(s[:, None], shape)),
+            "noise_effective": (dims, np.broadcast_to(eff[None, None, None, :, None, None], shape)),
+        },
+        coords={
+            "pattern": ["a", "b"],
+            "angle": [0.0],
+            "subset": [31],
+            "noise": [1.0, 2.0],
+            "blur": w,
+            "rep": [0, 1],
+        },
+    )
     path = tmp_path / "results.zarr"
     ds.to_zarr(path)
     out = tmp_path / "m.json"
@@ -136,13 +198,41 @@ def test_cli_errors(results_csv, tmp_path, capsys):
     model_path = tmp_path / "model.json"
     assert main(["fit", str(results_csv), "-o", str(model_path)]) == 0
     capsys.readouterr()
-    assert main(["plan", str(model_path), "--velocity", "0mm/s", "--scale", "0.05mm/px",
-                 "--target", "0.01px", "--noise", "2"]) == 2
+    assert (
+        main(
+            [
+                "plan",
+                str(model_path),
+                "--velocity",
+                "0mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--target",
+                "0.01px",
+                "--noise",
+                "2",
+            ]
+        )
+        == 2
+    )
     assert "velocity" in capsys.readouterr().err
     assert main(["predict", str(model_path), "--velocity", "1m/s"]) == 2
     assert "all three" in capsys.readouterr().err
-    assert main(["plan", str(model_path), "--velocity", "1m/s", "--scale", "0.05mm/px",
-                 "--full-well", "1e4"]) == 2
+    assert (
+        main(
+            [
+                "plan",
+                str(model_path),
+                "--velocity",
+                "1m/s",
+                "--scale",
+                "0.05mm/px",
+                "--full-well",
+                "1e4",
+            ]
+        )
+        == 2
+    )
     assert "--flux" in capsys.readouterr().err
 
 
@@ -164,20 +254,29 @@ def test_plan_shot_noise_at_reference_level(results_csv, tmp_path, capsys):
     assert main([*base, *cam_args, "--reference", str(ref), "--json"]) == 0
     got = json.loads(capsys.readouterr().out)
     from dicblur import load_image
+
     loaded = load_image(ref)
     # the model records no mean level: the reference's own mean is the scale
     assert model.mean_level is None
     level = gradient_weighted_level(loaded)
     cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)
-    expect = plan_exposure(model, velocity="120mm/s", scale="0.05mm/px", camera=cam,
-                           noise_level=level, mean_level=float(loaded.mean()))
+    expect = plan_exposure(
+        model,
+        velocity="120mm/s",
+        scale="0.05mm/px",
+        camera=cam,
+        noise_level=level,
+        mean_level=float(loaded.mean()),
+    )
     assert got["exposure"] == pytest.approx(expect.exposure, rel=1e-12)
     # --noise-level is a grey level on the model's scale (127.5 GL assumed here)
     assert main([*base, *cam_args, "--noise-level", str(level), "--json"]) == 0
-    same = plan_exposure(model, velocity="120mm/s", scale="0.05mm/px", camera=cam,
-                         noise_level=level)
-    assert json.loads(capsys.readouterr().out)["exposure"] == pytest.approx(same.exposure,
-                                                                            rel=1e-12)
+    same = plan_exposure(
+        model, velocity="120mm/s", scale="0.05mm/px", camera=cam, noise_level=level
+    )
+    assert json.loads(capsys.readouterr().out)["exposure"] == pytest.approx(
+        same.exposure, rel=1e-12
+    )
     # fixed noise has no shot noise to place; both options at once are ambiguous
     assert main([*base, "--target", "0.01px", "--noise", "2", "--noise-level", "100"]) != 0
     assert main([*base, *cam_args, "--reference", str(ref), "--noise-level", "100"]) != 0

@@ -49,21 +49,25 @@ def test_floor_recovered_from_two_noise_levels():
         assert p.low <= true <= p.high, (name, p)
     # with two levels a fitted gamma < 1 mimics the floor (AIC cannot choose), so "auto"
     # keeps the gamma model; three levels over a wider range separate them
-    assert fit_mismatch(w, s, u, noise_sigma=sig, next_term=False).names == (
-        "a", "gamma", "c")
+    assert fit_mismatch(w, s, u, noise_sigma=sig, next_term=False).names == ("a", "gamma", "c")
     w3 = np.tile(W, 3)
     sig3 = np.repeat([1.0, 4.0, 16.0], W.size)
     s3 = sssig_decay(w3, S0, BETA)
     u3 = mismatch_model(w3, s3, sig3, c=C_TRUE, a=A_TRUE, floor=FLOOR) * np.exp(
-        np.random.default_rng(1).normal(0.0, 0.01, w3.size))
+        np.random.default_rng(1).normal(0.0, 0.01, w3.size)
+    )
     auto = fit_mismatch(w3, s3, u3, noise_sigma=sig3, next_term=False)
     assert auto.names == ("a", "floor", "c")
     assert auto.parameter("floor").low <= FLOOR <= auto.parameter("floor").high
     # data without a floor keep the gamma model
     plain = mismatch_model(w3, s3, sig3, c=C_TRUE, a=A_TRUE) * np.exp(
-        np.random.default_rng(2).normal(0.0, 0.01, w3.size))
+        np.random.default_rng(2).normal(0.0, 0.01, w3.size)
+    )
     assert fit_mismatch(w3, s3, plain, noise_sigma=sig3, next_term=False).names == (
-        "a", "gamma", "c")
+        "a",
+        "gamma",
+        "c",
+    )
 
 
 def test_noise_growth_recovered_from_two_noise_levels():
@@ -72,7 +76,8 @@ def test_noise_growth_recovered_from_two_noise_levels():
     e = 2e-3
     rng = np.random.default_rng(6)
     u = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR, noise_blur=e) * np.exp(
-        rng.normal(0.0, 0.01, w.size))
+        rng.normal(0.0, 0.01, w.size)
+    )
     fit = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True)
     # "auto" kept the growth (its W**2 and W**4 parts: data made with d = 0)
     assert fit.names == ("a", "noise_blur2", "noise_blur", "floor", "c")
@@ -83,20 +88,20 @@ def test_noise_growth_recovered_from_two_noise_levels():
     hits, vals = [], []
     for seed in range(30):
         ui = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR, noise_blur=e) * np.exp(
-            np.random.default_rng(100 + seed).normal(0.0, 0.01, w.size))
-        pe = fit_mismatch(w, s, ui, noise_sigma=sig, next_term=False, floor=True,
-                          noise_blur=True).parameter("noise_blur")
+            np.random.default_rng(100 + seed).normal(0.0, 0.01, w.size)
+        )
+        pe = fit_mismatch(
+            w, s, ui, noise_sigma=sig, next_term=False, floor=True, noise_blur=True
+        ).parameter("noise_blur")
         hits.append(pe.low <= e <= pe.high)
         vals.append(pe.value)
     assert np.mean(hits) >= 0.8
     assert np.mean(vals) == pytest.approx(e, rel=0.08)
     # without it, c absorbs the growth of the 8 GL points and comes out high
-    plain = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True,
-                         noise_blur=False)
+    plain = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True, noise_blur=False)
     assert plain["c"] > fit.parameter("c").high
     with pytest.raises(InputError, match="noise_blur=True"):
-        fit_mismatch(W, sssig_decay(W, S0, BETA), u[:W.size], noise_sigma=2.0,
-                     noise_blur=True)
+        fit_mismatch(W, sssig_decay(W, S0, BETA), u[: W.size], noise_sigma=2.0, noise_blur=True)
 
 
 def test_floor_needs_two_noise_levels():
@@ -131,8 +136,9 @@ def _closed_form_model():
     w, _, sig, _ = _two_level_data(0)
     s = np.full(w.size, S0)
     u = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR)
-    return fit_blur_model(w, s, u, noise_sigma=sig, mean_level=100.0, default="mismatch",
-                          floor=True, compare=False)
+    return fit_blur_model(
+        w, s, u, noise_sigma=sig, mean_level=100.0, default="mismatch", floor=True, compare=False
+    )
 
 
 def test_plan_with_floor_closed_form():
@@ -151,16 +157,16 @@ def test_plan_with_floor_closed_form():
     assert plan.u_e == pytest.approx(math.sqrt(1.25 * big_a / t_star + FLOOR**2), rel=1e-4)
     pred = m.predict([2.0], 3.0)
     assert pred.u_floor == pytest.approx(FLOOR, rel=1e-4)
-    np.testing.assert_allclose(pred.u_e**2, pred.u_noise**2 + FLOOR**2 + pred.u_blur**2,
-                               rtol=1e-6)
+    np.testing.assert_allclose(pred.u_e**2, pred.u_noise**2 + FLOOR**2 + pred.u_blur**2, rtol=1e-6)
     assert not any("from one calibration noise level" in n for n in plan.notes)
 
 
 def test_plan_warns_when_one_level_is_extrapolated():
     s = sssig_decay(W, S0, BETA)
     u = mismatch_model(W, s, 2.0, c=C_TRUE, a=A_TRUE)
-    m = fit_blur_model(W, s, u, noise_sigma=2.0, mean_level=100.0, default="mismatch",
-                       compare=False)
+    m = fit_blur_model(
+        W, s, u, noise_sigma=2.0, mean_level=100.0, default="mismatch", compare=False
+    )
     # dim light: the optimum is at a noise far above the 2 GL of the calibration
     cam = PoissonGaussianCamera(full_well=1e12, read_noise=5.0, flux=2e5)
     plan = plan_exposure(m, velocity=120.0, scale=0.05, camera=cam)
@@ -190,8 +196,9 @@ def test_gradient_weighted_noise_against_monte_carlo():
     predicted = math.sqrt(2 * sig_eff**2 / np.sum(g**2))
     rng = np.random.default_rng(11)
     reps = 3000
-    u = np.array([np.sum(g * (cam.capture(img, rng=rng) - cam.capture(img, rng=rng)))
-                  for _ in range(reps)]) / np.sum(g**2)
+    u = np.array(
+        [np.sum(g * (cam.capture(img, rng=rng) - cam.capture(img, rng=rng))) for _ in range(reps)]
+    ) / np.sum(g**2)
     # the std of a std estimate is ~ 1/sqrt(2 reps) = 1.3 %; allow about 3.5 of them
     assert np.std(u) == pytest.approx(predicted, rel=0.045)
     assert math.sqrt(2 * sig_mean**2 / np.sum(g**2)) < 0.85 * np.std(u)
@@ -216,24 +223,40 @@ def test_cross_term_recovered_and_planned():
     sig = np.repeat([2.0, 8.0], W.size)
     s = sssig_decay(w, S0, BETA)
     exact = mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR, cross=b_true)
-    assert np.allclose(exact**2 - mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE,
-                                                 floor=FLOOR)**2, (b_true * w) ** 2)
+    assert np.allclose(
+        exact**2 - mismatch_model(w, s, sig, c=C_TRUE, a=A_TRUE, floor=FLOOR) ** 2,
+        (b_true * w) ** 2,
+    )
     hits = []
     for seed in range(20):
         u = exact * np.exp(np.random.default_rng(300 + seed).normal(0.0, 0.01, w.size))
         fit = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, noise_blur=False)
         assert fit.names == ("a", "floor", "cross", "c")  # "auto" keeps floor and cross
-        hits.append(all(fit.parameter(n).low <= t <= fit.parameter(n).high
-                        for n, t in (("a", A_TRUE), ("floor", FLOOR), ("cross", b_true),
-                                     ("c", C_TRUE))))
+        hits.append(
+            all(
+                fit.parameter(n).low <= t <= fit.parameter(n).high
+                for n, t in (("a", A_TRUE), ("floor", FLOOR), ("cross", b_true), ("c", C_TRUE))
+            )
+        )
     assert np.mean(hits) >= 0.75
     cam = PoissonGaussianCamera.from_camera(
         dicblur.Camera(read_noise=2.0, gain=0.05, full_well=None, bit_depth=None),
-        nominal_exposure=1e-3, mean_level=127.5)
+        nominal_exposure=1e-3,
+        mean_level=127.5,
+    )
 
     def planned(u: np.ndarray, **kw: object) -> float:
-        m = fit_blur_model(w, s, u, noise_sigma=sig, mean_level=127.5, default="mismatch",
-                           compare=False, noise_blur=False, **kw)  # type: ignore[arg-type]
+        m = fit_blur_model(
+            w,
+            s,
+            u,
+            noise_sigma=sig,
+            mean_level=127.5,
+            default="mismatch",
+            compare=False,
+            noise_blur=False,
+            **kw,
+        )  # type: ignore[arg-type]
         return plan_exposure(m, velocity=100.0, scale=0.05, camera=cam).exposure
 
     t_true = planned(exact, floor=True, cross=True)  # exact data: the true model's plan
@@ -241,7 +264,6 @@ def test_cross_term_recovered_and_planned():
     assert planned(u) == pytest.approx(t_true, rel=0.01)
     assert planned(u, cross=False) > 1.02 * t_true  # the floor model bends: plan too long
     with pytest.raises(InputError, match="cross=True"):
-        fit_mismatch(W, sssig_decay(W, S0, BETA), exact[:W.size], noise_sigma=2.0,
-                     cross=True)
+        fit_mismatch(W, sssig_decay(W, S0, BETA), exact[: W.size], noise_sigma=2.0, cross=True)
     with pytest.raises(InputError, match="cross="):
         fit_mismatch(w, s, exact, noise_sigma=sig, cross="yes")  # type: ignore[arg-type]

@@ -50,8 +50,13 @@ def test_default_model_is_mismatch_even_when_the_power_law_wins_held_out():
     with pytest.raises(InputError, match="model='mismatch'"):
         m.predict([3.0], 4.0, model="power_law")
     with pytest.raises(InputError, match="mismatch"):
-        plan_exposure(m, velocity=120.0, scale=0.05, which="power_law",
-                      camera=PoissonGaussianCamera(full_well=2e4, read_noise=5, flux=4e6))
+        plan_exposure(
+            m,
+            velocity=120.0,
+            scale=0.05,
+            which="power_law",
+            camera=PoissonGaussianCamera(full_well=2e4, read_noise=5, flux=4e6),
+        )
     auto = fit_blur_model(w, s, u, noise_sigma=2.0, default="auto")
     assert auto.default == "power_law"  # still available on request
 
@@ -83,8 +88,26 @@ def test_cli_predict_and_plan_default_to_the_mismatch_model(tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert "mismatch" in err and len(err.strip().splitlines()) == 1
-    assert main(["plan", str(model), "--velocity", "120mm/s", "--scale", "0.05mm/px",
-                 "--full-well", "20000", "--read-noise", "5", "--flux", "4e6", "--json"]) == 0
+    assert (
+        main(
+            [
+                "plan",
+                str(model),
+                "--velocity",
+                "120mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--full-well",
+                "20000",
+                "--read-noise",
+                "5",
+                "--flux",
+                "4e6",
+                "--json",
+            ]
+        )
+        == 0
+    )
     plan = json.loads(capsys.readouterr().out)
     assert plan["model"] == "mismatch"
     assert plan["rule_of_thumb_u_e"] < 1.0  # was "rule of thumb gives u_e 3.14e+03 px"
@@ -100,12 +123,18 @@ def _mismatch_data(w, sigma=2.0, seed=0, beta=BETA):
 def test_model_records_its_validity_domain_and_flags_extrapolation():
     w = np.round(np.arange(0.1, 2.81, 0.3), 10)
     s, u = _mismatch_data(w)
-    m = fit_blur_model(w, s, u, noise_sigma=2.0, subset=31, shape="affine", pattern="p1",
-                       pattern_sha256="ab" * 32)
+    m = fit_blur_model(
+        w, s, u, noise_sigma=2.0, subset=31, shape="affine", pattern="p1", pattern_sha256="ab" * 32
+    )
     d = m.domain
     assert (d.blur_min, d.blur_max) == (pytest.approx(0.1), pytest.approx(2.8))
-    assert (d.noise_min, d.noise_max, d.subset, d.shape, d.pattern) == (2.0, 2.0, 31,
-                                                                       "affine", "p1")
+    assert (d.noise_min, d.noise_max, d.subset, d.shape, d.pattern) == (
+        2.0,
+        2.0,
+        31,
+        "affine",
+        "p1",
+    )
     js = json.loads(m.to_json())
     assert js["schema"] == "dicblur.BlurUncertaintyModel/2"
     assert js["domain"]["blur_max"] == pytest.approx(2.8) and js["domain"]["subset"] == 31
@@ -121,8 +150,9 @@ def test_model_records_its_validity_domain_and_flags_extrapolation():
     assert plan.blur == pytest.approx(3.93, rel=1e-6)
     assert not plan.inside_domain and plan.extrapolated
     assert any("outside the model's validity domain" in n for n in plan.notes)
-    inside = plan_exposure(m, velocity="120mm/s", scale="0.05mm/px",
-                           target=float(m.predict([2.0]).u_e[0]))
+    inside = plan_exposure(
+        m, velocity="120mm/s", scale="0.05mm/px", target=float(m.predict([2.0]).u_e[0])
+    )
     assert inside.inside_domain
 
 
@@ -136,8 +166,21 @@ def test_cli_plan_warns_once_on_extrapolation(tmp_path, capsys):
     m = BlurUncertaintyModel.from_json(str(model))
     target = float(m.predict([3.93]).u_e[0])
     capsys.readouterr()
-    assert main(["plan", str(model), "--velocity", "120mm/s", "--scale", "0.05mm/px",
-                 "--target", f"{target!r}px"]) == 0
+    assert (
+        main(
+            [
+                "plan",
+                str(model),
+                "--velocity",
+                "120mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--target",
+                f"{target!r}px",
+            ]
+        )
+        == 0
+    )
     cap = capsys.readouterr()
     warn = [ln for ln in cap.err.splitlines() if ln.startswith("warning:")]
     assert len(warn) == 1 and "validity domain" in warn[0] and "3.93" in warn[0]
@@ -156,8 +199,7 @@ def test_breakdown_stops_predictions():
     assert m.domain.blur_max == 6.0 and max(m.data["blur"]) == 6.0  # left out of the fits
     assert m.mismatch["c"] == pytest.approx(3e-4, rel=0.1)
     p = m.predict([5.0, 8.0])
-    assert np.isfinite(p.u_e[0]) and np.isnan(p.u_e[1]) and p.broken_down.tolist() == [
-        False, True]
+    assert np.isfinite(p.u_e[0]) and np.isnan(p.u_e[1]) and p.broken_down.tolist() == [False, True]
     assert any("breaks down from W = 7" in n for n in p.notes)
     assert m.max_blur(1.0) < 7.0  # the target holds beyond: capped at the breakdown
     plan = plan_exposure(m, velocity=100.0, scale=0.05, target=1.0)
@@ -172,8 +214,14 @@ def test_breakdown_stops_predictions():
 def test_schema_1_files_still_load():
     w = np.arange(0.0, 6.01, 0.5)
     s, u = _mismatch_data(w)
-    m = fit_blur_model(w, s, u, noise_sigma=2.0, subset=21,
-                       provenance={"pattern": {"name": "paper4"}, "dic_shape": "affine"})
+    m = fit_blur_model(
+        w,
+        s,
+        u,
+        noise_sigma=2.0,
+        subset=21,
+        provenance={"pattern": {"name": "paper4"}, "dic_shape": "affine"},
+    )
     d = json.loads(m.to_json())
     # the layout written before this change: power law as (eta, alpha), no domain
     d["schema"] = "dicblur.BlurUncertaintyModel/1"
@@ -188,8 +236,7 @@ def test_schema_1_files_still_load():
     assert old.alpha == pytest.approx(m.alpha, rel=1e-9)
     assert old.domain.blur_max == 6.0 and old.domain.subset == 21
     assert old.domain.pattern == "paper4" and old.domain.shape == "affine"
-    np.testing.assert_allclose(old.predict([1.0, 3.0]).u_e, m.predict([1.0, 3.0]).u_e,
-                               rtol=1e-12)
+    np.testing.assert_allclose(old.predict([1.0, 3.0]).u_e, m.predict([1.0, 3.0]).u_e, rtol=1e-12)
 
 
 def test_cli_plan_uses_the_reference_mean_level(tmp_path, capsys):
@@ -203,8 +250,20 @@ def test_cli_plan_uses_the_reference_mean_level(tmp_path, capsys):
     rng = np.random.default_rng(0)
     save_image(ref, np.clip(80 + 40 * rng.standard_normal((64, 64)), 0, 255), bit_depth=8)
     capsys.readouterr()
-    args = ["plan", str(model), "--velocity", "120mm/s", "--scale", "0.05mm/px",
-            "--full-well", "20000", "--read-noise", "5", "--flux", "4e6"]
+    args = [
+        "plan",
+        str(model),
+        "--velocity",
+        "120mm/s",
+        "--scale",
+        "0.05mm/px",
+        "--full-well",
+        "20000",
+        "--read-noise",
+        "5",
+        "--flux",
+        "4e6",
+    ]
     assert main(args) == 0
     assert "assumed 127.5 GL" in capsys.readouterr().out  # truly unknown: said so
     assert main([*args, "--reference", str(ref)]) == 0
@@ -234,14 +293,32 @@ def test_degenerate_covariance_falls_back_to_a_seeded_bootstrap():
     s = sssig_decay(w, S0, BETA)
     eps = np.exp(np.random.default_rng(1).normal(0, 0.02, w.size))
     u = mismatch_model(w, s, sig, a=1.4, c=3e-4, floor=1e-3) * eps
-    f = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True, cross=True,
-                     noise_blur=False, n_boot=100)
+    f = fit_mismatch(
+        w,
+        s,
+        u,
+        noise_sigma=sig,
+        next_term=False,
+        floor=True,
+        cross=True,
+        noise_blur=False,
+        n_boot=100,
+    )
     assert f["cross"] < 3e-4  # at most the size of c W at W = 1 px
     assert f.ci_method == "bootstrap"
     p = f.parameter("cross")
     assert p.low < 1e-9 and np.isfinite(p.high) and p.high > p.value
-    again = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True, cross=True,
-                         noise_blur=False, n_boot=100)
+    again = fit_mismatch(
+        w,
+        s,
+        u,
+        noise_sigma=sig,
+        next_term=False,
+        floor=True,
+        cross=True,
+        noise_blur=False,
+        n_boot=100,
+    )
     assert again == f
 
 
@@ -263,15 +340,17 @@ def _coverage_case(which: str, seed: int):
         s = sssig_decay(w, S0, BETA)
         truth = {"a": 2.0, "c": 3e-4}
         u = mismatch_model(w, s, 2.0, **truth) * np.exp(rng.normal(0, 0.05, w.size))
-        return truth, fit_mismatch(w, s, u, noise_sigma=2.0, next_term=False, floor=False,
-                                   noise_blur=False, cross=False)
+        return truth, fit_mismatch(
+            w, s, u, noise_sigma=2.0, next_term=False, floor=False, noise_blur=False, cross=False
+        )
     w1 = np.arange(0.0, 6.01, 0.5)
     w, sig = np.tile(w1, 2), np.repeat([2.0, 8.0], w1.size)
     s = sssig_decay(w, S0, BETA)
     truth = {"a": 1.4, "floor": 1e-3, "cross": 1e-3, "c": 3e-4}
     u = mismatch_model(w, s, sig, **truth) * np.exp(rng.normal(0, 0.05, w.size))
-    return truth, fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=True,
-                               noise_blur=False, cross=True)
+    return truth, fit_mismatch(
+        w, s, u, noise_sigma=sig, next_term=False, floor=True, noise_blur=False, cross=True
+    )
 
 
 MODELS = ("power_law", "decay", "mismatch", "mismatch_cross")
@@ -311,19 +390,22 @@ def test_one_home_for_the_mismatch_formula():
     noise, blur2 = mismatch_terms(w, s, 2.0, **par)
     np.testing.assert_allclose(noise, 1.4 * (s / 4.0) ** -0.9 * (1 + 1e-3 * w**4))
     np.testing.assert_allclose(blur2, (1e-3 * w) ** 2 + (3e-4 * w**2 + 1e-6 * w**4) ** 2)
-    np.testing.assert_allclose(mismatch_model(w, s, 2.0, floor=1e-3, **par) ** 2,
-                               noise + 1e-6 + blur2)
+    np.testing.assert_allclose(
+        mismatch_model(w, s, 2.0, floor=1e-3, **par) ** 2, noise + 1e-6 + blur2
+    )
     # the fitted model evaluates the same function
     ww = np.tile(np.arange(0.0, 6.01, 0.5), 2)
     sig = np.repeat([2.0, 8.0], ww.size // 2)
     ss = sssig_decay(ww, S0, BETA)
     uu = mismatch_model(ww, ss, sig, a=1.4, c=3e-4, floor=1e-3, cross=1e-3)
-    m = fit_blur_model(ww, ss, uu, noise_sigma=sig, floor=True, cross=True, noise_blur=False,
-                       compare=False)
+    m = fit_blur_model(
+        ww, ss, uu, noise_sigma=sig, floor=True, cross=True, noise_blur=False, compare=False
+    )
     p = m.mismatch
     pred = m.predict(w, 4.0)
-    expect = mismatch_model(w, m.sssig(w), 4.0, a=p["a"], c=p["c"], floor=p["floor"],
-                            cross=p["cross"])
+    expect = mismatch_model(
+        w, m.sssig(w), 4.0, a=p["a"], c=p["c"], floor=p["floor"], cross=p["cross"]
+    )
     np.testing.assert_allclose(pred.u_e, expect, rtol=1e-12)
 
 
@@ -333,8 +415,15 @@ def _direct_u_e(tmp_path, tag: str, *, noise: float, blur: float, size: int, rep
     from dicblur.campaign import open_results, run_campaign
     from dicblur.campaign.calibrate import calibration_spec
 
-    spec = calibration_spec("paper4", noise=noise, subset=21, size=(size, size),
-                            blur=[float(blur)], repetitions=reps, seed=1)
+    spec = calibration_spec(
+        "paper4",
+        noise=noise,
+        subset=21,
+        size=(size, size),
+        blur=[float(blur)],
+        repetitions=reps,
+        seed=1,
+    )
     run_campaign(spec, tmp_path / f"{tag}.zarr", serial=True)
     u = open_results(tmp_path / f"{tag}.zarr")["u_e"].values.ravel()
     return float(np.sqrt(np.mean(u**2)))
@@ -344,16 +433,53 @@ def _direct_u_e(tmp_path, tag: str, *, noise: float, blur: float, size: int, rep
 def test_calibrate_then_predict_and_plan_match_a_direct_simulation(tmp_path, capsys):
     # about 20-30 s: a 128^2 calibration (13 blur levels) and two 8-repetition simulations
     cal = tmp_path / "cal"
-    assert main(["calibrate", "paper4", "--size", "128x128", "--noise", "2", "--subset",
-                 "21", "--blur", "0:6:0.5", "-o", str(cal), "--serial", "-q"]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "paper4",
+                "--size",
+                "128x128",
+                "--noise",
+                "2",
+                "--subset",
+                "21",
+                "--blur",
+                "0:6:0.5",
+                "-o",
+                str(cal),
+                "--serial",
+                "-q",
+            ]
+        )
+        == 0
+    )
     model = cal / "model.json"
     capsys.readouterr()
     assert main(["predict", str(model), "--blur", "3", "--noise", "4", "--json"]) == 0
     pred = json.loads(capsys.readouterr().out)["predictions"][0]["u_e_px"]
     meas = _direct_u_e(tmp_path, "n4", noise=4.0, blur=3.0, size=128, reps=8)
     assert pred == pytest.approx(meas, rel=0.10), (pred, meas)
-    assert main(["plan", str(model), "--velocity", "120mm/s", "--scale", "0.05mm/px",
-                 "--full-well", "20000", "--read-noise", "5", "--flux", "4e6", "--json"]) == 0
+    assert (
+        main(
+            [
+                "plan",
+                str(model),
+                "--velocity",
+                "120mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--full-well",
+                "20000",
+                "--read-noise",
+                "5",
+                "--flux",
+                "4e6",
+                "--json",
+            ]
+        )
+        == 0
+    )
     plan = json.loads(capsys.readouterr().out)
     m = BlurUncertaintyModel.from_json(str(model))
     cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)
@@ -365,9 +491,29 @@ def test_calibrate_then_predict_and_plan_match_a_direct_simulation(tmp_path, cap
 def test_calibrate_at_two_noise_levels(tmp_path, capsys):
     # two levels: both fitted together, the domain spans them, a plan between them is inside
     out = tmp_path / "cal2"
-    assert main(["calibrate", "paper4", "--size", "80x80", "--noise", "2", "--noise", "6",
-                 "--subset", "21", "--blur", "0:3:0.5", "-o", str(out), "--serial",
-                 "-q"]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "paper4",
+                "--size",
+                "80x80",
+                "--noise",
+                "2",
+                "--noise",
+                "6",
+                "--subset",
+                "21",
+                "--blur",
+                "0:3:0.5",
+                "-o",
+                str(out),
+                "--serial",
+                "-q",
+            ]
+        )
+        == 0
+    )
     m = BlurUncertaintyModel.from_json(str(out / "model.json"))
     assert m.noise_levels == (2.0, 6.0) and len(m.data["blur"]) == 14
     assert (m.domain.noise_min, m.domain.noise_max) == (2.0, 6.0)
@@ -381,8 +527,14 @@ def test_static_prediction_model_stops_at_its_breakdown_test():
     from dicblur.models import model_from_pattern
 
     img = dicblur.speckle_pattern((80, 80), speckle_size=3.0, softness=0.5, seed=2)
-    m = model_from_pattern(img, noise_sigma=2.0, subset=21, step=10, boundary="periodic",
-                           blur=np.arange(0.0, 12.01, 1.0))
+    m = model_from_pattern(
+        img,
+        noise_sigma=2.0,
+        subset=21,
+        step=10,
+        boundary="periodic",
+        blur=np.arange(0.0, 12.01, 1.0),
+    )
     d = m.domain
     assert (d.noise_min, d.noise_max, d.subset, d.shape) == (1.0, 4.0, 21, "translation")
     assert d.pattern_sha256 is not None and len(d.pattern_sha256) == 64
@@ -402,6 +554,5 @@ def test_power_law_beyond_its_fit_range_is_flagged():
     p = m.predict([1.0, 3.93])
     assert p.inside_domain.tolist() == [True, False] and p.extrapolated
     assert any("fit range (W 0.1..2.8 px)" in n for n in p.notes)
-    plan = plan_exposure(m, velocity="120mm/s", scale="0.05mm/px",
-                         target=float(p.u_e[1]))
+    plan = plan_exposure(m, velocity="120mm/s", scale="0.05mm/px", target=float(p.u_e[1]))
     assert plan.blur == pytest.approx(3.93, rel=1e-6) and plan.extrapolated

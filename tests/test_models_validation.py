@@ -32,10 +32,12 @@ def test_static_c_vs_bruteforce_ssd_up_to_w4():
     spec = np.fft.fft2(img)
     ky = np.fft.fftfreq(n)[:, None]
     kx = np.fft.fftfreq(n)[None, :]
-    cent = np.array([[r, c] for r in range(h + 1, n - h - 1, 8)
-                     for c in range(h + 1, n - h - 1, 8)])
-    pred = blur_sensitivity(img, subset=sub, points=cent, boundary="periodic",
-                            derivative="spectral", criterion="ssd").c
+    cent = np.array(
+        [[r, c] for r in range(h + 1, n - h - 1, 8) for c in range(h + 1, n - h - 1, 8)]
+    )
+    pred = blur_sensitivity(
+        img, subset=sub, points=cent, boundary="periodic", derivative="spectral", criterion="ssd"
+    ).c
     u_e = []
     for wl in BLURS:
         blurred = spec * np.sinc(wl * kx)
@@ -75,8 +77,12 @@ def test_static_c_vs_dic(size, shape):
     curve = blur_mismatch_curve(img, blurs, **kw).u_blur
     u_e, s = [], []
     for wl in blurs:
-        centred = motion_blur(img, None, substeps=None,
-                              trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1))
+        centred = motion_blur(
+            img,
+            None,
+            substeps=None,
+            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
+        )
         res = correlate(img, centred, subset=31, step=12, shape=shape)
         assert res.converged.all()
         u_e.append(float(np.std(res.u)))
@@ -103,8 +109,13 @@ def test_static_c_vs_dic_on_the_real_sample3(real_data):
     curve = blur_mismatch_curve(img, blurs, subset=31, points=pts).u_blur
     u_e, s = [], []
     for wl in blurs:
-        cur = dicblur.motion_blur(img, None, substeps=None, boundary="reflect",
-                                  trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1))
+        cur = dicblur.motion_blur(
+            img,
+            None,
+            substeps=None,
+            boundary="reflect",
+            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
+        )
         res = dicblur.correlate(img, cur, subset=31, step=12, shape="translation")
         u_e.append(float(np.std(res.u[res.converged])))
         s.append(float(dicblur.sssig(cur, subset=31, points=pts).mean()))
@@ -121,17 +132,26 @@ def test_prediction_from_the_static_pattern_vs_noisy_dic(shape):
     img = dicblur.speckle_pattern((192, 192), speckle_size=4.0, softness=0.5, seed=7)
     pts = dicblur.correlate(img, img, subset=21, step=10, shape=shape)
     pts = np.stack([pts.rows, pts.cols], axis=1)
-    pred = dicblur.predict_from_pattern(img, blurs, noise_sigma=sigma, subset=21, points=pts,
-                                        shape=shape, boundary="periodic")
+    pred = dicblur.predict_from_pattern(
+        img, blurs, noise_sigma=sigma, subset=21, points=pts, shape=shape, boundary="periodic"
+    )
     rng = np.random.default_rng(4)
     for j, wl in enumerate(blurs):
-        cur = dicblur.motion_blur(img, None, substeps=None,
-                                  trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1))
+        cur = dicblur.motion_blur(
+            img,
+            None,
+            substeps=None,
+            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
+        )
         u_e = []
         for _ in range(4):
-            res = dicblur.correlate(img + rng.normal(0, sigma, img.shape),
-                                    cur + rng.normal(0, sigma, img.shape),
-                                    subset=21, step=10, shape=shape)
+            res = dicblur.correlate(
+                img + rng.normal(0, sigma, img.shape),
+                cur + rng.normal(0, sigma, img.shape),
+                subset=21,
+                step=10,
+                shape=shape,
+            )
             u_e.append(np.std(res.u[res.converged]))
         # measured 0.99-1.06 on such cases; 4 x 289 POIs: +-4 % sampling scatter
         assert pred.u_e[j] == pytest.approx(np.mean(u_e), rel=0.12)
@@ -152,13 +172,15 @@ def test_subpixel_interpolation_bias_vs_noise_free_dic():
     for wl, d in ((0.0, 0.5), (0.0, 0.25), (1.5, 0.5), (1.5, 0.875)):
         res = dicblur.correlate(img, _moved(img, wl, d), subset=31, step=8, shape="affine")
         pts = np.stack([res.rows, res.cols], axis=1)
-        cv = blur_mismatch_curve(img, [wl], subset=31, points=pts, shape="affine",
-                                 boundary="periodic", subpixel=d)
+        cv = blur_mismatch_curve(
+            img, [wl], subset=31, points=pts, shape="affine", boundary="periodic", subpixel=d
+        )
         ok = res.converged & np.isfinite(cv.shifts[0])
         # per subset, not only as a statistic: the interpolation bias is pattern-specific
         assert np.corrcoef(res.u[ok] - res.u[ok].mean(), cv.shifts[0][ok])[0, 1] > 0.97
         assert np.var(cv.shifts[0][ok]) == pytest.approx(np.var(res.u[ok]), rel=0.06)
         if wl == 0.0:  # without the offset there is no error at all to predict
-            aligned = blur_mismatch_curve(img, [0.0], subset=31, points=pts, shape="affine",
-                                          boundary="periodic")
+            aligned = blur_mismatch_curve(
+                img, [0.0], subset=31, points=pts, shape="affine", boundary="periodic"
+            )
             assert np.all(aligned.shifts[0] == 0.0)

@@ -44,20 +44,33 @@ def test_reference_and_current_shares_match_a_monte_carlo_of_the_engine():
         ref_runs.append(noisy.correlate(cur).u)
     mc_ref = float(np.var(np.array(ref_runs), axis=0).mean())
     mc_cur = float(np.var(np.array(cur_runs), axis=0).mean())
-    pr = predict_from_pattern(img, [wl], noise_sigma=sigma, points=pts, boundary="periodic",
-                              **opts)
+    pr = predict_from_pattern(img, [wl], noise_sigma=sigma, points=pts, boundary="periodic", **opts)
     assert pr.u_noise_reference is not None and pr.u_noise_current is not None
     assert pr.u_noise_interaction is not None
-    np.testing.assert_allclose(pr.u_noise**2, pr.u_noise_reference**2
-                               + pr.u_noise_current**2 + pr.u_noise_interaction**2,
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        pr.u_noise**2,
+        pr.u_noise_reference**2 + pr.u_noise_current**2 + pr.u_noise_interaction**2,
+        rtol=1e-12,
+    )
     # the second-order interaction of the two noises: ~1 % of the variance at 2 GL here
     assert 0 < pr.u_noise_interaction[0] ** 2 < 0.02 * pr.u_noise[0] ** 2
     assert pr.u_noise_reference[0] ** 2 == pytest.approx(mc_ref, rel=0.15)
     assert pr.u_noise_current[0] ** 2 == pytest.approx(mc_cur, rel=0.15)
-    old = _shifts_and_variance(img, [wl], pts, SUB, motion=(0.0, 1.0), shape="translation",
-                               derivative="bspline3", boundary="periodic", criterion="znssd",
-                               max_shift=np.inf, chunk=256, variance=True, complete=False)[1]
+    old = _shifts_and_variance(
+        img,
+        [wl],
+        pts,
+        SUB,
+        motion=(0.0, 1.0),
+        shape="translation",
+        derivative="bspline3",
+        boundary="periodic",
+        criterion="znssd",
+        max_shift=np.inf,
+        chunk=256,
+        variance=True,
+        complete=False,
+    )[1]
     assert old is not None
     assert sigma**2 * np.mean(old[0, 0]) > 1.5 * mc_ref  # what the fix corrects
 
@@ -67,9 +80,16 @@ def test_no_mismatch_no_extra_term():
     # the match-score bound's halves, sigma^2 (J^T P J)^-1 each
     img = dicblur.speckle_pattern((96, 96), speckle_size=4.0, seed=1)
     pts = np.array([[48, 48], [40, 56]])
-    kw = dict(motion=(0.0, 1.0), shape="translation", derivative="bspline3",
-              boundary="periodic", criterion="znssd", max_shift=np.inf, chunk=256,
-              variance=True)
+    kw = dict(
+        motion=(0.0, 1.0),
+        shape="translation",
+        derivative="bspline3",
+        boundary="periodic",
+        criterion="znssd",
+        max_shift=np.inf,
+        chunk=256,
+        variance=True,
+    )
     new = _shifts_and_variance(img, [0.0], pts, 21, complete=True, **kw)[1]
     old = _shifts_and_variance(img, [0.0], pts, 21, complete=False, **kw)[1]
     assert new is not None and old is not None
@@ -89,7 +109,8 @@ def test_noise_growth_allows_a_negative_w2_term():
     sig = np.repeat([1.0, 4.0], w1.size)
     s = sssig_decay(w, 2.4e6, 0.05)
     u = mismatch_model(w, s, sig, c=2e-4, a=2.0, noise_blur=2e-4, noise_blur2=-0.02) * np.exp(
-        np.random.default_rng(3).normal(0.0, 0.005, w.size))
+        np.random.default_rng(3).normal(0.0, 0.005, w.size)
+    )
     fit = fit_mismatch(w, s, u, noise_sigma=sig, next_term=False, floor=False, cross=False)
     assert "noise_blur2" in fit.names
     d = fit.parameter("noise_blur2")
@@ -100,8 +121,9 @@ def test_breakdown_test_stops_the_static_prediction_instead_of_a_spike():
     # the reproduce stand-in for pattern #1 (2 px soft speckles): at W = 8.5 px the blur
     # has nearly erased, in some subsets reversed, the gradients along the motion; their
     # near-singular fixed points made the noise term spike to ~5 px (report Fig. 12)
-    img = dicblur.speckle_pattern((512, 512), speckle_size=2.0, density=0.5, softness=0.9,
-                                  levels=(55.0, 135.0), seed=2018)
+    img = dicblur.speckle_pattern(
+        (512, 512), speckle_size=2.0, density=0.5, softness=0.9, levels=(55.0, 135.0), seed=2018
+    )
     w = [6.0, 7.0, 8.0, 8.5, 9.0]
     kw = dict(noise_sigma=2.0, subset=SUB, step=20, boundary="periodic")
     raw = predict_from_pattern(img, w, min_contraction=0.0, **kw)

@@ -24,8 +24,9 @@ from dicblur.report import find_browser
 from dicblur.report.browser import evaluate_in_browser
 from dicblur.report.planner import SIZE_BUDGET, PlannerDefaults, planner_html, write_planner
 
-needs_browser = pytest.mark.skipif(find_browser() is None,
-                                   reason="no Chromium on PATH; .ci/run installs it")
+needs_browser = pytest.mark.skipif(
+    find_browser() is None, reason="no Chromium on PATH; .ci/run installs it"
+)
 
 S0, BETA = 2.4e6, 0.03
 
@@ -37,13 +38,21 @@ def _model(levels=(2.0, 8.0), seed=1, floor=9e-4, breakdown=None):
     sig = np.repeat(levels, w0.size)
     s = sssig_decay(w, S0, BETA)
     u = mismatch_model(w, s, sig, c=9e-4, a=1.4, floor=floor) * np.exp(
-        rng.normal(0.0, 0.02, w.size))
+        rng.normal(0.0, 0.02, w.size)
+    )
     extra = {}
     if breakdown is not None:  # DIC "fails" (< 90 % converged) from W = breakdown on
         extra["converged_fraction"] = np.where(w >= breakdown, 0.5, 1.0)
-    return fit_blur_model(w, s * np.exp(rng.normal(0.0, 0.005, w.size)), u, noise_sigma=sig,
-                          subset=31, mean_level=120.0,
-                          provenance={"pattern": "synthetic.tif"}, **extra)
+    return fit_blur_model(
+        w,
+        s * np.exp(rng.normal(0.0, 0.005, w.size)),
+        u,
+        noise_sigma=sig,
+        subset=31,
+        mean_level=120.0,
+        provenance={"pattern": "synthetic.tif"},
+        **extra,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -100,22 +109,46 @@ def _cases(models):
             # the power law predicts only at its fitted noise (model 0: 2..8 GL, model 1:
             # 2 GL); elsewhere both sides must refuse
             sigma = None if mi == 1 else float(rng.uniform(2.0, 8.0))
-        cases.append({"op": "predict", "model": mi, "kind": kind,
-                      "blur": float(rng.uniform(0, 9)), "sigma": sigma})
+        cases.append(
+            {
+                "op": "predict",
+                "model": mi,
+                "kind": kind,
+                "blur": float(rng.uniform(0, 9)),
+                "sigma": sigma,
+            }
+        )
     for _ in range(30):
-        cases.append({"op": "plan", "model": int(rng.choice([0, 2])), "kind": "mismatch",
-                      "velocity": float(rng.uniform(20, 400)), "scale": 0.05,
-                      "target": float(rng.uniform(0.004, 0.03)),
-                      "sigma": float(rng.uniform(1, 6)), "camera": None})
+        cases.append(
+            {
+                "op": "plan",
+                "model": int(rng.choice([0, 2])),
+                "kind": "mismatch",
+                "velocity": float(rng.uniform(20, 400)),
+                "scale": 0.05,
+                "target": float(rng.uniform(0.004, 0.03)),
+                "sigma": float(rng.uniform(1, 6)),
+                "camera": None,
+            }
+        )
     for _ in range(40):
-        cases.append({"op": "plan", "model": int(rng.choice([0, 2])),
-                      "kind": str(rng.choice(["mismatch", "power_law"])),
-                      "velocity": float(rng.uniform(20, 400)), "scale": 0.05,
-                      "target": float(rng.uniform(0.004, 0.03)), "sigma": None,
-                      "camera": {"full_well": float(rng.uniform(1e4, 4e4)),
-                                 "read_noise": float(rng.uniform(1, 10)),
-                                 "flux": float(10 ** rng.uniform(6, 7.5)),
-                                 "peak_to_mean": 2.0}})
+        cases.append(
+            {
+                "op": "plan",
+                "model": int(rng.choice([0, 2])),
+                "kind": str(rng.choice(["mismatch", "power_law"])),
+                "velocity": float(rng.uniform(20, 400)),
+                "scale": 0.05,
+                "target": float(rng.uniform(0.004, 0.03)),
+                "sigma": None,
+                "camera": {
+                    "full_well": float(rng.uniform(1e4, 4e4)),
+                    "read_noise": float(rng.uniform(1, 10)),
+                    "flux": float(10 ** rng.uniform(6, 7.5)),
+                    "peak_to_mean": 2.0,
+                },
+            }
+        )
     return cases
 
 
@@ -126,10 +159,21 @@ def _python(models, c):
             p = m.predict([c["blur"]], c["sigma"], model=c["kind"])
             return {"u_e": float(p.u_e[0]), "low": float(p.low[0]), "high": float(p.high[0])}
         cam = None if c["camera"] is None else PoissonGaussianCamera(**c["camera"])
-        p = plan_exposure(m, velocity=c["velocity"], scale=c["scale"], target=c["target"],
-                          sigma=c["sigma"], camera=cam, which=c["kind"])
-        return {"exposure": p.exposure, "u_e": p.u_e, "max_exposure": p.max_exposure,
-                "min_exposure": p.min_exposure}
+        p = plan_exposure(
+            m,
+            velocity=c["velocity"],
+            scale=c["scale"],
+            target=c["target"],
+            sigma=c["sigma"],
+            camera=cam,
+            which=c["kind"],
+        )
+        return {
+            "exposure": p.exposure,
+            "u_e": p.u_e,
+            "max_exposure": p.max_exposure,
+            "min_exposure": p.min_exposure,
+        }
     except Exception as exc:  # the page must refuse the same inputs
         return {"error": str(exc)}
 
@@ -201,8 +245,9 @@ def test_moving_two_controls_changes_plot_and_sentence(models, tmp_path):
     assert mid["sentence"].startswith("At 400 mm/s") and mid["curve"] != before["curve"]
     assert after["ue"] != mid["ue"] and after["curve"] != mid["curve"]
     # the sentence's exposure is the Python answer
-    plan = plan_exposure(models[0], velocity="120mm/s", scale="0.05mm/px", target="0.01px",
-                         sigma=2.0)
+    plan = plan_exposure(
+        models[0], velocity="120mm/s", scale="0.05mm/px", target="0.01px", sigma=2.0
+    )
     assert f"{plan.exposure * 1e3:.3g} ms" in before["sentence"]
     # screenshot as a test artefact
     from dicblur.report import check_in_browser
@@ -223,8 +268,25 @@ def test_cli_plan_writes_the_page(tmp_path, capsys):
     assert main(["plan", str(model_path), "--html", str(page)]) == 0
     assert "wrote" in capsys.readouterr().out and page.stat().st_size > 10_000
     # with the other options: the plan is printed and they are the page's starting values
-    assert main(["plan", str(model_path), "--velocity", "200mm/s", "--scale", "0.05mm/px",
-                 "--target", "0.02px", "--noise", "3", "--html", str(page)]) == 0
+    assert (
+        main(
+            [
+                "plan",
+                str(model_path),
+                "--velocity",
+                "200mm/s",
+                "--scale",
+                "0.05mm/px",
+                "--target",
+                "0.02px",
+                "--noise",
+                "3",
+                "--html",
+                str(page),
+            ]
+        )
+        == 0
+    )
     assert "rule of thumb" in capsys.readouterr().out
     text = page.read_text()
     assert 'value="200mm/s"' in text and 'value="0.02px"' in text

@@ -47,8 +47,12 @@ def test_closed_forms_match_numerical_convolution(train: PulseTrain) -> None:
     w = np.arange(0.25, 2 * train.du, 0.25)
     cf = closed_form_metrics(train, w, n_periods=3)
     nm = numeric_metrics(train, w, n_periods=3, supersample=8)
-    scale = {"mig": train.a, "gradient_variance": train.a**2, "contrast": train.a,
-             "sssig": train.a**2}
+    scale = {
+        "mig": train.a,
+        "gradient_variance": train.a**2,
+        "contrast": train.a,
+        "sssig": train.a**2,
+    }
     for q, s in scale.items():
         a, b = getattr(cf, q), getattr(nm, q)
         # relative error <= 1e-6 where the quantity is non-zero; ~0 where m(w) = 0
@@ -59,8 +63,10 @@ def test_closed_forms_match_numerical_convolution(train: PulseTrain) -> None:
 def test_numerical_convolution_converges_for_incommensurate_width() -> None:
     train = PulseTrain()
     exact = closed_form_metrics(train, [math.pi]).sssig[0]
-    errs = [abs(numeric_metrics(train, [math.pi], supersample=s).sssig[0] - exact) / exact
-            for s in (8, 32, 128)]
+    errs = [
+        abs(numeric_metrics(train, [math.pi], supersample=s).sssig[0] - exact) / exact
+        for s in (8, 32, 128)
+    ]
     assert errs[0] > errs[1] > errs[2]  # O(h): kinks fall inside cells
     assert errs[2] < 0.01
 
@@ -71,12 +77,16 @@ def test_pixel_departure_is_the_half_cell_at_each_ramp_end() -> None:
     # unit spacing has sum of squared differences (m - 1/2) (a/w)^2 instead of m (a/w)^2.
     train = PulseTrain()
     for w in (3.0, 5.0, 7.0, 9.0, 19.0):
-        assert_allclose(pixel_metrics(train, [w], n_periods=2).sssig,
-                        closed_form_metrics(train, [w], n_periods=2).sssig, rtol=1e-12)
+        assert_allclose(
+            pixel_metrics(train, [w], n_periods=2).sssig,
+            closed_form_metrics(train, [w], n_periods=2).sssig,
+            rtol=1e-12,
+        )
     for w in (8.0, 10.0, 14.0):
         m = closed_form_metrics(train, [w]).m[0]
-        assert_allclose(pixel_metrics(train, [w], n_periods=2).sssig,
-                        2 * 2 * (m - 0.5) / w**2, rtol=1e-12)
+        assert_allclose(
+            pixel_metrics(train, [w], n_periods=2).sssig, 2 * 2 * (m - 0.5) / w**2, rtol=1e-12
+        )
 
 
 def test_table_ii_rows_agree() -> None:
@@ -92,8 +102,7 @@ def test_blurred_signal_is_a_moving_average() -> None:
     train = PulseTrain(dp=6.0, du=22.0, x0=0.3)
     x, w = 1.7, 4.6
     t = np.linspace(x - w / 2, x + w / 2, 2_000_001)
-    assert train.blurred([x], w)[0] == pytest.approx(np.trapezoid(train.value(t), t) / w,
-                                                     abs=1e-5)
+    assert train.blurred([x], w)[0] == pytest.approx(np.trapezoid(train.value(t), t) / w, abs=1e-5)
 
 
 # --- chi2 ---------------------------------------------------------------------------------
@@ -101,8 +110,11 @@ def test_blurred_signal_is_a_moving_average() -> None:
 def test_chi2_regime_a_analytic_matches_numeric(w: float) -> None:
     train = PulseTrain(dp=12.0, du=30.0)  # w/2 + |xi| stays far from the neighbours
     xi = np.linspace(-1.5 * w, 1.5 * w, 13)
-    assert_allclose(chi2_continuous(train, xi, w, n_periods=4),
-                    chi2_regime_a(xi, w, a=train.a, n_periods=4), rtol=1e-9)
+    assert_allclose(
+        chi2_continuous(train, xi, w, n_periods=4),
+        chi2_regime_a(xi, w, a=train.a, n_periods=4),
+        rtol=1e-9,
+    )
     # the formula of the brief near the minimum: a^2 (w/6 + 2 xi^2 / w) per period
     inner = xi[np.abs(xi) <= w / 2]
     assert_allclose(chi2_regime_a(inner, w), w / 6 + 2 * inner**2 / w, rtol=1e-12)
@@ -173,15 +185,17 @@ def test_fourier_estimator_recovers_a_known_band_limited_shift() -> None:
 
 @pytest.mark.parametrize("interpolation", ["fourier", "analytic"])
 def test_monte_carlo_unbiased_without_noise(interpolation: str) -> None:
-    ds = simulate(widths=np.arange(1.0, 12.0), sigma=0.0, trials=3, seed=0,
-                  interpolation=interpolation)  # type: ignore[arg-type]
+    ds = simulate(
+        widths=np.arange(1.0, 12.0), sigma=0.0, trials=3, seed=0, interpolation=interpolation
+    )  # type: ignore[arg-type]
     assert np.all(np.abs(ds["mean"].values) < 1e-4)
     assert np.all(ds["u_e"].values < 1e-4)
 
 
 def test_analytic_estimator_recovers_imposed_displacement() -> None:
-    ds = simulate(widths=[2.0, 5.0, 8.0], sigma=0.0, trials=2, displacement=0.3,
-                  interpolation="analytic")
+    ds = simulate(
+        widths=[2.0, 5.0, 8.0], sigma=0.0, trials=2, displacement=0.3, interpolation="analytic"
+    )
     assert_allclose(ds["mean"].values, 0.3, atol=1e-9)
 
 
@@ -194,8 +208,15 @@ def test_monte_carlo_w1_matches_match_score() -> None:
     s_spec = pixel_metrics(train, [1.0], n_periods=n, gradient="spectral").sssig[0]
     assert float(ds["u_e"][0]) == pytest.approx(math.sqrt(2 * sigma**2 / s_spec), rel=0.05)
     # noise-free model shift, kinks off the pixel centres: continuous SSSIG = 2 N a^2
-    ds2 = simulate(PulseTrain(x0=-0.25), widths=[1.0], sigma=sigma, n_periods=n,
-                   trials=10_000, seed=3, interpolation="analytic")
+    ds2 = simulate(
+        PulseTrain(x0=-0.25),
+        widths=[1.0],
+        sigma=sigma,
+        n_periods=n,
+        trials=10_000,
+        seed=3,
+        interpolation="analytic",
+    )
     assert float(ds2["u_e"][0]) == pytest.approx(sigma / math.sqrt(n), rel=0.05)
 
 
@@ -205,8 +226,7 @@ def test_monte_carlo_follows_derived_law_and_analytic_follows_sqrt_law() -> None
     assert_allclose(ds["u_e"], ds["u_pixel_linearised"], rtol=0.05)
     # and is far from the first-principles sqrt law (about 2x)
     assert np.all(ds["u_e"] > 1.5 * ds["u_first_principles"])
-    ds2 = simulate(PulseTrain(x0=-0.25), widths=w, trials=4000, seed=5,
-                   interpolation="analytic")
+    ds2 = simulate(PulseTrain(x0=-0.25), widths=w, trials=4000, seed=5, interpolation="analytic")
     assert_allclose(ds2["u_e"], ds2["u_first_principles"], rtol=0.05)
 
 
@@ -218,15 +238,13 @@ def test_fourier_shift_does_not_depend_on_which_signal_moves() -> None:
 
 def test_knee_at_twice_the_pulse_width() -> None:
     for dp in (6.0, 4.0):
-        ds = simulate(PulseTrain(dp=dp, du=22.0), widths=np.arange(1.0, 18.0), trials=400,
-                      seed=1)
+        ds = simulate(PulseTrain(dp=dp, du=22.0), widths=np.arange(1.0, 18.0), trials=400, seed=1)
         assert find_knee(ds) == 2 * dp
 
 
 def test_fit_loglog_recovers_a_power_law() -> None:
     w = np.arange(1.0, 9.0)
-    ds = xr.Dataset({"u_e": ("w", 0.02 * w**0.7), "regime": ("w", ["a"] * w.size)},
-                    coords={"w": w})
+    ds = xr.Dataset({"u_e": ("w", 0.02 * w**0.7), "regime": ("w", ["a"] * w.size)}, coords={"w": w})
     fit = fit_loglog(ds, 1.0, 8.0)
     assert fit.slope == pytest.approx(0.7, abs=1e-12)
     assert fit.prefactor == pytest.approx(0.02, rel=1e-12)
@@ -246,8 +264,18 @@ def test_reproducible_with_seed() -> None:
 
 def test_dataset_layout() -> None:
     ds = simulate(widths=[1.0, 2.0], trials=50, seed=0)
-    for name in ("u_e", "u_e_ci_low", "u_e_ci_high", "mean", "mean_ci_low", "mean_ci_high",
-                 "regime", "u_first_principles", "u_paper_linear", "u_pixel_linearised"):
+    for name in (
+        "u_e",
+        "u_e_ci_low",
+        "u_e_ci_high",
+        "mean",
+        "mean_ci_low",
+        "mean_ci_high",
+        "regime",
+        "u_first_principles",
+        "u_paper_linear",
+        "u_pixel_linearised",
+    ):
         assert name in ds
     assert np.all(ds["u_e_ci_low"] <= ds["u_e"]) and np.all(ds["u_e"] <= ds["u_e_ci_high"])
     assert ds.attrs["seed"] == "0" and ds.attrs["trials"] == 50
@@ -289,13 +317,23 @@ def test_error_message_names_parameter() -> None:
 @pytest.mark.slow
 def test_cli_writes_all_outputs(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
     out = tmp_path / "pulse"
-    rc = main(["pulse", "--trials", "200", "--dependence-trials", "20", "--seed", "3",
-               "-o", str(out)])
+    rc = main(
+        ["pulse", "--trials", "200", "--dependence-trials", "20", "--seed", "3", "-o", str(out)]
+    )
     assert rc == 0
     names = {p.name for p in out.iterdir()}
-    assert {"table_ii.csv", "table_ii.md", "verdict.md", "montecarlo.csv", "montecarlo.nc",
-            "fits.csv", "dependence.csv", "fig4_regimes.png", "fig5_min_chi2.png",
-            "fig6_uncertainty.png"} <= names
+    assert {
+        "table_ii.csv",
+        "table_ii.md",
+        "verdict.md",
+        "montecarlo.csv",
+        "montecarlo.nc",
+        "fits.csv",
+        "dependence.csv",
+        "fig4_regimes.png",
+        "fig5_min_chi2.png",
+        "fig6_uncertainty.png",
+    } <= names
     verdict = (out / "verdict.md").read_text()
     assert "Knee" in verdict and "200 trials per w" in verdict
     table = (out / "table_ii.md").read_text()
@@ -339,15 +377,13 @@ def test_icgn_correlators_recover_a_shift_noise_free(kind):
         assert st[0] == 0 and abs(est[0] - u) < (1e-3 if kind == "bspline" else 2e-2)
 
 
-@pytest.mark.parametrize(("kind", "slope_range"), [("bspline", (0.6, 0.95)),
-                                                   ("keys", (0.3, 0.6))])
+@pytest.mark.parametrize(("kind", "slope_range"), [("bspline", (0.6, 0.95)), ("keys", (0.3, 0.6))])
 def test_law_with_own_derivative_matches_each_correlator(kind, slope_range):
     """u_e = sigma sqrt(S_o + S_b) / |C| with the correlator's D matches its Monte Carlo
     within 6 %, and the regime-(a) slope depends on the correlator (not 1, not 1/2)."""
     from dicblur.pulse.montecarlo import PAPER_TRAIN, simulate
 
-    ds = simulate(PAPER_TRAIN, widths=[1.0, 3.0, 5.0], trials=1500, seed=2,
-                  interpolation=kind)
+    ds = simulate(PAPER_TRAIN, widths=[1.0, 3.0, 5.0], trials=1500, seed=2, interpolation=kind)
     ratio = ds["u_e"].values / ds["u_pixel_linearised"].values
     assert np.all(np.abs(ratio - 1) < 0.06), ratio
     slope = np.polyfit(np.log(ds["w"].values), np.log(ds["u_e"].values), 1)[0]

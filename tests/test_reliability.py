@@ -30,9 +30,11 @@ from dicblur.io import (
 )
 from dicblur.models import BlurUncertaintyModel, parse_quantity
 
-FUZZ = settings(max_examples=60, deadline=None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                       HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=60,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
 
 @pytest.fixture(scope="module")
@@ -52,9 +54,11 @@ def _load_or_refuse(path: Path) -> None:
 
 # ------------------------------------------------------------------ image loader fuzz
 @FUZZ
-@given(data=st.binary(min_size=1, max_size=2048),
-       prefix=st.sampled_from([b"", b"II*\0", b"MM\0*", b"\x89PNG\r\n\x1a\n", b"BM"]),
-       suffix=st.sampled_from([".tif", ".png", ".bmp", ".jpg", ".dat"]))
+@given(
+    data=st.binary(min_size=1, max_size=2048),
+    prefix=st.sampled_from([b"", b"II*\0", b"MM\0*", b"\x89PNG\r\n\x1a\n", b"BM"]),
+    suffix=st.sampled_from([".tif", ".png", ".bmp", ".jpg", ".dat"]),
+)
 def test_fuzz_random_bytes(tmp_path: Path, data: bytes, prefix: bytes, suffix: str) -> None:
     path = tmp_path / f"fuzz{suffix}"
     path.write_bytes(prefix + data)
@@ -62,12 +66,16 @@ def test_fuzz_random_bytes(tmp_path: Path, data: bytes, prefix: bytes, suffix: s
 
 
 @FUZZ
-@given(cut=st.integers(1, 4000), flips=st.lists(st.tuples(st.integers(0, 10**6),
-                                                          st.integers(0, 255)), max_size=8),
-       kind=st.sampled_from(["good.tif", "good.png", "palette.tif", "five_channels.tif",
-                             "scene16.tif", "huge.tif"]))
-def test_fuzz_damaged_files(corpus: Path, tmp_path: Path, cut: int,
-                            flips: list[tuple[int, int]], kind: str) -> None:
+@given(
+    cut=st.integers(1, 4000),
+    flips=st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 255)), max_size=8),
+    kind=st.sampled_from(
+        ["good.tif", "good.png", "palette.tif", "five_channels.tif", "scene16.tif", "huge.tif"]
+    ),
+)
+def test_fuzz_damaged_files(
+    corpus: Path, tmp_path: Path, cut: int, flips: list[tuple[int, int]], kind: str
+) -> None:
     raw = bytearray((corpus / kind).read_bytes())
     raw = raw[: max(1, len(raw) - cut)] if cut % 3 == 0 else raw
     for pos, val in flips:
@@ -90,14 +98,21 @@ def test_fuzz_declared_png_sizes(tmp_path: Path, width: int, height: int) -> Non
 
 
 # ------------------------------------------------------------------ unit parser
-_UNITS = {"velocity": ["mm/s", "m/s", "um/ms", "px/s"], "time": ["s", "ms", "us", "ns"],
-          "scale": ["mm/px", "px/mm", "um/px"], "length": ["mm", "m", "um", "px"],
-          "blur": ["px", "mm"]}
+_UNITS = {
+    "velocity": ["mm/s", "m/s", "um/ms", "px/s"],
+    "time": ["s", "ms", "us", "ns"],
+    "scale": ["mm/px", "px/mm", "um/px"],
+    "length": ["mm", "m", "um", "px"],
+    "blur": ["px", "mm"],
+}
 
 
 @FUZZ
-@given(text=st.text(max_size=30), kind=st.sampled_from(sorted(_UNITS)),
-       scale=st.one_of(st.none(), st.floats(1e-6, 1e3)))
+@given(
+    text=st.text(max_size=30),
+    kind=st.sampled_from(sorted(_UNITS)),
+    scale=st.one_of(st.none(), st.floats(1e-6, 1e3)),
+)
 def test_units_any_text(text: str, kind: str, scale: float | None) -> None:
     try:
         x = parse_quantity(text, kind, name="--velocity", scale=scale)  # type: ignore[arg-type]
@@ -108,8 +123,9 @@ def test_units_any_text(text: str, kind: str, scale: float | None) -> None:
 
 
 @FUZZ
-@given(x=st.floats(-1e12, 1e12, allow_nan=False), kind=st.sampled_from(sorted(_UNITS)),
-       data=st.data())
+@given(
+    x=st.floats(-1e12, 1e12, allow_nan=False), kind=st.sampled_from(sorted(_UNITS)), data=st.data()
+)
 def test_units_round_trip(x: float, kind: str, data: st.DataObject) -> None:
     unit = data.draw(st.sampled_from(_UNITS[kind]))
     scale = 0.05
@@ -124,26 +140,55 @@ def test_units_round_trip(x: float, kind: str, data: st.DataObject) -> None:
 
 
 # ------------------------------------------------------------------ spec parser
-_toml_leaf = st.one_of(st.booleans(), st.integers(-10**12, 10**12),
-                       st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8))
-_toml_value = st.recursive(_toml_leaf, lambda c: st.one_of(
-    st.lists(c, max_size=3), st.dictionaries(st.text(max_size=6), c, max_size=3)),
-    max_leaves=8)
+_toml_leaf = st.one_of(
+    st.booleans(),
+    st.integers(-(10**12), 10**12),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=8),
+)
+_toml_value = st.recursive(
+    _toml_leaf,
+    lambda c: st.one_of(
+        st.lists(c, max_size=3), st.dictionaries(st.text(max_size=6), c, max_size=3)
+    ),
+    max_leaves=8,
+)
 
 
 def _valid_spec() -> dict:
-    return {"campaign": {"seed": 1, "repetitions": 1},
-            "pattern": [{"name": "p", "generator": "speckle", "shape": [48, 48]}],
-            "blur": {"lengths": [0.0, 1.0]}, "noise": {"model": "per-exposure"},
-            "dic": {"subsets": [11], "step": 8}}
+    return {
+        "campaign": {"seed": 1, "repetitions": 1},
+        "pattern": [{"name": "p", "generator": "speckle", "shape": [48, 48]}],
+        "blur": {"lengths": [0.0, 1.0]},
+        "noise": {"model": "per-exposure"},
+        "dic": {"subsets": [11], "step": 8},
+    }
 
 
 @FUZZ
-@given(section=st.sampled_from(["campaign", "blur", "noise", "dic", "run", "pattern"]),
-       key=st.sampled_from(["seed", "repetitions", "lengths", "angles", "levels", "model",
-                            "subsets", "step", "blur_chunk", "shape", "substeps",
-                            "tolerance", "name", "generator", "x"]),
-       value=_toml_value)
+@given(
+    section=st.sampled_from(["campaign", "blur", "noise", "dic", "run", "pattern"]),
+    key=st.sampled_from(
+        [
+            "seed",
+            "repetitions",
+            "lengths",
+            "angles",
+            "levels",
+            "model",
+            "subsets",
+            "step",
+            "blur_chunk",
+            "shape",
+            "substeps",
+            "tolerance",
+            "name",
+            "generator",
+            "x",
+        ]
+    ),
+    value=_toml_value,
+)
 def test_spec_parser_mutations(section: str, key: str, value: object) -> None:
     d = _valid_spec()
     target = d[section][0] if section == "pattern" else d.setdefault(section, {})
@@ -179,8 +224,9 @@ def _leaves(d: object, path: tuple = ()) -> list[tuple]:
 
 @FUZZ
 @given(data=st.data(), value=_toml_value, delete=st.booleans())
-def test_model_loader_mutations(corpus: Path, data: st.DataObject, value: object,
-                                delete: bool) -> None:
+def test_model_loader_mutations(
+    corpus: Path, data: st.DataObject, value: object, delete: bool
+) -> None:
     d = json.loads((corpus / "model.json").read_text())
     paths = [p for p in _leaves(d) if p]
     where = data.draw(st.sampled_from(paths))
@@ -235,8 +281,12 @@ def test_planar_rgb_tiff(tmp_path: Path) -> None:
     np.testing.assert_allclose(grey, 0.299 * 10 + 0.587 * 20 + 0.114 * 30)
 
 
-def test_size_limit_override(corpus: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                             capsys: pytest.CaptureFixture[str]) -> None:
+def test_size_limit_override(
+    corpus: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     path = tmp_path / "big.png"
     from PIL import Image
 
@@ -250,15 +300,30 @@ def test_size_limit_override(corpus: Path, tmp_path: Path, monkeypatch: pytest.M
     assert main(["pattern", "metrics", str(path)]) == 2
     assert "--max-pixels" in capsys.readouterr().err
     # --max-pixels raises it for one invocation and restores the environment after
-    assert main(["--max-pixels", "2e5", "pattern", "generate", str(tmp_path / "g.tif"),
-                 "--size", "300x400", "--seed", "1"]) == 0
+    assert (
+        main(
+            [
+                "--max-pixels",
+                "2e5",
+                "pattern",
+                "generate",
+                str(tmp_path / "g.tif"),
+                "--size",
+                "300x400",
+                "--seed",
+                "1",
+            ]
+        )
+        == 0
+    )
     assert os.environ["DICBLUR_MAX_PIXELS"] == "5e4"
     with pytest.raises(InputError, match="max-pixels"):
         dicblur.speckle_pattern((300, 400), seed=1)
 
 
-def test_bomb_refused_from_header_without_decoding(corpus: Path,
-                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_bomb_refused_from_header_without_decoding(
+    corpus: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     import tifffile
     from PIL import Image
 
@@ -328,20 +393,44 @@ def test_save_image_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
     assert [p.name for p in tmp_path.iterdir()] == ["a.tif"]
 
 
-@pytest.mark.parametrize(("argv", "stage"), [
-    (["correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "-o",
-      "{o}/missing/f.nc"], "dicblur.dic.Correlator"),
-    (["pulse", "-o", "{o}/missing/deeper", "--trials", "10"],
-     "dicblur.pulse.study.run_pulse_study"),
-    (["fit", "{d}/results.csv", "-o", "{o}/missing/m.json"], "dicblur.cli.models._read_table"),
-    (["pattern", "generate", "{o}/missing/x.tif", "--size", "64"],
-     "dicblur.patterns.speckle_pattern"),
-    (["campaign", "run", "{d}/spec.toml", "-o", "{o}/missing/r.zarr", "--serial", "-q"],
-     "dicblur.campaign.load_spec"),
-])
-def test_outputs_checked_before_the_work(argv: list[str], stage: str, corpus: Path,
-                                         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                         capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(
+    ("argv", "stage"),
+    [
+        (
+            [
+                "correlate",
+                "{d}/good.tif",
+                "{d}/good2.tif",
+                "--subset",
+                "21",
+                "-o",
+                "{o}/missing/f.nc",
+            ],
+            "dicblur.dic.Correlator",
+        ),
+        (
+            ["pulse", "-o", "{o}/missing/deeper", "--trials", "10"],
+            "dicblur.pulse.study.run_pulse_study",
+        ),
+        (["fit", "{d}/results.csv", "-o", "{o}/missing/m.json"], "dicblur.cli.models._read_table"),
+        (
+            ["pattern", "generate", "{o}/missing/x.tif", "--size", "64"],
+            "dicblur.patterns.speckle_pattern",
+        ),
+        (
+            ["campaign", "run", "{d}/spec.toml", "-o", "{o}/missing/r.zarr", "--serial", "-q"],
+            "dicblur.campaign.load_spec",
+        ),
+    ],
+)
+def test_outputs_checked_before_the_work(
+    argv: list[str],
+    stage: str,
+    corpus: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     def never(*a: object, **k: object) -> None:
         raise AssertionError("the computation started before the output was checked")
 
@@ -407,11 +496,12 @@ def test_metrics_never_print_nan(tmp_path: Path, capsys: pytest.CaptureFixture[s
 
     # negative grey levels (a float TIFF): the mean is < 0, contrasts are undefined
     tifffile.imwrite(tmp_path / "half.tif", speckle((64, 64)) - 300.0)
-    assert main(["pattern", "metrics", str(tmp_path / "half.tif"), "--subset", "11",
-                 "--noise", "2"]) == 0
+    assert (
+        main(["pattern", "metrics", str(tmp_path / "half.tif"), "--subset", "11", "--noise", "2"])
+        == 0
+    )
     out = capsys.readouterr()
-    values = [line.split("│")[2].strip() for line in out.out.splitlines()
-              if line.count("│") >= 3]
+    values = [line.split("│")[2].strip() for line in out.out.splitlines() if line.count("│") >= 3]
     assert values and not [v for v in values if v.lower() in ("nan", "inf", "-inf")]
     assert "-" in values  # the undefined ones
     assert "undefined" in out.err

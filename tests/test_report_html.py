@@ -15,8 +15,11 @@ def _report(tmp_path, broken=False):
     rep = HtmlReport("Test report", tmp_path)
     rep.section("Numbers")
     rep.paragraph("Some **bold** and `code` <escaped>.")
-    rep.table([{"name": "eta", "value": 0.0123, "verdict": "agrees"}], left=["name", "verdict"],
-              classes={"verdict": {"agrees": "agrees"}})
+    rep.table(
+        [{"name": "eta", "value": 0.0123, "verdict": "agrees"}],
+        left=["name", "verdict"],
+        classes={"verdict": {"agrees": "agrees"}},
+    )
     fig, ax = plt.subplots()
     ax.plot(np.arange(5), np.arange(5) ** 2)
     rep.figure(fig, "fig_test", "A parabola")

@@ -19,10 +19,18 @@ from dicblur.report.reproduce import ReproduceSettings, reproduce
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
-    settings = ReproduceSettings(out=out, quick=True, size=128, subset=21, serial=True,
-                                 blur_step_px=1.0, family=(2.0, 4.0, 8.0), trials=400,
-                                 pulse_dependence=False,
-                                 command="pytest small run")
+    settings = ReproduceSettings(
+        out=out,
+        quick=True,
+        size=128,
+        subset=21,
+        serial=True,
+        blur_step_px=1.0,
+        family=(2.0, 4.0, 8.0),
+        trials=400,
+        pulse_dependence=False,
+        command="pytest small run",
+    )
     return settings, reproduce(settings)
 
 
@@ -35,8 +43,7 @@ def test_outputs_exist_and_are_consistent(small_run):
     assert set(data["fits"]) == {"p1", "p2", "p3", "p4"}
     ids = [c["id"] for c in data["claims"]]
     assert ids == [f"C{i}" for i in range(1, 22)]
-    assert {c["verdict"] for c in data["claims"]} <= {"agrees", "differs", "partly",
-                                                      "inconclusive"}
+    assert {c["verdict"] for c in data["claims"]} <= {"agrees", "differs", "partly", "inconclusive"}
     c1 = next(c for c in data["claims"] if c["id"] == "C1")
     assert c1["verdict"] == "agrees" and "spectrum" in c1["ours"]  # Algorithm 1 itself
     c12 = next(c for c in data["claims"] if c["id"] == "C12")
@@ -61,7 +68,7 @@ def test_outputs_exist_and_are_consistent(small_run):
     assert "<h3>Verdict" in html and "<pre># Verdict" not in html
     assert "brief s." not in html and "extraction" not in html
     # the stage-time table is complete
-    assert "report (claims, figures, page)" in html and "<td class=\"l\">total</td>" in html
+    assert "report (claims, figures, page)" in html and '<td class="l">total</td>' in html
     assert "stand-in (sharp)" not in html
 
 
@@ -76,8 +83,9 @@ def test_rerun_reuses_campaign_results(small_run):
     assert [c["ours"] for c in again.claims] == [c["ours"] for c in first.claims]
 
 
-@pytest.mark.skipif(find_browser() is None,
-                    reason="no Chromium on PATH; .ci/run installs Debian's chromium")
+@pytest.mark.skipif(
+    find_browser() is None, reason="no Chromium on PATH; .ci/run installs Debian's chromium"
+)
 @pytest.mark.slow
 def test_report_opens_in_headless_chromium(small_run):
     settings, res = small_run
@@ -88,6 +96,8 @@ def test_report_opens_in_headless_chromium(small_run):
 
 
 def test_cli_rejects_bad_arguments(tmp_path, capsys):
-    assert main(["reproduce", "--out", str(tmp_path), "--pattern1",
-                 str(tmp_path / "missing.tif")]) == 2
+    assert (
+        main(["reproduce", "--out", str(tmp_path), "--pattern1", str(tmp_path / "missing.tif")])
+        == 2
+    )
     assert "no such file" in capsys.readouterr().err

@@ -26,6 +26,7 @@ def write_cine(path, frames, *, fps=5000, exposure_ns=100_000, bits=16, truncate
 
     n, rows, cols = frames.shape
     dtype = "<u1" if bits == 8 else "<u2"
+
     def pack(fields, values):
         out = b""
         for name, fmt in fields:
@@ -37,33 +38,63 @@ def write_cine(path, frames, *, fps=5000, exposure_ns=100_000, bits=16, truncate
                 v = [v]
             out += s.pack(*v)
         return out
+
     setup_size = sum(struct.calcsize("<" + f) for _, f in SETUP_FIELDS)
     head_size = sum(struct.calcsize("<" + f) for _, f in HEADER_FIELDS)
     bmp_size = sum(struct.calcsize("<" + f) for _, f in BITMAP_INFO_FIELDS)
     off_setup = head_size + bmp_size
-    tag_ts = struct.pack("<IHH", 8 + 8 * n, 1002, 1) + struct.pack(f"<{n}Q", *[
-        (1_700_000_000 << 32) + int(k / fps * 2**32) for k in range(n)])
+    tag_ts = struct.pack("<IHH", 8 + 8 * n, 1002, 1) + struct.pack(
+        f"<{n}Q", *[(1_700_000_000 << 32) + int(k / fps * 2**32) for k in range(n)]
+    )
     tag_exp = struct.pack("<IHH", 8 + 4 * n, 1003, 0) + struct.pack(
-        f"<{n}I", *[int(exposure_ns * 1e-9 * 2**32)] * n)
+        f"<{n}I", *[int(exposure_ns * 1e-9 * 2**32)] * n
+    )
     off_offsets = off_setup + setup_size + len(tag_ts) + len(tag_exp)
     first_image = off_offsets + 8 * n
     img_bytes = rows * cols * np.dtype(dtype).itemsize
     offsets = [first_image + k * (8 + img_bytes) for k in range(n)]
-    header = pack(HEADER_FIELDS, {"type": b"CI", "header_size": head_size, "version": 1,
-                                  "total_image_count": n, "image_count": n,
-                                  "off_image_header": head_size, "off_setup": off_setup,
-                                  "off_image_offsets": off_offsets,
-                                  "trigger_time": 1_700_000_000 << 32})
-    bmp = pack(BITMAP_INFO_FIELDS, {"bi_size": bmp_size, "bi_width": cols, "bi_height": rows,
-                                    "bi_planes": 1, "bi_bit_count": bits,
-                                    "bi_image_size": img_bytes})
-    setup = pack(SETUP_FIELDS, {"length": setup_size, "software_version": 100000,
-                                "frame_rate": fps, "shutter_ns": exposure_ns,
-                                "real_bpp": bits if bits != 16 else 12, "cfa": 0})
-    body = b"".join(struct.pack("<II", 8, img_bytes)
-                    + np.ascontiguousarray(f[::-1]).astype(dtype).tobytes() for f in frames)
+    header = pack(
+        HEADER_FIELDS,
+        {
+            "type": b"CI",
+            "header_size": head_size,
+            "version": 1,
+            "total_image_count": n,
+            "image_count": n,
+            "off_image_header": head_size,
+            "off_setup": off_setup,
+            "off_image_offsets": off_offsets,
+            "trigger_time": 1_700_000_000 << 32,
+        },
+    )
+    bmp = pack(
+        BITMAP_INFO_FIELDS,
+        {
+            "bi_size": bmp_size,
+            "bi_width": cols,
+            "bi_height": rows,
+            "bi_planes": 1,
+            "bi_bit_count": bits,
+            "bi_image_size": img_bytes,
+        },
+    )
+    setup = pack(
+        SETUP_FIELDS,
+        {
+            "length": setup_size,
+            "software_version": 100000,
+            "frame_rate": fps,
+            "shutter_ns": exposure_ns,
+            "real_bpp": bits if bits != 16 else 12,
+            "cfa": 0,
+        },
+    )
+    body = b"".join(
+        struct.pack("<II", 8, img_bytes) + np.ascontiguousarray(f[::-1]).astype(dtype).tobytes()
+        for f in frames
+    )
     data = header + bmp + setup + tag_ts + tag_exp + struct.pack(f"<{n}Q", *offsets) + body
-    path.write_bytes(data[:len(data) - truncate] if truncate else data)
+    path.write_bytes(data[: len(data) - truncate] if truncate else data)
     return path
 
 
@@ -88,10 +119,19 @@ def write_mraw_12bit(path, frames, *, fps=2000, shutter=2e-4):
     a, b = flat[0::2], flat[1::2]
     packed = np.stack([(a >> 4) & 0xFF, ((a & 0x0F) << 4) | (b >> 8), b & 0xFF], axis=1)
     path.with_suffix(".mraw").write_bytes(packed.astype(np.uint8).tobytes())
-    info = {"Record Rate(fps)": fps, "Shutter Speed(s)": shutter, "Total Frame": n,
-            "Original Total Frame": n, "Image Width": cols, "Image Height": rows,
-            "Color Type": "Mono", "Color Bit": 12, "File Format": "MRaw",
-            "EffectiveBit Depth": 12, "EffectiveBit Side": "Lower"}
+    info = {
+        "Record Rate(fps)": fps,
+        "Shutter Speed(s)": shutter,
+        "Total Frame": n,
+        "Original Total Frame": n,
+        "Image Width": cols,
+        "Image Height": rows,
+        "Color Type": "Mono",
+        "Color Bit": 12,
+        "File Format": "MRaw",
+        "EffectiveBit Depth": 12,
+        "EffectiveBit Side": "Lower",
+    }
     with path.with_suffix(".cih").open("w") as fh:
         fh.write("#Camera Information Header\n")
         for k, v in info.items():
@@ -166,8 +206,12 @@ def test_mraw_written_by_pymraw(tmp_path, bits):
     import pyMRAW
 
     frames = _frames(5, top=255 if bits == 8 else 65535)
-    pyMRAW.save_mraw(frames, str(tmp_path / "rec.cih"), bit_depth=bits,
-                     info_dict={"Record Rate(fps)": 4000, "Shutter Speed(s)": 0.0001})
+    pyMRAW.save_mraw(
+        frames,
+        str(tmp_path / "rec.cih"),
+        bit_depth=bits,
+        info_dict={"Record Rate(fps)": 4000, "Shutter Speed(s)": 0.0001},
+    )
     rec = open_recording(tmp_path / "rec.cih")
     assert rec.kind == "mraw" and len(rec) == 5 and rec.fps == 4000
     assert rec.exposure == pytest.approx(1e-4)

@@ -22,9 +22,17 @@ from dicblur.track.synthetic import VibratingTarget
 
 # shared/ sits beside the repository (conftest.REAL_DATA); a worktree sits one level lower
 _HERE = Path(__file__).resolve()
-REAL = next((p for p in (_HERE.parents[1].parent / "shared" / "data" / "real",
-                         _HERE.parents[2].parent / "shared" / "data" / "real") if p.exists()),
-            _HERE.parents[1].parent / "shared" / "data" / "real")
+REAL = next(
+    (
+        p
+        for p in (
+            _HERE.parents[1].parent / "shared" / "data" / "real",
+            _HERE.parents[2].parent / "shared" / "data" / "real",
+        )
+        if p.exists()
+    ),
+    _HERE.parents[1].parent / "shared" / "data" / "real",
+)
 
 
 def _pattern(n=112, seed=1):
@@ -35,8 +43,16 @@ def _pattern(n=112, seed=1):
 @pytest.fixture(scope="module")
 def tiny():
     """A 112^2 target, 4 static frames then a 200 Hz, 6 px vibration at 2000 fps (W <= 3 px)."""
-    tgt = VibratingTarget(_pattern(), fps=2000.0, exposure=0.4e-3, amplitude=6.0,
-                          frequency=200.0, angle=20.0, static=4, seed=3)
+    tgt = VibratingTarget(
+        _pattern(),
+        fps=2000.0,
+        exposure=0.4e-3,
+        amplitude=6.0,
+        frequency=200.0,
+        angle=20.0,
+        static=4,
+        seed=3,
+    )
     rec = tgt.recording(24)
     ds = dicblur.track(rec, static="0:4", subset=21, step=12, shape="translation")
     return tgt, ds
@@ -107,10 +123,26 @@ def test_parse_rate():
 def test_track_tiny_truth(tiny):
     tgt, ds = tiny
     assert ds.sizes["frame"] == 24 and ds.attrs["complete"] == 1
-    for name in ("u", "v", "W", "blur_direction", "sigma_u", "sigma_v", "sigma_u_noise",
-                 "sigma_u_blur", "sigma_v_noise", "sigma_v_blur", "status", "zncc",
-                 "outlier", "n_outliers", "blur_dominated_share", "bias_u", "bias_v",
-                 "reference_frame"):
+    for name in (
+        "u",
+        "v",
+        "W",
+        "blur_direction",
+        "sigma_u",
+        "sigma_v",
+        "sigma_u_noise",
+        "sigma_u_blur",
+        "sigma_v_noise",
+        "sigma_v_blur",
+        "status",
+        "zncc",
+        "outlier",
+        "n_outliers",
+        "blur_dominated_share",
+        "bias_u",
+        "bias_v",
+        "reference_frame",
+    ):
         assert name in ds
     tu, tv, bu, bv = tgt.truth(ds["frame"].values)
     valid = ds["valid"].values.astype(bool)
@@ -145,9 +177,17 @@ def test_blur_term_grows_with_w(tiny):
 # ---------------------------------------------------------------- bad inputs
 def _plain(frames, fps=None, exposure=None):
     arr = [np.asarray(f, dtype=np.float64) for f in frames]
-    return Recording(source="test", kind="memory", n_frames=len(arr), shape=arr[0].shape,
-                     bit_depth=8, fps=fps, exposure=exposure,
-                     names=[f"frame {i}" for i in range(len(arr))], _read=lambda i: arr[i])
+    return Recording(
+        source="test",
+        kind="memory",
+        n_frames=len(arr),
+        shape=arr[0].shape,
+        bit_depth=8,
+        fps=fps,
+        exposure=exposure,
+        names=[f"frame {i}" for i in range(len(arr))],
+        _read=lambda i: arr[i],
+    )
 
 
 def test_missing_exposure_and_too_long():
@@ -167,8 +207,13 @@ def test_metadata_disagreement_warns():
     img = _pattern(64)
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(4)]
     with pytest.warns(UserWarning, match="metadata says"):
-        ds = dicblur.track(_plain(frames, fps=1000, exposure=5e-4), exposure="0.2ms",
-                           noise=1.0, step=16, advice=False)
+        ds = dicblur.track(
+            _plain(frames, fps=1000, exposure=5e-4),
+            exposure="0.2ms",
+            noise=1.0,
+            step=16,
+            advice=False,
+        )
     assert ds.attrs["exposure"] == pytest.approx(2e-4)
 
 
@@ -177,8 +222,7 @@ def test_static_range_with_motion_warns():
     img = _pattern(80)
     frames = [np.roll(img, k // 2, axis=1) + rng.normal(0, 1, img.shape) for k in range(6)]
     with pytest.warns(UserWarning, match="the scene moves"):
-        dicblur.track(_plain(frames, fps=1000, exposure=1e-4), static="0:6", step=16,
-                      advice=False)
+        dicblur.track(_plain(frames, fps=1000, exposure=1e-4), static="0:6", step=16, advice=False)
 
 
 def test_bad_frame_keeps_what_was_tracked():
@@ -187,8 +231,7 @@ def test_bad_frame_keeps_what_was_tracked():
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(6)]
     frames[4] = frames[4][:-2]
     with pytest.raises(TrackInterrupted, match="after 4 of 6 frames") as info:
-        dicblur.track(_plain(frames, fps=1000, exposure=1e-4), noise=1.0, step=16,
-                      advice=False)
+        dicblur.track(_plain(frames, fps=1000, exposure=1e-4), noise=1.0, step=16, advice=False)
     ds = info.value.dataset
     assert ds.sizes["frame"] == 4 and ds.attrs["complete"] == 0
     assert "78x80" in ds.attrs["stop_reason"]
@@ -206,9 +249,27 @@ def test_cli_track_writes_dataset_csv_report(tmp_path, tiny):
     for k in range(12):
         dicblur.save_image(folder / f"f{k}.png", tgt.render(k), bit_depth=8)
     out = tmp_path / "out"
-    rc = main(["track", str(folder), "--exposure", "0.4ms", "--fps", "2kHz", "--static",
-               "0:4", "--subset", "21", "--step", "16", "--shape", "translation", "--csv",
-               "-o", str(out)])
+    rc = main(
+        [
+            "track",
+            str(folder),
+            "--exposure",
+            "0.4ms",
+            "--fps",
+            "2kHz",
+            "--static",
+            "0:4",
+            "--subset",
+            "21",
+            "--step",
+            "16",
+            "--shape",
+            "translation",
+            "--csv",
+            "-o",
+            str(out),
+        ]
+    )
     assert rc == 0
     ds = xr.open_dataset(out / "track.nc", engine="scipy")
     assert ds.sizes["frame"] == 12 and int(ds.attrs["complete"]) == 1
@@ -233,8 +294,24 @@ def test_cli_track_partial_on_bad_frame(tmp_path, capsys):
         f = img + rng.normal(0, 1, img.shape)
         dicblur.save_image(folder / f"f{k}.png", f if k != 3 else f[:, :-4], bit_depth=8)
     out = tmp_path / "out"
-    rc = main(["track", str(folder), "--exposure", "0.1ms", "--fps", "1000", "--noise", "1",
-               "--step", "16", "--format", "zarr", "-o", str(out)])
+    rc = main(
+        [
+            "track",
+            str(folder),
+            "--exposure",
+            "0.1ms",
+            "--fps",
+            "1000",
+            "--noise",
+            "1",
+            "--step",
+            "16",
+            "--format",
+            "zarr",
+            "-o",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and "after 3 of 5 frames" in err and "80x76" in err
     ds = xr.open_zarr(out / "track.zarr")
@@ -242,12 +319,21 @@ def test_cli_track_partial_on_bad_frame(tmp_path, capsys):
 
 
 # ---------------------------------------------------------------- real images
-@pytest.mark.skipif(not (REAL / "dicchallenge1_sample3").exists(),
-                    reason="DIC Challenge images not present (shared/data/real beside the repo)")
+@pytest.mark.skipif(
+    not (REAL / "dicchallenge1_sample3").exists(),
+    reason="DIC Challenge images not present (shared/data/real beside the repo)",
+)
 def test_real_sample3_static_pair(tmp_path):
     """Sample 3: reference and an independent zero-shift image, a noise-floor pair."""
-    ds = dicblur.track(str(REAL / "dicchallenge1_sample3" / "*.tif"), exposure="0.1ms",
-                       fps=1000, static="0:2", subset=21, step=20, advice=False)
+    ds = dicblur.track(
+        str(REAL / "dicchallenge1_sample3" / "*.tif"),
+        exposure="0.1ms",
+        fps=1000,
+        static="0:2",
+        subset=21,
+        step=20,
+        advice=False,
+    )
     valid = ds["valid"].values.astype(bool)
     assert valid[1].mean() > 0.95
     meas = np.std(ds["u"].values[1][valid[1]])
@@ -264,10 +350,17 @@ def test_predicted_sigma_matches_scatter_over_w():
     quadratic mean of the predicted sigma is within 15 % of the scatter over points."""
     w_all, d_all, s_all = [], [], []
     for i, t in enumerate((0.15e-3, 0.45e-3)):
-        tgt = VibratingTarget(_pattern(192, seed=5), fps=2000.0, exposure=t, amplitude=8.0,
-                              frequency=200.0, angle=20.0, static=8, seed=20 + i)
-        ds = dicblur.track(tgt.recording(38), static="0:8", subset=21, step=10,
-                           advice=False)
+        tgt = VibratingTarget(
+            _pattern(192, seed=5),
+            fps=2000.0,
+            exposure=t,
+            amplitude=8.0,
+            frequency=200.0,
+            angle=20.0,
+            static=8,
+            seed=20 + i,
+        )
+        ds = dicblur.track(tgt.recording(38), static="0:8", subset=21, step=10, advice=False)
         tu, _tv, bu, bv = tgt.truth(ds["frame"].values)
         valid = ds["valid"].values.astype(bool)
         eu = ds["u"].values - tu[:, None]
@@ -296,8 +389,11 @@ def test_reference_update_follows_a_large_rotation():
     img = _pattern(128, seed=7)
     rng = np.random.default_rng(5)
     angles = np.arange(10) * 4.0
-    frames = [ndimage.rotate(img, a, reshape=False, order=3, mode="reflect")
-              + rng.normal(0, 1.0, img.shape) for a in angles]
+    frames = [
+        ndimage.rotate(img, a, reshape=False, order=3, mode="reflect")
+        + rng.normal(0, 1.0, img.shape)
+        for a in angles
+    ]
     kw = dict(noise=1.0, subset=21, step=12, roi=(34, 94, 34, 94), advice=False)
     plain = dicblur.track(_plain(frames, fps=1000, exposure=1e-4), **kw)
     upd = dicblur.track(_plain(frames, fps=1000, exposure=1e-4), update_reference=True, **kw)
@@ -357,8 +453,9 @@ def test_kernel_skew_from_track_and_its_bias():
 def test_reference_in_the_middle_tracks_backwards(tiny):
     tgt, _ = tiny
     rec = tgt.recording(16)
-    ds = dicblur.track(rec, static="0:4", subset=21, step=12, shape="translation",
-                       reference=9, advice=False)
+    ds = dicblur.track(
+        rec, static="0:4", subset=21, step=12, shape="translation", reference=9, advice=False
+    )
     assert list(ds["frame"].values) == list(range(16))
     tu, tv, _, _ = tgt.truth(ds["frame"].values)
     valid = ds["valid"].values.astype(bool)

@@ -89,9 +89,9 @@ def _extend(image: NDArray[np.float64], boundary: Boundary) -> NDArray[np.float6
     raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
 
 
-def _spectral(image: NDArray[np.float64], boundary: Boundary, dy: float, dx: float,
-              blur: float | None = None
-              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def _spectral(
+    image: NDArray[np.float64], boundary: Boundary, dy: float, dx: float, blur: float | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Spectral ``(f_y, f_x, f_dd)``; with ``blur`` the centred box blur along ``(dy, dx)``
     of length ``blur`` px replaces ``f_dd`` (transfer ``sinc(blur * k.d)``, real: no shift).
     """
@@ -112,13 +112,15 @@ def _spectral(image: NDArray[np.float64], boundary: Boundary, dy: float, dx: flo
         kx_odd[:, -1] = 0
     fy = np.fft.irfft2(spec * ky_odd, s=shp)[:rows, :cols]
     fx = np.fft.irfft2(spec * kx_odd, s=shp)[:rows, :cols]
-    fdd = np.fft.irfft2(spec * (dx * dx * kx * kx + 2 * dx * dy * ky * kx + dy * dy * ky * ky),
-                        s=shp)
+    fdd = np.fft.irfft2(
+        spec * (dx * dx * kx * kx + 2 * dx * dy * ky * kx + dy * dy * ky * ky), s=shp
+    )
     return fy, fx, fdd[:rows, :cols]
 
 
-def _spline_gradients(image: NDArray[np.float64], derivative: str
-                      ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _spline_gradients(
+    image: NDArray[np.float64], derivative: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses)."""
     # imported here: dicblur.dic imports dicblur.metrics, which imports this module
     from .dic.interpolation import bspline_coefficients, bspline_gradients
@@ -128,9 +130,9 @@ def _spline_gradients(image: NDArray[np.float64], derivative: str
     return bspline_gradients(coef, order, image.shape)
 
 
-def _interpolated_at(image: NDArray[np.float64], boundary: Boundary, oy: float, ox: float,
-                     order: int
-                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def _interpolated_at(
+    image: NDArray[np.float64], boundary: Boundary, oy: float, ox: float, order: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The current image of a target moved by the sub-pixel offset ``(oy, ox)`` (px), as
     the matcher sees it back on the reference grid: ``(h~, h~_y, h~_x)`` at ``x + o``, with
     ``h = image(x - o)`` (exact spectral shift) sampled at the pixels and ``h~`` its B-spline
@@ -142,8 +144,9 @@ def _interpolated_at(image: NDArray[np.float64], boundary: Boundary, oy: float, 
     rows, cols = image.shape
     ext = _extend(image, boundary)
     shp = ext.shape
-    phase = np.exp(-2j * np.pi * (np.fft.fftfreq(shp[0])[:, None] * oy
-                                  + np.fft.rfftfreq(shp[1])[None, :] * ox))
+    phase = np.exp(
+        -2j * np.pi * (np.fft.fftfreq(shp[0])[:, None] * oy + np.fft.rfftfreq(shp[1])[None, :] * ox)
+    )
     h = np.fft.irfft2(np.fft.rfft2(ext) * phase, s=shp)[:rows, :cols]
     coef = bspline_coefficients(h, order=order, dtype=np.float64)
     out, gy, gx = bspline_at_offset(coef, order, h.shape, oy, ox)
@@ -161,18 +164,21 @@ def _interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[n
     n = 4096
     om = 2.0 * np.pi * np.fft.fftfreq(n)
     lo = -(order - 1) // 2
-    num = sum(float(bspline_kernel(np.array(t - m), order)) * np.exp(1j * om * m)
-              for m in range(lo, lo + order + 1))
+    num = sum(
+        float(bspline_kernel(np.array(t - m), order)) * np.exp(1j * om * m)
+        for m in range(lo, lo + order + 1)
+    )
     half = (order + 1) // 2
-    den = sum(float(bspline_kernel(np.array(float(m)), order)) * np.cos(om * m)
-              for m in range(-half, half + 1))
+    den = sum(
+        float(bspline_kernel(np.array(float(m)), order)) * np.cos(om * m)
+        for m in range(-half, half + 1)
+    )
     acov = np.fft.ifft(np.abs(num) ** 2 / den**2).real
     d = np.abs(np.arange(size)[:, None] - np.arange(size)[None, :])
     return np.asarray(acov[d])
 
 
-def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9
-                       ) -> NDArray[np.float64]:
+def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9) -> NDArray[np.float64]:
     """Impulse response ``d[m]``, ``m = -L..L``, of the matcher's derivative at the pixels:
     ``f_x[j] = sum_m d[m] n[j - m]``. For a B-spline, the derivative of the interpolant of
     the samples ``n`` (prefilter, then the derivative taps; transfer ``sum_m beta'(m)
@@ -194,20 +200,26 @@ def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9
     om = 2.0 * np.pi * np.fft.fftfreq(n)
     half = (order + 1) // 2
     ms = range(-half, half + 1)
-    num = sum(float(bspline_kernel_derivative(np.array(float(m)), order)) * np.exp(-1j * om * m)
-              for m in ms)
+    num = sum(
+        float(bspline_kernel_derivative(np.array(float(m)), order)) * np.exp(-1j * om * m)
+        for m in ms
+    )
     den = sum(float(bspline_kernel(np.array(float(m)), order)) * np.cos(om * m) for m in ms)
     d = np.fft.ifft(num / den).real
-    d = np.concatenate([d[n // 2:], d[: n // 2]])  # lag -n/2 .. n/2 - 1
+    d = np.concatenate([d[n // 2 :], d[: n // 2]])  # lag -n/2 .. n/2 - 1
     big = np.flatnonzero(np.abs(d) >= tol * np.abs(d).max())
     lag = max(abs(int(big[0]) - n // 2), abs(int(big[-1]) - n // 2))
     return np.asarray(d[n // 2 - lag : n // 2 + lag + 1])
 
 
-def _gradient_noise_fields(r0: NDArray[np.float64], subset: int, shape: str,
-                           ex: NDArray[np.float64], ey: NDArray[np.float64],
-                           kernel: NDArray[np.float64]
-                           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _gradient_noise_fields(
+    r0: NDArray[np.float64],
+    subset: int,
+    shape: str,
+    ex: NDArray[np.float64],
+    ey: NDArray[np.float64],
+    kernel: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``D_k^T (S_k r0)`` of every steepest-descent column ``k``: the linear functional of
     the reference noise ``n`` by which the noisy gradients move ``J_f^T r0``
     (``delta J_f[:, k] = S_k D n``, ``D`` the spline derivative along x or y, ``S_k`` the
@@ -229,18 +241,24 @@ def _gradient_noise_fields(r0: NDArray[np.float64], subset: int, shape: str,
     w3 = np.stack([(wt * np.ones((1, size * size))).reshape(size, size) for wt in weights])
     # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
     idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
-    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)],
-                    0.0)
+    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)], 0.0)
     v = r[:, None, :, :] * w3[None]  # (m, k, S, S)
     qx = np.matmul(v, tmat.T)  # along columns: (m, k, S, S + 2L)
     qy = np.matmul(tmat, v)  # along rows: (m, k, S + 2L, S)
     return np.moveaxis(qx, 1, -1), np.moveaxis(qy, 1, -1)
 
 
-def _reference_noise_middle(pf: NDArray[np.float64], ratio: NDArray[np.float64],
-                            sg: NDArray[np.float64], r0: NDArray[np.float64], subset: int,
-                            shape: str, ex: NDArray[np.float64], ey: NDArray[np.float64],
-                            kernel: NDArray[np.float64]) -> NDArray[np.float64]:
+def _reference_noise_middle(
+    pf: NDArray[np.float64],
+    ratio: NDArray[np.float64],
+    sg: NDArray[np.float64],
+    r0: NDArray[np.float64],
+    subset: int,
+    shape: str,
+    ex: NDArray[np.float64],
+    ey: NDArray[np.float64],
+    kernel: NDArray[np.float64],
+) -> NDArray[np.float64]:
     """``M^T M`` of the reference noise's response ``A^-1 M^T n``, per unit noise variance:
     ``M = ratio P_f J_f + sigma_g Q`` with ``Q = [D_k^T (S_k r0)]`` (docs/models.md s. 4,
     the complete noise term). Shape (m, k, k)."""
@@ -262,8 +280,7 @@ def _reference_noise_middle(pf: NDArray[np.float64], ratio: NDArray[np.float64],
     cross = _gram(pf, q_sub)
     r = ratio[:, None, None]
     s = sg[:, None, None]
-    return (r * r * _gram(pf, pf) + r * s * (cross + np.transpose(cross, (0, 2, 1)))
-            + s * s * qq)
+    return r * r * _gram(pf, pf) + r * s * (cross + np.transpose(cross, (0, 2, 1))) + s * s * qq
 
 
 def _check_derivative(derivative: str) -> None:
@@ -343,8 +360,7 @@ class _Windows:
 
     def __init__(self, subset: int, *images: NDArray[np.float64]) -> None:
         self.h = subset // 2
-        self.views = [np.lib.stride_tricks.sliding_window_view(a, (subset, subset))
-                      for a in images]
+        self.views = [np.lib.stride_tricks.sliding_window_view(a, (subset, subset)) for a in images]
         off = np.arange(-self.h, self.h + 1, dtype=np.float64)
         oy, ox = np.meshgrid(off, off, indexing="ij")
         self.ex, self.ey = ox.ravel()[None, :], oy.ravel()[None, :]
@@ -353,8 +369,9 @@ class _Windows:
         r0, c0 = cc[:, 0] - self.h, cc[:, 1] - self.h
         return [v[r0, c0].reshape(len(cc), -1) for v in self.views]
 
-    def jacobian(self, gx: NDArray[np.float64], gy: NDArray[np.float64],
-                 shape: str) -> NDArray[np.float64]:
+    def jacobian(
+        self, gx: NDArray[np.float64], gy: NDArray[np.float64], shape: str
+    ) -> NDArray[np.float64]:
         """Steepest-descent images, shape (m, pixels, 2 | 6)."""
         if shape == "translation":
             return np.stack([gx, gy], axis=2)
@@ -388,8 +405,7 @@ def _tdot(a: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]
 
 def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Batched ``a^-1 b``; NaN rows where ``a`` is singular (no gradient in the subset)."""
-    ok: NDArray[np.bool_] = np.asarray(np.isfinite(a).all(axis=(1, 2))
-                                       & np.isfinite(b).all(axis=1))
+    ok: NDArray[np.bool_] = np.asarray(np.isfinite(a).all(axis=(1, 2)) & np.isfinite(b).all(axis=1))
     ok[ok] = np.linalg.cond(a[ok]) < 1e12
     sol = np.full(b.shape, np.nan)
     if ok.any():
@@ -397,8 +413,9 @@ def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     return sol
 
 
-def _along(sol: NDArray[np.float64], shape: str, dy: float, dx: float,
-           max_shift: float = np.inf) -> NDArray[np.float64]:
+def _along(
+    sol: NDArray[np.float64], shape: str, dy: float, dx: float, max_shift: float = np.inf
+) -> NDArray[np.float64]:
     u = sol[:, 0]
     v = sol[:, 1] if shape == "translation" else sol[:, 3]
     return np.where(np.hypot(u, v) <= max_shift, dx * u + dy * v, np.nan)
@@ -518,20 +535,42 @@ def subset_blur_shifts(
         down.
     """
     _check_criterion(criterion)
-    return _shifts_and_variance(image, blur, centres, subset, motion=motion, shape=shape,
-                                derivative=derivative, boundary=boundary,
-                                criterion=criterion, max_shift=max_shift, chunk=chunk,
-                                variance=False, offset=offset)[0]
+    return _shifts_and_variance(
+        image,
+        blur,
+        centres,
+        subset,
+        motion=motion,
+        shape=shape,
+        derivative=derivative,
+        boundary=boundary,
+        criterion=criterion,
+        max_shift=max_shift,
+        chunk=chunk,
+        variance=False,
+        offset=offset,
+    )[0]
 
 
-def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
-                         centres: NDArray[np.intp], subset: int, *,
-                         motion: tuple[float, float], shape: Shape, derivative: Derivative,
-                         boundary: Boundary, criterion: Criterion, max_shift: float,
-                         chunk: int, variance: bool, offset: float | None = None,
-                         complete: bool = True, min_contraction: float = 0.0,
-                         contraction_out: NDArray[np.float64] | None = None
-                         ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+def _shifts_and_variance(
+    image: NDArray[np.float64],
+    blur: ArrayLike,
+    centres: NDArray[np.intp],
+    subset: int,
+    *,
+    motion: tuple[float, float],
+    shape: Shape,
+    derivative: Derivative,
+    boundary: Boundary,
+    criterion: Criterion,
+    max_shift: float,
+    chunk: int,
+    variance: bool,
+    offset: float | None = None,
+    complete: bool = True,
+    min_contraction: float = 0.0,
+    contraction_out: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
     :func:`subset_noise_variance`.
@@ -555,17 +594,20 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
     e[0] = dx
     e[1 if shape == "translation" else 3] = dy
     if offset is not None and derivative not in ("bspline3", "bspline5"):
-        raise InputError(f"subpixel={offset!r} with derivative={derivative!r}: the sub-pixel "
-                         "position is seen through the matcher's B-spline; use "
-                         "derivative='bspline3' or 'bspline5'")
+        raise InputError(
+            f"subpixel={offset!r} with derivative={derivative!r}: the sub-pixel "
+            "position is seen through the matcher's B-spline; use "
+            "derivative='bspline3' or 'bspline5'"
+        )
     noise_cov: tuple[NDArray[np.float64] | None, ...] | None = None
     if offset is not None and variance:
         order = 3 if derivative == "bspline3" else 5
         oy, ox = offset * dy, offset * dx
         # None: no fractional offset along that axis, the interpolant passes noise as is
-        noise_cov = tuple(None if t == 0.0 else
-                          _interpolated_noise_covariance(t, order, subset)
-                          for t in (oy - math.floor(oy), ox - math.floor(ox)))
+        noise_cov = tuple(
+            None if t == 0.0 else _interpolated_noise_covariance(t, order, subset)
+            for t in (oy - math.floor(oy), ox - math.floor(ox))
+        )
     offsets = _Windows(subset)
     win_ex, win_ey = offsets.ex, offsets.ey
     # E[dJ_f^T P_g n_g n_g^T P_g dJ_f] ~= sigma**4 R(0) G (interaction share): same-axis
@@ -575,20 +617,24 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
     # times C(0) across it; R the kernel's autocorrelation)
     gmat = np.zeros((e.size, e.size))
     if kernel is not None:
-        rk = np.correlate(kernel, kernel, "full")[len(kernel) - 1:]  # R(0), R(1), ...
+        rk = np.correlate(kernel, kernel, "full")[len(kernel) - 1 :]  # R(0), R(1), ...
         cov_yx = (None, None) if noise_cov is None else noise_cov
         c_axis = [np.eye(1)[0] if c is None else c[0] for c in cov_yx]  # C(0), C(1), ...
-        along = [float(rk[0] * c[0] + 2 * np.dot(rk[1:len(c)], c[1:len(rk)]))
-                 for c in c_axis]  # (y, x)
-        wts = (np.ones((subset * subset, 1)) if shape == "translation"
-               else np.stack([np.ones(subset * subset), win_ex[0], win_ey[0]], axis=1))
+        along = [
+            float(rk[0] * c[0] + 2 * np.dot(rk[1 : len(c)], c[1 : len(rk)])) for c in c_axis
+        ]  # (y, x)
+        wts = (
+            np.ones((subset * subset, 1))
+            if shape == "translation"
+            else np.stack([np.ones(subset * subset), win_ex[0], win_ey[0]], axis=1)
+        )
         gs = wts.T @ wts
         kx = wts.shape[1]
         gmat[:kx, :kx] = along[1] * c_axis[0][0] * gs  # x-type columns
         gmat[kx:, kx:] = along[0] * c_axis[1][0] * gs  # y-type columns
-    for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, motion,
-                                                    shape, derivative, boundary, chunk,
-                                                    offset):
+    for j, start, jf, jg, f, gg in _blurred_subsets(
+        image, w, centres, subset, motion, shape, derivative, boundary, chunk, offset
+    ):
         rows = slice(start, start + len(f))
         if criterion == "znssd" or variance:
             fh, sf = _normalise(f)
@@ -637,13 +683,13 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
                     p0 = _solve(cross / sg_ok[:, None, None], _tdot(jf, fh - gh))
                 # residual at the linearised fixed point, orthogonal to J_f
                 r0 = fh - gh - np.matmul(pjg, p0[:, :, None])[:, :, 0] / sg_ok[:, None]
-                mid_ref = _reference_noise_middle(pf, np.sqrt(ratio2), sg, r0, subset,
-                                                  shape, win_ex, win_ey, kernel)
+                mid_ref = _reference_noise_middle(
+                    pf, np.sqrt(ratio2), sg, r0, subset, shape, win_ex, win_ey, kernel
+                )
             else:
                 mid_ref = ratio2[:, None, None] * _gram(pf, pf)
             # e^T A^-1 M A^-T e = z^T M z with A^T z = e
-            z = _solve(np.transpose(cross, (0, 2, 1)),
-                       np.broadcast_to(e, (len(f), e.size)).copy())
+            z = _solve(np.transpose(cross, (0, 2, 1)), np.broadcast_to(e, (len(f), e.size)).copy())
             var[0, j, rows] = np.einsum("ni,nij,nj->n", z, mid_ref, z)
             var[1, j, rows] = np.einsum("ni,nij,nj->n", z, _gram(pg, pg_c), z)
             var[2, j, rows] = np.einsum("ni,ij,nj->n", z, gmat, z)
@@ -651,8 +697,13 @@ def _shifts_and_variance(image: NDArray[np.float64], blur: ArrayLike,
     return shifts, var
 
 
-def _contraction(jf: NDArray[np.float64], fh: NDArray[np.float64], sf: NDArray[np.float64],
-                 cross: NDArray[np.float64], sg: NDArray[np.float64]) -> NDArray[np.float64]:
+def _contraction(
+    jf: NDArray[np.float64],
+    fh: NDArray[np.float64],
+    sf: NDArray[np.float64],
+    cross: NDArray[np.float64],
+    sg: NDArray[np.float64],
+) -> NDArray[np.float64]:
     """Smallest real part of the eigenvalues of ``K = (sigma_f / sigma_g) H^-1 A`` per subset,
     ``H = J_f^T P_f J_f`` (the IC-GN Hessian of ZNSSD) and ``A = J_f^T P_g J_g`` (the
     fixed point's Jacobian). IC-GN against the blurred image moves by ``I - K`` per step
@@ -671,12 +722,22 @@ def _contraction(jf: NDArray[np.float64], fh: NDArray[np.float64], sf: NDArray[n
     return lam
 
 
-def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
-                     centres: NDArray[np.intp], subset: int, motion: tuple[float, float],
-                     shape: str, derivative: Derivative, boundary: Boundary, chunk: int,
-                     offset: float | None = None
-                     ) -> Iterator[tuple[int, int, NDArray[np.float64], NDArray[np.float64],
-                                         NDArray[np.float64], NDArray[np.float64]]]:
+def _blurred_subsets(
+    image: NDArray[np.float64],
+    blur: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    motion: tuple[float, float],
+    shape: str,
+    derivative: Derivative,
+    boundary: Boundary,
+    chunk: int,
+    offset: float | None = None,
+) -> Iterator[
+    tuple[
+        int, int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+    ]
+]:
     """``(j, start, J_f, J_g, f, g)`` for every blur length and chunk of subsets: the
     steepest-descent images of the sharp and of the centred-box-blurred image, and their
     subset intensities (W = 0: ``g = f``). With ``offset`` (px along the motion) the
@@ -687,8 +748,9 @@ def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
     for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
         if offset is not None:
             g = image if wl == 0 else _spectral(image, boundary, dy, dx, blur=float(wl))[0]
-            g, ggy, ggx = _interpolated_at(g, boundary, offset * dy, offset * dx,
-                                           3 if derivative == "bspline3" else 5)
+            g, ggy, ggx = _interpolated_at(
+                g, boundary, offset * dy, offset * dx, 3 if derivative == "bspline3" else 5
+            )
         elif wl == 0:
             g, ggy, ggx = image, fy, fx
         else:
@@ -696,8 +758,9 @@ def _blurred_subsets(image: NDArray[np.float64], blur: NDArray[np.float64],
             if derivative in ("bspline3", "bspline5"):  # no spectral pass needed
                 ggy, ggx = _spline_gradients(g, derivative)
             else:
-                ggy, ggx, _ = directional_derivatives(g, motion, derivative=derivative,
-                                                      boundary=boundary)
+                ggy, ggx, _ = directional_derivatives(
+                    g, motion, derivative=derivative, boundary=boundary
+                )
         win = _Windows(subset, fx, fy, ggx, ggy, image, g)
         for start in range(0, len(centres), chunk):
             ax, ay, bx, by, f, gg = win.take(centres[start : start + chunk])
@@ -740,9 +803,20 @@ def subset_noise_variance(
         ``sigma**4`` interaction of the two noises, which ``predict_from_pattern`` adds, is
         left out); ``nan`` where the subset has no gradient.
     """
-    var = _shifts_and_variance(image, blur, centres, subset, motion=motion, shape=shape,
-                               derivative=derivative, boundary=boundary, criterion="znssd",
-                               max_shift=np.inf, chunk=chunk, variance=True)[1]
+    var = _shifts_and_variance(
+        image,
+        blur,
+        centres,
+        subset,
+        motion=motion,
+        shape=shape,
+        derivative=derivative,
+        boundary=boundary,
+        criterion="znssd",
+        max_shift=np.inf,
+        chunk=chunk,
+        variance=True,
+    )[1]
     assert var is not None
     return np.asarray(var[0] + var[1])  # first order (the sigma**4 interaction left out)
 
@@ -801,8 +875,9 @@ def subset_blur_response(
     e = np.zeros((2, k))
     e[0, iu] = 1.0
     e[1, iv] = 1.0
-    for j, start, jf, jg, f, gg in _blurred_subsets(image, w, centres, subset, (dy, dx),
-                                                    shape, derivative, boundary, chunk):
+    for j, start, jf, jg, f, gg in _blurred_subsets(
+        image, w, centres, subset, (dy, dx), shape, derivative, boundary, chunk
+    ):
         rows = slice(start, start + len(f))
         fh, sf = _normalise(f)
         gh, sg = _normalise(gg)
@@ -814,14 +889,14 @@ def subset_blur_response(
             uv[~(np.hypot(uv[:, 0], uv[:, 1]) <= max_shift)] = np.nan
             shift[j, rows] = uv
         else:
-            shift[j, rows] = np.where(np.isfinite(sf)[:, None] & (sf > 0)[:, None], 0.0,
-                                      np.nan)
+            shift[j, rows] = np.where(np.isfinite(sf)[:, None] & (sf > 0)[:, None], 0.0, np.nan)
         ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
         pf, pg = _project(jf, fh), _project(jf, gh)
         mid = ratio2[:, None, None] * _gram(pf, pf) + _gram(pg, pg)
         at = np.transpose(cross, (0, 2, 1))
-        z = np.stack([_solve(at, np.broadcast_to(e[c], (len(f), k)).copy())
-                      for c in range(2)], axis=1)  # (m, 2, k): A^T z_c = e_c
+        z = np.stack(
+            [_solve(at, np.broadcast_to(e[c], (len(f), k)).copy()) for c in range(2)], axis=1
+        )  # (m, 2, k): A^T z_c = e_c
         cov[j, rows] = np.einsum("nci,nij,ndj->ncd", z, mid, z)
     return shift, cov
 
@@ -854,14 +929,14 @@ def subset_skew_coefficients(
     rows, cols = image.shape
     ext = _extend(image, boundary)
     shp = ext.shape
-    k = (2j * np.pi) * (dy * np.fft.fftfreq(shp[0])[:, None]
-                        + dx * np.fft.rfftfreq(shp[1])[None, :])
+    k = (2j * np.pi) * (
+        dy * np.fft.fftfreq(shp[0])[:, None] + dx * np.fft.rfftfreq(shp[1])[None, :]
+    )
     fddd = np.fft.irfft2(np.fft.rfft2(ext) * k**3, s=shp)[:rows, :cols]
     if derivative in ("bspline3", "bspline5"):
         fy, fx = _spline_gradients(image, derivative)
     else:
-        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative,
-                                            boundary=boundary)
+        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
     win = _Windows(subset, fx, fy, fddd, image)
     out = np.full((len(centres), 2), np.nan)
     iv = 1 if shape == "translation" else 3

@@ -44,9 +44,7 @@ def describe(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def as_image(
-    image: ArrayLike, name: str = "image", *, min_size: int = 2
-) -> NDArray[np.float64]:
+def as_image(image: ArrayLike, name: str = "image", *, min_size: int = 2) -> NDArray[np.float64]:
     """Return ``image`` as a C-contiguous 2-D float64 array of finite grey levels.
 
     Parameters
@@ -116,8 +114,10 @@ def check_seed(seed: Any, name: str = "seed") -> Any:
     if seed is None or isinstance(seed, np.random.Generator | np.random.SeedSequence):
         return seed
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
-        raise InputError(f"{name}={describe(seed)}: expected an int >= 0, a numpy Generator, "
-                         "a SeedSequence or None")
+        raise InputError(
+            f"{name}={describe(seed)}: expected an int >= 0, a numpy Generator, "
+            "a SeedSequence or None"
+        )
     if seed < 0:
         raise InputError(f"{name}={describe(seed)}: seeds must be integers >= 0 (e.g. 1)")
     return int(seed)
@@ -142,8 +142,9 @@ def check_odd_subset(subset: Any, name: str = "subset", *, minimum: int = 3) -> 
     return subset
 
 
-def check_subset_fits(subset: int, shape: tuple[int, ...], name: str = "subset", *,
-                      border: int = 1, minimum: int = 3) -> None:
+def check_subset_fits(
+    subset: int, shape: tuple[int, ...], name: str = "subset", *, border: int = 1, minimum: int = 3
+) -> None:
     """Check that an odd ``subset`` plus ``border`` px on each side fits in an image of
     ``shape``; the message gives the largest subset that fits, or says that none does."""
     rows, cols = int(shape[0]), int(shape[1])
@@ -206,7 +207,5 @@ def check_shape2d(shape: Any, name: str = "shape", *, min_size: int = 2) -> tupl
             f"{name}={describe(shape)}: expected (rows, cols) as two integers, e.g. (512, 512)"
         ) from exc
     if not ok or rows < min_size or cols < min_size:
-        raise InputError(
-            f"{name}={describe(shape)}: rows and cols must be integers >= {min_size}"
-        )
+        raise InputError(f"{name}={describe(shape)}: rows and cols must be integers >= {min_size}")
     return rows, cols

@@ -15,8 +15,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree, n
     __version__ = "0+unknown"
 
 #: The packages whose versions change dicblur's numbers or files (recorded in provenance).
-DEPENDENCIES = ("numpy", "scipy", "numba", "xarray", "zarr", "dask", "distributed",
-                "matplotlib")
+DEPENDENCIES = ("numpy", "scipy", "numba", "xarray", "zarr", "dask", "distributed", "matplotlib")
 
 
 def package_versions(packages: tuple[str, ...] = DEPENDENCIES) -> dict[str, str]:

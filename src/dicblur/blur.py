@@ -225,9 +225,9 @@ def _composite_gauss_legendre(segments: int) -> tuple[NDArray[np.float64], NDArr
     return nodes.ravel(), weights.ravel().copy()
 
 
-def _continuous_nodes(fn: Callable[[NDArray[np.float64]], NDArray[np.float64]]) -> tuple[
-    NDArray[np.float64], NDArray[np.float64]
-]:
+def _continuous_nodes(
+    fn: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Quadrature nodes/weights on [0, 1] able to resolve exp(-2 pi i f.p(t)).
 
     The phase changes by at most pi times the path's total variation (|f| <= 1/2 cycle/px

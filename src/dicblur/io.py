@@ -85,8 +85,9 @@ def max_pixels(override: int | float | str | None = None) -> int:
     return int(n)
 
 
-def check_pixels(shape: tuple[int, ...], what: str, *, factor: int = 1,
-                 limit: int | float | None = None) -> None:
+def check_pixels(
+    shape: tuple[int, ...], what: str, *, factor: int = 1, limit: int | float | None = None
+) -> None:
     """Refuse an image of ``shape`` (times ``factor`` pixels per pixel, e.g. a supersampled
     grid) above the size limit, before it is allocated.
 
@@ -109,8 +110,13 @@ def check_pixels(shape: tuple[int, ...], what: str, *, factor: int = 1,
 
 
 # ------------------------------------------------------------------------- output paths
-def check_output(path: str | os.PathLike[str], name: str = "path", *, folder: bool = False,
-                 suffixes: tuple[str, ...] | None = None) -> Path:
+def check_output(
+    path: str | os.PathLike[str],
+    name: str = "path",
+    *,
+    folder: bool = False,
+    suffixes: tuple[str, ...] | None = None,
+) -> Path:
     """Check an output path before any work is done, and return it as a ``Path``.
 
     The rule is the same for every command: the parent folder must exist (dicblur never
@@ -127,18 +133,24 @@ def check_output(path: str | os.PathLike[str], name: str = "path", *, folder: bo
     if str(path) == "":
         raise InputError(f"{name}='': give a file name")
     if suffixes is not None and not folder and p.suffix.lower() not in suffixes:
-        raise InputError(f"{name}={str(p)!r}: unsupported extension {p.suffix.lower()!r}; "
-                         f"use {', '.join(suffixes)}")
+        raise InputError(
+            f"{name}={str(p)!r}: unsupported extension {p.suffix.lower()!r}; "
+            f"use {', '.join(suffixes)}"
+        )
     parent = p.parent
     if not parent.exists():
-        raise InputError(f"{name}={str(p)!r}: the folder {str(parent)!r} does not exist; "
-                         "create it first (dicblur does not create missing parent folders)")
+        raise InputError(
+            f"{name}={str(p)!r}: the folder {str(parent)!r} does not exist; "
+            "create it first (dicblur does not create missing parent folders)"
+        )
     if not parent.is_dir():
         raise InputError(f"{name}={str(p)!r}: {str(parent)!r} is not a folder")
     if folder:
         if p.exists() and not p.is_dir():
-            raise InputError(f"{name}={str(p)!r}: exists and is not a folder; give a folder "
-                             "name (created if absent)")
+            raise InputError(
+                f"{name}={str(p)!r}: exists and is not a folder; give a folder "
+                "name (created if absent)"
+            )
     elif p.is_dir():
         raise InputError(f"{name}={str(p)!r}: is a directory; give a file name inside it")
     if not os.access(parent, os.W_OK | os.X_OK):
@@ -167,8 +179,9 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
             fig.savefig(tmp)
     """
     target = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}",
-                                dir=target.parent)
+    fd, name = tempfile.mkstemp(
+        prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent
+    )
     os.close(fd)
     tmp = Path(name)
     try:
@@ -249,9 +262,20 @@ class ImageHeader:
 
 
 def _pil_dtype(mode: str) -> str:
-    return {"1": "bool", "L": "uint8", "P": "uint8", "LA": "uint8", "RGB": "uint8",
-            "RGBA": "uint8", "CMYK": "uint8", "I;16": "uint16", "I;16B": "uint16",
-            "I;16L": "uint16", "I": "int32", "F": "float32"}.get(mode, "uint8")
+    return {
+        "1": "bool",
+        "L": "uint8",
+        "P": "uint8",
+        "LA": "uint8",
+        "RGB": "uint8",
+        "RGBA": "uint8",
+        "CMYK": "uint8",
+        "I;16": "uint16",
+        "I;16B": "uint16",
+        "I;16L": "uint16",
+        "I": "int32",
+        "F": "float32",
+    }.get(mode, "uint8")
 
 
 @contextlib.contextmanager
@@ -299,17 +323,28 @@ def _header(p: Path) -> ImageHeader:
             if len(rows_cols) != 2 or other:
                 raise ImageReadError(
                     f"path={str(p)!r}: TIFF page of shape {shape} (axes {axes}) is not a 2-D "
-                    "image; save one 2-D plane per page")
-            return ImageHeader(shape=(rows_cols[0], rows_cols[1]), channels=spp,
-                               dtype=str(page.dtype), pages=len(tif.pages),
-                               palette=int(page.photometric) == 3, format="TIFF")
+                    "image; save one 2-D plane per page"
+                )
+            return ImageHeader(
+                shape=(rows_cols[0], rows_cols[1]),
+                channels=spp,
+                dtype=str(page.dtype),
+                pages=len(tif.pages),
+                palette=int(page.photometric) == 3,
+                format="TIFF",
+            )
     from PIL import Image
 
     with _pil_limit(None), Image.open(p) as im:  # the header only: we check its size
         cols, rows = im.size
-        return ImageHeader(shape=(int(rows), int(cols)), channels=len(im.getbands()),
-                           dtype=_pil_dtype(im.mode), pages=1, palette=im.mode == "P",
-                           format=str(im.format))
+        return ImageHeader(
+            shape=(int(rows), int(cols)),
+            channels=len(im.getbands()),
+            dtype=_pil_dtype(im.mode),
+            pages=1,
+            palette=im.mode == "P",
+            format=str(im.format),
+        )
 
 
 def read_image_header(path: str | os.PathLike[str]) -> ImageHeader:
@@ -329,7 +364,8 @@ def read_image_header(path: str | os.PathLike[str]) -> ImageHeader:
         raise ImageReadError(
             f"path={str(p)!r}: cannot be read as an image ({type(exc).__name__}: "
             f"{_short(exc)}); is the file truncated or not an image? Supported: TIFF, PNG, "
-            "BMP, JPEG") from exc
+            "BMP, JPEG"
+        ) from exc
 
 
 def _short(exc: BaseException) -> str:
@@ -394,8 +430,7 @@ def _to_grey(arr: np.ndarray, path: Path) -> np.ndarray:
         return arr
     if arr.ndim == 3 and arr.shape[-1] in (3, 4):
         rgb = arr[..., :3]
-        if np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 0],
-                                                                         rgb[..., 2]):
+        if np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 0], rgb[..., 2]):
             return rgb[..., 0]  # grey stored as RGB (e.g. a grey palette): exact
         warnings.warn(
             f"{path.name}: colour image converted to grey with BT.601 luma weights "
@@ -409,12 +444,14 @@ def _to_grey(arr: np.ndarray, path: Path) -> np.ndarray:
     if arr.ndim == 3:
         raise ImageReadError(
             f"path={str(path)!r}: {arr.shape[-1]} channels per pixel; dicblur reads grey, "
-            "grey + alpha, RGB or RGBA images: save the channel to analyse as a grey image")
+            "grey + alpha, RGB or RGBA images: save the channel to analyse as a grey image"
+        )
     raise ImageReadError(f"path={str(path)!r}: unsupported image layout {arr.shape}")
 
 
-def load_image(path: str | os.PathLike[str], *,
-               max_pixels: int | float | None = None) -> NDArray[np.float64]:
+def load_image(
+    path: str | os.PathLike[str], *, max_pixels: int | float | None = None
+) -> NDArray[np.float64]:
     """Read an image file as grey levels.
 
     Parameters
@@ -444,11 +481,13 @@ def load_image(path: str | os.PathLike[str], *,
     limit = _max_pixels(max_pixels)
     header = read_image_header(path)
     p = Path(path)
-    check_pixels(header.shape, f"path={str(p)!r}", factor=max(header.channels, 1),
-                 limit=limit)
+    check_pixels(header.shape, f"path={str(p)!r}", factor=max(header.channels, 1), limit=limit)
     if header.pages > 1:
-        warnings.warn(f"{p.name}: multi-page image with {header.pages} pages; reading "
-                      "page 0", UserWarning, stacklevel=2)
+        warnings.warn(
+            f"{p.name}: multi-page image with {header.pages} pages; reading page 0",
+            UserWarning,
+            stacklevel=2,
+        )
     try:
         if header.format == "TIFF":
             arr = _read_tiff(p, limit)
@@ -464,8 +503,10 @@ def load_image(path: str | os.PathLike[str], *,
         ) from exc
     arr = _to_grey(np.asarray(arr), p)
     if np.iscomplexobj(arr) or arr.dtype == object:
-        raise ImageReadError(f"path={str(p)!r}: pixels are not real grey levels ({arr.dtype}); "
-                             "save a real-valued (integer or float) image")
+        raise ImageReadError(
+            f"path={str(p)!r}: pixels are not real grey levels ({arr.dtype}); "
+            "save a real-valued (integer or float) image"
+        )
     try:
         return as_image(arr, "image", min_size=1)
     except InputError as exc:
@@ -475,9 +516,7 @@ def load_image(path: str | os.PathLike[str], *,
 _max_pixels = max_pixels  # the keyword of load_image shadows the function's name
 
 
-def save_image(
-    path: str | os.PathLike[str], image: ArrayLike, *, bit_depth: int = 8
-) -> Path:
+def save_image(path: str | os.PathLike[str], image: ArrayLike, *, bit_depth: int = 8) -> Path:
     """Write grey levels to an image file.
 
     Values are rounded to the nearest integer (ties to even, ``numpy.rint``) and clipped to
@@ -517,7 +556,8 @@ def save_image(
     clipped = int(np.count_nonzero((rounded < 0) | (rounded > top)))
     if clipped:
         warnings.warn(
-            f"save_image: {clipped} pixel(s) outside 0..{top} were clipped", UserWarning,
+            f"save_image: {clipped} pixel(s) outside 0..{top} were clipped",
+            UserWarning,
             stacklevel=2,
         )
     data = np.clip(rounded, 0, top).astype(np.uint8 if bit_depth == 8 else np.uint16)

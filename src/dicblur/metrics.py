@@ -120,9 +120,9 @@ def subset_centres(shape: tuple[int, int], *, subset: int, step: int) -> NDArray
     return np.stack([rr.ravel(), cc.ravel()], axis=1)
 
 
-def _box_sums(values: NDArray[np.float64], centres: NDArray[np.intp], subset: int) -> NDArray[
-    np.float64
-]:
+def _box_sums(
+    values: NDArray[np.float64], centres: NDArray[np.intp], subset: int
+) -> NDArray[np.float64]:
     """Sum of ``values`` over each square subset (summed-area table, O(1) per subset)."""
     sat = np.zeros((values.shape[0] + 1, values.shape[1] + 1))
     sat[1:, 1:] = values.cumsum(axis=0).cumsum(axis=1)
@@ -483,7 +483,8 @@ def pattern_metrics(
             noise_sigma=sigma,
             match_score_x_mean=ms,
             match_score_x_std=float(finite_x.std()) if finite_x.size else math.nan,
-            match_score_y_mean=float(uy[np.isfinite(uy)].mean()) if np.isfinite(uy).any()
+            match_score_y_mean=float(uy[np.isfinite(uy)].mean())
+            if np.isfinite(uy).any()
             else math.inf,
             pan_u=pan_u,
             pan_over_match_score=pan_u / ms if ms > 0 and math.isfinite(ms) else math.nan,
@@ -518,8 +519,14 @@ def directional_sssig(
     return box_sssig(gy, gx, points, subset=subset, angle=angle)
 
 
-def box_sssig(gy: NDArray[np.float64], gx: NDArray[np.float64], points: NDArray[np.intp],
-               *, subset: int, angle: float) -> NDArray[np.float64]:
+def box_sssig(
+    gy: NDArray[np.float64],
+    gx: NDArray[np.float64],
+    points: NDArray[np.intp],
+    *,
+    subset: int,
+    angle: float,
+) -> NDArray[np.float64]:
     """:func:`directional_sssig` from given gradient images (summed-area table)."""
     a = math.radians(angle)
     g = math.cos(a) * gx + math.sin(a) * gy

@@ -95,8 +95,10 @@ class Recording:
         if i < 0:
             i += self.n_frames
         if not 0 <= i < self.n_frames:
-            raise InputError(f"frame={index}: outside the recording's {self.n_frames} frames "
-                             f"(0..{self.n_frames - 1})")
+            raise InputError(
+                f"frame={index}: outside the recording's {self.n_frames} frames "
+                f"(0..{self.n_frames - 1})"
+            )
         arr = np.asarray(self._read(i))
         if arr.ndim == 3 and arr.shape[-1] in (3, 4):
             arr = arr[..., :3].astype(np.float64) @ np.array([0.299, 0.587, 0.114])
@@ -104,7 +106,8 @@ class Recording:
             raise ImageReadError(
                 f"frame {i} ({self.names[i]}): {arr.shape[0]}x{arr.shape[1]} px, but the "
                 f"recording's frames are {self.shape[0]}x{self.shape[1]} px; remove or crop "
-                "that frame")
+                "that frame"
+            )
         out = np.asarray(arr, dtype=np.float64)
         if not np.all(np.isfinite(out)):
             raise ImageReadError(f"frame {i} ({self.names[i]}): pixels are not finite")
@@ -129,9 +132,16 @@ class Recording:
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready summary (source, kind, frames, size, bit depth, fps, exposure)."""
-        return {"source": self.source, "kind": self.kind, "n_frames": self.n_frames,
-                "shape": list(self.shape), "bit_depth": self.bit_depth, "fps": self.fps,
-                "exposure": self.exposure, **self.meta}
+        return {
+            "source": self.source,
+            "kind": self.kind,
+            "n_frames": self.n_frames,
+            "shape": list(self.shape),
+            "bit_depth": self.bit_depth,
+            "fps": self.fps,
+            "exposure": self.exposure,
+            **self.meta,
+        }
 
 
 def _bits_of(dtype: np.dtype[Any]) -> int:
@@ -140,9 +150,11 @@ def _bits_of(dtype: np.dtype[Any]) -> int:
 
 def _folder(files: list[Path], source: str) -> Recording:
     if len(files) == 0:
-        raise ImageReadError(f"recording={source!r}: no TIFF/PNG/BMP images found; give a "
-                             "folder of frames, a glob such as 'run/*.tif', a multi-page "
-                             "TIFF, a .cine or a .cih/.mraw recording")
+        raise ImageReadError(
+            f"recording={source!r}: no TIFF/PNG/BMP images found; give a "
+            "folder of frames, a glob such as 'run/*.tif', a multi-page "
+            "TIFF, a .cine or a .cih/.mraw recording"
+        )
     first = _read_file(files[0])
     shape = (int(first.shape[0]), int(first.shape[1]))
     bits = _bits_of(first.dtype)
@@ -150,9 +162,17 @@ def _folder(files: list[Path], source: str) -> Recording:
     def read(i: int) -> NDArray[Any]:
         return _read_file(files[i])
 
-    return Recording(source=source, kind="folder", n_frames=len(files), shape=shape,
-                     bit_depth=bits, fps=None, exposure=None, names=[f.name for f in files],
-                     _read=read)
+    return Recording(
+        source=source,
+        kind="folder",
+        n_frames=len(files),
+        shape=shape,
+        bit_depth=bits,
+        fps=None,
+        exposure=None,
+        names=[f.name for f in files],
+        _read=read,
+    )
 
 
 def _read_file(path: Path) -> NDArray[Any]:
@@ -186,34 +206,48 @@ def _tiff_stack(path: Path) -> Recording:
         shape = tuple(int(s) for s in first.shape[:2])
         dtype = np.dtype(first.dtype)
     except Exception as exc:
-        raise ImageReadError(f"recording={str(path)!r}: cannot be read as a TIFF stack "
-                             f"({type(exc).__name__}: {exc})") from exc
+        raise ImageReadError(
+            f"recording={str(path)!r}: cannot be read as a TIFF stack ({type(exc).__name__}: {exc})"
+        ) from exc
 
     def read(i: int) -> NDArray[Any]:
         try:
             return np.asarray(pages[i].asarray())
         except Exception as exc:
-            raise ImageReadError(f"recording={str(path)!r}: page {i} cannot be read "
-                                 f"({type(exc).__name__}: {exc}); is the file "
-                                 "truncated?") from exc
+            raise ImageReadError(
+                f"recording={str(path)!r}: page {i} cannot be read "
+                f"({type(exc).__name__}: {exc}); is the file "
+                "truncated?"
+            ) from exc
 
-    return Recording(source=str(path), kind="tiff-stack", n_frames=n,
-                     shape=(shape[0], shape[1]), bit_depth=_bits_of(dtype), fps=None,
-                     exposure=None, names=[f"page {i}" for i in range(n)], _read=read,
-                     _close=tf.close)
+    return Recording(
+        source=str(path),
+        kind="tiff-stack",
+        n_frames=n,
+        shape=(shape[0], shape[1]),
+        bit_depth=_bits_of(dtype),
+        fps=None,
+        exposure=None,
+        names=[f"page {i}" for i in range(n)],
+        _read=read,
+        _close=tf.close,
+    )
 
 
 def _cine(path: Path) -> Recording:
     try:
         import pims
     except ImportError as exc:  # pragma: no cover - a declared dependency
-        raise ImageReadError("reading .cine files needs the 'pims' package "
-                             "(pip install pims)") from exc
+        raise ImageReadError(
+            "reading .cine files needs the 'pims' package (pip install pims)"
+        ) from exc
     try:
         cine = pims.Cine(str(path))
     except Exception as exc:
-        raise ImageReadError(f"recording={str(path)!r}: cannot be read as a Phantom cine "
-                             f"({type(exc).__name__}: {exc})") from exc
+        raise ImageReadError(
+            f"recording={str(path)!r}: cannot be read as a Phantom cine "
+            f"({type(exc).__name__}: {exc})"
+        ) from exc
     size = path.stat().st_size
     rows, cols = int(cine.frame_shape[1]), int(cine.frame_shape[0])
     bits = int(cine.setup_fields_dict.get("real_bpp", 0) or _bits_of(cine.pixel_type))
@@ -223,22 +257,35 @@ def _cine(path: Path) -> Recording:
     # each image: annotation (>= 8 bytes: its size and the image size) then the pixels
     complete = sum(1 for loc in locations[:n] if loc + 8 + frame_bytes <= size)
     if complete < n:
-        warnings.warn(f"{path.name}: truncated recording, {complete} of the {n} frames the "
-                      "header lists are complete; reading those", UserWarning, stacklevel=3)
+        warnings.warn(
+            f"{path.name}: truncated recording, {complete} of the {n} frames the "
+            "header lists are complete; reading those",
+            UserWarning,
+            stacklevel=3,
+        )
         n = complete
     fps = float(cine.frame_rate) or None
     shutter = cine.setup_fields_dict.get("shutter_ns")
     exposure = float(shutter) * 1e-9 if shutter else None
     per_frame = getattr(cine, "all_exposures", None)
     if per_frame:
-        exposure = float(np.median(per_frame[:max(n, 1)])) or exposure
+        exposure = float(np.median(per_frame[: max(n, 1)])) or exposure
 
     def read(i: int) -> NDArray[Any]:
         return np.asarray(cine.get_frame(i))
 
-    return Recording(source=str(path), kind="cine", n_frames=n, shape=(rows, cols),
-                     bit_depth=bits, fps=fps, exposure=exposure,
-                     names=[f"frame {i}" for i in range(n)], _read=read, _close=cine.close)
+    return Recording(
+        source=str(path),
+        kind="cine",
+        n_frames=n,
+        shape=(rows, cols),
+        bit_depth=bits,
+        fps=fps,
+        exposure=exposure,
+        names=[f"frame {i}" for i in range(n)],
+        _read=read,
+        _close=cine.close,
+    )
 
 
 def _number(cih: dict[str, Any], *keys: str) -> float | None:
@@ -259,39 +306,52 @@ def _mraw(path: Path) -> Recording:
         heads = [path.with_suffix(s) for s in (".cih", ".cihx")]
         head = next((h for h in heads if h.exists()), None)
         if head is None:
-            raise ImageReadError(f"recording={str(path)!r}: the Photron header "
-                                 f"{path.with_suffix('.cih').name} (or .cihx) is missing; "
-                                 "keep it next to the .mraw file")
+            raise ImageReadError(
+                f"recording={str(path)!r}: the Photron header "
+                f"{path.with_suffix('.cih').name} (or .cihx) is missing; "
+                "keep it next to the .mraw file"
+            )
         data = path
     else:
         head, data = path, path.with_suffix(".mraw")
         if not data.exists():
-            raise ImageReadError(f"recording={str(path)!r}: the data file {data.name} is "
-                                 "missing; keep it next to the header")
+            raise ImageReadError(
+                f"recording={str(path)!r}: the data file {data.name} is "
+                "missing; keep it next to the header"
+            )
     try:
         import pyMRAW
     except ImportError:
-        raise ImageReadError(f"recording={str(path)!r}: reading Photron .cih/.mraw files "
-                             "needs pyMRAW (GPL-3.0, not installed with dicblur): pip install "
-                             "'dicblur[photron]'") from None
+        raise ImageReadError(
+            f"recording={str(path)!r}: reading Photron .cih/.mraw files "
+            "needs pyMRAW (GPL-3.0, not installed with dicblur): pip install "
+            "'dicblur[photron]'"
+        ) from None
     try:
         cih = pyMRAW.get_cih(str(head))
         n = int(cih["Total Frame"])
         rows, cols = int(cih["Image Height"]), int(cih["Image Width"])
         bits = int(cih["Color Bit"])
     except Exception as exc:
-        raise ImageReadError(f"recording={str(head)!r}: cannot read the Photron header "
-                             f"({type(exc).__name__}: {exc})") from exc
+        raise ImageReadError(
+            f"recording={str(head)!r}: cannot read the Photron header ({type(exc).__name__}: {exc})"
+        ) from exc
     if bits not in (8, 12, 16) or str(cih.get("File Format", "MRaw")).lower() != "mraw":
-        raise ImageReadError(f"recording={str(head)!r}: Color Bit {bits}, File Format "
-                             f"{cih.get('File Format')!r}: only 8/12/16-bit mono MRaw data "
-                             "are supported")
+        raise ImageReadError(
+            f"recording={str(head)!r}: Color Bit {bits}, File Format "
+            f"{cih.get('File Format')!r}: only 8/12/16-bit mono MRaw data "
+            "are supported"
+        )
     frame_bytes = rows * cols * bits // 8
     size = data.stat().st_size
     complete = size // frame_bytes
     if complete < n:
-        warnings.warn(f"{data.name}: truncated recording, {complete} of the {n} frames the "
-                      "header lists are complete; reading those", UserWarning, stacklevel=3)
+        warnings.warn(
+            f"{data.name}: truncated recording, {complete} of the {n} frames the "
+            "header lists are complete; reading those",
+            UserWarning,
+            stacklevel=3,
+        )
         n = int(complete)
     effective = _number(cih, "EffectiveBit Depth") or bits
     # one seek + read per frame (a memory map would count every page read in the
@@ -302,8 +362,9 @@ def _mraw(path: Path) -> Recording:
         fh.seek(i * frame_bytes)
         chunk = np.frombuffer(fh.read(frame_bytes), dtype=np.uint8)
         if chunk.size != frame_bytes:
-            raise ImageReadError(f"recording={str(data)!r}: frame {i} is incomplete; is "
-                                 "the file truncated?")
+            raise ImageReadError(
+                f"recording={str(data)!r}: frame {i} is incomplete; is the file truncated?"
+            )
         if bits == 8:
             return chunk.reshape(rows, cols)
         if bits == 16:
@@ -314,11 +375,19 @@ def _mraw(path: Path) -> Recording:
         out[:, 1] = ((b[:, 1] & 0x0F) << 8) | b[:, 2]
         return out.reshape(rows, cols)
 
-    return Recording(source=str(head), kind="mraw", n_frames=n, shape=(rows, cols),
-                     bit_depth=int(effective), fps=_number(cih, "Record Rate(fps)"),
-                     exposure=_number(cih, "Shutter Speed(s)"),
-                     names=[f"frame {i}" for i in range(n)], _read=read, _close=fh.close,
-                     meta={"camera": str(cih.get("Camera Type", ""))})
+    return Recording(
+        source=str(head),
+        kind="mraw",
+        n_frames=n,
+        shape=(rows, cols),
+        bit_depth=int(effective),
+        fps=_number(cih, "Record Rate(fps)"),
+        exposure=_number(cih, "Shutter Speed(s)"),
+        names=[f"frame {i}" for i in range(n)],
+        _read=read,
+        _close=fh.close,
+        meta={"camera": str(cih.get("Camera Type", ""))},
+    )
 
 
 def open_recording(source: str | os.PathLike[str]) -> Recording:
@@ -342,16 +411,18 @@ def open_recording(source: str | os.PathLike[str]) -> Recording:
     """
     text = str(source)
     if any(c in text for c in "*?["):
-        files = sorted((Path(f) for f in glob(text) if Path(f).is_file()),
-                       key=lambda p: natural_key(p.name))
+        files = sorted(
+            (Path(f) for f in glob(text) if Path(f).is_file()), key=lambda p: natural_key(p.name)
+        )
         return _folder(files, text)
     p = Path(text)
     if not p.exists():
         raise ImageReadError(f"recording={text!r}: no such file or folder; check the path")
     if p.is_dir():
-        files = sorted((f for f in p.iterdir()
-                        if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES),
-                       key=lambda f: natural_key(f.name))
+        files = sorted(
+            (f for f in p.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES),
+            key=lambda f: natural_key(f.name),
+        )
         return _folder(files, text)
     if p.stat().st_size == 0:
         raise ImageReadError(f"recording={text!r}: the file is empty (0 bytes)")

@@ -30,8 +30,9 @@ def shift_task(image: np.ndarray, batch: Batch, spec: CampaignSpec) -> dict[str,
     out = {k: np.full(n, np.nan) for k in VARIABLES}
     pts = task_points(image.shape, spec, subset=batch.subset, angle=batch.angle)
     h = batch.subset // 2
-    rng_ref = np.random.default_rng(task_seed(spec.seed, "reference", pattern=batch.pattern,
-                                              noise=batch.noise, rep=batch.rep))
+    rng_ref = np.random.default_rng(
+        task_seed(spec.seed, "reference", pattern=batch.pattern, noise=batch.noise, rep=batch.rep)
+    )
     ref = image + rng_ref.normal(0.0, batch.noise, image.shape)
     _, gx = image_gradients(ref)
     a = math.radians(batch.angle)
@@ -39,9 +40,17 @@ def shift_task(image: np.ndarray, batch: Batch, spec: CampaignSpec) -> dict[str,
         t0 = time.perf_counter()
         dy, dx = 0.5 * w * math.sin(a), 0.5 * w * math.cos(a)
         clean = _fourier_shift(image, dy, dx)
-        rng = np.random.default_rng(task_seed(spec.seed, "current", pattern=batch.pattern,
-                                              angle=batch.angle, noise=batch.noise,
-                                              blur=w, rep=batch.rep))
+        rng = np.random.default_rng(
+            task_seed(
+                spec.seed,
+                "current",
+                pattern=batch.pattern,
+                angle=batch.angle,
+                noise=batch.noise,
+                blur=w,
+                rep=batch.rep,
+            )
+        )
         cur = clean + rng.normal(0.0, batch.noise, image.shape)
         diff = ref - cur
         est = np.empty(len(pts))
@@ -63,8 +72,9 @@ def shift_task(image: np.ndarray, batch: Batch, spec: CampaignSpec) -> dict[str,
         out["noise_effective"][j] = batch.noise
         out["n_points"][j] = len(pts)
         out["time_s"][j] = time.perf_counter() - t0
-    out["sssig_ref"][:] = directional_sssig(image, pts, subset=batch.subset,
-                                            angle=batch.angle).mean()
+    out["sssig_ref"][:] = directional_sssig(
+        image, pts, subset=batch.subset, angle=batch.angle
+    ).mean()
     out["mig_ref"][:] = mig(image)
     out["contrast_ref"][:] = michelson_contrast(image)
     out["rms_contrast_ref"][:] = rms_contrast(image)
@@ -75,8 +85,13 @@ def small_spec_dict(**over: object) -> dict:
     d: dict = {
         "campaign": {"name": "t", "seed": 7, "repetitions": 2},
         "pattern": [
-            {"name": "a", "generator": "speckle", "shape": [64, 64], "speckle_size": 4.0,
-             "seed": 1},
+            {
+                "name": "a",
+                "generator": "speckle",
+                "shape": [64, 64],
+                "speckle_size": 4.0,
+                "seed": 1,
+            },
             {"name": "b", "generator": "paper4", "shape": [64, 64], "seed": 2},
         ],
         "blur": {"lengths": {"start": 0.0, "stop": 2.0, "step": 0.5}, "angles": [0.0]},

@@ -31,9 +31,15 @@ def affine_warp(image: np.ndarray, a: np.ndarray) -> np.ndarray:
     return ndimage.map_coordinates(image, [ys, xs], order=5, mode="grid-wrap")
 
 
-def blobs(shape: tuple[int, int], *, density: float = 0.008,
-          sigma: tuple[float, float] = (2.0, 3.0), amplitude: tuple[float, float] = (50, 300),
-          background: float = 10.0, seed: int = 3) -> np.ndarray:
+def blobs(
+    shape: tuple[int, int],
+    *,
+    density: float = 0.008,
+    sigma: tuple[float, float] = (2.0, 3.0),
+    amplitude: tuple[float, float] = (50, 300),
+    background: float = 10.0,
+    seed: int = 3,
+) -> np.ndarray:
     """Sparse Gaussian blobs clipped to [10, 245] GL (the hostile image of issue 15, as
     ``benchmarks/bench_dic_robust.py``): saturated plateaus and flat gaps."""
     rng = np.random.default_rng(seed)
@@ -48,5 +54,5 @@ def blobs(shape: tuple[int, int], *, density: float = 0.008,
         x0, x1 = max(0, int(x) - r), min(w, int(x) + r + 1)
         yy = np.arange(y0, y1)[:, None] - y
         xx = np.arange(x0, x1)[None, :] - x
-        img[y0:y1, x0:x1] += a * np.exp(-(yy ** 2 + xx ** 2) / (2 * s * s))
+        img[y0:y1, x0:x1] += a * np.exp(-(yy**2 + xx**2) / (2 * s * s))
     return np.clip(img, 10.0, 245.0)

@@ -105,24 +105,36 @@ def calibration_spec(
     name = str(image)
     is_file = Path(name).is_file()
     if is_file:
-        pattern: dict[str, Any] = {"name": Path(name).stem or "pattern",
-                                   "path": str(Path(name).resolve())}
+        pattern: dict[str, Any] = {
+            "name": Path(name).stem or "pattern",
+            "path": str(Path(name).resolve()),
+        }
         boundary = "reflect"
     elif name in GENERATORS:
         pattern = {"name": name, "generator": name, "shape": list(size), "seed": seed}
         boundary = "periodic"
     else:
-        raise InputError(f"image={name!r}: no such file; give an image file or a generator "
-                         f"name ({', '.join(GENERATORS)})")
-    return parse_spec({
-        "campaign": {"name": f"calibrate-{pattern['name']}", "seed": seed,
-                     "repetitions": repetitions},
-        "pattern": [pattern],
-        "blur": {"lengths": PAPER_BLUR if blur is None else blur, "angles": [angle],
-                 "boundary": boundary},
-        "noise": {"model": noise_model, "levels": _levels(noise)},
-        "dic": {"subsets": [subset], "step": step, "shape": shape},
-    })
+        raise InputError(
+            f"image={name!r}: no such file; give an image file or a generator "
+            f"name ({', '.join(GENERATORS)})"
+        )
+    return parse_spec(
+        {
+            "campaign": {
+                "name": f"calibrate-{pattern['name']}",
+                "seed": seed,
+                "repetitions": repetitions,
+            },
+            "pattern": [pattern],
+            "blur": {
+                "lengths": PAPER_BLUR if blur is None else blur,
+                "angles": [angle],
+                "boundary": boundary,
+            },
+            "noise": {"model": noise_model, "levels": _levels(noise)},
+            "dic": {"subsets": [subset], "step": step, "shape": shape},
+        }
+    )
 
 
 def _levels(noise: float | Sequence[float]) -> list[float]:
@@ -171,14 +183,24 @@ def calibrate(
     from .tasks import make_pattern
 
     check_output(out_dir, "out", folder=True)
-    spec = calibration_spec(image, noise=noise, subset=subset, angle=angle, step=step,
-                            noise_model=noise_model, shape=shape, size=size, seed=seed,
-                            blur=blur)
+    spec = calibration_spec(
+        image,
+        noise=noise,
+        subset=subset,
+        angle=angle,
+        step=step,
+        noise_model=noise_model,
+        shape=shape,
+        size=size,
+        seed=seed,
+        blur=blur,
+    )
     out = Path(out_dir)
     out.mkdir(exist_ok=True)
     results = out / "results.zarr"
-    summary = run_campaign(spec, results, scheduler=scheduler, workers=workers,
-                           serial=serial, progress=progress)
+    summary = run_campaign(
+        spec, results, scheduler=scheduler, workers=workers, serial=serial, progress=progress
+    )
     if not summary.complete:
         return None  # interrupted (Ctrl-C): the store keeps the finished batches
     csv_path = out / "results.csv"
@@ -191,18 +213,22 @@ def calibrate(
         return np.asarray(da.transpose("noise", "blur").values, dtype=np.float64).ravel()
 
     # the effective per-image noise of each level (per-subframe noise is sigma/sqrt(K+1))
-    eff = np.repeat([float(v) for v in mean["noise_effective"].mean("blur").values],
-                    mean.sizes["blur"])
+    eff = np.repeat(
+        [float(v) for v in mean["noise_effective"].mean("blur").values], mean.sizes["blur"]
+    )
     hashes = json.loads(ds.attrs["input_hashes"])
     model = fit_blur_model(
-        w, flat(mean["sssig"]), flat(mean["u_e"]),
+        w,
+        flat(mean["sssig"]),
+        flat(mean["u_e"]),
         noise_sigma=eff,
         contrast_ref=flat(mean["rms_contrast_ref"]),
         contrast=flat(mean["rms_contrast"]),
         subset=subset,
         # validity domain: DIC breaks down where < 90 % of the POIs converge (worst rep)
         converged_fraction=flat(ds["converged_fraction"].min("rep")),
-        shape=shape, pattern=spec.patterns[0].name,
+        shape=shape,
+        pattern=spec.patterns[0].name,
         pattern_sha256=next(iter(hashes.values()), None) if len(hashes) == 1 else None,
         mean_level=float(np.mean(make_pattern(spec, spec.patterns[0]))),
         # the sweep spans the W range the model will be used in (beyond it predictions are
@@ -215,14 +241,21 @@ def calibrate(
             "pattern": spec.patterns[0].to_dict(),
             "input_hashes": hashes,
             "spec_hash": ds.attrs["spec_hash"],
-            "noise_model": noise_model, "noise": _levels(noise), "angle": angle,
+            "noise_model": noise_model,
+            "noise": _levels(noise),
+            "angle": angle,
             "step": step,
             "dic_shape": shape,
         },
     )
     model_path = out / "model.json"
     model.to_json(str(model_path))
-    return CalibrationResult(model=model, model_path=model_path, results_path=results,
-                             csv_path=csv_path, sssig_r2=float(model.decay.r2), spec=spec,
-                             curves=mean.assign_coords(
-                                 noise_effective_level=("noise", eff[:: mean.sizes["blur"]])))
+    return CalibrationResult(
+        model=model,
+        model_path=model_path,
+        results_path=results,
+        csv_path=csv_path,
+        sssig_r2=float(model.decay.r2),
+        spec=spec,
+        curves=mean.assign_coords(noise_effective_level=("noise", eff[:: mean.sizes["blur"]])),
+    )

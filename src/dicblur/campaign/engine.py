@@ -92,8 +92,9 @@ class RunSummary:
         return self.n_skipped + self.n_run == self.n_tasks
 
 
-def _timed_task(fn: TaskFunction, image: NDArray[np.float64], batch: Batch,
-                spec: CampaignSpec) -> dict[str, Any]:
+def _timed_task(
+    fn: TaskFunction, image: NDArray[np.float64], batch: Batch, spec: CampaignSpec
+) -> dict[str, Any]:
     """Call the task function and add its process CPU time (s) as ``"_cpu_s"``."""
     t = time.process_time()
     out = dict(fn(image, batch, spec))
@@ -101,8 +102,10 @@ def _timed_task(fn: TaskFunction, image: NDArray[np.float64], batch: Batch,
     return out
 
 
-_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ucx|ws|wss)://)?(?:\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+)"
-                      r":\d{1,5}/?$|^inproc://\S+$")
+_ADDRESS = re.compile(
+    r"^(?:(?:tcp|tls|ucx|ws|wss)://)?(?:\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+)"
+    r":\d{1,5}/?$|^inproc://\S+$"
+)
 
 
 def check_scheduler_address(address: str) -> str:
@@ -114,9 +117,11 @@ def check_scheduler_address(address: str) -> str:
         If ``address`` is not ``[tcp|tls|ucx|ws|wss://]HOST:PORT`` or ``inproc://...``.
     """
     if not isinstance(address, str) or not _ADDRESS.match(address.strip()):
-        raise InputError(f"scheduler={address!r}: not a Dask scheduler address; give "
-                         "tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786 (or omit it for a "
-                         "local cluster)")
+        raise InputError(
+            f"scheduler={address!r}: not a Dask scheduler address; give "
+            "tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786 (or omit it for a "
+            "local cluster)"
+        )
     return address.strip()
 
 
@@ -132,8 +137,10 @@ def _prepare(spec: CampaignSpec, results: Path) -> tuple[CampaignStore, dict[str
     hashes = input_hashes(spec, images)
     if half_created(results):
         # Left by an interrupted creation of an older dicblur; it holds no task.
-        logger.warning("results=%r: removing a half-created store (no finished task) and "
-                       "creating it again", str(results))
+        logger.warning(
+            "results=%r: removing a half-created store (no finished task) and creating it again",
+            str(results),
+        )
         import shutil
 
         shutil.rmtree(results)
@@ -213,9 +220,17 @@ def run_campaign(
     if not isinstance(spec, CampaignSpec):
         spec = load_spec(spec)
     with StoreLock(path):
-        return _run_locked(spec, path, t0, scheduler=scheduler, workers=workers,
-                           serial=serial, task=task, progress=progress,
-                           connect_timeout=connect_timeout)
+        return _run_locked(
+            spec,
+            path,
+            t0,
+            scheduler=scheduler,
+            workers=workers,
+            serial=serial,
+            task=task,
+            progress=progress,
+            connect_timeout=connect_timeout,
+        )
 
 
 def _run_locked(
@@ -273,15 +288,29 @@ def _run_locked(
             interrupted = True
     else:
         n_workers, where, interrupted = _run_dask(
-            spec, images, pending, fn, finish, scheduler=scheduler, workers=workers,
-            connect_timeout=connect_timeout, started=started,
+            spec,
+            images,
+            pending,
+            fn,
+            finish,
+            scheduler=scheduler,
+            workers=workers,
+            connect_timeout=connect_timeout,
+            started=started,
         )
     return RunSummary(
-        path=str(path), n_tasks=n_total, n_skipped=n_skipped, n_run=counts["run"],
-        interrupted=interrupted, wall_s=time.perf_counter() - t0,
-        setup_s=started[0] - t0, compute_s=max(0.0, finished[0] - started[0]),
-        task_s=task_s[0], task_cpu_s=task_s[1],
-        workers=n_workers, scheduler=where,
+        path=str(path),
+        n_tasks=n_total,
+        n_skipped=n_skipped,
+        n_run=counts["run"],
+        interrupted=interrupted,
+        wall_s=time.perf_counter() - t0,
+        setup_s=started[0] - t0,
+        compute_s=max(0.0, finished[0] - started[0]),
+        task_s=task_s[0],
+        task_cpu_s=task_s[1],
+        workers=n_workers,
+        scheduler=where,
     )
 
 
@@ -324,7 +353,6 @@ class _Interrupt:
             raise KeyboardInterrupt
 
 
-
 @contextmanager
 def _spawn_ignoring_sigint() -> Iterator[None]:
     """Processes spawned by :mod:`multiprocessing` inside the block start with SIGINT
@@ -353,8 +381,12 @@ def _spawn_ignoring_sigint() -> Iterator[None]:
             fh.write(f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(os.fsdecode(exe))} \"$@\"\n")
         os.chmod(wrapper, 0o755)
         try:
-            ok = subprocess.run([wrapper, "-I", "-S", "-c", "pass"], timeout=60,
-                                capture_output=True).returncode == 0
+            ok = (
+                subprocess.run(
+                    [wrapper, "-I", "-S", "-c", "pass"], timeout=60, capture_output=True
+                ).returncode
+                == 0
+            )
         except (OSError, subprocess.SubprocessError):
             ok = False
         if not ok:
@@ -374,8 +406,11 @@ def _quiet_distributed() -> Iterator[None]:
     """Silence distributed's (and tornado's, asyncio's) loggers in this process: a shutdown
     while comms are still open logs ``CommClosedError`` tracebacks that mean nothing to
     the user."""
-    names = [n for n in list(logging.root.manager.loggerDict)
-             if n.split(".")[0] in ("distributed", "tornado", "asyncio")]
+    names = [
+        n
+        for n in list(logging.root.manager.loggerDict)
+        if n.split(".")[0] in ("distributed", "tornado", "asyncio")
+    ]
     names += ["distributed", "tornado", "asyncio"]
     saved = {n: (logging.getLogger(n).level, logging.getLogger(n).disabled) for n in names}
     for n in names:
@@ -427,31 +462,40 @@ def _run_dask(
             if scheduler is None:
                 n = int(workers) if workers is not None else (os.cpu_count() or 1)
                 if n < 1:
-                    raise InputError(f"workers={workers!r}: must be >= 1 (or omit it: all "
-                                     "cores)")
+                    raise InputError(f"workers={workers!r}: must be >= 1 (or omit it: all cores)")
                 # One single-threaded process per core: the tasks are CPU-bound
                 # numpy/numba code (the Correlator runs with workers=1 inside a task), so
                 # processes avoid the GIL. Dask sets MALLOC_TRIM_THRESHOLD_ in its workers,
                 # which disables glibc's dynamic mmap threshold: every large temporary
                 # array (a 512^2 image is 2 MiB) is then a fresh mmap with page faults,
                 # ~25% more CPU per task here. Keep the thread limits, drop that one.
-                env = {k: v for k, v in
-                       dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
-                       if k != "MALLOC_TRIM_THRESHOLD_"}
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": env}), \
-                        _spawn_ignoring_sigint():
-                    cluster = LocalCluster(n_workers=n, threads_per_worker=1,
-                                           processes=True, dashboard_address=":0",
-                                           silence_logs=logging.CRITICAL)
+                env = {
+                    k: v
+                    for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+                    if k != "MALLOC_TRIM_THRESHOLD_"
+                }
+                with (
+                    dask.config.set({"distributed.nanny.pre-spawn-environ": env}),
+                    _spawn_ignoring_sigint(),
+                ):
+                    cluster = LocalCluster(
+                        n_workers=n,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=":0",
+                        silence_logs=logging.CRITICAL,
+                    )
                 client = Client(cluster)
                 where = "local"
             else:
                 try:
                     client = Client(scheduler, timeout=f"{connect_timeout}s")
                 except (OSError, TimeoutError) as exc:
-                    raise InputError(f"scheduler={scheduler!r}: cannot connect to a Dask "
-                                     f"scheduler ({exc}); check the address "
-                                     "(tcp://HOST:PORT) and that it runs") from exc
+                    raise InputError(
+                        f"scheduler={scheduler!r}: cannot connect to a Dask "
+                        f"scheduler ({exc}); check the address "
+                        "(tcp://HOST:PORT) and that it runs"
+                    ) from exc
                 where = scheduler
             interrupt.check()
             info = client.scheduler_info(n_workers=-1).get("workers", {})
@@ -461,22 +505,40 @@ def _run_dask(
             # worker (not client.run), so that Ctrl-C can interrupt a long compilation.
             warm = getattr(fn, "warm_up", None)
             if callable(warm):
-                _wait_all([client.submit(warm, workers=[addr], allow_other_workers=False,
-                                         pure=False, key=f"dicblur-warm-up-{i}-"
-                                         f"{os.urandom(4).hex()}")
-                           for i, addr in enumerate(info)], interrupt)
+                _wait_all(
+                    [
+                        client.submit(
+                            warm,
+                            workers=[addr],
+                            allow_other_workers=False,
+                            pure=False,
+                            key=f"dicblur-warm-up-{i}-{os.urandom(4).hex()}",
+                        )
+                        for i, addr in enumerate(info)
+                    ],
+                    interrupt,
+                )
             # Each pattern image travels to every worker once, not once per batch.
-            remote = {name: client.scatter(img, broadcast=True, hash=False)
-                      for name, img in images.items()}
+            remote = {
+                name: client.scatter(img, broadcast=True, hash=False)
+                for name, img in images.items()
+            }
             interrupt.check()
             started[0] = time.perf_counter()
             by_key: dict[Any, Batch] = {}
             for b in pending:
                 # Larger blur costs more DIC iterations: start the batches of large W first
                 # (longest-first scheduling shortens the idle tail of the last workers).
-                fut = client.submit(_timed_task, fn, remote[b.pattern], b, spec, pure=False,
-                                    priority=b.loc[5],
-                                    key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}")
+                fut = client.submit(
+                    _timed_task,
+                    fn,
+                    remote[b.pattern],
+                    b,
+                    spec,
+                    pure=False,
+                    priority=b.loc[5],
+                    key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}",
+                )
                 by_key[fut.key] = b
                 futures.append(fut)
             ready = as_completed(futures)
@@ -534,12 +596,19 @@ class CampaignStatus:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
         return {
-            "path": self.path, "name": self.name, "spec_hash": self.spec_hash,
-            "n_tasks": self.n_tasks, "n_done": self.n_done, "complete": self.complete,
-            "dims": dict(self.dims), "done_by_pattern": dict(self.done_by_pattern),
+            "path": self.path,
+            "name": self.name,
+            "spec_hash": self.spec_hash,
+            "n_tasks": self.n_tasks,
+            "n_done": self.n_done,
+            "complete": self.complete,
+            "dims": dict(self.dims),
+            "done_by_pattern": dict(self.done_by_pattern),
             "tasks_per_pattern": self.tasks_per_pattern,
-            "input_hashes": dict(self.input_hashes), "versions": dict(self.versions),
-            "total_task_s": self.total_task_s, "n_damaged": self.n_damaged,
+            "input_hashes": dict(self.input_hashes),
+            "versions": dict(self.versions),
+            "total_task_s": self.total_task_s,
+            "n_damaged": self.n_damaged,
             "running": self.running,
         }
 
@@ -560,17 +629,22 @@ def campaign_status(results: str | os.PathLike[str]) -> CampaignStatus:
     holder = lock_holder(results)
     spec = store.spec_dict()
     names = [p["name"] for p in spec["pattern"]]
-    dims = dict(zip(("pattern", "angle", "subset", "noise", "blur", "rep"), mask.shape,
-                    strict=True))
+    dims = dict(
+        zip(("pattern", "angle", "subset", "noise", "blur", "rep"), mask.shape, strict=True)
+    )
     per_pattern = {n: int(mask[i].sum()) for i, n in enumerate(names)}
     try:
         times = store.read("time_s")
     except Exception:  # a damaged time_s chunk (counted in n_damaged)
         times = np.full(mask.shape, np.nan)
     return CampaignStatus(
-        path=str(results), name=spec["campaign"]["name"],
-        spec_hash=str(store.attrs["spec_hash"]), n_tasks=int(mask.size),
-        n_done=int(mask.sum()), dims=dims, done_by_pattern=per_pattern,
+        path=str(results),
+        name=spec["campaign"]["name"],
+        spec_hash=str(store.attrs["spec_hash"]),
+        n_tasks=int(mask.size),
+        n_done=int(mask.sum()),
+        dims=dims,
+        done_by_pattern=per_pattern,
         tasks_per_pattern=int(mask[0].size),
         input_hashes=json.loads(store.attrs.get("input_hashes", "{}")),
         versions=json.loads(store.attrs.get("versions", "{}")),

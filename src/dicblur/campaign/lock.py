@@ -68,8 +68,7 @@ class LockHolder:
 def _parse_holder(text: str) -> LockHolder:
     try:
         d: dict[str, Any] = json.loads(text)
-        return LockHolder(str(d["host"]), int(d["pid"]), str(d["since"]),
-                          str(d.get("command", "")))
+        return LockHolder(str(d["host"]), int(d["pid"]), str(d["since"]), str(d.get("command", "")))
     except (ValueError, KeyError, TypeError):
         return LockHolder("?", 0, "?", "")
 
@@ -110,9 +109,11 @@ class StoreLock:
             try:
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
             except OSError as exc:
-                raise StoreError(f"results={str(self.store)!r}: cannot create the lock file "
-                                 f"{str(self.path)!r} ({exc.strerror}); check that the "
-                                 "folder exists and is writable") from exc
+                raise StoreError(
+                    f"results={str(self.store)!r}: cannot create the lock file "
+                    f"{str(self.path)!r} ({exc.strerror}); check that the "
+                    "folder exists and is writable"
+                ) from exc
             try:
                 _flock_soon(fd)
             except BlockingIOError:
@@ -125,10 +126,12 @@ class StoreLock:
                 ) from None
             except OSError as exc:
                 os.close(fd)
-                raise StoreError(f"results={str(self.store)!r}: cannot lock "
-                                 f"{str(self.path)!r} ({exc.strerror}); the file system "
-                                 "does not support locks: run one campaign at a time on a "
-                                 "local disk") from exc
+                raise StoreError(
+                    f"results={str(self.store)!r}: cannot lock "
+                    f"{str(self.path)!r} ({exc.strerror}); the file system "
+                    "does not support locks: run one campaign at a time on a "
+                    "local disk"
+                ) from exc
             try:
                 same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
             except FileNotFoundError:
@@ -137,10 +140,12 @@ class StoreLock:
                 break
             os.close(fd)  # the previous holder unlinked this file: lock the new one
         else:  # pragma: no cover - a pathological race
-            raise StoreError(f"results={str(self.store)!r}: could not take the lock "
-                             f"{str(self.path)!r}; retry")
+            raise StoreError(
+                f"results={str(self.store)!r}: could not take the lock {str(self.path)!r}; retry"
+            )
         info = {
-            "host": socket.gethostname(), "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
             "since": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
             "command": " ".join(sys.argv),
         }

@@ -68,32 +68,44 @@ def task_points(
         return pts
     from ..blur import valid_region
 
-    rows, cols = valid_region(shape, _motion(max(spec.blur), angle),
-                              substeps=spec.substeps, trajectory=_trajectory(spec))
+    rows, cols = valid_region(
+        shape, _motion(max(spec.blur), angle), substeps=spec.substeps, trajectory=_trajectory(spec)
+    )
     h = subset // 2
-    keep = ((pts[:, 0] - h >= rows.start) & (pts[:, 0] + h < rows.stop)
-            & (pts[:, 1] - h >= cols.start) & (pts[:, 1] + h < cols.stop))
+    keep = (
+        (pts[:, 0] - h >= rows.start)
+        & (pts[:, 0] + h < rows.stop)
+        & (pts[:, 1] - h >= cols.start)
+        & (pts[:, 1] + h < cols.stop)
+    )
     if not keep.any():
         raise ConfigError(
             f"blur.lengths: at W = {max(spec.blur)} px with boundary={spec.boundary!r} no "
             f"subset of {subset} px fits in the trustworthy region of a {shape[0]}x"
-            f"{shape[1]} image; use a larger image, smaller W or boundary=\"periodic\""
+            f'{shape[1]} image; use a larger image, smaller W or boundary="periodic"'
         )
     return pts[keep]
 
 
-def _noisy(image: NDArray[np.float64], spec: CampaignSpec, level: float,
-           seed: np.random.SeedSequence) -> NDArray[np.float64]:
+def _noisy(
+    image: NDArray[np.float64], spec: CampaignSpec, level: float, seed: np.random.SeedSequence
+) -> NDArray[np.float64]:
     from ..camera import Camera, add_gaussian_noise
 
     if spec.noise_model == "poisson-gaussian":
         assert spec.full_well is not None
-        cam = Camera(read_noise=level, gain=255.0 / spec.full_well,
-                     full_well=spec.full_well, bit_depth=None)
+        cam = Camera(
+            read_noise=level, gain=255.0 / spec.full_well, full_well=spec.full_well, bit_depth=None
+        )
         return cam.capture(image, seed=seed)
     k = 100 if spec.substeps is None else spec.substeps
-    return add_gaussian_noise(image, level, model=spec.noise_model,  # type: ignore[arg-type]
-                              substeps=k, seed=seed)
+    return add_gaussian_noise(
+        image,
+        level,
+        model=spec.noise_model,  # type: ignore[arg-type]
+        substeps=k,
+        seed=seed,
+    )
 
 
 def _effective_noise(spec: CampaignSpec, level: float, image: NDArray[np.float64]) -> float:
@@ -106,9 +118,9 @@ def _effective_noise(spec: CampaignSpec, level: float, image: NDArray[np.float64
     return level
 
 
-def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec) -> dict[
-    str, NDArray[np.float64]
-]:
+def simulate_batch(
+    image: NDArray[np.float64], batch: Batch, spec: CampaignSpec
+) -> dict[str, NDArray[np.float64]]:
     """Run the tasks of one batch: one reference, one Correlator, every W of the batch.
 
     Parameters
@@ -134,7 +146,8 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
     ss = spec.supersample
     if spec.method == "rendered":
         reference = image.reshape(image.shape[0] // ss, ss, image.shape[1] // ss, ss).mean(
-            axis=(1, 3))
+            axis=(1, 3)
+        )
     else:
         reference = image
     traj = _trajectory(spec)
@@ -143,56 +156,90 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         window: tuple[slice, slice] = (slice(None), slice(None))
     else:
         h = batch.subset // 2
-        window = (slice(points[:, 0].min() - h, points[:, 0].max() + h + 1),
-                  slice(points[:, 1].min() - h, points[:, 1].max() + h + 1))
+        window = (
+            slice(points[:, 0].min() - h, points[:, 0].max() + h + 1),
+            slice(points[:, 1].min() - h, points[:, 1].max() + h + 1),
+        )
     a = math.radians(batch.angle)
     ca, sa = math.cos(a), math.sin(a)
 
-    ref_seed = task_seed(spec.seed, "reference", pattern=batch.pattern, noise=batch.noise,
-                         rep=batch.rep)
+    ref_seed = task_seed(
+        spec.seed, "reference", pattern=batch.pattern, noise=batch.noise, rep=batch.rep
+    )
     correlator = Correlator(
-        _noisy(reference, spec, batch.noise, ref_seed), subset=batch.subset,
-        points=points, shape=spec.dic_shape,  # type: ignore[arg-type]
+        _noisy(reference, spec, batch.noise, ref_seed),
+        subset=batch.subset,
+        points=points,
+        shape=spec.dic_shape,  # type: ignore[arg-type]
         interpolation=spec.interpolation,
-        max_iterations=spec.max_iterations, tolerance=spec.tolerance, workers=1,
+        max_iterations=spec.max_iterations,
+        tolerance=spec.tolerance,
+        workers=1,
         blur="given" if spec.compensation == "given" else "none",
     )
-    sssig_ref = float(np.mean(directional_sssig(reference, points, subset=batch.subset,
-                                                angle=batch.angle)))
+    sssig_ref = float(
+        np.mean(directional_sssig(reference, points, subset=batch.subset, angle=batch.angle))
+    )
     mig_ref = mig(reference[window])
     contrast_ref = michelson_contrast(reference[window])
     rms_ref = rms_contrast(reference[window])
 
     n = len(batch.blur)
-    out = {name: np.full(n, np.nan) for name in (
-        "u_e", "u_e_across", "bias", "converged_fraction", "sssig_ref", "sssig",
-        "sssig_std", "mig_ref", "mig", "contrast_ref", "contrast", "rms_contrast_ref",
-        "rms_contrast", "u_match_score",
-        "u_pan", "noise_effective", "n_points", "time_s")}
+    out = {
+        name: np.full(n, np.nan)
+        for name in (
+            "u_e",
+            "u_e_across",
+            "bias",
+            "converged_fraction",
+            "sssig_ref",
+            "sssig",
+            "sssig_std",
+            "mig_ref",
+            "mig",
+            "contrast_ref",
+            "contrast",
+            "rms_contrast_ref",
+            "rms_contrast",
+            "u_match_score",
+            "u_pan",
+            "noise_effective",
+            "n_points",
+            "time_s",
+        )
+    }
     setup = time.perf_counter() - t_start
     for j, length in enumerate(batch.blur):
         t0 = time.perf_counter()
         motion = _motion(length, batch.angle)
         if spec.method == "rendered":
-            blurred = render_blurred(image, motion, supersample=ss, substeps=spec.substeps,
-                                     trajectory=traj)
-            pos, w = trajectory_positions(motion, substeps=spec.substeps or 1024,
-                                          trajectory=traj)
+            blurred = render_blurred(
+                image, motion, supersample=ss, substeps=spec.substeps, trajectory=traj
+            )
+            pos, w = trajectory_positions(motion, substeps=spec.substeps or 1024, trajectory=traj)
             pos = np.rint(pos * ss) / ss
         else:
-            blurred = motion_blur(reference, motion, substeps=spec.substeps,
-                                  trajectory=traj,
-                                  boundary=spec.boundary)  # type: ignore[arg-type]
+            blurred = motion_blur(
+                reference, motion, substeps=spec.substeps, trajectory=traj, boundary=spec.boundary
+            )  # type: ignore[arg-type]
             pos, w = trajectory_positions(motion, substeps=spec.substeps, trajectory=traj)
         true_dy, true_dx = w @ pos
-        seed = task_seed(spec.seed, "current", pattern=batch.pattern, angle=batch.angle,
-                         noise=batch.noise, blur=length, rep=batch.rep)
+        seed = task_seed(
+            spec.seed,
+            "current",
+            pattern=batch.pattern,
+            angle=batch.angle,
+            noise=batch.noise,
+            blur=length,
+            rep=batch.rep,
+        )
         noisy = _noisy(blurred, spec, batch.noise, seed)
         if spec.compensation == "given":  # the known motion of the exposure (issue 18)
             result = correlator.correlate(noisy, blur_vector=motion)
         elif spec.compensation == "deblur":  # the published baseline, known kernel
-            result = correlator.correlate(deblur_wiener(
-                noisy, motion, _effective_noise(spec, batch.noise, blurred)))
+            result = correlator.correlate(
+                deblur_wiener(noisy, motion, _effective_noise(spec, batch.noise, blurred))
+            )
         else:
             result = correlator.correlate(noisy)
         ok = np.asarray(result.status) == int(PointStatus.CONVERGED)
@@ -206,8 +253,9 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
         sigma = _effective_noise(spec, batch.noise, blurred)
         out["u_e"][j] = float(np.std(along[ok], ddof=1)) if n_ok >= 2 else np.nan
         out["u_e_across"][j] = float(np.std(across[ok], ddof=1)) if n_ok >= 2 else np.nan
-        out["bias"][j] = (float(np.mean(along[ok])) - (true_dx * ca + true_dy * sa)
-                          if n_ok else np.nan)
+        out["bias"][j] = (
+            float(np.mean(along[ok])) - (true_dx * ca + true_dy * sa) if n_ok else np.nan
+        )
         out["converged_fraction"][j] = n_ok / ok.size
         out["sssig"][j] = float(np.mean(s_b))
         out["sssig_std"][j] = float(np.std(s_b))
@@ -225,4 +273,3 @@ def simulate_batch(image: NDArray[np.float64], batch: Batch, spec: CampaignSpec)
     out["contrast_ref"][:] = contrast_ref
     out["rms_contrast_ref"][:] = rms_ref
     return out
-

@@ -94,18 +94,44 @@ MAX_TASKS = 10_000_000
 
 _SECTIONS = {
     "campaign": {"name", "seed", "repetitions", "description"},
-    "blur": {"lengths", "angles", "trajectory", "trajectory_params", "method", "substeps",
-             "boundary", "supersample"},
+    "blur": {
+        "lengths",
+        "angles",
+        "trajectory",
+        "trajectory_params",
+        "method",
+        "substeps",
+        "boundary",
+        "supersample",
+    },
     "noise": {"model", "levels", "full_well"},
-    "dic": {"subsets", "step", "shape", "interpolation", "max_iterations", "tolerance",
-            "compensation"},
+    "dic": {
+        "subsets",
+        "step",
+        "shape",
+        "interpolation",
+        "max_iterations",
+        "tolerance",
+        "compensation",
+    },
     "run": {"blur_chunk"},
 }
-_PATTERN_KEYS = {"name", "generator", "path", "crop", "shape", "speckle_size", "density",
-                 "softness", "contrast", "supersample", "seed", "mask_sigma"}
+_PATTERN_KEYS = {
+    "name",
+    "generator",
+    "path",
+    "crop",
+    "shape",
+    "speckle_size",
+    "density",
+    "softness",
+    "contrast",
+    "supersample",
+    "seed",
+    "mask_sigma",
+}
 _GENERATOR_KEYS = {
-    "speckle": {"shape", "speckle_size", "density", "softness", "contrast", "supersample",
-                "seed"},
+    "speckle": {"shape", "speckle_size", "density", "softness", "contrast", "supersample", "seed"},
     "paper4": {"shape", "speckle_size", "density", "mask_sigma", "seed"},
 }
 
@@ -202,23 +228,38 @@ class CampaignSpec:
     def to_dict(self) -> dict[str, Any]:
         """Canonical JSON-ready dict (what the spec hash is computed from)."""
         return {
-            "campaign": {"name": self.name, "seed": self.seed,
-                         "repetitions": self.repetitions, "description": self.description},
+            "campaign": {
+                "name": self.name,
+                "seed": self.seed,
+                "repetitions": self.repetitions,
+                "description": self.description,
+            },
             "pattern": [p.to_dict() for p in self.patterns],
-            "blur": {"lengths": list(self.blur), "angles": list(self.angles),
-                     "trajectory": self.trajectory,
-                     "trajectory_params": dict(self.trajectory_params),
-                     "method": self.method,
-                     "substeps": 0 if self.substeps is None else self.substeps,
-                     "boundary": self.boundary, "supersample": self.supersample},
-            "noise": {"model": self.noise_model, "levels": list(self.noise_levels),
-                      **({} if self.full_well is None else {"full_well": self.full_well})},
-            "dic": {"subsets": list(self.subsets), "step": self.step,
-                    "shape": self.dic_shape, "interpolation": self.interpolation,
-                    "max_iterations": self.max_iterations, "tolerance": self.tolerance,
-                    # only when on: the hashes of existing specs stay what they were
-                    **({} if self.compensation == "none"
-                       else {"compensation": self.compensation})},
+            "blur": {
+                "lengths": list(self.blur),
+                "angles": list(self.angles),
+                "trajectory": self.trajectory,
+                "trajectory_params": dict(self.trajectory_params),
+                "method": self.method,
+                "substeps": 0 if self.substeps is None else self.substeps,
+                "boundary": self.boundary,
+                "supersample": self.supersample,
+            },
+            "noise": {
+                "model": self.noise_model,
+                "levels": list(self.noise_levels),
+                **({} if self.full_well is None else {"full_well": self.full_well}),
+            },
+            "dic": {
+                "subsets": list(self.subsets),
+                "step": self.step,
+                "shape": self.dic_shape,
+                "interpolation": self.interpolation,
+                "max_iterations": self.max_iterations,
+                "tolerance": self.tolerance,
+                # only when on: the hashes of existing specs stay what they were
+                **({} if self.compensation == "none" else {"compensation": self.compensation}),
+            },
             "run": {"blur_chunk": self.blur_chunk},
         }
 
@@ -242,8 +283,7 @@ class CampaignSpec:
         return p if p.is_absolute() else Path(self.base_dir) / p
 
 
-def check_pattern_fits(spec: CampaignSpec, pattern: PatternSpec,
-                       shape: tuple[int, int]) -> None:
+def check_pattern_fits(spec: CampaignSpec, pattern: PatternSpec, shape: tuple[int, int]) -> None:
     """Refuse a pattern too small for the campaign's largest blur and subset.
 
     The blur path at the largest W must be shorter, along each image axis, than the
@@ -258,23 +298,30 @@ def check_pattern_fits(spec: CampaignSpec, pattern: PatternSpec,
     rows, cols = int(shape[0]), int(shape[1])
     s = max(spec.subsets)
     if s + 2 > min(rows, cols):
-        raise ConfigError(f"dic.subsets={s}: pattern {pattern.name!r} is {rows}x{cols} px, "
-                          f"too small for a subset of {s} px plus a 1-px border; use "
-                          "smaller subsets or a larger pattern")
+        raise ConfigError(
+            f"dic.subsets={s}: pattern {pattern.name!r} is {rows}x{cols} px, "
+            f"too small for a subset of {s} px plus a 1-px border; use "
+            "smaller subsets or a larger pattern"
+        )
     w = max(spec.blur)
     for a in spec.angles:
         dy = abs(w * math.sin(math.radians(a)))
         dx = abs(w * math.cos(math.radians(a)))
         for ext, size, axis in ((dx, cols, "columns"), (dy, rows, "rows")):
             if ext > size - s:
-                room = (size - s) / max(abs(math.cos(math.radians(a))) if axis == "columns"
-                                        else abs(math.sin(math.radians(a))), 1e-12)
+                room = (size - s) / max(
+                    abs(math.cos(math.radians(a)))
+                    if axis == "columns"
+                    else abs(math.sin(math.radians(a))),
+                    1e-12,
+                )
                 raise ConfigError(
                     f"blur.lengths: W = {w:g} px at angle {a:g} deg moves {ext:.4g} px along "
                     f"the {axis}, more than pattern {pattern.name!r} ({rows}x{cols} px) "
                     f"minus the subset ({s} px) allows: the blurred subsets would be smeared "
                     f"over the whole pattern and u_e would be NaN; use W <= {room:.4g} px "
-                    "or a larger pattern")
+                    "or a larger pattern"
+                )
 
 
 # -- parsing helpers -----------------------------------------------------------------------
@@ -337,8 +384,12 @@ def _blur_lengths(value: Any) -> tuple[float, ...]:
     if isinstance(value, Mapping):
         unknown = set(value) - {"start", "stop", "step"}
         if unknown or {"start", "stop", "step"} - set(value):
-            raise _err(key, dict(value), "a range needs exactly start, stop and step (px), "
-                       "e.g. {start = 0.1, stop = 10.0, step = 0.1}")
+            raise _err(
+                key,
+                dict(value),
+                "a range needs exactly start, stop and step (px), "
+                "e.g. {start = 0.1, stop = 10.0, step = 0.1}",
+            )
         start = _number(value["start"], key + ".start")
         stop = _number(value["stop"], key + ".stop")
         step = _number(value["step"], key + ".step")
@@ -359,19 +410,24 @@ def _blur_lengths(value: Any) -> tuple[float, ...]:
 def _pattern(entry: Any, index: int) -> PatternSpec:
     where = f"pattern[{index}]"
     if not isinstance(entry, Mapping):
-        raise _err(where, entry, "expected a table ([[pattern]] with name and generator "
-                   "or path)")
+        raise _err(where, entry, "expected a table ([[pattern]] with name and generator or path)")
     unknown = sorted(set(entry) - _PATTERN_KEYS)
     if unknown:
-        raise _err(f"{where}.{unknown[0]}", entry[unknown[0]],
-                   "unknown key; allowed: " + ", ".join(sorted(_PATTERN_KEYS)))
+        raise _err(
+            f"{where}.{unknown[0]}",
+            entry[unknown[0]],
+            "unknown key; allowed: " + ", ".join(sorted(_PATTERN_KEYS)),
+        )
     name = entry.get("name", f"pattern{index}")
     if not isinstance(name, str) or not name or name.strip() != name:
         raise _err(f"{where}.name", name, "expected a non-empty name without outer spaces")
     has_gen, has_path = "generator" in entry, "path" in entry
     if has_gen == has_path:
-        raise _err(where, dict(entry), "give exactly one of 'generator' (speckle, paper4) "
-                   "and 'path' (an image file)")
+        raise _err(
+            where,
+            dict(entry),
+            "give exactly one of 'generator' (speckle, paper4) and 'path' (an image file)",
+        )
     crop = None
     if "crop" in entry:
         c = entry["crop"]
@@ -383,8 +439,11 @@ def _pattern(entry: Any, index: int) -> PatternSpec:
     if has_path:
         extra = sorted(set(entry) - {"name", "path", "crop"})
         if extra:
-            raise _err(f"{where}.{extra[0]}", entry[extra[0]],
-                       "generator settings do not apply to an image file")
+            raise _err(
+                f"{where}.{extra[0]}",
+                entry[extra[0]],
+                "generator settings do not apply to an image file",
+            )
         path = entry["path"]
         if not isinstance(path, str) or not path:
             raise _err(f"{where}.path", path, "expected an image file path")
@@ -393,8 +452,12 @@ def _pattern(entry: Any, index: int) -> PatternSpec:
     settings: dict[str, Any] = {}
     for key in sorted(set(entry) - {"name", "generator", "crop"}):
         if key not in _GENERATOR_KEYS[gen]:
-            raise _err(f"{where}.{key}", entry[key], f"not a setting of generator {gen!r}; "
-                       "allowed: " + ", ".join(sorted(_GENERATOR_KEYS[gen])))
+            raise _err(
+                f"{where}.{key}",
+                entry[key],
+                f"not a setting of generator {gen!r}; "
+                "allowed: " + ", ".join(sorted(_GENERATOR_KEYS[gen])),
+            )
         value = entry[key]
         if key == "shape":
             if isinstance(value, int) and not isinstance(value, bool):
@@ -412,8 +475,7 @@ def _pattern(entry: Any, index: int) -> PatternSpec:
     return PatternSpec(name=name, generator=gen, settings=settings, crop=crop)
 
 
-def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".") -> \
-        CampaignSpec:
+def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".") -> CampaignSpec:
     """Validate a campaign spec given as a dict (the parsed TOML) and return it.
 
     Parameters
@@ -434,8 +496,7 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
     allowed = set(_SECTIONS) | {"pattern"}
     for key in data:
         if key not in allowed:
-            raise _err(key, data[key], "unknown section; allowed: "
-                       + ", ".join(sorted(allowed)))
+            raise _err(key, data[key], "unknown section; allowed: " + ", ".join(sorted(allowed)))
     sec: dict[str, Mapping[str, Any]] = {}
     for name, keys in _SECTIONS.items():
         s = data.get(name, {})
@@ -443,8 +504,9 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
             raise _err(name, s, f"expected a table [{name}]")
         for key in s:
             if key not in keys:
-                raise _err(f"{name}.{key}", s[key],
-                           "unknown key; allowed: " + ", ".join(sorted(keys)))
+                raise _err(
+                    f"{name}.{key}", s[key], "unknown key; allowed: " + ", ".join(sorted(keys))
+                )
         sec[name] = s
 
     camp = sec["campaign"]
@@ -455,15 +517,20 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
     if not isinstance(description, str):
         raise _err("campaign.description", description, "expected a string")
     if "seed" not in camp:
-        raise _err("campaign.seed", None, "a base seed is required (e.g. seed = 1): it "
-                   "makes every task reproducible")
+        raise _err(
+            "campaign.seed",
+            None,
+            "a base seed is required (e.g. seed = 1): it makes every task reproducible",
+        )
     seed = _int(camp["seed"], "campaign.seed", minimum=0)
     repetitions = _int(camp.get("repetitions", 1), "campaign.repetitions", minimum=1)
 
     raw_patterns = data.get("pattern")
     if raw_patterns is None:
-        raise ConfigError("pattern: at least one [[pattern]] table is required "
-                          "(generator = \"paper4\" or path = \"image.tif\")")
+        raise ConfigError(
+            "pattern: at least one [[pattern]] table is required "
+            '(generator = "paper4" or path = "image.tif")'
+        )
     if isinstance(raw_patterns, Mapping):
         raw_patterns = [raw_patterns]
     if not isinstance(raw_patterns, list) or not raw_patterns:
@@ -473,14 +540,15 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
 
     blur = sec["blur"]
     if "lengths" not in blur:
-        raise _err("blur.lengths", None, "required: a list of W (px) or "
-                   "{start, stop, step}")
+        raise _err("blur.lengths", None, "required: a list of W (px) or {start, stop, step}")
     lengths = _blur_lengths(blur["lengths"])
-    angles = tuple(_clean(_number(a, "blur.angles")) for a in
-                   _list(blur.get("angles", [0.0]), "blur.angles"))
+    angles = tuple(
+        _clean(_number(a, "blur.angles")) for a in _list(blur.get("angles", [0.0]), "blur.angles")
+    )
     _unique(list(angles), "blur.angles")
-    trajectory = _choice(blur.get("trajectory", "linear"), "blur.trajectory",
-                         ("linear", "sine", "acceleration"))
+    trajectory = _choice(
+        blur.get("trajectory", "linear"), "blur.trajectory", ("linear", "sine", "acceleration")
+    )
     tparams = blur.get("trajectory_params", {})
     if not isinstance(tparams, Mapping) or not all(
         isinstance(v, int | float) and not isinstance(v, bool) for v in tparams.values()
@@ -489,95 +557,135 @@ def parse_spec(data: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".
     method = _choice(blur.get("method", "transfer"), "blur.method", BLUR_METHODS)
     substeps_raw = _int(blur.get("substeps", 100), "blur.substeps", minimum=0)
     substeps = None if substeps_raw == 0 else substeps_raw
-    boundary = _choice(blur.get("boundary", "periodic"), "blur.boundary",
-                       ("periodic", "reflect"))
+    boundary = _choice(blur.get("boundary", "periodic"), "blur.boundary", ("periodic", "reflect"))
     supersample = _int(blur.get("supersample", 8), "blur.supersample", minimum=1)
     if method == "rendered":
         for p in patterns:
             if p.generator != "speckle" or "supersample" in p.settings:
-                raise _err("blur.method", method, f"pattern {p.name!r}: rendering draws the "
-                           "pattern on a fine grid, so it needs generator = \"speckle\" "
-                           "without its own supersample (or use method = \"transfer\")")
+                raise _err(
+                    "blur.method",
+                    method,
+                    f"pattern {p.name!r}: rendering draws the "
+                    'pattern on a fine grid, so it needs generator = "speckle" '
+                    'without its own supersample (or use method = "transfer")',
+                )
 
     noise = sec["noise"]
     model = _choice(noise.get("model", "per-subframe"), "noise.model", NOISE_MODELS)
-    levels = tuple(_clean(_number(v, "noise.levels")) for v in
-                   _list(noise.get("levels", [2.0]), "noise.levels"))
+    levels = tuple(
+        _clean(_number(v, "noise.levels"))
+        for v in _list(noise.get("levels", [2.0]), "noise.levels")
+    )
     if any(v < 0 for v in levels):
         raise _err("noise.levels", list(levels), "noise std in grey levels must be >= 0")
     _unique(list(levels), "noise.levels")
     if model == "per-subframe" and substeps is None:
-        raise _err("noise.model", model, "per-subframe noise needs a finite blur.substeps "
-                   "(K + 1 sub-frames); use per-exposure with substeps = 0")
+        raise _err(
+            "noise.model",
+            model,
+            "per-subframe noise needs a finite blur.substeps "
+            "(K + 1 sub-frames); use per-exposure with substeps = 0",
+        )
     full_well = None
     if model == "poisson-gaussian":
         if "full_well" not in noise:
-            raise _err("noise.full_well", None, "poisson-gaussian needs full_well "
-                       "(electrons at grey level 255), e.g. 20000")
+            raise _err(
+                "noise.full_well",
+                None,
+                "poisson-gaussian needs full_well (electrons at grey level 255), e.g. 20000",
+            )
         full_well = _number(noise["full_well"], "noise.full_well")
         if full_well <= 0:
             raise _err("noise.full_well", full_well, "must be > 0 electrons")
     elif "full_well" in noise:
-        raise _err("noise.full_well", noise["full_well"],
-                   "applies to model = \"poisson-gaussian\" only")
+        raise _err(
+            "noise.full_well", noise["full_well"], 'applies to model = "poisson-gaussian" only'
+        )
 
     dic = sec["dic"]
-    subsets = tuple(_int(s, "dic.subsets", minimum=5) for s in
-                    _list(dic.get("subsets", [31]), "dic.subsets"))
+    subsets = tuple(
+        _int(s, "dic.subsets", minimum=5) for s in _list(dic.get("subsets", [31]), "dic.subsets")
+    )
     for s in subsets:
         if s % 2 == 0:
             raise _err("dic.subsets", s, f"subset sizes must be odd (use {s - 1} or {s + 1})")
     _unique(list(subsets), "dic.subsets")
     step = _int(dic.get("step", 10), "dic.step", minimum=1)
     dic_shape = _choice(dic.get("shape", "translation"), "dic.shape", DIC_SHAPES)
-    interpolation = _choice(dic.get("interpolation", "bspline3"), "dic.interpolation",
-                            INTERPOLATIONS)
+    interpolation = _choice(
+        dic.get("interpolation", "bspline3"), "dic.interpolation", INTERPOLATIONS
+    )
     max_iterations = _int(dic.get("max_iterations", 50), "dic.max_iterations", minimum=1)
     tolerance = _number(dic.get("tolerance", 1e-4), "dic.tolerance")
     if tolerance <= 0:
         raise _err("dic.tolerance", tolerance, "must be > 0")
 
-    compensation = _choice(dic.get("compensation", "none"), "dic.compensation",
-                           COMPENSATIONS)
+    compensation = _choice(dic.get("compensation", "none"), "dic.compensation", COMPENSATIONS)
     if compensation != "none":
         if trajectory != "linear":
-            raise _err("dic.compensation", compensation,
-                       "the compensated matcher models linear motion (a centred box); "
-                       "use blur.trajectory = \"linear\"")
+            raise _err(
+                "dic.compensation",
+                compensation,
+                "the compensated matcher models linear motion (a centred box); "
+                'use blur.trajectory = "linear"',
+            )
         if max(lengths) >= min(subsets):
-            raise _err("dic.compensation", compensation,
-                       f"blur lengths up to {max(lengths):g} px need subsets larger than "
-                       f"that (smallest: {min(subsets)} px)")
+            raise _err(
+                "dic.compensation",
+                compensation,
+                f"blur lengths up to {max(lengths):g} px need subsets larger than "
+                f"that (smallest: {min(subsets)} px)",
+            )
 
     blur_chunk = _int(sec["run"].get("blur_chunk", 10), "run.blur_chunk", minimum=1)
     blur_chunk = min(blur_chunk, len(lengths))
 
-    n_tasks = (len(patterns) * len(angles) * len(subsets) * len(levels) * len(lengths)
-               * repetitions)
+    n_tasks = len(patterns) * len(angles) * len(subsets) * len(levels) * len(lengths) * repetitions
     if n_tasks > MAX_TASKS:
-        raise _err("campaign.repetitions", repetitions,
-                   f"{n_tasks:.4g} tasks in all ({len(patterns)} pattern(s) x {len(angles)} "
-                   f"angle(s) x {len(subsets)} subset(s) x {len(levels)} noise level(s) x "
-                   f"{len(lengths)} W x {repetitions} repetition(s)); at most "
-                   f"{MAX_TASKS:.0e} tasks per campaign: split it or use fewer repetitions")
+        raise _err(
+            "campaign.repetitions",
+            repetitions,
+            f"{n_tasks:.4g} tasks in all ({len(patterns)} pattern(s) x {len(angles)} "
+            f"angle(s) x {len(subsets)} subset(s) x {len(levels)} noise level(s) x "
+            f"{len(lengths)} W x {repetitions} repetition(s)); at most "
+            f"{MAX_TASKS:.0e} tasks per campaign: split it or use fewer repetitions",
+        )
     for p in patterns:
         if p.generator is not None:
             ss = supersample if method == "rendered" else int(p.settings.get("supersample", 1))
             try:
-                check_pixels(tuple(p.settings["shape"]), f"pattern {p.name!r} shape",
-                             factor=ss * ss)
+                check_pixels(
+                    tuple(p.settings["shape"]), f"pattern {p.name!r} shape", factor=ss * ss
+                )
             except InputError as exc:
                 raise ConfigError(str(exc)) from None
 
     spec = CampaignSpec(
-        name=name, seed=seed, patterns=patterns, blur=lengths, angles=angles,
-        trajectory=trajectory, trajectory_params=dict(tparams), method=method,
-        substeps=substeps, boundary=boundary, supersample=supersample, noise_model=model,
-        noise_levels=levels, full_well=full_well, subsets=subsets, step=step,
-        dic_shape=dic_shape, compensation=compensation, interpolation=interpolation,
+        name=name,
+        seed=seed,
+        patterns=patterns,
+        blur=lengths,
+        angles=angles,
+        trajectory=trajectory,
+        trajectory_params=dict(tparams),
+        method=method,
+        substeps=substeps,
+        boundary=boundary,
+        supersample=supersample,
+        noise_model=model,
+        noise_levels=levels,
+        full_well=full_well,
+        subsets=subsets,
+        step=step,
+        dic_shape=dic_shape,
+        compensation=compensation,
+        interpolation=interpolation,
         max_iterations=max_iterations,
-        tolerance=tolerance, repetitions=repetitions, blur_chunk=blur_chunk,
-        description=description, base_dir=str(Path(base_dir).resolve()),
+        tolerance=tolerance,
+        repetitions=repetitions,
+        blur_chunk=blur_chunk,
+        description=description,
+        base_dir=str(Path(base_dir).resolve()),
     )
     for p in patterns:
         if p.crop is not None:

@@ -69,10 +69,11 @@ VARIABLES: dict[str, tuple[str, str]] = {
     "u_e_across": ("px", "std over converged POIs of the displacement across the motion"),
     "bias": ("px", "mean displacement along the motion minus the imposed one (W/2)"),
     "converged_fraction": ("1", "fraction of POIs whose DIC status is CONVERGED"),
-    "sssig_ref": ("GL^2/px^2", "mean over POIs of SSSIG along the motion, reference image "
-                  "(noise-free)"),
-    "sssig": ("GL^2/px^2", "mean over POIs of SSSIG along the motion, blurred image "
-              "(noise-free)"),
+    "sssig_ref": (
+        "GL^2/px^2",
+        "mean over POIs of SSSIG along the motion, reference image (noise-free)",
+    ),
+    "sssig": ("GL^2/px^2", "mean over POIs of SSSIG along the motion, blurred image (noise-free)"),
     "sssig_std": ("GL^2/px^2", "std over POIs of SSSIG along the motion, blurred image"),
     "mig_ref": ("GL/px", "mean intensity gradient of the reference image (noise-free)"),
     "mig": ("GL/px", "mean intensity gradient of the blurred image (noise-free)"),
@@ -82,15 +83,25 @@ VARIABLES: dict[str, tuple[str, str]] = {
     # contrast stays ~1 wherever a speckle interior survives: the contrast-loss measure.
     "rms_contrast_ref": ("1", "RMS contrast (std / mean) of the reference image (noise-free)"),
     "rms_contrast": ("1", "RMS contrast (std / mean) of the blurred image (noise-free)"),
-    "u_match_score": ("px", "match-score prediction sqrt(2 s^2 / SSSIG) with the blurred "
-                      "image's mean SSSIG and the effective noise std s (paper eq. 2)"),
-    "u_pan": ("px", "Pan's prediction sqrt(2) s / (N MIG) with the blurred image's MIG "
-              "(paper eq. 5)"),
-    "noise_effective": ("GL", "effective noise std per image (per-subframe: sigma / "
-                        "sqrt(K + 1); Poisson-Gaussian: at the mean grey level)"),
+    "u_match_score": (
+        "px",
+        "match-score prediction sqrt(2 s^2 / SSSIG) with the blurred "
+        "image's mean SSSIG and the effective noise std s (paper eq. 2)",
+    ),
+    "u_pan": (
+        "px",
+        "Pan's prediction sqrt(2) s / (N MIG) with the blurred image's MIG (paper eq. 5)",
+    ),
+    "noise_effective": (
+        "GL",
+        "effective noise std per image (per-subframe: sigma / "
+        "sqrt(K + 1); Poisson-Gaussian: at the mean grey level)",
+    ),
     "n_points": ("1", "number of POIs correlated"),
-    "time_s": ("s", "wall time of the task (blur, noise, DIC, metrics; batch set-up "
-               "shared out), on its worker"),
+    "time_s": (
+        "s",
+        "wall time of the task (blur, noise, DIC, metrics; batch set-up shared out), on its worker",
+    ),
 }
 
 
@@ -99,8 +110,9 @@ def _chunks(spec: CampaignSpec) -> tuple[int, ...]:
 
 
 #: Top-level entries of a store: what a half-created one may hold.
-_ENTRIES = frozenset({*VARIABLES, "done", "checksum", *DIMS, "zarr.json", ".zattrs",
-                      ".zgroup", ".zmetadata"})
+_ENTRIES = frozenset(
+    {*VARIABLES, "done", "checksum", *DIMS, "zarr.json", ".zattrs", ".zgroup", ".zmetadata"}
+)
 
 
 @dataclass(frozen=True)
@@ -151,8 +163,7 @@ def half_created(path: str | os.PathLike[str]) -> bool:
             attrs = {}
         if isinstance(attrs, dict) and attrs.get("dicblur_layout") in _LAYOUTS:
             return False
-        return not any(f.is_file() for f in (p / "done").rglob("*")
-                       if f.name != "zarr.json")
+        return not any(f.is_file() for f in (p / "done").rglob("*") if f.name != "zarr.json")
     except OSError:
         return False
 
@@ -227,16 +238,18 @@ class CampaignStore:
 
     # -- creation and opening -----------------------------------------------------------
     @classmethod
-    def create(cls, path: str | os.PathLike[str], spec: CampaignSpec,
-               hashes: Mapping[str, str]) -> CampaignStore:
+    def create(
+        cls, path: str | os.PathLike[str], spec: CampaignSpec, hashes: Mapping[str, str]
+    ) -> CampaignStore:
         """Create an empty store for ``spec`` (fails if ``path`` exists)."""
         import dask.array as da
         import xarray as xr
 
         p = Path(path)
         if p.exists():
-            raise StoreError(f"results={str(p)!r}: already exists; open it to resume or "
-                             "choose a new path")
+            raise StoreError(
+                f"results={str(p)!r}: already exists; open it to resume or choose a new path"
+            )
         shape = tuple(spec.dims.values())
         chunks = _chunks(spec)
         coords = {
@@ -253,12 +266,20 @@ class CampaignStore:
             arr = da.full(shape, np.nan, dtype=np.float64, chunks=chunks)
             data_vars[name] = (DIMS, arr, {"units": units, "description": desc})
             encoding[name] = {"chunks": chunks, "fill_value": np.nan, "compressors": None}
-        data_vars["checksum"] = (DIMS, da.zeros(shape, dtype=np.uint32, chunks=chunks),
-                                 {"description": "CRC-32 of the task's values of every "
-                                  "variable (little-endian float64, in store order)"})
+        data_vars["checksum"] = (
+            DIMS,
+            da.zeros(shape, dtype=np.uint32, chunks=chunks),
+            {
+                "description": "CRC-32 of the task's values of every "
+                "variable (little-endian float64, in store order)"
+            },
+        )
         encoding["checksum"] = {"chunks": chunks, "fill_value": 0, "compressors": None}
-        data_vars["done"] = (DIMS, da.zeros(shape, dtype=np.uint8, chunks=chunks),
-                             {"description": "1 when the task's results are stored"})
+        data_vars["done"] = (
+            DIMS,
+            da.zeros(shape, dtype=np.uint8, chunks=chunks),
+            {"description": "1 when the task's results are stored"},
+        )
         encoding["done"] = {"chunks": chunks, "fill_value": 0, "compressors": None}
         ds = xr.Dataset(data_vars, coords=coords)
         ds.coords["angle"].attrs["units"] = "degree from +x (columns) towards +y (rows)"
@@ -311,23 +332,31 @@ class CampaignStore:
         try:
             group = zarr.open_group(str(p), mode="r+")
         except Exception as exc:
-            raise StoreError(f"results={str(p)!r}: not a readable Zarr store "
-                             f"({type(exc).__name__}: {exc}); choose a new results "
-                             "path") from exc
+            raise StoreError(
+                f"results={str(p)!r}: not a readable Zarr store "
+                f"({type(exc).__name__}: {exc}); choose a new results "
+                "path"
+            ) from exc
         attrs = dict(group.attrs)
         layout = attrs.get("dicblur_layout")
         if layout not in _LAYOUTS or "spec" not in attrs:
             if half_created(p):
-                raise StoreError(f"results={str(p)!r}: a half-created store (its creation "
-                                 "was interrupted; it holds no finished task); run the "
-                                 "campaign again (dicblur campaign run SPEC -o "
-                                 f"{p!s}) to create it anew")
+                raise StoreError(
+                    f"results={str(p)!r}: a half-created store (its creation "
+                    "was interrupted; it holds no finished task); run the "
+                    "campaign again (dicblur campaign run SPEC -o "
+                    f"{p!s}) to create it anew"
+                )
             if isinstance(layout, int) and layout > LAYOUT_VERSION:
-                raise StoreError(f"results={str(p)!r}: store layout {layout} is newer than "
-                                 f"this dicblur reads (<= {LAYOUT_VERSION}); upgrade dicblur")
-            raise StoreError(f"results={str(p)!r}: not a dicblur campaign store (layout "
-                             f"{layout!r}, expected {LAYOUT_VERSION}); choose a new "
-                             "results path")
+                raise StoreError(
+                    f"results={str(p)!r}: store layout {layout} is newer than "
+                    f"this dicblur reads (<= {LAYOUT_VERSION}); upgrade dicblur"
+                )
+            raise StoreError(
+                f"results={str(p)!r}: not a dicblur campaign store (layout "
+                f"{layout!r}, expected {LAYOUT_VERSION}); choose a new "
+                "results path"
+            )
         try:
             spec_dict = json.loads(str(attrs["spec"]))
             dims = _dims_from_spec_dict(spec_dict)
@@ -338,12 +367,16 @@ class CampaignStore:
             try:
                 arr: Any = group[name]
             except KeyError:
-                raise StoreError(f"results={str(p)!r}: variable {name!r} is missing; the "
-                                 "store is damaged (rerun into a new path)") from None
+                raise StoreError(
+                    f"results={str(p)!r}: variable {name!r} is missing; the "
+                    "store is damaged (rerun into a new path)"
+                ) from None
             if tuple(arr.shape) != shape:
-                raise StoreError(f"results={str(p)!r}: variable {name!r} has shape "
-                                 f"{tuple(arr.shape)}, the spec implies {shape}; the store "
-                                 "is damaged")
+                raise StoreError(
+                    f"results={str(p)!r}: variable {name!r} has shape "
+                    f"{tuple(arr.shape)}, the spec implies {shape}; the store "
+                    "is damaged"
+                )
         return cls(p, group)
 
     # -- checks -------------------------------------------------------------------------
@@ -419,8 +452,7 @@ class CampaignStore:
             v, ok = self._read_chunk(name, key, n)
             if not ok or (v is None and self._raw):
                 return np.zeros(n, dtype=bool)  # a chunk the writer always writes
-            values[name] = (np.asarray(v, dtype=np.float64) if v is not None
-                            else np.full(n, np.nan))
+            values[name] = np.asarray(v, dtype=np.float64) if v is not None else np.full(n, np.nan)
         if self.layout < 2:
             return np.ones(n, dtype=bool)
         stored, ok = self._read_chunk("checksum", key, n)
@@ -428,8 +460,9 @@ class CampaignStore:
             return np.zeros(n, dtype=bool)
         return np.asarray(_task_checksums(values, n) == stored)
 
-    def _read_chunk(self, name: str, key: tuple[int, ...],
-                    n: int) -> tuple[NDArray[Any] | None, bool]:
+    def _read_chunk(
+        self, name: str, key: tuple[int, ...], n: int
+    ) -> tuple[NDArray[Any] | None, bool]:
         """The first ``n`` values of one chunk: ``(values, True)``, ``(None, True)`` when
         the chunk was never written, ``(None, False)`` when it is unreadable."""
         arr = self._arrays[name]
@@ -482,13 +515,17 @@ class CampaignStore:
         checked: dict[str, NDArray[Any]] = {}
         for name in VARIABLES:
             if name not in result:
-                raise StoreError(f"task result: variable {name!r} missing for batch "
-                                 f"{batch.index}; the task function must return all of "
-                                 f"{', '.join(VARIABLES)}")
+                raise StoreError(
+                    f"task result: variable {name!r} missing for batch "
+                    f"{batch.index}; the task function must return all of "
+                    f"{', '.join(VARIABLES)}"
+                )
             values = np.asarray(result[name], dtype=np.float64)
             if values.shape != (n,):
-                raise StoreError(f"task result {name!r}: shape {values.shape}, expected "
-                                 f"({n},) for batch {batch.index}")
+                raise StoreError(
+                    f"task result {name!r}: shape {values.shape}, expected "
+                    f"({n},) for batch {batch.index}"
+                )
             checked[name] = values
         if self.layout >= 2:
             checked["checksum"] = _task_checksums(checked, n)
@@ -548,10 +585,10 @@ def _raw_chunks(folder: Path) -> bool:
     return (
         meta.get("zarr_format") == 3
         # One-byte types (the "done" flags) carry no endianness.
-        and meta.get("codecs") in ([{"name": "bytes", "configuration": {"endian": "little"}}],
-                                   [{"name": "bytes"}])
-        and meta.get("chunk_key_encoding") == {"name": "default",
-                                               "configuration": {"separator": "/"}}
+        and meta.get("codecs")
+        in ([{"name": "bytes", "configuration": {"endian": "little"}}], [{"name": "bytes"}])
+        and meta.get("chunk_key_encoding")
+        == {"name": "default", "configuration": {"separator": "/"}}
         and meta.get("chunk_grid", {}).get("name") == "regular"
         and not meta.get("storage_transformers")
     )
@@ -607,15 +644,19 @@ def open_results(path: str | os.PathLike[str], *, only_done: bool = True) -> xr.
     store = CampaignStore.open(path)  # layout check with a clear error
     scan = store.scan()
     if scan.n_damaged:
-        raise StoreError(f"results={str(path)!r}: {scan.n_damaged} finished task(s) are "
-                         "damaged (missing, truncated or altered chunks, e.g. after a power "
-                         "loss or a full disk); rerun the campaign (the same dicblur "
-                         "campaign run command) to recompute them")
+        raise StoreError(
+            f"results={str(path)!r}: {scan.n_damaged} finished task(s) are "
+            "damaged (missing, truncated or altered chunks, e.g. after a power "
+            "loss or a full disk); rerun the campaign (the same dicblur "
+            "campaign run command) to recompute them"
+        )
     try:
         ds = xr.open_zarr(str(path), consolidated=False).load()
     except Exception as exc:
-        raise StoreError(f"results={str(path)!r}: cannot be read ({type(exc).__name__}: "
-                         f"{exc}); the store is damaged") from exc
+        raise StoreError(
+            f"results={str(path)!r}: cannot be read ({type(exc).__name__}: "
+            f"{exc}); the store is damaged"
+        ) from exc
     ds = ds.drop_vars("checksum", errors="ignore")
     if only_done:
         done = ds["done"] == 1

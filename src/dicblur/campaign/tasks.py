@@ -89,9 +89,16 @@ def iter_batches(spec: CampaignSpec) -> Iterator[Batch]:
                     for irep in range(spec.repetitions):
                         for b0 in range(0, nb, spec.blur_chunk):
                             b1 = min(b0 + spec.blur_chunk, nb)
-                            yield Batch(k, pat.name, angle, subset, noise, irep,
-                                        spec.blur[b0:b1],
-                                        (ip, ia, isub, inoise, b0, b1, irep))
+                            yield Batch(
+                                k,
+                                pat.name,
+                                angle,
+                                subset,
+                                noise,
+                                irep,
+                                spec.blur[b0:b1],
+                                (ip, ia, isub, inoise, b0, b1, irep),
+                            )
                             k += 1
 
 
@@ -156,14 +163,16 @@ def make_pattern(spec: CampaignSpec, pattern: PatternSpec) -> NDArray[np.float64
                 f"pattern {pattern.name!r}: crop={list(pattern.crop)} exceeds the image "
                 f"({img.shape[0]}x{img.shape[1]} px); use a window inside it"
             )
-        img = img[r0:r0 + nr, c0:c0 + nc]
+        img = img[r0 : r0 + nr, c0 : c0 + nc]
     if pattern.generator is None:
         k = spec.supersample if spec.method == "rendered" else 1
         check_pattern_fits(spec, pattern, (img.shape[0] // k, img.shape[1] // k))
     if float(np.ptp(img)) == 0.0:
-        raise ConfigError(f"pattern {pattern.name!r}: the image is constant (every pixel "
-                          f"{float(img.flat[0]):g} GL): no texture to correlate; give a "
-                          "speckle image")
+        raise ConfigError(
+            f"pattern {pattern.name!r}: the image is constant (every pixel "
+            f"{float(img.flat[0]):g} GL): no texture to correlate; give a "
+            "speckle image"
+        )
     return np.ascontiguousarray(img, dtype=np.float64)
 
 

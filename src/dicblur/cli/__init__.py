@@ -55,8 +55,9 @@ class _PipelineGroup(typer.core.TyperGroup):
     def list_commands(self, ctx: Any) -> list[str]:
         names = list(super().list_commands(ctx))
         order = list(PIPELINE)
-        return sorted(names, key=lambda n: (order.index(n) if n in order else len(order),
-                                            names.index(n)))
+        return sorted(
+            names, key=lambda n: (order.index(n) if n in order else len(order), names.index(n))
+        )
 
     def get_command(self, ctx: Any, cmd_name: str) -> Any:
         cmd = super().get_command(ctx, cmd_name)
@@ -75,6 +76,7 @@ def _plain_usage(cmd: Any) -> None:
     as ``{image}``, which reads like a template placeholder. Only our commands change."""
     for param in getattr(cmd, "params", ()):
         if hasattr(param, "_usage_display_name"):
+
             def plain(p: Any = param) -> str:
                 name = (p.metavar or p.name).upper()
                 name = name if p.required else f"[{name}]"
@@ -88,8 +90,7 @@ def _plain_usage(cmd: Any) -> None:
 app = typer.Typer(
     cls=_PipelineGroup,
     name="dicblur",
-    help="Predict, measure and reduce the displacement uncertainty of 2-D DIC under motion "
-    "blur.",
+    help="Predict, measure and reduce the displacement uncertainty of 2-D DIC under motion blur.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -114,10 +115,13 @@ def _root(
         False, "--version", callback=_version_callback, is_eager=True, help="Print the version."
     ),
     max_pixels: str | None = typer.Option(
-        None, "--max-pixels", metavar="N",
+        None,
+        "--max-pixels",
+        metavar="N",
         help="Largest image read or generated, rows x cols px (default 1e8; also the "
         "DICBLUR_MAX_PIXELS environment variable). Larger images are refused before they "
-        "are decoded or allocated."),
+        "are decoded or allocated.",
+    ),
 ) -> None:
     logging.basicConfig(
         level=logging.DEBUG if verbose else logging.WARNING,
@@ -137,8 +141,9 @@ def _root(
         try:
             _limit(max_pixels)
         except DicblurError:
-            raise DicblurError(f"--max-pixels={max_pixels}: expected a number of pixels "
-                               ">= 1, e.g. 4e8") from None
+            raise DicblurError(
+                f"--max-pixels={max_pixels}: expected a number of pixels >= 1, e.g. 4e8"
+            ) from None
         # the environment reaches every reader, and Dask workers started from here
         os.environ["DICBLUR_MAX_PIXELS"] = max_pixels
 
@@ -180,9 +185,16 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 
 # API parameter names that a command exposes under another option name (used only when
 # the command has that option).
-_ALIASES = {"sigma": "noise", "noise_sigma": "noise", "shape": "size", "motion": "length",
-            "start_speed": "start-speed", "max_pixels": "max-pixels", "results": "out",
-            "out": "csv"}
+_ALIASES = {
+    "sigma": "noise",
+    "noise_sigma": "noise",
+    "shape": "size",
+    "motion": "length",
+    "start_speed": "start-speed",
+    "max_pixels": "max-pixels",
+    "results": "out",
+    "out": "csv",
+}
 _NUMPY_REPR = re.compile(r"np\.(?:float|int|uint|complex|bool|str)[a-z_]*\d*\(([^()]*)\)")
 _PARAM = re.compile(r"(?<![\w.\-])([A-Za-z_][A-Za-z0-9_]*)=")
 _LEADING = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*):")
@@ -229,7 +241,7 @@ def cli_message(text: str, args: Sequence[str]) -> str:
     text = _PARAM.sub(repl, text)
     lead = _LEADING.match(text)
     if lead and option(lead.group(1)):
-        text = f"{option(lead.group(1))}:{text[lead.end():]}"
+        text = f"{option(lead.group(1))}:{text[lead.end() :]}"
     return text
 
 
@@ -267,8 +279,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MemoryError:
         if verbose:
             traceback.print_exc()
-        print("error: out of memory; use a smaller image or campaign (see dicblur "
-              "--max-pixels)", file=sys.stderr)
+        print(
+            "error: out of memory; use a smaller image or campaign (see dicblur --max-pixels)",
+            file=sys.stderr,
+        )
         return 2
     except OSError as exc:
         # the file system refused (disk full, permission, ...): not a dicblur bug

@@ -88,14 +88,20 @@ def blur_command(
     if not math.isfinite(length) or not math.isfinite(angle):
         raise InputError(f"--length={length}, --angle={angle}: must be finite numbers")
     if length < 0:
-        raise InputError(f"--length={length:g}: the path length (or sine amplitude) is >= 0 "
-                         f"px; reverse the motion with --angle {angle + 180:g} instead")
+        raise InputError(
+            f"--length={length:g}: the path length (or sine amplitude) is >= 0 "
+            f"px; reverse the motion with --angle {angle + 180:g} instead"
+        )
     if trajectory == "acceleration" and not 0.0 <= start_speed <= 2.0:
-        raise InputError(f"--start-speed={start_speed:g}: must be in 0..2 (0 starts from "
-                         "rest, 1 is uniform speed, 2 comes to rest at the end)")
+        raise InputError(
+            f"--start-speed={start_speed:g}: must be in 0..2 (0 starts from "
+            "rest, 1 is uniform speed, 2 comes to rest at the end)"
+        )
     if not continuous and substeps < 1:
-        raise InputError(f"--substeps={substeps}: K must be >= 1 sub-steps (the paper uses "
-                         "100); for the continuous limit K -> inf use --continuous")
+        raise InputError(
+            f"--substeps={substeps}: K must be >= 1 sub-steps (the paper uses "
+            "100); for the continuous limit K -> inf use --continuous"
+        )
     rad = math.radians(angle)
     motion = (length * math.sin(rad), length * math.cos(rad))
     traj: str | SineMotion | AcceleratedMotion

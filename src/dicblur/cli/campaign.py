@@ -15,8 +15,9 @@ from ._common import console, notice_on_start, parse_size, print_json, print_map
 if TYPE_CHECKING:  # the campaign stage is imported inside the commands (fast --help)
     from ..campaign.engine import RunSummary
 
-campaign_app = typer.Typer(help="Run blur campaigns (Dask), inspect and export their results.",
-                           no_args_is_help=True)
+campaign_app = typer.Typer(
+    help="Run blur campaigns (Dask), inspect and export their results.", no_args_is_help=True
+)
 
 
 @contextmanager
@@ -34,9 +35,17 @@ def _progress_bar(label: str, enabled: bool = True) -> Iterator[Callable[[int, i
         TimeRemainingColumn,
     )
 
-    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                   TextColumn("tasks"), TimeElapsedColumn(), TextColumn("ETA"),
-                   TimeRemainingColumn(), console=console, transient=False)
+    bar = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("tasks"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=False,
+    )
     ids: dict[str, int] = {}
 
     def update(done: int, total: int) -> None:
@@ -75,14 +84,15 @@ def _print_summary(s: RunSummary) -> None:
 @campaign_app.command("run")
 def run_command(
     spec: Path = typer.Argument(..., help="Campaign spec (TOML)."),
-    out: Path = typer.Option(..., "-o", "--out", "--output",
-                             help="Results store (Zarr folder)."),
+    out: Path = typer.Option(..., "-o", "--out", "--output", help="Results store (Zarr folder)."),
     scheduler: str | None = typer.Option(
-        None, "--scheduler", help="Existing Dask scheduler, tcp://HOST:PORT (default: a "
-        "local cluster)."),
+        None,
+        "--scheduler",
+        help="Existing Dask scheduler, tcp://HOST:PORT (default: a local cluster).",
+    ),
     workers: int | None = typer.Option(
-        None, "--workers", help="Worker processes of the local cluster (default: all "
-        "cores)."),
+        None, "--workers", help="Worker processes of the local cluster (default: all cores)."
+    ),
     serial: bool = typer.Option(False, "--serial", help="Run in this process, no Dask."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> int:
@@ -100,9 +110,14 @@ def run_command(
     try:
         with _progress_bar(f"campaign {s.name}", not quiet) as progress:
             # a cluster's workers compile in their own processes: the notice only serial
-            summary = run_campaign(s, out, scheduler=scheduler, workers=workers,
-                                   serial=serial,
-                                   progress=notice_on_start(progress, s.dic_shape, serial))
+            summary = run_campaign(
+                s,
+                out,
+                scheduler=scheduler,
+                workers=workers,
+                serial=serial,
+                progress=notice_on_start(progress, s.dic_shape, serial),
+            )
     except KeyboardInterrupt:  # before the tasks started (patterns, store creation)
         try:
             n_done = campaign_status(out).n_done
@@ -117,8 +132,9 @@ def run_command(
 
 def _interrupted(n_done: int, n_tasks: int) -> int:
     """The one line of an interrupted run (stderr); exit code 130."""
-    typer.echo(f"interrupted: {n_done} of {n_tasks} tasks done, rerun the same command to "
-               "resume", err=True)
+    typer.echo(
+        f"interrupted: {n_done} of {n_tasks} tasks done, rerun the same command to resume", err=True
+    )
     return 130
 
 
@@ -138,8 +154,11 @@ def status_command(
         "campaign": st.name,
         "tasks done": f"{st.n_done} / {st.n_tasks} ({100.0 * st.n_done / st.n_tasks:.1f}%)",
         "complete": st.complete,
-        "damaged": (f"{st.n_damaged} tasks (rerun the campaign to recompute them)"
-                    if st.n_damaged else "none"),
+        "damaged": (
+            f"{st.n_damaged} tasks (rerun the campaign to recompute them)"
+            if st.n_damaged
+            else "none"
+        ),
         "running": st.running or "no",
         "dims": ", ".join(f"{k}={v}" for k, v in st.dims.items()),
         "spec hash": st.spec_hash[:16],
@@ -167,24 +186,30 @@ def export_command(
 
 
 def calibrate_command(
-    image: str = typer.Argument(..., help="Pattern image file, or 'paper4' / 'speckle' "
-                                "to generate one."),
+    image: str = typer.Argument(
+        ..., help="Pattern image file, or 'paper4' / 'speckle' to generate one."
+    ),
     out: Path = typer.Option(..., "-o", "--out", "--output", help="Output folder."),
     noise: list[float] = typer.Option(
-        [2.0], "--noise",
+        [2.0],
+        "--noise",
         help="Noise std per image, GL; repeat (e.g. --noise 2 --noise 8) to calibrate at "
         "several levels: the model then separates its floor and cross term and a camera "
-        "plan between the levels stays inside its validity domain."),
+        "plan between the levels stays inside its validity domain.",
+    ),
     subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
     angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
     step: int = typer.Option(10, "--step", help="POI grid step, px."),
-    noise_model: str = typer.Option("per-exposure", "--noise-model",
-                                    help="per-exposure, per-subframe (the paper's) or "
-                                    "poisson-gaussian."),
+    noise_model: str = typer.Option(
+        "per-exposure",
+        "--noise-model",
+        help="per-exposure, per-subframe (the paper's) or poisson-gaussian.",
+    ),
     shape: str = typer.Option("translation", "--shape", help="DIC shape function."),
     seed: int = typer.Option(1, "--seed", help="Base seed (and generator seed)."),
-    blur: str = typer.Option("0.1:10:0.1", "--blur",
-                             help="W grid START:STOP:STEP in px (the paper's by default)."),
+    blur: str = typer.Option(
+        "0.1:10:0.1", "--blur", help="W grid START:STOP:STEP in px (the paper's by default)."
+    ),
     size: str = typer.Option("512x512", "--size", help="ROWSxCOLS of a generated pattern."),
     scheduler: str | None = typer.Option(None, "--scheduler", help="tcp://HOST:PORT."),
     workers: int | None = typer.Option(None, "--workers", help="Local worker processes."),
@@ -204,16 +229,28 @@ def calibrate_command(
     try:
         start, stop, inc = (float(v) for v in blur.split(":"))
     except ValueError as exc:
-        raise InputError(f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. "
-                         "0.1:10:0.1") from exc
+        raise InputError(
+            f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. 0.1:10:0.1"
+        ) from exc
     with _progress_bar("calibrate", not quiet) as progress:
         progress = notice_on_start(progress, shape, serial)
-        res = calibrate(image, out, noise=noise if len(noise) > 1 else noise[0],
-                        subset=subset, angle=angle, step=step,
-                        noise_model=noise_model, shape=shape, seed=seed,
-                        blur={"start": start, "stop": stop, "step": inc},
-                        size=parse_size(size), scheduler=scheduler, workers=workers,
-                        serial=serial, progress=progress)
+        res = calibrate(
+            image,
+            out,
+            noise=noise if len(noise) > 1 else noise[0],
+            subset=subset,
+            angle=angle,
+            step=step,
+            noise_model=noise_model,
+            shape=shape,
+            seed=seed,
+            blur={"start": start, "stop": stop, "step": inc},
+            size=parse_size(size),
+            scheduler=scheduler,
+            workers=workers,
+            serial=serial,
+            progress=progress,
+        )
     if res is None:
         console.print("interrupted: rerun the same command to finish the remaining tasks")
         return 130
@@ -243,9 +280,14 @@ def calibrate_command(
             "figures": ", ".join(p.name for p in res.figures),
             "planner page": str(planner),
         },
-        {"SSSIG_0": "(GL/px)^2", "beta (eq. 18)": "1/px^2", "MBRF = 2 alpha beta": "1/px^2",
-         "power law (paper): u_ref = u_e(0)": "px", "mismatch model: c": "px/px^2",
-         "DIC breaks down from W": "px"},
+        {
+            "SSSIG_0": "(GL/px)^2",
+            "beta (eq. 18)": "1/px^2",
+            "MBRF = 2 alpha beta": "1/px^2",
+            "power law (paper): u_ref = u_e(0)": "px",
+            "mismatch model: c": "px/px^2",
+            "DIC breaks down from W": "px",
+        },
     )
     return 0
 

@@ -10,10 +10,20 @@ import typer
 from ..errors import InputError
 from ._common import console, notice_compile, print_mapping
 
-_UNITS = {"mean_u": "px", "std_u": "px", "mean_v": "px", "std_v": "px",
-          "predicted_sigma_u": "px", "predicted_sigma_v": "px", "prepare_s": "s",
-          "compile_s": "s", "correlate_s": "s", "points_per_s": "POI/s",
-          "blur_length_mean": "px", "blur_length_std": "px"}
+_UNITS = {
+    "mean_u": "px",
+    "std_u": "px",
+    "mean_v": "px",
+    "std_v": "px",
+    "predicted_sigma_u": "px",
+    "predicted_sigma_v": "px",
+    "prepare_s": "s",
+    "compile_s": "s",
+    "correlate_s": "s",
+    "points_per_s": "POI/s",
+    "blur_length_mean": "px",
+    "blur_length_std": "px",
+}
 
 
 def correlate_command(
@@ -22,25 +32,45 @@ def correlate_command(
     subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
     step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
     shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
-    interpolation: Annotated[str, typer.Option("--interpolation",
-                                               help="bspline3 or bspline5.")] = "bspline3",
-    noise: Annotated[float | None, typer.Option(
-        "--noise", help="Noise std (grey levels) for the predicted sigma.")] = None,
-    workers: Annotated[int | None, typer.Option("--workers",
-                                                help="Threads (default: all).")] = None,
-    out: Annotated[Path | None, typer.Option(
-        "-o", "--out", help="Write the field to .nc (netCDF) or .csv.")] = None,
-    median_test: Annotated[bool, typer.Option(
-        "--median-test", help="Flag OUTLIER points: normalised median test of the field "
-        "(eps 0.1 px, threshold 2) and a probe of the neighbours' displacement.")] = False,
-    blur_compensation: Annotated[str, typer.Option(
-        "--blur-compensation",
-        help="none, given (needs --blur) or estimate (blur length per subset).")] = "none",
-    blur: Annotated[float | None, typer.Option(
-        "--blur", help="Blur length W during the exposure, px (given; estimate: start).")
+    interpolation: Annotated[
+        str, typer.Option("--interpolation", help="bspline3 or bspline5.")
+    ] = "bspline3",
+    noise: Annotated[
+        float | None,
+        typer.Option("--noise", help="Noise std (grey levels) for the predicted sigma."),
     ] = None,
-    angle: Annotated[float, typer.Option(
-        "--angle", help="Blur direction in degrees from +x (columns) towards +y (rows).")
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="Threads (default: all).")
+    ] = None,
+    out: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Write the field to .nc (netCDF) or .csv.")
+    ] = None,
+    median_test: Annotated[
+        bool,
+        typer.Option(
+            "--median-test",
+            help="Flag OUTLIER points: normalised median test of the field "
+            "(eps 0.1 px, threshold 2) and a probe of the neighbours' displacement.",
+        ),
+    ] = False,
+    blur_compensation: Annotated[
+        str,
+        typer.Option(
+            "--blur-compensation",
+            help="none, given (needs --blur) or estimate (blur length per subset).",
+        ),
+    ] = "none",
+    blur: Annotated[
+        float | None,
+        typer.Option(
+            "--blur", help="Blur length W during the exposure, px (given; estimate: start)."
+        ),
+    ] = None,
+    angle: Annotated[
+        float,
+        typer.Option(
+            "--angle", help="Blur direction in degrees from +x (columns) towards +y (rows)."
+        ),
     ] = 0.0,
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
@@ -57,27 +87,35 @@ def correlate_command(
 
     mode = blur_compensation.strip().lower()
     if mode not in ("none", "given", "estimate"):
-        raise InputError(f"--blur-compensation={blur_compensation!r}: use none, given or "
-                         "estimate")
+        raise InputError(f"--blur-compensation={blur_compensation!r}: use none, given or estimate")
     if blur is not None and not (math.isfinite(blur) and blur >= 0):
         raise InputError(f"--blur={blur}: the blur length must be a finite number >= 0 px")
     if not math.isfinite(angle):
         raise InputError(f"--angle={angle}: must be a finite number of degrees")
     if mode == "given" and blur is None:
-        raise InputError("--blur-compensation=given: give the blur length with --blur W "
-                         "(px) and its direction with --angle (degrees)")
+        raise InputError(
+            "--blur-compensation=given: give the blur length with --blur W "
+            "(px) and its direction with --angle (degrees)"
+        )
     if mode == "none" and blur is not None:
-        raise InputError(f"--blur={blur}: only used with --blur-compensation given or "
-                         "estimate")
+        raise InputError(f"--blur={blur}: only used with --blur-compensation given or estimate")
     vector = None
     if blur is not None and (mode == "given" or blur > 0):
         rad = math.radians(angle)
         vector = (blur * math.sin(rad), blur * math.cos(rad))
     ref = load_image(reference)
     cur = load_image(current)
-    corr = Correlator(ref, subset=subset, step=step, shape=shape,  # type: ignore[arg-type]
-                      interpolation=interpolation, noise_sigma=noise, workers=workers,
-                      median_test=median_test, blur=mode)  # type: ignore[arg-type]
+    corr = Correlator(
+        ref,
+        subset=subset,
+        step=step,
+        shape=shape,  # type: ignore[arg-type]
+        interpolation=interpolation,
+        noise_sigma=noise,
+        workers=workers,
+        median_test=median_test,
+        blur=mode,
+    )  # type: ignore[arg-type]
     notice_compile(shape)
     compile_s = corr.warmup()
     t0 = time.perf_counter()
@@ -86,21 +124,29 @@ def correlate_command(
     elif mode == "given":
         res = corr.correlate(cur, blur_vector=vector)
     else:
-        res = corr.correlate(cur, blur_vector=vector,
-                             blur_angle=None if vector is not None else angle)
+        res = corr.correlate(
+            cur, blur_vector=vector, blur_angle=None if vector is not None else angle
+        )
     dt = time.perf_counter() - t0
     data = res.summary()
     if res.blur_length is not None and res.blur_identified is not None:
         ident = res.blur_identified
-        data["blur_length_mean"] = (float(np.mean(res.blur_length[ident])) if ident.any()
-                                    else None)
-        data["blur_length_std"] = (float(np.std(res.blur_length[ident], ddof=1))
-                                   if ident.sum() > 1 else None)
+        data["blur_length_mean"] = float(np.mean(res.blur_length[ident])) if ident.any() else None
+        data["blur_length_std"] = (
+            float(np.std(res.blur_length[ident], ddof=1)) if ident.sum() > 1 else None
+        )
         data["blur_identified_fraction"] = float(ident.mean())
-    data.update({"prepare_s": corr.prepare_time_s, "compile_s": compile_s,
-                 "correlate_s": dt, "points_per_s": len(res) / dt if dt > 0 else None})
-    print_mapping(f"correlate: {reference.name} -> {current.name} ({shape}, subset {subset})",
-                  data, _UNITS)
+    data.update(
+        {
+            "prepare_s": corr.prepare_time_s,
+            "compile_s": compile_s,
+            "correlate_s": dt,
+            "points_per_s": len(res) / dt if dt > 0 else None,
+        }
+    )
+    print_mapping(
+        f"correlate: {reference.name} -> {current.name} ({shape}, subset {subset})", data, _UNITS
+    )
     if out is not None:
         if out.suffix.lower() == ".csv":
             res.to_csv(out)

@@ -17,8 +17,16 @@ if TYPE_CHECKING:  # numpy and the models are imported inside the commands (fast
     import numpy as np
 
 _COLUMNS = ("blur", "sssig", "u_e")
-_OPTIONAL = ("noise", "noise_effective", "contrast_ref", "contrast", "rms_contrast_ref",
-             "rms_contrast", "contrast_ratio", "converged_fraction")
+_OPTIONAL = (
+    "noise",
+    "noise_effective",
+    "contrast_ref",
+    "contrast",
+    "rms_contrast_ref",
+    "rms_contrast",
+    "contrast_ratio",
+    "converged_fraction",
+)
 # Coordinates of a campaign (dicblur.campaign.store.DIMS) other than noise, blur and rep:
 # one setting is fitted at a time.
 _SETTINGS = ("pattern", "angle", "subset", "shape", "step", "noise_model")
@@ -47,11 +55,12 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         try:
             text = path.read_bytes().decode("utf-8")
         except UnicodeDecodeError:
-            raise InputError(f"RESULTS={str(path)!r}: binary data, not a UTF-8 CSV text "
-                             "file; give the CSV of dicblur campaign export") from None
+            raise InputError(
+                f"RESULTS={str(path)!r}: binary data, not a UTF-8 CSV text "
+                "file; give the CSV of dicblur campaign export"
+            ) from None
         if "\0" in text:
-            raise InputError(f"RESULTS={str(path)!r}: binary data (NUL bytes), not a CSV "
-                             "text file")
+            raise InputError(f"RESULTS={str(path)!r}: binary data (NUL bytes), not a CSV text file")
         try:
             rows = list(csv.DictReader(text.splitlines()))
         except csv.Error as exc:
@@ -62,12 +71,13 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         seen: dict[str, str] = {}
         for key in rows[0]:
             if key is None:
-                raise InputError(f"RESULTS={str(path)!r}: a row has more fields than the "
-                                 "header")
+                raise InputError(f"RESULTS={str(path)!r}: a row has more fields than the header")
             name = _canonical(key)
             if name in seen:
-                raise InputError(f"RESULTS={str(path)!r}: columns {seen[name]!r} and {key!r} "
-                                 f"both mean {name!r}; keep one")
+                raise InputError(
+                    f"RESULTS={str(path)!r}: columns {seen[name]!r} and {key!r} "
+                    f"both mean {name!r}; keep one"
+                )
             seen[name] = key
             values = [r[key] if r[key] is not None else "" for r in rows]
             try:
@@ -79,8 +89,7 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         import xarray as xr
 
         try:
-            ds = (xr.open_zarr(path) if suffix == ".zarr" or path.is_dir()
-                  else xr.open_dataset(path))
+            ds = xr.open_zarr(path) if suffix == ".zarr" or path.is_dir() else xr.open_dataset(path)
         except Exception as exc:  # xarray raises many types for unreadable files
             raise InputError(f"RESULTS={str(path)!r}: cannot open as netCDF/zarr ({exc})") from exc
         if "u_e" not in ds:
@@ -92,9 +101,7 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
                 arr = np.asarray(ds[name].broadcast_like(template).values).ravel()
                 out[name] = arr if np.issubdtype(arr.dtype, np.number) else arr.astype(object)
         return out
-    raise InputError(
-        f"RESULTS={str(path)!r}: unknown format; use .csv, .nc or .zarr"
-    )
+    raise InputError(f"RESULTS={str(path)!r}: unknown format; use .csv, .nc or .zarr")
 
 
 def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.ndarray]:
@@ -116,8 +123,10 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
         key, sep, value = item.partition("=")
         key = _canonical(key)
         if not sep or key not in cols:
-            raise InputError(f"--select {item!r}: expected COLUMN=VALUE with a column of "
-                             f"RESULTS ({sorted(cols)})")
+            raise InputError(
+                f"--select {item!r}: expected COLUMN=VALUE with a column of "
+                f"RESULTS ({sorted(cols)})"
+            )
         col = cols[key]
         if col.dtype == object:
             mask &= col == value
@@ -139,8 +148,10 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
         check_measurements(u_e=ue)
     ok = np.isfinite(ue.astype(float))
     if not ok.any():
-        raise InputError(f"RESULTS: u_e has no finite value ({ue.size} row(s), all NaN or "
-                         "infinite); export a campaign with finished tasks")
+        raise InputError(
+            f"RESULTS: u_e has no finite value ({ue.size} row(s), all NaN or "
+            "infinite); export a campaign with finished tasks"
+        )
     check_measurements(u_e=ue[ok], sssig=keep["sssig"][ok])
     if not ok.all():
         warnings.warn(f"{int((~ok).sum())} row(s) without u_e dropped", stacklevel=2)
@@ -151,8 +162,9 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
     else:
         noise = np.zeros(keep["u_e"].size)
     blur = keep["blur"].astype(float)
-    out: dict[str, list[float]] = {k: [] for k in ("blur", "sssig", "u_e", "noise",
-                                                   "contrast_ratio", "converged_fraction")}
+    out: dict[str, list[float]] = {
+        k: [] for k in ("blur", "sssig", "u_e", "noise", "contrast_ratio", "converged_fraction")
+    }
     for nz in np.unique(noise[ok]):
         for w in np.unique(blur[ok & (noise == nz)]):
             sel = ok & (noise == nz) & (blur == w)
@@ -160,23 +172,36 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
             # the campaign's effective per-image noise (per-subframe noise is sigma /
             # sqrt(K + 1)) is what the models need; the nominal level groups the rows
             eff = keep.get("noise_effective")
-            out["noise"].append(float(np.mean(eff[sel].astype(float))) if eff is not None
-                                else float(nz))
+            out["noise"].append(
+                float(np.mean(eff[sel].astype(float))) if eff is not None else float(nz)
+            )
             out["sssig"].append(float(np.mean(keep["sssig"][sel].astype(float))))
             out["u_e"].append(float(np.sqrt(np.mean(keep["u_e"][sel].astype(float) ** 2))))
             if "converged_fraction" in keep:  # the worst repetition decides breakdown
                 out["converged_fraction"].append(
-                    float(np.min(keep["converged_fraction"][sel].astype(float))))
+                    float(np.min(keep["converged_fraction"][sel].astype(float)))
+                )
             if "contrast_ratio" in keep:
                 out["contrast_ratio"].append(float(np.mean(keep["contrast_ratio"][sel])))
             elif "rms_contrast_ref" in keep and "rms_contrast" in keep:
                 # RMS contrast tracks blur-induced contrast loss (campaign stores it)
-                out["contrast_ratio"].append(float(np.mean(
-                    keep["rms_contrast_ref"][sel].astype(float)
-                    / keep["rms_contrast"][sel].astype(float))))
+                out["contrast_ratio"].append(
+                    float(
+                        np.mean(
+                            keep["rms_contrast_ref"][sel].astype(float)
+                            / keep["rms_contrast"][sel].astype(float)
+                        )
+                    )
+                )
             elif "contrast_ref" in keep and "contrast" in keep:
-                out["contrast_ratio"].append(float(np.mean(
-                    keep["contrast_ref"][sel].astype(float) / keep["contrast"][sel].astype(float))))
+                out["contrast_ratio"].append(
+                    float(
+                        np.mean(
+                            keep["contrast_ref"][sel].astype(float)
+                            / keep["contrast"][sel].astype(float)
+                        )
+                    )
+                )
     res = {k: np.array(v) for k, v in out.items() if v}
     if "noise" not in cols and "noise_effective" not in cols:
         res.pop("noise")
@@ -194,12 +219,16 @@ def fit_command(
     select: list[str] = typer.Option([], "--select", help="Keep rows with COLUMN=VALUE."),
     noise: float | None = typer.Option(None, "--noise", help="Noise std (GL) if no column."),
     subset: int | None = typer.Option(None, "--subset", help="Subset size (px), recorded."),
-    fit_range: str | None = typer.Option(None, "--fit-range",
-                                         help="Power-law W range 'LO:HI' px (default: auto)."),
+    fit_range: str | None = typer.Option(
+        None, "--fit-range", help="Power-law W range 'LO:HI' px (default: auto)."
+    ),
     ci: str = typer.Option("covariance", "--ci", help="covariance or bootstrap."),
-    default: str = typer.Option("mismatch", "--default",
-                                help="mismatch (noise + blur mismatch), power_law (eq. 17, "
-                                "at the fitted noise only) or auto (held-out comparison)."),
+    default: str = typer.Option(
+        "mismatch",
+        "--default",
+        help="mismatch (noise + blur mismatch), power_law (eq. 17, "
+        "at the fitted noise only) or auto (held-out comparison).",
+    ),
     seed: int | None = typer.Option(None, "--seed", help="Bootstrap seed."),
     as_json: bool = typer.Option(False, "--json", help="Print the model JSON."),
 ) -> None:
@@ -215,20 +244,28 @@ def fit_command(
         try:
             rng = (float(lo), float(hi))
         except ValueError as exc:
-            raise InputError(f"--fit-range={fit_range!r}: expected LO:HI in px, e.g. 0:4") \
-                from exc
+            raise InputError(f"--fit-range={fit_range!r}: expected LO:HI in px, e.g. 0:4") from exc
     sigma: Any = data.get("noise", noise)
     model = fit_blur_model(
-        data["blur"], data["sssig"], data["u_e"], noise_sigma=sigma,
+        data["blur"],
+        data["sssig"],
+        data["u_e"],
+        noise_sigma=sigma,
         contrast_ratio=data.get("contrast_ratio"),
         subset=subset if subset is not None or "subset" not in data else int(data["subset"][0]),
-        fit_range=rng, ci=ci,
-        default=default, seed=seed,
+        fit_range=rng,
+        ci=ci,
+        default=default,
+        seed=seed,
         converged_fraction=data.get("converged_fraction"),
         shape=str(data["shape"][0]) if "shape" in data else None,
         pattern=str(data["pattern"][0]) if "pattern" in data else None,
-        provenance={"results": str(results), "select": list(select),
-                    "results_sha256": file_sha256(results) if results.is_file() else None})
+        provenance={
+            "results": str(results),
+            "select": list(select),
+            "results_sha256": file_sha256(results) if results.is_file() else None,
+        },
+    )
     model.to_json(str(out))
     if as_json:
         typer.echo(model.to_json())
@@ -268,54 +305,82 @@ def predict_command(
         raise InputError("--blur: give at least one blur length (px) or velocity/exposure/scale")
     pred = model.predict(ws, noise, model=which)
     assert pred.inside_domain is not None and pred.broken_down is not None
-    rows = [{"blur_px": float(w), "u_e_px": float(u), "low_px": float(lo), "high_px": float(hi),
-             "inside_domain": bool(ins), "broken_down": bool(brk)}
-            for w, u, lo, hi, ins, brk in zip(pred.blur, pred.u_e, pred.low, pred.high,
-                                              pred.inside_domain, pred.broken_down,
-                                              strict=True)]
+    rows = [
+        {
+            "blur_px": float(w),
+            "u_e_px": float(u),
+            "low_px": float(lo),
+            "high_px": float(hi),
+            "inside_domain": bool(ins),
+            "broken_down": bool(brk),
+        }
+        for w, u, lo, hi, ins, brk in zip(
+            pred.blur,
+            pred.u_e,
+            pred.low,
+            pred.high,
+            pred.inside_domain,
+            pred.broken_down,
+            strict=True,
+        )
+    ]
     _warn_notes(pred.notes)
     if as_json:
-        print_json({"model": pred.model, "sigma": pred.sigma, "confidence": pred.confidence,
-                    "extrapolated": pred.extrapolated, "notes": list(pred.notes),
-                    "domain": model.domain.to_dict() if model.domain else None,
-                    "predictions": rows})
+        print_json(
+            {
+                "model": pred.model,
+                "sigma": pred.sigma,
+                "confidence": pred.confidence,
+                "extrapolated": pred.extrapolated,
+                "notes": list(pred.notes),
+                "domain": model.domain.to_dict() if model.domain else None,
+                "predictions": rows,
+            }
+        )
         return
     pct = f"{100 * pred.confidence:g}%"
     for r in rows:
         if r["broken_down"]:
-            typer.echo(f"W = {r['blur_px']:.4g} px: no prediction (DIC breaks down) "
-                       f"[{pred.model}]")
+            typer.echo(f"W = {r['blur_px']:.4g} px: no prediction (DIC breaks down) [{pred.model}]")
             continue
         flag = "" if r["inside_domain"] else " (extrapolated)"
-        typer.echo(f"W = {r['blur_px']:.4g} px: u_e = {r['u_e_px']:.4g} px "
-                   f"({pct} prediction interval {r['low_px']:.4g} .. {r['high_px']:.4g}) "
-                   f"[{pred.model}]{flag}")
+        typer.echo(
+            f"W = {r['blur_px']:.4g} px: u_e = {r['u_e_px']:.4g} px "
+            f"({pct} prediction interval {r['low_px']:.4g} .. {r['high_px']:.4g}) "
+            f"[{pred.model}]{flag}"
+        )
 
 
 def plan_command(
     model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
-    velocity: str | None = typer.Option(None, "--velocity",
-                                        help="Target speed, e.g. 120mm/s."),
+    velocity: str | None = typer.Option(None, "--velocity", help="Target speed, e.g. 120mm/s."),
     scale: str | None = typer.Option(None, "--scale", help="Image scale, e.g. 0.05mm/px."),
     target: str | None = typer.Option(None, "--target", help="Largest u_e, e.g. 0.01px."),
     full_well: float | None = typer.Option(None, "--full-well", help="Full well, e-."),
     read_noise: float | None = typer.Option(None, "--read-noise", help="Read noise, e-."),
-    flux: float | None = typer.Option(None, "--flux",
-                                      help="e-/s at the pattern's mean grey level."),
-    peak_to_mean: float = typer.Option(2.0, "--peak-to-mean",
-                                       help="Brightest / mean grey level."),
+    flux: float | None = typer.Option(
+        None, "--flux", help="e-/s at the pattern's mean grey level."
+    ),
+    peak_to_mean: float = typer.Option(2.0, "--peak-to-mean", help="Brightest / mean grey level."),
     noise: float | None = typer.Option(None, "--noise", help="Fixed noise std, GL."),
     reference: Path | None = typer.Option(
-        None, "--reference",
-        help="Reference image of the specimen: shot noise at its gradient-weighted level."),
+        None,
+        "--reference",
+        help="Reference image of the specimen: shot noise at its gradient-weighted level.",
+    ),
     noise_level: float | None = typer.Option(
-        None, "--noise-level",
-        help="Grey level (of the fitted images) at which shot noise is evaluated."),
+        None,
+        "--noise-level",
+        help="Grey level (of the fitted images) at which shot noise is evaluated.",
+    ),
     which: str | None = typer.Option(None, "--model", help="mismatch or power_law."),
     plot: Path | None = typer.Option(None, "--plot", help="Write u_e(exposure) figure."),
     html_out: Path | None = typer.Option(
-        None, "--html", help="Write an interactive planner page (one self-contained HTML "
-        "file; the options given here are its starting values)."),
+        None,
+        "--html",
+        help="Write an interactive planner page (one self-contained HTML "
+        "file; the options given here are its starting values).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Plan the exposure: longest under --target, or the optimum with a camera.
@@ -338,23 +403,31 @@ def plan_command(
     if html_out is not None:
         check_output(html_out, "--html")
     if (velocity is None or scale is None) and html_out is None:
-        raise InputError("--velocity, --scale: give both (e.g. --velocity 120mm/s --scale "
-                         "0.05mm/px), or --html planner.html for the interactive page")
+        raise InputError(
+            "--velocity, --scale: give both (e.g. --velocity 120mm/s --scale "
+            "0.05mm/px), or --html planner.html for the interactive page"
+        )
     model = BlurUncertaintyModel.from_json(str(model_path))
     if html_out is not None:
         from ..report.planner import PlannerDefaults, write_planner
 
         defaults = PlannerDefaults(
-            velocity=velocity or "120mm/s", scale=scale or "0.05mm/px",
-            target=target or "0.01px", noise=noise, full_well=full_well,
-            read_noise=read_noise, flux=flux)
+            velocity=velocity or "120mm/s",
+            scale=scale or "0.05mm/px",
+            target=target or "0.01px",
+            noise=noise,
+            full_well=full_well,
+            read_noise=read_noise,
+            flux=flux,
+        )
         write_planner([model], html_out, labels=None, defaults=defaults)
         typer.echo(f"wrote {html_out}")
         if velocity is None or scale is None:
             return
     if reference is not None and noise_level is not None:
-        raise InputError("--reference, --noise-level: give one (the image's level is computed "
-                         "from it)")
+        raise InputError(
+            "--reference, --noise-level: give one (the image's level is computed from it)"
+        )
     mean_level: float | None = None
     if reference is not None:
         # the image's gradient-weighted level relative to its mean, on the model's scale;
@@ -372,22 +445,41 @@ def plan_command(
     cam_opts = (full_well, read_noise, flux)
     if any(o is not None for o in cam_opts):
         if any(o is None for o in cam_opts):
-            raise InputError("--full-well, --read-noise and --flux: give all three for a "
-                             "Poisson-Gaussian camera (or none for fixed noise)")
-        camera = PoissonGaussianCamera(full_well=float(full_well),  # type: ignore[arg-type]
-                                       read_noise=float(read_noise),  # type: ignore[arg-type]
-                                       flux=float(flux),  # type: ignore[arg-type]
-                                       peak_to_mean=peak_to_mean)
+            raise InputError(
+                "--full-well, --read-noise and --flux: give all three for a "
+                "Poisson-Gaussian camera (or none for fixed noise)"
+            )
+        camera = PoissonGaussianCamera(
+            full_well=float(full_well),  # type: ignore[arg-type]
+            read_noise=float(read_noise),  # type: ignore[arg-type]
+            flux=float(flux),  # type: ignore[arg-type]
+            peak_to_mean=peak_to_mean,
+        )
     if noise_level is not None and camera is None:
-        raise InputError("--reference/--noise-level: only with a camera (--full-well, "
-                         "--read-noise, --flux); with fixed noise give --noise")
+        raise InputError(
+            "--reference/--noise-level: only with a camera (--full-well, "
+            "--read-noise, --flux); with fixed noise give --noise"
+        )
     assert velocity is not None and scale is not None
-    plan = plan_exposure(model, velocity=velocity, scale=scale, target=target, camera=camera,
-                         sigma=noise, which=which, noise_level=noise_level,
-                         mean_level=mean_level)
+    plan = plan_exposure(
+        model,
+        velocity=velocity,
+        scale=scale,
+        target=target,
+        camera=camera,
+        sigma=noise,
+        which=which,
+        noise_level=noise_level,
+        mean_level=mean_level,
+    )
     if not plan.inside_domain or plan.limited_by_breakdown:
-        _warn_notes([n for n in plan.notes
-                     if "outside the model's validity domain" in n or "breaks down" in n])
+        _warn_notes(
+            [
+                n
+                for n in plan.notes
+                if "outside the model's validity domain" in n or "breaks down" in n
+            ]
+        )
     if as_json:
         print_json(plan.to_dict())
     else:

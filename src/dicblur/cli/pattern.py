@@ -13,8 +13,9 @@ import typer
 from ..errors import InputError
 from ._common import console, parse_size, print_json, print_mapping
 
-pattern_app = typer.Typer(help="Generate speckle patterns and measure their metrics.",
-                          no_args_is_help=True)
+pattern_app = typer.Typer(
+    help="Generate speckle patterns and measure their metrics.", no_args_is_help=True
+)
 
 _UNITS = {
     "mean_level": "GL",
@@ -66,15 +67,33 @@ def generate(
         raise InputError(f"--preset={preset!r}: unknown preset; choose 'paper4' or omit it")
     if preset == "paper4":
         img = paper_pattern4(shape, speckle_size=speckle_size, density=density, seed=seed)
-        settings = {"preset": "paper4", "shape": list(shape), "speckle_size": speckle_size,
-                    "density": density, "seed": seed}
+        settings = {
+            "preset": "paper4",
+            "shape": list(shape),
+            "speckle_size": speckle_size,
+            "density": density,
+            "seed": seed,
+        }
     else:
-        img = speckle_pattern(shape, speckle_size=speckle_size, density=density,
-                              softness=softness, contrast=contrast, supersample=supersample,
-                              seed=seed)
-        settings = PatternSettings(shape, speckle_size, density, softness,
-                                   127.5 - 127.5 * contrast, 127.5 + 127.5 * contrast,
-                                   supersample, seed).to_dict()
+        img = speckle_pattern(
+            shape,
+            speckle_size=speckle_size,
+            density=density,
+            softness=softness,
+            contrast=contrast,
+            supersample=supersample,
+            seed=seed,
+        )
+        settings = PatternSettings(
+            shape,
+            speckle_size,
+            density,
+            softness,
+            127.5 - 127.5 * contrast,
+            127.5 + 127.5 * contrast,
+            supersample,
+            seed,
+        ).to_dict()
     if bit_depth == 16:
         img = img * (65535.0 / 255.0)
     save_image(out, img, bit_depth=bit_depth)
@@ -97,20 +116,22 @@ def metrics(
     from ..metrics import pattern_metrics
 
     img = load_image(image)
-    pm = pattern_metrics(img, subset=subset, noise_sigma=noise, step=step,
-                         gradient=gradient)  # type: ignore[arg-type]
+    pm = pattern_metrics(img, subset=subset, noise_sigma=noise, step=step, gradient=gradient)  # type: ignore[arg-type]
     data = pm.to_dict()
     undefined = [k for k, v in data.items() if isinstance(v, float) and not math.isfinite(v)]
     if undefined:
         # printed as '-' (null in JSON), never as nan or inf
-        warnings.warn(f"{image}: {', '.join(undefined)} undefined for this image (a subset or "
-                      "the whole image without texture, or speckles too large to measure); "
-                      "shown as '-'", UserWarning, stacklevel=1)
+        warnings.warn(
+            f"{image}: {', '.join(undefined)} undefined for this image (a subset or "
+            "the whole image without texture, or speckles too large to measure); "
+            "shown as '-'",
+            UserWarning,
+            stacklevel=1,
+        )
     if as_json:
         print_json(data)
     else:
         print_mapping(f"pattern metrics: {image}", data, _UNITS)
-
 
 
 @pattern_app.command("predict")
@@ -119,21 +140,27 @@ def predict(
     noise: float = typer.Option(..., "--noise", help="Noise std in each image, grey levels."),
     subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
     step: int | None = typer.Option(None, "--step", help="Subset grid step, px."),
-    blur: list[float] = typer.Option([], "--blur",
-                                     help="Blur length W, px (repeatable; default 0..8)."),
+    blur: list[float] = typer.Option(
+        [], "--blur", help="Blur length W, px (repeatable; default 0..8)."
+    ),
     angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
     shape: str = typer.Option("translation", "--shape", help="translation or affine."),
     subpixel: str | None = typer.Option(
-        None, "--subpixel",
+        None,
+        "--subpixel",
         help="Target's sub-pixel position: 'average' (arbitrary, ~5x slower) or a fraction "
-             "0..1 px; adds DIC's interpolation bias. Default: aligned."),
-    out: Path | None = typer.Option(None, "-o", "--out",
-                                    help="Also write a model JSON for dicblur predict/plan."),
+        "0..1 px; adds DIC's interpolation bias. Default: aligned.",
+    ),
+    out: Path | None = typer.Option(
+        None, "-o", "--out", help="Also write a model JSON for dicblur predict/plan."
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
     compensation: str = typer.Option(
-        "none", "--compensation",
+        "none",
+        "--compensation",
         help="'given': also predict the blur-compensated matcher (dicblur correlate "
-             "--blur-compensation given) and the gain over the plain one."),
+        "--blur-compensation given) and the gain over the plain one.",
+    ),
 ) -> None:
     """Predict u_e(W) of IMAGE from the static image alone (no simulation, no DIC run)."""
     from rich.table import Table
@@ -148,8 +175,10 @@ def predict(
     if compensation not in ("none", "given"):
         raise InputError(f"--compensation={compensation!r}: choose 'none' or 'given'")
     if compensation == "given" and (out is not None or subpixel is not None):
-        raise InputError("--compensation=given: prints the compensated prediction only; "
-                         "drop -o/--out and --subpixel")
+        raise InputError(
+            "--compensation=given: prints the compensated prediction only; "
+            "drop -o/--out and --subpixel"
+        )
     img = load_image(image)
     a = math.radians(angle)
     motion = (math.sin(a), math.cos(a))
@@ -159,71 +188,149 @@ def predict(
         try:
             sp = float(subpixel)
         except ValueError:
-            raise InputError(f"--subpixel={subpixel!r}: give 'average' or a fraction in "
-                             "[0, 1) px, e.g. 0.5") from None
-    pred = predict_from_pattern(img, w, noise_sigma=noise, subset=subset, step=step,
-                                motion=motion, shape=shape,  # type: ignore[arg-type]
-                                subpixel=sp)
+            raise InputError(
+                f"--subpixel={subpixel!r}: give 'average' or a fraction in [0, 1) px, e.g. 0.5"
+            ) from None
+    pred = predict_from_pattern(
+        img,
+        w,
+        noise_sigma=noise,
+        subset=subset,
+        step=step,
+        motion=motion,
+        shape=shape,  # type: ignore[arg-type]
+        subpixel=sp,
+    )
     if compensation == "given":
-        _print_compensated(img, pred, image, noise=noise, subset=subset, step=step,
-                           motion=motion, shape=shape, angle=angle, as_json=as_json)
+        _print_compensated(
+            img,
+            pred,
+            image,
+            noise=noise,
+            subset=subset,
+            step=step,
+            motion=motion,
+            shape=shape,
+            angle=angle,
+            as_json=as_json,
+        )
         return
     if out is not None:
-        model = model_from_pattern(img, noise_sigma=noise, subset=subset, step=step,
-                                   motion=motion, shape=shape,  # type: ignore[arg-type]
-                                   provenance={"image": str(image)}, subpixel=sp)
+        model = model_from_pattern(
+            img,
+            noise_sigma=noise,
+            subset=subset,
+            step=step,
+            motion=motion,
+            shape=shape,  # type: ignore[arg-type]
+            provenance={"image": str(image)},
+            subpixel=sp,
+        )
         model.to_json(str(out))
     if as_json:
-        print_json({"blur": pred.blur.tolist(), "u_e": pred.u_e.tolist(),
-                    "u_noise": pred.u_noise.tolist(), "u_blur": pred.u_blur.tolist(),
-                    "sssig": pred.sssig.tolist(),
-                    "valid_fraction": pred.valid_fraction.tolist(), "noise_sigma": noise,
-                    "subset": subset, "shape": shape, "angle": angle,
-                    "subpixel": sp, "breakdown_blur": pred.breakdown_blur})
+        print_json(
+            {
+                "blur": pred.blur.tolist(),
+                "u_e": pred.u_e.tolist(),
+                "u_noise": pred.u_noise.tolist(),
+                "u_blur": pred.u_blur.tolist(),
+                "sssig": pred.sssig.tolist(),
+                "valid_fraction": pred.valid_fraction.tolist(),
+                "noise_sigma": noise,
+                "subset": subset,
+                "shape": shape,
+                "angle": angle,
+                "subpixel": sp,
+                "breakdown_blur": pred.breakdown_blur,
+            }
+        )
     else:
-        table = Table(title=f"predicted from the static image: {image} (noise {noise:g} GL, "
-                            f"subset {subset} px, {shape}, motion at {angle:g} deg)")
-        for col in ("W (px)", "u_e (px)", "noise term (px)", "blur term (px)",
-                    "SSSIG (GL/px)^2", "subsets kept"):
+        table = Table(
+            title=f"predicted from the static image: {image} (noise {noise:g} GL, "
+            f"subset {subset} px, {shape}, motion at {angle:g} deg)"
+        )
+        for col in (
+            "W (px)",
+            "u_e (px)",
+            "noise term (px)",
+            "blur term (px)",
+            "SSSIG (GL/px)^2",
+            "subsets kept",
+        ):
             table.add_column(col, justify="right")
         for j in range(pred.blur.size):
-            table.add_row(f"{pred.blur[j]:g}", f"{pred.u_e[j]:.4g}", f"{pred.u_noise[j]:.4g}",
-                          f"{pred.u_blur[j]:.4g}", f"{pred.sssig[j]:.4g}",
-                          f"{100 * pred.valid_fraction[j]:.0f} %")
+            table.add_row(
+                f"{pred.blur[j]:g}",
+                f"{pred.u_e[j]:.4g}",
+                f"{pred.u_noise[j]:.4g}",
+                f"{pred.u_blur[j]:.4g}",
+                f"{pred.sssig[j]:.4g}",
+                f"{100 * pred.valid_fraction[j]:.0f} %",
+            )
         console.print(table)
         if pred.breakdown_blur is not None:
-            console.print(f"DIC breaks down from W = {pred.breakdown_blur:g} px (fewer than "
-                          "90 % of the subsets keep their texture along the motion): the "
-                          "rows from there on do not describe DIC")
+            console.print(
+                f"DIC breaks down from W = {pred.breakdown_blur:g} px (fewer than "
+                "90 % of the subsets keep their texture along the motion): the "
+                "rows from there on do not describe DIC"
+            )
     if out is not None:
         console.print(f"wrote {out}: use it with dicblur predict / dicblur plan")
 
-def _print_compensated(img: Any, pred: Any, image: Path, *, noise: float, subset: int,
-                       step: int | None, motion: tuple[float, float], shape: str,
-                       angle: float, as_json: bool) -> None:
+
+def _print_compensated(
+    img: Any,
+    pred: Any,
+    image: Path,
+    *,
+    noise: float,
+    subset: int,
+    step: int | None,
+    motion: tuple[float, float],
+    shape: str,
+    angle: float,
+    as_json: bool,
+) -> None:
     """Plain and blur-compensated predictions side by side (issue 18)."""
     from rich.table import Table
 
     from ..models.compensated import predict_compensated
 
-    comp = predict_compensated(img, pred.blur, noise_sigma=noise, subset=subset, step=step,
-                               motion=motion, shape=shape)
+    comp = predict_compensated(
+        img, pred.blur, noise_sigma=noise, subset=subset, step=step, motion=motion, shape=shape
+    )
     gain = pred.u_e / comp.u_e
     if as_json:
-        print_json({"blur": pred.blur.tolist(), "u_e": pred.u_e.tolist(),
-                    "u_e_compensated": comp.u_e.tolist(), "gain": gain.tolist(),
-                    "sssig": pred.sssig.tolist(), "noise_sigma": noise, "subset": subset,
-                    "shape": shape, "angle": angle, "compensation": "given"})
+        print_json(
+            {
+                "blur": pred.blur.tolist(),
+                "u_e": pred.u_e.tolist(),
+                "u_e_compensated": comp.u_e.tolist(),
+                "gain": gain.tolist(),
+                "sssig": pred.sssig.tolist(),
+                "noise_sigma": noise,
+                "subset": subset,
+                "shape": shape,
+                "angle": angle,
+                "compensation": "given",
+            }
+        )
         return
-    table = Table(title=f"plain and blur-compensated matcher: {image} (noise {noise:g} GL, "
-                        f"subset {subset} px, {shape}, motion at {angle:g} deg)")
-    for col in ("W (px)", "u_e plain (px)", "u_e compensated (px)", "gain",
-                "static bound (px)"):
+    table = Table(
+        title=f"plain and blur-compensated matcher: {image} (noise {noise:g} GL, "
+        f"subset {subset} px, {shape}, motion at {angle:g} deg)"
+    )
+    for col in ("W (px)", "u_e plain (px)", "u_e compensated (px)", "gain", "static bound (px)"):
         table.add_column(col, justify="right")
     for j in range(pred.blur.size):
-        bound = math.sqrt(2.0 * noise ** 2 / comp.sssig[j])
-        table.add_row(f"{pred.blur[j]:g}", f"{pred.u_e[j]:.4g}", f"{comp.u_e[j]:.4g}",
-                      f"{gain[j]:.2f}x", f"{bound:.4g}")
+        bound = math.sqrt(2.0 * noise**2 / comp.sssig[j])
+        table.add_row(
+            f"{pred.blur[j]:g}",
+            f"{pred.u_e[j]:.4g}",
+            f"{comp.u_e[j]:.4g}",
+            f"{gain[j]:.2f}x",
+            f"{bound:.4g}",
+        )
     console.print(table)
 
 
@@ -239,13 +346,17 @@ def noise_command(
     img_a, img_b = load_image(image_a), load_image(image_b)  # each file checked first
     ha, hb = read_image_header(image_a), read_image_header(image_b)
     if ha.shape != hb.shape:
-        raise InputError(f"IMAGE_B={str(image_b)!r}: shape {hb.shape[0]}x{hb.shape[1]} px, "
-                         f"IMAGE_A is {ha.shape[0]}x{ha.shape[1]} px; give two images of the "
-                         "same scene from the same camera")
+        raise InputError(
+            f"IMAGE_B={str(image_b)!r}: shape {hb.shape[0]}x{hb.shape[1]} px, "
+            f"IMAGE_A is {ha.shape[0]}x{ha.shape[1]} px; give two images of the "
+            "same scene from the same camera"
+        )
     if ha.dtype != hb.dtype:
-        raise InputError(f"IMAGE_B={str(image_b)!r}: {hb.bit_depth}-bit {hb.dtype} samples, "
-                         f"IMAGE_A has {ha.bit_depth}-bit {ha.dtype}: their grey levels are on "
-                         "different scales; give two images saved at the same bit depth")
+        raise InputError(
+            f"IMAGE_B={str(image_b)!r}: {hb.bit_depth}-bit {hb.dtype} samples, "
+            f"IMAGE_A has {ha.bit_depth}-bit {ha.dtype}: their grey levels are on "
+            "different scales; give two images saved at the same bit depth"
+        )
     sigma = estimate_noise(img_a, img_b)
     if as_json:
         print_json({"noise_sigma": sigma})

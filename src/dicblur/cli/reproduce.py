@@ -15,15 +15,18 @@ def reproduce_command(
     out: Path = typer.Option(Path("report"), "--out", "-o", help="Output folder."),
     quick: bool = typer.Option(False, "--quick", help="Coarser W grid and fewer POIs."),
     pattern1: Path | None = typer.Option(
-        None, "--pattern1", help="DIC Challenge Sample 13 image (central crop)."),
+        None, "--pattern1", help="DIC Challenge Sample 13 image (central crop)."
+    ),
     pattern2: Path | None = typer.Option(
-        None, "--pattern2", help="DIC Challenge Sample 3 image (central crop)."),
+        None, "--pattern2", help="DIC Challenge Sample 3 image (central crop)."
+    ),
     workers: int | None = typer.Option(None, "--workers", help="Local Dask workers."),
     scheduler: str | None = typer.Option(None, "--scheduler", help="tcp://HOST:PORT"),
     serial: bool = typer.Option(False, "--serial", help="No Dask: run in this process."),
     seed: int = typer.Option(2017, "--seed", help="Base seed."),
     check_browser: bool = typer.Option(
-        False, "--check-browser", help="Open report.html in headless Chromium afterwards."),
+        False, "--check-browser", help="Open report.html in headless Chromium afterwards."
+    ),
 ) -> None:
     """Reproduce Lavatelli & Zappa (2017): figures, tables, claims, report.html."""
     from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
@@ -34,12 +37,25 @@ def reproduce_command(
     check_output(out, "--out", folder=True)
 
     settings = ReproduceSettings(
-        out=out, quick=quick, pattern1=pattern1, pattern2=pattern2, workers=workers,
-        scheduler=scheduler, serial=serial, seed=seed,
-        command="dicblur " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
-    with Progress(TextColumn("{task.description:<28}"), BarColumn(),
-                  TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(),
-                  console=console, transient=False, disable=not console.is_terminal) as bar:
+        out=out,
+        quick=quick,
+        pattern1=pattern1,
+        pattern2=pattern2,
+        workers=workers,
+        scheduler=scheduler,
+        serial=serial,
+        seed=seed,
+        command="dicblur " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+    )
+    with Progress(
+        TextColumn("{task.description:<28}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeElapsedColumn(),
+        console=console,
+        transient=False,
+        disable=not console.is_terminal,
+    ) as bar:
         tasks: dict[str, TaskID] = {}
 
         def progress(stage: str, done: int, total: int) -> None:
@@ -55,15 +71,19 @@ def reproduce_command(
         result = reproduce(settings, progress=progress)
     agree = sum(1 for c in result.claims if c["verdict"] == "agrees")
     console.print(f"report: {result.report}")
-    console.print(f"results: {result.results_json} ({len(result.figures)} figures, "
-                  f"{agree}/{len(result.claims)} claims agree, "
-                  f"{result.timings.get('total', 0):.1f} s)")
+    console.print(
+        f"results: {result.results_json} ({len(result.figures)} figures, "
+        f"{agree}/{len(result.claims)} claims agree, "
+        f"{result.timings.get('total', 0):.1f} s)"
+    )
     if check_browser:
         from ..report.browser import check_in_browser
 
         chk = check_in_browser(result.report, screenshot=out / "screenshot.png")
-        console.print(f"browser: {chk.image_count} images, all loaded: {chk.images_ok}; "
-                      f"screenshot {chk.screenshot}")
+        console.print(
+            f"browser: {chk.image_count} images, all loaded: {chk.images_ok}; "
+            f"screenshot {chk.screenshot}"
+        )
         if not chk.images_ok:
             raise typer.Exit(1)
 

@@ -22,38 +22,60 @@ def _ints(text: str, name: str, count: int | None = None) -> list[int]:
 
 
 def track_command(
-    recording: Annotated[str, typer.Argument(
-        help="Folder of frames, glob ('run/*.tif'), multi-page TIFF, .cine or .cih/.mraw.")],
+    recording: Annotated[
+        str,
+        typer.Argument(
+            help="Folder of frames, glob ('run/*.tif'), multi-page TIFF, .cine or .cih/.mraw."
+        ),
+    ],
     out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")],
-    exposure: Annotated[str | None, typer.Option(
-        "--exposure", help="Exposure time, e.g. 1ms (default: from the metadata).")] = None,
-    fps: Annotated[str | None, typer.Option(
-        "--fps", help="Frame rate, e.g. 5000 or 5kHz (default: from the metadata).")] = None,
-    static: Annotated[str | None, typer.Option(
-        "--static", help="Frames of the static scene for the noise, e.g. 0:20.")] = None,
-    noise: Annotated[float | None, typer.Option(
-        "--noise", help="Noise std (grey levels) instead of --static.")] = None,
+    exposure: Annotated[
+        str | None,
+        typer.Option("--exposure", help="Exposure time, e.g. 1ms (default: from the metadata)."),
+    ] = None,
+    fps: Annotated[
+        str | None,
+        typer.Option("--fps", help="Frame rate, e.g. 5000 or 5kHz (default: from the metadata)."),
+    ] = None,
+    static: Annotated[
+        str | None,
+        typer.Option("--static", help="Frames of the static scene for the noise, e.g. 0:20."),
+    ] = None,
+    noise: Annotated[
+        float | None, typer.Option("--noise", help="Noise std (grey levels) instead of --static.")
+    ] = None,
     subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
     step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
     shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
-    points: Annotated[str | None, typer.Option(
-        "--points", help="Explicit POIs 'r1,c1;r2,c2' (px) instead of a grid.")] = None,
-    roi: Annotated[str | None, typer.Option(
-        "--roi", help="Grid region ROW0,ROW1,COL0,COL1 (px, half-open).")] = None,
+    points: Annotated[
+        str | None,
+        typer.Option("--points", help="Explicit POIs 'r1,c1;r2,c2' (px) instead of a grid."),
+    ] = None,
+    roi: Annotated[
+        str | None, typer.Option("--roi", help="Grid region ROW0,ROW1,COL0,COL1 (px, half-open).")
+    ] = None,
     reference: Annotated[int, typer.Option("--reference", help="Reference frame.")] = 0,
-    update_reference: Annotated[bool, typer.Option(
-        "--update-reference", help="Renew the reference when the correlation degrades.")
-        ] = False,
-    frames: Annotated[str | None, typer.Option(
-        "--frames", help="Frames to track, START:STOP (default all).")] = None,
-    plot: Annotated[str | None, typer.Option(
-        "--plot-points", help="Point indices for the report's time series, e.g. 0,40.")] = None,
+    update_reference: Annotated[
+        bool,
+        typer.Option(
+            "--update-reference", help="Renew the reference when the correlation degrades."
+        ),
+    ] = False,
+    frames: Annotated[
+        str | None, typer.Option("--frames", help="Frames to track, START:STOP (default all).")
+    ] = None,
+    plot: Annotated[
+        str | None,
+        typer.Option(
+            "--plot-points", help="Point indices for the report's time series, e.g. 0,40."
+        ),
+    ] = None,
     fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
     csv: Annotated[bool, typer.Option("--csv", help="Also write track.csv (long).")] = False,
-    report: Annotated[bool, typer.Option("--report/--no-report",
-                                         help="Write report.html.")] = True,
-    workers: Annotated[int | None, typer.Option(
-        "--workers", help="Threads of the correlation kernels.")] = None,
+    report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="Threads of the correlation kernels.")
+    ] = None,
 ) -> None:
     """Track RECORDING and predict the random error (noise + motion blur) of every point in
     every frame; writes OUT/track.nc (or .zarr), OUT/report.html and, with --csv,
@@ -88,27 +110,49 @@ def track_command(
     out.mkdir(parents=True, exist_ok=True)
     rec = open_recording(recording)
     target = out / ("track.nc" if fmt == "netcdf" else "track.zarr")
-    with Progress(TextColumn("tracking"), BarColumn(), MofNCompleteColumn(),
-                  TextColumn("frames"), TimeElapsedColumn(), TextColumn("ETA"),
-                  TimeRemainingColumn(), console=console, transient=False) as bar:
+    with Progress(
+        TextColumn("tracking"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("frames"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=False,
+    ) as bar:
         task = bar.add_task("track", total=len(rec))
 
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total)
 
         try:
-            ds = track(rec, exposure=exposure, fps=fps, static=static, noise=noise,
-                       subset=subset, step=step, shape=shape,  # type: ignore[arg-type]
-                       points=pts, roi=roi_v, reference=reference, frames=frames,
-                       update_reference=update_reference,
-                       workers=workers, progress=progress)
+            ds = track(
+                rec,
+                exposure=exposure,
+                fps=fps,
+                static=static,
+                noise=noise,
+                subset=subset,
+                step=step,
+                shape=shape,  # type: ignore[arg-type]
+                points=pts,
+                roi=roi_v,
+                reference=reference,
+                frames=frames,
+                update_reference=update_reference,
+                workers=workers,
+                progress=progress,
+            )
         except TrackInterrupted as exc:
             if exc.dataset is not None:
                 save_track(exc.dataset, target)
                 if csv:
                     write_track_csv(exc.dataset, out / "track.csv")
-                console.print(f"wrote the {exc.dataset.sizes['frame']} frames tracked "
-                              f"before the stop to {target}")
+                console.print(
+                    f"wrote the {exc.dataset.sizes['frame']} frames tracked "
+                    f"before the stop to {target}"
+                )
             if isinstance(exc.__cause__, KeyboardInterrupt):
                 raise KeyboardInterrupt from exc
             raise
@@ -121,30 +165,38 @@ def track_command(
 
         plot_pts = None if plot is None else _ints(plot, "--plot-points")
         if plot_pts and max(plot_pts) >= ds.sizes["point"]:
-            raise InputError(f"--plot-points={plot!r}: the recording has "
-                             f"{ds.sizes['point']} points (0..{ds.sizes['point'] - 1})")
-        written.append(str(write_track_report(ds, out, image=rec.frame(reference),
-                                              points=plot_pts)))
+            raise InputError(
+                f"--plot-points={plot!r}: the recording has "
+                f"{ds.sizes['point']} points (0..{ds.sizes['point'] - 1})"
+            )
+        written.append(
+            str(write_track_report(ds, out, image=rec.frame(reference), points=plot_pts))
+        )
         page = _write_planner_page(ds, rec.frame(reference), out, subset=subset, step=step)
         if page is not None:
             written.append(str(page))
     a = ds.attrs
     valid = ds["valid"].values.astype(bool)
-    print_mapping(f"track: {recording}", {
-        "frames": int(ds.sizes["frame"]), "points": int(ds.sizes["point"]),
-        "exposure": float(a["exposure"]), "fps": float(a["fps"]),
-        "noise_sigma": float(a.get("noise_sigma", float("nan"))),
-        "valid_share": float(valid.mean()),
-        "outliers": int(ds["n_outliers"].values.sum()),
-        "frames_per_s": int(ds.sizes["frame"]) / max(float(a["tracking_time_s"]), 1e-9),
-        "advice": str(a.get("advice_sentence", "-")),
-    }, {"exposure": "s", "fps": "Hz", "noise_sigma": "GL"})
+    print_mapping(
+        f"track: {recording}",
+        {
+            "frames": int(ds.sizes["frame"]),
+            "points": int(ds.sizes["point"]),
+            "exposure": float(a["exposure"]),
+            "fps": float(a["fps"]),
+            "noise_sigma": float(a.get("noise_sigma", float("nan"))),
+            "valid_share": float(valid.mean()),
+            "outliers": int(ds["n_outliers"].values.sum()),
+            "frames_per_s": int(ds.sizes["frame"]) / max(float(a["tracking_time_s"]), 1e-9),
+            "advice": str(a.get("advice_sentence", "-")),
+        },
+        {"exposure": "s", "fps": "Hz", "noise_sigma": "GL"},
+    )
     for w in written:
         console.print(f"wrote {w}")
 
 
-def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: int
-                        ) -> Path | None:
+def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: int) -> Path | None:
     """OUT/planner.html: the exposure planner for this specimen (the reference frame's
     static prediction at the recording's noise, motion along its median blur direction),
     to set the exposure of the next test. The tracking results are already written, so a
@@ -170,13 +222,17 @@ def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: in
         if ok.any() and float(w[ok].sum()) > 0:
             a = 0.5 * float(np.angle(np.sum(w[ok] * np.exp(2j * ang[ok]))))
     try:
-        model = model_from_pattern(np.asarray(image, dtype=float), noise_sigma=sigma,
-                                   subset=subset, step=max(step, subset // 2),
-                                   motion=(math.sin(a), math.cos(a)),
-                                   provenance={"pattern": "reference frame",
-                                               "source": "dicblur track"})
-        return write_planner([model], out / "planner.html",
-                             labels=[f"this specimen, subset {subset} px"])
+        model = model_from_pattern(
+            np.asarray(image, dtype=float),
+            noise_sigma=sigma,
+            subset=subset,
+            step=max(step, subset // 2),
+            motion=(math.sin(a), math.cos(a)),
+            provenance={"pattern": "reference frame", "source": "dicblur track"},
+        )
+        return write_planner(
+            [model], out / "planner.html", labels=[f"this specimen, subset {subset} px"]
+        )
     except DicblurError as exc:
         typer.echo(f"warning: planner page not written ({exc})", err=True)
         return None

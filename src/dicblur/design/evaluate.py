@@ -34,8 +34,15 @@ from ..errors import FitError, InputError
 from .family import Candidate
 from .problem import DesignProblem
 
-__all__ = ["Evaluation", "campaign_spec", "evaluate_candidate", "measure_candidate",
-           "pattern_seeds", "screen_candidate", "surrogate"]
+__all__ = [
+    "Evaluation",
+    "campaign_spec",
+    "evaluate_candidate",
+    "measure_candidate",
+    "pattern_seeds",
+    "screen_candidate",
+    "surrogate",
+]
 
 
 @dataclass(frozen=True)
@@ -98,8 +105,20 @@ class Evaluation:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (NaN kept as float NaN)."""
         d: dict[str, Any] = {**self.candidate.to_dict(), "stage": self.stage}
-        for k in ("objective", "u_ref", "alpha", "beta", "mbrf", "c_fit", "c_static", "mig0",
-                  "surrogate", "fit_ok", "n_points", "time_s"):
+        for k in (
+            "objective",
+            "u_ref",
+            "alpha",
+            "beta",
+            "mbrf",
+            "c_fit",
+            "c_static",
+            "mig0",
+            "surrogate",
+            "fit_ok",
+            "n_points",
+            "time_s",
+        ):
             d[k] = getattr(self, k)
         for k in ("predicted", "fit_blurs", "u_e", "sssig"):
             d[k] = list(getattr(self, k))
@@ -113,19 +132,29 @@ def pattern_seeds(base_seed: int, n: int, *, fresh: bool = False) -> list[int]:
     return [int(v) for v in ss.generate_state(n, dtype=np.uint32)]
 
 
-def campaign_spec(candidate: Candidate, problem: DesignProblem, *, blurs: Any = None,
-                  seeds: list[int] | None = None, base_seed: int | None = None) -> Any:
+def campaign_spec(
+    candidate: Candidate,
+    problem: DesignProblem,
+    *,
+    blurs: Any = None,
+    seeds: list[int] | None = None,
+    base_seed: int | None = None,
+) -> Any:
     """The :class:`dicblur.campaign.CampaignSpec` of a candidate (one pattern per seed)."""
     from ..campaign import parse_spec
 
     seeds = pattern_seeds(problem.seed, problem.realisations) if seeds is None else seeds
     w = list(problem.fit_blurs if blurs is None else blurs)
     shape = (problem.image_size, problem.image_size)
-    patterns = [{"name": f"r{i}", "generator": "speckle", **candidate.settings(shape, s)}
-                for i, s in enumerate(seeds)]
+    patterns = [
+        {"name": f"r{i}", "generator": "speckle", **candidate.settings(shape, s)}
+        for i, s in enumerate(seeds)
+    ]
     data = {
-        "campaign": {"name": "design", "seed": problem.seed if base_seed is None
-                     else int(base_seed)},
+        "campaign": {
+            "name": "design",
+            "seed": problem.seed if base_seed is None else int(base_seed),
+        },
         "pattern": patterns,
         "blur": {"lengths": w, "substeps": problem.substeps, "boundary": "periodic"},
         "noise": {"model": "per-exposure", "levels": [problem.noise]},
@@ -135,9 +164,14 @@ def campaign_spec(candidate: Candidate, problem: DesignProblem, *, blurs: Any = 
     return parse_spec(data)
 
 
-def measure_candidate(candidate: Candidate, problem: DesignProblem, *, blurs: Any = None,
-                      seeds: list[int] | None = None, base_seed: int | None = None
-                      ) -> dict[str, NDArray[np.float64]]:
+def measure_candidate(
+    candidate: Candidate,
+    problem: DesignProblem,
+    *,
+    blurs: Any = None,
+    seeds: list[int] | None = None,
+    base_seed: int | None = None,
+) -> dict[str, NDArray[np.float64]]:
     """Run a candidate's campaign in this process; variables of shape (realisation, W).
 
     Returns the campaign variables (``u_e``, ``sssig``, ``mig_ref``, ``contrast_ref``,
@@ -157,8 +191,9 @@ def measure_candidate(candidate: Candidate, problem: DesignProblem, *, blurs: An
     return result
 
 
-def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
-              blurs: Any = None) -> tuple[NDArray[np.float64], float]:
+def surrogate(
+    images: NDArray[np.float64], problem: DesignProblem, *, blurs: Any = None
+) -> tuple[NDArray[np.float64], float]:
     """Static prediction of u_e (px) at ``blurs`` (default the design blurs), no DIC.
 
     Parameters
@@ -184,13 +219,16 @@ def surrogate(images: NDArray[np.float64], problem: DesignProblem, *,
     cs = []
     for img in images:
         pts = subset_centres(img.shape, subset=problem.subset, step=problem.step)
-        c = blur_sensitivity(img, subset=problem.subset, points=pts,
-                             shape=problem.dic_shape,  # type: ignore[arg-type]
-                             boundary="periodic").c
+        c = blur_sensitivity(
+            img,
+            subset=problem.subset,
+            points=pts,
+            shape=problem.dic_shape,  # type: ignore[arg-type]
+            boundary="periodic",
+        ).c
         cs.append(c)
         for j, wj in enumerate(w):
-            b = img if wj == 0 else motion_blur(img, (0.0, float(wj)),
-                                                substeps=problem.substeps)
+            b = img if wj == 0 else motion_blur(img, (0.0, float(wj)), substeps=problem.substeps)
             s = float(np.mean(directional_sssig(b, pts, subset=problem.subset, angle=0.0)))
             # the mismatch model with its theoretical constants (a = 2, gamma = 1, no floor)
             noise, blur2 = mismatch_terms([wj], [s], problem.noise, c=c)
@@ -209,8 +247,9 @@ def screen_candidate(candidate: Candidate, problem: DesignProblem) -> float:
     return problem.objective(u)
 
 
-def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
-                       stage: str = "grid") -> Evaluation:
+def evaluate_candidate(
+    candidate: Candidate, problem: DesignProblem, *, stage: str = "grid"
+) -> Evaluation:
     """Measure a candidate (campaign), fit its blur model, compute its surrogate."""
     from ..models import fit_blur_model
 
@@ -229,12 +268,20 @@ def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 model = fit_blur_model(
-                    w, sssig, u_e, noise_sigma=problem.noise,
+                    w,
+                    sssig,
+                    u_e,
+                    noise_sigma=problem.noise,
                     # RMS contrast, as dicblur calibrate (Michelson barely moves under blur)
                     contrast_ref=np.nanmean(m["rms_contrast_ref"], axis=0),
-                    contrast=np.nanmean(m["rms_contrast"], axis=0), subset=problem.subset,
-                    fit_range=(0.0, float(w[-1])), c_static=c_static, default="mismatch",
-                    compare=False, provenance={"candidate": candidate.to_dict()})
+                    contrast=np.nanmean(m["rms_contrast"], axis=0),
+                    subset=problem.subset,
+                    fit_range=(0.0, float(w[-1])),
+                    c_static=c_static,
+                    default="mismatch",
+                    compare=False,
+                    provenance={"candidate": candidate.to_dict()},
+                )
             u_ref, alpha, beta, mbrf = model.u_ref, model.alpha, model.beta, model.mbrf
             if model.mismatch is not None:
                 c_fit = float(model.mismatch["c"])
@@ -243,11 +290,22 @@ def evaluate_candidate(candidate: Candidate, problem: DesignProblem, *,
         except (FitError, InputError):
             pass
     return Evaluation(
-        candidate=candidate, stage=stage, objective=problem.objective(pred),
-        predicted=tuple(map(float, pred)), fit_blurs=problem.fit_blurs,
-        u_e=tuple(map(float, u_e)), sssig=tuple(map(float, sssig)),
-        u_ref=float(u_ref), alpha=float(alpha), beta=float(beta), mbrf=float(mbrf),
-        c_fit=c_fit, c_static=c_static, mig0=float(np.mean(m["mig_ref"][:, 0])),
-        surrogate=problem.objective(u_sur), fit_ok=fit_ok,
-        n_points=int(m["u_e"].size), time_s=time.perf_counter() - t0,
+        candidate=candidate,
+        stage=stage,
+        objective=problem.objective(pred),
+        predicted=tuple(map(float, pred)),
+        fit_blurs=problem.fit_blurs,
+        u_e=tuple(map(float, u_e)),
+        sssig=tuple(map(float, sssig)),
+        u_ref=float(u_ref),
+        alpha=float(alpha),
+        beta=float(beta),
+        mbrf=float(mbrf),
+        c_fit=c_fit,
+        c_static=c_static,
+        mig0=float(np.mean(m["mig_ref"][:, 0])),
+        surrogate=problem.objective(u_sur),
+        fit_ok=fit_ok,
+        n_points=int(m["u_e"].size),
+        time_s=time.perf_counter() - t0,
     )

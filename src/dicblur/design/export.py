@@ -70,11 +70,19 @@ class PrintExport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
-        return {"png": str(self.png), "pdf": None if self.pdf is None else str(self.pdf),
-                "settings": str(self.settings), "dpi": self.dpi, "shape": list(self.shape),
-                "size_mm": list(self.size_mm), "speckle_size_mm": self.speckle_size_mm,
-                "softness_mm": self.softness_mm, "speckle_size_dots": self.speckle_size_dots,
-                "softness_dots": self.softness_dots, "generator": dict(self.generator)}
+        return {
+            "png": str(self.png),
+            "pdf": None if self.pdf is None else str(self.pdf),
+            "settings": str(self.settings),
+            "dpi": self.dpi,
+            "shape": list(self.shape),
+            "size_mm": list(self.size_mm),
+            "speckle_size_mm": self.speckle_size_mm,
+            "softness_mm": self.softness_mm,
+            "speckle_size_dots": self.speckle_size_dots,
+            "softness_dots": self.softness_dots,
+            "generator": dict(self.generator),
+        }
 
 
 def _size_mm(size_mm: Any) -> tuple[float, float]:
@@ -83,8 +91,9 @@ def _size_mm(size_mm: Any) -> tuple[float, float]:
     try:
         h, w = size_mm
     except (TypeError, ValueError) as exc:
-        raise InputError(f"size_mm={describe(size_mm)}: expected (height, width) in mm, "
-                         "e.g. (100, 100)") from exc
+        raise InputError(
+            f"size_mm={describe(size_mm)}: expected (height, width) in mm, e.g. (100, 100)"
+        ) from exc
     return check_positive(h, "size_mm"), check_positive(w, "size_mm")
 
 
@@ -144,21 +153,37 @@ def export_pattern(
     s_dots = s_mm / pitch
     if d_dots < 1.0:
         need = math.ceil(MM_PER_INCH / d_mm)
-        raise InputError(f"dpi={dpi_f:g}: a speckle of {d_mm:.3g} mm is {d_dots:.2f} printed "
-                         f"dots; use dpi >= {need} (>= {3 * need} for well-formed speckles)")
+        raise InputError(
+            f"dpi={dpi_f:g}: a speckle of {d_mm:.3g} mm is {d_dots:.2f} printed "
+            f"dots; use dpi >= {need} (>= {3 * need} for well-formed speckles)"
+        )
     if rows * cols > max_pixels:
-        raise InputError(f"size_mm=({h_mm:g}, {w_mm:g}) at dpi={dpi_f:g}: {rows}x{cols} dots "
-                         f"exceeds max_pixels={max_pixels}; lower the DPI, print a smaller "
-                         "tile, or raise max_pixels")
+        raise InputError(
+            f"size_mm=({h_mm:g}, {w_mm:g}) at dpi={dpi_f:g}: {rows}x{cols} dots "
+            f"exceeds max_pixels={max_pixels}; lower the DPI, print a smaller "
+            "tile, or raise max_pixels"
+        )
     if d_dots > min(rows, cols) / 2:
-        raise InputError(f"size_mm=({h_mm:g}, {w_mm:g}): smaller than two speckles of "
-                         f"{d_mm:.3g} mm; print a larger area")
+        raise InputError(
+            f"size_mm=({h_mm:g}, {w_mm:g}): smaller than two speckles of "
+            f"{d_mm:.3g} mm; print a larger area"
+        )
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise InputError(f"seed={describe(seed)}: expected an integer >= 0")
-    gen = {"shape": [rows, cols], "speckle_size": d_dots, "density": candidate.density,
-           "softness": s_dots, "seed": int(seed)}
-    img = speckle_pattern((rows, cols), speckle_size=d_dots, density=candidate.density,
-                          softness=s_dots, seed=int(seed))
+    gen = {
+        "shape": [rows, cols],
+        "speckle_size": d_dots,
+        "density": candidate.density,
+        "softness": s_dots,
+        "seed": int(seed),
+    }
+    img = speckle_pattern(
+        (rows, cols),
+        speckle_size=d_dots,
+        density=candidate.density,
+        softness=s_dots,
+        seed=int(seed),
+    )
     data = np.rint(np.clip(img, 0.0, 255.0)).astype(np.uint8)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -187,10 +212,19 @@ def export_pattern(
     }
     settings = out / f"{stem}.json"
     write_text(settings, json.dumps(record, indent=2, default=float))
-    return PrintExport(png=png, pdf=pdf_path, settings=settings, dpi=dpi_f,
-                       shape=(rows, cols), size_mm=size, speckle_size_mm=d_mm,
-                       softness_mm=s_mm, speckle_size_dots=d_dots, softness_dots=s_dots,
-                       generator=gen)
+    return PrintExport(
+        png=png,
+        pdf=pdf_path,
+        settings=settings,
+        dpi=dpi_f,
+        shape=(rows, cols),
+        size_mm=size,
+        speckle_size_mm=d_mm,
+        softness_mm=s_mm,
+        speckle_size_dots=d_dots,
+        softness_dots=s_dots,
+        generator=gen,
+    )
 
 
 def regenerate(settings: str | os.PathLike[str] | dict[str, Any]) -> NDArray[np.uint8]:
@@ -202,8 +236,9 @@ def regenerate(settings: str | os.PathLike[str] | dict[str, Any]) -> NDArray[np.
     else:
         p = Path(settings)
         if not p.is_file():
-            raise InputError(f"settings={str(p)!r}: no such file; give the .json written "
-                             "by export_pattern")
+            raise InputError(
+                f"settings={str(p)!r}: no such file; give the .json written by export_pattern"
+            )
         record = json.loads(p.read_text(encoding="utf-8"))
     gen = dict(record.get("generator", {}))
     if "shape" not in gen:

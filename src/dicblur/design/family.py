@@ -62,17 +62,25 @@ class Candidate:
 
     def label(self) -> str:
         """Short readable label, e.g. ``D=4 p=0.5 s=0``."""
-        return (f"D={self.speckle_size:.3g} p={self.density:.3g} s={self.softness:.3g}")
+        return f"D={self.speckle_size:.3g} p={self.density:.3g} s={self.softness:.3g}"
 
     def settings(self, shape: tuple[int, int], seed: int) -> dict[str, Any]:
         """Keyword arguments of :func:`dicblur.speckle_pattern` for this candidate."""
-        return {"shape": [int(shape[0]), int(shape[1])], "speckle_size": self.speckle_size,
-                "density": self.density, "softness": self.softness, "seed": int(seed)}
+        return {
+            "shape": [int(shape[0]), int(shape[1])],
+            "speckle_size": self.speckle_size,
+            "density": self.density,
+            "softness": self.softness,
+            "seed": int(seed),
+        }
 
     def to_dict(self) -> dict[str, float]:
         """JSON-ready dict."""
-        return {"speckle_size": self.speckle_size, "density": self.density,
-                "softness": self.softness}
+        return {
+            "speckle_size": self.speckle_size,
+            "density": self.density,
+            "softness": self.softness,
+        }
 
 
 #: The defaults of :func:`dicblur.speckle_pattern`: the "default pattern" the design beats.
@@ -87,9 +95,7 @@ def _bounds(value: Any, name: str, lo_min: float, hi_max: float) -> tuple[float,
             raise
         raise InputError(f"{name}={describe(value)}: expected (low, high)") from exc
     if not lo_min <= lo <= hi <= hi_max:
-        raise InputError(
-            f"{name}=({lo:g}, {hi:g}): need {lo_min:g} <= low <= high <= {hi_max:g}"
-        )
+        raise InputError(f"{name}=({lo:g}, {hi:g}): need {lo_min:g} <= low <= high <= {hi_max:g}")
     return lo, hi
 
 
@@ -116,15 +122,19 @@ class PatternFamily:
     grid: tuple[int, int, int] = (5, 3, 3)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "speckle_size",
-                           _bounds(self.speckle_size, "speckle_size", 1.5, 64.0))
+        object.__setattr__(
+            self, "speckle_size", _bounds(self.speckle_size, "speckle_size", 1.5, 64.0)
+        )
         object.__setattr__(self, "density", _bounds(self.density, "density", 0.1, 0.9))
         object.__setattr__(self, "softness", _bounds(self.softness, "softness", 0.0, 8.0))
         g = tuple(self.grid)
-        if len(g) != 3 or not all(isinstance(n, int | np.integer) and not isinstance(n, bool)
-                                  and 1 <= n <= 25 for n in g):
-            raise InputError(f"grid={describe(self.grid)}: expected three integers in 1..25 "
-                             "(points along speckle_size, density, softness)")
+        if len(g) != 3 or not all(
+            isinstance(n, int | np.integer) and not isinstance(n, bool) and 1 <= n <= 25 for n in g
+        ):
+            raise InputError(
+                f"grid={describe(self.grid)}: expected three integers in 1..25 "
+                "(points along speckle_size, density, softness)"
+            )
         object.__setattr__(self, "grid", tuple(int(n) for n in g))
 
     @classmethod
@@ -156,8 +166,12 @@ class PatternFamily:
 
     def grid_candidates(self) -> list[Candidate]:
         """Coarse-grid members, speckle size varying slowest."""
-        return [Candidate(float(d), float(p), float(s))
-                for d in self.axis(0) for p in self.axis(1) for s in self.axis(2)]
+        return [
+            Candidate(float(d), float(p), float(s))
+            for d in self.axis(0)
+            for p in self.axis(1)
+            for s in self.axis(2)
+        ]
 
     def to_unit(self, c: Candidate) -> NDArray[np.float64]:
         """Map a candidate to [0, 1]^3 (log scale for the speckle size)."""
@@ -184,10 +198,13 @@ class PatternFamily:
     def contains(self, c: Candidate, *, tol: float = 1e-9) -> bool:
         """Whether ``c`` lies within the bounds."""
         vals = (c.speckle_size, c.density, c.softness)
-        return all(lo - tol <= v <= hi + tol for (lo, hi), v in zip(self.bounds, vals,
-                                                                     strict=True))
+        return all(lo - tol <= v <= hi + tol for (lo, hi), v in zip(self.bounds, vals, strict=True))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
-        return {"speckle_size": list(self.speckle_size), "density": list(self.density),
-                "softness": list(self.softness), "grid": list(self.grid)}
+        return {
+            "speckle_size": list(self.speckle_size),
+            "density": list(self.density),
+            "softness": list(self.softness),
+            "grid": list(self.grid),
+        }

@@ -78,16 +78,24 @@ class DesignProblem:
         """Readable statement of the design blur."""
         if len(self.blurs) == 1:
             return f"W = {self.blurs[0]:g} px"
-        return (f"mean over W = {self.blurs[0]:g}..{self.blurs[-1]:g} px "
-                f"({len(self.blurs)} values)")
+        return f"mean over W = {self.blurs[0]:g}..{self.blurs[-1]:g} px ({len(self.blurs)} values)"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
-        return {"blurs": list(self.blurs), "weights": list(self.weights), "noise": self.noise,
-                "subset": self.subset, "step": self.step, "image_size": self.image_size,
-                "dic_shape": self.dic_shape, "substeps": self.substeps,
-                "realisations": self.realisations, "fit_blurs": list(self.fit_blurs),
-                "scale": self.scale, "seed": self.seed}
+        return {
+            "blurs": list(self.blurs),
+            "weights": list(self.weights),
+            "noise": self.noise,
+            "subset": self.subset,
+            "step": self.step,
+            "image_size": self.image_size,
+            "dic_shape": self.dic_shape,
+            "substeps": self.substeps,
+            "realisations": self.realisations,
+            "fit_blurs": list(self.fit_blurs),
+            "scale": self.scale,
+            "seed": self.seed,
+        }
 
 
 def sine_blur_distribution(
@@ -132,8 +140,10 @@ def sine_blur_distribution(
 def _blur_value(value: Any, name: str) -> float:
     w = check_finite_number(value, name)
     if w < 0:
-        raise InputError(f"{name}={value!r}: a blur length W is the distance (px) travelled "
-                         "during the exposure, it must be >= 0")
+        raise InputError(
+            f"{name}={value!r}: a blur length W is the distance (px) travelled "
+            "during the exposure, it must be >= 0"
+        )
     return w
 
 
@@ -173,8 +183,12 @@ def design_problem(
     """
     from ..blur import blur_length
 
-    given = [blur is not None, blur_range is not None, blurs is not None,
-             velocity is not None or exposure is not None]
+    given = [
+        blur is not None,
+        blur_range is not None,
+        blurs is not None,
+        velocity is not None or exposure is not None,
+    ]
     if sum(given) != 1:
         raise InputError(
             "blur: give exactly one of blur (px), blur_range (lo, hi px), blurs (a "
@@ -187,12 +201,13 @@ def design_problem(
         try:
             lo_raw, hi_raw = blur_range
         except (TypeError, ValueError) as exc:
-            raise InputError(f"blur_range={describe(blur_range)}: expected (lo, hi) in px") \
-                from exc
+            raise InputError(f"blur_range={describe(blur_range)}: expected (lo, hi) in px") from exc
         lo, hi = _blur_value(lo_raw, "blur_range"), _blur_value(hi_raw, "blur_range")
         if hi < lo:
-            raise InputError(f"blur_range=({lo:g}, {hi:g}): inverted range; give it as "
-                             f"{hi:g}..{lo:g} (low..high)")
+            raise InputError(
+                f"blur_range=({lo:g}, {hi:g}): inverted range; give it as "
+                f"{hi:g}..{lo:g} (low..high)"
+            )
         n = 1 if hi == lo else max(2, int(range_points))
         w = np.linspace(lo, hi, n)
         wt = np.full(n, 1.0 / n)
@@ -201,17 +216,20 @@ def design_problem(
         if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0):
             raise InputError(f"blurs={describe(blurs)}: expected finite blur lengths >= 0 px")
         wt = np.ones(w.size) if weights is None else np.asarray(weights, dtype=np.float64)
-        if wt.shape != w.shape or not np.all(np.isfinite(wt)) or np.any(wt < 0) or \
-                wt.sum() <= 0:
-            raise InputError(f"weights={describe(weights)}: expected one weight >= 0 per "
-                             "blur length, not all zero")
+        if wt.shape != w.shape or not np.all(np.isfinite(wt)) or np.any(wt < 0) or wt.sum() <= 0:
+            raise InputError(
+                f"weights={describe(weights)}: expected one weight >= 0 per "
+                "blur length, not all zero"
+            )
         order = np.argsort(w)
         w, wt = w[order], wt[order]
         wt = wt / wt.sum()
     else:
         if velocity is None or exposure is None or scale is None:
-            raise InputError("velocity, exposure, scale: all three are needed to compute the "
-                             "blur length W = velocity * exposure / scale")
+            raise InputError(
+                "velocity, exposure, scale: all three are needed to compute the "
+                "blur length W = velocity * exposure / scale"
+            )
         w = np.array([blur_length(velocity, exposure, scale)])
         wt = np.ones(1)
     noise = check_positive(noise, "noise")
@@ -221,27 +239,40 @@ def design_problem(
     if isinstance(image_size, bool) or not isinstance(image_size, int | np.integer):
         raise InputError(f"image_size={describe(image_size)}: expected an integer (px)")
     if image_size < 2 * subset + 2 * int(step):
-        raise InputError(f"image_size={image_size}: too small for subset {subset} px; use "
-                         f">= {2 * subset + 2 * int(step)} px so several subsets fit")
+        raise InputError(
+            f"image_size={image_size}: too small for subset {subset} px; use "
+            f">= {2 * subset + 2 * int(step)} px so several subsets fit"
+        )
     if dic_shape not in ("translation", "affine"):
         raise InputError(f"dic_shape={dic_shape!r}: choose 'translation' or 'affine'")
     if isinstance(realisations, bool) or not isinstance(realisations, int) or realisations < 1:
         raise InputError(f"realisations={describe(realisations)}: expected an integer >= 1")
     if not isinstance(n_fit_blurs, int) or n_fit_blurs < 4:
-        raise InputError(f"n_fit_blurs={describe(n_fit_blurs)}: the blur model needs at "
-                         "least 4 blur levels")
+        raise InputError(
+            f"n_fit_blurs={describe(n_fit_blurs)}: the blur model needs at least 4 blur levels"
+        )
     if scale is not None:
         scale = check_positive(scale, "scale")
     w_max = float(w.max())
     if w_max > image_size / 4:
-        raise InputError(f"blur: W = {w_max:g} px is more than a quarter of the {image_size} "
-                         "px synthetic image; use a larger image_size")
+        raise InputError(
+            f"blur: W = {w_max:g} px is more than a quarter of the {image_size} "
+            "px synthetic image; use a larger image_size"
+        )
     # Each candidate's campaign spans 0 .. 1.25 max(W) (>= 1 px): the model interpolates.
     w_hi = max(1.25 * w_max, 1.0)
     fit = tuple(float(round(v, 4)) for v in np.linspace(0.0, w_hi, n_fit_blurs))
     return DesignProblem(
-        blurs=tuple(float(v) for v in w), weights=tuple(float(v) for v in wt),
-        noise=noise, subset=subset, step=int(step), image_size=int(image_size),
-        dic_shape=dic_shape, substeps=int(substeps), realisations=realisations,
-        fit_blurs=fit, scale=scale, seed=int(seed),
+        blurs=tuple(float(v) for v in w),
+        weights=tuple(float(v) for v in wt),
+        noise=noise,
+        subset=subset,
+        step=int(step),
+        image_size=int(image_size),
+        dic_shape=dic_shape,
+        substeps=int(substeps),
+        realisations=realisations,
+        fit_blurs=fit,
+        scale=scale,
+        seed=int(seed),
     )

@@ -90,8 +90,7 @@ class Confirmation:
     def difference(self, a: str, b: str) -> tuple[float, float]:
         """Paired difference ``b - a`` (px) over the shared realisations, and its standard
         error (same pattern seeds and noise seeds: a paired comparison)."""
-        d = np.asarray(self.objective[self._index(b)]) - np.asarray(
-            self.objective[self._index(a)])
+        d = np.asarray(self.objective[self._index(b)]) - np.asarray(self.objective[self._index(a)])
         se = float(np.std(d, ddof=1) / math.sqrt(d.size)) if d.size > 1 else float("nan")
         return float(np.mean(d)), se
 
@@ -104,7 +103,9 @@ class Confirmation:
             "objective": [list(k) for k in self.objective],
             "mean": {lab: self.mean(lab) for lab in self.labels},
             "stderr": {lab: self.stderr(lab) for lab in self.labels},
-            "seeds": list(self.seeds), "base_seed": self.base_seed, "n_points": self.n_points,
+            "seeds": list(self.seeds),
+            "base_seed": self.base_seed,
+            "n_points": self.n_points,
         }
 
 
@@ -160,7 +161,8 @@ class DesignResult:
             "default_predicted_u_e": self.reference.objective,
             "worst": self.worst.candidate.to_dict(),
             "worst_predicted_u_e": self.worst.objective,
-            "n_campaigns": self.n_campaigns, "n_points": self.n_points,
+            "n_campaigns": self.n_campaigns,
+            "n_points": self.n_points,
             "n_grid": len(self.grid),
             "n_screened": len(self.screened),
             "n_refine": sum(e.stage == "refine" for e in self.evaluations),
@@ -187,8 +189,10 @@ class DesignResult:
     def to_dict(self) -> dict[str, Any]:
         """Everything (JSON-ready)."""
         return {
-            "problem": self.problem.to_dict(), "family": self.family.to_dict(),
-            "summary": self.summary(), "settings": dict(self.settings),
+            "problem": self.problem.to_dict(),
+            "family": self.family.to_dict(),
+            "summary": self.summary(),
+            "settings": dict(self.settings),
             "reference": self.reference.to_dict(),
             "evaluations": [e.to_dict() for e in self.evaluations],
             "confirmation": None if self.confirmation is None else self.confirmation.to_dict(),
@@ -196,12 +200,15 @@ class DesignResult:
         }
 
 
-def confirm(candidates: dict[str, Candidate], problem: DesignProblem, *,
-            realisations: int = 8) -> Confirmation:
+def confirm(
+    candidates: dict[str, Candidate], problem: DesignProblem, *, realisations: int = 8
+) -> Confirmation:
     """Measure candidates on fresh seeds at the design blurs (see module docs, step 3)."""
     if isinstance(realisations, bool) or not isinstance(realisations, int) or realisations < 2:
-        raise InputError(f"confirm_realisations={realisations!r}: need an integer >= 2 "
-                         "(a standard error needs two realisations)")
+        raise InputError(
+            f"confirm_realisations={realisations!r}: need an integer >= 2 "
+            "(a standard error needs two realisations)"
+        )
     seeds = pattern_seeds(problem.seed, realisations, fresh=True)
     base = int(np.random.SeedSequence(problem.seed, spawn_key=(2,)).generate_state(1)[0])
     # Distinct design blurs only (a campaign's W values must be distinct).
@@ -210,15 +217,22 @@ def confirm(candidates: dict[str, Candidate], problem: DesignProblem, *,
     u_all, obj_all = [], []
     n_points = 0
     for cand in candidates.values():
-        m = measure_candidate(cand, problem, blurs=[float(v) for v in w_unique], seeds=seeds,
-                              base_seed=base)
+        m = measure_candidate(
+            cand, problem, blurs=[float(v) for v in w_unique], seeds=seeds, base_seed=base
+        )
         u = m["u_e"][:, inverse]  # (realisation, design blur)
         n_points += int(m["u_e"].size)
         u_all.append(tuple(tuple(map(float, r)) for r in u))
         obj_all.append(tuple(float(np.dot(weights, r)) for r in u))
-    return Confirmation(labels=tuple(candidates), candidates=tuple(candidates.values()),
-                        u_e=tuple(u_all), objective=tuple(obj_all), seeds=tuple(seeds),
-                        base_seed=base, n_points=n_points)
+    return Confirmation(
+        labels=tuple(candidates),
+        candidates=tuple(candidates.values()),
+        u_e=tuple(u_all),
+        objective=tuple(obj_all),
+        seeds=tuple(seeds),
+        base_seed=base,
+        n_points=n_points,
+    )
 
 
 def design_pattern(
@@ -257,10 +271,12 @@ def design_pattern(
     family = PatternFamily.for_subset(problem.subset) if family is None else family
     if isinstance(max_refine, bool) or not isinstance(max_refine, int) or max_refine < 0:
         raise InputError(f"max_refine={max_refine!r}: expected an integer >= 0")
-    if confirm_realisations != 0 and (not isinstance(confirm_realisations, int)
-                                      or confirm_realisations < 2):
-        raise InputError(f"confirm_realisations={confirm_realisations!r}: 0 (no "
-                         "confirmation) or an integer >= 2")
+    if confirm_realisations != 0 and (
+        not isinstance(confirm_realisations, int) or confirm_realisations < 2
+    ):
+        raise InputError(
+            f"confirm_realisations={confirm_realisations!r}: 0 (no confirmation) or an integer >= 2"
+        )
     t0 = time.perf_counter()
     cache: dict[tuple[float, float, float], Evaluation] = {}
     evaluations: list[Evaluation] = []
@@ -271,8 +287,9 @@ def design_pattern(
             e = evaluate_candidate(c, problem, stage=stage)
             cache[key] = e
             evaluations.append(e)
-            logger.info("design %s %d: %s -> %.5f px", stage, len(evaluations), c.label(),
-                        e.objective)
+            logger.info(
+                "design %s %d: %s -> %.5f px", stage, len(evaluations), c.label(), e.objective
+            )
             if progress is not None:
                 progress(stage, len(evaluations), e)
         return cache[key]
@@ -281,8 +298,10 @@ def design_pattern(
     screened: list[tuple[Candidate, float]] = []
     if screen is not None:
         if isinstance(screen, bool) or not isinstance(screen, int) or screen < 1:
-            raise InputError(f"screen={screen!r}: expected an integer >= 1 (grid members "
-                             "to measure) or None (all)")
+            raise InputError(
+                f"screen={screen!r}: expected an integer >= 1 (grid members "
+                "to measure) or None (all)"
+            )
         screened = [(c, screen_candidate(c, problem)) for c in candidates]
         order = sorted(range(len(candidates)), key=lambda i: screened[i][1])
         candidates = [candidates[i] for i in sorted(order[:screen])]
@@ -314,9 +333,18 @@ def design_pattern(
             step = spacing[i]
             v[j] = x0[j] + step if x0[j] + step <= 1.0 else x0[j] - step
             simplex.append(v)
-        optimize.minimize(f, x0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * len(free),
-                          options={"initial_simplex": np.array(simplex),
-                                   "maxfev": 3 * max_refine, "xatol": 0.02, "fatol": 0.005})
+        optimize.minimize(
+            f,
+            x0,
+            method="Nelder-Mead",
+            bounds=[(0.0, 1.0)] * len(free),
+            options={
+                "initial_simplex": np.array(simplex),
+                "maxfev": 3 * max_refine,
+                "xatol": 0.02,
+                "fatol": 0.005,
+            },
+        )
     extra_refs: list[Evaluation] = []
     reference = cache.get(DEFAULT_CANDIDATE.key())
     if reference is None:
@@ -332,17 +360,32 @@ def design_pattern(
             worst = max(worst, worst_eval, key=lambda e: e.objective)
     confirmation = None
     if confirm_realisations:
-        confirmation = confirm({"best": best.candidate, "default": DEFAULT_CANDIDATE,
-                                "worst": worst.candidate}, problem,
-                               realisations=confirm_realisations)
+        confirmation = confirm(
+            {"best": best.candidate, "default": DEFAULT_CANDIDATE, "worst": worst.candidate},
+            problem,
+            realisations=confirm_realisations,
+        )
     n_campaigns = len(evaluations) + len(extra_refs) + (3 if confirmation else 0)
-    n_points = (sum(e.n_points for e in evaluations) + sum(e.n_points for e in extra_refs)
-                + (confirmation.n_points if confirmation else 0))
+    n_points = (
+        sum(e.n_points for e in evaluations)
+        + sum(e.n_points for e in extra_refs)
+        + (confirmation.n_points if confirmation else 0)
+    )
     return DesignResult(
-        problem=problem, family=family, evaluations=tuple(evaluations), reference=reference,
-        best=best, worst=worst, confirmation=confirmation, n_campaigns=n_campaigns,
-        n_points=n_points, wall_s=time.perf_counter() - t0,
-        settings={"max_refine": max_refine, "confirm_realisations": confirm_realisations,
-                  "screen": screen},
+        problem=problem,
+        family=family,
+        evaluations=tuple(evaluations),
+        reference=reference,
+        best=best,
+        worst=worst,
+        confirmation=confirmation,
+        n_campaigns=n_campaigns,
+        n_points=n_points,
+        wall_s=time.perf_counter() - t0,
+        settings={
+            "max_refine": max_refine,
+            "confirm_realisations": confirm_realisations,
+            "screen": screen,
+        },
         screened=tuple(screened),
     )

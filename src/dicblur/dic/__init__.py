@@ -14,5 +14,13 @@ from .outliers import neighbour_median, normalized_median_test
 from .result import DICResult
 from .status import PointStatus
 
-__all__ = ["Correlator", "DICResult", "PointStatus", "blur_reference", "correlate",
-           "deblur_wiener", "neighbour_median", "normalized_median_test"]
+__all__ = [
+    "Correlator",
+    "DICResult",
+    "PointStatus",
+    "blur_reference",
+    "correlate",
+    "deblur_wiener",
+    "neighbour_median",
+    "normalized_median_test",
+]

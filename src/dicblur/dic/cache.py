@@ -57,8 +57,9 @@ for shape in {shapes!r}:
 """
 
 
-def compile_kernels(shapes: tuple[str, ...] = ("translation", "affine"), *,
-                    timeout: float = 1800.0) -> bool:
+def compile_kernels(
+    shapes: tuple[str, ...] = ("translation", "affine"), *, timeout: float = 1800.0
+) -> bool:
     """Compile the DIC kernels of ``shapes`` into numba's cache in a subprocess, if the
     cache is cold; return whether it compiled.
 
@@ -73,6 +74,10 @@ def compile_kernels(shapes: tuple[str, ...] = ("translation", "affine"), *,
     cold = tuple(s for s in shapes if not kernels_cached(s))  # type: ignore[arg-type]
     if not cold:
         return False
-    subprocess.run([sys.executable, "-c", _COMPILE.format(shapes=cold)], check=True,
-                   timeout=timeout, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-c", _COMPILE.format(shapes=cold)],
+        check=True,
+        timeout=timeout,
+        capture_output=True,
+    )
     return True

@@ -40,16 +40,24 @@ from .._validation import as_image, check_positive, describe
 from ..errors import InputError
 from .icgn import N_PARAMS, raw_jacobian
 
-__all__ = ["BLUR_MODES", "BlurStepPrep", "blur_reference", "check_blur_vector",
-           "deblur_wiener", "noise_gain_slope", "prepare_blur_step"]
+__all__ = [
+    "BLUR_MODES",
+    "BlurStepPrep",
+    "blur_reference",
+    "check_blur_vector",
+    "deblur_wiener",
+    "noise_gain_slope",
+    "prepare_blur_step",
+]
 
 #: Matcher modes: ``none`` (plain IC-GN), ``given`` (blur vector known), ``estimate``
 #: (blur length along a given direction estimated per subset).
 BLUR_MODES: tuple[str, ...] = ("none", "given", "estimate")
 
 
-def check_blur_vector(value: Any, *, n_points: int, subset: int,
-                      name: str = "blur_vector") -> NDArray[np.float64]:
+def check_blur_vector(
+    value: Any, *, n_points: int, subset: int, name: str = "blur_vector"
+) -> NDArray[np.float64]:
     """Validate a blur vector ``(dy, dx)`` px, or one per POI (shape (n_points, 2)).
 
     Returns an array of shape (2,) or (n_points, 2). Raises :class:`InputError` on NaN or
@@ -60,19 +68,27 @@ def check_blur_vector(value: Any, *, n_points: int, subset: int,
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{name}={describe(value)}: expected (dy, dx) in px, e.g. "
-                         "(0.0, 3.5), or an (n_points, 2) array") from exc
+        raise InputError(
+            f"{name}={describe(value)}: expected (dy, dx) in px, e.g. "
+            "(0.0, 3.5), or an (n_points, 2) array"
+        ) from exc
     if arr.shape != (2,) and arr.shape != (n_points, 2):
-        raise InputError(f"{name}={describe(arr)}: expected (dy, dx) in px (shape (2,)) or "
-                         f"one vector per POI (shape ({n_points}, 2))")
+        raise InputError(
+            f"{name}={describe(arr)}: expected (dy, dx) in px (shape (2,)) or "
+            f"one vector per POI (shape ({n_points}, 2))"
+        )
     if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name}={describe(value)}: must be finite (no NaN or infinity); "
-                         "give the motion during the exposure in px")
+        raise InputError(
+            f"{name}={describe(value)}: must be finite (no NaN or infinity); "
+            "give the motion during the exposure in px"
+        )
     length = np.hypot(arr[..., 0], arr[..., 1])
     if np.any(length >= subset):
         worst = float(np.max(length))
-        raise InputError(f"{name}: blur length {worst:.4g} px is not shorter than the "
-                         f"subset ({subset} px); use a subset larger than the blur")
+        raise InputError(
+            f"{name}: blur length {worst:.4g} px is not shorter than the "
+            f"subset ({subset} px); use a subset larger than the blur"
+        )
     return arr
 
 
@@ -80,12 +96,12 @@ def _dsinc(x: NDArray[np.float64]) -> NDArray[np.float64]:
     """d sinc(x) / dx with ``sinc(x) = sin(pi x) / (pi x)``; ``-pi^2 x / 3`` near 0."""
     small = np.abs(x) < 1e-4
     safe = np.where(small, 1.0, x)
-    return np.where(small, -math.pi ** 2 * x / 3.0,
-                    (np.cos(math.pi * safe) - np.sinc(safe)) / safe)
+    return np.where(small, -(math.pi**2) * x / 3.0, (np.cos(math.pi * safe) - np.sinc(safe)) / safe)
 
 
-def _symmetric_grid(h: Callable[[NDArray, NDArray], NDArray], n: int, m: int
-                    ) -> NDArray[np.float64]:
+def _symmetric_grid(
+    h: Callable[[NDArray, NDArray], NDArray], n: int, m: int
+) -> NDArray[np.float64]:
     """Real, even transfer function ``h(fy, fx)`` on the rfft2 grid of an (n, m) image
     with even n and m: the Nyquist row and column average ``+1/2`` and ``-1/2`` cycles/px
     (the symmetric convention of :mod:`dicblur.blur`), so the output stays real."""
@@ -104,8 +120,9 @@ def _mirror(img: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.concatenate([top, top[::-1, :]], axis=0)
 
 
-def blur_reference(image: ArrayLike, blur_vector: ArrayLike, *, derivative: bool = False
-                   ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+def blur_reference(
+    image: ArrayLike, blur_vector: ArrayLike, *, derivative: bool = False
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """The image convolved with a centred box of the blur vector (the forward model).
 
     Parameters
@@ -142,8 +159,10 @@ def blur_reference(image: ArrayLike, blur_vector: ArrayLike, *, derivative: bool
     length = math.hypot(dy, dx)
     if length == 0.0:
         if derivative:
-            raise InputError("blur_vector=(0, 0): the derivative with respect to the blur "
-                             "length needs a direction (a non-zero vector)")
+            raise InputError(
+                "blur_vector=(0, 0): the derivative with respect to the blur "
+                "length needs a direction (a non-zero vector)"
+            )
         return img.copy(), None
     work = _mirror(img)
     n, m = work.shape
@@ -163,12 +182,14 @@ def blur_reference(image: ArrayLike, blur_vector: ArrayLike, *, derivative: bool
             return s * _dsinc(length * s)
 
         d_out = np.ascontiguousarray(
-            sfft.irfft2(spec * _symmetric_grid(dh, n, m), s=work.shape)[:rows, :cols])
+            sfft.irfft2(spec * _symmetric_grid(dh, n, m), s=work.shape)[:rows, :cols]
+        )
     return np.ascontiguousarray(blurred), d_out
 
 
-def deblur_wiener(image: ArrayLike, blur_vector: ArrayLike, noise_sigma: float
-                  ) -> NDArray[np.float64]:
+def deblur_wiener(
+    image: ArrayLike, blur_vector: ArrayLike, noise_sigma: float
+) -> NDArray[np.float64]:
     """Deblur a motion-blurred image with the Wiener filter of the known kernel.
 
     The baseline of issue 18 (Lavatelli, Zappa et al., Acta IMEKO, "Optimization of the
@@ -208,11 +229,11 @@ def deblur_wiener(image: ArrayLike, blur_vector: ArrayLike, noise_sigma: float
         return np.sinc(fy * dy + fx * dx)
 
     hh = _symmetric_grid(h, n, m)
-    signal = max(float(np.var(img)) - sigma ** 2, 1e-12)
-    nsr = sigma ** 2 / signal
+    signal = max(float(np.var(img)) - sigma**2, 1e-12)
+    nsr = sigma**2 / signal
     with np.errstate(divide="ignore", invalid="ignore"):
         filt = hh / (hh * hh + nsr) if nsr > 0 else np.where(hh != 0, 1.0 / hh, 0.0)
-    out = sfft.irfft2(sfft.rfft2(work) * filt, s=work.shape)[:img.shape[0], :img.shape[1]]
+    out = sfft.irfft2(sfft.rfft2(work) * filt, s=work.shape)[: img.shape[0], : img.shape[1]]
     return np.ascontiguousarray(out)
 
 
@@ -262,10 +283,18 @@ class BlurStepPrep:
     ok: NDArray[np.bool_]
 
 
-def prepare_blur_step(f0: NDArray[np.float64], gx: NDArray[np.float64],
-                      gy: NDArray[np.float64], dimg: NDArray[np.float64],
-                      rows: NDArray[np.int64], cols: NDArray[np.int64], half: int,
-                      shape: str, *, chunk: int = 256) -> BlurStepPrep:
+def prepare_blur_step(
+    f0: NDArray[np.float64],
+    gx: NDArray[np.float64],
+    gy: NDArray[np.float64],
+    dimg: NDArray[np.float64],
+    rows: NDArray[np.int64],
+    cols: NDArray[np.int64],
+    half: int,
+    shape: str,
+    *,
+    chunk: int = 256,
+) -> BlurStepPrep:
     """Per-subset quantities of the joint step (see :class:`BlurStepPrep`).
 
     ``f0``, ``gx``, ``gy``, ``dimg`` (rows, cols): blurred reference, its x / y spline
@@ -276,16 +305,28 @@ def prepare_blur_step(f0: NDArray[np.float64], gx: NDArray[np.float64],
     k = N_PARAMS[shape]
     size = 2 * half + 1
     npx = size * size
-    out = {name: np.zeros((n, *s)) for name, s in (
-        ("hinv", (k + 1, k + 1)), ("fmean", ()), ("fnorm", ()), ("jsum", (k,)),
-        ("avec", (k,)), ("evec", (k,)), ("dsum", ()), ("bval", ()), ("dd", ()))}
+    out = {
+        name: np.zeros((n, *s))
+        for name, s in (
+            ("hinv", (k + 1, k + 1)),
+            ("fmean", ()),
+            ("fnorm", ()),
+            ("jsum", (k,)),
+            ("avec", (k,)),
+            ("evec", (k,)),
+            ("dsum", ()),
+            ("bval", ()),
+            ("dd", ()),
+        )
+    }
     ok = np.zeros(n, bool)
     views = [sliding_window_view(a, (size, size)) for a in (f0, gx, gy, dimg)]
     for s in range(0, n, chunk):
-        r = rows[s:s + chunk] - half
-        c = cols[s:s + chunk] - half
-        fp, gxp, gyp, dp = (np.asarray(v[r, c], dtype=np.float64).reshape(len(r), npx)
-                            for v in views)
+        r = rows[s : s + chunk] - half
+        c = cols[s : s + chunk] - half
+        fp, gxp, gyp, dp = (
+            np.asarray(v[r, c], dtype=np.float64).reshape(len(r), npx) for v in views
+        )
         jac = raw_jacobian(gxp, gyp, half, shape)
         fmean = fp.mean(axis=1)
         fc = fp - fmean[:, None]
@@ -305,7 +346,7 @@ def prepare_blur_step(f0: NDArray[np.float64], gx: NDArray[np.float64],
         eig = np.linalg.eigvalsh(big)
         good = (fnorm > 0) & (eig[:, 0] > 1e-10 * np.maximum(eig[:, -1], 1e-300))
         big_safe = np.where(good[:, None, None], big, np.eye(k + 1)[None])
-        hinv = np.linalg.inv(big_safe) * (safe ** 2)[:, None, None]
+        hinv = np.linalg.inv(big_safe) * (safe**2)[:, None, None]
         hinv[~good] = 0.0
         sl = slice(s, s + len(r))
         out["hinv"][sl] = hinv

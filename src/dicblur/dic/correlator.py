@@ -53,8 +53,12 @@ SHAPES: tuple[str, ...] = ("affine", "translation")
 #: ``subset``: per-subset FFT-CC for every POI; ``zero``: start every POI at (0, 0).
 INITIAL_METHODS: tuple[str, ...] = ("fftcc", "subset", "zero")
 
-_RETRY = (PointStatus.MAX_ITERATIONS, PointStatus.DIVERGED, PointStatus.LOW_CORRELATION,
-          PointStatus.OUT_OF_BOUNDS)
+_RETRY = (
+    PointStatus.MAX_ITERATIONS,
+    PointStatus.DIVERGED,
+    PointStatus.LOW_CORRELATION,
+    PointStatus.OUT_OF_BOUNDS,
+)
 #: A retried POI gets at most this many times the median iterations of the converged POIs
 #: (at least 10): a subset that failed once rarely needs the full ``max_iterations``.
 RETRY_BUDGET = 4
@@ -167,14 +171,27 @@ class Correlator:
     True
     """
 
-    def __init__(self, reference: ArrayLike, *, subset: int = 21, step: int = 10,
-                 roi: Sequence[int] | None = None, points: ArrayLike | None = None,
-                 shape: Shape = "affine", interpolation: str = "bspline3",
-                 initial: str = "fftcc", max_iterations: int = 50, tolerance: float = 1e-4,
-                 noise_sigma: float | None = None, min_zncc: float = 0.6,
-                 workers: int | None = None, max_residual: float | None = 2.0,
-                 median_test: bool = False, blur: BlurMode = "none",
-                 max_blur_sigma: float = 0.5) -> None:
+    def __init__(
+        self,
+        reference: ArrayLike,
+        *,
+        subset: int = 21,
+        step: int = 10,
+        roi: Sequence[int] | None = None,
+        points: ArrayLike | None = None,
+        shape: Shape = "affine",
+        interpolation: str = "bspline3",
+        initial: str = "fftcc",
+        max_iterations: int = 50,
+        tolerance: float = 1e-4,
+        noise_sigma: float | None = None,
+        min_zncc: float = 0.6,
+        workers: int | None = None,
+        max_residual: float | None = 2.0,
+        median_test: bool = False,
+        blur: BlurMode = "none",
+        max_blur_sigma: float = 0.5,
+    ) -> None:
         t0 = time.perf_counter()
         self.blur: str = check_choice(blur, "blur", BLUR_MODES)
         self.max_blur_sigma = check_positive(max_blur_sigma, "max_blur_sigma")
@@ -189,14 +206,18 @@ class Correlator:
         self.initial = check_choice(initial, "initial", INITIAL_METHODS)
         self.max_iterations = _check_int(max_iterations, "max_iterations", 1)
         self.tolerance = check_positive(tolerance, "tolerance")
-        self.noise_sigma = (None if noise_sigma is None
-                            else check_positive(noise_sigma, "noise_sigma", allow_zero=True))
+        self.noise_sigma = (
+            None
+            if noise_sigma is None
+            else check_positive(noise_sigma, "noise_sigma", allow_zero=True)
+        )
         self.min_zncc = float(min_zncc)
         if not -1.0 <= self.min_zncc <= 1.0:
             raise InputError(f"min_zncc={min_zncc!r}: must lie in [-1, 1]")
         self.workers = None if workers is None else _check_int(workers, "workers", 1)
-        self.max_residual = (None if max_residual is None
-                             else check_positive(max_residual, "max_residual"))
+        self.max_residual = (
+            None if max_residual is None else check_positive(max_residual, "max_residual")
+        )
         if not isinstance(median_test, bool | np.bool_):
             raise InputError(f"median_test={describe(median_test)}: must be True or False")
         self.image_shape: tuple[int, int] = (int(ref.shape[0]), int(ref.shape[1]))
@@ -206,8 +227,7 @@ class Correlator:
         rows, cols, status0 = self._points(roi, points)
         self.rows = rows
         self.cols = cols
-        self._grid_shape, self._grid_index = self._grid_of(
-            rows, cols, required=bool(median_test))
+        self._grid_shape, self._grid_index = self._grid_of(rows, cols, required=bool(median_test))
         #: Whether :meth:`correlate` screens the grid for ``OUTLIER`` points.
         self.median_test = bool(median_test)
         coef = bspline_coefficients(ref, order=self.order, dtype=np.float64)
@@ -233,8 +253,10 @@ class Correlator:
         self._gx32[:, :cols_img] = gx
         self._gy32 = np.zeros_like(self._f32)
         self._gy32[:, :cols_img] = gy
-        self._kernel_args = tuple(np.ascontiguousarray(a) for a in (
-            rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm))
+        self._kernel_args = tuple(
+            np.ascontiguousarray(a)
+            for a in (rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm)
+        )
         self._coef_buf = np.zeros((rows_img + 2 * PAD, cols_img + 2 * PAD + extra), np.float32)
         self._all = np.arange(len(rows), dtype=np.intp)
         self._none = np.zeros(0, dtype=np.intp)
@@ -249,7 +271,7 @@ class Correlator:
             # dicblur.metrics.sssig): see docs/dic.md for why not the spline gradients
             cgy, cgx = image_gradients(ref)
             pp = prepare_subsets(ref, cgx, cgy, rc, cc, half, self.shape)
-            s2 = self.noise_sigma ** 2
+            s2 = self.noise_sigma**2
             with np.errstate(divide="ignore", invalid="ignore"):
                 if self.shape == "translation":
                     pu = np.sqrt(2.0 * s2 / pp.sssig_x)
@@ -268,23 +290,32 @@ class Correlator:
         self.last_timings: dict[str, float] = {}
 
     # ------------------------------------------------------------------ setup helpers
-    def _points(self, roi: Sequence[int] | None, points: ArrayLike | None
-                ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]:
+    def _points(
+        self, roi: Sequence[int] | None, points: ArrayLike | None
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]:
         rows_img, cols_img = self.image_shape
         half = self.subset // 2
         if points is not None:
             pts = np.asarray(points)
             if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] == 0:
-                raise InputError(f"points={describe(pts)}: expected an (n, 2) array of "
-                                 "(row, col) POI centres, n >= 1")
+                raise InputError(
+                    f"points={describe(pts)}: expected an (n, 2) array of "
+                    "(row, col) POI centres, n >= 1"
+                )
             if not np.issubdtype(pts.dtype, np.integer):
                 if not np.all(np.isfinite(pts)) or not np.all(pts == np.round(pts)):
-                    raise InputError(f"points={describe(pts)}: POI centres must be integer "
-                                     "pixel positions (round them first)")
+                    raise InputError(
+                        f"points={describe(pts)}: POI centres must be integer "
+                        "pixel positions (round them first)"
+                    )
             pts = pts.astype(np.int64)
             r, c = pts[:, 0].copy(), pts[:, 1].copy()
-            inside = ((r - half >= 0) & (r + half <= rows_img - 1) & (c - half >= 0)
-                      & (c + half <= cols_img - 1))
+            inside = (
+                (r - half >= 0)
+                & (r + half <= rows_img - 1)
+                & (c - half >= 0)
+                & (c + half <= cols_img - 1)
+            )
             st = np.where(inside, 0, int(PointStatus.OUT_OF_BOUNDS)).astype(np.uint8)
             return r, c, st
         r0, r1, c0, c1 = 0, rows_img, 0, cols_img
@@ -292,23 +323,30 @@ class Correlator:
             try:
                 r0, r1, c0, c1 = (int(x) for x in roi)
             except (TypeError, ValueError) as exc:
-                raise InputError(f"roi={describe(roi)}: expected (row_start, row_stop, "
-                                 "col_start, col_stop) in px") from exc
+                raise InputError(
+                    f"roi={describe(roi)}: expected (row_start, row_stop, "
+                    "col_start, col_stop) in px"
+                ) from exc
             if not (0 <= r0 < r1 <= rows_img and 0 <= c0 < c1 <= cols_img):
-                raise InputError(f"roi={describe(roi)}: must satisfy 0 <= row_start < "
-                                 f"row_stop <= {rows_img} and 0 <= col_start < col_stop <= "
-                                 f"{cols_img}")
+                raise InputError(
+                    f"roi={describe(roi)}: must satisfy 0 <= row_start < "
+                    f"row_stop <= {rows_img} and 0 <= col_start < col_stop <= "
+                    f"{cols_img}"
+                )
         if min(r1 - r0, c1 - c0) < self.subset + 2:
-            raise InputError(f"roi={describe(roi)}: region smaller than the subset "
-                             f"({self.subset} px) plus a 1-px border; enlarge it")
+            raise InputError(
+                f"roi={describe(roi)}: region smaller than the subset "
+                f"({self.subset} px) plus a 1-px border; enlarge it"
+            )
         centres = subset_centres((r1 - r0, c1 - c0), subset=self.subset, step=self.step)
         r = centres[:, 0].astype(np.int64) + r0
         c = centres[:, 1].astype(np.int64) + c0
         return r, c, np.zeros(len(r), np.uint8)
 
     @staticmethod
-    def _grid_of(rows: NDArray[np.int64], cols: NDArray[np.int64], *, required: bool
-                 ) -> tuple[tuple[int, int] | None, NDArray[np.intp] | None]:
+    def _grid_of(
+        rows: NDArray[np.int64], cols: NDArray[np.int64], *, required: bool
+    ) -> tuple[tuple[int, int] | None, NDArray[np.intp] | None]:
         """Shape of the POI grid and each POI's row-major cell, when the POIs fill one."""
         ur, ri = np.unique(rows, return_inverse=True)
         uc, ci = np.unique(cols, return_inverse=True)
@@ -316,9 +354,11 @@ class Correlator:
         if len(rows) == len(ur) * len(uc) and np.unique(cell).size == len(rows):
             return (len(ur), len(uc)), cell
         if required:
-            raise InputError(f"median_test=True: the {len(rows)} points do not fill a "
-                             f"regular grid ({len(ur)} rows x {len(uc)} columns of centres)"
-                             "; use median_test=False or a full grid of points")
+            raise InputError(
+                f"median_test=True: the {len(rows)} points do not fill a "
+                f"regular grid ({len(ur)} rows x {len(uc)} columns of centres)"
+                "; use median_test=False or a full grid of points"
+            )
         return None, None
 
     def _setup_seeds(self) -> None:
@@ -358,8 +398,18 @@ class Correlator:
         self._packed = tuple(np.zeros((n, ng), np.float32) for _ in range(3))
         if n:
             rows, cols, _, _, _, fmean, _ = self._kernel_args
-            kernels.pack_reference(self._f32, self._gx32, self._gy32, fmean, rows, cols,
-                                   self.half, self._w, self._status0, *self._packed)
+            kernels.pack_reference(
+                self._f32,
+                self._gx32,
+                self._gy32,
+                fmean,
+                rows,
+                cols,
+                self.half,
+                self._w,
+                self._status0,
+                *self._packed,
+            )
 
     @property
     def n_points(self) -> int:
@@ -382,12 +432,16 @@ class Correlator:
         return None if self._grid_index is None else self._grid_index.copy()
 
     # ------------------------------------------------------------------ correlation
-    def _translation(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
-                     status_in: NDArray[np.uint8], first: NDArray[np.intp],
-                     second: NDArray[np.intp], source: NDArray[np.intp],
-                     max_iter: int | None = None
-                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
-                                NDArray[np.uint8]]:
+    def _translation(
+        self,
+        coef: NDArray[np.float32],
+        p0: NDArray[np.float64],
+        status_in: NDArray[np.uint8],
+        first: NDArray[np.intp],
+        second: NDArray[np.intp],
+        source: NDArray[np.intp],
+        max_iter: int | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
         """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
         ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
         rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
@@ -397,28 +451,55 @@ class Correlator:
         out_i = np.empty(n, np.int64)
         out_s = np.empty(n, np.uint8)
         kernels.icgn_translation(  # type: ignore[call-arg]
-            coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
-            self._gx32, self._gy32, rows, cols, self.half, self._w, hinv, jsum, avec, fmean,
-            fnorm, p0, status_in,
-            self.max_iterations if max_iter is None else max_iter, self.tolerance,
-            self.min_zncc, float(self.subset), first,
-            second, source, numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
-            *self._packed, out_p, out_z, out_i, out_s)
+            coef,
+            self.image_shape[0],
+            self.image_shape[1],
+            self.order,
+            self._f32,
+            self._gx32,
+            self._gy32,
+            rows,
+            cols,
+            self.half,
+            self._w,
+            hinv,
+            jsum,
+            avec,
+            fmean,
+            fnorm,
+            p0,
+            status_in,
+            self.max_iterations if max_iter is None else max_iter,
+            self.tolerance,
+            self.min_zncc,
+            float(self.subset),
+            first,
+            second,
+            source,
+            numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
+            *self._packed,
+            out_p,
+            out_z,
+            out_i,
+            out_s,
+        )
         return out_p, out_z, out_i, out_s
 
-    def _run_icgn(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
-                  status_in: NDArray[np.uint8], idx: NDArray[np.intp] | None = None,
-                  max_iter: int | None = None
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
-                             NDArray[np.uint8]]:
+    def _run_icgn(
+        self,
+        coef: NDArray[np.float32],
+        p0: NDArray[np.float64],
+        status_in: NDArray[np.uint8],
+        idx: NDArray[np.intp] | None = None,
+        max_iter: int | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
         if self.shape == "translation":
             full = np.zeros((self.n_points, 2))
             st_full = np.zeros(self.n_points, np.uint8)
             sel = self._all if idx is None else idx
             full[sel] = p0
             st_full[sel] = status_in
-            out = self._translation(coef, full, st_full, sel, self._none, self._none,
-                                    max_iter)
+            out = self._translation(coef, full, st_full, sel, self._none, self._none, max_iter)
             return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
         prep = self._prep
         if idx is None:
@@ -433,26 +514,46 @@ class Correlator:
                 hinv, jsum, avec = prep.hinv[idx], prep.jsum[idx], prep.avec[idx]
                 fmean, fnorm = prep.fmean[idx], prep.fnorm[idx]
                 if idx is self._seeds or (self._rest is not None and idx is self._rest):
-                    self._args_cache[key] = (idx, (rows, cols, hinv, jsum, avec, fmean,
-                                                   fnorm))
+                    self._args_cache[key] = (idx, (rows, cols, hinv, jsum, avec, fmean, fnorm))
         n = len(self.rows) if idx is None else len(idx)
         k = N_PARAMS[self.shape]
         out_p = np.empty((n, k))
         out_z = np.empty(n)
         out_i = np.empty(n, np.int64)
         out_s = np.empty(n, np.uint8)
-        kernels.icgn_affine(coef, self.image_shape[0], self.image_shape[1], self.order, self._f32,
-             self._gx32, self._gy32,
-             rows, cols, self.half, self._tw, hinv, jsum, avec, fmean, fnorm,
-             np.ascontiguousarray(p0), np.ascontiguousarray(status_in),
-             self.max_iterations if max_iter is None else max_iter,
-             self.tolerance, self.min_zncc, float(self.subset), out_p, out_z, out_i, out_s)
+        kernels.icgn_affine(
+            coef,
+            self.image_shape[0],
+            self.image_shape[1],
+            self.order,
+            self._f32,
+            self._gx32,
+            self._gy32,
+            rows,
+            cols,
+            self.half,
+            self._tw,
+            hinv,
+            jsum,
+            avec,
+            fmean,
+            fnorm,
+            np.ascontiguousarray(p0),
+            np.ascontiguousarray(status_in),
+            self.max_iterations if max_iter is None else max_iter,
+            self.tolerance,
+            self.min_zncc,
+            float(self.subset),
+            out_p,
+            out_z,
+            out_i,
+            out_s,
+        )
         return out_p, out_z, out_i, out_s
 
-    def _seeded_icgn(self, coef: NDArray[np.float32], p0: NDArray[np.float64],
-                     status0: NDArray[np.uint8]) -> tuple[NDArray[np.float64],
-                                                          NDArray[np.float64],
-                                                          NDArray[np.int64], NDArray[np.uint8]]:
+    def _seeded_icgn(
+        self, coef: NDArray[np.float32], p0: NDArray[np.float64], status0: NDArray[np.uint8]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
         assert self._seeds is not None and self._rest is not None
         seeds, rest, src = self._seeds, self._rest, self._rest_seed
         if self.shape == "translation":
@@ -486,17 +587,23 @@ class Correlator:
         p[rest], z[rest], it[rest], st[rest] = pr, zr, itr, str_
         return p, z, it, st
 
-    def _guess_to_params(self, u: NDArray[np.float64], v: NDArray[np.float64]
-                         ) -> NDArray[np.float64]:
+    def _guess_to_params(
+        self, u: NDArray[np.float64], v: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
         k = N_PARAMS[self.shape]
         p0 = np.zeros((len(u), k))
         p0[:, 0] = u
         p0[:, 1 if k == 2 else 3] = v
         return p0
 
-    def correlate(self, current: ArrayLike, *, initial: ArrayLike | None = None,
-                  blur_vector: ArrayLike | None = None,
-                  blur_angle: float | None = None) -> DICResult:
+    def correlate(
+        self,
+        current: ArrayLike,
+        *,
+        initial: ArrayLike | None = None,
+        blur_vector: ArrayLike | None = None,
+        blur_angle: float | None = None,
+    ) -> DICResult:
         """Measure the displacement of every POI in ``current``.
 
         Parameters
@@ -524,27 +631,34 @@ class Correlator:
         """
         cur = as_image(current, "current", min_size=3)
         if cur.shape != self.image_shape:
-            raise InputError(f"current: shape {cur.shape} differs from the reference "
-                             f"{self.image_shape}; both images must have the same size")
+            raise InputError(
+                f"current: shape {cur.shape} differs from the reference "
+                f"{self.image_shape}; both images must have the same size"
+            )
         old_threads = numba.get_num_threads()
         if self.workers is not None:
             numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
         try:
             if self.blur == "none":
                 if blur_vector is not None or blur_angle is not None:
-                    raise InputError(f"blur_vector={describe(blur_vector)}: this Correlator "
-                                     "has blur='none'; create it with blur='given' or "
-                                     "blur='estimate' to compensate the blur")
+                    raise InputError(
+                        f"blur_vector={describe(blur_vector)}: this Correlator "
+                        "has blur='none'; create it with blur='given' or "
+                        "blur='estimate' to compensate the blur"
+                    )
                 return self._correlate(cur, initial)
             if self.blur == "given":
                 if blur_vector is None:
-                    raise InputError("blur_vector=None: blur='given' needs the motion "
-                                     "during the exposure (dy, dx) px, e.g. (0.0, 3.5)")
+                    raise InputError(
+                        "blur_vector=None: blur='given' needs the motion "
+                        "during the exposure (dy, dx) px, e.g. (0.0, 3.5)"
+                    )
                 if blur_angle is not None:
-                    raise InputError(f"blur_angle={blur_angle!r}: only for blur='estimate'; "
-                                     "with blur='given' the vector holds the direction")
-                vec = check_blur_vector(blur_vector, n_points=self.n_points,
-                                        subset=self.subset)
+                    raise InputError(
+                        f"blur_angle={blur_angle!r}: only for blur='estimate'; "
+                        "with blur='given' the vector holds the direction"
+                    )
+                vec = check_blur_vector(blur_vector, n_points=self.n_points, subset=self.subset)
                 return self._correlate_given(cur, initial, vec)
             return self._correlate_estimate(cur, initial, blur_vector, blur_angle)
         finally:
@@ -554,8 +668,9 @@ class Correlator:
         t0 = time.perf_counter()
         cols_img = self.image_shape[1]
         coef = self._coef_buf
-        bspline_coefficients(cur, order=self.order, dtype=np.float32,
-                             out=coef[:, :cols_img + 2 * PAD])
+        bspline_coefficients(
+            cur, order=self.order, dtype=np.float32, out=coef[:, : cols_img + 2 * PAD]
+        )
         t1 = time.perf_counter()
         n = self.n_points
         status0 = self._status0
@@ -565,19 +680,22 @@ class Correlator:
             if guess.shape == (2,):
                 guess = np.broadcast_to(guess, (n, 2))
             if guess.shape != (n, 2) or not np.all(np.isfinite(guess)):
-                raise InputError(f"initial={describe(guess)}: expected finite (u, v) px, "
-                                 f"shape (2,) or ({n}, 2)")
+                raise InputError(
+                    f"initial={describe(guess)}: expected finite (u, v) px, shape (2,) or ({n}, 2)"
+                )
             gu, gv = guess[:, 0].copy(), guess[:, 1].copy()
             method = "given"
         elif method == "fftcc":
             # one FFT thread: at the 128 px window a second one costs more than it gives
-            su, sv, _ = global_shift(self._ref, cur, workers=1,
-                                     reference_spectrum=self._ref_spectrum)
+            su, sv, _ = global_shift(
+                self._ref, cur, workers=1, reference_spectrum=self._ref_spectrum
+            )
             gu = np.full(n, float(su))
             gv = np.full(n, float(sv))
         elif method == "subset":
-            iu, iv, _ = subset_fftcc(self._ref, cur, self.rows, self.cols, self.half,
-                                     workers=self.workers)
+            iu, iv, _ = subset_fftcc(
+                self._ref, cur, self.rows, self.cols, self.half, workers=self.workers
+            )
             gu, gv = iu.astype(float), iv.astype(float)
         else:
             gu = np.zeros(n)
@@ -594,25 +712,47 @@ class Correlator:
         t4 = time.perf_counter()
         noise_var = self._screen(coef, p, z, st)
         t5 = time.perf_counter()
-        self.last_timings = {"prefilter_s": t1 - t0, "initial_s": (t2 - t1) + (t4 - t3),
-                             "icgn_s": t3 - t2, "screen_s": t5 - t4, "total_s": t5 - t0}
+        self.last_timings = {
+            "prefilter_s": t1 - t0,
+            "initial_s": (t2 - t1) + (t4 - t3),
+            "icgn_s": t3 - t2,
+            "screen_s": t5 - t4,
+            "total_s": t5 - t0,
+        }
         k = p.shape[1]
         u = p[:, 0].copy()
         v = p[:, 1 if k == 2 else 3].copy()
         info = self._info_base(method)
         info["screen_noise_sigma"] = None if noise_var is None else float(np.sqrt(noise_var))
         return DICResult(
-            rows=self.rows.copy(), cols=self.cols.copy(), u=u, v=v, params=p, zncc=z,
-            iterations=it, status=st,
-            predicted_sigma_u=None if self.predicted_sigma_u is None
+            rows=self.rows.copy(),
+            cols=self.cols.copy(),
+            u=u,
+            v=v,
+            params=p,
+            zncc=z,
+            iterations=it,
+            status=st,
+            predicted_sigma_u=None
+            if self.predicted_sigma_u is None
             else self.predicted_sigma_u.copy(),
-            predicted_sigma_v=None if self.predicted_sigma_v is None
+            predicted_sigma_v=None
+            if self.predicted_sigma_v is None
             else self.predicted_sigma_v.copy(),
-            info=info)
+            info=info,
+        )
 
-    def _retry(self, cur: NDArray[np.float64], coef: NDArray[np.float32],
-               gu: NDArray[np.float64], gv: NDArray[np.float64], p: NDArray[np.float64],
-               z: NDArray[np.float64], it: NDArray[np.int64], st: NDArray[np.uint8]) -> None:
+    def _retry(
+        self,
+        cur: NDArray[np.float64],
+        coef: NDArray[np.float32],
+        gu: NDArray[np.float64],
+        gv: NDArray[np.float64],
+        p: NDArray[np.float64],
+        z: NDArray[np.float64],
+        it: NDArray[np.int64],
+        st: NDArray[np.uint8],
+    ) -> None:
         """Second chance for the failed POIs, in place, within an iteration budget.
 
         A POI with converged grid neighbours restarts from their median parameters (a
@@ -625,8 +765,11 @@ class Correlator:
             return
         ok = st == PointStatus.CONVERGED
         conv = it[ok]
-        budget = self.max_iterations if conv.size == 0 else min(
-            self.max_iterations, max(10, RETRY_BUDGET * int(np.median(conv))))
+        budget = (
+            self.max_iterations
+            if conv.size == 0
+            else min(self.max_iterations, max(10, RETRY_BUDGET * int(np.median(conv))))
+        )
         k = p.shape[1]
         start = np.full((retry.size, k), np.nan)
         if self._grid_shape is not None and ok.any():
@@ -637,14 +780,20 @@ class Correlator:
             grid[:, cell] = p.T
             valid = np.zeros(ny * nx, bool)
             valid[cell] = ok
-            start = neighbour_medians(grid.reshape(k, ny, nx), valid.reshape(ny, nx),
-                                      cell[retry]).T
+            start = neighbour_medians(grid.reshape(k, ny, nx), valid.reshape(ny, nx), cell[retry]).T
         near = np.all(np.isfinite(start), axis=1)
         far = retry[~near]
         if far.size:
-            iu, iv, _ = subset_fftcc(self._ref, cur, self.rows[far], self.cols[far],
-                                     self.half, guess_u=gu[far], guess_v=gv[far],
-                                     workers=1)
+            iu, iv, _ = subset_fftcc(
+                self._ref,
+                cur,
+                self.rows[far],
+                self.cols[far],
+                self.half,
+                guess_u=gu[far],
+                guess_v=gv[far],
+                workers=1,
+            )
             # the first pass started there already: nothing new to try
             new = (iu != np.rint(gu[far])) | (iv != np.rint(gv[far]))
             start[~near] = self._guess_to_params(iu.astype(float), iv.astype(float))
@@ -658,8 +807,13 @@ class Correlator:
         p[idx], z[idx], st[idx] = p2[better], z2[better], st2[better]
         it[idx] = it[idx] + it2[better]
 
-    def _screen(self, coef: NDArray[np.float32], p: NDArray[np.float64],
-                z: NDArray[np.float64], st: NDArray[np.uint8]) -> float | None:
+    def _screen(
+        self,
+        coef: NDArray[np.float32],
+        p: NDArray[np.float64],
+        z: NDArray[np.float64],
+        st: NDArray[np.uint8],
+    ) -> float | None:
         """Flag false convergence in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
 
         Returns the noise variance (GL^2) the tests used, or None when none ran.
@@ -678,12 +832,12 @@ class Correlator:
         if not ok.any() or not (residual or self.median_test):
             return None
         k = p.shape[1]
-        fnorm2 = self._prep.fnorm ** 2
+        fnorm2 = self._prep.fnorm**2
         m = self.subset * self.subset - k - 2
         unit = np.maximum(1.0 - z, 0.0) * fnorm2 / m
         noise_var = float(np.median(unit[ok]))
         if self.noise_sigma is not None:
-            noise_var = max(noise_var, self.noise_sigma ** 2)
+            noise_var = max(noise_var, self.noise_sigma**2)
         if self.max_residual is not None and self.noise_sigma is not None and noise_var > 0:
             high = ok & (unit > self.max_residual * noise_var)
             st[high] = PointStatus.HIGH_RESIDUAL
@@ -701,9 +855,13 @@ class Correlator:
         valid[cell] = ok
         # points within PROBE_DISTANCE of their neighbours' median skip the median (and the
         # probe): the shortcut of median_screen
-        out2, med_g = median_screen(grid.reshape(k, *shape), valid.reshape(shape),
-                                    eps=MEDIAN_EPS, threshold=MEDIAN_THRESHOLD,
-                                    within=PROBE_DISTANCE / np.sqrt(2.0))
+        out2, med_g = median_screen(
+            grid.reshape(k, *shape),
+            valid.reshape(shape),
+            eps=MEDIAN_EPS,
+            threshold=MEDIAN_THRESHOLD,
+            within=PROBE_DISTANCE / np.sqrt(2.0),
+        )
         out = out2.ravel()[cell]
         st[out] = PointStatus.OUTLIER
         ok &= ~out
@@ -723,11 +881,16 @@ class Correlator:
         return noise_var
 
     # ------------------------------------------------------------------ blur compensation
-    def _blurred(self, vec: NDArray[np.float64], index: NDArray[np.intp] | None, *,
-                 tag: str = "given", step: bool = False) -> _BlurredReference:
+    def _blurred(
+        self,
+        vec: NDArray[np.float64],
+        index: NDArray[np.intp] | None,
+        *,
+        tag: str = "given",
+        step: bool = False,
+    ) -> _BlurredReference:
         """The prepared blurred reference for ``vec`` on the POIs ``index`` (None: all)."""
-        key = (tag, float(vec[0]), float(vec[1]),
-               None if index is None else index.tobytes(), step)
+        key = (tag, float(vec[0]), float(vec[1]), None if index is None else index.tobytes(), step)
         hit = self._blur_cache.get(key)
         if hit is not None:
             self._blur_cache.move_to_end(key)
@@ -735,12 +898,20 @@ class Correlator:
         blurred, dimg = blur_reference(self._ref, vec, derivative=step)
         sel = self._all if index is None else index
         pts = np.stack([self.rows[sel], self.cols[sel]], axis=1)
-        corr = Correlator(blurred, subset=self.subset, step=self.step, points=pts,
-                          shape=self.shape,  # type: ignore[arg-type]
-                          interpolation=self.interpolation, initial=self.initial,
-                          max_iterations=self.max_iterations, tolerance=self.tolerance,
-                          noise_sigma=self.noise_sigma, min_zncc=self.min_zncc,
-                          workers=self.workers)
+        corr = Correlator(
+            blurred,
+            subset=self.subset,
+            step=self.step,
+            points=pts,
+            shape=self.shape,  # type: ignore[arg-type]
+            interpolation=self.interpolation,
+            initial=self.initial,
+            max_iterations=self.max_iterations,
+            tolerance=self.tolerance,
+            noise_sigma=self.noise_sigma,
+            min_zncc=self.min_zncc,
+            workers=self.workers,
+        )
         prep = None
         images: tuple[NDArray[np.float64], ...] = ()
         if step:
@@ -751,8 +922,9 @@ class Correlator:
             cc = np.clip(pts[:, 1], self.half, self.image_shape[1] - 1 - self.half)
             prep = prepare_blur_step(blurred, gx, gy, dimg, rc, cc, self.half, self.shape)
             images = (blurred, gx, gy, dimg)
-        entry = _BlurredReference(corr=corr, index=index, vector=np.array(vec, dtype=float),
-                                  step=prep, images=images)
+        entry = _BlurredReference(
+            corr=corr, index=index, vector=np.array(vec, dtype=float), step=prep, images=images
+        )
         self._blur_cache[key] = entry
         # about 64 bytes per image pixel per entry: keep the cache under ~1 GiB
         limit = max(2, min(_BLUR_CACHE_SIZE, 2**30 // (64 * self._ref.size)))
@@ -761,8 +933,9 @@ class Correlator:
         return entry
 
     @staticmethod
-    def _initial_for(initial: ArrayLike | None, index: NDArray[np.intp], n: int
-                     ) -> ArrayLike | None:
+    def _initial_for(
+        initial: ArrayLike | None, index: NDArray[np.intp], n: int
+    ) -> ArrayLike | None:
         if initial is None:
             return None
         arr = np.asarray(initial, dtype=np.float64)
@@ -776,18 +949,28 @@ class Correlator:
     def _info_base(self, method: str) -> dict[str, Any]:
         from .._version import __version__
 
-        return {"subset": self.subset, "step": self.step, "shape": self.shape,
-                "interpolation": self.interpolation, "initial": method,
-                "max_iterations": self.max_iterations, "tolerance": self.tolerance,
-                "noise_sigma": self.noise_sigma, "min_zncc": self.min_zncc,
-                "max_residual": self.max_residual, "median_test": int(self.median_test),
-                "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
-                "grid_shape": (None if self._grid_shape is None
-                               else f"{self._grid_shape[0]}x{self._grid_shape[1]}"),
-                "dicblur_version": __version__}
+        return {
+            "subset": self.subset,
+            "step": self.step,
+            "shape": self.shape,
+            "interpolation": self.interpolation,
+            "initial": method,
+            "max_iterations": self.max_iterations,
+            "tolerance": self.tolerance,
+            "noise_sigma": self.noise_sigma,
+            "min_zncc": self.min_zncc,
+            "max_residual": self.max_residual,
+            "median_test": int(self.median_test),
+            "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
+            "grid_shape": (
+                None if self._grid_shape is None else f"{self._grid_shape[0]}x{self._grid_shape[1]}"
+            ),
+            "dicblur_version": __version__,
+        }
 
-    def _correlate_given(self, cur: NDArray[np.float64], initial: ArrayLike | None,
-                         vec: NDArray[np.float64]) -> DICResult:
+    def _correlate_given(
+        self, cur: NDArray[np.float64], initial: ArrayLike | None, vec: NDArray[np.float64]
+    ) -> DICResult:
         t0 = time.perf_counter()
         n = self.n_points
         if vec.ndim == 2 and np.all(vec == vec[:1]):
@@ -801,8 +984,9 @@ class Correlator:
                 res = entry.corr._correlate(cur, initial)
                 self.last_timings = dict(entry.corr.last_timings)
             self.last_timings["total_with_blur_s"] = time.perf_counter() - t0
-            return self._blur_info(res, blur_compensation="given",
-                                   blur_dy=float(vec[0]), blur_dx=float(vec[1]))
+            return self._blur_info(
+                res, blur_compensation="given", blur_dy=float(vec[0]), blur_dx=float(vec[1])
+            )
         # one vector per POI: group the POIs that share a vector
         uniq, inverse = np.unique(vec, axis=0, return_inverse=True)
         inverse = np.asarray(inverse).ravel()
@@ -827,26 +1011,42 @@ class Correlator:
         self.last_timings = {"total_s": time.perf_counter() - t0}
         info = self._info_base(self.initial)
         info.update(blur_compensation="given", blur_vectors=len(uniq))
-        return DICResult(rows=self.rows.copy(), cols=self.cols.copy(), u=p[:, 0].copy(),
-                         v=p[:, 1 if k == 2 else 3].copy(), params=p, zncc=z,
-                         iterations=it, status=st, predicted_sigma_u=pu,
-                         predicted_sigma_v=pv, info=info)
+        return DICResult(
+            rows=self.rows.copy(),
+            cols=self.cols.copy(),
+            u=p[:, 0].copy(),
+            v=p[:, 1 if k == 2 else 3].copy(),
+            params=p,
+            zncc=z,
+            iterations=it,
+            status=st,
+            predicted_sigma_u=pu,
+            predicted_sigma_v=pv,
+            info=info,
+        )
 
-    def _blur_direction(self, blur_vector: ArrayLike | None, blur_angle: float | None
-                        ) -> tuple[NDArray[np.float64], float | None]:
+    def _blur_direction(
+        self, blur_vector: ArrayLike | None, blur_angle: float | None
+    ) -> tuple[NDArray[np.float64], float | None]:
         if blur_vector is not None:
             vec = check_blur_vector(blur_vector, n_points=self.n_points, subset=self.subset)
             if vec.ndim != 1:
-                raise InputError(f"blur_vector={describe(vec)}: blur='estimate' takes one "
-                                 "vector (dy, dx) px: its direction and starting length")
+                raise InputError(
+                    f"blur_vector={describe(vec)}: blur='estimate' takes one "
+                    "vector (dy, dx) px: its direction and starting length"
+                )
             length = math.hypot(float(vec[0]), float(vec[1]))
             if length == 0.0:
-                raise InputError("blur_vector=(0, 0): blur='estimate' needs the direction; "
-                                 "give a non-zero vector or blur_angle (degrees)")
+                raise InputError(
+                    "blur_vector=(0, 0): blur='estimate' needs the direction; "
+                    "give a non-zero vector or blur_angle (degrees)"
+                )
             return vec / length, length
         if blur_angle is None:
-            raise InputError("blur_angle=None: blur='estimate' needs the blur direction; "
-                             "pass blur_angle (degrees from +x towards +y) or blur_vector")
+            raise InputError(
+                "blur_angle=None: blur='estimate' needs the blur direction; "
+                "pass blur_angle (degrees from +x towards +y) or blur_vector"
+            )
         try:
             ang = float(blur_angle)
         except (TypeError, ValueError) as exc:
@@ -856,10 +1056,16 @@ class Correlator:
         rad = math.radians(ang)
         return np.array([math.sin(rad), math.cos(rad)]), None
 
-    def _joint_step(self, entry: _BlurredReference, cur_corr: Correlator, res: DICResult,
-                    max_iter: int = 10) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                                                 NDArray[np.float64], NDArray[np.float64],
-                                                 NDArray[np.int64], NDArray[np.uint8]]:
+    def _joint_step(
+        self, entry: _BlurredReference, cur_corr: Correlator, res: DICResult, max_iter: int = 10
+    ) -> tuple[
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.int64],
+        NDArray[np.uint8],
+    ]:
         """Joint (shape, blur length) Gauss-Newton from the compensated IC-GN result."""
         from .kernels_blur import joint_blur_step
 
@@ -876,12 +1082,41 @@ class Correlator:
         out_s = np.empty(n, np.uint8)
         st_in = np.where(res.status == PointStatus.CONVERGED, 0, res.status).astype(np.uint8)
         st_in[~sp.ok & (st_in == 0)] = int(PointStatus.LOW_TEXTURE)
-        joint_blur_step(c._coef_buf, self.image_shape[0], self.image_shape[1], self.order,
-                        f0, gx, gy, dimg, c.rows, c.cols, self.half, self.shape == "affine",
-                        sp.hinv, sp.fmean, sp.fnorm, sp.jsum, sp.avec, sp.evec, sp.dsum,
-                        sp.bval, sp.dd, np.ascontiguousarray(res.params), st_in, max_iter,
-                        self.tolerance, _BLUR_TOLERANCE, out_p, out_lam, out_z, out_r, out_i, out_s)
-        npx = self.subset ** 2
+        joint_blur_step(
+            c._coef_buf,
+            self.image_shape[0],
+            self.image_shape[1],
+            self.order,
+            f0,
+            gx,
+            gy,
+            dimg,
+            c.rows,
+            c.cols,
+            self.half,
+            self.shape == "affine",
+            sp.hinv,
+            sp.fmean,
+            sp.fnorm,
+            sp.jsum,
+            sp.avec,
+            sp.evec,
+            sp.dsum,
+            sp.bval,
+            sp.dd,
+            np.ascontiguousarray(res.params),
+            st_in,
+            max_iter,
+            self.tolerance,
+            _BLUR_TOLERANCE,
+            out_p,
+            out_lam,
+            out_z,
+            out_r,
+            out_i,
+            out_s,
+        )
+        npx = self.subset**2
         with np.errstate(invalid="ignore", divide="ignore"):
             sig = np.sqrt(np.maximum(out_r, 0.0) / (npx - k - 1) * sp.hinv[:, k, k])
             if self.noise_sigma:
@@ -889,13 +1124,23 @@ class Correlator:
                 # -n sigma^2 kappa'(W0) / 2 (Df^-2 hinv) of the length (noise_gain_slope)
                 length = math.hypot(float(entry.vector[0]), float(entry.vector[1]))
                 slope = noise_gain_slope(length, entry.vector / length)
-                out_lam += (sp.hinv[:, k, k] / np.where(sp.fnorm > 0, sp.fnorm, 1.0) ** 2
-                            * npx * self.noise_sigma ** 2 * slope / 2.0)
+                out_lam += (
+                    sp.hinv[:, k, k]
+                    / np.where(sp.fnorm > 0, sp.fnorm, 1.0) ** 2
+                    * npx
+                    * self.noise_sigma**2
+                    * slope
+                    / 2.0
+                )
         return out_p, out_lam, out_z, sig, out_i, out_s
 
-    def _correlate_estimate(self, cur: NDArray[np.float64], initial: ArrayLike | None,
-                            blur_vector: ArrayLike | None, blur_angle: float | None
-                            ) -> DICResult:
+    def _correlate_estimate(
+        self,
+        cur: NDArray[np.float64],
+        initial: ArrayLike | None,
+        blur_vector: ArrayLike | None,
+        blur_angle: float | None,
+    ) -> DICResult:
         """Blur length along a fixed direction, estimated with the displacement.
 
         1. image level, on up to 64 spread POIs: compensated IC-GN at ``W0`` (a 0.25 px
@@ -912,8 +1157,11 @@ class Correlator:
         good = np.flatnonzero(self._status0 == 0)
         if good.size == 0:
             good = self._all
-        sample = (good if good.size <= _BLUR_SAMPLE else
-                  good[np.linspace(0, good.size - 1, _BLUR_SAMPLE).round().astype(np.intp)])
+        sample = (
+            good
+            if good.size <= _BLUR_SAMPLE
+            else good[np.linspace(0, good.size - 1, _BLUR_SAMPLE).round().astype(np.intp)]
+        )
 
         def grid(w: float) -> float:
             return float(min(max(round(w / _BLUR_GRID) * _BLUR_GRID, 0.5), wmax))
@@ -957,27 +1205,39 @@ class Correlator:
                 break
             w0 = grid(w0 + step)  # the blur changed since the last image
         self._last_blur_length = w0
-        identified = (st == PointStatus.CONVERGED) & np.isfinite(sig) & (
-            sig <= self.max_blur_sigma)
+        identified = (st == PointStatus.CONVERGED) & np.isfinite(sig) & (sig <= self.max_blur_sigma)
         # a subset that cannot tell its own blur keeps the displacement at the image's W0
         keep = ~identified
         p[keep] = base.params[keep]
         z[keep] = base.zncc[keep]
         st = np.where(keep, base.status, st).astype(np.uint8)
-        st[(st == PointStatus.CONVERGED) & ~(z >= self.min_zncc)] = int(
-            PointStatus.LOW_CORRELATION)
+        st[(st == PointStatus.CONVERGED) & ~(z >= self.min_zncc)] = int(PointStatus.LOW_CORRELATION)
         k = p.shape[1]
         length = np.where(np.isfinite(lam), w0 + lam, np.nan)
         self.last_timings = {"total_s": time.perf_counter() - t0}
         info = self._info_base(base.info.get("initial", self.initial))
-        info.update(blur_compensation="estimate", blur_dir_dy=float(e[0]),
-                    blur_dir_dx=float(e[1]), blur_w0=w0)
-        return DICResult(rows=self.rows.copy(), cols=self.cols.copy(), u=p[:, 0].copy(),
-                         v=p[:, 1 if k == 2 else 3].copy(), params=p, zncc=z,
-                         iterations=base.iterations + its, status=st,
-                         predicted_sigma_u=base.predicted_sigma_u,
-                         predicted_sigma_v=base.predicted_sigma_v, info=info,
-                         blur_length=length, blur_sigma=sig, blur_identified=identified)
+        info.update(
+            blur_compensation="estimate",
+            blur_dir_dy=float(e[0]),
+            blur_dir_dx=float(e[1]),
+            blur_w0=w0,
+        )
+        return DICResult(
+            rows=self.rows.copy(),
+            cols=self.cols.copy(),
+            u=p[:, 0].copy(),
+            v=p[:, 1 if k == 2 else 3].copy(),
+            params=p,
+            zncc=z,
+            iterations=base.iterations + its,
+            status=st,
+            predicted_sigma_u=base.predicted_sigma_u,
+            predicted_sigma_v=base.predicted_sigma_v,
+            info=info,
+            blur_length=length,
+            blur_sigma=sig,
+            blur_identified=identified,
+        )
 
     def warmup(self) -> float:
         """Compile (or load from the numba cache) the kernels of this configuration on a
@@ -985,37 +1245,72 @@ class Correlator:
         t0 = time.perf_counter()
         rng = np.random.default_rng(0)
         img = rng.normal(128.0, 30.0, (self.subset + 12, self.subset + 12))
-        c = Correlator(img, subset=self.subset, step=self.step, shape=self.shape,  # type: ignore[arg-type]
-                       interpolation=self.interpolation, initial="zero",
-                       workers=self.workers, median_test=self.median_test)
+        c = Correlator(
+            img,
+            subset=self.subset,
+            step=self.step,
+            shape=self.shape,  # type: ignore[arg-type]
+            interpolation=self.interpolation,
+            initial="zero",
+            workers=self.workers,
+            median_test=self.median_test,
+        )
         c.correlate(img)
         if self.blur == "estimate":  # the joint (shape, length) step's kernel too
-            e = Correlator(img, subset=self.subset, step=self.step, shape=self.shape,  # type: ignore[arg-type]
-                           interpolation=self.interpolation, initial="zero",
-                           workers=self.workers, blur="estimate")
+            e = Correlator(
+                img,
+                subset=self.subset,
+                step=self.step,
+                shape=self.shape,  # type: ignore[arg-type]
+                interpolation=self.interpolation,
+                initial="zero",
+                workers=self.workers,
+                blur="estimate",
+            )
             e.correlate(img, blur_vector=(0.0, 1.0))
         return time.perf_counter() - t0
 
 
-def correlate(reference: ArrayLike, current: ArrayLike, *, subset: int = 21, step: int = 10,
-              roi: Sequence[int] | None = None, points: ArrayLike | None = None,
-              shape: Shape = "affine", interpolation: str = "bspline3",
-              initial: str | ArrayLike = "fftcc", max_iterations: int = 50,
-              tolerance: float = 1e-4, noise_sigma: float | None = None,
-              min_zncc: float = 0.6, workers: int | None = None,
-              max_residual: float | None = 2.0,
-              median_test: bool = False) -> DICResult:
+def correlate(
+    reference: ArrayLike,
+    current: ArrayLike,
+    *,
+    subset: int = 21,
+    step: int = 10,
+    roi: Sequence[int] | None = None,
+    points: ArrayLike | None = None,
+    shape: Shape = "affine",
+    interpolation: str = "bspline3",
+    initial: str | ArrayLike = "fftcc",
+    max_iterations: int = 50,
+    tolerance: float = 1e-4,
+    noise_sigma: float | None = None,
+    min_zncc: float = 0.6,
+    workers: int | None = None,
+    max_residual: float | None = 2.0,
+    median_test: bool = False,
+) -> DICResult:
     """One-shot subset DIC of ``current`` against ``reference`` (see :class:`Correlator`).
 
     ``initial`` is a method name (``"fftcc"``, ``"subset"``, ``"zero"``) or an array of
     initial guesses ``(u, v)`` px of shape (n, 2) or (2,).
     """
     method = initial if isinstance(initial, str) else "fftcc"
-    c = Correlator(reference, subset=subset, step=step, roi=roi, points=points, shape=shape,
-                   interpolation=interpolation, initial=method,
-                   max_iterations=max_iterations, tolerance=tolerance,
-                   noise_sigma=noise_sigma, min_zncc=min_zncc, workers=workers,
-                   max_residual=max_residual, median_test=median_test)
+    c = Correlator(
+        reference,
+        subset=subset,
+        step=step,
+        roi=roi,
+        points=points,
+        shape=shape,
+        interpolation=interpolation,
+        initial=method,
+        max_iterations=max_iterations,
+        tolerance=tolerance,
+        noise_sigma=noise_sigma,
+        min_zncc=min_zncc,
+        workers=workers,
+        max_residual=max_residual,
+        median_test=median_test,
+    )
     return c.correlate(current, initial=None if isinstance(initial, str) else initial)
-
-

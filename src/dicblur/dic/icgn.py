@@ -36,8 +36,7 @@ from .interpolation import interpolate_reference
 from .kernels import STALL_ITERATIONS
 from .status import PointStatus
 
-__all__ = ["PreparedSubsets", "compose_affine", "icgn_reference", "prepare_subsets",
-           "raw_jacobian"]
+__all__ = ["PreparedSubsets", "compose_affine", "icgn_reference", "prepare_subsets", "raw_jacobian"]
 
 #: Number of shape parameters per shape function.
 N_PARAMS = {"translation": 2, "affine": 6}
@@ -66,15 +65,17 @@ class PreparedSubsets:
     sssig_y: NDArray[np.float64]
 
 
-def _patches(image: NDArray[np.float64], rows: NDArray[np.intp], cols: NDArray[np.intp],
-             half: int) -> NDArray[np.float64]:
+def _patches(
+    image: NDArray[np.float64], rows: NDArray[np.intp], cols: NDArray[np.intp], half: int
+) -> NDArray[np.float64]:
     size = 2 * half + 1
     view = sliding_window_view(image, (size, size))
     return np.asarray(view[rows - half, cols - half], dtype=np.float64).reshape(len(rows), -1)
 
 
-def raw_jacobian(gx: NDArray[np.float64], gy: NDArray[np.float64], half: int,
-                 shape: str) -> NDArray[np.float64]:
+def raw_jacobian(
+    gx: NDArray[np.float64], gy: NDArray[np.float64], half: int, shape: str
+) -> NDArray[np.float64]:
     """Raw steepest-descent images ``J`` (n, npx, k) from subset gradients (n, npx).
 
     Column order follows the parameters: translation ``(u, v)``; affine
@@ -89,9 +90,15 @@ def raw_jacobian(gx: NDArray[np.float64], gy: NDArray[np.float64], half: int,
     return np.stack([gx, gx * dx, gx * dy, gy, gy * dx, gy * dy], axis=-1)
 
 
-def prepare_subsets(f: NDArray[np.float64], gx: NDArray[np.float64], gy: NDArray[np.float64],
-                    rows: NDArray[np.intp], cols: NDArray[np.intp], half: int,
-                    shape: str) -> PreparedSubsets:
+def prepare_subsets(
+    f: NDArray[np.float64],
+    gx: NDArray[np.float64],
+    gy: NDArray[np.float64],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    half: int,
+    shape: str,
+) -> PreparedSubsets:
     """Compute the per-subset quantities of IC-GN once for a reference image.
 
     Parameters
@@ -131,15 +138,21 @@ def prepare_subsets(f: NDArray[np.float64], gx: NDArray[np.float64], gy: NDArray
     status[bad] = PointStatus.LOW_TEXTURE
     big_safe = np.where(bad[:, None, None], np.eye(k)[None], big)
     big_inv = np.linalg.inv(big_safe)
-    hinv = big_inv * (safe ** 2)[:, None, None]
+    hinv = big_inv * (safe**2)[:, None, None]
     cov_unit = 2.0 * big_inv
     hinv[bad] = 0.0
     cov_unit[bad] = np.nan
     return PreparedSubsets(
-        hinv=np.ascontiguousarray(hinv), jsum=np.ascontiguousarray(jsum),
-        avec=np.ascontiguousarray(avec), fmean=fmean, fnorm=fnorm, status=status,
-        cov_unit=cov_unit, sssig_x=np.einsum("ij,ij->i", gxp, gxp),
-        sssig_y=np.einsum("ij,ij->i", gyp, gyp))
+        hinv=np.ascontiguousarray(hinv),
+        jsum=np.ascontiguousarray(jsum),
+        avec=np.ascontiguousarray(avec),
+        fmean=fmean,
+        fnorm=fnorm,
+        status=status,
+        cov_unit=cov_unit,
+        sssig_x=np.einsum("ij,ij->i", gxp, gxp),
+        sssig_y=np.einsum("ij,ij->i", gyp, gyp),
+    )
 
 
 def compose_affine(p: NDArray[np.float64], dp: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -152,12 +165,22 @@ def compose_affine(p: NDArray[np.float64], dp: NDArray[np.float64]) -> NDArray[n
     return np.array([m[0, 2], m[0, 0] - 1, m[0, 1], m[1, 2], m[1, 0], m[1, 1] - 1])
 
 
-def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
-                   gy: NDArray[np.float64], coef: NDArray[np.floating], order: int,
-                   row: int, col: int, half: int, shape: str, p0: NDArray[np.float64], *,
-                   max_iterations: int = 50, tolerance: float = 1e-4,
-                   step_gain: bool = True,
-                   ) -> tuple[NDArray[np.float64], float, int, bool]:
+def icgn_reference(
+    ref: NDArray[np.float64],
+    gx: NDArray[np.float64],
+    gy: NDArray[np.float64],
+    coef: NDArray[np.floating],
+    order: int,
+    row: int,
+    col: int,
+    half: int,
+    shape: str,
+    p0: NDArray[np.float64],
+    *,
+    max_iterations: int = 50,
+    tolerance: float = 1e-4,
+    step_gain: bool = True,
+) -> tuple[NDArray[np.float64], float, int, bool]:
     """Plain IC-GN for one POI (direct ZNSSD formulas, no precomputed sums): reference.
 
     Returns ``(p, zncc, iterations, converged)``; ``p`` as in the kernels (translation
@@ -199,8 +222,12 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
             pp = float(prev @ prev)
             dot = float(dp @ prev)
             rho = dot / pp if pp > 0 else 0.0
-            if (step_gain and pp > 0 and 0.3 < rho < 0.97
-                    and dot * dot > 0.9025 * float(dp @ dp) * pp):
+            if (
+                step_gain
+                and pp > 0
+                and 0.3 < rho < 0.97
+                and dot * dot > 0.9025 * float(dp @ dp) * pp
+            ):
                 gain, prev = 1.0 / (1.0 - rho), np.zeros(2)
             else:
                 prev = dp.copy()
@@ -212,8 +239,7 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
             pp, dot = float(b @ b), float(a @ b)
             rho = dot / pp if pp > 0 else 0.0
             gain = 1.0
-            if (step_gain and pp > 0 and 0.3 < rho < 0.97
-                    and dot * dot > 0.9025 * float(a @ a) * pp):
+            if step_gain and pp > 0 and 0.3 < rho < 0.97 and dot * dot > 0.9025 * float(a @ a) * pp:
                 gain, prev6 = 1.0 / (1.0 - rho), np.zeros(6)
             else:
                 prev6 = dp.copy()
@@ -221,9 +247,13 @@ def icgn_reference(ref: NDArray[np.float64], gx: NDArray[np.float64],
         if shape == "translation":
             norm = float(np.hypot(dp[0], dp[1]))
         else:
-            norm = float(np.sqrt(dp[0] ** 2 + dp[3] ** 2
-                                 + half ** 2 * (dp[1] ** 2 + dp[2] ** 2 + dp[4] ** 2
-                                                + dp[5] ** 2)))
+            norm = float(
+                np.sqrt(
+                    dp[0] ** 2
+                    + dp[3] ** 2
+                    + half**2 * (dp[1] ** 2 + dp[2] ** 2 + dp[4] ** 2 + dp[5] ** 2)
+                )
+            )
         if norm < tolerance:
             return p, zncc, it + 1, True
         # stall test, as the kernels (kernels.STALL_ITERATIONS)

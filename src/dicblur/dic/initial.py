@@ -31,8 +31,9 @@ def _window(shape: tuple[int, int], window: int) -> tuple[slice, slice]:
     return slice(r0, r0 + wr), slice(c0, c0 + wc)
 
 
-def window_spectrum(image: NDArray[np.floating], *, window: int = 128,
-                    workers: int | None = None) -> NDArray[np.complex64]:
+def window_spectrum(
+    image: NDArray[np.floating], *, window: int = 128, workers: int | None = None
+) -> NDArray[np.complex64]:
     """Spectrum of the Hann-tapered, mean-free central ``window`` x ``window`` region of
     ``image`` (clipped to the image): the reference half of :func:`global_shift`, computed
     once per reference by :class:`~dicblur.dic.Correlator`."""
@@ -42,10 +43,14 @@ def window_spectrum(image: NDArray[np.floating], *, window: int = 128,
     return np.asarray(sfft.rfft2((a - a.mean()) * taper, workers=workers))
 
 
-def global_shift(reference: NDArray[np.floating], current: NDArray[np.floating], *,
-                 window: int = 128, workers: int | None = None,
-                 reference_spectrum: NDArray[np.complex64] | None = None,
-                 ) -> tuple[int, int, float]:
+def global_shift(
+    reference: NDArray[np.floating],
+    current: NDArray[np.floating],
+    *,
+    window: int = 128,
+    workers: int | None = None,
+    reference_spectrum: NDArray[np.complex64] | None = None,
+) -> tuple[int, int, float]:
     """Integer rigid shift ``(u, v)`` of ``current`` against ``reference`` (px).
 
     Phase correlation of the central ``window`` x ``window`` region (clipped to the image,
@@ -61,8 +66,11 @@ def global_shift(reference: NDArray[np.floating], current: NDArray[np.floating],
     peak : float
         Height of the phase-correlation peak (0..1; near 0 means no common texture).
     """
-    fa = (window_spectrum(reference, window=window, workers=workers)
-          if reference_spectrum is None else reference_spectrum)
+    fa = (
+        window_spectrum(reference, window=window, workers=workers)
+        if reference_spectrum is None
+        else reference_spectrum
+    )
     fb = window_spectrum(current, window=window, workers=workers)
     wr, wc = (s.stop - s.start for s in _window(current.shape, window))
     cross = fb * np.conj(fa)
@@ -75,12 +83,19 @@ def global_shift(reference: NDArray[np.floating], current: NDArray[np.floating],
     return u, v, float(corr.flat[idx])
 
 
-def subset_fftcc(reference: NDArray[np.floating], current: NDArray[np.floating],
-                 rows: NDArray[np.intp], cols: NDArray[np.intp], half: int, *,
-                 guess_u: NDArray[np.floating] | None = None,
-                 guess_v: NDArray[np.floating] | None = None, search: int | None = None,
-                 chunk: int = 256, workers: int | None = None,
-                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+def subset_fftcc(
+    reference: NDArray[np.floating],
+    current: NDArray[np.floating],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    half: int,
+    *,
+    guess_u: NDArray[np.floating] | None = None,
+    guess_v: NDArray[np.floating] | None = None,
+    search: int | None = None,
+    chunk: int = 256,
+    workers: int | None = None,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """Per-subset integer displacement by ZNCC over a +-``search`` px window.
 
     Parameters
@@ -127,7 +142,7 @@ def subset_fftcc(reference: NDArray[np.floating], current: NDArray[np.floating],
         ri = np.arange(size)
         fsub = ref[(r[:, None] - half + ri)[:, :, None], (c[:, None] - half + ri)[:, None, :]]
         fsub = fsub - fsub.mean(axis=(1, 2), keepdims=True)
-        fnorm = np.sqrt((fsub ** 2).sum(axis=(1, 2)))
+        fnorm = np.sqrt((fsub**2).sum(axis=(1, 2)))
         wi = np.arange(win)
         top = r + gv[sl] - half - s
         left = c + gu[sl] - half - s
@@ -136,20 +151,24 @@ def subset_fftcc(reference: NDArray[np.floating], current: NDArray[np.floating],
         gwin = cur[ry[:, :, None], rx[:, None, :]]
         ff = sfft.rfft2(fsub, s=(L, L), workers=workers)
         fg = sfft.rfft2(gwin, s=(L, L), workers=workers)
-        num = sfft.irfft2(fg * np.conj(ff), s=(L, L), workers=workers)[:, :2 * s + 1, :2 * s + 1]
+        num = sfft.irfft2(fg * np.conj(ff), s=(L, L), workers=workers)[:, : 2 * s + 1, : 2 * s + 1]
         # local energy of each candidate current subset by summed-area tables
         sat = np.zeros((m, win + 1, win + 1))
         sat[:, 1:, 1:] = gwin.cumsum(1).cumsum(2)
         sat2 = np.zeros((m, win + 1, win + 1))
-        sat2[:, 1:, 1:] = (gwin ** 2).cumsum(1).cumsum(2)
+        sat2[:, 1:, 1:] = (gwin**2).cumsum(1).cumsum(2)
 
         def box(t: NDArray[np.float64]) -> NDArray[np.float64]:
-            return (t[:, size:, size:] - t[:, :-size, size:] - t[:, size:, :-size]
-                    + t[:, :-size, :-size])
+            return (
+                t[:, size:, size:]
+                - t[:, :-size, size:]
+                - t[:, size:, :-size]
+                + t[:, :-size, :-size]
+            )
 
         s1 = box(sat)
         s2 = box(sat2)
-        var = np.maximum(s2 - s1 ** 2 / npx, 0.0)
+        var = np.maximum(s2 - s1**2 / npx, 0.0)
         den = np.sqrt(var) * fnorm[:, None, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             zn = np.where(den > 0, num / np.where(den > 0, den, 1.0), -np.inf)

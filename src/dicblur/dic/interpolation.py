@@ -59,7 +59,7 @@ def bspline_kernel(x: ArrayLike, order: int) -> NDArray[np.float64]:
     out = np.zeros_like(x)
     for j in range(order + 2):
         shifted = np.maximum(0.0, x + (order + 1) / 2 - j)
-        out += (-1) ** j * math.comb(order + 1, j) * shifted ** order
+        out += (-1) ** j * math.comb(order + 1, j) * shifted**order
     return out / math.factorial(order)
 
 
@@ -84,12 +84,14 @@ def prefilter_reference(image: ArrayLike, order: int) -> NDArray[np.float64]:
 
     Plain reference for :func:`bspline_coefficients` (float64, unpadded).
     """
-    return ndimage.spline_filter(np.asarray(image, dtype=np.float64), order=order,
-                                 mode="mirror")
+    return ndimage.spline_filter(np.asarray(image, dtype=np.float64), order=order, mode="mirror")
 
 
 def bspline_coefficients(
-    image: ArrayLike, *, order: int = 3, dtype: type = np.float32,
+    image: ArrayLike,
+    *,
+    order: int = 3,
+    dtype: type = np.float32,
     out: NDArray[np.floating] | None = None,
 ) -> NDArray[np.floating]:
     """Padded B-spline coefficients of ``image`` (compiled recursive prefilter).
@@ -112,8 +114,7 @@ def bspline_coefficients(
         margin holds the mirror-symmetric continuation (whole-sample symmetry).
     """
     if order not in (3, 5):
-        raise InputError(f"order={order}: the B-spline order must be 3 or 5 (bspline3 or "
-                         "bspline5)")
+        raise InputError(f"order={order}: the B-spline order must be 3 or 5 (bspline3 or bspline5)")
     img: NDArray[np.floating] = np.asarray(image)
     if img.dtype not in (np.float32, np.float64):
         img = img.astype(np.float64)
@@ -122,8 +123,10 @@ def bspline_coefficients(
     if out is None:
         out = np.empty(shape, dtype=dtype)
     elif out.shape != shape or out.dtype != np.dtype(dtype):
-        raise InputError(f"out: expected an array of shape {shape} and dtype "
-                         f"{np.dtype(dtype)}; pass out=None to allocate one")
+        raise InputError(
+            f"out: expected an array of shape {shape} and dtype "
+            f"{np.dtype(dtype)}; pass out=None to allocate one"
+        )
     kernels.prefilter_padded(img, order, out)
     return out
 
@@ -152,8 +155,13 @@ def bspline_gradients(
 
 
 def bspline_at_offset(
-    coeffs: NDArray[np.floating], order: int, shape: tuple[int, int], oy: float, ox: float,
-    *, values: bool = True,
+    coeffs: NDArray[np.floating],
+    order: int,
+    shape: tuple[int, int],
+    oy: float,
+    ox: float,
+    *,
+    values: bool = True,
 ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64], NDArray[np.float64]]:
     """The spline and its exact derivatives at every pixel moved by ``(oy, ox)``.
 
@@ -182,8 +190,10 @@ def bspline_at_offset(
     ks = range(-(order - 1) // 2, (order + 1) // 2 + 1)
 
     def taps(t: float) -> tuple[list[float], list[float]]:
-        return ([float(bspline_kernel(t - k, order)) for k in ks],
-                [float(bspline_kernel_derivative(t - k, order)) for k in ks])
+        return (
+            [float(bspline_kernel(t - k, order)) for k in ks],
+            [float(bspline_kernel_derivative(t - k, order)) for k in ks],
+        )
 
     vy, dy = taps(oy - iy)
     vx, dx = taps(ox - ix)
@@ -191,17 +201,17 @@ def bspline_at_offset(
     val_r = np.zeros((rows, c.shape[1]))
     der_r = np.zeros((rows, c.shape[1]))
     for k, a, b in zip(ks, vy, dy, strict=True):
-        band = c[r0 + k:r0 + k + rows, :]
+        band = c[r0 + k : r0 + k + rows, :]
         val_r += a * band
         der_r += b * band
     h = np.zeros(shape) if values else None
     gy = np.zeros(shape)
     gx = np.zeros(shape)
     for k, a, b in zip(ks, vx, dx, strict=True):
-        cv = val_r[:, c0 + k:c0 + k + cols]
+        cv = val_r[:, c0 + k : c0 + k + cols]
         if h is not None:
             h += a * cv
-        gy += a * der_r[:, c0 + k:c0 + k + cols]
+        gy += a * der_r[:, c0 + k : c0 + k + cols]
         gx += b * cv
     return h, gy, gx
 

@@ -34,8 +34,17 @@ import numpy as np
 
 from .status import PointStatus
 
-__all__ = ["PAD", "STALL_ITERATIONS", "flat_lengths", "flat_width", "icgn_affine",
-           "icgn_translation", "pack_reference", "prefilter_padded", "weights"]
+__all__ = [
+    "PAD",
+    "STALL_ITERATIONS",
+    "flat_lengths",
+    "flat_width",
+    "icgn_affine",
+    "icgn_translation",
+    "pack_reference",
+    "prefilter_padded",
+    "weights",
+]
 
 #: Margin (px) of mirrored coefficients around the image (quintic needs 3 taps + 1).
 PAD = 4
@@ -62,10 +71,12 @@ _FASTMATH = {"contract", "arcp", "nsz", "reassoc", "afn"}  # a set: numba takes 
 
 # Poles of the B-spline prefilters (Unser 1999, Table I).
 _POLES3 = np.array([math.sqrt(3.0) - 2.0])
-_POLES5 = np.array([
-    math.sqrt(135.0 / 2.0 - math.sqrt(17745.0 / 4.0)) + math.sqrt(105.0 / 4.0) - 13.0 / 2.0,
-    math.sqrt(135.0 / 2.0 + math.sqrt(17745.0 / 4.0)) - math.sqrt(105.0 / 4.0) - 13.0 / 2.0,
-])
+_POLES5 = np.array(
+    [
+        math.sqrt(135.0 / 2.0 - math.sqrt(17745.0 / 4.0)) + math.sqrt(105.0 / 4.0) - 13.0 / 2.0,
+        math.sqrt(135.0 / 2.0 + math.sqrt(17745.0 / 4.0)) - math.sqrt(105.0 / 4.0) - 13.0 / 2.0,
+    ]
+)
 
 
 @nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
@@ -235,7 +246,7 @@ def prefilter_padded(image: np.ndarray, order: int, out: np.ndarray) -> None:
     poles = _POLES3 if order == 3 else _POLES5
     tol = 1e-7 if out.dtype == np.float32 else 1e-14
     rows, cols = image.shape
-    centre = out[PAD:PAD + rows, PAD:PAD + cols]
+    centre = out[PAD : PAD + rows, PAD : PAD + cols]
     _filter_axis1(image, centre, poles, tol)  # along x (columns), no transpose
     _filter_axis0(centre, poles, tol)  # along y (rows), in place, vectorised across columns
     _fill_margin(out, rows, cols, PAD)
@@ -260,8 +271,14 @@ def _beta5(x):  # pragma: no cover - compiled
         return 0.55 - 0.5 * a2 + 0.25 * a2 * a2 - a2 * a2 * a / 12.0
     if a < 2.0:
         a2 = a * a
-        return (17.0 / 40.0 + 0.625 * a - 1.75 * a2 + 1.25 * a2 * a - 0.375 * a2 * a2
-                + a2 * a2 * a / 24.0)
+        return (
+            17.0 / 40.0
+            + 0.625 * a
+            - 1.75 * a2
+            + 1.25 * a2 * a
+            - 0.375 * a2 * a2
+            + a2 * a2 * a / 24.0
+        )
     if a < 3.0:
         b = 3.0 - a
         return b * b * b * b * b / 120.0
@@ -299,8 +316,9 @@ def _beta(x, order):  # pragma: no cover - compiled
     q3 = p3 * p3
     q2 = p2 * p2
     q1 = p1 * p1
-    return (q3 * q3 * p3 - np.float32(6.0) * q2 * q2 * p2
-            + np.float32(15.0) * q1 * q1 * p1) * np.float32(1.0 / 120.0)
+    return (
+        q3 * q3 * p3 - np.float32(6.0) * q2 * q2 * p2 + np.float32(15.0) * q1 * q1 * p1
+    ) * np.float32(1.0 / 120.0)
 
 
 @nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
@@ -335,8 +353,9 @@ def _beta3d(x):  # pragma: no cover - compiled
 # Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
 # their fixed-width (tw, a multiple of 16) loops; inlined into the parfor body they were not.
 @nb.njit(fastmath=_FASTMATH, cache=True)
-def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
-                     grow):  # pragma: no cover
+def _row_affine_fast(
+    coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow, grow
+):  # pragma: no cover
     tw = grow.shape[0]
     sten = order + 2
     lo = (order - 1) // 2
@@ -356,7 +375,7 @@ def _row_affine_fast(coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wy
         for j in range(tw):
             hrow[j] = 0.0
         for b in range(sten):
-            row = coef[rb + a, cb + b:cb + b + tw]
+            row = coef[rb + a, cb + b : cb + b + tw]
             wxb = wxs[b]
             for j in range(tw):
                 hrow[j] += wxb[j] * row[j]
@@ -382,18 +401,19 @@ def _w5(t):  # pragma: no cover - compiled
 
 
 @nb.njit(fastmath=_FASTMATH, cache=True)
-def _row_affine_cubic(coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy, r,
-                      c0):  # pragma: no cover
+def _row_affine_cubic(
+    coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy, r, c0
+):  # pragma: no cover
     """Cubic affine fast path, one row: 5x5 stencil at contiguous memory, fused sums."""
     tw = mask.shape[0]
-    q0 = coef[rb, cb:cb + tw + 4]
-    q1 = coef[rb + 1, cb:cb + tw + 4]
-    q2 = coef[rb + 2, cb:cb + tw + 4]
-    q3 = coef[rb + 3, cb:cb + tw + 4]
-    q4 = coef[rb + 4, cb:cb + tw + 4]
-    fr = f[r, c0:c0 + tw]
-    gxr = gx[r, c0:c0 + tw]
-    gyr = gy[r, c0:c0 + tw]
+    q0 = coef[rb, cb : cb + tw + 4]
+    q1 = coef[rb + 1, cb : cb + tw + 4]
+    q2 = coef[rb + 2, cb : cb + tw + 4]
+    q3 = coef[rb + 3, cb : cb + tw + 4]
+    q4 = coef[rb + 4, cb : cb + tw + 4]
+    fr = f[r, c0 : c0 + tw]
+    gxr = gx[r, c0 : c0 + tw]
+    gyr = gy[r, c0 : c0 + tw]
     s0 = np.float32(0.0)
     s1 = np.float32(0.0)
     s2 = np.float32(0.0)
@@ -426,9 +446,9 @@ def _row_affine_cubic(coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy,
 def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
     """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
     tw = grow.shape[0]
-    fr = f[r, c0:c0 + tw]
-    gxr = gx[r, c0:c0 + tw]
-    gyr = gy[r, c0:c0 + tw]
+    fr = f[r, c0 : c0 + tw]
+    gxr = gx[r, c0 : c0 + tw]
+    gyr = gy[r, c0 : c0 + tw]
     s0 = np.float32(0.0)
     s1 = np.float32(0.0)
     s2 = np.float32(0.0)
@@ -512,20 +532,33 @@ def _load_reference(f, gx, gy, fmean, r0, c0, size, w, fp, gxp, gyp):  # pragma:
 
 
 @nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
-def pack_reference(f, gx, gy, fmean, rows, cols, half, w, status, fpk, gxpk,
-                   gypk):  # pragma: no cover - compiled
+def pack_reference(
+    f, gx, gy, fmean, rows, cols, half, w, status, fpk, gxpk, gypk
+):  # pragma: no cover - compiled
     """Flat reference subsets of all POIs (rows of ``fpk``, ``gxpk``, ``gypk``, shape
     (n, ng)) for :func:`icgn_translation`, prepared once with the reference."""
     size = 2 * half + 1
     for k in nb.prange(rows.shape[0]):
         if status[k] == 0:
-            _load_reference(f, gx, gy, fmean[k], rows[k] - half, cols[k] - half, size, w,
-                            fpk[k], gxpk[k], gypk[k])
+            _load_reference(
+                f,
+                gx,
+                gy,
+                fmean[k],
+                rows[k] - half,
+                cols[k] - half,
+                size,
+                w,
+                fpk[k],
+                gxpk[k],
+                gypk[k],
+            )
 
 
 @nb.njit(fastmath=_FASTMATH, cache=True)
-def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, maskf, fp,
-                      gxp, gyp):  # pragma: no cover
+def _sums_translation(
+    coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, maskf, fp, gxp, gyp
+):  # pragma: no cover
     """The five sums of one translation IC-GN iteration over the flat subset.
 
     ``g = sum_a wy_a sum_b wx_b c[rb + row + a, cb + col + b] - off``; returns
@@ -546,9 +579,9 @@ def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, m
     # horizontal taps along the flat rows: output columns < size never read across a row end
     # because w >= size + order
     c0 = cbuf[0:nh]
-    c1 = cbuf[1:nh + 1]
-    c2 = cbuf[2:nh + 2]
-    c3 = cbuf[3:nh + 3]
+    c1 = cbuf[1 : nh + 1]
+    c2 = cbuf[2 : nh + 2]
+    c3 = cbuf[3 : nh + 3]
     b0 = wxf[0]
     b1 = wxf[1]
     b2 = wxf[2]
@@ -557,22 +590,21 @@ def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, m
         for i in range(nh):
             hbuf[i] = b0 * c0[i] + b1 * c1[i] + b2 * c2[i] + b3 * c3[i]
     else:
-        c4 = cbuf[4:nh + 4]
-        c5 = cbuf[5:nh + 5]
+        c4 = cbuf[4 : nh + 4]
+        c5 = cbuf[5 : nh + 5]
         b4 = wxf[4]
         b5 = wxf[5]
         for i in range(nh):
-            hbuf[i] = (b0 * c0[i] + b1 * c1[i] + b2 * c2[i] + b3 * c3[i] + b4 * c4[i]
-                       + b5 * c5[i])
+            hbuf[i] = b0 * c0[i] + b1 * c1[i] + b2 * c2[i] + b3 * c3[i] + b4 * c4[i] + b5 * c5[i]
     s0 = np.float32(0.0)
     s1 = np.float32(0.0)
     s2 = np.float32(0.0)
     s3 = np.float32(0.0)
     s4 = np.float32(0.0)
     h0 = hbuf[0:ng]
-    h1 = hbuf[w:w + ng]
-    h2 = hbuf[2 * w:2 * w + ng]
-    h3 = hbuf[3 * w:3 * w + ng]
+    h1 = hbuf[w : w + ng]
+    h2 = hbuf[2 * w : 2 * w + ng]
+    h3 = hbuf[3 * w : 3 * w + ng]
     a0 = wyf[0]
     a1 = wyf[1]
     a2 = wyf[2]
@@ -587,13 +619,12 @@ def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, m
             s3 += gyp[i] * gm
             s4 += fp[i] * gm
     else:
-        h4 = hbuf[4 * w:4 * w + ng]
-        h5 = hbuf[5 * w:5 * w + ng]
+        h4 = hbuf[4 * w : 4 * w + ng]
+        h5 = hbuf[5 * w : 5 * w + ng]
         a4 = wyf[4]
         a5 = wyf[5]
         for i in range(ng):
-            g = (a0 * h0[i] + a1 * h1[i] + a2 * h2[i] + a3 * h3[i] + a4 * h4[i] + a5 * h5[i]
-                 - off)
+            g = a0 * h0[i] + a1 * h1[i] + a2 * h2[i] + a3 * h3[i] + a4 * h4[i] + a5 * h5[i] - off
             gm = g * maskf[i]
             s0 += gm
             s1 += gm * g
@@ -604,10 +635,47 @@ def _sums_translation(coef, rb, cb, order, size, w, wxf, wyf, cbuf, hbuf, off, m
 
 
 @nb.njit(fastmath=_FASTMATH, cache=True)
-def _points_translation(todo, m0, m1, source, p0, status_in, coef, himg, wimg, order, w, f,
-                        gx, gy, rows, cols, half, hinv, jsum, avec, fmean, fnorm, max_iter,
-                        tol, min_zncc, max_step, maskf, cbuf, hbuf, fps, gxps, gyps, fpk, gxpk,
-                        gypk, out_p, out_zncc, out_iter, out_status):  # pragma: no cover
+def _points_translation(
+    todo,
+    m0,
+    m1,
+    source,
+    p0,
+    status_in,
+    coef,
+    himg,
+    wimg,
+    order,
+    w,
+    f,
+    gx,
+    gy,
+    rows,
+    cols,
+    half,
+    hinv,
+    jsum,
+    avec,
+    fmean,
+    fnorm,
+    max_iter,
+    tol,
+    min_zncc,
+    max_step,
+    maskf,
+    cbuf,
+    hbuf,
+    fps,
+    gxps,
+    gyps,
+    fpk,
+    gxpk,
+    gypk,
+    out_p,
+    out_zncc,
+    out_iter,
+    out_status,
+):  # pragma: no cover
     """IC-GN translation of the POIs ``todo[m0:m1]`` (see :func:`icgn_translation`): one call
     per chunk of POIs keeps the call overhead of the many array arguments off each POI."""
     packed = fpk.shape[0] > 0
@@ -635,22 +703,130 @@ def _points_translation(todo, m0, m1, source, p0, status_in, coef, himg, wimg, o
                 u = out_p[s, 0]
                 v = out_p[s, 1]
         if packed:
-            _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, cols,
-                               half, hinv, jsum, avec, fmean, fnorm, max_iter, tol, min_zncc,
-                               max_step, maskf, wx, wy, wxf, wyf, cbuf, hbuf, fpk[k], gxpk[k],
-                               gypk[k], False, out_p, out_zncc, out_iter, out_status)
+            _point_translation(
+                k,
+                u,
+                v,
+                coef,
+                himg,
+                wimg,
+                order,
+                w,
+                f,
+                gx,
+                gy,
+                rows,
+                cols,
+                half,
+                hinv,
+                jsum,
+                avec,
+                fmean,
+                fnorm,
+                max_iter,
+                tol,
+                min_zncc,
+                max_step,
+                maskf,
+                wx,
+                wy,
+                wxf,
+                wyf,
+                cbuf,
+                hbuf,
+                fpk[k],
+                gxpk[k],
+                gypk[k],
+                False,
+                out_p,
+                out_zncc,
+                out_iter,
+                out_status,
+            )
         else:
-            _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, cols,
-                               half, hinv, jsum, avec, fmean, fnorm, max_iter, tol, min_zncc,
-                               max_step, maskf, wx, wy, wxf, wyf, cbuf, hbuf, fps, gxps, gyps,
-                               True, out_p, out_zncc, out_iter, out_status)
+            _point_translation(
+                k,
+                u,
+                v,
+                coef,
+                himg,
+                wimg,
+                order,
+                w,
+                f,
+                gx,
+                gy,
+                rows,
+                cols,
+                half,
+                hinv,
+                jsum,
+                avec,
+                fmean,
+                fnorm,
+                max_iter,
+                tol,
+                min_zncc,
+                max_step,
+                maskf,
+                wx,
+                wy,
+                wxf,
+                wyf,
+                cbuf,
+                hbuf,
+                fps,
+                gxps,
+                gyps,
+                True,
+                out_p,
+                out_zncc,
+                out_iter,
+                out_status,
+            )
 
 
 @nb.njit(fastmath=_FASTMATH, cache=True)
-def _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, cols, half,
-                       hinv, jsum, avec, fmean, fnorm, max_iter, tol, min_zncc, max_step,
-                       maskf, wx, wy, wxf, wyf, cbuf, hbuf, fp, gxp, gyp, load, out_p,
-                       out_zncc, out_iter, out_status):  # pragma: no cover - compiled
+def _point_translation(
+    k,
+    u,
+    v,
+    coef,
+    himg,
+    wimg,
+    order,
+    w,
+    f,
+    gx,
+    gy,
+    rows,
+    cols,
+    half,
+    hinv,
+    jsum,
+    avec,
+    fmean,
+    fnorm,
+    max_iter,
+    tol,
+    min_zncc,
+    max_step,
+    maskf,
+    wx,
+    wy,
+    wxf,
+    wyf,
+    cbuf,
+    hbuf,
+    fp,
+    gxp,
+    gyp,
+    load,
+    out_p,
+    out_zncc,
+    out_iter,
+    out_status,
+):  # pragma: no cover - compiled
     """IC-GN translation of POI ``k`` started at ``(u, v)``; writes row ``k`` of the
     outputs."""
     size = 2 * half + 1
@@ -674,8 +850,9 @@ def _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, col
     for it in range(max_iter):
         x0 = c0 + u
         y0 = r0 + v
-        if not (x0 >= 0.0 and y0 >= 0.0 and x0 + 2 * half <= wimg - 1
-                and y0 + 2 * half <= himg - 1):
+        if not (
+            x0 >= 0.0 and y0 >= 0.0 and x0 + 2 * half <= wimg - 1 and y0 + 2 * half <= himg - 1
+        ):
             st = _OUT_OF_BOUNDS
             break
         ix = int(math.floor(x0))
@@ -685,9 +862,23 @@ def _point_translation(k, u, v, coef, himg, wimg, order, w, f, gx, gy, rows, col
         for a in range(taps):
             wxf[a] = wx[a]
             wyf[a] = wy[a]
-        sg, sgg, sx, sy, sfc = _sums_translation(coef, iy - lo + PAD, ix - lo + PAD, order,
-                                                 size, w, wxf, wyf, cbuf, hbuf, off, maskf,
-                                                 fp, gxp, gyp)
+        sg, sgg, sx, sy, sfc = _sums_translation(
+            coef,
+            iy - lo + PAD,
+            ix - lo + PAD,
+            order,
+            size,
+            w,
+            wxf,
+            wyf,
+            cbuf,
+            hbuf,
+            off,
+            maskf,
+            fp,
+            gxp,
+            gyp,
+        )
         gm = sg / npx
         dg2 = sgg - npx * gm * gm
         if not dg2 > 1e-12 * (sgg + 1e-30):
@@ -759,10 +950,41 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
 
 
 @nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
-def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hinv, jsum,
-                     avec, fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
-                     first, second, source, nthr, fpk, gxpk, gypk, out_p, out_zncc,
-                     out_iter, out_status):  # pragma: no cover - compiled
+def icgn_translation(
+    coef,
+    himg,
+    wimg,
+    order,
+    f,
+    gx,
+    gy,
+    rows,
+    cols,
+    half,
+    w,
+    hinv,
+    jsum,
+    avec,
+    fmean,
+    fnorm,
+    p0,
+    status_in,
+    max_iter,
+    tol,
+    min_zncc,
+    max_step,
+    first,
+    second,
+    source,
+    nthr,
+    fpk,
+    gxpk,
+    gypk,
+    out_p,
+    out_zncc,
+    out_iter,
+    out_status,
+):  # pragma: no cover - compiled
     """IC-GN with the zero-order (translation) shape function, ZNSSD criterion.
 
     Parameters ``(u, v)`` px. Per POI: ``hinv`` (2, 2) inverse exact ZNSSD Gauss-Newton
@@ -805,17 +1027,78 @@ def icgn_translation(coef, himg, wimg, order, f, gx, gy, rows, cols, half, w, hi
         nch = (todo.shape[0] + chunk - 1) // chunk
         for c in nb.prange(nch):
             t = nb.get_thread_id()
-            _points_translation(todo, c * chunk, min(todo.shape[0], (c + 1) * chunk), src, p0,
-                                status_in, coef, himg, wimg, order, w, f, gx, gy, rows, cols,
-                                half, hinv, jsum, avec, fmean, fnorm, max_iter, tol, min_zncc,
-                                max_step, maskf, cbufs[t], hbufs[t], fps[t], gxps[t], gyps[t],
-                                fpk, gxpk, gypk, out_p, out_zncc, out_iter, out_status)
+            _points_translation(
+                todo,
+                c * chunk,
+                min(todo.shape[0], (c + 1) * chunk),
+                src,
+                p0,
+                status_in,
+                coef,
+                himg,
+                wimg,
+                order,
+                w,
+                f,
+                gx,
+                gy,
+                rows,
+                cols,
+                half,
+                hinv,
+                jsum,
+                avec,
+                fmean,
+                fnorm,
+                max_iter,
+                tol,
+                min_zncc,
+                max_step,
+                maskf,
+                cbufs[t],
+                hbufs[t],
+                fps[t],
+                gxps[t],
+                gyps[t],
+                fpk,
+                gxpk,
+                gypk,
+                out_p,
+                out_zncc,
+                out_iter,
+                out_status,
+            )
 
 
 @nb.njit(parallel=True, fastmath=_FASTMATH, cache=True)
-def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, jsum, avec,
-                fmean, fnorm, p0, status_in, max_iter, tol, min_zncc, max_step,
-                out_p, out_zncc, out_iter, out_status):  # pragma: no cover - compiled
+def icgn_affine(
+    coef,
+    himg,
+    wimg,
+    order,
+    f,
+    gx,
+    gy,
+    rows,
+    cols,
+    half,
+    tw,
+    hinv,
+    jsum,
+    avec,
+    fmean,
+    fnorm,
+    p0,
+    status_in,
+    max_iter,
+    tol,
+    min_zncc,
+    max_step,
+    out_p,
+    out_zncc,
+    out_iter,
+    out_status,
+):  # pragma: no cover - compiled
     """IC-GN with the first-order (affine) shape function, ZNSSD criterion.
 
     Parameters ``p = (u, du/dx, du/dy, v, dv/dx, dv/dy)``; the warp of a subset pixel at
@@ -889,8 +1172,12 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                         oxmax = max(oxmax, ox)
                         oymin = min(oymin, oy)
                         oymax = max(oymax, oy)
-                        if not (xc + cx + ox >= 0.0 and yc + cy + oy >= 0.0
-                                and xc + cx + ox <= wimg - 1 and yc + cy + oy <= himg - 1):
+                        if not (
+                            xc + cx + ox >= 0.0
+                            and yc + cy + oy >= 0.0
+                            and xc + cx + ox <= wimg - 1
+                            and yc + cy + oy <= himg - 1
+                        ):
                             inside = False
                 if not inside:
                     st = _OUT_OF_BOUNDS
@@ -909,17 +1196,44 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                     dy = i - half
                     if fast and order == 3:
                         t0s, t1s, t2s, t3s, t4s, t5s, t6s = _row_affine_cubic(
-                            coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
-                            np.float32(p[0] + p[2] * dy - bx), np.float32(p[3] + p[5] * dy - by),
-                            p1, p4, dxs, off, mask, f, gx, gy, r0 + i, c0)
+                            coef,
+                            r0 + i + by - lo + PAD,
+                            c0 + bx - lo + PAD,
+                            np.float32(p[0] + p[2] * dy - bx),
+                            np.float32(p[3] + p[5] * dy - by),
+                            p1,
+                            p4,
+                            dxs,
+                            off,
+                            mask,
+                            f,
+                            gx,
+                            gy,
+                            r0 + i,
+                            c0,
+                        )
                     else:
                         if fast:
                             # offsets t in [0, 2) from the common integer base (bx, by)
                             tx0 = np.float32(p[0] + p[2] * dy - bx)
                             ty0 = np.float32(p[3] + p[5] * dy - by)
-                            _row_affine_fast(coef, r0 + i + by - lo + PAD, c0 + bx - lo + PAD,
-                                             order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow,
-                                             grow)
+                            _row_affine_fast(
+                                coef,
+                                r0 + i + by - lo + PAD,
+                                c0 + bx - lo + PAD,
+                                order,
+                                tx0,
+                                ty0,
+                                p1,
+                                p4,
+                                dxs,
+                                tx,
+                                ty,
+                                wxs,
+                                wys,
+                                hrow,
+                                grow,
+                            )
                         else:
                             for j in range(tw):
                                 grow[j] = 0.0
@@ -927,8 +1241,9 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                                 xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
                                 yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
                                 grow[j] = _sample(coef, order, yy, xx)
-                        t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(grow, off, mask, dxs, f, gx, gy,
-                                                                  r0 + i, c0)
+                        t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(
+                            grow, off, mask, dxs, f, gx, gy, r0 + i, c0
+                        )
                     sg += t0s
                     sgg += t1s
                     q[0] += t2s
@@ -1013,8 +1328,11 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                     st = _DIVERGED
                     break
                 # convergence on the plain (unscaled) Gauss-Newton step, as the translation
-                norm = math.sqrt(du0 * du0 + dv0 * dv0 + half * half * (
-                    dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0))
+                norm = math.sqrt(
+                    du0 * du0
+                    + dv0 * dv0
+                    + half * half * (dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0)
+                )
                 if norm < tol:
                     st = _CONVERGED
                     break
@@ -1023,9 +1341,14 @@ def icgn_affine(coef, himg, wimg, order, f, gx, gy, rows, cols, half, tw, hinv, 
                     ibest = it
                 elif it - ibest >= STALL_ITERATIONS:
                     break
-                if (abs(p[0] - p0[k, 0]) > max_step or abs(p[3] - p0[k, 3]) > max_step
-                        or abs(p[1]) > 0.5 or abs(p[2]) > 0.5 or abs(p[4]) > 0.5
-                        or abs(p[5]) > 0.5):
+                if (
+                    abs(p[0] - p0[k, 0]) > max_step
+                    or abs(p[3] - p0[k, 3]) > max_step
+                    or abs(p[1]) > 0.5
+                    or abs(p[2]) > 0.5
+                    or abs(p[4]) > 0.5
+                    or abs(p[5]) > 0.5
+                ):
                     st = _DIVERGED
                     break
             if st == _CONVERGED and not zn >= min_zncc:

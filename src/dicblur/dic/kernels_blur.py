@@ -49,8 +49,14 @@ def _bspline(x, order):  # pragma: no cover - compiled
         return 0.55 - 0.5 * a2 + 0.25 * a2 * a2 - a2 * a2 * a / 12.0
     if a < 2.0:
         a2 = a * a
-        return (17.0 / 40.0 + 0.625 * a - 1.75 * a2 + 1.25 * a2 * a - 0.375 * a2 * a2
-                + a2 * a2 * a / 24.0)
+        return (
+            17.0 / 40.0
+            + 0.625 * a
+            - 1.75 * a2
+            + 1.25 * a2 * a
+            - 0.375 * a2 * a2
+            + a2 * a2 * a / 24.0
+        )
     if a < 3.0:
         b = 3.0 - a
         return b * b * b * b * b / 120.0
@@ -80,10 +86,40 @@ def _sample(coef, order, y, x, wy, wx):  # pragma: no cover - compiled
 
 # reassociation only (vectorised sums); no 'nnan'/'ninf', so the finiteness checks stay
 @nb.njit(parallel=True, cache=True, fastmath={"reassoc", "contract", "arcp", "nsz"})
-def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, affine,
-                    hinv, fmean, fnorm, jsum, avec, evec, dsum, bval, dd, p_in, status_in,
-                    max_iter, tol, lam_tol, out_p, out_lam, out_z, out_res2, out_iter,
-                    out_status):  # pragma: no cover - compiled
+def joint_blur_step(
+    coef,
+    himg,
+    wimg,
+    order,
+    f,
+    gx,
+    gy,
+    dimg,
+    rows,
+    cols,
+    half,
+    affine,
+    hinv,
+    fmean,
+    fnorm,
+    jsum,
+    avec,
+    evec,
+    dsum,
+    bval,
+    dd,
+    p_in,
+    status_in,
+    max_iter,
+    tol,
+    lam_tol,
+    out_p,
+    out_lam,
+    out_z,
+    out_res2,
+    out_iter,
+    out_status,
+):  # pragma: no cover - compiled
     """Joint Gauss-Newton in the shape parameters and the blur-length correction ``lam``.
 
     Points with ``status_in != 0`` are copied through (``lam`` NaN). ``p`` as the IC-GN
@@ -235,10 +271,14 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
             zn0 = (sfg - fmean[pt] * sg) / (df * dg)
             zf = ((sfg + lam * q[k]) - (fmean[pt] + lam * dsum[pt] / npx) * sg) / (nf * dg)
             for m in range(k):
-                rhs[m] = (((q[m] - jsum[pt, m] * gm) / dg - avec[pt, m] * zn0)
-                          - lam * (evec[pt, m] - avec[pt, m] * bval[pt]) / nf) / df
-            rhs[k] = (((q[k] - dsum[pt] * gm) / dg - bval[pt] * zn0)
-                      - lam * (dd[pt] - bval[pt] * bval[pt]) / nf) / df
+                rhs[m] = (
+                    ((q[m] - jsum[pt, m] * gm) / dg - avec[pt, m] * zn0)
+                    - lam * (evec[pt, m] - avec[pt, m] * bval[pt]) / nf
+                ) / df
+            rhs[k] = (
+                ((q[k] - dsum[pt] * gm) / dg - bval[pt] * zn0)
+                - lam * (dd[pt] - bval[pt] * bval[pt]) / nf
+            ) / df
             for m in range(k + 1):
                 acc = 0.0
                 for l_ in range(k + 1):
@@ -269,8 +309,11 @@ def joint_blur_step(coef, himg, wimg, order, f, gx, gy, dimg, rows, cols, half, 
                 p[2] = m11 * i12 + m12 * i22
                 p[4] = m21 * i11 + m22 * i21
                 p[5] = m21 * i12 + m22 * i22 - 1.0
-                norm = math.sqrt(du * du + dv * dv + half * half * (
-                    dux * dux + duy * duy + dvx * dvx + dvy * dvy))
+                norm = math.sqrt(
+                    du * du
+                    + dv * dv
+                    + half * half * (dux * dux + duy * duy + dvx * dvx + dvy * dvy)
+                )
             else:
                 p[0] -= stp[0]
                 p[1] -= stp[1]

@@ -23,8 +23,14 @@ from numpy.typing import ArrayLike, NDArray
 from .._validation import check_positive, describe
 from ..errors import InputError
 
-__all__ = ["MEDIAN_EPS", "MEDIAN_THRESHOLD", "median_screen", "neighbour_median",
-           "neighbour_medians", "normalized_median_test"]
+__all__ = [
+    "MEDIAN_EPS",
+    "MEDIAN_THRESHOLD",
+    "median_screen",
+    "neighbour_median",
+    "neighbour_medians",
+    "normalized_median_test",
+]
 
 #: Default ``eps`` (px) of :func:`normalized_median_test` (Westerweel & Scarano 2005).
 MEDIAN_EPS = 0.1
@@ -39,16 +45,19 @@ def _grid(name: str, values: ArrayLike, shape: tuple[int, int]) -> NDArray[np.fl
         return a
     if a.shape == (n,):
         return a.reshape(shape)
-    raise InputError(f"{name}: shape {a.shape} does not match grid_shape {shape} (give "
-                     f"an array of shape {shape} or ({n},) in row-major order)")
+    raise InputError(
+        f"{name}: shape {a.shape} does not match grid_shape {shape} (give "
+        f"an array of shape {shape} or ({n},) in row-major order)"
+    )
 
 
 def _check_grid_shape(grid_shape: Any) -> tuple[int, int]:
     try:
         ny, nx = (int(s) for s in grid_shape)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"grid_shape={describe(grid_shape)}: expected (rows, cols) of the "
-                         "POI grid") from exc
+        raise InputError(
+            f"grid_shape={describe(grid_shape)}: expected (rows, cols) of the POI grid"
+        ) from exc
     if ny < 1 or nx < 1:
         raise InputError(f"grid_shape={describe(grid_shape)}: both sizes must be >= 1")
     return ny, nx
@@ -151,10 +160,16 @@ def _screen_kernel(a, ntest, ok, eps, thr, min_nb, within, flag, med):  # pragma
                         flag[y, x] = True
 
 
-def median_screen(values: ArrayLike, valid: ArrayLike, *, ntest: int = 2,
-                  eps: float = MEDIAN_EPS, threshold: float = MEDIAN_THRESHOLD,
-                  min_neighbours: int = 3, within: float | None = None
-                  ) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+def median_screen(
+    values: ArrayLike,
+    valid: ArrayLike,
+    *,
+    ntest: int = 2,
+    eps: float = MEDIAN_EPS,
+    threshold: float = MEDIAN_THRESHOLD,
+    min_neighbours: int = 3,
+    within: float | None = None,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
     """The normalised median test on components ``0..ntest-1`` of ``values`` (k, ny, nx)
     and the neighbour medians of all k components where they were needed.
 
@@ -176,21 +191,28 @@ def median_screen(values: ArrayLike, valid: ArrayLike, *, ntest: int = 2,
         w = -1.0
     flag = np.zeros(ok.shape, np.bool_)
     med = np.empty(a.shape)
-    _screen_kernel(a, int(ntest), ok, float(eps), float(threshold), int(min_neighbours),
-                   w, flag, med)
+    _screen_kernel(
+        a, int(ntest), ok, float(eps), float(threshold), int(min_neighbours), w, flag, med
+    )
     return flag, med
 
 
-def _medians(stack: NDArray[np.float64], ok: NDArray[np.bool_]
-             ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
+def _medians(
+    stack: NDArray[np.float64], ok: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
     """Neighbour medians of each component of ``stack`` (k, ny, nx) over the ``ok``
     points: ``(median, residual median, count)``, shapes (k, ny, nx), (k, ny, nx),
     (ny, nx)."""
     med = np.empty(stack.shape)
     res = np.empty(stack.shape)
     count = np.zeros(stack.shape[1:], np.intp)
-    _neighbour_medians(np.ascontiguousarray(stack, dtype=np.float64),
-                       np.ascontiguousarray(ok, dtype=np.bool_), med, res, count)
+    _neighbour_medians(
+        np.ascontiguousarray(stack, dtype=np.float64),
+        np.ascontiguousarray(ok, dtype=np.bool_),
+        med,
+        res,
+        count,
+    )
     return med, res, count
 
 
@@ -213,8 +235,7 @@ def _medians_at(a, ok, ys, xs, out):  # pragma: no cover - compiled
             out[c, m] = _sorted_median(buf, n) if n > 0 else np.nan
 
 
-def neighbour_medians(values: ArrayLike, valid: ArrayLike, at: ArrayLike
-                      ) -> NDArray[np.float64]:
+def neighbour_medians(values: ArrayLike, valid: ArrayLike, at: ArrayLike) -> NDArray[np.float64]:
     """Median of the valid 3x3 neighbours of some grid points, for each component.
 
     Parameters
@@ -240,9 +261,9 @@ def neighbour_medians(values: ArrayLike, valid: ArrayLike, at: ArrayLike
     return out
 
 
-def neighbour_median(values: ArrayLike, grid_shape: tuple[int, int], *,
-                     valid: ArrayLike | None = None
-                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
+def neighbour_median(
+    values: ArrayLike, grid_shape: tuple[int, int], *, valid: ArrayLike | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
     """Median of each point's valid 3x3 neighbours and of their residuals.
 
     Parameters
@@ -269,10 +290,16 @@ def neighbour_median(values: ArrayLike, grid_shape: tuple[int, int], *,
     return med[0], res[0], count
 
 
-def normalized_median_test(u: ArrayLike, v: ArrayLike, grid_shape: tuple[int, int], *,
-                           valid: ArrayLike | None = None, eps: float = MEDIAN_EPS,
-                           threshold: float = MEDIAN_THRESHOLD,
-                           min_neighbours: int = 3) -> NDArray[np.bool_]:
+def normalized_median_test(
+    u: ArrayLike,
+    v: ArrayLike,
+    grid_shape: tuple[int, int],
+    *,
+    valid: ArrayLike | None = None,
+    eps: float = MEDIAN_EPS,
+    threshold: float = MEDIAN_THRESHOLD,
+    min_neighbours: int = 3,
+) -> NDArray[np.bool_]:
     """Outliers of a displacement field on a regular POI grid (Westerweel & Scarano 2005).
 
     Parameters
@@ -309,13 +336,16 @@ def normalized_median_test(u: ArrayLike, v: ArrayLike, grid_shape: tuple[int, in
     va = _grid("v", v, shape)
     eps_f = check_positive(eps, "eps", allow_zero=True)
     thr = check_positive(threshold, "threshold")
-    if isinstance(min_neighbours, bool) or not isinstance(min_neighbours, int | np.integer) \
-            or not 1 <= min_neighbours <= 8:
-        raise InputError(f"min_neighbours={describe(min_neighbours)}: must be an integer "
-                         "in 1..8")
+    if (
+        isinstance(min_neighbours, bool)
+        or not isinstance(min_neighbours, int | np.integer)
+        or not 1 <= min_neighbours <= 8
+    ):
+        raise InputError(f"min_neighbours={describe(min_neighbours)}: must be an integer in 1..8")
     ok = np.isfinite(ua) & np.isfinite(va)
     if valid is not None:
         ok &= _grid("valid", np.asarray(valid, dtype=float), shape) > 0
-    out, _ = median_screen(np.stack([ua, va]), ok, eps=eps_f, threshold=thr,
-                           min_neighbours=int(min_neighbours))
+    out, _ = median_screen(
+        np.stack([ua, va]), ok, eps=eps_f, threshold=thr, min_neighbours=int(min_neighbours)
+    )
     return out if np.shape(u) == shape else out.ravel()

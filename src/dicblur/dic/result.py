@@ -87,8 +87,9 @@ class DICResult:
         """Number of POIs per status name."""
         return {s.name.lower(): int(np.count_nonzero(self.status == s)) for s in PointStatus}
 
-    def summary(self, *, true_u: float | None = None,
-                true_v: float | None = None) -> dict[str, Any]:
+    def summary(
+        self, *, true_u: float | None = None, true_v: float | None = None
+    ) -> dict[str, Any]:
         """Statistics over the converged POIs.
 
         Parameters
@@ -123,8 +124,10 @@ class DICResult:
         if self.predicted_sigma_u is not None and self.predicted_sigma_v is not None:
             out["predicted_sigma_u"] = _nanstat(np.mean, self.predicted_sigma_u[ok])
             out["predicted_sigma_v"] = _nanstat(np.mean, self.predicted_sigma_v[ok])
-        for name, truth, est, pred in (("u", true_u, u, self.predicted_sigma_u),
-                                       ("v", true_v, v, self.predicted_sigma_v)):
+        for name, truth, est, pred in (
+            ("u", true_u, u, self.predicted_sigma_u),
+            ("v", true_v, v, self.predicted_sigma_v),
+        ):
             if truth is None:
                 continue
             t = float(truth)
@@ -132,16 +135,16 @@ class DICResult:
                 raise InputError(f"true_{name}={truth!r}: must be a finite number (px)")
             err = est - t
             out[f"bias_{name}"] = _nanstat(np.mean, err)
-            out[f"rms_error_{name}"] = _nanstat(lambda a: np.sqrt(np.mean(a ** 2)), err)
+            out[f"rms_error_{name}"] = _nanstat(lambda a: np.sqrt(np.mean(a**2)), err)
             if pred is not None and err.size > 1:
                 out[f"normalised_std_{name}"] = float(np.std(err / pred[ok], ddof=1))
-        out.update({f"n_{k}": c for k, c in self.status_counts().items()
-                    if k != "converged"})
+        out.update({f"n_{k}": c for k, c in self.status_counts().items() if k != "converged"})
         return out
 
     def _param_names(self) -> tuple[str, ...]:
-        return PARAM_NAMES.get(self.params.shape[1],
-                               tuple(f"p{i}" for i in range(self.params.shape[1])))
+        return PARAM_NAMES.get(
+            self.params.shape[1], tuple(f"p{i}" for i in range(self.params.shape[1]))
+        )
 
     def to_xarray(self) -> Any:
         """The result as an :class:`xarray.Dataset` over dimension ``point``.
@@ -158,8 +161,11 @@ class DICResult:
             "params": (("point", "param"), self.params),
             "zncc": ("point", self.zncc),
             "iterations": ("point", self.iterations.astype(np.int32)),
-            "status": ("point", self.status, {
-                "legend": ", ".join(f"{s.value}={s.name}" for s in PointStatus)}),
+            "status": (
+                "point",
+                self.status,
+                {"legend": ", ".join(f"{s.value}={s.name}" for s in PointStatus)},
+            ),
         }
         if self.predicted_sigma_u is not None and self.predicted_sigma_v is not None:
             data["predicted_sigma_u"] = ("point", self.predicted_sigma_u, {"units": "px"})
@@ -169,14 +175,20 @@ class DICResult:
             data["blur_sigma"] = ("point", self.blur_sigma, {"units": "px"})
         if self.blur_identified is not None:
             data["blur_identified"] = ("point", self.blur_identified.astype(np.uint8))
-        attrs = {k: (v if isinstance(v, int | float | str) else str(v))
-                 for k, v in self.info.items() if v is not None}
+        attrs = {
+            k: (v if isinstance(v, int | float | str) else str(v))
+            for k, v in self.info.items()
+            if v is not None
+        }
         return xr.Dataset(
             data,
-            coords={"row": ("point", self.rows.astype(np.int32)),
-                    "col": ("point", self.cols.astype(np.int32)),
-                    "param": list(self._param_names())},
-            attrs=attrs)
+            coords={
+                "row": ("point", self.rows.astype(np.int32)),
+                "col": ("point", self.cols.astype(np.int32)),
+                "param": list(self._param_names()),
+            },
+            attrs=attrs,
+        )
 
     def to_csv(self, path: str | Path) -> None:
         """Write one row per POI (header: row, col, u, v, zncc, iterations, status,
@@ -196,23 +208,32 @@ class DICResult:
                 w = csv.writer(fh)
                 w.writerow(header)
                 for i in range(len(self)):
-                    row: list[Any] = [int(self.rows[i]), int(self.cols[i]),
-                                      repr(float(self.u[i])), repr(float(self.v[i])),
-                                      repr(float(self.zncc[i])), int(self.iterations[i]),
-                                      int(self.status[i]),
-                                      PointStatus(int(self.status[i])).name.lower()]
+                    row: list[Any] = [
+                        int(self.rows[i]),
+                        int(self.cols[i]),
+                        repr(float(self.u[i])),
+                        repr(float(self.v[i])),
+                        repr(float(self.zncc[i])),
+                        int(self.iterations[i]),
+                        int(self.status[i]),
+                        PointStatus(int(self.status[i])).name.lower(),
+                    ]
                     row += [repr(float(x)) for x in self.params[i]]
                     if pred:
                         assert self.predicted_sigma_u is not None
                         assert self.predicted_sigma_v is not None
-                        row += [repr(float(self.predicted_sigma_u[i])),
-                                repr(float(self.predicted_sigma_v[i]))]
+                        row += [
+                            repr(float(self.predicted_sigma_u[i])),
+                            repr(float(self.predicted_sigma_v[i])),
+                        ]
                     if blur:
                         assert self.blur_length is not None and self.blur_sigma is not None
-                        ident = (self.blur_identified is not None
-                                 and bool(self.blur_identified[i]))
-                        row += [repr(float(self.blur_length[i])),
-                                repr(float(self.blur_sigma[i])), int(ident)]
+                        ident = self.blur_identified is not None and bool(self.blur_identified[i])
+                        row += [
+                            repr(float(self.blur_length[i])),
+                            repr(float(self.blur_sigma[i])),
+                            int(ident),
+                        ]
                     w.writerow(row)
         except OSError as exc:
             raise StoreError(f"path={str(path)!r}: cannot write the CSV ({exc})") from exc

@@ -19,9 +19,7 @@ def as_vector(x: ArrayLike, name: str, n: int | None = None) -> NDArray[np.float
     if a.ndim != 1:
         raise InputError(f"{name}={describe(a)}: expected a 1-D array (one value per point)")
     if n is not None and a.size != n:
-        raise InputError(
-            f"{name}: {a.size} values but blur has {n}; give one value per blur level"
-        )
+        raise InputError(f"{name}: {a.size} values but blur has {n}; give one value per blur level")
     bad = ~np.isfinite(a)
     if bad.any():
         raise InputError(
@@ -31,8 +29,13 @@ def as_vector(x: ArrayLike, name: str, n: int | None = None) -> NDArray[np.float
     return a
 
 
-def as_blur(x: ArrayLike, name: str = "blur", *, increasing: bool = True,
-            groups: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+def as_blur(
+    x: ArrayLike,
+    name: str = "blur",
+    *,
+    increasing: bool = True,
+    groups: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
     w = as_vector(x, name)
     if w.size == 0:
         raise InputError(f"{name}: empty; give the blur lengths W (px) of the measurements")

@@ -222,8 +222,7 @@ def make_result(
         else:
             if ci == "bootstrap":
                 raise FitError(
-                    f"{model}: bootstrap failed (too few valid resamples); use "
-                    "ci='covariance'"
+                    f"{model}: bootstrap failed (too few valid resamples); use ci='covariance'"
                 )
             # neither works: say so with unbounded intervals rather than a false width
             method = "unidentified"
@@ -232,8 +231,9 @@ def make_result(
             high = np.full(p, np.inf)
     assert low is not None and high is not None and cov is not None
     if nonneg:
-        low = np.array([max(lo, 0.0) if nm in nonneg else lo
-                        for lo, nm in zip(low, names, strict=True)])
+        low = np.array(
+            [max(lo, 0.0) if nm in nonneg else lo for lo, nm in zip(low, names, strict=True)]
+        )
     return FitResult(
         model=model,
         names=names,
@@ -258,10 +258,16 @@ _MAX_COND = 1e12
 """Condition number of the column-scaled ``J^T J`` above which the covariance is degenerate."""
 
 
-def _wald(values: NDArray[np.float64], jac: NDArray[np.float64], s2: float,
-          names: tuple[str, ...], log_params: tuple[str, ...], nonneg: tuple[str, ...],
-          confidence: float, dof: int
-          ) -> tuple[Any, Any, Any]:
+def _wald(
+    values: NDArray[np.float64],
+    jac: NDArray[np.float64],
+    s2: float,
+    names: tuple[str, ...],
+    log_params: tuple[str, ...],
+    nonneg: tuple[str, ...],
+    confidence: float,
+    dof: int,
+) -> tuple[Any, Any, Any]:
     """Student-t intervals from ``s**2 (J^T J)^-1``; ``(None, None, None)`` if degenerate:
     a singular (column-scaled) ``J^T J``, a zero standard error, or a parameter bounded at
     0 whose interval reaches below it.
@@ -298,9 +304,15 @@ def _wald(values: NDArray[np.float64], jac: NDArray[np.float64], s2: float,
     return low, high, cov
 
 
-def _bootstrap(fit_once: Callable[[NDArray[np.intp]], tuple[NDArray[np.float64], ...]],
-               n: int, p: int, blur: NDArray[np.float64], confidence: float, n_boot: int,
-               seed: int | np.random.Generator | None) -> tuple[Any, Any, Any] | None:
+def _bootstrap(
+    fit_once: Callable[[NDArray[np.intp]], tuple[NDArray[np.float64], ...]],
+    n: int,
+    p: int,
+    blur: NDArray[np.float64],
+    confidence: float,
+    n_boot: int,
+    seed: int | np.random.Generator | None,
+) -> tuple[Any, Any, Any] | None:
     """Pairs bootstrap percentile intervals and covariance, or None if it fails."""
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     boots = []

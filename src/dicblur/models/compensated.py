@@ -41,29 +41,39 @@ from .pattern import PatternPrediction
 __all__ = ["predict_compensated"]
 
 
-def _points(img: NDArray[np.float64], subset: int, step: int | None,
-            points: ArrayLike | None) -> NDArray[np.intp]:
+def _points(
+    img: NDArray[np.float64], subset: int, step: int | None, points: ArrayLike | None
+) -> NDArray[np.intp]:
     half = subset // 2
     if points is None:
         if subset + 2 > min(img.shape):
             raise InputError(f"subset={subset}: larger than the image {img.shape} allows")
-        return np.asarray(subset_centres(img.shape, subset=subset, step=step or subset),
-                          dtype=np.intp)
+        return np.asarray(
+            subset_centres(img.shape, subset=subset, step=step or subset), dtype=np.intp
+        )
     pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
-        raise InputError(f"points={describe(pts)}: expected an (n, 2) array of (row, col) "
-                         "subset centres, n >= 2")
+        raise InputError(
+            f"points={describe(pts)}: expected an (n, 2) array of (row, col) subset centres, n >= 2"
+        )
     pts = pts.astype(np.intp)
-    inside = ((pts[:, 0] >= half) & (pts[:, 0] < img.shape[0] - half)
-              & (pts[:, 1] >= half) & (pts[:, 1] < img.shape[1] - half))
+    inside = (
+        (pts[:, 0] >= half)
+        & (pts[:, 0] < img.shape[0] - half)
+        & (pts[:, 1] >= half)
+        & (pts[:, 1] < img.shape[1] - half)
+    )
     if not inside.all():
-        raise InputError(f"points: {int((~inside).sum())} subset(s) leave the image; keep "
-                         f"centres >= {half} px from the border")
+        raise InputError(
+            f"points: {int((~inside).sum())} subset(s) leave the image; keep "
+            f"centres >= {half} px from the border"
+        )
     return pts
 
 
-def _gradients(img: NDArray[np.float64], derivative: str
-               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _gradients(
+    img: NDArray[np.float64], derivative: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(d/drow, d/dcol): exact B-spline derivatives (as the matcher) or central
     differences (as dicblur.sssig)."""
     if derivative == "central":
@@ -74,17 +84,25 @@ def _gradients(img: NDArray[np.float64], derivative: str
     return bspline_gradients(coef, order, img.shape)
 
 
-def _noise_variance(fw: NDArray[np.float64], fww: NDArray[np.float64],
-                    pts: NDArray[np.intp], half: int, shape: str,
-                    e: tuple[float, float], derivative: str) -> NDArray[np.float64]:
+def _noise_variance(
+    fw: NDArray[np.float64],
+    fww: NDArray[np.float64],
+    pts: NDArray[np.intp],
+    half: int,
+    shape: str,
+    e: tuple[float, float],
+    derivative: str,
+) -> NDArray[np.float64]:
     """Per-subset variance along ``e`` (dy, dx) per unit noise variance, px^2 / GL^2."""
     size = 2 * half + 1
     npx = size * size
     gy, gx = _gradients(fw, derivative)
     hy, hx = _gradients(fww, derivative)
     r, c = pts[:, 0] - half, pts[:, 1] - half
-    views = [np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), npx)
-             for a in (fw, gx, gy, hx, hy)]
+    views = [
+        np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), npx)
+        for a in (fw, gx, gy, hx, hy)
+    ]
     f, gxp, gyp, hxp, hyp = views
     if shape == "translation":
         # eq. 2 form (diagonal), as the plain matcher's prediction
@@ -93,7 +111,7 @@ def _noise_variance(fw: NDArray[np.float64], fww: NDArray[np.float64],
         s1 = np.einsum("ij,ij->i", ge, ge)
         s2 = np.einsum("ij,ij->i", he, he)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.asarray(1.0 / s1 + s2 / s1 ** 2)
+            return np.asarray(1.0 / s1 + s2 / s1**2)
     fc = f - f.mean(axis=1, keepdims=True)
     fn = np.sqrt(np.einsum("ij,ij->i", fc, fc))
     fh = fc / np.where(fn > 0, fn, 1.0)[:, None]
@@ -180,8 +198,10 @@ def predict_compensated(
         raise InputError(f"motion={describe(motion)}: expected a non-zero finite (dy, dx)")
     e = (my / norm, mx / norm)
     if np.any(w >= subset):
-        raise InputError(f"blur: {float(w.max()):g} px is not shorter than the subset "
-                         f"({subset} px); use a subset larger than the blur")
+        raise InputError(
+            f"blur: {float(w.max()):g} px is not shorter than the subset "
+            f"({subset} px); use a subset larger than the blur"
+        )
     pts = _points(img, subset, step, points)
     angle = math.degrees(math.atan2(e[0], e[1]))
     u_noise = np.empty(w.size)
@@ -194,11 +214,22 @@ def predict_compensated(
         var = _noise_variance(fw, fww, pts, subset // 2, shape, e, derivative)
         ok = np.isfinite(var) & (var > 0)
         if ok.sum() < 2:
-            raise InputError(f"image: fewer than two subsets keep an intensity gradient at "
-                             f"W = {wl:g} px; no prediction there")
+            raise InputError(
+                f"image: fewer than two subsets keep an intensity gradient at "
+                f"W = {wl:g} px; no prediction there"
+            )
         u_noise[i] = sigma * math.sqrt(float(np.mean(var[ok])))
         sssig[i] = float(directional_sssig(fw, pts, subset=subset, angle=angle).mean())
         frac[i] = ok.mean()
-    return PatternPrediction(blur=w, u_e=u_noise.copy(), u_noise=u_noise,
-                             u_blur=np.zeros(w.size), sssig=sssig, valid_fraction=frac,
-                             noise_sigma=sigma, subset=subset, shape=shape, motion=e)
+    return PatternPrediction(
+        blur=w,
+        u_e=u_noise.copy(),
+        u_noise=u_noise,
+        u_blur=np.zeros(w.size),
+        sssig=sssig,
+        valid_fraction=frac,
+        noise_sigma=sigma,
+        subset=subset,
+        shape=shape,
+        motion=e,
+    )

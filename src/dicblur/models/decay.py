@@ -99,14 +99,31 @@ def fit_sssig_decay(
         def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
             return (sssig_decay(wi, p[0] * scale, p[1]) - si) / scale
 
-        r = optimize.least_squares(resid, [s0 / scale, beta0], bounds=([0, 0], [np.inf, np.inf]),
-                                   method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14)
+        r = optimize.least_squares(
+            resid,
+            [s0 / scale, beta0],
+            bounds=([0, 0], [np.inf, np.inf]),
+            method="trf",
+            xtol=1e-14,
+            ftol=1e-14,
+            gtol=1e-14,
+        )
         if not r.success:  # pragma: no cover - the problem is smooth and bounded
             raise FitError(f"sssig_decay: the least-squares fit failed ({r.message})")
         vals = np.array([r.x[0] * scale, r.x[1]])
         jac = r.jac * np.array([1.0 / scale, 1.0]) * scale
         return vals, jac, r.fun * scale
 
-    return make_result(model="sssig_decay", names=("sssig0", "beta"), fit_once=fit_once,
-                       n=len(w), data_space=s, blur=w, fixed={}, confidence=confidence, ci=ci,
-                       n_boot=n_boot, seed=seed)
+    return make_result(
+        model="sssig_decay",
+        names=("sssig0", "beta"),
+        fit_once=fit_once,
+        n=len(w),
+        data_space=s,
+        blur=w,
+        fixed={},
+        confidence=confidence,
+        ci=ci,
+        n_boot=n_boot,
+        seed=seed,
+    )

@@ -83,8 +83,11 @@ class ValidityDomain:
         """``W 0.1..6 px, noise 2 GL, subset 31 px, translation, pattern paper4``."""
         parts = [f"W {self.blur_min:g}..{self.blur_max:g} px"]
         if self.noise_min is not None and self.noise_max is not None:
-            parts.append(f"noise {self.noise_min:g} GL" if self.noise_min == self.noise_max
-                         else f"noise {self.noise_min:g}..{self.noise_max:g} GL")
+            parts.append(
+                f"noise {self.noise_min:g} GL"
+                if self.noise_min == self.noise_max
+                else f"noise {self.noise_min:g}..{self.noise_max:g} GL"
+            )
         if self.subset is not None:
             parts.append(f"subset {self.subset} px")
         if self.shape is not None:
@@ -99,14 +102,17 @@ class ValidityDomain:
         out = w[~self.inside_blur(w)]
         why = []
         if out.size:
-            why.append(f"W = {', '.join(f'{x:.3g}' for x in out[:3])}"
-                       f"{' ...' if out.size > 3 else ''} px")
+            why.append(
+                f"W = {', '.join(f'{x:.3g}' for x in out[:3])}{' ...' if out.size > 3 else ''} px"
+            )
         if not self.inside_noise(sigma):
             why.append(f"noise {sigma:.3g} GL")
         if not why:
             return None
-        return (f"{' and '.join(why)} outside the model's validity domain "
-                f"({self.describe()}): extrapolated")
+        return (
+            f"{' and '.join(why)} outside the model's validity domain "
+            f"({self.describe()}): extrapolated"
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -118,11 +124,15 @@ class ValidityDomain:
             return None if v is None else float(v)
 
         bmin, bmax = num("blur_min"), num("blur_max")
-        return cls(blur_min=0.0 if bmin is None else bmin,
-                   blur_max=math.inf if bmax is None else bmax,
-                   noise_min=num("noise_min"), noise_max=num("noise_max"),
-                   subset=None if d.get("subset") is None else int(d["subset"]),
-                   shape=d.get("shape"), pattern=d.get("pattern"),
-                   pattern_sha256=d.get("pattern_sha256"),
-                   breakdown_blur=num("breakdown_blur"),
-                   breakdown_rule=d.get("breakdown_rule"))
+        return cls(
+            blur_min=0.0 if bmin is None else bmin,
+            blur_max=math.inf if bmax is None else bmax,
+            noise_min=num("noise_min"),
+            noise_max=num("noise_max"),
+            subset=None if d.get("subset") is None else int(d["subset"]),
+            shape=d.get("shape"),
+            pattern=d.get("pattern"),
+            pattern_sha256=d.get("pattern_sha256"),
+            breakdown_blur=num("breakdown_blur"),
+            breakdown_rule=d.get("breakdown_rule"),
+        )

@@ -26,8 +26,9 @@ __all__ = ["ModelComparison", "compare_models", "fit_blur_model"]
 def _json_clean(obj: Any) -> Any:
     """JSON-normalise (tuples -> lists, numpy scalars -> Python) so round trips are exact."""
     try:
-        return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist")
-                                     else str(o)))
+        return json.loads(
+            json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
+        )
     except (TypeError, ValueError) as exc:
         raise InputError(f"provenance: not JSON-serialisable ({exc})") from exc
 
@@ -59,8 +60,10 @@ def check_measurements(**columns: ArrayLike) -> None:
             try:
                 arr = arr.astype(np.float64)
             except (TypeError, ValueError):
-                raise InputError(f"{name}: the column is not numeric (e.g. "
-                                 f"{describe(arr.ravel()[0])}); give numbers") from None
+                raise InputError(
+                    f"{name}: the column is not numeric (e.g. "
+                    f"{describe(arr.ravel()[0])}); give numbers"
+                ) from None
         if arr.size == 0:
             raise InputError(f"{name}: no rows; give the measured values")
         as_positive(arr, name, arr.size)
@@ -220,12 +223,14 @@ def fit_blur_model(
     if contrast_ratio is not None:
         ratio = as_positive(contrast_ratio, "contrast_ratio", n)
     elif contrast_ref is not None and contrast is not None:
-        ratio = as_positive(np.broadcast_to(np.asarray(contrast_ref, dtype=float), (n,)),
-                            "contrast_ref", n) / as_positive(contrast, "contrast", n)
+        ratio = as_positive(
+            np.broadcast_to(np.asarray(contrast_ref, dtype=float), (n,)), "contrast_ref", n
+        ) / as_positive(contrast, "contrast", n)
     # eq. 18 on the mean SSSIG per blur level (noise levels pooled)
     s_mean = np.array([s[w == lv].mean() for lv in levels_w])
-    decay = fit_sssig_decay(levels_w, s_mean, confidence=confidence, ci=ci, n_boot=n_boot,
-                            seed=seed)
+    decay = fit_sssig_decay(
+        levels_w, s_mean, confidence=confidence, ci=ci, n_boot=n_boot, seed=seed
+    )
     if fit_range is not None:
         try:
             lo, hi = (float(fit_range[0]), float(fit_range[1]))
@@ -235,32 +240,59 @@ def fit_blur_model(
             raise InputError(f"fit_range={fit_range!r}: need finite W_lo < W_hi (px)")
         rule = "given"
     else:
-        lo, hi = edge_driven_range(w, contrast_ratio=ratio, sssig=s if ratio is None else None,
-                                   tolerance=range_tolerance)
-        rule = (f"contrast ratio <= {1 + range_tolerance:g}" if ratio is not None
-                else "beta W^2 <= 1 (SSSIG at most halved)")
+        lo, hi = edge_driven_range(
+            w, contrast_ratio=ratio, sssig=s if ratio is None else None, tolerance=range_tolerance
+        )
+        rule = (
+            f"contrast ratio <= {1 + range_tolerance:g}"
+            if ratio is not None
+            else "beta W^2 <= 1 (SSSIG at most halved)"
+        )
     in_range = (w >= lo) & (w <= hi)
     if np.unique(w[in_range]).size < 3:
         raise InputError(
             f"fit_range=({lo:g}, {hi:g}): holds {np.unique(w[in_range]).size} blur level(s); "
             "the power law needs at least 3"
         )
-    pl = fit_power_law(s[in_range], u[in_range], noise_sigma=None if sig is None else sig[in_range],
-                       blur=w[in_range], sssig_ref=decay["sssig0"], confidence=confidence,
-                       ci=ci, n_boot=n_boot, seed=seed)
+    pl = fit_power_law(
+        s[in_range],
+        u[in_range],
+        noise_sigma=None if sig is None else sig[in_range],
+        blur=w[in_range],
+        sssig_ref=decay["sssig0"],
+        confidence=confidence,
+        ci=ci,
+        n_boot=n_boot,
+        seed=seed,
+    )
     try:
-        mm = fit_mismatch(w, s, u, noise_sigma=sig, next_term=next_term,  # type: ignore[arg-type]
-                          floor=floor, noise_blur=noise_blur,  # type: ignore[arg-type]
-                          cross=cross,  # type: ignore[arg-type]
-                          confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
+        mm = fit_mismatch(
+            w,
+            s,
+            u,
+            noise_sigma=sig,
+            next_term=next_term,  # type: ignore[arg-type]
+            floor=floor,
+            noise_blur=noise_blur,  # type: ignore[arg-type]
+            cross=cross,  # type: ignore[arg-type]
+            confidence=confidence,
+            ci=ci,
+            n_boot=n_boot,
+            seed=seed,
+        )
     except FitError as exc:
-        warnings.warn(f"mismatch model not fitted: {exc}; the default model is the power "
-                      "law (eq. 17), which predicts only at the fitted noise", stacklevel=2)
+        warnings.warn(
+            f"mismatch model not fitted: {exc}; the default model is the power "
+            "law (eq. 17), which predicts only at the fitted noise",
+            stacklevel=2,
+        )
         mm = None
     levels = tuple(float(v) for v in np.unique(sig)) if sig is not None else ()
-    data: dict[str, tuple[float, ...]] = {"blur": tuple(map(float, w)),
-                                          "sssig": tuple(map(float, s)),
-                                          "u_e": tuple(map(float, u))}
+    data: dict[str, tuple[float, ...]] = {
+        "blur": tuple(map(float, w)),
+        "sssig": tuple(map(float, s)),
+        "u_e": tuple(map(float, u)),
+    }
     if sig is not None:
         data["noise"] = tuple(map(float, sig))
     if ratio is not None:
@@ -275,29 +307,51 @@ def fit_blur_model(
         data["err_mismatch"] = tuple(float(math.expm1(-r)) for r in mm.residuals)
     model = BlurUncertaintyModel(
         default="mismatch" if mm is not None else "power_law",
-        decay=decay, power_law=pl, mismatch=mm, fit_range=(lo, hi), range_rule=rule,
-        noise_sigma=levels[0] if len(levels) == 1 else None, noise_levels=levels,
+        decay=decay,
+        power_law=pl,
+        mismatch=mm,
+        fit_range=(lo, hi),
+        range_rule=rule,
+        noise_sigma=levels[0] if len(levels) == 1 else None,
+        noise_levels=levels,
         subset=None if subset is None else int(subset),
         mean_level=None if mean_level is None else float(mean_level),
-        c_static=None if c_static is None else float(c_static), data=data, comparison=None,
-        provenance=_json_clean(provenance or {}), version=__version__,
+        c_static=None if c_static is None else float(c_static),
+        data=data,
+        comparison=None,
+        provenance=_json_clean(provenance or {}),
+        version=__version__,
         confidence=float(confidence),
         domain=ValidityDomain(
-            blur_min=float(w.min()), blur_max=float(w.max()),
+            blur_min=float(w.min()),
+            blur_max=float(w.max()),
             noise_min=float(min(levels)) if levels else None,
             noise_max=float(max(levels)) if levels else None,
-            subset=None if subset is None else int(subset), shape=shape, pattern=pattern,
-            pattern_sha256=pattern_sha256, breakdown_blur=breakdown_blur,
-            breakdown_rule=breakdown_rule if breakdown_blur is not None else None),
+            subset=None if subset is None else int(subset),
+            shape=shape,
+            pattern=pattern,
+            pattern_sha256=pattern_sha256,
+            breakdown_blur=breakdown_blur,
+            breakdown_rule=breakdown_rule if breakdown_blur is not None else None,
+        ),
     )
     chosen = model.default
     comparison = None
     if mm is not None and compare and levels_w.size >= 6:
         try:
-            cmp_ = compare_models(w, s, u, noise_sigma=sig, contrast_ratio=ratio,
-                                  fit_range=fit_range, range_tolerance=range_tolerance,
-                                  next_term=next_term, floor=floor,
-                                  noise_blur=noise_blur, cross=cross)
+            cmp_ = compare_models(
+                w,
+                s,
+                u,
+                noise_sigma=sig,
+                contrast_ratio=ratio,
+                fit_range=fit_range,
+                range_tolerance=range_tolerance,
+                next_term=next_term,
+                floor=floor,
+                noise_blur=noise_blur,
+                cross=cross,
+            )
             comparison = _json_clean(cmp_.to_dict())
             if default == "auto":
                 chosen = cmp_.better
@@ -387,10 +441,20 @@ def compare_models(
             f"blur level(s) and {int(test.sum())} test point(s); need >= 3 and >= 1"
         )
     fitted = fit_blur_model(
-        w[train], s[train], u[train], noise_sigma=None if sig is None else sig[train],
-        contrast_ratio=None if ratio is None else ratio[train], fit_range=fit_range,
-        range_tolerance=range_tolerance, default="mismatch", next_term=next_term,
-        floor=floor, noise_blur=noise_blur, cross=cross, compare=False)
+        w[train],
+        s[train],
+        u[train],
+        noise_sigma=None if sig is None else sig[train],
+        contrast_ratio=None if ratio is None else ratio[train],
+        fit_range=fit_range,
+        range_tolerance=range_tolerance,
+        default="mismatch",
+        next_term=next_term,
+        floor=floor,
+        noise_blur=noise_blur,
+        cross=cross,
+        compare=False,
+    )
     rms: dict[str, float] = {}
     mx: dict[str, float] = {}
     rel: dict[str, tuple[float, ...]] = {}
@@ -409,8 +473,14 @@ def compare_models(
         rel[kind] = tuple(float(x) for x in r - 1.0)
     better = "mismatch" if rms["mismatch"] <= rms["power_law"] else "power_law"
     return ModelComparison(
-        train_max_blur=float(train_max_blur), holdout_noise=holdout_noise,
-        n_train=int(train.sum()), n_test=int(test.sum()), rms_log_error=rms, max_rel_error=mx,
-        better=better, test_blur=tuple(float(x) for x in w[test]),
+        train_max_blur=float(train_max_blur),
+        holdout_noise=holdout_noise,
+        n_train=int(train.sum()),
+        n_test=int(test.sum()),
+        rms_log_error=rms,
+        max_rel_error=mx,
+        better=better,
+        test_blur=tuple(float(x) for x in w[test]),
         test_noise=None if sig is None else tuple(float(x) for x in sig[test]),
-        test_rel_error=rel)
+        test_rel_error=rel,
+    )

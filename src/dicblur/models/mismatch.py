@@ -68,9 +68,13 @@ __all__ = [
 ]
 
 
-def _subset_inputs(image: ArrayLike, subset: int, step: int | None, points: ArrayLike | None,
-                   boundary: str = "reflect"
-                   ) -> tuple[NDArray[np.float64], int, NDArray[np.intp]]:
+def _subset_inputs(
+    image: ArrayLike,
+    subset: int,
+    step: int | None,
+    points: ArrayLike | None,
+    boundary: str = "reflect",
+) -> tuple[NDArray[np.float64], int, NDArray[np.intp]]:
     """Checked image, subset size and subset centres (row, col) of the static predictions."""
     img = as_image(image, "image", min_size=5)
     subset = check_odd_subset(subset)
@@ -163,8 +167,16 @@ def blur_sensitivity(
     BlurSensitivity
     """
     img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
-    k = subset_blur_coefficients(img, pts, subset, motion=motion, shape=shape,
-                                 derivative=derivative, boundary=boundary, criterion=criterion)
+    k = subset_blur_coefficients(
+        img,
+        pts,
+        subset,
+        motion=motion,
+        shape=shape,
+        derivative=derivative,
+        boundary=boundary,
+        criterion=criterion,
+    )
     good = k[np.isfinite(k)]
     if good.size < 2:
         raise InputError(
@@ -177,12 +189,18 @@ def blur_sensitivity(
         raise InputError(
             f"image: all {good.size} subsets respond identically to blur (c = 0); the image "
             "has no random texture (flat, or periodic with the subset grid); use a speckle "
-            "image")
+            "image"
+        )
     n = math.hypot(float(motion[0]), float(motion[1]))
-    return BlurSensitivity(c=float(good.std()), mean=float(good.mean()), k=k, centres=pts,
-                           subset=subset, motion=(float(motion[0]) / n, float(motion[1]) / n),
-                           shape=str(shape))
-
+    return BlurSensitivity(
+        c=float(good.std()),
+        mean=float(good.mean()),
+        k=k,
+        centres=pts,
+        subset=subset,
+        motion=(float(motion[0]) / n, float(motion[1]) / n),
+        shape=str(shape),
+    )
 
 
 @dataclass(frozen=True)
@@ -272,9 +290,19 @@ def blur_mismatch_curve(
     w = as_blur(blur, "blur", increasing=False)
     max_shift = check_positive(max_shift, "max_shift")
     offset = None if subpixel is None else _check_subpixel(subpixel)
-    xi = subset_blur_shifts(img, w, pts, subset, motion=motion, shape=shape,
-                            derivative=derivative, boundary=boundary, criterion=criterion,
-                            max_shift=max_shift, offset=offset)
+    xi = subset_blur_shifts(
+        img,
+        w,
+        pts,
+        subset,
+        motion=motion,
+        shape=shape,
+        derivative=derivative,
+        boundary=boundary,
+        criterion=criterion,
+        max_shift=max_shift,
+        offset=offset,
+    )
     good = np.isfinite(xi)
     count = good.sum(axis=1)
     if np.any(count < 2):
@@ -288,17 +316,30 @@ def blur_mismatch_curve(
         u_blur = np.nanstd(xi, axis=1)
         mean = np.nanmean(xi, axis=1)
     n = math.hypot(float(motion[0]), float(motion[1]))
-    return BlurMismatchCurve(blur=w, u_blur=u_blur, mean=mean,
-                             valid_fraction=count / xi.shape[1], shifts=xi, centres=pts,
-                             subset=subset, motion=(float(motion[0]) / n, float(motion[1]) / n),
-                             shape=str(shape))
+    return BlurMismatchCurve(
+        blur=w,
+        u_blur=u_blur,
+        mean=mean,
+        valid_fraction=count / xi.shape[1],
+        shifts=xi,
+        centres=pts,
+        subset=subset,
+        motion=(float(motion[0]) / n, float(motion[1]) / n),
+        shape=str(shape),
+    )
+
 
 def _check_subpixel(subpixel: object) -> float:
     """A sub-pixel offset (px) as a float in [0, 1)."""
-    if isinstance(subpixel, bool) or not isinstance(subpixel, (int, float)) or not (
-            math.isfinite(subpixel) and 0.0 <= subpixel < 1.0):
-        raise InputError(f"subpixel={subpixel!r}: give the target's sub-pixel position along "
-                         "the motion in [0, 1) px (e.g. 0.5)")
+    if (
+        isinstance(subpixel, bool)
+        or not isinstance(subpixel, (int, float))
+        or not (math.isfinite(subpixel) and 0.0 <= subpixel < 1.0)
+    ):
+        raise InputError(
+            f"subpixel={subpixel!r}: give the target's sub-pixel position along "
+            "the motion in [0, 1) px (e.g. 0.5)"
+        )
     return float(subpixel)
 
 
@@ -382,14 +423,25 @@ def mismatch_model(
     with the blur mismatch (:func:`noise_growth`); ``cross`` (``b``, px/px) the
     mismatch-interpolation cross term.
     """
-    noise, blur2 = mismatch_terms(blur, sssig, noise_sigma, c=c, a=a, gamma=gamma, c4=c4,
-                                  k=k, noise_blur=noise_blur, cross=cross,
-                                  noise_blur2=noise_blur2)
+    noise, blur2 = mismatch_terms(
+        blur,
+        sssig,
+        noise_sigma,
+        c=c,
+        a=a,
+        gamma=gamma,
+        c4=c4,
+        k=k,
+        noise_blur=noise_blur,
+        cross=cross,
+        noise_blur2=noise_blur2,
+    )
     return np.sqrt(noise + floor * floor + blur2)
 
 
-def noise_growth(blur: ArrayLike, noise_blur: float, noise_blur2: float = 0.0
-                 ) -> NDArray[np.float64]:
+def noise_growth(
+    blur: ArrayLike, noise_blur: float, noise_blur2: float = 0.0
+) -> NDArray[np.float64]:
     """Growth factor of the noise term with the blur mismatch, ``(1 + d W**2)**2 + e W**4``
     (``d = noise_blur2`` px**-2, any sign: the negative covariance of the reference
     gradients' noise with its intensities' noise; ``e = noise_blur`` px**-4 >= 0). Positive
@@ -456,8 +508,11 @@ def fit_mismatch(
     check_ci(ci, confidence, n_boot)
     sig: NDArray[np.float64] | None = None
     if noise_sigma is not None:
-        sig = as_positive(np.broadcast_to(np.asarray(noise_sigma, dtype=np.float64), w.shape)
-                          .copy(), "noise_sigma", w.size)
+        sig = as_positive(
+            np.broadcast_to(np.asarray(noise_sigma, dtype=np.float64), w.shape).copy(),
+            "noise_sigma",
+            w.size,
+        )
     multi = sig is not None and np.unique(sig).size >= 2
     if next_term not in (True, False, "auto"):
         raise InputError(f"next_term={next_term!r}: use True, False or 'auto'")
@@ -475,15 +530,17 @@ def fit_mismatch(
             )
     options = [False, True] if next_term == "auto" else [bool(next_term)]
     floors = ([False, True] if multi else [False]) if floor == "auto" else [bool(floor)]
-    growths = ([False, True] if multi else [False]) if noise_blur == "auto" else [
-        bool(noise_blur)]
+    growths = ([False, True] if multi else [False]) if noise_blur == "auto" else [bool(noise_blur)]
     crosses = ([False, True] if multi else [False]) if cross == "auto" else [bool(cross)]
     results = []
     for with_cross in crosses:
         for with_growth in growths:
             for with_floor in floors:
-                do_gamma = bool((multi and not (with_floor or with_cross))
-                                if fit_gamma is None else (fit_gamma and sig is not None))
+                do_gamma = bool(
+                    (multi and not (with_floor or with_cross))
+                    if fit_gamma is None
+                    else (fit_gamma and sig is not None)
+                )
                 for with_c4 in options:
                     names: list[str] = ["a" if sig is not None else "k"]
                     if do_gamma:
@@ -497,14 +554,28 @@ def fit_mismatch(
                     names.append("c")
                     if with_c4:
                         names.append("c4")
-                    auto = ((with_c4 and next_term == "auto")
-                            or (with_floor and floor == "auto")
-                            or (with_growth and noise_blur == "auto")
-                            or (with_cross and cross == "auto"))
+                    auto = (
+                        (with_c4 and next_term == "auto")
+                        or (with_floor and floor == "auto")
+                        or (with_growth and noise_blur == "auto")
+                        or (with_cross and cross == "auto")
+                    )
                     if w.size - len(names) < (2 if auto else 1):
                         continue
-                    results.append(_fit_one(w, s, u, sig, tuple(names), confidence, ci,
-                                            n_boot, seed, intervals=False))
+                    results.append(
+                        _fit_one(
+                            w,
+                            s,
+                            u,
+                            sig,
+                            tuple(names),
+                            confidence,
+                            ci,
+                            n_boot,
+                            seed,
+                            intervals=False,
+                        )
+                    )
     if not results:
         raise FitError(
             f"mismatch: {w.size} point(s) are too few for the noise + blur-mismatch model; "
@@ -559,34 +630,82 @@ def _fit_one(
         floor0 = 0.3 * float(ui.min())
         if "floor" in names:  # start with part of the low-W variance on the floor
             noise0 *= 0.9
-        start = {"a": noise0, "k": noise0, "gamma": 1.0, "c": c0, "c4": 0.0, "floor": floor0,
-                 "noise_blur": 1e-3, "noise_blur2": 0.0, "cross": 0.5 * c0}
+        start = {
+            "a": noise0,
+            "k": noise0,
+            "gamma": 1.0,
+            "c": c0,
+            "c4": 0.0,
+            "floor": floor0,
+            "noise_blur": 1e-3,
+            "noise_blur2": 0.0,
+            "cross": 0.5 * c0,
+        }
         p0 = np.array([start[n] for n in names])
         scl = np.where(p0 > 0, p0, 1e-3 * c0 if c0 > 0 else 1e-6)
         scl[[n == "noise_blur2" for n in names]] = 1e-2  # px**-2, starts at 0
-        lower = np.array([0.0 if n in ("a", "k", "c", "floor", "noise_blur", "cross")
-                          else (0.05 if n == "gamma" else -np.inf) for n in names])
+        lower = np.array(
+            [
+                0.0
+                if n in ("a", "k", "c", "floor", "noise_blur", "cross")
+                else (0.05 if n == "gamma" else -np.inf)
+                for n in names
+            ]
+        )
         upper = np.array([5.0 if n == "gamma" else np.inf for n in names])
 
         def resid(pn: NDArray[np.float64]) -> NDArray[np.float64]:
             d = unpack(pn * scl)
-            m = mismatch_model(wi, si, sg, c=d["c"], a=d.get("a", 2.0), gamma=d["gamma"],
-                               c4=d["c4"], k=d.get("k"), floor=d["floor"],
-                               noise_blur=d["noise_blur"], cross=d["cross"],
-                               noise_blur2=d["noise_blur2"])
+            m = mismatch_model(
+                wi,
+                si,
+                sg,
+                c=d["c"],
+                a=d.get("a", 2.0),
+                gamma=d["gamma"],
+                c4=d["c4"],
+                k=d.get("k"),
+                floor=d["floor"],
+                noise_blur=d["noise_blur"],
+                cross=d["cross"],
+                noise_blur2=d["noise_blur2"],
+            )
             return np.log(np.maximum(m, 1e-300)) - np.log(ui)
 
-        r = optimize.least_squares(resid, p0 / scl, bounds=(lower / scl, upper / scl),
-                                   method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
-                                   gtol=1e-12, max_nfev=2000)
+        r = optimize.least_squares(
+            resid,
+            p0 / scl,
+            bounds=(lower / scl, upper / scl),
+            method="trf",
+            x_scale="jac",
+            xtol=1e-12,
+            ftol=1e-12,
+            gtol=1e-12,
+            max_nfev=2000,
+        )
         if not np.all(np.isfinite(r.fun)):
             raise FitError("mismatch: the fit produced non-finite residuals; check the data")
         return r.x * scl, r.jac / scl, r.fun
 
-    extra = {"noise_levels": [] if sig is None else [float(v) for v in np.unique(sig)],
-             "noise_term": "k/SSSIG" if sig is None else "a*(SSSIG/sigma^2)^-gamma"}
+    extra = {
+        "noise_levels": [] if sig is None else [float(v) for v in np.unique(sig)],
+        "noise_term": "k/SSSIG" if sig is None else "a*(SSSIG/sigma^2)^-gamma",
+    }
     fixed = {} if "gamma" in names or sig is None else {"gamma": 1.0}
-    return make_result(model="mismatch", names=names, fit_once=fit_once, n=w.size,
-                       data_space=np.log(u), blur=w, fixed=fixed, confidence=confidence,
-                       ci=ci, n_boot=n_boot, seed=seed, extra=extra, log_params=("a", "k"),
-                       nonneg=("c", "floor", "noise_blur", "cross"), intervals=intervals)
+    return make_result(
+        model="mismatch",
+        names=names,
+        fit_once=fit_once,
+        n=w.size,
+        data_space=np.log(u),
+        blur=w,
+        fixed=fixed,
+        confidence=confidence,
+        ci=ci,
+        n_boot=n_boot,
+        seed=seed,
+        extra=extra,
+        log_params=("a", "k"),
+        nonneg=("c", "floor", "noise_blur", "cross"),
+        intervals=intervals,
+    )

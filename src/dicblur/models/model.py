@@ -194,8 +194,9 @@ class BlurUncertaintyModel:
         assert fit is not None
         return fit
 
-    def _log_u(self, kind: str, w: NDArray[np.float64], sigma: float | None,
-               theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    def _log_u(
+        self, kind: str, w: NDArray[np.float64], sigma: float | None, theta: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
         fit = self._fit(kind)
         nf = len(fit.names)
         p = dict(zip(fit.names, theta[:nf], strict=True))
@@ -211,28 +212,47 @@ class BlurUncertaintyModel:
         noise, blur2 = self._mismatch_terms(p, w, s, sigma)
         return 0.5 * np.log(noise + p.get("floor", 0.0) ** 2 + blur2)
 
-    def _mismatch_terms(self, p: dict[str, float], w: NDArray[np.float64],
-                        s: NDArray[np.float64], sigma: float | None
-                        ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch
-                      else 1.0)
+    def _mismatch_terms(
+        self,
+        p: dict[str, float],
+        w: NDArray[np.float64],
+        s: NDArray[np.float64],
+        sigma: float | None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch else 1.0)
         if "k" in p:
-            return mismatch_terms(w, s, None, k=p["k"], c=p["c"], c4=p.get("c4", 0.0),
-                                  noise_blur=p.get("noise_blur", 0.0),
-                                  cross=p.get("cross", 0.0),
-                                  noise_blur2=p.get("noise_blur2", 0.0))
+            return mismatch_terms(
+                w,
+                s,
+                None,
+                k=p["k"],
+                c=p["c"],
+                c4=p.get("c4", 0.0),
+                noise_blur=p.get("noise_blur", 0.0),
+                cross=p.get("cross", 0.0),
+                noise_blur2=p.get("noise_blur2", 0.0),
+            )
         assert sigma is not None
-        return mismatch_terms(w, s, sigma, a=p["a"], gamma=gamma, c=p["c"],
-                              c4=p.get("c4", 0.0), noise_blur=p.get("noise_blur", 0.0),
-                              cross=p.get("cross", 0.0),
-                              noise_blur2=p.get("noise_blur2", 0.0))
+        return mismatch_terms(
+            w,
+            s,
+            sigma,
+            a=p["a"],
+            gamma=gamma,
+            c=p["c"],
+            c4=p.get("c4", 0.0),
+            noise_blur=p.get("noise_blur", 0.0),
+            cross=p.get("cross", 0.0),
+            noise_blur2=p.get("noise_blur2", 0.0),
+        )
 
     def _sigma(self, kind: str, sigma: float | None) -> float | None:
         if sigma is not None:
             sigma = check_positive(sigma, "sigma")
         fit = self._fit(kind)
         has_noise = (kind == "power_law" and fit.extra.get("sigma_ref") is not None) or (
-            kind == "mismatch" and "a" in fit.names)
+            kind == "mismatch" and "a" in fit.names
+        )
         if sigma is not None and not has_noise:
             raise InputError(
                 f"sigma={sigma!r}: the model was fitted without noise levels, so it cannot "
@@ -255,10 +275,11 @@ class BlurUncertaintyModel:
         if not levels:
             return
         lo, hi = min(levels), max(levels)
-        if lo * (1 - 1e-6) <= sigma <= hi * (1 + 1e-6) and (len(levels) > 1
-                                                           or math.isclose(sigma, lo)):
+        if lo * (1 - 1e-6) <= sigma <= hi * (1 + 1e-6) and (
+            len(levels) > 1 or math.isclose(sigma, lo)
+        ):
             return
-        where = (f"{lo:g} GL" if len(levels) == 1 else f"{lo:g}..{hi:g} GL")
+        where = f"{lo:g} GL" if len(levels) == 1 else f"{lo:g}..{hi:g} GL"
         raise InputError(
             f"sigma={sigma:g} GL: the power law (eq. 17) was fitted at noise {where} and "
             "its noise dependence is not measured (one level: u_e would scale as "
@@ -276,8 +297,9 @@ class BlurUncertaintyModel:
         cov[nf:, nf:] = self.decay.cov_array
         return theta, cov
 
-    def predict(self, blur: ArrayLike, sigma: float | None = None, *,
-                model: str | None = None) -> Prediction:
+    def predict(
+        self, blur: ArrayLike, sigma: float | None = None, *, model: str | None = None
+    ) -> Prediction:
         """Predict u_e (px) at blur lengths ``blur`` (px) and noise ``sigma`` (GL).
 
         Parameters
@@ -297,8 +319,9 @@ class BlurUncertaintyModel:
         """
         w = as_vector(blur, "blur")
         if np.any(w < 0):
-            raise InputError(f"blur: negative blur length {float(w[w < 0][0])!r} px; W must be "
-                             ">= 0")
+            raise InputError(
+                f"blur: negative blur length {float(w[w < 0][0])!r} px; W must be >= 0"
+            )
         kind = self._kind(model)
         sig = self._sigma(kind, sigma)
         lu, half, u_noise, u_blur, u_floor = self._evaluate(kind, w, sig)
@@ -316,9 +339,11 @@ class BlurUncertaintyModel:
             in_fit = (w >= lo - 1e-9) & (w <= hi + 1e-9)
             if (~in_fit & inside).any():
                 out = w[~in_fit & inside]
-                notes.append(f"W = {', '.join(f'{x:.3g}' for x in out[:3])}"
-                             f"{' ...' if out.size > 3 else ''} px outside the power law's "
-                             f"fit range (W {lo:g}..{hi:g} px): extrapolated")
+                notes.append(
+                    f"W = {', '.join(f'{x:.3g}' for x in out[:3])}"
+                    f"{' ...' if out.size > 3 else ''} px outside the power law's "
+                    f"fit range (W {lo:g}..{hi:g} px): extrapolated"
+                )
             inside &= in_fit
         if broken.any():
             notes.append(self.breakdown_note(w[broken]))
@@ -327,24 +352,42 @@ class BlurUncertaintyModel:
             if u_noise is not None and u_blur is not None:
                 u_noise[broken] = np.nan
                 u_blur[broken] = np.nan
-        return Prediction(blur=w, u_e=np.exp(lu), low=np.exp(lu - half), high=np.exp(lu + half),
-                          u_noise=u_noise, u_blur=u_blur, sigma=sig, model=kind,
-                          confidence=self.confidence, u_floor=u_floor,
-                          inside_domain=inside & ~broken, broken_down=broken,
-                          extrapolated=bool((~inside & ~broken).any()), notes=tuple(notes))
+        return Prediction(
+            blur=w,
+            u_e=np.exp(lu),
+            low=np.exp(lu - half),
+            high=np.exp(lu + half),
+            u_noise=u_noise,
+            u_blur=u_blur,
+            sigma=sig,
+            model=kind,
+            confidence=self.confidence,
+            u_floor=u_floor,
+            inside_domain=inside & ~broken,
+            broken_down=broken,
+            extrapolated=bool((~inside & ~broken).any()),
+            notes=tuple(notes),
+        )
 
     def breakdown_note(self, blur: NDArray[np.float64]) -> str:
         """The one-line reason why no prediction is made at ``blur`` (px)."""
         dom = self.domain
         assert dom is not None and dom.breakdown_blur is not None
-        return (f"no prediction at W = {', '.join(f'{x:.3g}' for x in blur[:3])}"
-                f"{' ...' if blur.size > 3 else ''} px: DIC breaks down from W = "
-                f"{dom.breakdown_blur:g} px ({dom.breakdown_rule or 'breakdown'})")
+        return (
+            f"no prediction at W = {', '.join(f'{x:.3g}' for x in blur[:3])}"
+            f"{' ...' if blur.size > 3 else ''} px: DIC breaks down from W = "
+            f"{dom.breakdown_blur:g} px ({dom.breakdown_rule or 'breakdown'})"
+        )
 
-    def _evaluate(self, kind: str, w: NDArray[np.float64], sig: float | None
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                             NDArray[np.float64] | None, NDArray[np.float64] | None,
-                             float | None]:
+    def _evaluate(
+        self, kind: str, w: NDArray[np.float64], sig: float | None
+    ) -> tuple[
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64] | None,
+        NDArray[np.float64] | None,
+        float | None,
+    ]:
         """log u_e, the half-width of its prediction interval and the mismatch terms."""
         theta, cov = self._theta(kind)
         lu = self._log_u(kind, w, sig, theta)
@@ -377,8 +420,9 @@ class BlurUncertaintyModel:
         u0 = float(self.predict([0.0], model="power_law").u_e[0])
         return u0 * (1.0 + self.alpha * self.beta * w * w)
 
-    def max_blur(self, target: float, sigma: float | None = None, *,
-                 model: str | None = None) -> float:
+    def max_blur(
+        self, target: float, sigma: float | None = None, *, model: str | None = None
+    ) -> float:
         """Largest blur length W (px) whose predicted u_e stays <= ``target`` (px).
 
         Capped at the domain's breakdown blur (DIC fails beyond it): if the target still
@@ -426,8 +470,11 @@ class BlurUncertaintyModel:
             f"{len(self.data['blur'])} points, W {min(self.data['blur']):g}..."
             f"{max(self.data['blur']):g} px",
             f"validity domain: {self.domain.describe() if self.domain else 'unknown'}"
-            + (f"; DIC breaks down from W = {self.domain.breakdown_blur:g} px"
-               if self.domain and self.domain.breakdown_blur is not None else ""),
+            + (
+                f"; DIC breaks down from W = {self.domain.breakdown_blur:g} px"
+                if self.domain and self.domain.breakdown_blur is not None
+                else ""
+            ),
             "",
             f"SSSIG decay (eq. 18), R^2 = {self.decay.r2:.4f} [{self.decay.ci_method} {pct} CI]",
         ]
@@ -439,30 +486,43 @@ class BlurUncertaintyModel:
                 lines.append(f"  {p.name:7s} = {p.value:.5g}  {ci}")
 
         block(self.decay)
-        lines += [f"power law (eq. 17) on W {self.fit_range[0]:g}..{self.fit_range[1]:g} px "
-                  f"({self.range_rule}), R^2 (log) = {self.power_law.r2:.4f}"]
-        lines.append(f"  u_e = u_ref (SSSIG / {self.sssig_ref:.4g})^-alpha; the paper's eta = "
-                     f"u_ref sssig_ref^alpha = {self.eta:.4g} (units depend on alpha); "
-                     "predicts only at the noise it was fitted at")
+        lines += [
+            f"power law (eq. 17) on W {self.fit_range[0]:g}..{self.fit_range[1]:g} px "
+            f"({self.range_rule}), R^2 (log) = {self.power_law.r2:.4f}"
+        ]
+        lines.append(
+            f"  u_e = u_ref (SSSIG / {self.sssig_ref:.4g})^-alpha; the paper's eta = "
+            f"u_ref sssig_ref^alpha = {self.eta:.4g} (units depend on alpha); "
+            "predicts only at the noise it was fitted at"
+        )
         block(self.power_law)
-        lines.append(f"  MBRF = 2 alpha beta = {self.mbrf:.4g} 1/px^2 "
-                     f"(u_e ~ u_e(0) (1 + {self.alpha * self.beta:.4g} W^2))")
+        lines.append(
+            f"  MBRF = 2 alpha beta = {self.mbrf:.4g} 1/px^2 "
+            f"(u_e ~ u_e(0) (1 + {self.alpha * self.beta:.4g} W^2))"
+        )
         if self.power_law.extra.get("kappa_rule") == "fitted":
-            lines.append(f"  scale consistency: kappa = {self.power_law['kappa']:.3g} vs "
-                         f"2 alpha = {2 * self.alpha:.3g}")
+            lines.append(
+                f"  scale consistency: kappa = {self.power_law['kappa']:.3g} vs "
+                f"2 alpha = {2 * self.alpha:.3g}"
+            )
         if self.mismatch is not None:
-            lines.append(f"noise + blur mismatch, R^2 (log) = {self.mismatch.r2:.4f}, "
-                         f"residual {100 * self.mismatch.residual_std:.2g}% rms")
+            lines.append(
+                f"noise + blur mismatch, R^2 (log) = {self.mismatch.r2:.4f}, "
+                f"residual {100 * self.mismatch.residual_std:.2g}% rms"
+            )
             block(self.mismatch)
             if self.c_static is not None:
-                lines.append(f"  c predicted from the static image = {self.c_static:.4g} "
-                             f"(fitted / predicted = {self.mismatch['c'] / self.c_static:.3f})")
+                lines.append(
+                    f"  c predicted from the static image = {self.c_static:.4g} "
+                    f"(fitted / predicted = {self.mismatch['c'] / self.c_static:.3f})"
+                )
         if self.comparison:
             cmp_ = self.comparison
             lines.append(
                 f"held-out comparison ({cmp_['n_test']} points): rms log error power law "
                 f"{cmp_['rms_log_error']['power_law']:.3g}, mismatch "
-                f"{cmp_['rms_log_error']['mismatch']:.3g} -> {cmp_['better']}")
+                f"{cmp_['rms_log_error']['mismatch']:.3g} -> {cmp_['better']}"
+            )
         if self.provenance:
             lines.append("provenance: " + json.dumps(self.provenance, sort_keys=True))
         return "\n".join(lines)
@@ -511,20 +571,26 @@ class BlurUncertaintyModel:
             source = f"model={text!r}"
             if not p.is_file():
                 why = "is a directory" if p.is_dir() else "no such file"
-                raise InputError(f"{source}: {why}; give a model .json written by dicblur fit "
-                                 "(or dicblur pattern predict -o)")
+                raise InputError(
+                    f"{source}: {why}; give a model .json written by dicblur fit "
+                    "(or dicblur pattern predict -o)"
+                )
             try:
                 text = p.read_bytes().decode("utf-8")
             except UnicodeDecodeError:
-                raise InputError(f"{source}: binary data, not a JSON text file; give a model "
-                                 ".json written by dicblur fit") from None
+                raise InputError(
+                    f"{source}: binary data, not a JSON text file; give a model "
+                    ".json written by dicblur fit"
+                ) from None
             except OSError as exc:
                 raise InputError(f"{source}: cannot be read ({exc.strerror})") from exc
         try:
             d = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise InputError(f"{source}: invalid JSON ({exc.msg} at line {exc.lineno}); the "
-                             "file is truncated or not a model file") from exc
+            raise InputError(
+                f"{source}: invalid JSON ({exc.msg} at line {exc.lineno}); the "
+                "file is truncated or not a model file"
+            ) from exc
         validate_model_dict(d, source)
         return cls(**model_kwargs(d))
 
@@ -562,11 +628,15 @@ def _refit_power_law_v1(kw: dict[str, Any]) -> FitResult:
     sel = (w >= lo) & (w <= hi)
     noise = np.array(data["noise"])[sel] if "noise" in data else None
     old = kw["power_law"]
-    return fit_power_law(np.array(data["sssig"])[sel], np.array(data["u_e"])[sel],
-                         noise_sigma=noise, blur=w[sel],
-                         sssig_ref=kw["decay"]["sssig0"],
-                         fit_noise_exponent="kappa" in old.names,
-                         confidence=old.confidence)
+    return fit_power_law(
+        np.array(data["sssig"])[sel],
+        np.array(data["u_e"])[sel],
+        noise_sigma=noise,
+        blur=w[sel],
+        sssig_ref=kw["decay"]["sssig0"],
+        fit_noise_exponent="kappa" in old.names,
+        confidence=old.confidence,
+    )
 
 
 def _domain_from_fields(m: BlurUncertaintyModel) -> ValidityDomain:
@@ -582,9 +652,12 @@ def _domain_from_fields(m: BlurUncertaintyModel) -> ValidityDomain:
         sha = next(iter(hashes.values()))
     shape = prov.get("dic_shape", prov.get("shape"))
     return ValidityDomain(
-        blur_min=float(min(w)), blur_max=float(max(w)),
+        blur_min=float(min(w)),
+        blur_max=float(max(w)),
         noise_min=float(min(levels)) if levels else None,
         noise_max=float(max(levels)) if levels else None,
-        subset=m.subset, shape=shape if isinstance(shape, str) else None,
+        subset=m.subset,
+        shape=shape if isinstance(shape, str) else None,
         pattern=name if isinstance(name, str) else None,
-        pattern_sha256=sha if isinstance(sha, str) else None)
+        pattern_sha256=sha if isinstance(sha, str) else None,
+    )

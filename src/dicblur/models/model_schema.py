@@ -21,8 +21,16 @@ from typing import Any
 
 from ..errors import InputError
 
-__all__ = ["DOMAIN_RULES", "FIT_RULES", "MODEL_RULES", "SCHEMA", "SCHEMA_V1",
-           "SCHEMA_VERSION", "Rule", "validate_model_dict"]
+__all__ = [
+    "DOMAIN_RULES",
+    "FIT_RULES",
+    "MODEL_RULES",
+    "SCHEMA",
+    "SCHEMA_V1",
+    "SCHEMA_VERSION",
+    "Rule",
+    "validate_model_dict",
+]
 
 SCHEMA_NAME = "dicblur.BlurUncertaintyModel"
 SCHEMA_VERSION = 2
@@ -47,8 +55,14 @@ def _is_num(v: Any) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool)
 
 
-def number(*, finite: bool = True, nan: bool = False, minimum: float | None = None,
-           low: float | None = None, high: float | None = None) -> Check:
+def number(
+    *,
+    finite: bool = True,
+    nan: bool = False,
+    minimum: float | None = None,
+    low: float | None = None,
+    high: float | None = None,
+) -> Check:
     """A JSON number; ``finite`` refuses +-inf, ``nan`` allows NaN, bounds are inclusive
     (``minimum``) or exclusive (``low``, ``high``)."""
 
@@ -147,8 +161,10 @@ FIT_RULES: dict[str, Rule] = {
     "n_points": Rule(integer(1), "an integer >= 1"),
     "blur_range": Rule(array(number(minimum=0.0), length=2), "[W_min, W_max] in px"),
     "confidence": Rule(number(low=0.0, high=1.0), "a number in (0, 1)"),
-    "ci_method": Rule(string(("covariance", "bootstrap", "unidentified")),
-                      "'covariance', 'bootstrap' or 'unidentified'"),
+    "ci_method": Rule(
+        string(("covariance", "bootstrap", "unidentified")),
+        "'covariance', 'bootstrap' or 'unidentified'",
+    ),
     "extra": Rule(mapping(), "a table", required=False),
 }
 
@@ -170,8 +186,7 @@ DOMAIN_RULES: dict[str, Rule] = {
     "blur_min": Rule(number(minimum=0.0), "W_min >= 0 px"),
     "blur_max": Rule(number(finite=False, minimum=0.0), "W_max >= 0 px"),
     "noise_min": Rule(optional(number(minimum=0.0)), "a noise std >= 0 GL or null"),
-    "noise_max": Rule(optional(number(finite=False, minimum=0.0)),
-                      "a noise std >= 0 GL or null"),
+    "noise_max": Rule(optional(number(finite=False, minimum=0.0)), "a noise std >= 0 GL or null"),
     "subset": Rule(optional(integer(1)), "a subset size in px or null"),
     "shape": Rule(optional(string()), "a shape name or null"),
     "pattern": Rule(optional(string()), "a pattern name or null"),
@@ -252,20 +267,24 @@ def validate_model_dict(d: Any, source: str = "model") -> dict[str, Any]:
     """
     fix = "refit it with dicblur fit, or restore the file written by it"
     if not isinstance(d, dict):
-        raise InputError(f"{source}: not a dicblur model file (expected a JSON object with "
-                         f"schema {SCHEMA!r}, got a {type(d).__name__}); {fix}")
+        raise InputError(
+            f"{source}: not a dicblur model file (expected a JSON object with "
+            f"schema {SCHEMA!r}, got a {type(d).__name__}); {fix}"
+        )
     tag = d.get("schema")
     if not isinstance(tag, str) or not tag.startswith(SCHEMA_NAME + "/"):
-        raise InputError(f"{source}: not a dicblur model file (schema must be {SCHEMA!r}, "
-                         f"got {tag!r}); {fix}")
+        raise InputError(
+            f"{source}: not a dicblur model file (schema must be {SCHEMA!r}, got {tag!r}); {fix}"
+        )
     version = tag.rpartition("/")[2]
     if version not in READABLE_VERSIONS:
-        raise InputError(f"{source}: model schema version {version!r}, this dicblur reads "
-                         f"versions {', '.join(READABLE_VERSIONS)}; refit the model with "
-                         "this dicblur")
+        raise InputError(
+            f"{source}: model schema version {version!r}, this dicblur reads "
+            f"versions {', '.join(READABLE_VERSIONS)}; refit the model with "
+            "this dicblur"
+        )
     try:
         _check_table(d, MODEL_RULES, "")
     except _Defect as defect:
-        raise InputError(f"{source}: key {defect.where.lstrip('.')}: {defect.why}; "
-                         f"{fix}") from None
+        raise InputError(f"{source}: key {defect.where.lstrip('.')}: {defect.why}; {fix}") from None
     return d

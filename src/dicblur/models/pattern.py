@@ -119,35 +119,54 @@ def _offsets(subpixel: float | str | None) -> list[float | None]:
         return [None]
     if isinstance(subpixel, str):
         if subpixel != "average":
-            raise InputError(f"subpixel={subpixel!r}: use None, 'average' or an offset in "
-                             "[0, 1) px")
+            raise InputError(
+                f"subpixel={subpixel!r}: use None, 'average' or an offset in [0, 1) px"
+            )
         return [(k + 0.5) / N_OFFSETS for k in range(N_OFFSETS)]
     return [_check_subpixel(subpixel)]
 
 
-def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.intp],
-           subset: int, motion: tuple[float, float], shape: Shape, derivative: Derivative,
-           boundary: Boundary, max_shift: float, subpixel: float | str | None = None,
-           min_contraction: float = 0.0
-           ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
-                      NDArray[np.float64]]:
+def _terms(
+    img: NDArray[np.float64],
+    w: NDArray[np.float64],
+    pts: NDArray[np.intp],
+    subset: int,
+    motion: tuple[float, float],
+    shape: Shape,
+    derivative: Derivative,
+    boundary: Boundary,
+    max_shift: float,
+    subpixel: float | str | None = None,
+    min_contraction: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Per W: mean noise variance (shape (3, m): the reference and the current image's
     shares per GL**2, their interaction per GL**4), mismatch variance, SSSIG, valid
     fraction (subsets with a shift <= ``max_shift`` and an IC-GN contraction >=
     ``min_contraction``; averaged over the sub-pixel offsets of ``subpixel``). The terms
     leave out only the degenerate subsets (contraction < ``DEGENERATE``); ``nan`` where
     fewer than two subsets remain."""
-    kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative,
-                              boundary=boundary)
+    kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative, boundary=boundary)
     offs = _offsets(subpixel)
     lams = np.empty((len(offs), len(w), len(pts)))
     # degenerate fixed points (contraction below DEGENERATE) are left out, as DIC's
     # non-converged points; the breakdown counts those below min_contraction
-    runs = [_shifts_and_variance(img, w, pts, subset, criterion="znssd",
-                                 max_shift=max_shift, chunk=256, variance=True, offset=o,
-                                 min_contraction=min(DEGENERATE, min_contraction),
-                                 contraction_out=lams[i], **kw)
-            for i, o in enumerate(offs)]
+    runs = [
+        _shifts_and_variance(
+            img,
+            w,
+            pts,
+            subset,
+            criterion="znssd",
+            max_shift=max_shift,
+            chunk=256,
+            variance=True,
+            offset=o,
+            min_contraction=min(DEGENERATE, min_contraction),
+            contraction_out=lams[i],
+            **kw,
+        )
+        for i, o in enumerate(offs)
+    ]
     xis = np.stack([r[0] for r in runs])
     parts = np.stack([r[1] for r in runs if r[1] is not None])  # (offsets, 3, m, n)
     variances = parts.sum(axis=1)
@@ -164,15 +183,26 @@ def _terms(img: NDArray[np.float64], w: NDArray[np.float64], pts: NDArray[np.int
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-nan beyond the breakdown
         # reference and current shares, each averaged over the subsets and offsets
-        mean_var = np.nanmean(np.where(ok[None], np.moveaxis(parts, 1, 0), np.nan),
-                              axis=3).mean(axis=1)
+        mean_var = np.nanmean(np.where(ok[None], np.moveaxis(parts, 1, 0), np.nan), axis=3).mean(
+            axis=1
+        )
         mis_var = np.nanvar(np.where(ok, xis, np.nan), axis=2).mean(axis=0)
     dy, dx = _unit(motion)
     angle = math.degrees(math.atan2(dy, dx))
     # SSSIG along the motion as dicblur.sssig and the campaigns compute it
-    s = np.array([float(directional_sssig(
-        img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0], pts,
-        subset=subset, angle=angle).mean()) for wl in w])
+    s = np.array(
+        [
+            float(
+                directional_sssig(
+                    img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0],
+                    pts,
+                    subset=subset,
+                    angle=angle,
+                ).mean()
+            )
+            for wl in w
+        ]
+    )
     held = ok & ((lams >= min_contraction).all(axis=0) if min_contraction > 0 else True)
     return mean_var, mis_var, s, held.sum(axis=1) / xis.shape[2]
 
@@ -249,21 +279,30 @@ def predict_from_pattern(
     max_shift = check_positive(max_shift, "max_shift")
     lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
     w = as_blur(blur, "blur", increasing=False)
-    mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, derivative,
-                                        boundary, max_shift, subpixel, lam_min)
+    mean_var, mis_var, s, frac = _terms(
+        img, w, pts, subset, motion, shape, derivative, boundary, max_shift, subpixel, lam_min
+    )
     broken = frac < BREAKDOWN_FRACTION
     breakdown = float(w[broken].min()) if broken.any() else None
     u_noise = np.sqrt(sigma**2 * (mean_var[0] + mean_var[1]) + sigma**4 * mean_var[2])
     u_blur = np.sqrt(mis_var)
     n = math.hypot(float(motion[0]), float(motion[1]))
-    return PatternPrediction(blur=w, u_e=np.hypot(u_noise, u_blur), u_noise=u_noise,
-                             u_blur=u_blur, sssig=s, valid_fraction=frac, noise_sigma=sigma,
-                             subset=subset, shape=str(shape),
-                             motion=(float(motion[0]) / n, float(motion[1]) / n),
-                             u_noise_reference=sigma * np.sqrt(mean_var[0]),
-                             u_noise_current=sigma * np.sqrt(mean_var[1]),
-                             u_noise_interaction=sigma**2 * np.sqrt(mean_var[2]),
-                             breakdown_blur=breakdown)
+    return PatternPrediction(
+        blur=w,
+        u_e=np.hypot(u_noise, u_blur),
+        u_noise=u_noise,
+        u_blur=u_blur,
+        sssig=s,
+        valid_fraction=frac,
+        noise_sigma=sigma,
+        subset=subset,
+        shape=str(shape),
+        motion=(float(motion[0]) / n, float(motion[1]) / n),
+        u_noise_reference=sigma * np.sqrt(mean_var[0]),
+        u_noise_current=sigma * np.sqrt(mean_var[1]),
+        u_noise_interaction=sigma**2 * np.sqrt(mean_var[2]),
+        breakdown_blur=breakdown,
+    )
 
 
 def model_from_pattern(
@@ -319,10 +358,12 @@ def model_from_pattern(
     sigma = check_positive(noise_sigma, "noise_sigma")
     w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
     if np.unique(w).size < 4:
-        raise InputError(f"blur: {np.unique(w).size} distinct lengths; give at least 4 "
-                         "(e.g. W = 0, 1, 2, 4 px)")
-    mean_var, mis_var, s, frac = _terms(img, w, pts, subset, motion, shape, "bspline3",
-                                        boundary, 1.0, subpixel, MIN_CONTRACTION)
+        raise InputError(
+            f"blur: {np.unique(w).size} distinct lengths; give at least 4 (e.g. W = 0, 1, 2, 4 px)"
+        )
+    mean_var, mis_var, s, frac = _terms(
+        img, w, pts, subset, motion, shape, "bspline3", boundary, 1.0, subpixel, MIN_CONTRACTION
+    )
     # below the first breakdown only (as the campaigns' rule: >= 90 % of the subsets)
     keep = frac >= BREAKDOWN_FRACTION
     keep &= w < (w[~keep].min() if (~keep).any() else np.inf)
@@ -336,27 +377,44 @@ def model_from_pattern(
     ww = np.concatenate([w[keep]] * 3)
     ss = np.concatenate([s[keep]] * 3)
     var1 = mean_var[0] + mean_var[1]
-    uu = np.concatenate([np.sqrt(lv**2 * var1[keep] + lv**4 * mean_var[2][keep]
-                                 + mis_var[keep]) for lv in levels])
+    uu = np.concatenate(
+        [np.sqrt(lv**2 * var1[keep] + lv**4 * mean_var[2][keep] + mis_var[keep]) for lv in levels]
+    )
     nn = np.repeat(levels, int(keep.sum()))
-    prov: dict[str, Any] = {"source": "static prediction", "subset": subset,
-                            "subpixel": subpixel,
-                            "shape": str(shape), "motion": [float(motion[0]), float(motion[1])],
-                            "n_subsets": len(pts), "image_shape": list(img.shape)}
+    prov: dict[str, Any] = {
+        "source": "static prediction",
+        "subset": subset,
+        "subpixel": subpixel,
+        "shape": str(shape),
+        "motion": [float(motion[0]), float(motion[1])],
+        "n_subsets": len(pts),
+        "image_shape": list(img.shape),
+    }
     prov.update(provenance or {})
     # validity domain: the static prediction's own breakdown test ends it
     broken = np.nonzero(~keep)[0]
     w_break = float(w[broken[0]]) if broken.size else None
     import hashlib
 
-    model = fit_blur_model(ww, ss, uu, noise_sigma=nn, subset=subset,
-                           mean_level=float(img.mean()), next_term=True, default="mismatch",
-                           provenance=prov, compare=False, shape=str(shape),
-                           pattern=_pattern_name(prov),
-                           pattern_sha256=hashlib.sha256(img.tobytes()).hexdigest(),
-                           breakdown_blur=w_break,
-                           breakdown_rule="static prediction: < 90 % of the subsets keep a "
-                           "shift below 1 px" if w_break is not None else None)
+    model = fit_blur_model(
+        ww,
+        ss,
+        uu,
+        noise_sigma=nn,
+        subset=subset,
+        mean_level=float(img.mean()),
+        next_term=True,
+        default="mismatch",
+        provenance=prov,
+        compare=False,
+        shape=str(shape),
+        pattern=_pattern_name(prov),
+        pattern_sha256=hashlib.sha256(img.tobytes()).hexdigest(),
+        breakdown_blur=w_break,
+        breakdown_rule="static prediction: < 90 % of the subsets keep a shift below 1 px"
+        if w_break is not None
+        else None,
+    )
     # fitted on three noise levels: make the model's own noise the one asked for
     return replace(model, noise_sigma=sigma)
 

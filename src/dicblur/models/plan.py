@@ -38,8 +38,13 @@ from ..errors import InputError
 from .model import BlurUncertaintyModel
 from .units import parse_quantity
 
-__all__ = ["RULE_OF_THUMB_BLUR", "ExposurePlan", "PoissonGaussianCamera",
-           "gradient_weighted_level", "plan_exposure"]
+__all__ = [
+    "RULE_OF_THUMB_BLUR",
+    "ExposurePlan",
+    "PoissonGaussianCamera",
+    "gradient_weighted_level",
+    "plan_exposure",
+]
 
 RULE_OF_THUMB_BLUR = 0.02
 """The common rule of thumb: keep the motion during the exposure under 0.02 px."""
@@ -74,8 +79,9 @@ class PoissonGaussianCamera:
             raise InputError(f"peak_to_mean={self.peak_to_mean!r}: must be >= 1")
 
     @classmethod
-    def from_camera(cls, camera: Any, *, nominal_exposure: float, mean_level: float,
-                    peak_to_mean: float = 2.0) -> PoissonGaussianCamera:
+    def from_camera(
+        cls, camera: Any, *, nominal_exposure: float, mean_level: float, peak_to_mean: float = 2.0
+    ) -> PoissonGaussianCamera:
         """Build from a :class:`dicblur.Camera` (grey-level units) and its nominal exposure.
 
         ``Camera`` maps an irradiance image in grey levels at the nominal exposure to
@@ -106,16 +112,21 @@ class PoissonGaussianCamera:
         if full_well is None:
             full_well = (2**bits - 1) / gain if bits is not None else 1e30
         # exposure_scale is the camera's own exposure knob: the plan sets the exposure
-        return cls(full_well=float(full_well), read_noise=float(camera.read_noise) / gain,
-                   flux=level / (gain * t0), peak_to_mean=peak_to_mean)
+        return cls(
+            full_well=float(full_well),
+            read_noise=float(camera.read_noise) / gain,
+            flux=level / (gain * t0),
+            peak_to_mean=peak_to_mean,
+        )
 
     @property
     def saturation_exposure(self) -> float:
         """Exposure (s) at which the brightest pixels reach the full well."""
         return self.full_well / (self.flux * self.peak_to_mean)
 
-    def noise_gl(self, exposure: NDArray[np.float64] | float, mean_level: float,
-                 level: float | None = None) -> NDArray[np.float64]:
+    def noise_gl(
+        self, exposure: NDArray[np.float64] | float, mean_level: float, level: float | None = None
+    ) -> NDArray[np.float64]:
         """Noise std in grey levels of images normalised to ``mean_level`` (see module).
 
         ``level`` (GL, same images): intensity at which the shot noise is evaluated
@@ -127,8 +138,7 @@ class PoissonGaussianCamera:
         return np.asarray(mean_level * np.sqrt(e * ratio + self.read_noise**2) / e)
 
 
-def gradient_weighted_level(image: Any, *, motion: tuple[float, float] = (0.0, 1.0)
-                            ) -> float:
+def gradient_weighted_level(image: Any, *, motion: tuple[float, float] = (0.0, 1.0)) -> float:
     """Intensity at which signal-dependent noise enters the DIC error (GL).
 
     ``sum(g**2 I) / sum(g**2)`` over the image, ``g`` the central-difference derivative
@@ -154,8 +164,9 @@ def gradient_weighted_level(image: Any, *, motion: tuple[float, float] = (0.0, 1
     if not math.isfinite(norm) or norm == 0:
         raise InputError(f"motion={motion!r}: give a non-zero direction (dy, dx), e.g. (0, 1)")
     g = np.zeros_like(img)
-    g[1:-1, 1:-1] = (0.5 * dy * (img[2:, 1:-1] - img[:-2, 1:-1])
-                     + 0.5 * dx * (img[1:-1, 2:] - img[1:-1, :-2])) / norm
+    g[1:-1, 1:-1] = (
+        0.5 * dy * (img[2:, 1:-1] - img[:-2, 1:-1]) + 0.5 * dx * (img[1:-1, 2:] - img[1:-1, :-2])
+    ) / norm
     g2 = g * g
     total = float(g2.sum())
     if total <= 0:
@@ -207,20 +218,25 @@ class ExposurePlan:
             f"(model: {self.model})",
         ]
         kind = "optimal exposure" if self.optimal else "longest exposure under the target"
-        lines.append(f"{kind}: {_fmt_time(self.exposure)} -> blur {self.blur:.3g} px, "
-                     f"u_e {self.u_e:.3g} px [{self.u_e_low:.3g}, {self.u_e_high:.3g}] "
-                     f"= {self.u_e * self.scale * 1e3:.3g} um")
+        lines.append(
+            f"{kind}: {_fmt_time(self.exposure)} -> blur {self.blur:.3g} px, "
+            f"u_e {self.u_e:.3g} px [{self.u_e_low:.3g}, {self.u_e_high:.3g}] "
+            f"= {self.u_e * self.scale * 1e3:.3g} um"
+        )
         if self.target is not None:
             if self.max_exposure is None:
                 lines.append(f"target {self.target:g} px: not reachable at any exposure")
             else:
                 lo = "" if self.min_exposure is None else f"{_fmt_time(self.min_exposure)} .. "
-                lines.append(f"target {self.target:g} px met for exposures {lo}"
-                             f"{_fmt_time(self.max_exposure)}")
+                lines.append(
+                    f"target {self.target:g} px met for exposures {lo}"
+                    f"{_fmt_time(self.max_exposure)}"
+                )
         lines.append(
             f"rule of thumb (blur <= {RULE_OF_THUMB_BLUR} px): exposure "
             f"{_fmt_time(self.rule_of_thumb_exposure)}, u_e {self.rule_of_thumb_u_e:.3g} px; "
-            f"planned exposure = {self.exposure / self.rule_of_thumb_exposure:.3g} x that")
+            f"planned exposure = {self.exposure / self.rule_of_thumb_exposure:.3g} x that"
+        )
         lines += list(self.notes)
         return "\n".join(lines)
 
@@ -322,8 +338,10 @@ def plan_exposure(
         t_fix = w_max / v_px
         limited = w_break is not None and w_max >= w_break * (1.0 - 1e-12)
         if limited:
-            notes.append(f"the target holds up to W = {w_break:g} px, where DIC breaks down "
-                         f"({dom.breakdown_rule}); no longer exposure is planned")
+            notes.append(
+                f"the target holds up to W = {w_break:g} px, where DIC breaks down "
+                f"({dom.breakdown_rule}); no longer exposure is planned"
+            )
         t = np.linspace(0.0, 2.0 * max(t_fix, t_rule), n_curve)
         pred = model.predict(t * v_px, sigma, model=kind)
         at = model.predict([w_max], sigma, model=kind)
@@ -335,19 +353,39 @@ def plan_exposure(
         sig_used = at.sigma
         assert at.inside_domain is not None
         inside = bool(at.inside_domain[0])  # blur and noise range (power law: fit range)
-        notes.append(f"planned W = {w_max:.3g} px"
-                     + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL")
-                     + (" lies inside" if inside else " lies outside")
-                     + f" the model's validity domain ({dom.describe()})"
-                     + ("" if inside else ": extrapolated"))
+        notes.append(
+            f"planned W = {w_max:.3g} px"
+            + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL")
+            + (" lies inside" if inside else " lies outside")
+            + f" the model's validity domain ({dom.describe()})"
+            + ("" if inside else ": extrapolated")
+        )
         return ExposurePlan(
-            model=kind, velocity=v, scale=sc, velocity_px=v_px, target=tgt, exposure=t_fix,
-            blur=w_max, u_e=float(at.u_e[0]), u_e_low=float(at.low[0]),
-            u_e_high=float(at.high[0]), max_exposure=t_fix, min_exposure=None, optimal=False,
-            saturation_exposure=None, rule_of_thumb_exposure=t_rule, rule_of_thumb_u_e=u_rule,
-            curve_exposure=t, curve_blur=t * v_px, curve_u_e=pred.u_e, notes=tuple(notes),
-            inside_domain=inside, extrapolated=not inside, limited_by_breakdown=limited,
-            domain=dom.to_dict())
+            model=kind,
+            velocity=v,
+            scale=sc,
+            velocity_px=v_px,
+            target=tgt,
+            exposure=t_fix,
+            blur=w_max,
+            u_e=float(at.u_e[0]),
+            u_e_low=float(at.low[0]),
+            u_e_high=float(at.high[0]),
+            max_exposure=t_fix,
+            min_exposure=None,
+            optimal=False,
+            saturation_exposure=None,
+            rule_of_thumb_exposure=t_rule,
+            rule_of_thumb_u_e=u_rule,
+            curve_exposure=t,
+            curve_blur=t * v_px,
+            curve_u_e=pred.u_e,
+            notes=tuple(notes),
+            inside_domain=inside,
+            extrapolated=not inside,
+            limited_by_breakdown=limited,
+            domain=dom.to_dict(),
+        )
 
     for attr in ("full_well", "read_noise", "flux"):
         if not hasattr(camera, attr):
@@ -388,8 +426,12 @@ def plan_exposure(
 
     def log_u(tt: NDArray[np.float64]) -> NDArray[np.float64]:
         sig = noise(tt)
-        return np.array([model._log_u(kind, np.array([ti * v_px]), float(si), theta)[0]
-                         for ti, si in zip(tt, sig, strict=True)])
+        return np.array(
+            [
+                model._log_u(kind, np.array([ti * v_px]), float(si), theta)[0]
+                for ti, si in zip(tt, sig, strict=True)
+            ]
+        )
 
     # search blur lengths 1e-4 .. 1e4 px, capped by saturation and by DIC's breakdown
     t_lo = 1e-4 / v_px
@@ -407,19 +449,27 @@ def plan_exposure(
     lg = log_u(grid)
     i = int(np.argmin(lg))
     if 0 < i < grid.size - 1:
-        r = optimize.minimize_scalar(lambda x: float(log_u(np.array([math.exp(x)]))[0]),
-                                     bounds=(math.log(grid[i - 1]), math.log(grid[i + 1])),
-                                     method="bounded", options={"xatol": 1e-10})
+        r = optimize.minimize_scalar(
+            lambda x: float(log_u(np.array([math.exp(x)]))[0]),
+            bounds=(math.log(grid[i - 1]), math.log(grid[i + 1])),
+            method="bounded",
+            options={"xatol": 1e-10},
+        )
         t_opt = float(math.exp(r.x))
     else:
         t_opt = float(grid[i])
         if i == grid.size - 1 and limited:
-            notes.append(f"u_e still falls at W = {w_break:g} px, where DIC breaks down "
-                         f"({dom.breakdown_rule}): the plan stops there")
+            notes.append(
+                f"u_e still falls at W = {w_break:g} px, where DIC breaks down "
+                f"({dom.breakdown_rule}): the plan stops there"
+            )
         else:
-            notes.append("the optimum is at the saturation limit (brighter light or a "
-                         "shorter exposure range changes the answer)" if i == grid.size - 1
-                         else "the optimum is at the shortest exposure searched")
+            notes.append(
+                "the optimum is at the saturation limit (brighter light or a "
+                "shorter exposure range changes the answer)"
+                if i == grid.size - 1
+                else "the optimum is at the shortest exposure searched"
+            )
     limited = limited and i == grid.size - 1
     sig_opt = float(noise(t_opt))
     levels = model.noise_levels
@@ -428,7 +478,8 @@ def plan_exposure(
             f"the noise term is extrapolated from one calibration noise level ({levels[0]:g} "
             f"GL) to {sig_opt:.3g} GL at the optimum; a noise-independent floor (sub-pixel "
             "interpolation bias) cannot be separated at one level and inflates the "
-            "extrapolated noise: calibrate at >= 2 noise levels (docs/models.md s. 4)")
+            "extrapolated noise: calibrate at >= 2 noise levels (docs/models.md s. 4)"
+        )
     at = model.predict([t_opt * v_px], sig_opt, model=kind)
     t_curve = np.geomspace(max(t_lo, t_opt / 100), min(t_hi, t_opt * 100), n_curve)
     u_curve = np.exp(log_u(t_curve))
@@ -438,20 +489,28 @@ def plan_exposure(
     if tgt is not None:
         ok = np.exp(lg) <= tgt
         if ok.any():
+
             def f(x: float) -> float:
                 return float(log_u(np.array([math.exp(x)]))[0]) - math.log(tgt)
+
             j0, j1 = int(np.argmax(ok)), int(ok.size - 1 - np.argmax(ok[::-1]))
-            t_min = (float(math.exp(optimize.brentq(f, math.log(grid[j0 - 1]),
-                                                    math.log(grid[j0]))))
-                     if j0 > 0 else float(grid[0]))
-            t_max = (float(math.exp(optimize.brentq(f, math.log(grid[j1]),
-                                                    math.log(grid[j1 + 1]))))
-                     if j1 < grid.size - 1 else float(grid[-1]))
+            t_min = (
+                float(math.exp(optimize.brentq(f, math.log(grid[j0 - 1]), math.log(grid[j0]))))
+                if j0 > 0
+                else float(grid[0])
+            )
+            t_max = (
+                float(math.exp(optimize.brentq(f, math.log(grid[j1]), math.log(grid[j1 + 1]))))
+                if j1 < grid.size - 1
+                else float(grid[-1])
+            )
         else:
-            notes.append(f"target {tgt:g} px is below the best achievable u_e "
-                         f"{float(at.u_e[0]):.3g} px")
-    notes.append(f"rule of thumb gives u_e {u_rule:.3g} px vs {float(at.u_e[0]):.3g} px at "
-                 "the optimum")
+            notes.append(
+                f"target {tgt:g} px is below the best achievable u_e {float(at.u_e[0]):.3g} px"
+            )
+    notes.append(
+        f"rule of thumb gives u_e {u_rule:.3g} px vs {float(at.u_e[0]):.3g} px at the optimum"
+    )
     w_opt = t_opt * v_px
     assert at.inside_domain is not None
     inside = bool(at.inside_domain[0])
@@ -459,15 +518,36 @@ def plan_exposure(
         f"the optimum (W = {w_opt:.3g} px, noise {sig_opt:.3g} GL) lies "
         + ("inside" if inside else "outside")
         + f" the model's validity domain ({dom.describe()})"
-        + ("" if inside else ": extrapolated"))
+        + ("" if inside else ": extrapolated")
+    )
     return ExposurePlan(
-        model=kind, velocity=v, scale=sc, velocity_px=v_px, target=tgt, exposure=t_opt,
-        blur=t_opt * v_px, u_e=float(at.u_e[0]), u_e_low=float(at.low[0]),
-        u_e_high=float(at.high[0]), max_exposure=t_max, min_exposure=t_min, optimal=True,
+        model=kind,
+        velocity=v,
+        scale=sc,
+        velocity_px=v_px,
+        target=tgt,
+        exposure=t_opt,
+        blur=t_opt * v_px,
+        u_e=float(at.u_e[0]),
+        u_e_low=float(at.low[0]),
+        u_e_high=float(at.high[0]),
+        max_exposure=t_max,
+        min_exposure=t_min,
+        optimal=True,
         saturation_exposure=t_sat if math.isfinite(t_sat) else None,
-        rule_of_thumb_exposure=t_rule, rule_of_thumb_u_e=u_rule, curve_exposure=t_curve,
-        curve_blur=t_curve * v_px, curve_u_e=u_curve, notes=tuple(notes),
-        camera={k: float(getattr(camera, k)) for k in ("full_well", "read_noise", "flux",
-                                                        "peak_to_mean") if hasattr(camera, k)},
-        inside_domain=inside, extrapolated=not inside, limited_by_breakdown=limited,
-        domain=dom.to_dict())
+        rule_of_thumb_exposure=t_rule,
+        rule_of_thumb_u_e=u_rule,
+        curve_exposure=t_curve,
+        curve_blur=t_curve * v_px,
+        curve_u_e=u_curve,
+        notes=tuple(notes),
+        camera={
+            k: float(getattr(camera, k))
+            for k in ("full_well", "read_noise", "flux", "peak_to_mean")
+            if hasattr(camera, k)
+        },
+        inside_domain=inside,
+        extrapolated=not inside,
+        limited_by_breakdown=limited,
+        domain=dom.to_dict(),
+    )

@@ -91,8 +91,7 @@ def edge_driven_range(
         raise InputError(f"range_tolerance={tolerance!r}: must be > 0, e.g. 0.05 (5 % loss)")
     if levels.size < min_points:
         raise InputError(
-            f"blur: {levels.size} distinct blur level(s); the power law needs at least "
-            f"{min_points}"
+            f"blur: {levels.size} distinct blur level(s); the power law needs at least {min_points}"
         )
     if contrast_ratio is not None:
         r = as_positive(contrast_ratio, "contrast_ratio", w.size)
@@ -171,8 +170,11 @@ def fit_power_law(
     levels = np.unique(sig) if sig is not None else np.array([])
     multi = levels.size >= 2
     fit_kappa = multi if fit_noise_exponent is None else bool(fit_noise_exponent and multi)
-    sigma_ref = (float(np.exp(np.mean(np.log(levels)))) if multi
-                 else (float(levels[0]) if levels.size else None))
+    sigma_ref = (
+        float(np.exp(np.mean(np.log(levels))))
+        if multi
+        else (float(levels[0]) if levels.size else None)
+    )
     x = np.log(s / s_ref)
     y = np.log(u)
     z = np.log(sig / sigma_ref) if (sig is not None and sigma_ref is not None) else np.zeros_like(x)
@@ -192,12 +194,27 @@ def fit_power_law(
         jac[:, 0] = 1.0 / u_ref
         return vals, jac, res
 
-    extra = {"sigma_ref": sigma_ref, "sssig_ref": s_ref,
-             "noise_levels": [float(v) for v in levels],
-             "kappa_rule": "fitted" if fit_kappa else "2*alpha"}
-    res = make_result(model="power_law", names=names, fit_once=fit_once, n=s.size,
-                      data_space=y, blur=w, fixed={}, confidence=confidence, ci=ci,
-                      n_boot=n_boot, seed=seed, extra=extra, log_params=("u_ref", "a", "k"))
+    extra = {
+        "sigma_ref": sigma_ref,
+        "sssig_ref": s_ref,
+        "noise_levels": [float(v) for v in levels],
+        "kappa_rule": "fitted" if fit_kappa else "2*alpha",
+    }
+    res = make_result(
+        model="power_law",
+        names=names,
+        fit_once=fit_once,
+        n=s.size,
+        data_space=y,
+        blur=w,
+        fixed={},
+        confidence=confidence,
+        ci=ci,
+        n_boot=n_boot,
+        seed=seed,
+        extra=extra,
+        log_params=("u_ref", "a", "k"),
+    )
     eta = res["u_ref"] * s_ref ** res["alpha"]
     from dataclasses import replace
 

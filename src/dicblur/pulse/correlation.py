@@ -58,9 +58,7 @@ def chi2_regime_a(
     return 2 * n_periods * a**2 * np.where(x <= wa / 2, inner, outer)
 
 
-def _piecewise_integral(
-    f, breaks: NDArray[np.float64], lo: float, hi: float
-) -> float:
+def _piecewise_integral(f, breaks: NDArray[np.float64], lo: float, hi: float) -> float:
     """Exact integral over [lo, hi] of ``f``, polynomial of degree <= 3 between ``breaks``.
 
     Two-point Gauss-Legendre on each piece: exact for cubics and never evaluates ``f`` at a
@@ -132,9 +130,12 @@ def min_chi2(
         j = int(np.argmin(c))
         lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
         res = optimize.minimize_scalar(
-            lambda s, wi=wi: float(chi2_continuous(train, [s], float(wi), w_ref=w_ref,
-                                                   n_periods=n_periods)[0]),
-            bounds=(lo, hi), method="bounded", options={"xatol": 1e-10},
+            lambda s, wi=wi: float(
+                chi2_continuous(train, [s], float(wi), w_ref=w_ref, n_periods=n_periods)[0]
+            ),
+            bounds=(lo, hi),
+            method="bounded",
+            options={"xatol": 1e-10},
         )
         best = min((float(res.fun), float(res.x)), (float(c[j]), float(grid[j])))
         vals[i], locs[i] = best

@@ -170,12 +170,16 @@ def _fourier_shift_estimate(
     moving: NDArray[np.float64], fixed: NDArray[np.float64], du: float, tol: float = 1e-11
 ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
     length = moving.shape[-1]
-    return _fourier_estimate_from_spectra(np.fft.rfft(moving, axis=-1),
-                                          np.fft.rfft(fixed, axis=-1), length, du, tol)
+    return _fourier_estimate_from_spectra(
+        np.fft.rfft(moving, axis=-1), np.fft.rfft(fixed, axis=-1), length, du, tol
+    )
 
 
 def _fourier_estimate_from_spectra(
-    gm: NDArray[np.complex128], fm: NDArray[np.complex128], length: int, du: float,
+    gm: NDArray[np.complex128],
+    fm: NDArray[np.complex128],
+    length: int,
+    du: float,
     tol: float = 1e-11,
 ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
     """Fourier-shift SSD minimiser from the rFFTs of the moving and fixed signals."""
@@ -197,8 +201,9 @@ def _fourier_estimate_from_spectra(
     h = np.ascontiguousarray(cross[:, 1 : nq + 1])
     gn = gm[:, -1].real.copy() if even else np.zeros(c.shape[0])
     fn = fm[:, -1].real.copy() if even else np.zeros(c.shape[0])
-    return _newton_fourier(h, gn, fn, float(length), centre + delta, centre - 1.0,
-                           centre + 1.0, tol, 60)
+    return _newton_fourier(
+        h, gn, fn, float(length), centre + delta, centre - 1.0, centre + 1.0, tol, 60
+    )
 
 
 def _white_noise_spectrum(
@@ -276,8 +281,7 @@ def _analytic_shift_estimate(
     slope = train.blurred_gradient(x, model_w)
     a = np.sum(slope**2, axis=-1)
     b = 2 * np.sum(slope * gval, axis=-1)[None, :] - 2 * data @ slope.T
-    c = (np.sum(gval**2, axis=-1)[None, :] - 2 * data @ gval.T
-         + np.sum(data**2, axis=-1)[:, None])
+    c = np.sum(gval**2, axis=-1)[None, :] - 2 * data @ gval.T + np.sum(data**2, axis=-1)[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.where(a > 0, -b / (2 * a), 0.0)
     d = np.clip(d, (lo - mid)[None, :], (hi - mid)[None, :])
@@ -315,24 +319,39 @@ def _taps(t: NDArray[np.float64], kind: str) -> tuple[NDArray[np.float64], NDArr
     """Weights (4, n) of taps -1..2 around ``floor(x)`` and of their derivative in ``t``."""
     if kind == "bspline":
         u = 1.0 - t
-        w = np.stack([u**3 / 6, (3 * t**3 - 6 * t**2 + 4) / 6,
-                      (-3 * t**3 + 3 * t**2 + 3 * t + 1) / 6, t**3 / 6])
-        dw = np.stack([-(u**2) / 2, (3 * t**2 - 4 * t) / 2, (-3 * t**2 + 2 * t + 1) / 2,
-                       t**2 / 2])
+        w = np.stack(
+            [
+                u**3 / 6,
+                (3 * t**3 - 6 * t**2 + 4) / 6,
+                (-3 * t**3 + 3 * t**2 + 3 * t + 1) / 6,
+                t**3 / 6,
+            ]
+        )
+        dw = np.stack([-(u**2) / 2, (3 * t**2 - 4 * t) / 2, (-3 * t**2 + 2 * t + 1) / 2, t**2 / 2])
         return w, dw
     x = np.stack([t + 1.0, t, t - 1.0, t - 2.0])  # distance to each tap
     ax = np.abs(x)
     inner = ax <= 1.0
-    w = np.where(inner, 1.5 * ax**3 - 2.5 * ax**2 + 1.0,
-                 np.where(ax < 2.0, -0.5 * ax**3 + 2.5 * ax**2 - 4.0 * ax + 2.0, 0.0))
-    dw = np.where(inner, 4.5 * x * ax - 5.0 * x,
-                  np.where(ax < 2.0, -1.5 * x * ax + 5.0 * x - 4.0 * np.sign(x), 0.0))
+    w = np.where(
+        inner,
+        1.5 * ax**3 - 2.5 * ax**2 + 1.0,
+        np.where(ax < 2.0, -0.5 * ax**3 + 2.5 * ax**2 - 4.0 * ax + 2.0, 0.0),
+    )
+    dw = np.where(
+        inner,
+        4.5 * x * ax - 5.0 * x,
+        np.where(ax < 2.0, -1.5 * x * ax + 5.0 * x - 4.0 * np.sign(x), 0.0),
+    )
     return w, dw
 
 
 def _icgn_shift_estimate(
-    moving: NDArray[np.float64], fixed: NDArray[np.float64], du: float, kind: str,
-    tol: float = 1e-11, max_iter: int = 60,
+    moving: NDArray[np.float64],
+    fixed: NDArray[np.float64],
+    du: float,
+    kind: str,
+    tol: float = 1e-11,
+    max_iter: int = 60,
 ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
     """Root of ``F(xi) = sum_k D f(k) [g(k + xi) - f(k)]`` (IC-GN's fixed point for a
     translation) with ``g`` the moved signal read through the ``kind`` interpolant."""
@@ -341,8 +360,11 @@ def _icgn_shift_estimate(
     fm, ff = np.fft.rfft(moving, axis=-1), np.fft.rfft(fixed, axis=-1)
     df = np.fft.irfft(derivative_multiplier(length, kind) * ff, length, axis=-1)
     # the interpolant's coefficients: B-spline prefilter, or the samples themselves
-    coef = (np.fft.irfft(fm / ((4.0 + 2.0 * np.cos(q)) / 6.0), length, axis=-1)
-            if kind == "bspline" else moving)
+    coef = (
+        np.fft.irfft(fm / ((4.0 + 2.0 * np.cos(q)) / 6.0), length, axis=-1)
+        if kind == "bspline"
+        else moving
+    )
     corr = np.fft.irfft(fm * np.conj(ff), length, axis=-1)
     lags = _lag_window(length, du)
     xi = lags[np.argmax(corr[:, lags % length], axis=-1)].astype(np.float64)
@@ -417,13 +439,16 @@ def estimate_shift(
     period = check_positive(period, "period")
     check_choice(interpolation, "interpolation", ("fourier", "linear", *_ICGN_KINDS))
     check_choice(shifted, "shifted", ("blurred", "reference"))
-    def fn(m: NDArray[np.float64], f: NDArray[np.float64], du: float) -> tuple[
-            NDArray[np.float64], NDArray[np.uint8]]:
+
+    def fn(
+        m: NDArray[np.float64], f: NDArray[np.float64], du: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
         if interpolation in _ICGN_KINDS:
             return _icgn_shift_estimate(m, f, du, interpolation)
         if interpolation == "fourier":
             return _fourier_shift_estimate(m, f, du)
         return _linear_shift_estimate(m, f, du)
+
     if shifted == "blurred":
         u, st = fn(np.ascontiguousarray(cur), np.ascontiguousarray(ref), period)
         return u, st
@@ -447,7 +472,12 @@ def _std_ci(x: NDArray[np.float64]) -> tuple[float, float, float]:
 
 
 def _pixel_linearised(
-    train: PulseTrain, w: float, w_ref: float, sigma: float, length: int, displacement: float,
+    train: PulseTrain,
+    w: float,
+    w_ref: float,
+    sigma: float,
+    length: int,
+    displacement: float,
     kind: str = "fourier",
 ) -> tuple[float, float, float, float]:
     """Pixel-level ``sigma sqrt(S_o + S_b) / |C|`` with the correlator's own derivative D
@@ -536,8 +566,7 @@ def simulate(
     if not isinstance(trials, int | np.integer) or trials < 2:
         raise InputError(f"trials={describe(trials)}: expected an int >= 2 (default 10000)")
     displacement = check_finite_number(displacement, "displacement")
-    check_choice(interpolation, "interpolation",
-                 ("fourier", "linear", "analytic", *_ICGN_KINDS))
+    check_choice(interpolation, "interpolation", ("fourier", "linear", "analytic", *_ICGN_KINDS))
     check_choice(shifted, "shifted", ("blurred", "reference"))
     w_ref = check_positive(w_ref, "w_ref")
     outlier_threshold = check_positive(outlier_threshold, "outlier_threshold")
@@ -559,8 +588,18 @@ def simulate(
     from .._version import __version__
 
     ref_clean = train.sample(length, w_ref)
-    names = ("u_e", "u_e_ci_low", "u_e_ci_high", "mean", "mean_ci_low", "mean_ci_high",
-             "median", "u_e_robust", "outlier_fraction", "converged_fraction")
+    names = (
+        "u_e",
+        "u_e_ci_low",
+        "u_e_ci_high",
+        "mean",
+        "mean_ci_low",
+        "mean_ci_high",
+        "median",
+        "u_e_robust",
+        "outlier_fraction",
+        "converged_fraction",
+    )
     stats = {k: np.empty(wa.size) for k in names}
     pix = np.empty((4, wa.size))
     samples = np.empty((wa.size, trials)) if keep_samples else None
@@ -582,15 +621,20 @@ def simulate(
             tau_b = sigma * rng.standard_normal((trials, length))
         if interpolation == "analytic":
             if shifted == "blurred":
-                u, st = _analytic_shift_estimate(train, float(w), displacement,
-                                                 ref_clean + tau_o - tau_b)
+                u, st = _analytic_shift_estimate(
+                    train, float(w), displacement, ref_clean + tau_o - tau_b
+                )
             else:
-                u, st = _analytic_shift_estimate(train, w_ref, 0.0,
-                                                 cur_clean + tau_b - tau_o)
+                u, st = _analytic_shift_estimate(train, w_ref, 0.0, cur_clean + tau_b - tau_o)
                 u = -u
         elif interpolation in ("linear", *_ICGN_KINDS):
-            u, st = estimate_shift(ref_clean + tau_o, cur_clean + tau_b, period=train.du,
-                                   interpolation=interpolation, shifted=shifted)
+            u, st = estimate_shift(
+                ref_clean + tau_o,
+                cur_clean + tau_b,
+                period=train.du,
+                interpolation=interpolation,
+                shifted=shifted,
+            )
         if samples is not None:
             samples[i] = u
         err = u - displacement
@@ -598,50 +642,83 @@ def simulate(
         mean = float(u.mean())
         half = _Z95 * s / math.sqrt(trials)
         med = float(np.median(u))
-        for k, v in zip(names, (s, lo, hi, mean, mean - half, mean + half, med,
-                                1.482602218505602 * float(np.median(np.abs(u - med))),
-                                float(np.mean(np.abs(err) > outlier_threshold)),
-                                float(np.mean(st == 0))), strict=True):
+        for k, v in zip(
+            names,
+            (
+                s,
+                lo,
+                hi,
+                mean,
+                mean - half,
+                mean + half,
+                med,
+                1.482602218505602 * float(np.median(np.abs(u - med))),
+                float(np.mean(np.abs(err) > outlier_threshold)),
+                float(np.mean(st == 0)),
+            ),
+            strict=True,
+        ):
             stats[k][i] = v
-        pix[:, i] = _pixel_linearised(train, float(w), w_ref, max(sigma, 0.0), length,
-                                      displacement, interpolation)
+        pix[:, i] = _pixel_linearised(
+            train, float(w), w_ref, max(sigma, 0.0), length, displacement, interpolation
+        )
 
     s_o, s_b, cross = gradient_sums(train, wa, w_ref=w_ref, n_periods=n_periods)
     sig = max(sigma, 1e-300)
     data_vars: dict[str, tuple] = {k: ("w", v) for k, v in stats.items()}
     data_vars["bias"] = ("w", stats["mean"] - displacement)
-    data_vars.update({
-        "regime": ("w", np.array([regime(train, float(w)) for w in wa])),
-        "m": ("w", edge_length(train, wa)),
-        "sssig_blur": ("w", s_b),
-        "sssig_ref": ("w", s_o),
-        "cross_gradient": ("w", cross),
-        "u_first_principles": ("w", predict_first_principles(train, wa, sigma=sig,
-                                                             n_periods=n_periods)),
-        "u_interpolated_noise": ("w", predict_interpolated_noise(
-            train, wa, sigma=sig, n_periods=n_periods, w_ref=w_ref)),
-        "u_paper_linear": ("w", predict_paper_linear(train, wa, sigma=sig,
-                                                     n_periods=n_periods)),
-        "u_pixel_linearised": ("w", pix[3]),  # with this correlator's own D
-        "sssig_blur_spectral": ("w", pix[1]),
-        "sssig_ref_spectral": ("w", pix[0]),
-        "cross_gradient_spectral": ("w", pix[2]),
-    })
+    data_vars.update(
+        {
+            "regime": ("w", np.array([regime(train, float(w)) for w in wa])),
+            "m": ("w", edge_length(train, wa)),
+            "sssig_blur": ("w", s_b),
+            "sssig_ref": ("w", s_o),
+            "cross_gradient": ("w", cross),
+            "u_first_principles": (
+                "w",
+                predict_first_principles(train, wa, sigma=sig, n_periods=n_periods),
+            ),
+            "u_interpolated_noise": (
+                "w",
+                predict_interpolated_noise(train, wa, sigma=sig, n_periods=n_periods, w_ref=w_ref),
+            ),
+            "u_paper_linear": (
+                "w",
+                predict_paper_linear(train, wa, sigma=sig, n_periods=n_periods),
+            ),
+            "u_pixel_linearised": ("w", pix[3]),  # with this correlator's own D
+            "sssig_blur_spectral": ("w", pix[1]),
+            "sssig_ref_spectral": ("w", pix[0]),
+            "cross_gradient_spectral": ("w", pix[2]),
+        }
+    )
     if samples is not None:
         data_vars["u"] = (("w", "trial"), samples)
-    ds = xr.Dataset(data_vars, coords={"w": ("w", wa, {"units": "px",
-                                                      "long_name": "box width w = 1 + W"})})
+    ds = xr.Dataset(
+        data_vars, coords={"w": ("w", wa, {"units": "px", "long_name": "box width w = 1 + W"})}
+    )
     for name in ds.data_vars:
         if str(name).startswith(("u", "mean", "median", "bias", "m")):
             ds[name].attrs["units"] = "px"
-    ds.attrs.update({
-        "title": "1-D periodic-pulse Monte Carlo (Lavatelli & Zappa 2017, Section V-B)",
-        "a": train.a, "dp": train.dp, "du": train.du, "x0": train.x0,
-        "sigma": sigma, "n_periods": int(n_periods), "trials": int(trials),
-        "seed": "None" if seed is None else str(seed if not isinstance(
-            seed, np.random.SeedSequence) else seed.entropy),
-        "displacement": displacement, "interpolation": interpolation, "shifted": shifted,
-        "w_ref": w_ref, "outlier_threshold": outlier_threshold,
-        "dicblur_version": __version__,
-    })
+    ds.attrs.update(
+        {
+            "title": "1-D periodic-pulse Monte Carlo (Lavatelli & Zappa 2017, Section V-B)",
+            "a": train.a,
+            "dp": train.dp,
+            "du": train.du,
+            "x0": train.x0,
+            "sigma": sigma,
+            "n_periods": int(n_periods),
+            "trials": int(trials),
+            "seed": "None"
+            if seed is None
+            else str(seed if not isinstance(seed, np.random.SeedSequence) else seed.entropy),
+            "displacement": displacement,
+            "interpolation": interpolation,
+            "shifted": shifted,
+            "w_ref": w_ref,
+            "outlier_threshold": outlier_threshold,
+            "dicblur_version": __version__,
+        }
+    )
     return ds

@@ -32,9 +32,14 @@ class LogLogFit:
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {
-            "segment": self.segment, "regime": self.regime, "w_min": self.w_min,
-            "w_max": self.w_max, "n": self.n, "slope": self.slope,
-            "slope_ci_low": self.slope_ci[0], "slope_ci_high": self.slope_ci[1],
+            "segment": self.segment,
+            "regime": self.regime,
+            "w_min": self.w_min,
+            "w_max": self.w_max,
+            "n": self.n,
+            "slope": self.slope,
+            "slope_ci_low": self.slope_ci[0],
+            "slope_ci_high": self.slope_ci[1],
             "prefactor": self.prefactor,
         }
         d.update({f"slope_{k}": v for k, v in self.slopes_pred.items()})

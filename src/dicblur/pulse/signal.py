@@ -189,8 +189,7 @@ def edge_length(train: PulseTrain, w: ArrayLike) -> NDArray[np.float64]:
     lag w, of the pulse indicator (length dp) and the gap indicator (length g).
     """
     s = np.mod(np.asarray(w, dtype=np.float64), train.du)
-    return np.minimum.reduce([s, np.full_like(s, train.dp), np.full_like(s, train.g),
-                              train.du - s])
+    return np.minimum.reduce([s, np.full_like(s, train.dp), np.full_like(s, train.g), train.du - s])
 
 
 def regime(train: PulseTrain, w: float) -> Regime:
@@ -235,9 +234,7 @@ class PulseMetrics:
         return {k: np.atleast_1d(getattr(self, k)).tolist() for k in keys}
 
 
-def closed_form_metrics(
-    train: PulseTrain, w: ArrayLike, *, n_periods: float = 1.0
-) -> PulseMetrics:
+def closed_form_metrics(train: PulseTrain, w: ArrayLike, *, n_periods: float = 1.0) -> PulseMetrics:
     """Closed-form MIG, gradient variance, contrast and SSSIG of the blurred train (Table II).
 
     Parameters
@@ -271,8 +268,12 @@ def _metrics_from_samples(
     d = (np.roll(b, -1) - b) / h  # forward differences over one period (circular)
     mean = float(d.mean())
     var = float(np.mean((d - mean) ** 2))
-    return float(np.mean(np.abs(d))), mean, var, float(b.max() - b.min()), float(
-        n_periods * np.sum(d**2) * h
+    return (
+        float(np.mean(np.abs(d))),
+        mean,
+        var,
+        float(b.max() - b.min()),
+        float(n_periods * np.sum(d**2) * h),
     )
 
 
@@ -329,8 +330,14 @@ def numeric_metrics(
         b = np.fft.irfft(np.fft.rfft(cells) * np.conj(np.fft.rfft(kfull)), n)
         out[:, i] = _metrics_from_samples(b, h, n_periods, wi, "numeric")
     return PulseMetrics(
-        w=wa, m=np.full(wa.shape, np.nan), mig=out[0], gradient_mean=out[1],
-        gradient_variance=out[2], contrast=out[3], sssig=out[4], n_periods=n_periods,
+        w=wa,
+        m=np.full(wa.shape, np.nan),
+        mig=out[0],
+        gradient_mean=out[1],
+        gradient_variance=out[2],
+        contrast=out[3],
+        sssig=out[4],
+        n_periods=n_periods,
         method=f"numerical convolution, h = 1/{supersample} px",
     )
 
@@ -366,15 +373,24 @@ def pixel_metrics(
         elif gradient == "spectral":
             d = spectral_derivative(f)
         else:
-            raise InputError(
-                f"gradient={gradient!r}: choose 'forward', 'central' or 'spectral'"
-            )
+            raise InputError(f"gradient={gradient!r}: choose 'forward', 'central' or 'spectral'")
         mean = float(d.mean())
-        out[:, i] = (float(np.mean(np.abs(d))), mean, float(np.mean((d - mean) ** 2)),
-                     float(f.max() - f.min()), float(np.sum(d**2)))
+        out[:, i] = (
+            float(np.mean(np.abs(d))),
+            mean,
+            float(np.mean((d - mean) ** 2)),
+            float(f.max() - f.min()),
+            float(np.sum(d**2)),
+        )
     return PulseMetrics(
-        w=wa, m=np.full(wa.shape, np.nan), mig=out[0], gradient_mean=out[1],
-        gradient_variance=out[2], contrast=out[3], sssig=out[4], n_periods=float(n_periods),
+        w=wa,
+        m=np.full(wa.shape, np.nan),
+        mig=out[0],
+        gradient_mean=out[1],
+        gradient_variance=out[2],
+        contrast=out[3],
+        sssig=out[4],
+        n_periods=float(n_periods),
         method=f"pixel samples, {gradient} differences",
     )
 

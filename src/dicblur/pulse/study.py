@@ -98,8 +98,12 @@ def table_ii(*, supersample: int = 64, n_periods: int = 1) -> tuple[dict[str, An
     signal (a = 1, dp = 6, du = 22), (d) w = 10 on a dense train (dp = 16, du = 22), where
     (d) exists (it needs dp > g).
     """
-    cases = (("a", PAPER_TRAIN, 3.0), ("b", PAPER_TRAIN, 10.0), ("c", PAPER_TRAIN, 19.0),
-             ("d", DENSE_TRAIN, 10.0))
+    cases = (
+        ("a", PAPER_TRAIN, 3.0),
+        ("b", PAPER_TRAIN, 10.0),
+        ("c", PAPER_TRAIN, 19.0),
+        ("d", DENSE_TRAIN, 10.0),
+    )
     exprs = {"a": "w", "b": "dp", "c": "du - w", "d": "g"}
     rows = []
     for reg, train, w in cases:
@@ -107,8 +111,13 @@ def table_ii(*, supersample: int = 64, n_periods: int = 1) -> tuple[dict[str, An
         nm = numeric_metrics(train, [w], n_periods=n_periods, supersample=supersample)
         px = pixel_metrics(train, [w], n_periods=n_periods, gradient="forward")
         row: dict[str, Any] = {
-            "regime": reg, "condition": REGIMES[reg].split(":")[0], "m": exprs[reg],
-            "dp": train.dp, "du": train.du, "w": w, "m_value": float(cf.m[0]),
+            "regime": reg,
+            "condition": REGIMES[reg].split(":")[0],
+            "m": exprs[reg],
+            "dp": train.dp,
+            "du": train.du,
+            "w": w,
+            "m_value": float(cf.m[0]),
         }
         for q in ("mig", "gradient_variance", "contrast", "sssig"):
             row[f"{q}_closed"] = float(getattr(cf, q)[0])
@@ -127,9 +136,18 @@ def segments(train: PulseTrain, w: NDArray[np.float64], w_ref: float = 1.0) -> l
 
 
 def fit_loglog(
-    ds: xr.Dataset, w_min: float, w_max: float, *, var: str = "u_e", segment: str = "",
-    predictions: tuple[str, ...] = ("u_first_principles", "u_paper_linear",
-                                    "u_interpolated_noise", "u_pixel_linearised"),
+    ds: xr.Dataset,
+    w_min: float,
+    w_max: float,
+    *,
+    var: str = "u_e",
+    segment: str = "",
+    predictions: tuple[str, ...] = (
+        "u_first_principles",
+        "u_paper_linear",
+        "u_interpolated_noise",
+        "u_pixel_linearised",
+    ),
 ) -> LogLogFit:
     """Fit ``log u_e`` against ``log w`` over ``w_min <= w <= w_max`` (see :class:`LogLogFit`).
 
@@ -174,10 +192,18 @@ def fit_loglog(
         if ok.any():
             ratios[p] = float(np.exp(np.mean(y[ok] - np.log(pv[ok]))))
     regs = sorted(set(str(r) for r in sel["regime"].values)) if "regime" in sel else []
-    return LogLogFit(segment=segment, regime="".join(regs), w_min=float(w.min()),
-                     w_max=float(w.max()), n=int(w.size), slope=slope,
-                     slope_ci=(slope - tq * sslope, slope + tq * sslope),
-                     prefactor=float(np.exp(icpt)), slopes_pred=slopes, ratio_pred=ratios)
+    return LogLogFit(
+        segment=segment,
+        regime="".join(regs),
+        w_min=float(w.min()),
+        w_max=float(w.max()),
+        n=int(w.size),
+        slope=slope,
+        slope_ci=(slope - tq * sslope, slope + tq * sslope),
+        prefactor=float(np.exp(icpt)),
+        slopes_pred=slopes,
+        ratio_pred=ratios,
+    )
 
 
 def find_knee(ds: xr.Dataset, *, var: str = "u_e", threshold: float = 3.0) -> float:
@@ -199,8 +225,7 @@ def _segment_fits(ds: xr.Dataset, train: PulseTrain, w_ref: float) -> tuple[LogL
     for i in range(1, w.size + 1):
         if i == w.size or labels[i] != labels[start]:
             if i - start >= 2:
-                fits.append(fit_loglog(ds, float(w[start]), float(w[i - 1]),
-                                       segment=labels[start]))
+                fits.append(fit_loglog(ds, float(w[start]), float(w[i - 1]), segment=labels[start]))
             start = i
     return tuple(fits)
 
@@ -212,8 +237,13 @@ def _fig5(n_periods: int = 1) -> xr.Dataset:
     return xr.Dataset(
         {"min_chi2": ("w", val), "xi_min": ("w", loc), "chi2_law": ("w", law)},
         coords={"w": w},
-        attrs={"a": FIG5_TRAIN.a, "dp": FIG5_TRAIN.dp, "du": FIG5_TRAIN.du,
-               "n_periods": n_periods, "w_ref": 0.0},
+        attrs={
+            "a": FIG5_TRAIN.a,
+            "dp": FIG5_TRAIN.dp,
+            "du": FIG5_TRAIN.du,
+            "n_periods": n_periods,
+            "w_ref": 0.0,
+        },
     )
 
 
@@ -222,29 +252,61 @@ def _dependence(trials: int, seed: SeedLike, sigma: float) -> tuple[DependenceRo
     variants = [
         ("main: Fourier, shift blurred, N = 10", "fourier", "blurred", 10, PAPER_TRAIN),
         ("Fourier, shift reference", "fourier", "reference", 10, PAPER_TRAIN),
-        ("Fourier, edges at 1/4 px (sampling phase)", "fourier", "blurred", 10,
-         PulseTrain(a=1.0, dp=6.0, du=22.0, x0=-0.25)),
+        (
+            "Fourier, edges at 1/4 px (sampling phase)",
+            "fourier",
+            "blurred",
+            10,
+            PulseTrain(a=1.0, dp=6.0, du=22.0, x0=-0.25),
+        ),
         ("Fourier, N = 1", "fourier", "blurred", 1, PAPER_TRAIN),
         ("Fourier, N = 3", "fourier", "blurred", 3, PAPER_TRAIN),
         ("Fourier, N = 30", "fourier", "blurred", 30, PAPER_TRAIN),
         ("linear interpolation, shift blurred", "linear", "blurred", 10, PAPER_TRAIN),
         ("linear interpolation, shift reference", "linear", "reference", 10, PAPER_TRAIN),
-        ("B-spline IC-GN (engine-like), shift blurred", "bspline", "blurred", 10,
-         PAPER_TRAIN),
-        ("Keys interpolation + central differences, shift blurred", "keys", "blurred", 10,
-         PAPER_TRAIN),
-        ("template (noise-free blurred model moved), shift blurred", "analytic", "blurred",
-         10, PAPER_TRAIN),
-        ("template, shift blurred, edges at 1/4 px", "analytic", "blurred", 10,
-         PulseTrain(a=1.0, dp=6.0, du=22.0, x0=-0.25)),
+        ("B-spline IC-GN (engine-like), shift blurred", "bspline", "blurred", 10, PAPER_TRAIN),
+        (
+            "Keys interpolation + central differences, shift blurred",
+            "keys",
+            "blurred",
+            10,
+            PAPER_TRAIN,
+        ),
+        (
+            "template (noise-free blurred model moved), shift blurred",
+            "analytic",
+            "blurred",
+            10,
+            PAPER_TRAIN,
+        ),
+        (
+            "template, shift blurred, edges at 1/4 px",
+            "analytic",
+            "blurred",
+            10,
+            PulseTrain(a=1.0, dp=6.0, du=22.0, x0=-0.25),
+        ),
         ("template, shift reference", "analytic", "reference", 10, PAPER_TRAIN),
-        ("Fourier, dp = 4 (knee check)", "fourier", "blurred", 10,
-         PulseTrain(a=1.0, dp=4.0, du=22.0)),
+        (
+            "Fourier, dp = 4 (knee check)",
+            "fourier",
+            "blurred",
+            10,
+            PulseTrain(a=1.0, dp=4.0, du=22.0),
+        ),
     ]
     rows = []
     for name, interp, shifted, n, train in variants:
-        ds = simulate(train, widths=widths, sigma=sigma, n_periods=n, trials=trials,
-                      seed=seed, interpolation=interp, shifted=shifted)  # type: ignore[arg-type]
+        ds = simulate(
+            train,
+            widths=widths,
+            sigma=sigma,
+            n_periods=n,
+            trials=trials,
+            seed=seed,
+            interpolation=interp,
+            shifted=shifted,
+        )  # type: ignore[arg-type]
         wa = min(train.dp, train.g)
         try:
             fa = fit_loglog(ds, 1.0, float(np.max(widths[widths < wa])))
@@ -252,14 +314,25 @@ def _dependence(trials: int, seed: SeedLike, sigma: float) -> tuple[DependenceRo
         except InputError:
             slope, ci = math.nan, (math.nan, math.nan)
         u5 = float(ds["u_e"].sel(w=5.0))
-        rows.append(DependenceRow(
-            name=name, interpolation=interp, shifted=shifted, n_periods=n, dp=train.dp,
-            du=train.du, x0=train.x0, slope_a=slope, slope_a_ci=ci,
-            u_e_w1=float(ds["u_e"].sel(w=1.0)), u_e_w5=u5,
-            ratio_first_principles_w5=u5 / float(ds["u_first_principles"].sel(w=5.0)),
-            ratio_derived_pixel_w5=u5 / float(ds["u_pixel_linearised"].sel(w=5.0)),
-            knee=find_knee(ds), knee_predicted=2 * min(train.dp, train.g),
-        ))
+        rows.append(
+            DependenceRow(
+                name=name,
+                interpolation=interp,
+                shifted=shifted,
+                n_periods=n,
+                dp=train.dp,
+                du=train.du,
+                x0=train.x0,
+                slope_a=slope,
+                slope_a_ci=ci,
+                u_e_w1=float(ds["u_e"].sel(w=1.0)),
+                u_e_w5=u5,
+                ratio_first_principles_w5=u5 / float(ds["u_first_principles"].sel(w=5.0)),
+                ratio_derived_pixel_w5=u5 / float(ds["u_pixel_linearised"].sel(w=5.0)),
+                knee=find_knee(ds),
+                knee_predicted=2 * min(train.dp, train.g),
+            )
+        )
     return tuple(rows)
 
 
@@ -293,20 +366,40 @@ def run_pulse_study(
     from .._version import __version__
 
     t0 = time.perf_counter()
-    ds = simulate(PAPER_TRAIN, widths=PAPER_WIDTHS, sigma=sigma, n_periods=n_periods,
-                  trials=trials, seed=seed, keep_samples=True)
+    ds = simulate(
+        PAPER_TRAIN,
+        widths=PAPER_WIDTHS,
+        sigma=sigma,
+        n_periods=n_periods,
+        trials=trials,
+        seed=seed,
+        keep_samples=True,
+    )
     elapsed = time.perf_counter() - t0
     fits = _segment_fits(ds, PAPER_TRAIN, 1.0)
     knee = find_knee(ds)
     dep: tuple[DependenceRow, ...] = ()
     if dependence_trials is not None:
         dep = _dependence(int(min(trials, dependence_trials)), seed, sigma)
-    study_kw = dict(dataset=ds, table=table_ii(), fig5=_fig5(), fits=fits, knee=knee,
-                    knee_predicted=2 * min(PAPER_TRAIN.dp, PAPER_TRAIN.g),
-                    knee_paper=PAPER_TRAIN.g, dependence=dep, elapsed_s=elapsed,
-                    settings={"trials": int(trials), "seed": seed, "n_periods": n_periods,
-                              "sigma": sigma, "dependence_trials": dependence_trials,
-                              "dicblur_version": __version__})
+    study_kw = dict(
+        dataset=ds,
+        table=table_ii(),
+        fig5=_fig5(),
+        fits=fits,
+        knee=knee,
+        knee_predicted=2 * min(PAPER_TRAIN.dp, PAPER_TRAIN.g),
+        knee_paper=PAPER_TRAIN.g,
+        dependence=dep,
+        elapsed_s=elapsed,
+        settings={
+            "trials": int(trials),
+            "seed": seed,
+            "n_periods": n_periods,
+            "sigma": sigma,
+            "dependence_trials": dependence_trials,
+            "dicblur_version": __version__,
+        },
+    )
     from .verdict import verdict_text
 
     return PulseStudy(verdict=verdict_text(**study_kw), **study_kw)  # type: ignore[arg-type]

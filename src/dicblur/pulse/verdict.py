@@ -27,20 +27,30 @@ def _f(x: float, nd: int = 3) -> str:
 
 
 def _nscale(rows: tuple[DependenceRow, ...]) -> str:
-    four = sorted((r for r in rows if r.interpolation == "fourier" and r.shifted == "blurred"
-                   and r.dp == 6.0 and r.x0 == -0.5), key=lambda r: r.n_periods)
-    return ", ".join(f"{r.u_e_w5 * math.sqrt(r.n_periods):.3f} (N = {r.n_periods})"
-                     for r in four)
+    four = sorted(
+        (
+            r
+            for r in rows
+            if r.interpolation == "fourier"
+            and r.shifted == "blurred"
+            and r.dp == 6.0
+            and r.x0 == -0.5
+        ),
+        key=lambda r: r.n_periods,
+    )
+    return ", ".join(f"{r.u_e_w5 * math.sqrt(r.n_periods):.3f} (N = {r.n_periods})" for r in four)
 
 
 def _phase(rows: tuple[DependenceRow, ...]) -> str:
     r = next((r for r in rows if r.interpolation == "fourier" and r.x0 != -0.5), None)
     if r is None:
         return ""
-    return (f"Moving the pulse edges off the pixel boundaries (x0 = {r.x0:g}) makes the sampled "
-            f"reference non-binary: u_e(1) becomes {r.u_e_w1:.3g} px and the regime-(a) slope "
-            f"{r.slope_a:.2f}, but u_e(5) is still {r.ratio_first_principles_w5:.2f} x the "
-            f"sqrt law and {r.ratio_derived_pixel_w5:.2f} x the derived law.")
+    return (
+        f"Moving the pulse edges off the pixel boundaries (x0 = {r.x0:g}) makes the sampled "
+        f"reference non-binary: u_e(1) becomes {r.u_e_w1:.3g} px and the regime-(a) slope "
+        f"{r.slope_a:.2f}, but u_e(5) is still {r.ratio_first_principles_w5:.2f} x the "
+        f"sqrt law and {r.ratio_derived_pixel_w5:.2f} x the derived law."
+    )
 
 
 #: Correlators compared in the dependence study, by interpolation name.
@@ -57,8 +67,18 @@ def correlator_rows(rows: tuple[DependenceRow, ...]) -> list[DependenceRow]:
     N = 10, dp = 6, edges on pixel boundaries), one per correlator, in CORRELATORS order."""
     out = []
     for kind in CORRELATORS:
-        r = next((r for r in rows if r.interpolation == kind and r.shifted == "blurred"
-                  and r.n_periods == 10 and r.dp == 6.0 and r.x0 == -0.5), None)
+        r = next(
+            (
+                r
+                for r in rows
+                if r.interpolation == kind
+                and r.shifted == "blurred"
+                and r.n_periods == 10
+                and r.dp == 6.0
+                and r.x0 == -0.5
+            ),
+            None,
+        )
         if r is not None:
             out.append(r)
     return out
@@ -112,8 +132,11 @@ def verdict_text(
     r_in = val("u_e", w_hi) / val("u_pixel_linearised", w_hi)
     ident = [f for f in fits if not f.segment.endswith("'")]
     w_last_ok = max(f.w_max for f in ident)
-    worst_in = max(abs(float(ds["u_e"].sel(w=w)) / float(ds["u_pixel_linearised"].sel(w=w))
-                       - 1) for w in ds["w"].values if w <= w_last_ok)
+    worst_in = max(
+        abs(float(ds["u_e"].sel(w=w)) / float(ds["u_pixel_linearised"].sel(w=w)) - 1)
+        for w in ds["w"].values
+        if w <= w_last_ok
+    )
     lines = [
         "# Verdict: the 1-D pulse Monte Carlo (paper Section V-B)",
         "",
@@ -142,7 +165,8 @@ def verdict_text(
             f"{fb.slope:.3f} ({fb.slope_ci[0]:.3f}..{fb.slope_ci[1]:.3f}); here the sqrt law "
             f"itself has slope {fb.slopes_pred.get('u_first_principles', math.nan):.2f} "
             f"but the data are {fb.ratio_pred.get('u_first_principles', math.nan):.2f} x its "
-            "level.")
+            "level."
+        )
     corr = correlator_rows(dependence)
     lines += [
         "- **The law is the estimator's, not the signal's.** Linearising the correlator's "
@@ -157,16 +181,19 @@ def verdict_text(
     ]
     if corr:
         lines.append(
-            "- **Regime-(a) slope by correlator** (dependence runs): " + "; ".join(
+            "- **Regime-(a) slope by correlator** (dependence runs): "
+            + "; ".join(
                 f"{CORRELATORS[r.interpolation]} {r.slope_a:.2f} ({r.slope_a_ci[0]:.2f}.."
                 f"{r.slope_a_ci[1]:.2f}), u_e(5) / law {r.ratio_derived_pixel_w5:.2f}"
-                if r.interpolation != "analytic" else
-                f"{CORRELATORS[r.interpolation]} {r.slope_a:.2f} ({r.slope_a_ci[0]:.2f}.."
+                if r.interpolation != "analytic"
+                else f"{CORRELATORS[r.interpolation]} {r.slope_a:.2f} ({r.slope_a_ci[0]:.2f}.."
                 f"{r.slope_a_ci[1]:.2f}), u_e(5) / sqrt law {r.ratio_first_principles_w5:.2f}"
-                for r in corr)
+                for r in corr
+            )
             + ". There is no single slope to quote: the paper's 'linear' reading holds for "
             "the spectral correlator only, and the sqrt law for the template estimator, whose "
-            "u_e = sqrt(2 sigma^2 / S_b) is the static match score with the blurred SSSIG.")
+            "u_e = sqrt(2 sigma^2 / S_b) is the static match score with the blurred SSSIG."
+        )
     lines += [
         f"- **Knee**: u_e jumps at w = **{_f(knee)}** (first local log-log slope > 3; "
         f"u_e({_f(knee - 1)}) = {_f(val('u_e', knee - 1) if math.isfinite(knee) else math.nan)}"
@@ -217,33 +244,48 @@ def verdict_text(
             f"| {_f(f.ratio_pred.get('u_first_principles', math.nan))} "
             f"| {_f(f.ratio_pred.get('u_paper_linear', math.nan))} "
             f"| {_f(f.ratio_pred.get('u_pixel_linearised', math.nan))} "
-            f"| {_f(f.slopes_pred.get('u_pixel_linearised', math.nan))} |")
-    lines += ["", "## u_e(w), px", "",
-              "| w | regime | u_e (95% CI) | mean | outliers | sqrt law | paper linear | "
-              "law (pixel, own D) |", "|---|---|---|---|---|---|---|---|"]
+            f"| {_f(f.slopes_pred.get('u_pixel_linearised', math.nan))} |"
+        )
+    lines += [
+        "",
+        "## u_e(w), px",
+        "",
+        "| w | regime | u_e (95% CI) | mean | outliers | sqrt law | paper linear | "
+        "law (pixel, own D) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for w in ds["w"].values:
         s = ds.sel(w=w)
         lines.append(
             f"| {w:g} | {s['regime'].item()} | {float(s['u_e']):.4g} ({float(s['u_e_ci_low']):.4g}"
             f"..{float(s['u_e_ci_high']):.4g}) | {float(s['mean']):+.2g} | "
             f"{float(s['outlier_fraction']):.3f} | {float(s['u_first_principles']):.4g} | "
-            f"{float(s['u_paper_linear']):.4g} | {_f(float(s['u_pixel_linearised']), 4)} |")
+            f"{float(s['u_paper_linear']):.4g} | {_f(float(s['u_pixel_linearised']), 4)} |"
+        )
     if dependence:
-        lines += ["", "## Dependence on choices the paper leaves open", "",
-                  f"{settings.get('dependence_trials')} trials per w (fewer than the main run),"
-                  " same seed. Slope over regime (a); ratios at w = 5.", "",
-                  "| variant | slope (a) (95% CI) | u_e(1) | u_e(5) | / sqrt law | "
-                  "/ law (own D) | knee (pred. 2 min(dp,g)) |", "|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            "## Dependence on choices the paper leaves open",
+            "",
+            f"{settings.get('dependence_trials')} trials per w (fewer than the main run),"
+            " same seed. Slope over regime (a); ratios at w = 5.",
+            "",
+            "| variant | slope (a) (95% CI) | u_e(1) | u_e(5) | / sqrt law | "
+            "/ law (own D) | knee (pred. 2 min(dp,g)) |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for r in dependence:
             lines.append(
                 f"| {r.name} | {r.slope_a:.3f} ({r.slope_a_ci[0]:.3f}..{r.slope_a_ci[1]:.3f})"
                 f" | {r.u_e_w1:.4g} | {r.u_e_w5:.4g} | {r.ratio_first_principles_w5:.2f} | "
-                f"{r.ratio_derived_pixel_w5:.2f} | {_f(r.knee)} ({r.knee_predicted:g}) |")
+                f"{r.ratio_derived_pixel_w5:.2f} | {_f(r.knee)} ({r.knee_predicted:g}) |"
+            )
         lines += [
             "",
             f"Reading: N scales u_e roughly as 1/sqrt(N) (u_e(5) sqrt(N) = {_nscale(dependence)}"
             " px for the Fourier rows, in order of N) and leaves the slope unchanged; few "
-            "periods make the estimator slightly more non-linear. " + _phase(dependence)
+            "periods make the estimator slightly more non-linear. "
+            + _phase(dependence)
             + " With an exact Fourier "
             "shift it does not matter which signal is moved (the shift is unitary). Linear "
             "interpolation makes the SSD kinked at integer shifts and the estimator locks to "
@@ -263,8 +305,13 @@ def verdict_text(
         "the correlator's own derivative, so its growth with w depends on the estimator: "
         f"slope {fa.slope:.2f} ({fa.slope_ci[0]:.2f}..{fa.slope_ci[1]:.2f}) in regime (a) "
         "for the spectral correlator"
-        + ("".join(f", {r.slope_a:.2f} for {CORRELATORS[r.interpolation]}" for r in corr
-                   if r.interpolation != "fourier"))
+        + (
+            "".join(
+                f", {r.slope_a:.2f} for {CORRELATORS[r.interpolation]}"
+                for r in corr
+                if r.interpolation != "fourier"
+            )
+        )
         + "; the paper's 'linear' reading and the first-principles sqrt law are each right "
         "for one estimator only. "
         f"The steep rise starts at w = {_f(knee)} = 2 dp (the blurred ramps leave the "

@@ -12,8 +12,9 @@ from typing import Any
 __all__ = ["subplots"]
 
 
-def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float] | None = None,
-             **kwargs: Any) -> tuple[Any, Any]:
+def subplots(
+    nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float] | None = None, **kwargs: Any
+) -> tuple[Any, Any]:
     """``(Figure, axes)`` like ``pyplot.subplots``, but on a detached ``Figure``."""
     from matplotlib.figure import Figure
 

@@ -51,8 +51,9 @@ def ratio_interval(num: Any, den: Any, *, level: float = 0.95) -> tuple[float, f
     m = float(r.mean())
     if r.size < 2:
         return math.exp(m), math.nan, math.nan
-    half = float(stats.t.ppf(0.5 + level / 2, r.size - 1)) * float(r.std(ddof=1)) / math.sqrt(
-        r.size)
+    half = (
+        float(stats.t.ppf(0.5 + level / 2, r.size - 1)) * float(r.std(ddof=1)) / math.sqrt(r.size)
+    )
     return math.exp(m), math.exp(m - half), math.exp(m + half)
 
 
@@ -102,14 +103,23 @@ def algorithm1_translation(image: np.ndarray, blur: float) -> dict[str, float]:
     return {"translation": shift, "expected": blur / 2.0, "asymmetry": resid}
 
 
-def _claim(cid: str, section: str, claim: str, paper: str, ours: str, verdict: str,
-           why: str) -> dict[str, Any]:
-    return {"id": cid, "section": section, "claim": claim, "paper": paper, "ours": ours,
-            "verdict": verdict, "why": why}
+def _claim(
+    cid: str, section: str, claim: str, paper: str, ours: str, verdict: str, why: str
+) -> dict[str, Any]:
+    return {
+        "id": cid,
+        "section": section,
+        "claim": claim,
+        "paper": paper,
+        "ours": ours,
+        "verdict": verdict,
+        "why": why,
+    }
 
 
-def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...],
-                      replicates: int) -> dict[str, Any]:
+def _mini_experiments(
+    image: np.ndarray, settings: Any, blur: tuple[float, ...], replicates: int
+) -> dict[str, Any]:
     """u_e on pattern #4 with (a) a rigid offset of 0.5 px added to the motion and (b) a
     reference blurred like the current image (independent noise), against (c) the
     campaign's case (sharp reference, offset 0). Same noise, subset, step; ``replicates``
@@ -121,8 +131,13 @@ def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...],
     rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 21]))
     sig = settings.main_noise
     kw = {"subset": settings.subset, "step": settings.poi_step, "shape": "translation"}
-    out: dict[str, Any] = {"blur": list(blur), "replicates": replicates,
-                           "sharp_ref": [], "offset": [], "blurred_ref": []}
+    out: dict[str, Any] = {
+        "blur": list(blur),
+        "replicates": replicates,
+        "sharp_ref": [],
+        "offset": [],
+        "blurred_ref": [],
+    }
     k = 100
     t = np.linspace(0.0, 1.0, k + 1)
     for w in blur:
@@ -137,8 +152,11 @@ def _mini_experiments(image: np.ndarray, settings: Any, blur: tuple[float, ...],
             cur = add_gaussian_noise(sharp, sig, rng=rng)
             cur_off = add_gaussian_noise(shifted, sig, rng=rng)
             ref_b = Correlator(add_gaussian_noise(sharp, sig, rng=rng), **kw)
-            for key, corr, img in (("sharp_ref", base, cur), ("offset", base, cur_off),
-                                   ("blurred_ref", ref_b, cur)):
+            for key, corr, img in (
+                ("sharp_ref", base, cur),
+                ("offset", base, cur_off),
+                ("blurred_ref", ref_b, cur),
+            ):
                 res = corr.correlate(img)
                 u = np.asarray(res.u)[np.asarray(res.converged)]
                 per[key].append(float(np.std(u, ddof=1)))
@@ -160,10 +178,19 @@ def _combine(verdicts: list[str]) -> str:
     return "inconclusive"
 
 
-def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[str, Any],
-                    fits: dict[str, Any], models: dict[str, Any], family: list[dict[str, Any]],
-                    pulse: Any, settings: Any, valid: dict[str, np.ndarray]
-                    ) -> list[dict[str, Any]]:
+def evaluate_claims(
+    *,
+    ds: Any,
+    ds_family: Any,
+    pats: list[Any],
+    static: dict[str, Any],
+    fits: dict[str, Any],
+    models: dict[str, Any],
+    family: list[dict[str, Any]],
+    pulse: Any,
+    settings: Any,
+    valid: dict[str, np.ndarray],
+) -> list[dict[str, Any]]:
     """Evaluate the claims; returns a list of JSON-ready rows.
 
     ``valid[k]`` marks the blur values where DIC worked (>= 90 % of POIs converged); claims
@@ -181,72 +208,101 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
     alg = [algorithm1_translation(p4.image, w) for w in (1.0, 3.0, 6.0)]
     dev = max(abs(r["translation"] - r["expected"]) for r in alg)
     asym = max(r["asymmetry"] for r in alg)
-    rows.append(_claim(
-        "C1", "III", "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
-        "stated", "translation from the spectrum of the blurred / sharp image: " + ", ".join(
-            f"{r['translation']:.6f} px (X = {2 * r['expected']:g})" for r in alg)
-        + f"; max |translation - X/2| = {dev:.1e} px, kernel asymmetry {asym:.1e}",
-        "agrees" if (dev < 1e-6 and asym < 1e-6) else "differs",
-        "criterion: translation within 1e-6 px of X/2 and a symmetric (real, centred) "
-        "transfer function, measured on pattern #4 itself. DIC's own sub-pixel bias at the "
-        "W/2 shift is a separate matter (C2)."))
+    rows.append(
+        _claim(
+            "C1",
+            "III",
+            "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
+            "stated",
+            "translation from the spectrum of the blurred / sharp image: "
+            + ", ".join(f"{r['translation']:.6f} px (X = {2 * r['expected']:g})" for r in alg)
+            + f"; max |translation - X/2| = {dev:.1e} px, kernel asymmetry {asym:.1e}",
+            "agrees" if (dev < 1e-6 and asym < 1e-6) else "differs",
+            "criterion: translation within 1e-6 px of X/2 and a symmetric (real, centred) "
+            "transfer function, measured on pattern #4 itself. DIC's own sub-pixel bias at the "
+            "W/2 shift is a separate matter (C2).",
+        )
+    )
 
     bias = {k: series(ds, "bias", k, n)[valid[k]] for k in keys}
     ue = {k: series(ds, "u_e", k, n)[valid[k]] for k in keys}
     Wv = {k: W[valid[k]] for k in keys}
 
     def worst(wmin: float) -> float:
-        return max(float(np.nanmax(np.abs(bias[k][Wv[k] >= wmin]) / ue[k][Wv[k] >= wmin]))
-                   for k in keys)
+        return max(
+            float(np.nanmax(np.abs(bias[k][Wv[k] >= wmin]) / ue[k][Wv[k] >= wmin])) for k in keys
+        )
 
     worst_bias = max(float(np.nanmax(np.abs(b))) for b in bias.values())
     r1, r3 = worst(1.0), worst(3.0)
-    rows.append(_claim(
-        "C2", "I, III", "Under blur the bias is negligible against the random error.",
-        "stated (refs [5], [6])",
-        f"max |bias| / u_e = {r3:.2f} for W >= 3 px, {r1:.2f} for W >= 1 px (max |mean u - "
-        f"W/2| = {worst_bias:.4f} px, DIC interpolation bias)",
-        "agrees" if r1 < 0.3 else ("partly" if r3 < 0.3 else "differs"),
-        "criterion: ratio < 0.3. At small blur the random error of a sharp, noise-light "
-        "pattern is a few thousandths of a px and the sub-pixel interpolation bias of the "
-        "W/2 shift is of the same size; once blur dominates, the bias is negligible."))
+    rows.append(
+        _claim(
+            "C2",
+            "I, III",
+            "Under blur the bias is negligible against the random error.",
+            "stated (refs [5], [6])",
+            f"max |bias| / u_e = {r3:.2f} for W >= 3 px, {r1:.2f} for W >= 1 px (max |mean u - "
+            f"W/2| = {worst_bias:.4f} px, DIC interpolation bias)",
+            "agrees" if r1 < 0.3 else ("partly" if r3 < 0.3 else "differs"),
+            "criterion: ratio < 0.3. At small blur the random error of a sharp, noise-light "
+            "pattern is a few thousandths of a px and the sub-pixel interpolation bias of the "
+            "W/2 shift is of the same size; once blur dominates, the bias is negligible.",
+        )
+    )
 
     # Extra experiments on pattern #4, with paired noise replicates.
     reps = 4 if s.quick else 12
     mini = _mini_experiments(p4.image, s, (3.0, 6.0), reps)
-    off = [ratio_interval(o, r) for o, r in zip(mini["offset"], mini["sharp_ref"],
-                                                 strict=True)]
-    rows.append(_claim(
-        "C3", "III", "The rigid part of the motion does not change the blur uncertainty.",
-        "verified in [35]",
-        "u_e(offset 0.5 px) / u_e(offset 0) = " + ", ".join(
-            f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(off, mini["blur"], strict=True)),
-        _combine([judge_interval(r[1], r[2], accept=(0.85, 1.15)) for r in off]),
-        f"criterion: ratio within 15 % of 1; 95 % interval over {reps} paired noise "
-        "realisations (pattern #4); inconclusive when the interval straddles the bound."))
-    same = [ratio_interval(o, r) for o, r in zip(mini["blurred_ref"], mini["sharp_ref"],
-                                                  strict=True)]
-    rows.append(_claim(
-        "C4", "V-A", "Random errors are smaller when both images carry the same blur "
-        "(a sharp reference is the worst case).", "stated (ref [5])",
-        "u_e(blurred ref) / u_e(sharp ref) = " + ", ".join(
-            f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(same, mini["blur"], strict=True)),
-        _combine([judge_interval(r[1], r[2], accept=(0.0, 1.0)) for r in same]),
-        f"criterion: ratio < 1 at every W tested; 95 % interval over {reps} paired noise "
-        "realisations (pattern #4)."))
+    off = [ratio_interval(o, r) for o, r in zip(mini["offset"], mini["sharp_ref"], strict=True)]
+    rows.append(
+        _claim(
+            "C3",
+            "III",
+            "The rigid part of the motion does not change the blur uncertainty.",
+            "verified in [35]",
+            "u_e(offset 0.5 px) / u_e(offset 0) = "
+            + ", ".join(f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(off, mini["blur"], strict=True)),
+            _combine([judge_interval(r[1], r[2], accept=(0.85, 1.15)) for r in off]),
+            f"criterion: ratio within 15 % of 1; 95 % interval over {reps} paired noise "
+            "realisations (pattern #4); inconclusive when the interval straddles the bound.",
+        )
+    )
+    same = [
+        ratio_interval(o, r) for o, r in zip(mini["blurred_ref"], mini["sharp_ref"], strict=True)
+    ]
+    rows.append(
+        _claim(
+            "C4",
+            "V-A",
+            "Random errors are smaller when both images carry the same blur "
+            "(a sharp reference is the worst case).",
+            "stated (ref [5])",
+            "u_e(blurred ref) / u_e(sharp ref) = "
+            + ", ".join(f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(same, mini["blur"], strict=True)),
+            _combine([judge_interval(r[1], r[2], accept=(0.0, 1.0)) for r in same]),
+            f"criterion: ratio < 1 at every W tested; 95 % interval over {reps} paired noise "
+            "realisations (pattern #4).",
+        )
+    )
 
     # C5 Pan's approximation at W = 0 (Fig. 2).
-    pan = {k: static[k]["metrics"]["sssig_x_mean"] / static[k]["metrics"]["pan_sssig"]
-           for k in keys}
+    pan = {
+        k: static[k]["metrics"]["sssig_x_mean"] / static[k]["metrics"]["pan_sssig"] for k in keys
+    }
     closest = min(keys, key=lambda k: abs(math.log(pan[k])))
-    rows.append(_claim(
-        "C5", "IV, Fig. 2", "Pattern #3 lies close to Pan's SSSIG ~ N^2 MIG^2; the others "
-        "depart from it.", "qualitative",
-        "SSSIG / (N^2 MIG^2) = " + ", ".join(f"{labels[k].split()[0]} {pan[k]:.2f}"
-                                              for k in keys),
-        "agrees" if closest == "p3" else "differs",
-        f"criterion: #3 closest to 1; closest here is {labels[closest]}. Depends on the "
-        "camera emulation of #3 and on the stand-ins when no DIC Challenge images are given."))
+    rows.append(
+        _claim(
+            "C5",
+            "IV, Fig. 2",
+            "Pattern #3 lies close to Pan's SSSIG ~ N^2 MIG^2; the others depart from it.",
+            "qualitative",
+            "SSSIG / (N^2 MIG^2) = "
+            + ", ".join(f"{labels[k].split()[0]} {pan[k]:.2f}" for k in keys),
+            "agrees" if closest == "p3" else "differs",
+            f"criterion: #3 closest to 1; closest here is {labels[closest]}. Depends on the "
+            "camera emulation of #3 and on the stand-ins when no DIC Challenge images are given.",
+        )
+    )
 
     # C6 SSSIG and MIG decrease with W.
     dec = []
@@ -255,116 +311,211 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         mg = series(ds, "mig", k, n)
         dec.append((k, sg[-1] / sg[0], mg[-1] / mg[0], float(np.mean(np.diff(sg) < 0))))
     ok = all(r[1] < 1 and r[2] < 1 and r[3] > 0.9 for r in dec)
-    rows.append(_claim(
-        "C6", "IV, Fig. 2", "SSSIG and MIG decrease as the blur W grows.", "qualitative",
-        "; ".join(f"{labels[k].split()[0]}: SSSIG x{a:.2f}, MIG x{b:.2f} at W=10, "
-                  f"{100 * c:.0f}% of steps decreasing" for k, a, b, c in dec),
-        "agrees" if ok else "differs", "criterion: both fall and SSSIG falls at >90 % of steps."))
+    rows.append(
+        _claim(
+            "C6",
+            "IV, Fig. 2",
+            "SSSIG and MIG decrease as the blur W grows.",
+            "qualitative",
+            "; ".join(
+                f"{labels[k].split()[0]}: SSSIG x{a:.2f}, MIG x{b:.2f} at W=10, "
+                f"{100 * c:.0f}% of steps decreasing"
+                for k, a, b, c in dec
+            ),
+            "agrees" if ok else "differs",
+            "criterion: both fall and SSSIG falls at >90 % of steps.",
+        )
+    )
 
     # C7 static match-score fails under blur.
     ums = {k: series(ds, "u_match_score", k, n)[valid[k]] for k in keys}
     r_end = {k: ue[k][-1] / ums[k][-1] for k in keys}
     r_0 = {k: ue[k][0] / ums[k][0] for k in keys}
-    rows.append(_claim(
-        "C7", "IV-V", "The static match-score model (eq. 2) does not predict u_e under blur, "
-        "even with the blurred image's SSSIG.", "qualitative (Fig. 2)",
-        "measured / eq. 2 at W=0: " + ", ".join(f"{r_0[k]:.2f}" for k in keys)
-        + "; at the largest converged W: " + ", ".join(
-            f"{r_end[k]:.2f} (W={Wv[k].max():g})" for k in keys),
-        "agrees" if all(abs(r - 1) > 0.25 for r in r_end.values()) else "differs",
-        "criterion: off by > 25 % at the largest W where DIC converges, for every pattern."))
+    rows.append(
+        _claim(
+            "C7",
+            "IV-V",
+            "The static match-score model (eq. 2) does not predict u_e under blur, "
+            "even with the blurred image's SSSIG.",
+            "qualitative (Fig. 2)",
+            "measured / eq. 2 at W=0: "
+            + ", ".join(f"{r_0[k]:.2f}" for k in keys)
+            + "; at the largest converged W: "
+            + ", ".join(f"{r_end[k]:.2f} (W={Wv[k].max():g})" for k in keys),
+            "agrees" if all(abs(r - 1) > 0.25 for r in r_end.values()) else "differs",
+            "criterion: off by > 25 % at the largest W where DIC converges, for every pattern.",
+        )
+    )
 
     # 1-D analysis: Table II.
     tab = {r["regime"]: r for r in pulse.table}
-    lin = all(abs(r["sssig_numeric"] - r["du"] * r["gradient_variance_numeric"])
-              < 1e-6 * r["sssig_numeric"] for r in pulse.table)
-    rows.append(_claim(
-        "C8", "V, finding 1", "SSSIG depends linearly on the gradient variance, not on MIG "
-        "(SSSIG = N var[p']).", "derived", "SSSIG = du * var[p'] in every Table II row "
-        f"(rel. dev. < 1e-6): {lin}", "agrees" if lin else "differs",
-        "zero-mean gradient of a periodic signal: mean square = variance."))
+    lin = all(
+        abs(r["sssig_numeric"] - r["du"] * r["gradient_variance_numeric"])
+        < 1e-6 * r["sssig_numeric"]
+        for r in pulse.table
+    )
+    rows.append(
+        _claim(
+            "C8",
+            "V, finding 1",
+            "SSSIG depends linearly on the gradient variance, not on MIG (SSSIG = N var[p']).",
+            "derived",
+            f"SSSIG = du * var[p'] in every Table II row (rel. dev. < 1e-6): {lin}",
+            "agrees" if lin else "differs",
+            "zero-mean gradient of a periodic signal: mean square = variance.",
+        )
+    )
     a = tab.get("a")
-    ok_a = a is not None and abs(a["contrast_numeric"] - 1) < 1e-9 and abs(
-        a["mig_numeric"] - 2 / a["du"]) < 1e-9
-    rows.append(_claim(
-        "C9", "V, finding 3", "Small blur (regime a) softens edges only: MIG and contrast "
-        "unchanged, SSSIG falls.", "Table II",
-        f"regime a, w={a['w'] if a else '-'}: MIG {a['mig_numeric']:.4f} (= 2a/du), contrast "
-        f"{a['contrast_numeric']:.3f}, SSSIG {a['sssig_numeric']:.3f} (sharp: 2)" if a else "-",
-        "agrees" if ok_a else "differs", "closed form m(w) = w; numerical convolution agrees."))
+    ok_a = (
+        a is not None
+        and abs(a["contrast_numeric"] - 1) < 1e-9
+        and abs(a["mig_numeric"] - 2 / a["du"]) < 1e-9
+    )
+    rows.append(
+        _claim(
+            "C9",
+            "V, finding 3",
+            "Small blur (regime a) softens edges only: MIG and contrast unchanged, SSSIG falls.",
+            "Table II",
+            f"regime a, w={a['w'] if a else '-'}: MIG {a['mig_numeric']:.4f} (= 2a/du), contrast "
+            f"{a['contrast_numeric']:.3f}, SSSIG {a['sssig_numeric']:.3f} (sharp: 2)"
+            if a
+            else "-",
+            "agrees" if ok_a else "differs",
+            "closed form m(w) = w; numerical convolution agrees.",
+        )
+    )
     b, c = tab.get("b", {}), tab.get("c", {})
-    ok_bc = bool(b and c and b["contrast_numeric"] < 1
-                 and c["contrast_numeric"] < b["contrast_numeric"])
-    rows.append(_claim(
-        "C10", "V, finding 4", "Larger blur (regimes b, c) lowers the contrast and SSSIG "
-        "falls faster (contrast-driven).", "Table II",
-        f"contrast {b['contrast_numeric']:.2f} (b, w={b['w']:g}), {c['contrast_numeric']:.2f} "
-        f"(c, w={c['w']:g})" if ok_bc else "-", "agrees" if ok_bc else "differs",
-        "SSSIG ~ 1/w^2 in (b) against 1/w in (a)."))
+    ok_bc = bool(
+        b and c and b["contrast_numeric"] < 1 and c["contrast_numeric"] < b["contrast_numeric"]
+    )
+    rows.append(
+        _claim(
+            "C10",
+            "V, finding 4",
+            "Larger blur (regimes b, c) lowers the contrast and SSSIG "
+            "falls faster (contrast-driven).",
+            "Table II",
+            f"contrast {b['contrast_numeric']:.2f} (b, w={b['w']:g}), {c['contrast_numeric']:.2f} "
+            f"(c, w={c['w']:g})"
+            if ok_bc
+            else "-",
+            "agrees" if ok_bc else "differs",
+            "SSSIG ~ 1/w^2 in (b) against 1/w in (a).",
+        )
+    )
     d = tab.get("d")
-    rows.append(_claim(
-        "C11", "V, finding 5", "Dense patterns (regime d) lose edges and contrast together "
-        "at low blur.", "Table II",
-        f"dp={d['dp']:g}, du={d['du']:g}, w={d['w']:g}: contrast {d['contrast_numeric']:.2f}"
-        if d else "-", "agrees" if d and d["contrast_numeric"] < 1 else "differs",
-        "m(w) = g < w."))
+    rows.append(
+        _claim(
+            "C11",
+            "V, finding 5",
+            "Dense patterns (regime d) lose edges and contrast together at low blur.",
+            "Table II",
+            f"dp={d['dp']:g}, du={d['du']:g}, w={d['w']:g}: contrast {d['contrast_numeric']:.2f}"
+            if d
+            else "-",
+            "agrees" if d and d["contrast_numeric"] < 1 else "differs",
+            "m(w) = g < w.",
+        )
+    )
     f5 = pulse.fig5
     wa = np.asarray(f5["w"].values)
     sel = wa < float(f5.attrs.get("dp", 10.0))
     ratio6 = float(np.mean(np.asarray(f5["min_chi2"].values)[sel] / (wa[sel] / 6.0)))
     ratio4 = ratio6 * 6 / 4
     # the paper's w/4 against the exact minimum, our w/6 as the alternative (2 % band)
-    v12 = ("agrees" if abs(ratio4 - 1) < 0.02 else
-           "differs" if abs(ratio6 - 1) < 0.02 else "inconclusive")
-    rows.append(_claim(
-        "C12", "V-A, eq. 13", "SSD in regime (a): chi2 ~ N a^2 (w/4 + 2 xi^2 / w).",
-        "minimum N a^2 w/4", f"exact continuous minimum / (N a^2 w/4) = {ratio4:.4f}; "
-        f"/ (N a^2 w/6) = {ratio6:.4f}", v12,
-        "criterion: the exact minimum (numerical integral of the SSD of the sampled "
-        "continuous signals, regime a) within 2 % of the paper's w/4; it follows w/6 instead "
-        "(the closed form a^2 (w/6 + 2 xi^2 / w) per period, docs/pulse.md)."))
+    v12 = (
+        "agrees"
+        if abs(ratio4 - 1) < 0.02
+        else "differs"
+        if abs(ratio6 - 1) < 0.02
+        else "inconclusive"
+    )
+    rows.append(
+        _claim(
+            "C12",
+            "V-A, eq. 13",
+            "SSD in regime (a): chi2 ~ N a^2 (w/4 + 2 xi^2 / w).",
+            "minimum N a^2 w/4",
+            f"exact continuous minimum / (N a^2 w/4) = {ratio4:.4f}; / (N a^2 w/6) = {ratio6:.4f}",
+            v12,
+            "criterion: the exact minimum (numerical integral of the SSD of the sampled "
+            "continuous signals, regime a) within 2 % of the paper's w/4; it follows w/6 instead "
+            "(the closed form a^2 (w/6 + 2 xi^2 / w) per period, docs/pulse.md).",
+        )
+    )
     mins = np.asarray(f5["min_chi2"].values)
     frac = float(np.mean(np.diff(mins[: int(np.argmax(mins)) + 1]) > 0))
-    rows.append(_claim(
-        "C13", "V-A, Fig. 5", "The minimum of chi2 grows (higher, flatter) as w grows.",
-        "Fig. 5", f"min chi2 rises monotonically up to w = {wa[int(np.argmax(mins))]:g} "
-        f"({100 * frac:.0f}% of steps)", "agrees" if frac == 1.0 else "differs",
-        "then falls as the blurred pulses merge (regime c)."))
+    rows.append(
+        _claim(
+            "C13",
+            "V-A, Fig. 5",
+            "The minimum of chi2 grows (higher, flatter) as w grows.",
+            "Fig. 5",
+            f"min chi2 rises monotonically up to w = {wa[int(np.argmax(mins))]:g} "
+            f"({100 * frac:.0f}% of steps)",
+            "agrees" if frac == 1.0 else "differs",
+            "then falls as the blurred pulses merge (regime c).",
+        )
+    )
     fit_a = next((f for f in pulse.fits if f.regime == "a"), None)
     if fit_a is not None:
         from ..pulse.verdict import CORRELATORS, correlator_rows
 
         slopes = [("spectral (main run)", fit_a.slope, fit_a.slope_ci)]
-        slopes += [(CORRELATORS[r.interpolation], r.slope_a, r.slope_a_ci)
-                   for r in correlator_rows(pulse.dependence)
-                   if r.interpolation in ("bspline", "keys")]
+        slopes += [
+            (CORRELATORS[r.interpolation], r.slope_a, r.slope_a_ci)
+            for r in correlator_rows(pulse.dependence)
+            if r.interpolation in ("bspline", "keys")
+        ]
         linear = [lo <= 1 <= hi for _, _, (lo, hi) in slopes]
-        rows.append(_claim(
-            "C14", "V-A/B, eq. 16, Fig. 6", "1-D uncertainty grows linearly with w "
-            "(edge-driven region).", "linear (eq. 16)",
-            "log-log slope over regime (a): " + "; ".join(
-                f"{name} {sl:.2f} [{lo:.2f}, {hi:.2f}]" for name, sl, (lo, hi) in slopes),
-            "agrees" if all(linear) else ("partly" if any(linear) else "differs"),
-            "criterion: slope 1 inside the 95 % CI for every correlator (a measured-signal "
-            "estimator: spectral, B-spline IC-GN, Keys + central differences). The slope "
-            "follows sigma sqrt(S_o + S_b) / |C| with each correlator's own derivative "
-            "(docs/pulse-verdict.md), so it depends on the estimator."))
-    rows.append(_claim(
-        "C15", "V-B, Fig. 6", "u_e rises faster past w = du - dp (contrast-driven region).",
-        f"knee at w = {pulse.knee_paper:g}", f"knee observed at w = {pulse.knee:g} "
-        f"(predicted 2 min(dp, g) = {pulse.knee_predicted:g})",
-        "agrees" if abs(pulse.knee - pulse.knee_paper) <= 1 else "differs",
-        "the steep rise starts where the blurred ramps leave the reference edges."))
+        rows.append(
+            _claim(
+                "C14",
+                "V-A/B, eq. 16, Fig. 6",
+                "1-D uncertainty grows linearly with w (edge-driven region).",
+                "linear (eq. 16)",
+                "log-log slope over regime (a): "
+                + "; ".join(
+                    f"{name} {sl:.2f} [{lo:.2f}, {hi:.2f}]" for name, sl, (lo, hi) in slopes
+                ),
+                "agrees" if all(linear) else ("partly" if any(linear) else "differs"),
+                "criterion: slope 1 inside the 95 % CI for every correlator (a measured-signal "
+                "estimator: spectral, B-spline IC-GN, Keys + central differences). The slope "
+                "follows sigma sqrt(S_o + S_b) / |C| with each correlator's own derivative "
+                "(docs/pulse-verdict.md), so it depends on the estimator.",
+            )
+        )
+    rows.append(
+        _claim(
+            "C15",
+            "V-B, Fig. 6",
+            "u_e rises faster past w = du - dp (contrast-driven region).",
+            f"knee at w = {pulse.knee_paper:g}",
+            f"knee observed at w = {pulse.knee:g} "
+            f"(predicted 2 min(dp, g) = {pulse.knee_predicted:g})",
+            "agrees" if abs(pulse.knee - pulse.knee_paper) <= 1 else "differs",
+            "the steep rise starts where the blurred ramps leave the reference edges.",
+        )
+    )
 
     # Section VI fits.
     r2pl = {k: fits[k]["r2_power_law"] for k in keys}
-    rows.append(_claim(
-        "C16", "VI, eq. 17, Fig. 7", "log u_e is linear in log SSSIG over the edge-driven "
-        "range.", "Fig. 7", "R^2 of eq. 17 in its range: " + ", ".join(
-            f"{labels[k].split()[0]} {r2pl[k]:.3f} (W <= {fits[k]['fit_range'][1]:g})"
-            for k in keys),
-        "agrees" if all(v > 0.9 for v in r2pl.values()) else "differs",
-        "criterion: R^2 > 0.9 (log space) for every pattern."))
+    rows.append(
+        _claim(
+            "C16",
+            "VI, eq. 17, Fig. 7",
+            "log u_e is linear in log SSSIG over the edge-driven range.",
+            "Fig. 7",
+            "R^2 of eq. 17 in its range: "
+            + ", ".join(
+                f"{labels[k].split()[0]} {r2pl[k]:.3f} (W <= {fits[k]['fit_range'][1]:g})"
+                for k in keys
+            ),
+            "agrees" if all(v > 0.9 for v in r2pl.values()) else "differs",
+            "criterion: R^2 > 0.9 (log space) for every pattern.",
+        )
+    )
     rho = {}
     for k in keys:
         m_paper = models[k][0]
@@ -372,58 +523,99 @@ def evaluate_claims(*, ds: Any, ds_family: Any, pats: list[Any], static: dict[st
         ratio = np.asarray(m_paper.data.get("contrast_ratio", [math.nan] * err.size), float)
         rho[k] = spearman(err, ratio)
     n_ok = sum(1 for v in rho.values() if v > 0.5)
-    rows.append(_claim(
-        "C17", "VI, Fig. 8", "The error of eq. 17 grows as the contrast ratio (static / "
-        "blurred) grows.", "Fig. 8", "Spearman(|error|, contrast ratio) = " + ", ".join(
-            f"{labels[k].split()[0]} {rho[k]:.2f}" for k in keys),
-        "agrees" if n_ok >= 3 else "differs", "criterion: > 0.5 for at least 3 patterns."))
+    rows.append(
+        _claim(
+            "C17",
+            "VI, Fig. 8",
+            "The error of eq. 17 grows as the contrast ratio (static / blurred) grows.",
+            "Fig. 8",
+            "Spearman(|error|, contrast ratio) = "
+            + ", ".join(f"{labels[k].split()[0]} {rho[k]:.2f}" for k in keys),
+            "agrees" if n_ok >= 3 else "differs",
+            "criterion: > 0.5 for at least 3 patterns.",
+        )
+    )
     r2d = {k: fits[k]["r2_decay"] for k in keys}
-    rows.append(_claim(
-        "C18", "VI, eq. 18, Fig. 9", "SSSIG(W) = SSSIG_0 / (beta W^2 + 1) fits with "
-        "R^2 > 0.92 for #2-#4; #1 departs for W > 4.", "R^2 > 0.92",
-        "R^2 = " + ", ".join(f"{labels[k].split()[0]} {r2d[k]:.3f}" for k in keys),
-        "agrees" if all(r2d[k] > 0.92 for k in ("p2", "p3", "p4")) else "differs",
-        "criterion: R^2 > 0.92 for #2-#4."))
+    rows.append(
+        _claim(
+            "C18",
+            "VI, eq. 18, Fig. 9",
+            "SSSIG(W) = SSSIG_0 / (beta W^2 + 1) fits with "
+            "R^2 > 0.92 for #2-#4; #1 departs for W > 4.",
+            "R^2 > 0.92",
+            "R^2 = " + ", ".join(f"{labels[k].split()[0]} {r2d[k]:.3f}" for k in keys),
+            "agrees" if all(r2d[k] > 0.92 for k in ("p2", "p3", "p4")) else "differs",
+            "criterion: R^2 > 0.92 for #2-#4.",
+        )
+    )
     e19 = {k: fits[k]["eq19_max_rel_error"] for k in keys}
     emm = {k: fits[k]["mismatch_max_rel_error"] for k in keys}
-    rows.append(_claim(
-        "C19", "VI, eq. 19, Fig. 10", "Eq. 19 predicts u_e(W) correctly over the blur range.",
-        "Fig. 10", "max |eq. 19 / measured - 1| where DIC converges: " + ", ".join(
-            f"{labels[k].split()[0]} {100 * e19[k]:.0f}% (W <= {Wv[k].max():g})" for k in keys)
-        + "; noise + blur-mismatch model: " + ", ".join(
-            f"{100 * v:.0f}%" if v is not None else "-" for v in emm.values()),
-        "agrees" if all(v < 0.2 for v in e19.values()) else "differs",
-        "criterion: within 20 % everywhere. Eq. 17 is fitted on the edge-driven range only."))
+    rows.append(
+        _claim(
+            "C19",
+            "VI, eq. 19, Fig. 10",
+            "Eq. 19 predicts u_e(W) correctly over the blur range.",
+            "Fig. 10",
+            "max |eq. 19 / measured - 1| where DIC converges: "
+            + ", ".join(
+                f"{labels[k].split()[0]} {100 * e19[k]:.0f}% (W <= {Wv[k].max():g})" for k in keys
+            )
+            + "; noise + blur-mismatch model: "
+            + ", ".join(f"{100 * v:.0f}%" if v is not None else "-" for v in emm.values()),
+            "agrees" if all(v < 0.2 for v in e19.values()) else "differs",
+            "criterion: within 20 % everywhere. Eq. 17 is fitted on the edge-driven range only.",
+        )
+    )
     k4 = "p4"
     al, be = fits[k4]["alpha"]["value"], fits[k4]["beta"]["value"]
     w1 = math.sqrt(0.05 / (al * be)) if al * be > 0 else 1.0
     exact = (be * w1**2 + 1) ** al - 1
     single, double = al * be * w1**2, 2 * al * be * w1**2
     # which second-order term matches eq. 19's exact rise (10 % band, small W)
-    v20 = ("agrees" if abs(exact / double - 1) < 0.1 else
-           "differs" if abs(exact / single - 1) < 0.1 else "inconclusive")
-    rows.append(_claim(
-        "C20", "VI, eqs. 21-22", "u_e(W) ~= u_e(0) (1 + 2 alpha beta W^2) = u_e(0) "
-        "(1 + MBRF W^2).", "factor 2 alpha beta",
-        f"pattern #4 at W = {w1:.2f} px: exact eq. 19 rise {exact:.4f}, alpha beta W^2 = "
-        f"{single:.4f}, 2 alpha beta W^2 = {double:.4f}", v20,
-        "criterion: the eq. 22 term within 10 % of the exact rise of eq. 19 at small W. "
-        "The Taylor expansion of eq. 19 is u_e(0)(1 + alpha beta W^2); MBRF = 2 alpha beta "
-        "is kept as the paper defines it (it equals u_e''(0) / u_e(0)); predictions use the "
-        "correct expansion."))
+    v20 = (
+        "agrees"
+        if abs(exact / double - 1) < 0.1
+        else "differs"
+        if abs(exact / single - 1) < 0.1
+        else "inconclusive"
+    )
+    rows.append(
+        _claim(
+            "C20",
+            "VI, eqs. 21-22",
+            "u_e(W) ~= u_e(0) (1 + 2 alpha beta W^2) = u_e(0) (1 + MBRF W^2).",
+            "factor 2 alpha beta",
+            f"pattern #4 at W = {w1:.2f} px: exact eq. 19 rise {exact:.4f}, alpha beta W^2 = "
+            f"{single:.4f}, 2 alpha beta W^2 = {double:.4f}",
+            v20,
+            "criterion: the eq. 22 term within 10 % of the exact rise of eq. 19 at small W. "
+            "The Taylor expansion of eq. 19 is u_e(0)(1 + alpha beta W^2); MBRF = 2 alpha beta "
+            "is kept as the paper defines it (it equals u_e''(0) / u_e(0)); predictions use the "
+            "correct expansion.",
+        )
+    )
     fam = sorted(family, key=lambda r: r["mig0"])
     r_u0 = spearman_interval([r["mig0"] for r in fam], [r["u_e0"] for r in fam])
     r_mb = spearman_interval([r["mig0"] for r in fam], [r["mbrf"] for r in fam])
-    rows.append(_claim(
-        "C21", "VI, Fig. 11", "Raising MIG_0 improves noise rejection but speeds up the "
-        "loss under blur: static and dynamic performance cannot both be maximised.",
-        "Fig. 11 (non-monotonic eta, MBRF)",
-        f"over {len(fam)} generated patterns: Spearman(MIG_0, u_e(0)) = {_fmt_ci(r_u0)}, "
-        f"Spearman(MIG_0, MBRF) = {_fmt_ci(r_mb)}",
-        _combine([judge_interval(r_u0[1], r_u0[2], accept=(-1.0, -0.5)),
-                  judge_interval(r_mb[1], r_mb[2], accept=(0.5, 1.0))]),
-        "criterion: u_e(0) falls (rho < -0.5) while MBRF rises (rho > 0.5) with MIG_0, "
-        "each 95 % interval (Fisher z) inside its bound; with few patterns the interval is "
-        "wide and the verdict inconclusive. eta alone is not comparable across patterns "
-        "when alpha differs (its units change)."))
+    rows.append(
+        _claim(
+            "C21",
+            "VI, Fig. 11",
+            "Raising MIG_0 improves noise rejection but speeds up the "
+            "loss under blur: static and dynamic performance cannot both be maximised.",
+            "Fig. 11 (non-monotonic eta, MBRF)",
+            f"over {len(fam)} generated patterns: Spearman(MIG_0, u_e(0)) = {_fmt_ci(r_u0)}, "
+            f"Spearman(MIG_0, MBRF) = {_fmt_ci(r_mb)}",
+            _combine(
+                [
+                    judge_interval(r_u0[1], r_u0[2], accept=(-1.0, -0.5)),
+                    judge_interval(r_mb[1], r_mb[2], accept=(0.5, 1.0)),
+                ]
+            ),
+            "criterion: u_e(0) falls (rho < -0.5) while MBRF rises (rho > 0.5) with MIG_0, "
+            "each 95 % interval (Fisher z) inside its bound; with few patterns the interval is "
+            "wide and the verdict inconclusive. eta alone is not comparable across patterns "
+            "when alpha differs (its units change).",
+        )
+    )
     return rows

@@ -30,9 +30,14 @@ _COLORS = ("#d1495b", "#edae49", "#00798c", "#30638e", "#6a4c93", "#8ac926")
 def _layout(fig: Any, *, rows: int = 1, twin: bool = False) -> None:
     """Fixed margins (tight_layout measures every text and is the slowest step)."""
     h = fig.get_figheight()
-    fig.subplots_adjust(left=0.09, right=0.88 if twin else 0.97, top=1 - 0.45 / h,
-                        bottom=0.55 / h, hspace=0.75 / max(rows, 1) + 0.25,
-                        wspace=0.45 if twin else 0.3)
+    fig.subplots_adjust(
+        left=0.09,
+        right=0.88 if twin else 0.97,
+        top=1 - 0.45 / h,
+        bottom=0.55 / h,
+        hspace=0.75 / max(rows, 1) + 0.25,
+        wspace=0.45 if twin else 0.3,
+    )
 
 
 def _grid(n: int) -> tuple[Any, Any]:
@@ -60,8 +65,9 @@ def fig_sssig_pan(data: Mapping[str, Mapping[str, np.ndarray]], subset: int) -> 
     fig, axes = _grid(len(data))
     for ax, (label, d) in zip(axes, data.items(), strict=False):
         ax.semilogy(d["blur"], d["sssig"], "o", ms=3, color=_COLORS[2], label="SSSIG (data)")
-        ax.semilogy(d["blur"], subset**2 * d["mig"] ** 2, "-", color=_COLORS[0],
-                    label=r"Pan: $N^2\,MIG^2$")
+        ax.semilogy(
+            d["blur"], subset**2 * d["mig"] ** 2, "-", color=_COLORS[0], label=r"Pan: $N^2\,MIG^2$"
+        )
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel(r"SSSIG$_x$ (GL$^2$/px$^2$)")
@@ -77,14 +83,21 @@ def fig_ue_blur(data: Mapping[str, Mapping[str, np.ndarray]]) -> Any:
         ok = d.get("valid", np.ones(d["blur"].size, dtype=bool))
         ax.plot(d["blur"][ok], d["u_e"][ok], "o", ms=3, color="k", label="measured (DIC)")
         if not ok.all():
-            ax.plot(d["blur"][~ok], d["u_e"][~ok], "o", ms=4, mfc="none", color="0.4",
-                    label="DIC breakdown (< 90 % converged), not fitted")
+            ax.plot(
+                d["blur"][~ok],
+                d["u_e"][~ok],
+                "o",
+                ms=4,
+                mfc="none",
+                color="0.4",
+                label="DIC breakdown (< 90 % converged), not fitted",
+            )
         ax.plot(d["blur"], d["eq19"], "-", color=_COLORS[0], label="eq. 19 (power law)")
         if d.get("mismatch") is not None:
-            ax.plot(d["blur"], d["mismatch"], "--", color=_COLORS[2],
-                    label="noise + blur mismatch")
-        ax.plot(d["blur"], d["match_score"], ":", color=_COLORS[3],
-                label="static match score, eq. 2")
+            ax.plot(d["blur"], d["mismatch"], "--", color=_COLORS[2], label="noise + blur mismatch")
+        ax.plot(
+            d["blur"], d["match_score"], ":", color=_COLORS[3], label="static match score, eq. 2"
+        )
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel(r"$u_e$ (px)")
@@ -100,9 +113,14 @@ def fig_loglog(data: Mapping[str, Mapping[str, Any]]) -> Any:
         ax.loglog(d["sssig"], d["u_e"], "o", ms=3, color="k", label="data")
         inside = d["in_range"]
         s = np.sort(d["sssig"][inside])
-        ax.loglog(s, d["u_ref"] * (s / d["sssig_ref"]) ** (-d["alpha"]), "-",
-                  color=_COLORS[0], lw=2,
-                  label=rf"eq. 17: $\alpha$={d['alpha']:.2f}, fit W $\leq$ {d['w_max']:.1f}")
+        ax.loglog(
+            s,
+            d["u_ref"] * (s / d["sssig_ref"]) ** (-d["alpha"]),
+            "-",
+            color=_COLORS[0],
+            lw=2,
+            label=rf"eq. 17: $\alpha$={d['alpha']:.2f}, fit W $\leq$ {d['w_max']:.1f}",
+        )
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("SSSIG (GL$^2$/px$^2$)")
         ax.set_ylabel(r"$u_e$ (px)")
@@ -135,8 +153,9 @@ def fig_contrast_error(data: Mapping[str, Mapping[str, np.ndarray]]) -> Any:
     """Fig. 8: |model error| of eq. 17 and the contrast ratio (static / blurred) vs W."""
     fig, axes = _grid(len(data))
     for ax, (label, d) in zip(axes, data.items(), strict=False):
-        ax.plot(d["blur"], 100 * np.abs(d["error"]), "--", color=_COLORS[0],
-                label="|model error| (%)")
+        ax.plot(
+            d["blur"], 100 * np.abs(d["error"]), "--", color=_COLORS[0], label="|model error| (%)"
+        )
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel("|eq. 17 error| (%)", color=_COLORS[0])
         ax2 = ax.twinx()
@@ -152,8 +171,13 @@ def fig_sssig_decay(data: Mapping[str, Mapping[str, Any]]) -> Any:
     fig, axes = _grid(len(data))
     for ax, (label, d) in zip(axes, data.items(), strict=False):
         ax.plot(d["blur"], d["sssig"], "o", ms=3, color="k", label="data")
-        ax.plot(d["blur"], d["fit"], "-", color=_COLORS[2],
-                label=rf"eq. 18: $\beta$={d['beta']:.3g}, $R^2$={d['r2']:.3f}")
+        ax.plot(
+            d["blur"],
+            d["fit"],
+            "-",
+            color=_COLORS[2],
+            label=rf"eq. 18: $\beta$={d['beta']:.3g}, $R^2$={d['r2']:.3f}",
+        )
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel("SSSIG (GL$^2$/px$^2$)")
@@ -162,25 +186,35 @@ def fig_sssig_decay(data: Mapping[str, Mapping[str, Any]]) -> Any:
     return fig
 
 
-def fig_mbrf_mig(
-    study: Sequence[Mapping[str, Any]], family: Sequence[Mapping[str, Any]]
-) -> Any:
+def fig_mbrf_mig(study: Sequence[Mapping[str, Any]], family: Sequence[Mapping[str, Any]]) -> Any:
     """Fig. 11: u_ref (eq. 17 around SSSIG_0, px) and MBRF against MIG_0 (study patterns and
     a generated family). The paper plots eta, whose units depend on alpha."""
     fig, (a1, a2) = subplots(1, 2, figsize=(10.5, 3.9))
-    panels = ((a1, "u_ref", r"$u_{ref}$ = eq. 17 $u_e$(0) (px)"),
-              (a2, "mbrf", r"MBRF = 2$\alpha\beta$ (px$^{-2}$)"))
+    panels = (
+        (a1, "u_ref", r"$u_{ref}$ = eq. 17 $u_e$(0) (px)"),
+        (a2, "mbrf", r"MBRF = 2$\alpha\beta$ (px$^{-2}$)"),
+    )
     for ax, key, ylab in panels:
         fam = sorted(family, key=lambda r: r["mig0"])
         if fam:
-            ax.plot([r["mig0"] for r in fam], [r[key] for r in fam], "-o", ms=4,
-                    color=_COLORS[2], label="generated family (speckle size)")
+            ax.plot(
+                [r["mig0"] for r in fam],
+                [r[key] for r in fam],
+                "-o",
+                ms=4,
+                color=_COLORS[2],
+                label="generated family (speckle size)",
+            )
             for r in fam:
-                ax.annotate(f"{r['speckle_size']:g}px", (r["mig0"], r[key]), fontsize=7,
-                            textcoords="offset points", xytext=(3, 3))
+                ax.annotate(
+                    f"{r['speckle_size']:g}px",
+                    (r["mig0"], r[key]),
+                    fontsize=7,
+                    textcoords="offset points",
+                    xytext=(3, 3),
+                )
         for i, r in enumerate(study):
-            ax.plot(r["mig0"], r[key], "s", ms=7, color=_COLORS[i % len(_COLORS)],
-                    label=r["label"])
+            ax.plot(r["mig0"], r[key], "s", ms=7, color=_COLORS[i % len(_COLORS)], label=r["label"])
         ax.set_xlabel(r"MIG$_0$ (GL/px)")
         ax.set_ylabel(ylab)
         ax.set_yscale("log")
@@ -199,8 +233,9 @@ def fig_mismatch(data: Mapping[str, Mapping[str, Any]]) -> Any:
             ax.semilogy(d["blur"], u, "o", ms=3, color=c, label=f"σ = {sigma:g} GL")
             ax.semilogy(d["blur"], model, "-", color=c)
             if st is not None:
-                ax.semilogy(d["blur"], st, ":", color=c,
-                            label="static image, no fit" if j == 0 else None)
+                ax.semilogy(
+                    d["blur"], st, ":", color=c, label="static image, no fit" if j == 0 else None
+                )
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("blur W (px)")
         ax.set_ylabel(r"$u_e$ (px)")
@@ -217,8 +252,7 @@ def fig_compensation(data: Mapping[str, Any]) -> Any:
     ax = axes[0]
     w = np.asarray(data["blur"])
     ax.semilogy(w, data["plain"], "o", ms=3, color=_COLORS[0], label="plain (sharp reference)")
-    ax.semilogy(w, data["deblur"], "s", ms=3, color=_COLORS[1],
-                label="deblurred current (Wiener)")
+    ax.semilogy(w, data["deblur"], "s", ms=3, color=_COLORS[1], label="deblurred current (Wiener)")
     ax.semilogy(w, data["given"], "^", ms=3, color=_COLORS[2], label="blur-compensated")
     ax.semilogy(w, data["bound"], "-", color="0.3", label=r"static bound, eq. 2 at SSSIG(W)")
     ax.set_title(str(data["label"]), fontsize=10)

@@ -80,8 +80,9 @@ def markdown_to_html(text: str, *, heading_offset: int = 0) -> str:
         if rows:
             head, body = rows[0], rows[1:]
             cells = "".join(f"<th>{_inline(c)}</th>" for c in head)
-            trs = "".join("<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in r) + "</tr>"
-                          for r in body)
+            trs = "".join(
+                "<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in r) + "</tr>" for r in body
+            )
             out.append(f"<table><tr>{cells}</tr>{trs}</table>")
             rows.clear()
 

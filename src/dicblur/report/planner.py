@@ -46,17 +46,23 @@ class PlannerDefaults:
 def _fit_payload(fit: Any) -> dict[str, Any]:
     cov = [[float(x) for x in row] for row in fit.covariance]
     finite = all(math.isfinite(x) for row in cov for x in row)
-    return {"names": list(fit.names), "values": [float(v) for v in fit.values],
-            # JSON has no inf/NaN: an unidentified covariance is sent as zeros plus a flag
-            # (the interval is then unbounded, as in BlurUncertaintyModel.predict)
-            "covariance": cov if finite else [[0.0] * len(cov) for _ in cov],
-            "covariance_finite": finite,
-            "fixed": {k: float(v) for k, v in fit.fixed.items()},
-            "extra": {k: (list(v) if isinstance(v, list | tuple) else v)
-                      for k, v in fit.extra.items()
-                      if isinstance(v, int | float | str | list | tuple) or v is None},
-            "residual_std": float(fit.residual_std), "dof": int(fit.dof),
-            "t_quantile": float(fit.t_quantile)}
+    return {
+        "names": list(fit.names),
+        "values": [float(v) for v in fit.values],
+        # JSON has no inf/NaN: an unidentified covariance is sent as zeros plus a flag
+        # (the interval is then unbounded, as in BlurUncertaintyModel.predict)
+        "covariance": cov if finite else [[0.0] * len(cov) for _ in cov],
+        "covariance_finite": finite,
+        "fixed": {k: float(v) for k, v in fit.fixed.items()},
+        "extra": {
+            k: (list(v) if isinstance(v, list | tuple) else v)
+            for k, v in fit.extra.items()
+            if isinstance(v, int | float | str | list | tuple) or v is None
+        },
+        "residual_std": float(fit.residual_std),
+        "dof": int(fit.dof),
+        "t_quantile": float(fit.t_quantile),
+    }
 
 
 def planner_payload(model: Any, *, label: str | None = None) -> dict[str, Any]:
@@ -76,8 +82,10 @@ def planner_payload(model: Any, *, label: str | None = None) -> dict[str, Any]:
     subset = f", subset {model.subset} px" if model.subset else ""
     dom = model.domain.to_dict() if model.domain is not None else None
     if dom is not None:
-        dom = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-               for k, v in dom.items()}
+        dom = {
+            k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in dom.items()
+        }
     return {
         "label": f"{Path(name).name}{subset}",
         "default": model.default,
@@ -131,8 +139,13 @@ body{max-width:none}#sentence{border-left-color:#000}input{border:none}}
 """
 
 
-def planner_html(models: Sequence[Any], *, labels: Sequence[str] | None = None,
-                 defaults: PlannerDefaults | None = None, title: str | None = None) -> str:
+def planner_html(
+    models: Sequence[Any],
+    *,
+    labels: Sequence[str] | None = None,
+    defaults: PlannerDefaults | None = None,
+    title: str | None = None,
+) -> str:
     """The planner page (HTML text) for one or more models.
 
     Parameters
@@ -149,18 +162,28 @@ def planner_html(models: Sequence[Any], *, labels: Sequence[str] | None = None,
     if labels is not None and len(labels) != len(models):
         raise InputError(f"labels: {len(labels)} labels for {len(models)} models")
     d = defaults or PlannerDefaults()
-    payload = [planner_payload(m, label=None if labels is None else labels[i])
-               for i, m in enumerate(models)]
+    payload = [
+        planner_payload(m, label=None if labels is None else labels[i])
+        for i, m in enumerate(models)
+    ]
     first = models[0]
-    noise = d.noise if d.noise is not None else (
-        first.noise_sigma if first.noise_sigma is not None else
-        (first.noise_levels[0] if first.noise_levels else 2.0))
+    noise = (
+        d.noise
+        if d.noise is not None
+        else (
+            first.noise_sigma
+            if first.noise_sigma is not None
+            else (first.noise_levels[0] if first.noise_levels else 2.0)
+        )
+    )
     camera = d.full_well is not None
     by_flux = d.flux is not None or d.grey_level is None
-    grey = d.grey_level if d.grey_level is not None else (
-        first.mean_level if first.mean_level is not None else 127.5)
-    kinds = [k for k in ("mismatch", "power_law")
-             if any(p[k] is not None for p in payload)]
+    grey = (
+        d.grey_level
+        if d.grey_level is not None
+        else (first.mean_level if first.mean_level is not None else 127.5)
+    )
+    kinds = [k for k in ("mismatch", "power_law") if any(p[k] is not None for p in payload)]
 
     def val(x: Any) -> str:
         return html.escape(str(x), quote=True)
@@ -234,12 +257,14 @@ def planner_html(models: Sequence[Any], *, labels: Sequence[str] | None = None,
 {100 * first.confidence:g} % prediction interval; it comes from the calibration of the selected
 pattern (dicblur), evaluated in this page with the same formulas as the Python models.
 Outside the calibrated W and noise range the answer is an extrapolation.</footer>"""
-    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-            "<meta name='viewport' content='width=device-width,initial-scale=1'>"
-            f"<title>{html.escape(page_title)}</title><style>{_CSS}</style></head><body>"
-            f"{body}<script type='application/json' id='dicblur-models'>"
-            f"{_json_for_script(payload)}</script><script>{PLANNER_JS}</script>"
-            "</body></html>")
+    return (
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+        "<meta name='viewport' content='width=device-width,initial-scale=1'>"
+        f"<title>{html.escape(page_title)}</title><style>{_CSS}</style></head><body>"
+        f"{body}<script type='application/json' id='dicblur-models'>"
+        f"{_json_for_script(payload)}</script><script>{PLANNER_JS}</script>"
+        "</body></html>"
+    )
 
 
 def write_planner(models: Sequence[Any], path: str | Path, **kwargs: Any) -> Path:

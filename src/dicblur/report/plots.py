@@ -35,8 +35,11 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     out = Path(out) if out is not None else Path(result.model_path).parent
     if "noise" not in dsn.dims:
         dsn = dsn.expand_dims("noise")
-    sigmas = (dsn["noise_effective_level"].values if "noise_effective_level" in dsn.coords
-              else dsn["noise"].values)
+    sigmas = (
+        dsn["noise_effective_level"].values
+        if "noise_effective_level" in dsn.coords
+        else dsn["noise"].values
+    )
     ds = dsn.isel(noise=0)  # SSSIG is noise-free; the log-log fit is at the first level
 
     w = ds["blur"].values
@@ -48,23 +51,40 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     fig, ax = subplots(figsize=(5.5, 4))
     for i, sig in enumerate(sigmas):
         col = f"C{i}"
-        ax.plot(w, dsn["u_e"].isel(noise=i).values, "o", ms=3, color=col,
-                label=f"campaign, noise {float(sig):.3g} GL")
+        ax.plot(
+            w,
+            dsn["u_e"].isel(noise=i).values,
+            "o",
+            ms=3,
+            color=col,
+            label=f"campaign, noise {float(sig):.3g} GL",
+        )
         for kind, style in (("mismatch", "-"), ("power_law", "--")):
             if kind == "mismatch" and model.mismatch is None:
                 continue
             if kind == "power_law" and i > 0:
                 continue  # the power law predicts at its fitted noise only
             pred = model.predict(wf, float(sig), model=kind)  # NaN where DIC breaks down
-            ax.plot(wf, pred.u_e, style, color=col,
-                    label=(("noise + blur mismatch" if kind == "mismatch"
-                            else "power law, eq. 19")
-                           + (" (default)" if kind == model.default else "")) if i == 0
-                    else None)
-        ax.plot(w, dsn["u_match_score"].isel(noise=i).values, ":", color=col,
-                label="static match score, eq. 2" if i == 0 else None)
-    ax.set(xlabel="blur length W (px)", ylabel="u_e (px)",
-           title="random error vs blur")
+            ax.plot(
+                wf,
+                pred.u_e,
+                style,
+                color=col,
+                label=(
+                    ("noise + blur mismatch" if kind == "mismatch" else "power law, eq. 19")
+                    + (" (default)" if kind == model.default else "")
+                )
+                if i == 0
+                else None,
+            )
+        ax.plot(
+            w,
+            dsn["u_match_score"].isel(noise=i).values,
+            ":",
+            color=col,
+            label="static match score, eq. 2" if i == 0 else None,
+        )
+    ax.set(xlabel="blur length W (px)", ylabel="u_e (px)", title="random error vs blur")
     ax.legend(fontsize=8)
     fig.tight_layout()
     paths.append(out / "ue_vs_blur.png")
@@ -72,10 +92,17 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
 
     fig, ax = subplots(figsize=(5.5, 4))
     ax.plot(w, s, "o", ms=3, label="campaign (mean over POIs)")
-    ax.plot(wf, sssig_decay(wf, model.decay["sssig0"], model.decay["beta"]), "-",
-            label=f"eq. 18 fit, R^2 = {model.decay.r2:.3f}")
-    ax.set(xlabel="blur length W (px)", ylabel="SSSIG along the motion ((GL/px)^2)",
-           title="SSSIG vs blur")
+    ax.plot(
+        wf,
+        sssig_decay(wf, model.decay["sssig0"], model.decay["beta"]),
+        "-",
+        label=f"eq. 18 fit, R^2 = {model.decay.r2:.3f}",
+    )
+    ax.set(
+        xlabel="blur length W (px)",
+        ylabel="SSSIG along the motion ((GL/px)^2)",
+        title="SSSIG vs blur",
+    )
     ax.legend()
     fig.tight_layout()
     paths.append(out / "sssig_vs_blur.png")
@@ -86,11 +113,14 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     sf = np.geomspace(float(s.min()), float(s.max()), 100)
     pl = model.power_law
     ref = pl.extra.get("sigma_ref")
-    at_first = ((float(sigmas[0]) / ref) ** pl["kappa"] if "kappa" in pl.names and ref
-                else 1.0)
-    ax.loglog(sf, at_first * pl["u_ref"] * (sf / pl.extra["sssig_ref"]) ** (-pl["alpha"]), "-",
-              label=f"eq. 17 fit, alpha = {pl['alpha']:.2f} (W in {model.fit_range[0]:g}.."
-                    f"{model.fit_range[1]:g} px)")
+    at_first = (float(sigmas[0]) / ref) ** pl["kappa"] if "kappa" in pl.names and ref else 1.0
+    ax.loglog(
+        sf,
+        at_first * pl["u_ref"] * (sf / pl.extra["sssig_ref"]) ** (-pl["alpha"]),
+        "-",
+        label=f"eq. 17 fit, alpha = {pl['alpha']:.2f} (W in {model.fit_range[0]:g}.."
+        f"{model.fit_range[1]:g} px)",
+    )
     ax.set(xlabel="SSSIG ((GL/px)^2)", ylabel="u_e (px)", title="log u_e vs log SSSIG")
     ax.legend()
     fig.tight_layout()
@@ -106,8 +136,12 @@ def plan_figure(plan: Any, path: str | Path) -> Path:
     fig, ax = subplots(figsize=(6, 4))
     t = np.asarray(plan.curve_exposure) * 1e3
     ax.plot(t, plan.curve_u_e, label=f"predicted u_e ({plan.model})")
-    ax.axvline(plan.exposure * 1e3, color="C1", ls="--",
-               label="optimum" if plan.optimal else "longest under target")
+    ax.axvline(
+        plan.exposure * 1e3,
+        color="C1",
+        ls="--",
+        label="optimum" if plan.optimal else "longest under target",
+    )
     ax.axvline(plan.rule_of_thumb_exposure * 1e3, color="C2", ls=":", label="0.02 px rule")
     if plan.target is not None:
         ax.axhline(plan.target, color="C3", ls="-.", label="target")

@@ -24,9 +24,12 @@ def _save(fig: Any, out: Path | str) -> None:
 
 def plot_regimes(path: str | Path) -> Path:
     """Fig. 4: the sharp (dashed) and blurred (solid) train in the four regimes (PNG)."""
-    cases = (("(a) w < dp, w < g", PAPER_TRAIN, 3.0), ("(b) dp <= w < g", PAPER_TRAIN, 10.0),
-             ("(c) w >= dp, w >= g", PAPER_TRAIN, 19.0),
-             ("(d) g <= w < dp (dp = 16)", DENSE_TRAIN, 10.0))
+    cases = (
+        ("(a) w < dp, w < g", PAPER_TRAIN, 3.0),
+        ("(b) dp <= w < g", PAPER_TRAIN, 10.0),
+        ("(c) w >= dp, w >= g", PAPER_TRAIN, 19.0),
+        ("(d) g <= w < dp (dp = 16)", DENSE_TRAIN, 10.0),
+    )
     fig, axes = subplots(2, 2, figsize=(9, 6), sharey=True)
     for ax, (title, train, w) in zip(axes.ravel(), cases, strict=True):
         x = np.linspace(-train.du / 2, 1.5 * train.du, 2000)
@@ -72,8 +75,7 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
     fig, axes = subplots(1, 2, figsize=(11, 5.0))
     for ax, log in zip(axes, (False, True), strict=True):
         err = np.vstack([ds["u_e"] - ds["u_e_ci_low"], ds["u_e_ci_high"] - ds["u_e"]])
-        ax.errorbar(w, ds["u_e"], yerr=err, fmt="ko", ms=4, capsize=2,
-                    label="Monte Carlo (95% CI)")
+        ax.errorbar(w, ds["u_e"], yerr=err, fmt="ko", ms=4, capsize=2, label="Monte Carlo (95% CI)")
         ax.plot(w, ds["u_first_principles"], "b-", label="sqrt law sigma sqrt(2/S_b)")
         ax.plot(w, ds["u_paper_linear"], "g--", label="paper: linear, sigma w/(a sqrt N)")
         # The linearisation is meaningless once the cross-gradient C has vanished.
@@ -91,19 +93,24 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
         else:
             # zoom on the identifiable range, up to the predicted knee
             w_zoom = float(study.knee_predicted)
-            top = max(float(ds["u_e_ci_high"].sel(w=slice(None, w_zoom)).max()),
-                      float(ds["u_paper_linear"].sel(w=slice(None, w_zoom)).max()))
+            top = max(
+                float(ds["u_e_ci_high"].sel(w=slice(None, w_zoom)).max()),
+                float(ds["u_paper_linear"].sel(w=slice(None, w_zoom)).max()),
+            )
             ax.set_xlim(0.5, w_zoom + 0.5)
             ax.set_ylim(0, 1.1 * top)
-            ax.set_title(f"zoom: w <= {w_zoom:g} (up to the predicted knee), linear axes",
-                         fontsize=9)
+            ax.set_title(
+                f"zoom: w <= {w_zoom:g} (up to the predicted knee), linear axes", fontsize=9
+            )
     # one legend below both panels: inside them it covered the Monte Carlo points
     handles, labels = axes[1].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.suptitle(
         f"1-D pulse Monte Carlo: a = {ds.attrs['a']:g}, dp = {ds.attrs['dp']:g}, du = "
         f"{ds.attrs['du']:g}, sigma = {ds.attrs['sigma']:g}, N = {ds.attrs['n_periods']}, "
-        f"{ds.attrs['trials']} trials", fontsize=9)
+        f"{ds.attrs['trials']} trials",
+        fontsize=9,
+    )
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     out = Path(path)
     _save(fig, out)
@@ -113,5 +120,8 @@ def plot_uncertainty(study: PulseStudy, path: str | Path) -> Path:
 def write_figures(study: PulseStudy, outdir: str | Path) -> list[Path]:
     """Write ``fig4_regimes.png``, ``fig5_min_chi2.png``, ``fig6_uncertainty.png``."""
     d = Path(outdir)
-    return [plot_regimes(d / "fig4_regimes.png"), plot_min_chi2(study, d / "fig5_min_chi2.png"),
-            plot_uncertainty(study, d / "fig6_uncertainty.png")]
+    return [
+        plot_regimes(d / "fig4_regimes.png"),
+        plot_min_chi2(study, d / "fig5_min_chi2.png"),
+        plot_uncertainty(study, d / "fig6_uncertainty.png"),
+    ]

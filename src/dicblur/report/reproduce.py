@@ -120,8 +120,9 @@ class ReproduceSettings:
     def family_sizes(self) -> tuple[float, ...]:
         if self.family is not None:
             return self.family
-        return (2.0, 3.0, 4.0, 6.0, 9.0) if self.quick else (2.0, 2.5, 3.0, 4.0, 5.0, 6.0,
-                                                             8.0, 10.0)
+        return (
+            (2.0, 3.0, 4.0, 6.0, 9.0) if self.quick else (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)
+        )
 
     @property
     def pulse_trials(self) -> int:
@@ -147,17 +148,29 @@ def _study_patterns(s: ReproduceSettings) -> list[StudyPattern]:
     if s.pattern1 is not None:
         p1 = load_user_pattern("p1", "#1 Sample 13", s.pattern1, s.size)
     else:
-        p1 = StudyPattern("p1", "#1 stand-in (fine, low contrast)",
-                          stand_in_pattern1(s.size, s.seed + 1),
-                          True, "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135")
+        p1 = StudyPattern(
+            "p1",
+            "#1 stand-in (fine, low contrast)",
+            stand_in_pattern1(s.size, s.seed + 1),
+            True,
+            "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135",
+        )
     if s.pattern2 is not None:
         p2 = load_user_pattern("p2", "#2 Sample 3", s.pattern2, s.size)
     else:
-        p2 = StudyPattern("p2", "#2 stand-in (coarse, high contrast)",
-                          stand_in_pattern2(s.size, s.seed + 2),
-                          True, "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190")
-    return [p1, p2, emulated_camera_pattern3(s.size, s.seed + 3),
-            numerical_pattern4(s.size, s.seed + 4)]
+        p2 = StudyPattern(
+            "p2",
+            "#2 stand-in (coarse, high contrast)",
+            stand_in_pattern2(s.size, s.seed + 2),
+            True,
+            "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190",
+        )
+    return [
+        p1,
+        p2,
+        emulated_camera_pattern3(s.size, s.seed + 3),
+        numerical_pattern4(s.size, s.seed + 4),
+    ]
 
 
 def _write_float_tiff(path: Path, image: np.ndarray) -> None:
@@ -168,8 +181,14 @@ def _write_float_tiff(path: Path, image: np.ndarray) -> None:
 
 
 def _campaign(
-    s: ReproduceSettings, name: str, patterns: list[dict[str, Any]], blur: dict[str, float],
-    noise: tuple[float, ...], progress: Progress | None, *, compensation: str = "none",
+    s: ReproduceSettings,
+    name: str,
+    patterns: list[dict[str, Any]],
+    blur: dict[str, float],
+    noise: tuple[float, ...],
+    progress: Progress | None,
+    *,
+    compensation: str = "none",
 ) -> Any:
     from ..campaign import open_results, parse_spec, run_campaign
 
@@ -177,11 +196,21 @@ def _campaign(
         {
             "campaign": {"name": name, "seed": s.seed, "repetitions": 1},
             "pattern": patterns,
-            "blur": {"lengths": blur, "angles": [0.0], "trajectory": "linear",
-                     "method": "transfer", "substeps": 100, "boundary": "periodic"},
+            "blur": {
+                "lengths": blur,
+                "angles": [0.0],
+                "trajectory": "linear",
+                "method": "transfer",
+                "substeps": 100,
+                "boundary": "periodic",
+            },
             "noise": {"model": "per-exposure", "levels": list(noise)},
-            "dic": {"subsets": [s.subset], "step": s.poi_step, "shape": "translation",
-                    **({} if compensation == "none" else {"compensation": compensation})},
+            "dic": {
+                "subsets": [s.subset],
+                "step": s.poi_step,
+                "shape": "translation",
+                **({} if compensation == "none" else {"compensation": compensation}),
+            },
         },
         base_dir=s.out,
     )
@@ -192,10 +221,14 @@ def _campaign(
         if progress is not None:
             progress(f"campaign {name}", done, total)
 
-    summary = run_campaign(spec, store, scheduler=s.scheduler, workers=s.workers,
-                           serial=s.serial, progress=cb)
-    return open_results(store), {"tasks": summary.n_tasks, "run": summary.n_run,
-                                 "skipped": summary.n_skipped}
+    summary = run_campaign(
+        spec, store, scheduler=s.scheduler, workers=s.workers, serial=s.serial, progress=cb
+    )
+    return open_results(store), {
+        "tasks": summary.n_tasks,
+        "run": summary.n_run,
+        "skipped": summary.n_skipped,
+    }
 
 
 def _warm_kernels(s: ReproduceSettings) -> float:
@@ -209,14 +242,23 @@ def _warm_kernels(s: ReproduceSettings) -> float:
 
     t0 = time.perf_counter()
     size = 4 * s.subset
-    spec = parse_spec({
-        "campaign": {"name": "warm-up", "seed": 0},
-        "pattern": [{"name": "w", "generator": "speckle", "shape": [size, size],
-                     "speckle_size": 4.0, "seed": 0}],
-        "blur": {"lengths": [0.0, 1.0], "method": "transfer", "substeps": 100},
-        "noise": {"model": "per-exposure", "levels": [s.main_noise]},
-        "dic": {"subsets": [s.subset], "step": s.poi_step, "shape": "translation"},
-    })
+    spec = parse_spec(
+        {
+            "campaign": {"name": "warm-up", "seed": 0},
+            "pattern": [
+                {
+                    "name": "w",
+                    "generator": "speckle",
+                    "shape": [size, size],
+                    "speckle_size": 4.0,
+                    "seed": 0,
+                }
+            ],
+            "blur": {"lengths": [0.0, 1.0], "method": "transfer", "substeps": 100},
+            "noise": {"model": "per-exposure", "levels": [s.main_noise]},
+            "dic": {"subsets": [s.subset], "step": s.poi_step, "shape": "translation"},
+        }
+    )
     batch = next(iter(iter_batches(spec)))
     simulate_batch(make_pattern(spec, spec.patterns[0]), batch, spec)
     return time.perf_counter() - t0
@@ -238,11 +280,12 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
 
     s = settings
     if s.size < 4 * s.subset:
-        raise InputError(f"size={s.size}: the study images need at least 4 subsets a side "
-                         f"(size >= {4 * s.subset})")
+        raise InputError(
+            f"size={s.size}: the study images need at least 4 subsets a side "
+            f"(size >= {4 * s.subset})"
+        )
     if s.main_noise not in s.noise_levels:
-        raise InputError(f"main_noise={s.main_noise}: must be one of noise_levels "
-                         f"{s.noise_levels}")
+        raise InputError(f"main_noise={s.main_noise}: must be one of noise_levels {s.noise_levels}")
     out = check_output(s.out, "out", folder=True)
     out.mkdir(exist_ok=True)
     timings: dict[str, float] = {}
@@ -262,8 +305,14 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         _write_float_tiff(pdir / f"{p.key}.tif", p.image)
         m = pattern_metrics(p.image, subset=s.subset, noise_sigma=s.main_noise, step=s.poi_step)
         c = blur_sensitivity(p.image, subset=s.subset, step=s.poi_step)
-        static[p.key] = {"label": p.label, "synthetic": p.synthetic, "source": p.source,
-                         "sha256": p.sha256, "metrics": m.to_dict(), "c_static": c.c}
+        static[p.key] = {
+            "label": p.label,
+            "synthetic": p.synthetic,
+            "source": p.source,
+            "sha256": p.sha256,
+            "metrics": m.to_dict(),
+            "c_static": c.c,
+        }
     timings["patterns"] = time.perf_counter() - t0
 
     # 2. main campaign -------------------------------------------------------------------
@@ -279,23 +328,41 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     # and with the deblur baseline (issue 18; main noise level only)
     t = time.perf_counter()
     comp_key = pats[1].key
-    comp_runs = {mode: _campaign(s, f"study_{mode}", [study_patterns[1]], blur_grid,
-                                 (s.main_noise,), progress, compensation=mode)
-                 for mode in ("given", "deblur")}
+    comp_runs = {
+        mode: _campaign(
+            s,
+            f"study_{mode}",
+            [study_patterns[1]],
+            blur_grid,
+            (s.main_noise,),
+            progress,
+            compensation=mode,
+        )
+        for mode in ("given", "deblur")
+    }
     compensation = {
-        "pattern": comp_key, "label": pats[1].label,
+        "pattern": comp_key,
+        "label": pats[1].label,
         "blur": np.asarray(ds["blur"].values, dtype=np.float64),
         "plain": series(ds, "u_e", comp_key, s.main_noise),
         "given": series(comp_runs["given"][0], "u_e", comp_key, s.main_noise),
         "deblur": series(comp_runs["deblur"][0], "u_e", comp_key, s.main_noise),
-        "bound": series(ds, "u_match_score", comp_key, s.main_noise)}
+        "bound": series(ds, "u_match_score", comp_key, s.main_noise),
+    }
     timings["campaign_compensation"] = time.perf_counter() - t
 
     # 3. family for Fig. 11 --------------------------------------------------------------
     t = time.perf_counter()
     fam_specs = [
-        {"name": f"d{d:g}", "generator": "speckle", "shape": [s.size, s.size],
-         "speckle_size": d, "density": 0.5, "softness": 0.5, "seed": s.seed + 100 + i}
+        {
+            "name": f"d{d:g}",
+            "generator": "speckle",
+            "shape": [s.size, s.size],
+            "speckle_size": d,
+            "density": 0.5,
+            "softness": 0.5,
+            "seed": s.seed + 100 + i,
+        }
         for i, d in enumerate(s.family_sizes)
     ]
     fam_grid = {"start": 0.0, "stop": 6.0, "step": 1.0 if s.quick else 0.25}
@@ -305,9 +372,13 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     # 4. 1-D analysis --------------------------------------------------------------------
     t = time.perf_counter()
     stage("1-D pulse analysis")
-    pulse = run_pulse_study(trials=s.pulse_trials, seed=s.seed,
-                            dependence_trials=(min(s.pulse_trials, 500 if s.quick else 2000)
-                                               if s.pulse_dependence else None))
+    pulse = run_pulse_study(
+        trials=s.pulse_trials,
+        seed=s.seed,
+        dependence_trials=(
+            min(s.pulse_trials, 500 if s.quick else 2000) if s.pulse_dependence else None
+        ),
+    )
     timings["pulse"] = time.perf_counter() - t
 
     # 5. fits ----------------------------------------------------------------------------
@@ -321,8 +392,7 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         k = p.key
         # Points where DIC broke down (< 90 % of POIs converged) measure failure, not the
         # random error the models describe: they are shown but not fitted.
-        ok = {lv: series(ds, "converged_fraction", k, lv) >= MIN_CONVERGED
-              for lv in s.noise_levels}
+        ok = {lv: series(ds, "converged_fraction", k, lv) >= MIN_CONVERGED for lv in s.noise_levels}
         v = ok[s.main_noise]
         valid[k] = v
         u = series(ds, "u_e", k, s.main_noise)[v]
@@ -330,21 +400,37 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         # RMS contrast: the 2-D analogue of the paper's 1-D contrast (Fig. 8).
         cref = series(ds, "rms_contrast_ref", k, s.main_noise)[v]
         con = series(ds, "rms_contrast", k, s.main_noise)[v]
-        prov = {"pattern": p.source, "sha256": p.sha256, "subset": s.subset,
-                "step": s.poi_step, "dic": "translation IC-GN, ZNSSD, bspline3",
-                "noise": "per-exposure Gaussian",
-                "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged"}
+        prov = {
+            "pattern": p.source,
+            "sha256": p.sha256,
+            "subset": s.subset,
+            "step": s.poi_step,
+            "dic": "translation IC-GN, ZNSSD, bspline3",
+            "noise": "per-exposure Gaussian",
+            "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged",
+        }
         # the automatic eq. 17 range may fall back on its minimum number of points; the
         # report states the range it used (table "eq.17 range"), so the warning, which
         # tells an API user to pass fit_range, is kept as a note instead of printed
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            paper = fit_blur_model(W[v], sg, u, noise_sigma=s.main_noise, contrast_ref=cref,
-                                   contrast=con, subset=s.subset,
-                                   c_static=static[k]["c_static"], provenance=prov,
-                                   mean_level=float(p.image.mean()))
-        range_notes = [str(wm.message).split(". Pass fit_range")[0] for wm in caught
-                       if "edge-driven range" in str(wm.message)]
+            paper = fit_blur_model(
+                W[v],
+                sg,
+                u,
+                noise_sigma=s.main_noise,
+                contrast_ref=cref,
+                contrast=con,
+                subset=s.subset,
+                c_static=static[k]["c_static"],
+                provenance=prov,
+                mean_level=float(p.image.mean()),
+            )
+        range_notes = [
+            str(wm.message).split(". Pass fit_range")[0]
+            for wm in caught
+            if "edge-driven range" in str(wm.message)
+        ]
         for wm in caught:
             if "edge-driven range" not in str(wm.message):
                 warnings.warn_explicit(wm.message, wm.category, wm.filename, wm.lineno)
@@ -352,12 +438,23 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         allu = np.concatenate([series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
         alls = np.concatenate([series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
         alln = np.concatenate([np.full(int(ok[lv].sum()), lv) for lv in s.noise_levels])
-        allc = np.concatenate([(series(ds, "rms_contrast_ref", k, lv)
-                                / series(ds, "rms_contrast", k, lv))[ok[lv]]
-                               for lv in s.noise_levels])
-        full = fit_blur_model(allw, alls, allu, noise_sigma=alln, contrast_ratio=allc,
-                              subset=s.subset, c_static=static[k]["c_static"], provenance=prov,
-                              mean_level=float(p.image.mean()))
+        allc = np.concatenate(
+            [
+                (series(ds, "rms_contrast_ref", k, lv) / series(ds, "rms_contrast", k, lv))[ok[lv]]
+                for lv in s.noise_levels
+            ]
+        )
+        full = fit_blur_model(
+            allw,
+            alls,
+            allu,
+            noise_sigma=alln,
+            contrast_ratio=allc,
+            subset=s.subset,
+            c_static=static[k]["c_static"],
+            provenance=prov,
+            mean_level=float(p.image.mean()),
+        )
         models[k] = (paper, full)
         paper.to_json(str(out / f"model_{k}.json"))
         full.to_json(str(out / f"model_{k}_all_noise.json"))
@@ -366,46 +463,59 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         # both terms are smooth in W (u_blur ~ c W^2 at first): predicted every 0.5 px
         # (the quick grid) and interpolated by cubic splines onto a finer study grid
         wc = np.union1d(np.arange(0.0, float(W.max()) + 0.25, 0.5), [float(W.max())])
-        unit = predict_from_pattern(p.image, wc, noise_sigma=1.0, subset=s.subset,
-                                    step=s.poi_step, boundary="periodic")
+        unit = predict_from_pattern(
+            p.image, wc, noise_sigma=1.0, subset=s.subset, step=s.poi_step, boundary="periodic"
+        )
         # first-order noise scales with sigma, the two noises' interaction with sigma^2
         assert unit.u_noise_interaction is not None
-        un = np.clip(CubicSpline(wc, np.sqrt(np.maximum(
-            unit.u_noise**2 - unit.u_noise_interaction**2, 0.0)))(W), 0.0, None)
+        un = np.clip(
+            CubicSpline(
+                wc, np.sqrt(np.maximum(unit.u_noise**2 - unit.u_noise_interaction**2, 0.0))
+            )(W),
+            0.0,
+            None,
+        )
         ui = np.clip(CubicSpline(wc, unit.u_noise_interaction)(W), 0.0, None)
         ub = np.clip(CubicSpline(wc, unit.u_blur)(W), 0.0, None)
         static[k]["predicted_u_e"] = {
             f"{lv:g}": np.sqrt((lv * un) ** 2 + (lv * lv * ui) ** 2 + ub**2).tolist()
-            for lv in s.noise_levels}
+            for lv in s.noise_levels
+        }
         # where the static prediction stops describing DIC (docs/models.md s. 4)
         static[k]["breakdown_blur"] = unit.breakdown_blur
         st = np.asarray(static[k]["predicted_u_e"][f"{s.main_noise:g}"])[v]
         eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
-        mism = (full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch
-                else None)
+        mism = full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch else None
         fits[k] = {
             # eq. 17 around SSSIG_0: u_ref (px) = its u_e(0); eta = u_ref SSSIG_0^alpha is
             # kept as a derived number (its units depend on alpha)
-            "u_ref": _param(paper.power_law, "u_ref"), "eta": paper.eta,
-            "sssig_ref": paper.sssig_ref, "alpha": _param(paper.power_law, "alpha"),
-            "beta": _param(paper.decay, "beta"), "sssig0": _param(paper.decay, "sssig0"),
-            "mbrf": paper.mbrf, "r2_decay": paper.decay.r2, "r2_power_law": paper.power_law.r2,
-            "fit_range": list(paper.fit_range), "range_rule": paper.range_rule,
+            "u_ref": _param(paper.power_law, "u_ref"),
+            "eta": paper.eta,
+            "sssig_ref": paper.sssig_ref,
+            "alpha": _param(paper.power_law, "alpha"),
+            "beta": _param(paper.decay, "beta"),
+            "sssig0": _param(paper.decay, "sssig0"),
+            "mbrf": paper.mbrf,
+            "r2_decay": paper.decay.r2,
+            "r2_power_law": paper.power_law.r2,
+            "fit_range": list(paper.fit_range),
+            "range_rule": paper.range_rule,
             "range_note": "; ".join(range_notes),
             "mig0": static[k]["metrics"]["mig"],
-            "c_static": static[k]["c_static"], "c_fitted": full.c,
+            "c_static": static[k]["c_static"],
+            "c_fitted": full.c,
             "c_fitted_param": _param(full.mismatch, "c") if full.mismatch else None,
             "comparison": full.comparison,
             "default_model": full.default,
             "eq19_max_rel_error": float(np.max(np.abs(eq19 / u - 1))),
-            "mismatch_max_rel_error": (float(np.max(np.abs(mism / u - 1)))
-                                       if mism is not None else None),
+            "mismatch_max_rel_error": (
+                float(np.max(np.abs(mism / u - 1))) if mism is not None else None
+            ),
             "static_max_rel_error": float(np.max(np.abs(st / u - 1))),
             "static_rms_log_error": float(np.sqrt(np.mean(np.log(st / u) ** 2))),
             "w_fitted_max": float(W[v].max()),
             "bias_max": float(np.nanmax(np.abs(series(ds, "bias", k, s.main_noise)[v]))),
-            "converged_min": float(np.nanmin(series(ds, "converged_fraction", k,
-                                                     s.main_noise))),
+            "converged_min": float(np.nanmin(series(ds, "converged_fraction", k, s.main_noise))),
         }
     fam_rows = []
     for spec_row in fam_specs:
@@ -414,20 +524,38 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         vf = series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
         u = series(ds_fam, "u_e", name, s.main_noise)[vf]
         sg = series(ds_fam, "sssig", name, s.main_noise)[vf]
-        ratio = (series(ds_fam, "rms_contrast_ref", name, s.main_noise)
-                 / series(ds_fam, "rms_contrast", name, s.main_noise))[vf]
+        ratio = (
+            series(ds_fam, "rms_contrast_ref", name, s.main_noise)
+            / series(ds_fam, "rms_contrast", name, s.main_noise)
+        )[vf]
         Wf = Wf[vf]
         with warnings.catch_warnings():
             # the family table lists each fit's range; the API hint to pass fit_range
             # is not actionable here
             warnings.filterwarnings("ignore", message="edge-driven range")
-            fm = fit_blur_model(Wf, sg, u, noise_sigma=s.main_noise, contrast_ratio=ratio,
-                               subset=s.subset, compare=False, default="power_law")
-        fam_rows.append({"name": name, "speckle_size": spec_row["speckle_size"],
-                         "mig0": float(series(ds_fam, "mig_ref", name, s.main_noise)[0]),
-                         "u_ref": fm.u_ref, "alpha": fm.alpha, "beta": fm.beta,
-                         "mbrf": fm.mbrf,
-                         "u_e0": float(u[0]), "u_e_max": float(u[-1])})
+            fm = fit_blur_model(
+                Wf,
+                sg,
+                u,
+                noise_sigma=s.main_noise,
+                contrast_ratio=ratio,
+                subset=s.subset,
+                compare=False,
+                default="power_law",
+            )
+        fam_rows.append(
+            {
+                "name": name,
+                "speckle_size": spec_row["speckle_size"],
+                "mig0": float(series(ds_fam, "mig_ref", name, s.main_noise)[0]),
+                "u_ref": fm.u_ref,
+                "alpha": fm.alpha,
+                "beta": fm.beta,
+                "mbrf": fm.mbrf,
+                "u_e0": float(u[0]),
+                "u_e_max": float(u[-1]),
+            }
+        )
     timings["fits"] = time.perf_counter() - t
 
     # 6. report --------------------------------------------------------------------------
@@ -436,40 +564,92 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
     from .claims import evaluate_claims
     from .write import write_report
 
-    claims = evaluate_claims(ds=ds, ds_family=ds_fam, pats=pats, static=static, fits=fits,
-                             models=models, family=fam_rows, pulse=pulse, settings=s,
-                             valid=valid)
-    versions = {"python": sys.version.split()[0], "platform": platform.platform(),
-                **package_versions()}
+    claims = evaluate_claims(
+        ds=ds,
+        ds_family=ds_fam,
+        pats=pats,
+        static=static,
+        fits=fits,
+        models=models,
+        family=fam_rows,
+        pulse=pulse,
+        settings=s,
+        valid=valid,
+    )
+    versions = {
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        **package_versions(),
+    }
     report_path, figures = write_report(
-        out=out, settings=s, ds=ds, pats=pats, static=static, fits=fits, models=models,
-        family=fam_rows, pulse=pulse, claims=claims, versions=versions, timings=timings,
-        valid=valid, clock=(t0, t), compensation=compensation)
+        out=out,
+        settings=s,
+        ds=ds,
+        pats=pats,
+        static=static,
+        fits=fits,
+        models=models,
+        family=fam_rows,
+        pulse=pulse,
+        claims=claims,
+        versions=versions,
+        timings=timings,
+        valid=valid,
+        clock=(t0, t),
+        compensation=compensation,
+    )
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     results = {
-        "command": s.command, "versions": versions, "mode": "quick" if s.quick else "full",
-        "settings": {"size": s.size, "subset": s.subset, "poi_step": s.poi_step,
-                     "blur_step": s.blur_step, "noise_levels": list(s.noise_levels),
-                     "main_noise": s.main_noise, "seed": s.seed},
-        "patterns": static, "fits": fits, "family": fam_rows,
-        "pulse": {"table_ii": list(pulse.table), "knee": pulse.knee,
-                  "knee_predicted": pulse.knee_predicted, "knee_paper": pulse.knee_paper,
-                  "fits": [f.__dict__ if hasattr(f, "__dict__") else str(f)
-                           for f in pulse.fits],
-                  "verdict": pulse.verdict},
-        "claims": claims, "figures": figures, "timings": timings,
-        "campaign_runs": {"study": run_study, "family": run_family,
-                          **{f"study_{m}": r[1] for m, r in comp_runs.items()}},
-        "compensation": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
-                         for k, v in compensation.items()},
+        "command": s.command,
+        "versions": versions,
+        "mode": "quick" if s.quick else "full",
+        "settings": {
+            "size": s.size,
+            "subset": s.subset,
+            "poi_step": s.poi_step,
+            "blur_step": s.blur_step,
+            "noise_levels": list(s.noise_levels),
+            "main_noise": s.main_noise,
+            "seed": s.seed,
+        },
+        "patterns": static,
+        "fits": fits,
+        "family": fam_rows,
+        "pulse": {
+            "table_ii": list(pulse.table),
+            "knee": pulse.knee,
+            "knee_predicted": pulse.knee_predicted,
+            "knee_paper": pulse.knee_paper,
+            "fits": [f.__dict__ if hasattr(f, "__dict__") else str(f) for f in pulse.fits],
+            "verdict": pulse.verdict,
+        },
+        "claims": claims,
+        "figures": figures,
+        "timings": timings,
+        "campaign_runs": {
+            "study": run_study,
+            "family": run_family,
+            **{f"study_{m}": r[1] for m, r in comp_runs.items()},
+        },
+        "compensation": {
+            k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in compensation.items()
+        },
     }
     rj = out / "results.json"
     write_text(rj, json.dumps(_clean(results), indent=2))
-    write_text(out / "command.txt",
-        s.command + "\n\n" + "\n".join(f"{k}: {v}" for k, v in versions.items()) + "\n")
-    return ReproduceResult(report_path, rj, tuple(figures), tuple(claims), timings,
-                           {"study": run_study, "family": run_family})
+    write_text(
+        out / "command.txt",
+        s.command + "\n\n" + "\n".join(f"{k}: {v}" for k, v in versions.items()) + "\n",
+    )
+    return ReproduceResult(
+        report_path,
+        rj,
+        tuple(figures),
+        tuple(claims),
+        timings,
+        {"study": run_study, "family": run_family},
+    )
 
 
 def _clean(obj: Any) -> Any:

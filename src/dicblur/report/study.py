@@ -107,10 +107,12 @@ def numerical_pattern4(size: int, seed: int) -> StudyPattern:
     """Pattern #4: 4 px binary speckles smoothed by the 4x4 Gaussian mask."""
     img = paper_pattern4(size, speckle_size=4.0, seed=seed)
     return StudyPattern(
-        "p4", "#4 numerical", img, True,
+        "p4",
+        "#4 numerical",
+        img,
+        True,
         f"paper_pattern4(size={size}, speckle_size=4, sigma=0.5, seed={seed})",
     )
-
 
 
 def emulated_camera_pattern3(size: int, seed: int, *, supersample: int = 4) -> StudyPattern:
@@ -128,8 +130,9 @@ def emulated_camera_pattern3(size: int, seed: int, *, supersample: int = 4) -> S
 
     ss = supersample
     ss_seq = np.random.SeedSequence([seed, 3])
-    fine = speckle_pattern(size * ss, speckle_size=4.0 * ss, density=0.5,
-                           seed=np.random.default_rng(ss_seq))
+    fine = speckle_pattern(
+        size * ss, speckle_size=4.0 * ss, density=0.5, seed=np.random.default_rng(ss_seq)
+    )
     fine = gaussian_filter_periodic(fine, 0.5 * ss)  # the 4x4 mask of pattern #4
     fine = 25.0 + fine * (190.0 / 255.0)
     fine = gaussian_filter_periodic(fine, 0.6 * ss)  # optics PSF
@@ -137,7 +140,10 @@ def emulated_camera_pattern3(size: int, seed: int, *, supersample: int = 4) -> S
     camera = Camera(read_noise=1.0, full_well=20000.0, bit_depth=8)
     img = camera.capture(irradiance, rng=np.random.default_rng(ss_seq.spawn(1)[0]))
     return StudyPattern(
-        "p3", "#3 emulated camera", img, True,
+        "p3",
+        "#3 emulated camera",
+        img,
+        True,
         f"#4 recipe at {ss}x, levels 25..215, PSF sigma 0.6 px, pixel integration, "
         f"Camera(full_well=20000, read_noise=1, 8-bit), seed={seed}",
     )

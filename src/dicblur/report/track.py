@@ -40,8 +40,9 @@ def auto_points(ds: Any, n: int = 3) -> list[int]:
     valid = ds["valid"].values.astype(bool)
     with np.errstate(invalid="ignore"):
         cnt = valid.sum(axis=0)
-        mean = np.where(cnt > 0, np.nansum(np.where(valid, s, 0.0), axis=0)
-                        / np.maximum(cnt, 1), np.nan)
+        mean = np.where(
+            cnt > 0, np.nansum(np.where(valid, s, 0.0), axis=0) / np.maximum(cnt, 1), np.nan
+        )
     ok = np.flatnonzero(np.isfinite(mean) & (cnt >= max(2, 0.5 * valid.shape[0])))
     if ok.size == 0:
         return [0]
@@ -60,18 +61,21 @@ def fig_time_series(ds: Any, points: Sequence[int]) -> Any:
             valid = ds["valid"].values[:, p].astype(bool)
             y = np.where(valid, ds[name].values[:, p], np.nan)
             s = np.where(valid, ds[sname].values[:, p], np.nan)
-            ax.fill_between(t, y - 2 * s, y + 2 * s, color="#00798c", alpha=0.35,
-                            linewidth=0, label="+-2 sigma")
+            ax.fill_between(
+                t, y - 2 * s, y + 2 * s, color="#00798c", alpha=0.35, linewidth=0, label="+-2 sigma"
+            )
             ax.plot(t, y, color="#30638e", lw=0.9, label=name)
-            ax.set_title(f"point {p} (row {int(ds['row'].values[p])}, col "
-                         f"{int(ds['col'].values[p])}): {name}", fontsize=9)
+            ax.set_title(
+                f"point {p} (row {int(ds['row'].values[p])}, col "
+                f"{int(ds['col'].values[p])}): {name}",
+                fontsize=9,
+            )
             ax.set_xlabel("time (ms)", fontsize=8)
             ax.set_ylabel(f"{name} (px)", fontsize=8)
             ax.tick_params(labelsize=7)
             if i == 0 and j == 0:
                 ax.legend(fontsize=7, loc="best")
-    fig.subplots_adjust(hspace=0.8, wspace=0.25, left=0.07, right=0.98, top=0.93,
-                        bottom=0.08)
+    fig.subplots_adjust(hspace=0.8, wspace=0.25, left=0.07, right=0.98, top=0.93, bottom=0.08)
     return fig
 
 
@@ -99,12 +103,12 @@ def fig_sigma_map(ds: Any, image: NDArray[np.float64] | None, index: int) -> Any
     ok = ds["valid"].values[index].astype(bool)
     rows, cols = ds["row"].values, ds["col"].values
     sc = ax.scatter(cols[ok], rows[ok], c=s[ok], s=14, cmap="viridis", marker="s")
-    ax.scatter(cols[~ok], rows[~ok], s=10, marker="x", color="#d1495b", linewidths=0.8,
-               label="not valid")
+    ax.scatter(
+        cols[~ok], rows[~ok], s=10, marker="x", color="#d1495b", linewidths=0.8, label="not valid"
+    )
     cb = fig.colorbar(sc, ax=ax, fraction=0.046, pad=0.04)
     cb.set_label("sigma (px)")
-    ax.set_title(f"predicted sigma at frame {int(ds['frame'].values[index])} (worst)",
-                 fontsize=10)
+    ax.set_title(f"predicted sigma at frame {int(ds['frame'].values[index])} (worst)", fontsize=10)
     if (~ok).any():
         ax.legend(fontsize=7, loc="upper right")
     ax.set_xlabel("col (px)")
@@ -129,8 +133,7 @@ def fig_blur_share(ds: Any) -> Any:
     """Share of the valid points where the blur term exceeds the noise term, per frame."""
     fig = _figure(8, 3)
     ax = fig.add_subplot(1, 1, 1)
-    ax.plot(ds["time"].values * 1e3, 100 * ds["blur_dominated_share"].values,
-            color="#d1495b", lw=1)
+    ax.plot(ds["time"].values * 1e3, 100 * ds["blur_dominated_share"].values, color="#d1495b", lw=1)
     ax.set_ylim(-3, 103)
     ax.set_xlabel("time (ms)")
     ax.set_ylabel("blur-dominated points (%)")
@@ -159,9 +162,14 @@ def fig_status(ds: Any) -> Any:
     return fig
 
 
-def write_track_report(ds: Any, folder: Path, *, image: NDArray[np.float64] | None = None,
-                       points: Sequence[int] | None = None,
-                       title: str = "dicblur track") -> Path:
+def write_track_report(
+    ds: Any,
+    folder: Path,
+    *,
+    image: NDArray[np.float64] | None = None,
+    points: Sequence[int] | None = None,
+    title: str = "dicblur track",
+) -> Path:
     """Write ``folder/report.html`` (figures also as PNG/SVG in ``folder/figures``).
 
     Parameters
@@ -180,8 +188,11 @@ def write_track_report(ds: Any, folder: Path, *, image: NDArray[np.float64] | No
     s = np.hypot(ds["sigma_u"].values, ds["sigma_v"].values)
     rep.section("Summary")
     if not a.get("complete", 1):
-        rep.paragraph(f"**Incomplete:** {a.get('stop_reason', 'stopped')}; "
-                      f"{a.get('n_frames_tracked')} frames tracked.", css_class="note")
+        rep.paragraph(
+            f"**Incomplete:** {a.get('stop_reason', 'stopped')}; "
+            f"{a.get('n_frames_tracked')} frames tracked.",
+            css_class="note",
+        )
     if "advice_sentence" in a:
         rep.paragraph(str(a["advice_sentence"]), css_class="note")
     rows: list[dict[str, Any]] = [
@@ -192,10 +203,14 @@ def write_track_report(ds: Any, folder: Path, *, image: NDArray[np.float64] | No
         {"quantity": "frame rate (Hz)", "value": float(a.get("fps", np.nan))},
         {"quantity": "noise (GL)", "value": float(a.get("noise_sigma", np.nan))},
         {"quantity": "valid point-frames (%)", "value": 100 * float(valid.mean())},
-        {"quantity": "median sigma (px)",
-         "value": float(np.median(s[valid])) if valid.any() else float("nan")},
-        {"quantity": "largest W (px)",
-         "value": float(np.nanmax(ds["W"].values[valid])) if valid.any() else float("nan")},
+        {
+            "quantity": "median sigma (px)",
+            "value": float(np.median(s[valid])) if valid.any() else float("nan"),
+        },
+        {
+            "quantity": "largest W (px)",
+            "value": float(np.nanmax(ds["W"].values[valid])) if valid.any() else float("nan"),
+        },
         {"quantity": "outliers (median test)", "value": int(ds["n_outliers"].values.sum())},
     ]
     rep.table(rows, left=("quantity", "value"))
@@ -203,20 +218,30 @@ def write_track_report(ds: Any, folder: Path, *, image: NDArray[np.float64] | No
         rep.paragraph("Notes: " + str(a["notes"]))
     pts = list(points) if points else auto_points(ds)
     rep.section("Displacement with +-2 sigma")
-    rep.figure(fig_time_series(ds, pts), "time_series",
-               "u and v at the plotted points; the band is +-2 predicted sigma (noise and "
-               "blur terms)")
+    rep.figure(
+        fig_time_series(ds, pts),
+        "time_series",
+        "u and v at the plotted points; the band is +-2 predicted sigma (noise and blur terms)",
+    )
     rep.section("Sigma map")
     wf = worst_frame(ds)
-    rep.figure(fig_sigma_map(ds, image, wf), "sigma_map",
-               "predicted sigma of every valid point at the frame with the largest median "
-               "sigma; crosses: not valid (not converged, outlier or no prediction)")
+    rep.figure(
+        fig_sigma_map(ds, image, wf),
+        "sigma_map",
+        "predicted sigma of every valid point at the frame with the largest median "
+        "sigma; crosses: not valid (not converged, outlier or no prediction)",
+    )
     rep.section("Blur")
-    rep.figure(fig_w_histogram(ds), "w_histogram",
-               "blur length W (motion during the exposure, from the local fit of each "
-               "point's track)")
-    rep.figure(fig_blur_share(ds), "blur_share",
-               "share of the valid points whose blur term exceeds their noise term")
+    rep.figure(
+        fig_w_histogram(ds),
+        "w_histogram",
+        "blur length W (motion during the exposure, from the local fit of each point's track)",
+    )
+    rep.figure(
+        fig_blur_share(ds),
+        "blur_share",
+        "share of the valid points whose blur term exceeds their noise term",
+    )
     rep.section("Statuses")
     rep.figure(fig_status(ds), "statuses", "points per DIC status and outliers per frame")
     return rep.write()

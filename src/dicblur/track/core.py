@@ -48,8 +48,14 @@ from .uncertainty import (
     subset_levels,
 )
 
-__all__ = ["ZNCC_RATIO", "TrackInterrupted", "parse_frame_range", "parse_rate", "track",
-           "zncc_flags"]
+__all__ = [
+    "ZNCC_RATIO",
+    "TrackInterrupted",
+    "parse_frame_range",
+    "parse_rate",
+    "track",
+    "zncc_flags",
+]
 
 #: A frame falls back to the engine's FFT-CC start when more than this share of its
 #: correlatable points fails from the extrapolated guess.
@@ -89,15 +95,17 @@ def parse_rate(value: float | str, name: str = "fps") -> float:
         try:
             x = float(text) * mult
         except ValueError as exc:
-            raise InputError(f"{name}={value!r}: expected a frame rate such as 5000, "
-                             "'5000fps' or '5kHz'") from exc
+            raise InputError(
+                f"{name}={value!r}: expected a frame rate such as 5000, '5000fps' or '5kHz'"
+            ) from exc
     if not math.isfinite(x) or x <= 0:
         raise InputError(f"{name}={value!r}: the frame rate must be > 0 Hz, e.g. 5000")
     return x
 
 
-def parse_frame_range(text: str | Sequence[int], n_frames: int, name: str = "static"
-                      ) -> tuple[int, int]:
+def parse_frame_range(
+    text: str | Sequence[int], n_frames: int, name: str = "static"
+) -> tuple[int, int]:
     """``"0:20"`` (half-open, Python style; negative counts from the end) -> (0, 20)."""
     if isinstance(text, str):
         parts = text.split(":")
@@ -107,34 +115,44 @@ def parse_frame_range(text: str | Sequence[int], n_frames: int, name: str = "sta
             a = int(parts[0]) if parts[0] else 0
             b = int(parts[1]) if parts[1] else n_frames
         except ValueError as exc:
-            raise InputError(f"{name}={text!r}: expected START:STOP frame numbers, e.g. "
-                             "0:20") from exc
+            raise InputError(
+                f"{name}={text!r}: expected START:STOP frame numbers, e.g. 0:20"
+            ) from exc
     else:
         a, b = (int(x) for x in text)
     a = a + n_frames if a < 0 else a
     b = b + n_frames if b < 0 else b
     if not 0 <= a < b <= n_frames:
-        raise InputError(f"{name}={text!r}: must satisfy 0 <= START < STOP <= {n_frames} "
-                         "(the recording's frames)")
+        raise InputError(
+            f"{name}={text!r}: must satisfy 0 <= START < STOP <= {n_frames} "
+            "(the recording's frames)"
+        )
     return a, b
 
 
-def _resolve(value: Any, meta: float | None, kind: str, name: str, flag: str,
-             example: str) -> float:
+def _resolve(
+    value: Any, meta: float | None, kind: str, name: str, flag: str, example: str
+) -> float:
     given = None
     if value is not None:
-        given = (parse_rate(value, name) if kind == "rate"
-                 else parse_quantity(value, "time", name=name))
+        given = (
+            parse_rate(value, name) if kind == "rate" else parse_quantity(value, "time", name=name)
+        )
         if given <= 0:
             raise InputError(f"{name}={value!r}: must be > 0, e.g. {example}")
     if given is not None and meta is not None and abs(given - meta) > 0.01 * meta:
-        warnings.warn(f"{flag}={value}: the recording's metadata says {meta:g} "
-                      f"{'Hz' if kind == 'rate' else 's'}; using the value given",
-                      UserWarning, stacklevel=3)
+        warnings.warn(
+            f"{flag}={value}: the recording's metadata says {meta:g} "
+            f"{'Hz' if kind == 'rate' else 's'}; using the value given",
+            UserWarning,
+            stacklevel=3,
+        )
     out = given if given is not None else meta
     if out is None:
-        raise InputError(f"{flag}: the recording has no {name} in its metadata; give "
-                         f"{flag} (e.g. {flag} {example})")
+        raise InputError(
+            f"{flag}: the recording has no {name} in its metadata; give "
+            f"{flag} (e.g. {flag} {example})"
+        )
     return float(out)
 
 
@@ -142,8 +160,9 @@ def _grid_shape(rows: NDArray[np.int64], cols: NDArray[np.int64]) -> tuple[int, 
     ur, uc = np.unique(rows), np.unique(cols)
     if ur.size * uc.size != rows.size:
         return None
-    if not (np.array_equal(rows, np.repeat(ur, uc.size))
-            and np.array_equal(cols, np.tile(uc, ur.size))):
+    if not (
+        np.array_equal(rows, np.repeat(ur, uc.size)) and np.array_equal(cols, np.tile(uc, ur.size))
+    ):
         return None
     return int(ur.size), int(uc.size)
 
@@ -160,8 +179,9 @@ class _Tracked:
     fallback: list[bool]
 
 
-def _extrapolate(hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]]
-                 ) -> NDArray[np.float64] | None:
+def _extrapolate(
+    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+) -> NDArray[np.float64] | None:
     """Guess (n, 2) for the next frame from up to the last three fields."""
     if not hist:
         return None
@@ -188,9 +208,12 @@ class _FrameResult:
     status: NDArray[np.uint8]
 
 
-def _correlate_frame(corr: Correlator, img: NDArray[np.float64],
-                     guess: NDArray[np.float64] | None, ok0: NDArray[np.bool_]
-                     ) -> tuple[_FrameResult, bool]:
+def _correlate_frame(
+    corr: Correlator,
+    img: NDArray[np.float64],
+    guess: NDArray[np.float64] | None,
+    ok0: NDArray[np.bool_],
+) -> tuple[_FrameResult, bool]:
     """Correlate one frame from ``guess``; where too many points fail, run the engine's
     FFT-CC start too and keep, per point, the better of the two (converged, higher ZNCC)."""
     if guess is None:
@@ -203,10 +226,14 @@ def _correlate_frame(corr: Correlator, img: NDArray[np.float64],
         return _FrameResult(res.u, res.v, res.zncc, res.status), False
     alt = corr.correlate(img)
     take = (alt.status == PointStatus.CONVERGED) & (
-        (res.status != PointStatus.CONVERGED) | (alt.zncc > res.zncc + 1e-9))
-    return _FrameResult(np.where(take, alt.u, res.u), np.where(take, alt.v, res.v),
-                        np.where(take, alt.zncc, res.zncc),
-                        np.where(take, alt.status, res.status).astype(np.uint8)), True
+        (res.status != PointStatus.CONVERGED) | (alt.zncc > res.zncc + 1e-9)
+    )
+    return _FrameResult(
+        np.where(take, alt.u, res.u),
+        np.where(take, alt.v, res.v),
+        np.where(take, alt.zncc, res.zncc),
+        np.where(take, alt.status, res.status).astype(np.uint8),
+    ), True
 
 
 #: A converged point whose ``1 - ZNCC`` exceeds this multiple of its usual value (its
@@ -214,8 +241,9 @@ def _correlate_frame(corr: Correlator, img: NDArray[np.float64],
 ZNCC_RATIO = 4.0
 
 
-def zncc_flags(zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *,
-               ratio: float = ZNCC_RATIO) -> NDArray[np.bool_]:
+def zncc_flags(
+    zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *, ratio: float = ZNCC_RATIO
+) -> NDArray[np.bool_]:
     """Converged points whose match is much worse than usual (frames, points).
 
     ``q = 1 - ZNCC`` grows with the noise and the blur of a frame and with how little
@@ -233,16 +261,25 @@ def zncc_flags(zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *,
     return np.asarray(converged & np.isfinite(score) & (score > ratio))
 
 
-def _median_flags(u: NDArray[np.float64], v: NDArray[np.float64], ok: NDArray[np.bool_],
-                  gshape: tuple[int, int] | None, eps: NDArray[np.float64],
-                  threshold: float) -> NDArray[np.bool_]:
+def _median_flags(
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    ok: NDArray[np.bool_],
+    gshape: tuple[int, int] | None,
+    eps: NDArray[np.float64],
+    threshold: float,
+) -> NDArray[np.bool_]:
     out = np.zeros(u.shape, bool)
     if gshape is None:
         return out
     for i in range(u.shape[0]):
-        out[i] = normalized_median_test(np.where(ok[i], u[i], np.nan),
-                                        np.where(ok[i], v[i], np.nan), gshape,
-                                        eps=float(eps[i]), threshold=threshold)
+        out[i] = normalized_median_test(
+            np.where(ok[i], u[i], np.nan),
+            np.where(ok[i], v[i], np.nan),
+            gshape,
+            eps=float(eps[i]),
+            threshold=threshold,
+        )
     return out
 
 
@@ -338,28 +375,35 @@ def track(
     rec = recording if isinstance(recording, Recording) else open_recording(recording)
     n_total = len(rec)
     if n_total < 2:
-        raise InputError(f"recording={rec.source!r}: {n_total} frame(s); tracking needs at "
-                         "least 2")
+        raise InputError(f"recording={rec.source!r}: {n_total} frame(s); tracking needs at least 2")
     fps_v = _resolve(fps, rec.fps, "rate", "fps", "--fps", "5000")
     t_exp = _resolve(exposure, rec.exposure, "time", "exposure", "--exposure", "1ms")
     if t_exp > 1.0 / fps_v * (1 + 1e-6):
-        raise InputError(f"exposure={t_exp:g} s: longer than the frame interval 1/fps = "
-                         f"{1.0 / fps_v:g} s; check --exposure and --fps")
+        raise InputError(
+            f"exposure={t_exp:g} s: longer than the frame interval 1/fps = "
+            f"{1.0 / fps_v:g} s; check --exposure and --fps"
+        )
     f0, f1 = (0, n_total) if frames is None else parse_frame_range(frames, n_total, "frames")
     if not f0 <= reference < f1:
-        raise InputError(f"reference={reference}: must be one of the tracked frames "
-                         f"{f0}..{f1 - 1}")
+        raise InputError(f"reference={reference}: must be one of the tracked frames {f0}..{f1 - 1}")
     st_range = None
     if static is not None:
         st_range = parse_frame_range(static, n_total, "static")
     elif noise is None:
-        raise InputError("noise: give the static frames (--static 0:20) or the noise std "
-                         "(--noise 2, grey levels)")
+        raise InputError(
+            "noise: give the static frames (--static 0:20) or the noise std "
+            "(--noise 2, grey levels)"
+        )
     if noise is not None and (not math.isfinite(float(noise)) or float(noise) <= 0):
         raise InputError(f"noise={noise!r}: must be a noise std > 0 (GL)")
     ref_img = rec.frame(reference)
-    opts: dict[str, Any] = {"subset": subset, "step": step, "shape": shape,
-                            "min_zncc": min_zncc, "workers": workers}
+    opts: dict[str, Any] = {
+        "subset": subset,
+        "step": step,
+        "shape": shape,
+        "min_zncc": min_zncc,
+        "workers": workers,
+    }
     corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
     corr = corr0
     n_pts = corr0.n_points
@@ -390,31 +434,35 @@ def track(
                 # more than 1 px from the extrapolated field's median, move the guesses
                 # by the difference (the extrapolation of a sine at 10 frames per cycle
                 # misses by ~2.5 px at the turning points)
-                gu, gv, peak = global_shift(ref_img_now, img, workers=1,
-                                            reference_spectrum=spectrum[ref_now])
-                dmed = (np.array([gu, gv], float) + np.median(base, axis=0)
-                        - np.median(guess, axis=0))
+                gu, gv, peak = global_shift(
+                    ref_img_now, img, workers=1, reference_spectrum=spectrum[ref_now]
+                )
+                dmed = (
+                    np.array([gu, gv], float) + np.median(base, axis=0) - np.median(guess, axis=0)
+                )
                 if peak > 0.05 and np.hypot(*dmed) > 1.0:
                     guess = guess + np.rint(dmed)
-            res, fb = _correlate_frame(corr, img, None if guess is None else guess - base,
-                                       ok0)
-            share = float(np.mean(res.status[ok0] == PointStatus.CONVERGED)) if ok0.any() \
-                else 0.0
+            res, fb = _correlate_frame(corr, img, None if guess is None else guess - base, ok0)
+            share = float(np.mean(res.status[ok0] == PointStatus.CONVERGED)) if ok0.any() else 0.0
             if k == reference:
-                ok0 = ~np.isin(res.status, (PointStatus.LOW_TEXTURE,
-                                            PointStatus.OUT_OF_BOUNDS))
-                ref_share = max(float(np.mean(res.status[ok0] == PointStatus.CONVERGED)),
-                                1e-9) if ok0.any() else 1.0
-            elif (update_reference and prev is not None and hist
-                  and share < update_share * ref_share):
+                ok0 = ~np.isin(res.status, (PointStatus.LOW_TEXTURE, PointStatus.OUT_OF_BOUNDS))
+                ref_share = (
+                    max(float(np.mean(res.status[ok0] == PointStatus.CONVERGED)), 1e-9)
+                    if ok0.any()
+                    else 1.0
+                )
+            elif (
+                update_reference and prev is not None and hist and share < update_share * ref_share
+            ):
                 # renew the reference on the last frame tracked, POIs at their positions
                 # there (Lagrangian: the increments add to that frame's displacement)
                 last = np.stack(hist[-1], axis=1)
                 bad = ~np.isfinite(last).all(axis=1)
                 if not bad.all():
                     last[bad] = np.median(last[~bad], axis=0)
-                    pts = np.stack([np.rint(corr0.rows + last[:, 1]),
-                                    np.rint(corr0.cols + last[:, 0])], axis=1).astype(int)
+                    pts = np.stack(
+                        [np.rint(corr0.rows + last[:, 1]), np.rint(corr0.cols + last[:, 0])], axis=1
+                    ).astype(int)
                     new = Correlator(prev[1], points=pts, **opts)
                     g2 = None if guess is None else guess - last
                     res2, fb2 = _correlate_frame(new, img, g2, ok0)
@@ -447,17 +495,33 @@ def track(
     if not out.frames:
         if error is not None:
             raise error
-    settings = {"subset": corr0.subset, "step": corr0.step, "shape": corr0.shape,
-                "reference": reference, "min_zncc": min_zncc, "half_window": half_window,
-                "median_eps": median_eps, "median_threshold": median_threshold,
-                "exposure": t_exp, "fps": fps_v, "source": rec.source, "kind": rec.kind,
-                "bit_depth": rec.bit_depth, "n_frames_recording": n_total,
-                "tracking_time_s": elapsed}
+    settings = {
+        "subset": corr0.subset,
+        "step": corr0.step,
+        "shape": corr0.shape,
+        "reference": reference,
+        "min_zncc": min_zncc,
+        "half_window": half_window,
+        "median_eps": median_eps,
+        "median_threshold": median_threshold,
+        "exposure": t_exp,
+        "fps": fps_v,
+        "source": rec.source,
+        "kind": rec.kind,
+        "bit_depth": rec.bit_depth,
+        "n_frames_recording": n_total,
+        "tracking_time_s": elapsed,
+    }
     noise_est: NoiseEstimate | None = None
     notes: list[str] = []
     if noise is not None:
-        noise_est = NoiseEstimate(sigma=float(noise), read_variance=float(noise) ** 2,
-                                  slope=0.0, level_dependent=False, source="given")
+        noise_est = NoiseEstimate(
+            sigma=float(noise),
+            read_variance=float(noise) ** 2,
+            slope=0.0,
+            level_dependent=False,
+            source="given",
+        )
     if st_range is not None:
         try:
             est = estimate_static_noise(rec, *st_range)
@@ -469,30 +533,60 @@ def track(
                 notes.append(f"no noise estimate: {exc}")
     settings["update_reference"] = int(update_reference)
     settings["n_reference_updates"] = len(set(refs)) - 1
-    ds = _assemble(rec, corr0, out, refs, noise_est, st_range, fps_v, t_exp, settings, notes,
-                   half_window=half_window, eps=median_eps, threshold=median_threshold,
-                   advice=advice and error is None, ref_img=ref_img)
+    ds = _assemble(
+        rec,
+        corr0,
+        out,
+        refs,
+        noise_est,
+        st_range,
+        fps_v,
+        t_exp,
+        settings,
+        notes,
+        half_window=half_window,
+        eps=median_eps,
+        threshold=median_threshold,
+        advice=advice and error is None,
+        ref_img=ref_img,
+    )
     if error is not None:
-        what = ("interrupted" if isinstance(error, KeyboardInterrupt)
-                else f"stopped: {error}")
+        what = "interrupted" if isinstance(error, KeyboardInterrupt) else f"stopped: {error}"
         ds.attrs["complete"] = 0
         ds.attrs["stop_reason"] = what
-        raise TrackInterrupted(f"tracking {what} after {len(out.frames)} of {len(order)} "
-                               "frames; the frames tracked so far are kept", ds) from error
+        raise TrackInterrupted(
+            f"tracking {what} after {len(out.frames)} of {len(order)} "
+            "frames; the frames tracked so far are kept",
+            ds,
+        ) from error
     return ds
 
 
-def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
-              noise: NoiseEstimate | None,
-              st_range: tuple[int, int] | None, fps: float, t_exp: float,
-              settings: dict[str, Any], notes: list[str], *, half_window: int, eps: float,
-              threshold: float, advice: bool, ref_img: NDArray[np.float64]) -> Any:
+def _assemble(
+    rec: Recording,
+    corr: Correlator,
+    out: _Tracked,
+    refs: list[int],
+    noise: NoiseEstimate | None,
+    st_range: tuple[int, int] | None,
+    fps: float,
+    t_exp: float,
+    settings: dict[str, Any],
+    notes: list[str],
+    *,
+    half_window: int,
+    eps: float,
+    threshold: float,
+    advice: bool,
+    ref_img: NDArray[np.float64],
+) -> Any:
     import xarray as xr
 
     from .._version import __version__
 
     idx = np.argsort(out.frames)
     frames = np.asarray(out.frames, dtype=np.int64)[idx]
+
     # frames tracked may have a gap only at the start (backwards part not reached): the
     # kinematics needs consecutive frames, so keep the contiguous run around the reference
     def stacked(lst: list[Any], dtype: Any) -> Any:
@@ -522,8 +616,13 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
 
     def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         if n_f >= 2 and contiguous:
-            mu_, mv_ = exposure_motion(np.where(good, u, np.nan), np.where(good, v, np.nan),
-                                       fps=fps, exposure=t_exp, half_window=half_window)
+            mu_, mv_ = exposure_motion(
+                np.where(good, u, np.nan),
+                np.where(good, v, np.nan),
+                fps=fps,
+                exposure=t_exp,
+                half_window=half_window,
+            )
             return mu_.astype(np.float32), mv_.astype(np.float32)
         nan = np.full((n_f, n_p), np.nan, np.float32)
         return nan, nan.copy()
@@ -545,26 +644,38 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
             spread = float(max(np.nanmax(mu) - np.nanmin(mu), np.nanmax(mv) - np.nanmin(mv)))
             settings["static_motion_px"] = spread
             if spread > STATIC_MOTION_PX:
-                msg = (f"static={st_range[0]}:{st_range[1]}: the scene moves by {spread:.3g} "
-                       "px over these frames, so the noise estimate from their differences "
-                       "is too high; give frames where nothing moves, or --noise")
+                msg = (
+                    f"static={st_range[0]}:{st_range[1]}: the scene moves by {spread:.3g} "
+                    "px over these frames, so the noise estimate from their differences "
+                    "is too high; give frames where nothing moves, or --noise"
+                )
                 warnings.warn(msg, UserWarning, stacklevel=4)
                 notes.append(msg)
     centres = np.stack([corr.rows, corr.cols], axis=1).astype(np.intp)
-    inside = ((corr.rows - corr.half >= 0) & (corr.cols - corr.half >= 0)
-              & (corr.rows + corr.half < ref_img.shape[0])
-              & (corr.cols + corr.half < ref_img.shape[1]))
+    inside = (
+        (corr.rows - corr.half >= 0)
+        & (corr.cols - corr.half >= 0)
+        & (corr.rows + corr.half < ref_img.shape[0])
+        & (corr.cols + corr.half < ref_img.shape[1])
+    )
     # derived per-point fields in float32 (7 significant digits; halves the memory of a
     # long recording), displacements stay float64
-    sig = {k: np.full((n_f, n_p), np.nan, np.float32) for k in
-           ("sigma_u_noise", "sigma_v_noise", "sigma_u_blur", "sigma_v_blur")}
+    sig = {
+        k: np.full((n_f, n_p), np.nan, np.float32)
+        for k in ("sigma_u_noise", "sigma_v_noise", "sigma_u_blur", "sigma_v_blur")
+    }
     blur_dom = np.full(n_f, np.nan)
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
-        table = build_blur_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
-                                 blur=np.where(good[:, pin], w[:, pin], np.nan),
-                                 angle=ang[:, pin])
+        table = build_blur_table(
+            ref_img,
+            centres[pin],
+            subset=corr.subset,
+            shape=corr.shape,
+            blur=np.where(good[:, pin], w[:, pin], np.nan),
+            angle=ang[:, pin],
+        )
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
@@ -579,8 +690,10 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
 
         predict()
         if gshape is not None:
-            s_max = np.fmax(np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"]),
-                            np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"]))
+            s_max = np.fmax(
+                np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"]),
+                np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"]),
+            )
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 eps_k = 2.0 * np.nanmedian(np.where(good, s_max, np.nan), axis=1)
@@ -595,17 +708,24 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
                 predict()
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
-            f"{a:g}" for a in table.angles[table.available])
+            f"{a:g}" for a in table.angles[table.available]
+        )
     # the bias of an accelerating blur: the kernel's third moment from the fitted track
     # times each subset's skew coefficient (a shift common to nearly all points)
     bias = np.full((n_f, n_p, 2), np.nan, np.float32)
     if noise is not None and inside.any() and n_f >= 2 and contiguous:
         pin = np.flatnonzero(inside)
-        k3, axis = exposure_skew(np.where(good, u, np.nan), np.where(good, v, np.nan),
-                                 fps=fps, exposure=t_exp, half_window=half_window)
+        k3, axis = exposure_skew(
+            np.where(good, u, np.nan),
+            np.where(good, v, np.nan),
+            fps=fps,
+            exposure=t_exp,
+            half_window=half_window,
+        )
         k3, axis = k3[:, pin], axis[:, pin]
-        skew = build_skew_table(ref_img, centres[pin], subset=corr.subset, shape=corr.shape,
-                                axis=axis, kappa3=k3)
+        skew = build_skew_table(
+            ref_img, centres[pin], subset=corr.subset, shape=corr.shape, axis=axis, kappa3=k3
+        )
         for a in range(0, n_f, 128):
             b = slice(a, a + 128)
             bias[b, pin] = skew.bias(k3[b], axis[b])
@@ -626,26 +746,40 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     outlier |= low_zncc
     valid = good & np.isfinite(sigma_u) & np.isfinite(sigma_v) & np.isfinite(w)
     with np.errstate(invalid="ignore"):
-        dom = (np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"])
-               > np.hypot(sig["sigma_u_noise"], sig["sigma_v_noise"]))
+        dom = np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"]) > np.hypot(
+            sig["sigma_u_noise"], sig["sigma_v_noise"]
+        )
         cnt = valid.sum(axis=1)
         blur_dom = np.where(cnt > 0, (dom & valid).sum(axis=1) / np.maximum(cnt, 1), np.nan)
-    attrs: dict[str, Any] = {**{k: v for k, v in settings.items() if v is not None},
-                             "dicblur_version": __version__, "complete": 1,
-                             "n_frames_tracked": int(n_f),
-                             "status_legend": ", ".join(f"{s.value}={s.name}"
-                                                        for s in PointStatus)}
+    attrs: dict[str, Any] = {
+        **{k: v for k, v in settings.items() if v is not None},
+        "dicblur_version": __version__,
+        "complete": 1,
+        "n_frames_tracked": int(n_f),
+        "status_legend": ", ".join(f"{s.value}={s.name}" for s in PointStatus),
+    }
     if noise is not None:
-        attrs.update({f"noise_{k}": (int(v) if isinstance(v, bool) else v)
-                      for k, v in noise.to_dict().items()})
+        attrs.update(
+            {
+                f"noise_{k}": (int(v) if isinstance(v, bool) else v)
+                for k, v in noise.to_dict().items()
+            }
+        )
     if advice and noise is not None and valid.any():
         try:
-            adv = advise_exposure(ref_img, centres[inside], (w / t_exp)[valid], ang[valid],
-                                  exposure=t_exp, fps=fps, noise=noise,
-                                  level=float(np.median(subset_levels(ref_img, centres[inside],
-                                                                      corr.subset))),
-                                  subset=corr.subset, shape=corr.shape,
-                                  bit_depth=rec.bit_depth)
+            adv = advise_exposure(
+                ref_img,
+                centres[inside],
+                (w / t_exp)[valid],
+                ang[valid],
+                exposure=t_exp,
+                fps=fps,
+                noise=noise,
+                level=float(np.median(subset_levels(ref_img, centres[inside], corr.subset))),
+                subset=corr.subset,
+                shape=corr.shape,
+                bit_depth=rec.bit_depth,
+            )
             attrs.update({f"advice_{k}": v for k, v in adv.to_dict().items()})
         except DicblurError as exc:
             notes.append(f"no exposure advice: {exc}")
@@ -656,34 +790,66 @@ def _assemble(rec: Recording, corr: Correlator, out: _Tracked, refs: list[int],
     data = {
         "u": (fr, u, {"units": "px", "long_name": "displacement along x"}),
         "v": (fr, v, {"units": "px", "long_name": "displacement along y"}),
-        "blur_u": (fr, np.asarray(wu, np.float32),
-                   {"units": "px", "long_name": "motion along x during the exposure"}),
-        "blur_v": (fr, np.asarray(wv, np.float32),
-                   {"units": "px", "long_name": "motion along y during the exposure"}),
+        "blur_u": (
+            fr,
+            np.asarray(wu, np.float32),
+            {"units": "px", "long_name": "motion along x during the exposure"},
+        ),
+        "blur_v": (
+            fr,
+            np.asarray(wv, np.float32),
+            {"units": "px", "long_name": "motion along y during the exposure"},
+        ),
         "W": (fr, np.asarray(w, np.float32), {"units": "px", "long_name": "blur length"}),
-        "blur_direction": (fr, np.asarray(ang, np.float32), {"units": "deg",
-                                     "long_name": "blur direction from +x towards +y"}),
-        "sigma_u": (fr, sigma_u, pu), "sigma_v": (fr, sigma_v, pu),
+        "blur_direction": (
+            fr,
+            np.asarray(ang, np.float32),
+            {"units": "deg", "long_name": "blur direction from +x towards +y"},
+        ),
+        "sigma_u": (fr, sigma_u, pu),
+        "sigma_v": (fr, sigma_v, pu),
         **{k: (fr, a, pu) for k, a in sig.items()},
-        "bias_u": (fr, bias[..., 0], {"units": "px", "long_name": "predicted bias of an "
-                                      "accelerating blur (kernel skew), along x"}),
-        "bias_v": (fr, bias[..., 1], {"units": "px", "long_name": "predicted bias of an "
-                                      "accelerating blur (kernel skew), along y"}),
+        "bias_u": (
+            fr,
+            bias[..., 0],
+            {
+                "units": "px",
+                "long_name": "predicted bias of an accelerating blur (kernel skew), along x",
+            },
+        ),
+        "bias_v": (
+            fr,
+            bias[..., 1],
+            {
+                "units": "px",
+                "long_name": "predicted bias of an accelerating blur (kernel skew), along y",
+            },
+        ),
         "status": (fr, st, {"legend": attrs["status_legend"]}),
         "zncc": (fr, zn),
-        "outlier": (fr, outlier.astype(np.uint8),
-                    {"long_name": "gross error: normalised median test (Westerweel & "
-                     "Scarano 2005) or ZNCC far below the point's usual"}),
+        "outlier": (
+            fr,
+            outlier.astype(np.uint8),
+            {
+                "long_name": "gross error: normalised median test (Westerweel & "
+                "Scarano 2005) or ZNCC far below the point's usual"
+            },
+        ),
         "valid": (fr, valid.astype(np.uint8)),
         "n_converged": ("frame", conv.sum(axis=1).astype(np.int32)),
         "n_outliers": ("frame", outlier.sum(axis=1).astype(np.int32)),
         "blur_dominated_share": ("frame", blur_dom),
         "reference_frame": ("frame", ref_of.astype(np.int32)),
-        "fallback": ("frame", fb.astype(np.uint8),
-                     {"long_name": "frame needed the FFT-CC start"}),
+        "fallback": ("frame", fb.astype(np.uint8), {"long_name": "frame needed the FFT-CC start"}),
     }
-    return xr.Dataset(data, coords={
-        "frame": ("frame", frames), "point": ("point", np.arange(n_p)),
-        "row": ("point", corr.rows.astype(np.int32)),
-        "col": ("point", corr.cols.astype(np.int32)),
-        "time": ("frame", frames / fps + 0.5 * t_exp, {"units": "s"})}, attrs=attrs)
+    return xr.Dataset(
+        data,
+        coords={
+            "frame": ("frame", frames),
+            "point": ("point", np.arange(n_p)),
+            "row": ("point", corr.rows.astype(np.int32)),
+            "col": ("point", corr.cols.astype(np.int32)),
+            "time": ("frame", frames / fps + 0.5 * t_exp, {"units": "s"}),
+        },
+        attrs=attrs,
+    )

@@ -29,8 +29,7 @@ from ..errors import InputError
 __all__ = ["blur_weights", "exposure_motion"]
 
 
-def _window_average_row(tau: NDArray[np.float64], a: float, degree: int
-                        ) -> NDArray[np.float64]:
+def _window_average_row(tau: NDArray[np.float64], a: float, degree: int) -> NDArray[np.float64]:
     """Mean of ``t**p`` over ``[tau - a, tau + a]`` for p = 0..degree, shape (len, deg+1)."""
     p = np.arange(degree + 1)
     if a == 0:
@@ -40,8 +39,9 @@ def _window_average_row(tau: NDArray[np.float64], a: float, degree: int
     return np.asarray((hi - lo) / ((p + 1) * 2 * a))
 
 
-def _rise_weights(n_frames: int, duty: float, half_window: int
-                  ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+def _rise_weights(
+    n_frames: int, duty: float, half_window: int
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     """Per frame: stencil start and the weights (width,) of the rise over its window."""
     if n_frames < 2:
         raise InputError(f"n_frames={n_frames}: the motion needs at least 2 frames")
@@ -51,7 +51,7 @@ def _rise_weights(n_frames: int, duty: float, half_window: int
     degree = width - 1
     a = 0.5 * duty
     # rise over the window of the polynomial sum c_p t**p: sum c_p (a**p - (-a)**p)
-    rise = np.array([a ** p - (-a) ** p for p in range(degree + 1)])
+    rise = np.array([a**p - (-a) ** p for p in range(degree + 1)])
     starts = np.empty(n_frames, np.intp)
     wts = np.empty((n_frames, width))
     for k in range(n_frames):
@@ -85,13 +85,19 @@ def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray
     starts, wts = _rise_weights(n_frames, duty, half_window)
     m = np.zeros((n_frames, n_frames))
     for k in range(n_frames):
-        m[k, starts[k]:starts[k] + wts.shape[1]] = wts[k]
+        m[k, starts[k] : starts[k] + wts.shape[1]] = wts[k]
     return m
 
 
-def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
-                    half_window: int = 2, block: int = 128
-                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def exposure_motion(
+    u: ArrayLike,
+    v: ArrayLike,
+    *,
+    fps: float,
+    exposure: float,
+    half_window: int = 2,
+    block: int = 128,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Blur vector ``(W_u, W_v)`` of every point in every frame from its track.
 
     Parameters
@@ -117,8 +123,10 @@ def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
     uu = np.asarray(u, dtype=np.float64)
     vv = np.asarray(v, dtype=np.float64)
     if uu.ndim != 2 or uu.shape != vv.shape:
-        raise InputError(f"u, v: expected two (frames, points) arrays of one shape, got "
-                         f"{uu.shape} and {vv.shape}")
+        raise InputError(
+            f"u, v: expected two (frames, points) arrays of one shape, got "
+            f"{uu.shape} and {vv.shape}"
+        )
     starts, wts = _rise_weights(uu.shape[0], exposure * fps, half_window)
     idx = starts[:, None] + np.arange(wts.shape[1])[None, :]  # (frames, width)
     out = (np.empty(uu.shape), np.empty(vv.shape))
@@ -129,16 +137,16 @@ def exposure_motion(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
         # interpolation in time under-estimates fast motion by several px)
         complete = (np.isfinite(su) & np.isfinite(sv)).all(axis=1)
         for o, st in zip(out, (su, sv), strict=True):
-            o[:, b] = np.where(complete, np.einsum("fw,fwn->fn", wts, np.nan_to_num(st)),
-                               np.nan)
+            o[:, b] = np.where(complete, np.einsum("fw,fwn->fn", wts, np.nan_to_num(st)), np.nan)
     return out
 
 
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(12)
 
 
-def _node_weights(n_frames: int, duty: float, half_window: int
-                  ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+def _node_weights(
+    n_frames: int, duty: float, half_window: int
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     """Per frame: stencil start and the weights (G, width) giving the fitted position at
     the G Gauss nodes of the exposure window from the stencil's samples."""
     width = min(2 * half_window + 1, n_frames)
@@ -156,9 +164,15 @@ def _node_weights(n_frames: int, duty: float, half_window: int
     return starts, wts
 
 
-def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
-                  half_window: int = 2, block: int = 64
-                  ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+def exposure_skew(
+    u: ArrayLike,
+    v: ArrayLike,
+    *,
+    fps: float,
+    exposure: float,
+    half_window: int = 2,
+    block: int = 64,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Third central moment of the blur kernel of every point in every frame.
 
     The fitted track of :func:`exposure_motion` gives the position at 12 Gauss nodes of
@@ -196,6 +210,6 @@ def exposure_skew(u: ArrayLike, v: ArrayLike, *, fps: float, exposure: float,
         cxy = np.einsum("g,bgn->bn", gw, xs * ys)
         th = 0.5 * np.arctan2(2 * cxy, cxx - cyy)
         s = xs * np.cos(th)[:, None] + ys * np.sin(th)[:, None]
-        k3[b] = np.einsum("g,bgn->bn", gw, s ** 3)
+        k3[b] = np.einsum("g,bgn->bn", gw, s**3)
         axis[b] = np.mod(np.degrees(th), 180.0)
     return k3, axis

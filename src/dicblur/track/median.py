@@ -24,13 +24,18 @@ def _neighbours(a: NDArray[np.float64]) -> NDArray[np.float64]:
     """The 8 neighbours of every grid node, shape (8, rows, cols); NaN outside the grid."""
     p = np.pad(a, 1, constant_values=np.nan)
     rows, cols = a.shape
-    out = [p[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
-           for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
+    out = [
+        p[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + cols]
+        for dr in (-1, 0, 1)
+        for dc in (-1, 0, 1)
+        if (dr, dc) != (0, 0)
+    ]
     return np.stack(out)
 
 
-def normalized_residual(values: ArrayLike, grid_shape: tuple[int, int], *,
-                        eps: float = 0.1, min_neighbours: int = 3) -> NDArray[np.float64]:
+def normalized_residual(
+    values: ArrayLike, grid_shape: tuple[int, int], *, eps: float = 0.1, min_neighbours: int = 3
+) -> NDArray[np.float64]:
     """Normalised residual ``r_0`` of one displacement component on a grid.
 
     Parameters
@@ -59,8 +64,14 @@ def normalized_residual(values: ArrayLike, grid_shape: tuple[int, int], *,
     return r0.ravel()
 
 
-def normalized_median_test(u: ArrayLike, v: ArrayLike, grid_shape: tuple[int, int], *,
-                           eps: float = 0.1, threshold: float = 2.0) -> NDArray[np.bool_]:
+def normalized_median_test(
+    u: ArrayLike,
+    v: ArrayLike,
+    grid_shape: tuple[int, int],
+    *,
+    eps: float = 0.1,
+    threshold: float = 2.0,
+) -> NDArray[np.bool_]:
     """Flag spurious vectors with the normalised median test (Westerweel & Scarano 2005).
 
     Parameters
@@ -85,8 +96,10 @@ def normalized_median_test(u: ArrayLike, v: ArrayLike, grid_shape: tuple[int, in
     uu = np.asarray(u, dtype=np.float64).ravel()
     vv = np.asarray(v, dtype=np.float64).ravel()
     if uu.shape != (rows * cols,) or vv.shape != uu.shape:
-        raise InputError(f"grid_shape={grid_shape!r}: u and v must hold rows * cols = "
-                         f"{rows * cols} values (got {uu.size} and {vv.size})")
+        raise InputError(
+            f"grid_shape={grid_shape!r}: u and v must hold rows * cols = "
+            f"{rows * cols} values (got {uu.size} and {vv.size})"
+        )
     if not (eps > 0 and threshold > 0):
         raise InputError(f"eps={eps!r}, threshold={threshold!r}: both must be > 0")
     ru = normalized_residual(uu, (rows, cols), eps=eps)

@@ -15,9 +15,29 @@ from ..errors import StoreError
 
 __all__ = ["CSV_COLUMNS", "save_track", "write_track_csv"]
 
-CSV_COLUMNS = ("frame", "time", "point", "row", "col", "u", "v", "W", "blur_u", "blur_v",
-               "blur_direction", "sigma_u", "sigma_v", "sigma_u_noise", "sigma_u_blur",
-               "sigma_v_noise", "sigma_v_blur", "status", "zncc", "outlier", "valid")
+CSV_COLUMNS = (
+    "frame",
+    "time",
+    "point",
+    "row",
+    "col",
+    "u",
+    "v",
+    "W",
+    "blur_u",
+    "blur_v",
+    "blur_direction",
+    "sigma_u",
+    "sigma_v",
+    "sigma_u_noise",
+    "sigma_u_blur",
+    "sigma_v_noise",
+    "sigma_v_blur",
+    "status",
+    "zncc",
+    "outlier",
+    "valid",
+)
 
 
 def save_track(ds: Any, path: str | os.PathLike[str]) -> Path:
@@ -71,8 +91,12 @@ def write_track_csv(ds: Any, path: str | os.PathLike[str]) -> Path:
             w.writerow(CSV_COLUMNS)
             ints = {"frame", "point", "row", "col", "status", "outlier", "valid"}
             for i in range(n_f * n_p):
-                w.writerow([int(cols[c][i]) if c in ints else f"{float(cols[c][i]):.6g}"
-                            for c in CSV_COLUMNS])
+                w.writerow(
+                    [
+                        int(cols[c][i]) if c in ints else f"{float(cols[c][i]):.6g}"
+                        for c in CSV_COLUMNS
+                    ]
+                )
         os.replace(tmp, p)
     except OSError as exc:
         tmp.unlink(missing_ok=True)

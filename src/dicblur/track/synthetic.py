@@ -57,8 +57,9 @@ class VibratingTarget:
     frequency: float = 200.0
     angle: float = 0.0
     static: int = 10
-    camera: Camera = field(default_factory=lambda: Camera(read_noise=2.0, full_well=20000.0,
-                                                          bit_depth=8))
+    camera: Camera = field(
+        default_factory=lambda: Camera(read_noise=2.0, full_well=20000.0, bit_depth=8)
+    )
     seed: int = 0
 
     @property
@@ -78,8 +79,9 @@ class VibratingTarget:
         t0 = np.asarray(frames, dtype=np.float64) / self.fps
         nodes, weights = np.polynomial.legendre.leggauss(32)
         tau = 0.5 * (nodes + 1.0)
-        mean = (self.position(t0[:, None] + self.exposure * tau[None, :])
-                * (0.5 * weights)[None, :]).sum(axis=1)
+        mean = (
+            self.position(t0[:, None] + self.exposure * tau[None, :]) * (0.5 * weights)[None, :]
+        ).sum(axis=1)
         rise = self.position(t0 + self.exposure) - self.position(t0)
         dy, dx = self._dir
         return mean * dx, mean * dy, rise * dx, rise * dy
@@ -100,8 +102,14 @@ class VibratingTarget:
         """A lazy :class:`~dicblur.sequence.Recording` rendering frames on demand (with the
         exposure and frame rate as metadata)."""
         shape = (int(self.pattern.shape[0]), int(self.pattern.shape[1]))
-        return Recording(source="synthetic vibrating target", kind="synthetic",
-                         n_frames=int(n_frames), shape=shape,
-                         bit_depth=int(self.camera.bit_depth or 16), fps=self.fps,
-                         exposure=self.exposure,
-                         names=[f"frame {i}" for i in range(n_frames)], _read=self.render)
+        return Recording(
+            source="synthetic vibrating target",
+            kind="synthetic",
+            n_frames=int(n_frames),
+            shape=shape,
+            bit_depth=int(self.camera.bit_depth or 16),
+            fps=self.fps,
+            exposure=self.exposure,
+            names=[f"frame {i}" for i in range(n_frames)],
+            _read=self.render,
+        )

@@ -31,8 +31,15 @@ from .._blur_sensitivity import subset_blur_response
 from ..errors import InputError
 from ..metrics import estimate_noise
 
-__all__ = ["ANGLE_STEP", "BLUR_STEP", "BlurTable", "NoiseEstimate", "build_blur_table",
-           "estimate_static_noise", "subset_levels"]
+__all__ = [
+    "ANGLE_STEP",
+    "BLUR_STEP",
+    "BlurTable",
+    "NoiseEstimate",
+    "build_blur_table",
+    "estimate_static_noise",
+    "subset_levels",
+]
 
 ANGLE_STEP = 15.0  # deg between direction nodes of the table
 BLUR_STEP = 1.0  # px between blur nodes of the table
@@ -61,8 +68,9 @@ class BlurTable:
     available: NDArray[np.bool_]
     values: NDArray[np.float64]
 
-    def lookup(self, w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
-               ) -> NDArray[np.float64]:
+    def lookup(
+        self, w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
+    ) -> NDArray[np.float64]:
         """Interpolated ``(xi_u, xi_v, c_uu, c_vv)`` at ``w`` (px) and ``angle`` (deg), both
         shape (frames, points); returns shape (frames, points, 4) (NaN where ``w`` is NaN
         or beyond the table)."""
@@ -70,15 +78,15 @@ class BlurTable:
         a = self.angles.size
         wq = np.where(np.isfinite(w), w, 0.0)
         # linear in W**2 between the nodes
-        s2 = wq ** 2
-        b2 = self.blur ** 2
+        s2 = wq**2
+        b2 = self.blur**2
         i1 = np.clip(np.searchsorted(b2, s2, side="right"), 1, b2.size - 1)
         i0 = i1 - 1
         tw = np.clip((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0, 1.0)[..., None]
         th = np.mod(np.where(np.isfinite(angle), angle, 0.0), 180.0) / ANGLE_STEP
         j0 = np.floor(th).astype(np.intp) % a
         j1 = (j0 + 1) % a
-        ta = (th - np.floor(th))
+        ta = th - np.floor(th)
         # a missing node: use the nearest computed one
         near = self._nearest()
         both = self.available[j0] & self.available[j1]
@@ -102,9 +110,16 @@ class BlurTable:
         return np.asarray(idx[np.argmin(d, axis=1)], dtype=np.intp)
 
 
-def build_blur_table(reference: NDArray[np.float64], centres: NDArray[np.intp], *,
-                     subset: int, shape: str, blur: NDArray[np.floating[Any]],
-                     angle: NDArray[np.floating[Any]], min_blur: float = 0.5) -> BlurTable:
+def build_blur_table(
+    reference: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    *,
+    subset: int,
+    shape: str,
+    blur: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    min_blur: float = 0.5,
+) -> BlurTable:
     """Tabulate the blur response of every point for the blur vectors that occur.
 
     Parameters
@@ -143,10 +158,15 @@ def build_blur_table(reference: NDArray[np.float64], centres: NDArray[np.intp], 
     values = np.full((a, nodes.size, len(centres), 4), np.nan)
     for j in np.flatnonzero(need):
         t = math.radians(angles[j])
-        shift, cov = subset_blur_response(reference, nodes, centres, subset,
-                                          motion=(math.sin(t), math.cos(t)),
-                                          shape=shape,  # type: ignore[arg-type]
-                                          max_shift=1.0)
+        shift, cov = subset_blur_response(
+            reference,
+            nodes,
+            centres,
+            subset,
+            motion=(math.sin(t), math.cos(t)),
+            shape=shape,  # type: ignore[arg-type]
+            max_shift=1.0,
+        )
         values[j, ..., 0:2] = shift
         values[j, ..., 2] = cov[..., 0, 0]
         values[j, ..., 3] = cov[..., 1, 1]
@@ -185,17 +205,21 @@ class NoiseEstimate:
         """Noise variance (GL**2) at grey levels ``level``."""
         lv = np.asarray(level, dtype=np.float64)
         if not self.level_dependent:
-            return np.full(lv.shape, self.sigma ** 2)
+            return np.full(lv.shape, self.sigma**2)
         return np.maximum(self.read_variance + self.slope * lv, 1e-12)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"sigma": self.sigma, "read_variance": self.read_variance,
-                "slope": self.slope, "level_dependent": self.level_dependent,
-                "source": self.source, "pairs": self.pairs}
+        return {
+            "sigma": self.sigma,
+            "read_variance": self.read_variance,
+            "slope": self.slope,
+            "level_dependent": self.level_dependent,
+            "source": self.source,
+            "pairs": self.pairs,
+        }
 
 
-def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24
-                          ) -> NoiseEstimate:
+def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24) -> NoiseEstimate:
     """Noise of a recording from its static frames ``start .. stop - 1``.
 
     Consecutive pairs give ``sigma**2 = var(a - b) / 2`` (a global offset, flicker,
@@ -212,8 +236,10 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24
         Static frames, half-open (at least 2).
     """
     if stop - start < 2:
-        raise InputError(f"static={start}:{stop}: needs at least 2 frames of the static "
-                         "scene (e.g. --static 0:20)")
+        raise InputError(
+            f"static={start}:{stop}: needs at least 2 frames of the static "
+            "scene (e.g. --static 0:20)"
+        )
     prev = frames[start]
     lo, hi = float(prev.min()), float(prev.max())
     edges = np.linspace(lo, hi + 1e-9, bins + 1)
@@ -232,7 +258,7 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24
         prev = cur
     sigma = math.sqrt(float(np.mean(sig2)))
     ok = cnt >= 200
-    read, slope, dep = sigma ** 2, 0.0, False
+    read, slope, dep = sigma**2, 0.0, False
     if ok.sum() >= 3:
         lev_c = 0.5 * (edges[:-1] + edges[1:])[ok]
         var_b = s2[ok] / cnt[ok] / 2.0
@@ -240,14 +266,21 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24
         A = np.stack([np.ones_like(lev_c), lev_c], axis=1) * np.sqrt(wts)[:, None]
         coef = np.linalg.lstsq(A, var_b * np.sqrt(wts), rcond=None)[0]
         span = coef[1] * (lev_c.max() - lev_c.min())
-        if coef[1] > 0 and span > 0.2 * sigma ** 2:
+        if coef[1] > 0 and span > 0.2 * sigma**2:
             read, slope, dep = float(max(coef[0], 0.0)), float(coef[1]), True
-    return NoiseEstimate(sigma=sigma, read_variance=read, slope=slope, level_dependent=dep,
-                         source=f"static frames {start}:{stop}", pairs=len(sig2))
+    return NoiseEstimate(
+        sigma=sigma,
+        read_variance=read,
+        slope=slope,
+        level_dependent=dep,
+        source=f"static frames {start}:{stop}",
+        pairs=len(sig2),
+    )
 
 
-def subset_levels(reference: NDArray[np.float64], centres: NDArray[np.intp], subset: int
-                  ) -> NDArray[np.float64]:
+def subset_levels(
+    reference: NDArray[np.float64], centres: NDArray[np.intp], subset: int
+) -> NDArray[np.float64]:
     """Gradient-weighted grey level ``sum(g**2 I) / sum(g**2)`` of each subset (GL): the
     level at which signal-dependent noise enters its displacement error
     (:func:`dicblur.gradient_weighted_level`, per subset and for both directions)."""
@@ -263,8 +296,9 @@ def subset_levels(reference: NDArray[np.float64], centres: NDArray[np.intp], sub
     return np.where(np.isfinite(lv), lv, reference.mean())
 
 
-def _angle_interp(values: NDArray[np.float64], available: NDArray[np.bool_],
-                  angle: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
+def _angle_interp(
+    values: NDArray[np.float64], available: NDArray[np.bool_], angle: NDArray[np.floating[Any]]
+) -> NDArray[np.float64]:
     """``values`` (a, n, c) on the direction nodes, linearly interpolated at ``angle``
     (frames, n) deg; a missing node is replaced by the nearest computed one."""
     a = values.shape[0]
@@ -296,17 +330,25 @@ class SkewTable:
     available: NDArray[np.bool_]
     values: NDArray[np.float64]
 
-    def bias(self, kappa3: NDArray[np.floating[Any]], axis: NDArray[np.floating[Any]]
-             ) -> NDArray[np.float64]:
+    def bias(
+        self, kappa3: NDArray[np.floating[Any]], axis: NDArray[np.floating[Any]]
+    ) -> NDArray[np.float64]:
         """Predicted shift ``(u, v)`` (frames, points, 2), px, of kernels with third
         moment ``kappa3`` (px**3) along ``axis`` (deg)."""
         q = _angle_interp(self.values, self.available, axis)
         return np.asarray(q * np.where(np.isfinite(kappa3), kappa3, np.nan)[..., None])
 
 
-def build_skew_table(reference: NDArray[np.float64], centres: NDArray[np.intp], *,
-                     subset: int, shape: str, axis: NDArray[np.floating[Any]],
-                     kappa3: NDArray[np.floating[Any]], min_fraction: float = 0.05) -> SkewTable:
+def build_skew_table(
+    reference: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    *,
+    subset: int,
+    shape: str,
+    axis: NDArray[np.floating[Any]],
+    kappa3: NDArray[np.floating[Any]],
+    min_fraction: float = 0.05,
+) -> SkewTable:
     """Compute the skew coefficients at the direction nodes around every axis whose
     ``|kappa3|`` exceeds ``min_fraction`` of the largest (at least one node)."""
     from .._blur_sensitivity import subset_skew_coefficients
@@ -316,8 +358,9 @@ def build_skew_table(reference: NDArray[np.float64], centres: NDArray[np.intp], 
     ok = np.isfinite(kappa3) & np.isfinite(axis)
     need = np.zeros(a, bool)
     if ok.any():
-        big = ok & (np.abs(np.where(ok, kappa3, 0.0))
-                    >= min_fraction * np.nanmax(np.abs(kappa3[ok])))
+        big = ok & (
+            np.abs(np.where(ok, kappa3, 0.0)) >= min_fraction * np.nanmax(np.abs(kappa3[ok]))
+        )
         th = np.mod(axis[big], 180.0) / ANGLE_STEP
         need[np.floor(th).astype(int) % a] = True
         need[(np.floor(th).astype(int) + 1) % a] = True
@@ -326,7 +369,7 @@ def build_skew_table(reference: NDArray[np.float64], centres: NDArray[np.intp], 
     values = np.full((a, len(centres), 2), np.nan)
     for j in np.flatnonzero(need):
         t = math.radians(angles[j])
-        values[j] = subset_skew_coefficients(reference, centres, subset,
-                                             motion=(math.sin(t), math.cos(t)),
-                                             shape=shape)  # type: ignore[arg-type]
+        values[j] = subset_skew_coefficients(
+            reference, centres, subset, motion=(math.sin(t), math.cos(t)), shape=shape
+        )  # type: ignore[arg-type]
     return SkewTable(angles=angles, available=need, values=values)

@@ -220,8 +220,12 @@ def simulate_batch(
             pos = np.rint(pos * ss) / ss
         else:
             blurred = motion_blur(
-                reference, motion, substeps=spec.substeps, trajectory=traj, boundary=spec.boundary
-            )  # type: ignore[arg-type]
+                reference,
+                motion,
+                substeps=spec.substeps,
+                trajectory=traj,
+                boundary=spec.boundary,  # type: ignore[arg-type]
+            )
             pos, w = trajectory_positions(motion, substeps=spec.substeps, trajectory=traj)
         true_dy, true_dx = w @ pos
         seed = task_seed(

@@ -114,8 +114,8 @@ def correlate_command(
         noise_sigma=noise,
         workers=workers,
         median_test=median_test,
-        blur=mode,
-    )  # type: ignore[arg-type]
+        blur=mode,  # type: ignore[arg-type]
+    )
     notice_compile(shape)
     compile_s = corr.warmup()
     t0 = time.perf_counter()

@@ -272,7 +272,7 @@ def fit_blur_model(
             u,
             noise_sigma=sig,
             next_term=next_term,  # type: ignore[arg-type]
-            floor=floor,
+            floor=floor,  # type: ignore[arg-type]
             noise_blur=noise_blur,  # type: ignore[arg-type]
             cross=cross,  # type: ignore[arg-type]
             confidence=confidence,

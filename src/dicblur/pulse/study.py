@@ -304,9 +304,9 @@ def _dependence(trials: int, seed: SeedLike, sigma: float) -> tuple[DependenceRo
             n_periods=n,
             trials=trials,
             seed=seed,
-            interpolation=interp,
-            shifted=shifted,
-        )  # type: ignore[arg-type]
+            interpolation=interp,  # type: ignore[arg-type]
+            shifted=shifted,  # type: ignore[arg-type]
+        )
         wa = min(train.dp, train.g)
         try:
             fa = fit_loglog(ds, 1.0, float(np.max(widths[widths < wa])))

@@ -104,8 +104,8 @@ def advise_exposure(
         subset=subset,
         points=pts,
         motion=(math.sin(dom), math.cos(dom)),
-        shape=shape,
-    )  # type: ignore[arg-type]
+        shape=shape,  # type: ignore[arg-type]
+    )
     mean_level = float(reference.mean())
     top = float(2 ** min(int(bit_depth), 16) - 1)
     if noise.level_dependent and noise.slope > 0:

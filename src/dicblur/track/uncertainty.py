@@ -370,6 +370,10 @@ def build_skew_table(
     for j in np.flatnonzero(need):
         t = math.radians(angles[j])
         values[j] = subset_skew_coefficients(
-            reference, centres, subset, motion=(math.sin(t), math.cos(t)), shape=shape
-        )  # type: ignore[arg-type]
+            reference,
+            centres,
+            subset,
+            motion=(math.sin(t), math.cos(t)),
+            shape=shape,  # type: ignore[arg-type]
+        )
     return SkewTable(angles=angles, available=need, values=values)

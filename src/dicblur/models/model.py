@@ -352,11 +352,14 @@ class BlurUncertaintyModel:
             if u_noise is not None and u_blur is not None:
                 u_noise[broken] = np.nan
                 u_blur[broken] = np.nan
+        # an unidentified parameter gives an unbounded interval: exp(inf) = inf is meant
+        with np.errstate(over="ignore"):
+            low, high = np.exp(lu - half), np.exp(lu + half)
         return Prediction(
             blur=w,
             u_e=np.exp(lu),
-            low=np.exp(lu - half),
-            high=np.exp(lu + half),
+            low=low,
+            high=high,
             u_noise=u_noise,
             u_blur=u_blur,
             sigma=sig,

@@ -70,6 +70,9 @@ def test_spearman_interval_is_wide_for_five_points():
     assert lo < 0.5 < hi  # five patterns cannot settle a 0.5 criterion
     _, lo, hi = spearman_interval(np.arange(40), np.arange(40) + 0.1)
     assert lo > 0.9
+    # a perfect order of five points is no certainty
+    rho, lo, hi = spearman_interval([1, 2, 3, 4, 5], [5, 4, 3, 2, 1])
+    assert rho == pytest.approx(-1.0) and hi - lo > 0.5 and hi > -0.5
 
 
 def test_algorithm1_translates_by_half_the_motion_on_the_image():

@@ -68,7 +68,11 @@ def spearman_interval(a: Any, b: Any, *, level: float = 0.95) -> tuple[float, fl
     n = int(np.sum(np.isfinite(x) & np.isfinite(y)))
     if not math.isfinite(rho) or n < 4:
         return rho, math.nan, math.nan
-    z = math.atanh(min(max(rho, -0.999999), 0.999999))
+    # a perfect rank order of a few points has z = +-inf: shrink |rho| to 1 - 1/(2n) first
+    # (a perfect order of 5 points happens by chance 1 time in 60), so that a small sample
+    # never yields a zero-width interval
+    lim = 1.0 - 0.5 / n
+    z = math.atanh(min(max(rho, -lim), lim))
     half = float(stats.norm.ppf(0.5 + level / 2)) * math.sqrt(1.06 / (n - 3))
     return rho, math.tanh(z - half), math.tanh(z + half)
 

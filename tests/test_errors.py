@@ -12,7 +12,6 @@ from dicblur import errors
         (errors.ImageReadError, OSError),
         (errors.ConfigError, ValueError),
         (errors.FitError, RuntimeError),
-        (errors.ConvergenceError, RuntimeError),
         (errors.StoreError, RuntimeError),
     ],
 )

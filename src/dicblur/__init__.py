@@ -48,7 +48,6 @@ _SUBMODULES: dict[str, tuple[str, ...]] = {
     "dic": ("Correlator", "DICResult", "PointStatus", "correlate"),
     "errors": (
         "ConfigError",
-        "ConvergenceError",
         "DicblurError",
         "FitError",
         "ImageReadError",
@@ -144,7 +143,6 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from .dic import Correlator, DICResult, PointStatus, correlate
     from .errors import (
         ConfigError,
-        ConvergenceError,
         DicblurError,
         FitError,
         ImageReadError,
@@ -211,7 +209,6 @@ __all__ = [
     "Camera",
     "CampaignSpec",
     "ConfigError",
-    "ConvergenceError",
     "Correlator",
     "DICResult",
     "DesignResult",

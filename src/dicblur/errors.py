@@ -14,7 +14,6 @@ from __future__ import annotations
 
 __all__ = [
     "ConfigError",
-    "ConvergenceError",
     "DicblurError",
     "FitError",
     "ImageReadError",
@@ -41,10 +40,6 @@ class ConfigError(DicblurError, ValueError):
 
 class FitError(DicblurError, RuntimeError):
     """A model could not be fitted to the data given."""
-
-
-class ConvergenceError(DicblurError, RuntimeError):
-    """An iterative solver could not produce a usable answer."""
 
 
 class StoreError(DicblurError, RuntimeError):

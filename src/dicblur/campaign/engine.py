@@ -248,11 +248,7 @@ def _run_locked(
     store, images = _prepare(spec, path)
     fn = task if task is not None else _default_task()
     if task is None:
-        from ..dic.cache import compile_kernels
-
-        # every process (this one, the workers, a later resume) then runs the same cached
-        # kernels: bit-identical results however the campaign is interrupted
-        compile_kernels((spec.dic_shape,))
+        _compile_kernels_first(spec.dic_shape)
     mask = store.done_mask()
     pending = [b for b in iter_batches(spec) if not mask[b.region].all()]
     n_total = spec.n_tasks
@@ -312,6 +308,33 @@ def _run_locked(
         workers=n_workers,
         scheduler=where,
     )
+
+
+def _compile_kernels_first(shape: str) -> None:
+    """Compile a cold numba cache in a subprocess before the tasks, so that every process
+    (this one, the workers, a later resume) runs the same cached kernels: bit-identical
+    results however the campaign is interrupted (:func:`dicblur.dic.cache.compile_kernels`).
+
+    Ctrl-C meanwhile is a flag (numba's cache look-up could swallow a KeyboardInterrupt),
+    raised as ``KeyboardInterrupt`` once the step is over. If the subprocess fails the
+    kernels compile in this process as before (results correct, a resume on another cold
+    cache may then differ in the last bits), with a warning.
+    """
+    import subprocess
+
+    from ..dic.cache import compile_kernels
+
+    with _Interrupt() as interrupt:
+        try:
+            compile_kernels((shape,))
+        except (subprocess.SubprocessError, OSError) as exc:
+            if not interrupt.flag:
+                logger.warning(
+                    "compiling the DIC kernels in a subprocess failed (%s); they "
+                    "compile in this process",
+                    type(exc).__name__,
+                )
+    interrupt.check()
 
 
 class _Interrupt:

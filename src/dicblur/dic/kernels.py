@@ -37,6 +37,7 @@ from .status import PointStatus
 __all__ = [
     "PAD",
     "STALL_ITERATIONS",
+    "compose_inverse_affine",
     "flat_lengths",
     "flat_width",
     "icgn_affine",
@@ -250,6 +251,35 @@ def prefilter_padded(image: np.ndarray, order: int, out: np.ndarray) -> None:
     _filter_axis1(image, centre, poles, tol)  # along x (columns), no transpose
     _filter_axis0(centre, poles, tol)  # along y (rows), in place, vectorised across columns
     _fill_margin(out, rows, cols, PAD)
+
+
+@nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
+def compose_inverse_affine(p, du, dux, duy, dv, dvx, dvy):  # pragma: no cover - compiled
+    """Inverse-compositional update of an affine warp in place: ``W(p) <- W(p) o W(dp)^-1``
+    (3x3 homogeneous matrices; ``p = (u, ux, uy, v, vx, vy)``). Returns False, leaving
+    ``p`` unchanged, when ``W(dp)`` is singular."""
+    a11 = 1.0 + dux
+    a22 = 1.0 + dvy
+    det = a11 * a22 - duy * dvx
+    if not abs(det) > 1e-12:
+        return False
+    i11 = a22 / det
+    i12 = -duy / det
+    i21 = -dvx / det
+    i22 = a11 / det
+    it1 = -(i11 * du + i12 * dv)
+    it2 = -(i21 * du + i22 * dv)
+    m11 = 1.0 + p[1]
+    m12 = p[2]
+    m21 = p[4]
+    m22 = 1.0 + p[5]
+    p[0] = m11 * it1 + m12 * it2 + p[0]
+    p[3] = m21 * it1 + m22 * it2 + p[3]
+    p[1] = m11 * i11 + m12 * i21 - 1.0
+    p[2] = m11 * i12 + m12 * i22
+    p[4] = m21 * i11 + m22 * i21
+    p[5] = m21 * i12 + m22 * i22 - 1.0
+    return True
 
 
 @nb.njit(inline="always", fastmath=_FASTMATH, cache=True)
@@ -1294,31 +1324,9 @@ def icgn_affine(
                 dv *= gain
                 dvx *= gain
                 dvy *= gain
-                # inverse composition W(p) <- W(p) o W(dp)^-1 on 3x3 homogeneous matrices
-                a11 = 1.0 + dux
-                a12 = duy
-                a21 = dvx
-                a22 = 1.0 + dvy
-                det = a11 * a22 - a12 * a21
-                if not abs(det) > 1e-12:
+                if not compose_inverse_affine(p, du, dux, duy, dv, dvx, dvy):
                     st = _DIVERGED
                     break
-                i11 = a22 / det
-                i12 = -a12 / det
-                i21 = -a21 / det
-                i22 = a11 / det
-                it1 = -(i11 * du + i12 * dv)
-                it2 = -(i21 * du + i22 * dv)
-                m11 = 1.0 + p[1]
-                m12 = p[2]
-                m21 = p[4]
-                m22 = 1.0 + p[5]
-                p[0] = m11 * it1 + m12 * it2 + p[0]
-                p[3] = m21 * it1 + m22 * it2 + p[3]
-                p[1] = m11 * i11 + m12 * i21 - 1.0
-                p[2] = m11 * i12 + m12 * i22
-                p[4] = m21 * i11 + m22 * i21
-                p[5] = m21 * i12 + m22 * i22 - 1.0
                 nit = it + 1
                 finite = True
                 for m in range(6):

@@ -23,7 +23,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .kernels import PAD
+from .kernels import PAD, compose_inverse_affine
 from .status import PointStatus
 
 __all__ = ["joint_blur_step"]
@@ -287,28 +287,9 @@ def joint_blur_step(
             lam += stp[k]
             if affine:
                 du, dux, duy, dv, dvx, dvy = stp[0], stp[1], stp[2], stp[3], stp[4], stp[5]
-                a11 = 1.0 + dux
-                a22 = 1.0 + dvy
-                det = a11 * a22 - duy * dvx
-                if not abs(det) > 1e-12:
+                if not compose_inverse_affine(p, du, dux, duy, dv, dvx, dvy):
                     st = _DIVERGED
                     break
-                i11 = a22 / det
-                i12 = -duy / det
-                i21 = -dvx / det
-                i22 = a11 / det
-                it1 = -(i11 * du + i12 * dv)
-                it2 = -(i21 * du + i22 * dv)
-                m11 = 1.0 + p[1]
-                m12 = p[2]
-                m21 = p[4]
-                m22 = 1.0 + p[5]
-                p[0] = m11 * it1 + m12 * it2 + p[0]
-                p[3] = m21 * it1 + m22 * it2 + p[3]
-                p[1] = m11 * i11 + m12 * i21 - 1.0
-                p[2] = m11 * i12 + m12 * i22
-                p[4] = m21 * i11 + m22 * i21
-                p[5] = m21 * i12 + m22 * i22 - 1.0
                 norm = math.sqrt(
                     du * du
                     + dv * dv

@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 
 import dicblur
-from dicblur.dic import kernels
+from dicblur.dic.kernels import affine, blur, common, prefilter, spline, translation
 from dicblur.dic.status import PointStatus
 
 
 def _compiled_kernels():
-    for name in dir(kernels):
-        obj = getattr(kernels, name)
-        if hasattr(obj, "targetoptions") and hasattr(obj, "py_func"):
-            yield name, obj
+    for module in (affine, blur, common, prefilter, spline, translation):
+        for name in dir(module):
+            obj = getattr(module, name)
+            if hasattr(obj, "targetoptions") and hasattr(obj, "py_func"):
+                yield f"{module.__name__}.{name}", obj
 
 
 def test_no_kernel_assumes_finite_values():

@@ -19,8 +19,17 @@ COMPILE_NOTICE = "compiling the DIC kernels, first run only (~20 s)"
 # The entry points a correlation calls, per shape function (their callees are inlined or
 # cached with them).
 _ENTRY = {
-    "translation": ("icgn_translation", "pack_reference", "_filter_axis0", "_filter_axis1"),
-    "affine": ("icgn_affine", "_filter_axis0", "_filter_axis1"),
+    "translation": (
+        ("translation", "icgn_translation"),
+        ("translation", "pack_reference"),
+        ("prefilter", "filter_axis0"),
+        ("prefilter", "filter_axis1"),
+    ),
+    "affine": (
+        ("affine", "icgn_affine"),
+        ("prefilter", "filter_axis0"),
+        ("prefilter", "filter_axis1"),
+    ),
 }
 
 
@@ -32,11 +41,12 @@ def kernels_cached(shape: Literal["affine", "translation"] = "affine") -> bool:
     kernel source) do not count. If the cache cannot be inspected (another numba layout)
     the answer is True: the notice is then left out rather than printed wrongly.
     """
-    from . import kernels
+    import importlib
 
     try:
-        for name in _ENTRY[shape]:
-            cache = getattr(kernels, name)._cache
+        for module, name in _ENTRY[shape]:
+            kernel = getattr(importlib.import_module(f"{__package__}.kernels.{module}"), name)
+            cache = kernel._cache
             if not cache._cache_file._load_index():  # {signature key: file}; {} when cold
                 return False
     except Exception:  # numba internals differ: do not guess

@@ -1067,7 +1067,7 @@ class Correlator:
         NDArray[np.uint8],
     ]:
         """Joint (shape, blur length) Gauss-Newton from the compensated IC-GN result."""
-        from .kernels_blur import joint_blur_step
+        from .kernels.blur import joint_blur_step
 
         sp = entry.step
         f0, gx, gy, dimg = entry.images

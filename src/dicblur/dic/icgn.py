@@ -185,7 +185,7 @@ def icgn_reference(
 
     Returns ``(p, zncc, iterations, converged)``; ``p`` as in the kernels (translation
     ``(u, v)``, affine ``(u, ux, uy, v, vx, vy)``), px. ``step_gain=False`` takes plain
-    Gauss-Newton steps (no Aitken gain, see ``kernels._aitken_gain``).
+    Gauss-Newton steps (no Aitken gain, see ``kernels.translation._aitken_gain``).
     """
     size = 2 * half + 1
     d = np.arange(size, dtype=np.float64) - half
@@ -217,7 +217,7 @@ def icgn_reference(
         zncc = float(fh @ gh)
         dp = np.linalg.solve(hess, -jh.T @ (fh - gh))
         if shape == "translation":
-            # Aitken step gain, as the compiled kernel (kernels._aitken_gain)
+            # Aitken step gain, as the compiled kernel (kernels.translation._aitken_gain)
             gain = 1.0
             pp = float(prev @ prev)
             dot = float(dp @ prev)
@@ -233,7 +233,7 @@ def icgn_reference(
                 prev = dp.copy()
             p = p - gain * dp
         else:
-            # the same gain on the weighted 6-vector (kernels._aitken_gain6)
+            # the same gain on the weighted 6-vector (kernels.affine._aitken_gain6)
             sc = np.array([1.0, half, half, 1.0, half, half])
             a, b = dp * sc, prev6 * sc
             pp, dot = float(b @ b), float(a @ b)

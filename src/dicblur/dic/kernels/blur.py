@@ -23,8 +23,8 @@ import math
 import numba as nb
 import numpy as np
 
-from .kernels import PAD, compose_inverse_affine
-from .status import PointStatus
+from ..status import PointStatus
+from .common import PAD, compose_inverse_affine
 
 __all__ = ["joint_blur_step"]
 

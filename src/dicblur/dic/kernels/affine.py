@@ -1,0 +1,439 @@
+# ruff: noqa: RUF046  (int(math.floor(x)) gives numba an integer index)
+"""IC-GN kernel of the affine shape function (row slices, 5x5 stencil fast path)."""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .common import (
+    CONVERGED,
+    DIVERGED,
+    FASTMATH,
+    LOW_CORRELATION,
+    MAX_ITERATIONS,
+    OUT_OF_BOUNDS,
+    PAD,
+    STALL_ITERATIONS,
+    compose_inverse_affine,
+)
+from .spline import beta, sample
+
+__all__ = ["icgn_affine"]
+
+
+# Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
+# their fixed-width (tw, a multiple of 16) loops; inlined into the parfor body they were not.
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _row_affine_fast(
+    coef, rb, cb, order, tx0, ty0, p1, p4, dxs, tx, ty, wxs, wys, hrow, grow
+):  # pragma: no cover
+    tw = grow.shape[0]
+    sten = order + 2
+    lo = (order - 1) // 2
+    for j in range(tw):
+        tx[j] = tx0 + p1 * dxs[j]
+        ty[j] = ty0 + p4 * dxs[j]
+    for b in range(sten):
+        kb = np.float32(b - lo)
+        wxb = wxs[b]
+        wyb = wys[b]
+        for j in range(tw):
+            wxb[j] = beta(tx[j] - kb, order)
+            wyb[j] = beta(ty[j] - kb, order)
+    for j in range(tw):
+        grow[j] = 0.0
+    for a in range(sten):
+        for j in range(tw):
+            hrow[j] = 0.0
+        for b in range(sten):
+            row = coef[rb + a, cb + b : cb + b + tw]
+            wxb = wxs[b]
+            for j in range(tw):
+                hrow[j] += wxb[j] * row[j]
+        wya = wys[a]
+        for j in range(tw):
+            grow[j] += wya[j] * hrow[j]
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _w5(t):  # pragma: no cover - compiled
+    """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
+    sh = np.float32(1.0) if t >= np.float32(1.0) else np.float32(0.0)
+    u = t - sh
+    u2 = u * u
+    u3 = u2 * u
+    v = np.float32(1.0) - u
+    w0 = v * v * v * np.float32(1.0 / 6.0)
+    w1 = np.float32(2.0 / 3.0) - u2 + np.float32(0.5) * u3
+    w2 = (np.float32(1.0) + np.float32(3.0) * (u + u2 - u3)) * np.float32(1.0 / 6.0)
+    w3 = u3 * np.float32(1.0 / 6.0)
+    ns = np.float32(1.0) - sh
+    return (ns * w0, ns * w1 + sh * w0, ns * w2 + sh * w1, ns * w3 + sh * w2, sh * w3)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _row_affine_cubic(
+    coef, rb, cb, tx0, ty0, p1, p4, dxs, off, mask, f, gx, gy, r, c0
+):  # pragma: no cover
+    """Cubic affine fast path, one row: 5x5 stencil at contiguous memory, fused sums."""
+    tw = mask.shape[0]
+    q0 = coef[rb, cb : cb + tw + 4]
+    q1 = coef[rb + 1, cb : cb + tw + 4]
+    q2 = coef[rb + 2, cb : cb + tw + 4]
+    q3 = coef[rb + 3, cb : cb + tw + 4]
+    q4 = coef[rb + 4, cb : cb + tw + 4]
+    fr = f[r, c0 : c0 + tw]
+    gxr = gx[r, c0 : c0 + tw]
+    gyr = gy[r, c0 : c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    s5 = np.float32(0.0)
+    s6 = np.float32(0.0)
+    for j in range(tw):
+        x0, x1, x2, x3, x4 = _w5(tx0 + p1 * dxs[j])
+        y0, y1, y2, y3, y4 = _w5(ty0 + p4 * dxs[j])
+        h0 = x0 * q0[j] + x1 * q0[j + 1] + x2 * q0[j + 2] + x3 * q0[j + 3] + x4 * q0[j + 4]
+        h1 = x0 * q1[j] + x1 * q1[j + 1] + x2 * q1[j + 2] + x3 * q1[j + 3] + x4 * q1[j + 4]
+        h2 = x0 * q2[j] + x1 * q2[j + 1] + x2 * q2[j + 2] + x3 * q2[j + 3] + x4 * q2[j + 4]
+        h3 = x0 * q3[j] + x1 * q3[j + 1] + x2 * q3[j + 2] + x3 * q3[j + 3] + x4 * q3[j + 4]
+        h4 = x0 * q4[j] + x1 * q4[j + 1] + x2 * q4[j + 2] + x3 * q4[j + 3] + x4 * q4[j + 4]
+        g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 + y4 * h4 - off) * mask[j]
+        gxg = gxr[j] * g
+        gyg = gyr[j] * g
+        s0 += g
+        s1 += g * g
+        s2 += gxg
+        s3 += gxg * dxs[j]
+        s4 += gyg
+        s5 += gyg * dxs[j]
+        s6 += fr[j] * g
+    return s0, s1, s2, s3, s4, s5, s6
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
+    """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
+    tw = grow.shape[0]
+    fr = f[r, c0 : c0 + tw]
+    gxr = gx[r, c0 : c0 + tw]
+    gyr = gy[r, c0 : c0 + tw]
+    s0 = np.float32(0.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    s5 = np.float32(0.0)
+    s6 = np.float32(0.0)
+    for j in range(tw):
+        g = (grow[j] - off) * mask[j]
+        gxg = gxr[j] * g
+        gyg = gyr[j] * g
+        s0 += g
+        s1 += g * g
+        s2 += gxg
+        s3 += gxg * dxs[j]
+        s4 += gyg
+        s5 += gyg * dxs[j]
+        s6 += fr[j] * g
+    return s0, s1, s2, s3, s4, s5, s6
+
+
+@nb.njit(cache=True, inline="always")
+def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
+    """Step gain of IC-GN affine (as :func:`_aitken_gain`), ratio measured on the 6-vector
+    ``(du, h dux, h duy, dv, h dvx, h dvy)`` (``h`` = subset half-width, the weights of
+    the convergence norm); updates the remembered step ``prev`` in place."""
+    pp = 0.0
+    dd = 0.0
+    dot = 0.0
+    for m in range(6):
+        sc = 1.0 if m == 0 or m == 3 else half * 1.0
+        a = d[m] * sc
+        b = prev[m] * sc
+        pp += b * b
+        dd += a * a
+        dot += a * b
+    if pp > 0.0:
+        rho = dot / pp
+        if 0.3 < rho < 0.97 and dot * dot > 0.9025 * dd * pp:
+            for m in range(6):
+                prev[m] = 0.0
+            return 1.0 / (1.0 - rho)
+    for m in range(6):
+        prev[m] = d[m]
+    return 1.0
+
+
+@nb.njit(parallel=True, fastmath=FASTMATH, cache=True)
+def icgn_affine(
+    coef,
+    himg,
+    wimg,
+    order,
+    f,
+    gx,
+    gy,
+    rows,
+    cols,
+    half,
+    tw,
+    hinv,
+    jsum,
+    avec,
+    fmean,
+    fnorm,
+    p0,
+    status_in,
+    max_iter,
+    tol,
+    min_zncc,
+    max_step,
+    out_p,
+    out_zncc,
+    out_iter,
+    out_status,
+):  # pragma: no cover - compiled
+    """IC-GN with the first-order (affine) shape function, ZNSSD criterion.
+
+    Parameters ``p = (u, du/dx, du/dy, v, dv/dx, dv/dy)``; the warp of a subset pixel at
+    offset ``(dx, dy)`` from the POI is ``x' = x + u + ux dx + uy dy``,
+    ``y' = y + v + vx dx + vy dy`` (Pan et al. 2013, doi:10.1007/s11340-013-9717-6).
+
+    Fast path: when the sub-pixel offsets ``x' - x`` (and ``y' - y``) of all subset pixels
+    span less than one pixel, one integer base covers the subset and every sample reads
+    the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
+    with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
+    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout as in
+    :func:`icgn_translation`.
+    """
+    n = rows.shape[0]
+    size = 2 * half + 1
+    lo = (order - 1) // 2
+    sten = order + 2
+    npx = size * size
+    mask = np.zeros(tw, dtype=np.float32)
+    mask[:size] = 1.0
+    dxs = np.zeros(tw, dtype=np.float32)
+    for j in range(tw):
+        dxs[j] = j - half
+    # chunks of 16 POIs: the scratch arrays are allocated once per chunk, not per POI
+    chunk = 16
+    for ch in nb.prange((n + chunk - 1) // chunk):
+        q = np.empty(6, dtype=np.float64)
+        p = np.empty(6, dtype=np.float64)
+        dstep = np.empty(6, dtype=np.float64)
+        dprev = np.zeros(6, dtype=np.float64)
+        wxs = np.empty((sten, tw), dtype=np.float32)
+        wys = np.empty((sten, tw), dtype=np.float32)
+        tx = np.empty(tw, dtype=np.float32)
+        ty = np.empty(tw, dtype=np.float32)
+        hrow = np.empty(tw, dtype=np.float32)
+        grow = np.empty(tw, dtype=np.float32)
+        for k in range(ch * chunk, min(n, (ch + 1) * chunk)):
+            if status_in[k] != 0:
+                out_status[k] = status_in[k]
+                for m in range(6):
+                    out_p[k, m] = np.nan
+                out_zncc[k] = np.nan
+                out_iter[k] = 0
+                continue
+            for m in range(6):
+                dprev[m] = 0.0
+            for m in range(6):
+                p[m] = p0[k, m]
+            xc = cols[k]
+            yc = rows[k]
+            r0 = rows[k] - half
+            c0 = cols[k] - half
+            off = np.float32(fmean[k])
+            st = MAX_ITERATIONS
+            zn = np.nan
+            nit = 0
+            best = np.inf
+            ibest = 0
+            for it in range(max_iter):
+                # bounds: an affine map sends the subset's corners to the warped extremes
+                inside = True
+                oxmin = 1e30
+                oxmax = -1e30
+                oymin = 1e30
+                oymax = -1e30
+                for cy in (-half, half):
+                    for cx in (-half, half):
+                        ox = p[0] + p[1] * cx + p[2] * cy
+                        oy = p[3] + p[4] * cx + p[5] * cy
+                        oxmin = min(oxmin, ox)
+                        oxmax = max(oxmax, ox)
+                        oymin = min(oymin, oy)
+                        oymax = max(oymax, oy)
+                        if not (
+                            xc + cx + ox >= 0.0
+                            and yc + cy + oy >= 0.0
+                            and xc + cx + ox <= wimg - 1
+                            and yc + cy + oy <= himg - 1
+                        ):
+                            inside = False
+                if not inside:
+                    st = OUT_OF_BOUNDS
+                    break
+                fast = (oxmax - oxmin) < 0.999 and (oymax - oymin) < 0.999
+                bx = int(math.floor(oxmin))
+                by = int(math.floor(oymin))
+                sg = 0.0
+                sgg = 0.0
+                sf = 0.0
+                for m in range(6):
+                    q[m] = 0.0
+                p1 = np.float32(p[1])
+                p4 = np.float32(p[4])
+                for i in range(size):
+                    dy = i - half
+                    if fast and order == 3:
+                        t0s, t1s, t2s, t3s, t4s, t5s, t6s = _row_affine_cubic(
+                            coef,
+                            r0 + i + by - lo + PAD,
+                            c0 + bx - lo + PAD,
+                            np.float32(p[0] + p[2] * dy - bx),
+                            np.float32(p[3] + p[5] * dy - by),
+                            p1,
+                            p4,
+                            dxs,
+                            off,
+                            mask,
+                            f,
+                            gx,
+                            gy,
+                            r0 + i,
+                            c0,
+                        )
+                    else:
+                        if fast:
+                            # offsets t in [0, 2) from the common integer base (bx, by)
+                            tx0 = np.float32(p[0] + p[2] * dy - bx)
+                            ty0 = np.float32(p[3] + p[5] * dy - by)
+                            _row_affine_fast(
+                                coef,
+                                r0 + i + by - lo + PAD,
+                                c0 + bx - lo + PAD,
+                                order,
+                                tx0,
+                                ty0,
+                                p1,
+                                p4,
+                                dxs,
+                                tx,
+                                ty,
+                                wxs,
+                                wys,
+                                hrow,
+                                grow,
+                            )
+                        else:
+                            for j in range(tw):
+                                grow[j] = 0.0
+                            for j in range(size):
+                                xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
+                                yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
+                                grow[j] = sample(coef, order, yy, xx)
+                        t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(
+                            grow, off, mask, dxs, f, gx, gy, r0 + i, c0
+                        )
+                    sg += t0s
+                    sgg += t1s
+                    q[0] += t2s
+                    q[1] += t3s
+                    q[2] += t2s * dy
+                    q[3] += t4s
+                    q[4] += t5s
+                    q[5] += t4s * dy
+                    sf += t6s
+                gm = sg / npx
+                dg2 = sgg - npx * gm * gm
+                if not dg2 > 1e-12 * (sgg + 1e-30):
+                    st = DIVERGED
+                    break
+                dg = math.sqrt(dg2)
+                zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
+                for m in range(6):
+                    q[m] = ((q[m] - jsum[k, m] * gm) / dg - avec[k, m] * zn) / fnorm[k]
+                du = 0.0
+                dux = 0.0
+                duy = 0.0
+                dv = 0.0
+                dvx = 0.0
+                dvy = 0.0
+                for m in range(6):
+                    du += hinv[k, 0, m] * q[m]
+                    dux += hinv[k, 1, m] * q[m]
+                    duy += hinv[k, 2, m] * q[m]
+                    dv += hinv[k, 3, m] * q[m]
+                    dvx += hinv[k, 4, m] * q[m]
+                    dvy += hinv[k, 5, m] * q[m]
+                dstep[0] = du
+                dstep[1] = dux
+                dstep[2] = duy
+                dstep[3] = dv
+                dstep[4] = dvx
+                dstep[5] = dvy
+                gain = _aitken_gain6(dstep, dprev, half)
+                du0 = du
+                dux0 = dux
+                duy0 = duy
+                dv0 = dv
+                dvx0 = dvx
+                dvy0 = dvy
+                du *= gain
+                dux *= gain
+                duy *= gain
+                dv *= gain
+                dvx *= gain
+                dvy *= gain
+                if not compose_inverse_affine(p, du, dux, duy, dv, dvx, dvy):
+                    st = DIVERGED
+                    break
+                nit = it + 1
+                finite = True
+                for m in range(6):
+                    if not math.isfinite(p[m]):
+                        finite = False
+                if not finite:
+                    st = DIVERGED
+                    break
+                # convergence on the plain (unscaled) Gauss-Newton step, as the translation
+                norm = math.sqrt(
+                    du0 * du0
+                    + dv0 * dv0
+                    + half * half * (dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0)
+                )
+                if norm < tol:
+                    st = CONVERGED
+                    break
+                if norm < best:
+                    best = norm
+                    ibest = it
+                elif it - ibest >= STALL_ITERATIONS:
+                    break
+                if (
+                    abs(p[0] - p0[k, 0]) > max_step
+                    or abs(p[3] - p0[k, 3]) > max_step
+                    or abs(p[1]) > 0.5
+                    or abs(p[2]) > 0.5
+                    or abs(p[4]) > 0.5
+                    or abs(p[5]) > 0.5
+                ):
+                    st = DIVERGED
+                    break
+            if st == CONVERGED and not zn >= min_zncc:
+                st = LOW_CORRELATION
+            out_status[k] = st
+            keep = st == CONVERGED or st == MAX_ITERATIONS or st == LOW_CORRELATION
+            for m in range(6):
+                out_p[k, m] = p[m] if keep else np.nan
+            out_zncc[k] = zn
+            out_iter[k] = nit

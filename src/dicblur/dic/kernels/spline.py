@@ -1,0 +1,112 @@
+# ruff: noqa: RUF046  (int(math.floor(x)) gives numba an integer index)
+"""Compiled B-spline tap weights and samples (cubic and quintic), inlined into the
+IC-GN kernels."""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .common import FASTMATH, PAD
+
+__all__ = ["beta", "beta3d", "beta5", "sample", "weights", "weights3", "weights_into"]
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def weights3(t, w):  # pragma: no cover - compiled
+    t2 = t * t
+    t3 = t2 * t
+    s = 1.0 - t
+    w[0] = s * s * s / 6.0
+    w[1] = 2.0 / 3.0 - t2 + 0.5 * t3
+    w[2] = (1.0 + 3.0 * t + 3.0 * t2 - 3.0 * t3) / 6.0
+    w[3] = t3 / 6.0
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def beta5(x):  # pragma: no cover - compiled
+    a = abs(x)
+    if a < 1.0:
+        a2 = a * a
+        return 0.55 - 0.5 * a2 + 0.25 * a2 * a2 - a2 * a2 * a / 12.0
+    if a < 2.0:
+        a2 = a * a
+        return (
+            17.0 / 40.0
+            + 0.625 * a
+            - 1.75 * a2
+            + 1.25 * a2 * a
+            - 0.375 * a2 * a2
+            + a2 * a2 * a / 24.0
+        )
+    if a < 3.0:
+        b = 3.0 - a
+        return b * b * b * b * b / 120.0
+    return 0.0
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def weights_into(t, order, w):  # pragma: no cover - compiled
+    if order == 3:
+        weights3(t, w)
+    else:
+        for k in range(6):
+            w[k] = beta5(t - (k - 2))
+
+
+@nb.njit(cache=True)
+def weights(t, order):  # pragma: no cover - compiled
+    """Tap weights at fractional offset ``t`` (compiled; see ``bspline_weights``)."""
+    w = np.empty(order + 1, dtype=np.float64)
+    weights_into(t, order, w)
+    return w
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def beta(x, order):  # pragma: no cover - compiled
+    """Branch-free centred B-spline (truncated-power form), vectorisable."""
+    a = abs(x)
+    if order == 3:
+        p2 = max(np.float32(0.0), np.float32(2.0) - a)
+        p1 = max(np.float32(0.0), np.float32(1.0) - a)
+        return (p2 * p2 * p2 - np.float32(4.0) * p1 * p1 * p1) * np.float32(1.0 / 6.0)
+    p3 = max(np.float32(0.0), np.float32(3.0) - a)
+    p2 = max(np.float32(0.0), np.float32(2.0) - a)
+    p1 = max(np.float32(0.0), np.float32(1.0) - a)
+    q3 = p3 * p3
+    q2 = p2 * p2
+    q1 = p1 * p1
+    return (
+        q3 * q3 * p3 - np.float32(6.0) * q2 * q2 * p2 + np.float32(15.0) * q1 * q1 * p1
+    ) * np.float32(1.0 / 120.0)
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def sample(coef, order, y, x):  # pragma: no cover - compiled
+    """One spline sample at image position (y, x) (generic path)."""
+    taps = order + 1
+    lo = (order - 1) // 2
+    ix = int(math.floor(x))
+    iy = int(math.floor(y))
+    tx = x - ix
+    ty = y - iy
+    g = 0.0
+    for a in range(taps):
+        wy = beta5(ty - (a - lo)) if order == 5 else beta3d(ty - (a - lo))
+        crow = coef[iy - lo + a + PAD]
+        acc = 0.0
+        for b in range(taps):
+            wx = beta5(tx - (b - lo)) if order == 5 else beta3d(tx - (b - lo))
+            acc += wx * crow[ix - lo + b + PAD]
+        g += wy * acc
+    return g
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def beta3d(x):  # pragma: no cover - compiled
+    a = abs(x)
+    p2 = max(0.0, 2.0 - a)
+    p1 = max(0.0, 1.0 - a)
+    return (p2 * p2 * p2 - 4.0 * p1 * p1 * p1) / 6.0

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 import dicblur
-from dicblur._blur_sensitivity import _shifts_and_variance
+from dicblur.models.sensitivity import _shifts_and_variance
 from dicblur.models import predict_from_pattern
 
 OUT = Path(__file__).resolve().parent / "results" / "noise_term.json"

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import dicblur
-from dicblur._blur_sensitivity import _shifts_and_variance
+from dicblur.models.sensitivity import _shifts_and_variance
 from dicblur.models import fit_mismatch, mismatch_model, predict_from_pattern
 from dicblur.models.decay import sssig_decay
 from dicblur.models.mismatch import noise_growth

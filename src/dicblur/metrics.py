@@ -28,7 +28,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from ._blur_sensitivity import subset_blur_coefficients
 from ._validation import (
     as_image,
     check_choice,
@@ -468,6 +467,8 @@ def pattern_metrics(
         "pan_sssig": float(subset**2 * m**2),
     }
     if blur_sensitivity:
+        from .models.sensitivity import subset_blur_coefficients
+
         pts = _resolve_points(img.shape, subset, step, None)
         k = subset_blur_coefficients(img, pts, subset, motion=(0.0, 1.0), shape="translation")
         k = k[np.isfinite(k)]

@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from .._blur_sensitivity import (
+from .sensitivity import (
     Boundary,
     Criterion,
     Derivative,

@@ -7,7 +7,7 @@ image and its exact box blur, subset by subset, for the ZNSSD IC-GN matcher:
   (:func:`~dicblur.models.blur_mismatch_curve`);
 - the noise variance ``var_i(W)``: the response of that fixed point to independent
   Gaussian noise of std ``sigma`` in both images (the sandwich formula of
-  :func:`dicblur._blur_sensitivity.subset_noise_variance`, with the reference's noise
+  :func:`dicblur.models.sensitivity.subset_noise_variance`, with the reference's noise
   through its intensities and its gradients, plus the two noises' second-order
   interaction; at W = 0 the match-score bound, eq. 2). Against a Monte Carlo of the
   engine: within 3 % at W = 0..8 px (BENCHMARKS.md).
@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._blur_sensitivity import (
+from .sensitivity import (
     Boundary,
     Derivative,
     Shape,

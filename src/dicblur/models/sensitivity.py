@@ -48,7 +48,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = [
     "directional_derivatives",
@@ -123,7 +123,7 @@ def _spline_gradients(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses)."""
     # imported here: dicblur.dic imports dicblur.metrics, which imports this module
-    from .dic.interpolation import bspline_coefficients, bspline_gradients
+    from ..dic.interpolation import bspline_coefficients, bspline_gradients
 
     order = 3 if derivative == "bspline3" else 5
     coef = bspline_coefficients(image, order=order, dtype=np.float64)
@@ -139,7 +139,7 @@ def _interpolated_at(
     interpolant of degree ``order``. ``h~(x + o) = image(x)`` but for the interpolation
     error, which is the matcher's sub-pixel bias (docs/models.md s. 4)."""
     # imported here: dicblur.dic imports dicblur.metrics, which imports this module
-    from .dic.interpolation import bspline_at_offset, bspline_coefficients
+    from ..dic.interpolation import bspline_at_offset, bspline_coefficients
 
     rows, cols = image.shape
     ext = _extend(image, boundary)
@@ -159,7 +159,7 @@ def _interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[n
     degree ``order`` at the fractional offset ``t`` (px): ``C(d) = sum_m k(m) k(m + d)``
     with ``k`` the interpolator's impulse response, transfer
     ``sum_m beta(t - m) e^{i w m} / sum_m beta(m) e^{-i w m}`` (prefilter, then taps)."""
-    from .dic.interpolation import bspline_kernel
+    from ..dic.interpolation import bspline_kernel
 
     n = 4096
     om = 2.0 * np.pi * np.fft.fftfreq(n)
@@ -187,7 +187,7 @@ def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9) -> NDArr
     ``"central"``: ``(n[j+1] - n[j-1]) / 2``; ``"spectral"``: the ideal derivative
     ``(-1)^(m+1) / m`` of an infinite signal, cut at ``L = 3 subset`` (it decays as 1/m).
     Real and odd."""
-    from .dic.interpolation import bspline_kernel, bspline_kernel_derivative
+    from ..dic.interpolation import bspline_kernel, bspline_kernel_derivative
 
     if derivative == "central":
         return np.array([0.5, 0.0, -0.5])

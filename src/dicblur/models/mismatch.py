@@ -43,6 +43,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
+from .._validation import as_image, check_odd_subset, check_positive
+from ..errors import FitError, InputError
+from ..metrics import resolve_points
+from ._checks import as_blur, as_positive, as_vector
+from ._result import FitResult, check_ci, make_result
 from .sensitivity import (
     Boundary,
     Criterion,
@@ -51,11 +56,6 @@ from .sensitivity import (
     subset_blur_coefficients,
     subset_blur_shifts,
 )
-from .._validation import as_image, check_odd_subset, check_positive
-from ..errors import FitError, InputError
-from ..metrics import _resolve_points
-from ._checks import as_blur, as_positive, as_vector
-from ._result import FitResult, check_ci, make_result
 
 __all__ = [
     "BlurMismatchCurve",
@@ -80,7 +80,7 @@ def _subset_inputs(
     subset = check_odd_subset(subset)
     if boundary not in ("reflect", "periodic"):
         raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
-    return img, subset, _resolve_points(img.shape, subset, step, points)
+    return img, subset, resolve_points(img.shape, subset, step, points)
 
 
 @dataclass(frozen=True)

@@ -32,20 +32,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .sensitivity import (
-    Boundary,
-    Derivative,
-    Shape,
-    _shifts_and_variance,
-    _spectral,
-    _unit,
-)
 from .._validation import check_positive
 from ..errors import InputError
 from ..metrics import directional_sssig
 from ._checks import as_blur
 from .mismatch import _check_subpixel, _subset_inputs
 from .model import BlurUncertaintyModel
+from .sensitivity import (
+    Boundary,
+    Derivative,
+    Shape,
+    box_blurred,
+    shifts_and_variance,
+    unit_direction,
+)
 
 __all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern"]
 
@@ -151,7 +151,7 @@ def _terms(
     # degenerate fixed points (contraction below DEGENERATE) are left out, as DIC's
     # non-converged points; the breakdown counts those below min_contraction
     runs = [
-        _shifts_and_variance(
+        shifts_and_variance(
             img,
             w,
             pts,
@@ -187,14 +187,14 @@ def _terms(
             axis=1
         )
         mis_var = np.nanvar(np.where(ok, xis, np.nan), axis=2).mean(axis=0)
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     angle = math.degrees(math.atan2(dy, dx))
     # SSSIG along the motion as dicblur.sssig and the campaigns compute it
     s = np.array(
         [
             float(
                 directional_sssig(
-                    img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0],
+                    img if wl == 0 else box_blurred(img, boundary, dy, dx, float(wl)),
                     pts,
                     subset=subset,
                     angle=angle,

@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..models.sensitivity import subset_blur_response
 from ..errors import InputError
 from ..metrics import estimate_noise
+from ..models.sensitivity import subset_blur_response
 
 __all__ = [
     "ANGLE_STEP",

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import fft as sfft
 
-from ._validation import as_image, check_choice, check_finite_number, check_positive, describe
+from .checks import as_image, check_choice, check_finite_number, check_positive, describe
 from .errors import InputError
 
 __all__ = [

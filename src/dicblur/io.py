@@ -35,7 +35,7 @@ from typing import IO, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validation import as_image
+from .checks import as_image
 from .errors import ImageReadError, InputError
 
 __all__ = [

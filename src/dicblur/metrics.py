@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from ._validation import (
+from .checks import (
     as_image,
     check_choice,
     check_odd_subset,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import describe
+from ..checks import describe
 from ..errors import InputError
 
 

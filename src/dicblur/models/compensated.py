@@ -29,7 +29,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_image, check_choice, check_odd_subset, check_positive, describe
+from ..checks import as_image, check_choice, check_odd_subset, check_positive, describe
 from ..dic.compensation import blur_reference
 from ..dic.icgn import raw_jacobian
 from ..dic.interpolation import bspline_coefficients, bspline_gradients

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import describe
+from ..checks import describe
 from ..errors import FitError, InputError
 from ._checks import as_blur, as_positive, as_vector
 from .decay import fit_sssig_decay

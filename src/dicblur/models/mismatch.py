@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from .._validation import as_image, check_odd_subset, check_positive
+from ..checks import as_image, check_odd_subset, check_positive
 from ..errors import FitError, InputError
 from ..metrics import resolve_points
 from ._checks import as_blur, as_positive, as_vector

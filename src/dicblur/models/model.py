@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from .._validation import check_positive
+from ..checks import check_positive
 from ..errors import FitError, InputError
 from ._checks import as_vector
 from ._result import FitResult, t_quantile

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import check_positive
+from ..checks import check_positive
 from ..errors import InputError
 from ..metrics import directional_sssig
 from ._checks import as_blur

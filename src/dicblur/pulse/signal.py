@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import check_finite_number, check_positive, describe
+from ..checks import check_finite_number, check_positive, describe
 from ..errors import InputError
 
 __all__ = [

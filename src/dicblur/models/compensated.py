@@ -29,13 +29,12 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
-from ..checks import as_image, check_choice, check_odd_subset, check_positive, describe
+from ..checks import as_blur, as_image, check_choice, check_odd_subset, check_positive, describe
 from ..dic.compensation import blur_reference
 from ..dic.icgn import raw_jacobian
 from ..dic.interpolation import bspline_coefficients, bspline_gradients
 from ..errors import InputError
 from ..metrics import directional_sssig, image_gradients, subset_centres
-from ._checks import as_blur
 from .pattern import PatternPrediction
 
 __all__ = ["predict_compensated"]

@@ -32,11 +32,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..checks import check_positive
+from ..checks import as_blur, check_positive, check_subpixel
 from ..errors import InputError
 from ..metrics import directional_sssig
-from ._checks import as_blur
-from .mismatch import _check_subpixel, _subset_inputs
+from .mismatch import subset_inputs
 from .model import BlurUncertaintyModel
 from .sensitivity import (
     Boundary,
@@ -123,7 +122,7 @@ def _offsets(subpixel: float | str | None) -> list[float | None]:
                 f"subpixel={subpixel!r}: use None, 'average' or an offset in [0, 1) px"
             )
         return [(k + 0.5) / N_OFFSETS for k in range(N_OFFSETS)]
-    return [_check_subpixel(subpixel)]
+    return [check_subpixel(subpixel)]
 
 
 def _terms(
@@ -274,7 +273,7 @@ def predict_from_pattern(
     Gaussian noise of the same std in both images (for a Poisson-Gaussian camera give the
     noise at the mean level, or use :func:`model_from_pattern` with ``plan_exposure``).
     """
-    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     max_shift = check_positive(max_shift, "max_shift")
     lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
@@ -354,7 +353,7 @@ def model_from_pattern(
     """
     from .fit import fit_blur_model
 
-    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
     if np.unique(w).size < 4:

@@ -42,8 +42,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import fft as sfft
 
-from .checks import as_image, check_choice, check_finite_number, check_positive, describe
-from .errors import InputError
+from ..checks import as_image, check_choice, check_finite_number, check_positive, describe
+from ..errors import InputError
 
 __all__ = [
     "AcceleratedMotion",
@@ -552,7 +552,7 @@ def _linear_fast(
     vec = _check_motion(motion)
     if k is None or abs(vec[0]) + abs(vec[1]) > k:
         return None
-    from ._blur_kernels import apply_linear_dirichlet
+    from .kernels import apply_linear_dirichlet
 
     fy, fx, ny, nx = _grid(shape)
     dy, dx = float(vec[0]), float(vec[1])

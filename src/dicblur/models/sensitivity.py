@@ -62,6 +62,7 @@ __all__ = [
     "directional_derivatives",
     "shifts_and_variance",
     "spectral_derivatives",
+    "spline_gradients",
     "subset_blur_coefficients",
     "subset_blur_response",
     "subset_blur_shifts",
@@ -140,10 +141,11 @@ def box_blurred(
     return spectral_derivatives(image, boundary, dy, dx, blur=blur)[0]
 
 
-def _spline_gradients(
+def spline_gradients(
     image: NDArray[np.float64], derivative: str
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses)."""
+    """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses),
+    ``derivative`` "bspline3" or "bspline5"; shape (rows, cols) each, GL / px."""
     order = 3 if derivative == "bspline3" else 5
     coef = bspline_coefficients(image, order=order, dtype=np.float64)
     return bspline_gradients(coef, order, image.shape)
@@ -340,7 +342,7 @@ def directional_derivatives(
     if derivative != "central":
         fy, fx, fdd = spectral_derivatives(image, boundary, dy, dx)
         if derivative in ("bspline3", "bspline5"):
-            fy, fx = _spline_gradients(image, derivative)
+            fy, fx = spline_gradients(image, derivative)
         return fy, fx, fdd
     if boundary not in ("reflect", "periodic"):
         _extend(image, boundary)  # raises the boundary error
@@ -768,7 +770,7 @@ def _blurred_subsets(
         else:
             g = box_blurred(image, boundary, dy, dx, float(wl))
             if derivative in ("bspline3", "bspline5"):  # no spectral pass needed
-                ggy, ggx = _spline_gradients(g, derivative)
+                ggy, ggx = spline_gradients(g, derivative)
             else:
                 ggy, ggx, _ = directional_derivatives(
                     g, motion, derivative=derivative, boundary=boundary
@@ -946,7 +948,7 @@ def subset_skew_coefficients(
     )
     fddd = np.fft.irfft2(np.fft.rfft2(ext) * k**3, s=shp)[:rows, :cols]
     if derivative in ("bspline3", "bspline5"):
-        fy, fx = _spline_gradients(image, derivative)
+        fy, fx = spline_gradients(image, derivative)
     else:
         fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
     win = _Windows(subset, fx, fy, fddd, image)

@@ -68,30 +68,39 @@ class ReproduceResult:
 
 
 # ---------------------------------------------------------------------------------------
+#: Patterns #1 and #2: the DIC Challenge image's label, and the stand-in used without it
+#: (label, generator, seed offset, source).
+_STAND_INS = {
+    "p1": (
+        "#1 Sample 13",
+        "#1 stand-in (fine, low contrast)",
+        stand_in_pattern1,
+        1,
+        "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135",
+    ),
+    "p2": (
+        "#2 Sample 3",
+        "#2 stand-in (coarse, high contrast)",
+        stand_in_pattern2,
+        2,
+        "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190",
+    ),
+}
+
+
 def _study_patterns(s: ReproduceSettings) -> list[StudyPattern]:
-    if s.pattern1 is not None:
-        p1 = load_user_pattern("p1", "#1 Sample 13", s.pattern1, s.size)
-    else:
-        p1 = StudyPattern(
-            "p1",
-            "#1 stand-in (fine, low contrast)",
-            stand_in_pattern1(s.size, s.seed + 1),
-            True,
-            "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135",
-        )
-    if s.pattern2 is not None:
-        p2 = load_user_pattern("p2", "#2 Sample 3", s.pattern2, s.size)
-    else:
-        p2 = StudyPattern(
-            "p2",
-            "#2 stand-in (coarse, high contrast)",
-            stand_in_pattern2(s.size, s.seed + 2),
-            True,
-            "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190",
-        )
+    """The four study patterns: #1 and #2 from the given images or their stand-ins, the
+    emulated camera pattern #3 and the numerical pattern #4."""
+    given = {"p1": s.pattern1, "p2": s.pattern2}
+    pats = []
+    for key, (real, label, make, offset, source) in _STAND_INS.items():
+        path = given[key]
+        if path is not None:
+            pats.append(load_user_pattern(key, real, path, s.size))
+        else:
+            pats.append(StudyPattern(key, label, make(s.size, s.seed + offset), True, source))
     return [
-        p1,
-        p2,
+        *pats,
         emulated_camera_pattern3(s.size, s.seed + 3),
         numerical_pattern4(s.size, s.seed + 4),
     ]

@@ -61,13 +61,13 @@ def part_a() -> list[dict]:
         rows.append(
             {"case": f"blur_sensitivity 512x512, subset 31, step 10, {shape}", "seconds": t}
         )
-    t_on = _best(lambda: dicblur.pattern_metrics(img, subset=31))
-    t_off = _best(lambda: dicblur.pattern_metrics(img, subset=31, blur_sensitivity=False))
+    t_metrics = _best(lambda: dicblur.pattern_metrics(img, subset=31))
+    t_c = _best(lambda: blur_sensitivity(img, subset=31))
     rows.append(
         {
-            "case": "pattern_metrics 512x512 with c / without c",
-            "seconds": t_on,
-            "ratio": t_on / t_off,
+            "case": "pattern_metrics 512x512 / blur_sensitivity on its subsets",
+            "seconds": t_metrics,
+            "ratio": (t_metrics + t_c) / t_metrics,
         }
     )
     w = np.arange(0.0, 10.01, 0.5)

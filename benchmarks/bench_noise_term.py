@@ -41,8 +41,8 @@ from pathlib import Path
 import numpy as np
 
 import dicblur
-from dicblur._blur_sensitivity import _shifts_and_variance
 from dicblur.models import predict_from_pattern
+from dicblur.models.sensitivity import shifts_and_variance
 
 OUT = Path(__file__).resolve().parent / "results" / "noise_term.json"
 # /work/shared/data/real next to the checkout (main or a worktree under /work/wt)
@@ -156,7 +156,7 @@ def predict(img: np.ndarray, boundary: str, row: dict) -> dict:
     )
     assert pr.u_noise_reference is not None and pr.u_noise_current is not None
     assert pr.u_noise_interaction is not None
-    old = _shifts_and_variance(
+    old = shifts_and_variance(
         img,
         [w],
         pts,

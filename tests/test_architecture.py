@@ -20,16 +20,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "dicblur"
 
-# The only private names still imported across modules: the noise-term work edits these
-# files now; moved by lead after merge (see pyproject.toml's import-linter ignores too).
-PRIVATE_ALLOWED = {
-    ("models/mismatch.py", "_resolve_points"),
-    ("models/pattern.py", "_shifts_and_variance"),
-    ("models/pattern.py", "_spectral"),
-    ("models/pattern.py", "_unit"),
-    ("models/pattern.py", "_check_subpixel"),
-    ("models/pattern.py", "_subset_inputs"),
-}
+# Private names still imported across modules, each with its reason (none left: keep it so).
+PRIVATE_ALLOWED: set[tuple[str, str]] = set()
 
 
 def lint(src_parent: Path | None = None) -> subprocess.CompletedProcess[str]:

@@ -10,12 +10,8 @@ import pytest
 
 from dicblur import speckle_pattern
 from dicblur.report import claims
-from dicblur.report.claims import (
-    algorithm1_translation,
-    judge_interval,
-    ratio_interval,
-    spearman_interval,
-)
+from dicblur.report.claims import judge_interval, ratio_interval, spearman_interval
+from dicblur.report.experiments import algorithm1_translation
 from dicblur.report.html import markdown_to_html
 
 
@@ -79,8 +75,8 @@ def test_algorithm1_translates_by_half_the_motion_on_the_image():
     img = speckle_pattern((64, 96), speckle_size=4, density=0.5, softness=0.5, seed=1)
     for w in (1.0, 3.5, 7.0):
         r = algorithm1_translation(img, w)
-        assert abs(r["translation"] - w / 2) < 1e-9
-        assert r["asymmetry"] < 1e-9
+        assert abs(r.translation - w / 2) < 1e-9
+        assert r.asymmetry < 1e-9
 
 
 def test_algorithm1_check_detects_an_off_centre_kernel(monkeypatch):
@@ -99,7 +95,7 @@ def test_algorithm1_check_detects_an_off_centre_kernel(monkeypatch):
     monkeypatch.setattr(blur, "motion_blur", off_centre)
     img = speckle_pattern((64, 96), speckle_size=4, density=0.5, softness=0.5, seed=1)
     r = algorithm1_translation(img, 4.0)
-    assert abs(r["translation"] - 2.0) > 0.1
+    assert abs(r.translation - 2.0) > 0.1
 
 
 def test_markdown_renders_as_html_not_pre():

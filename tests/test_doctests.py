@@ -7,7 +7,13 @@ import importlib
 
 import pytest
 
-MODULES = ["dicblur.blur", "dicblur.patterns", "dicblur.metrics", "dicblur.dic.correlator"]
+MODULES = [
+    "dicblur.blur.synthesis",
+    "dicblur.blur.units",
+    "dicblur.patterns",
+    "dicblur.metrics",
+    "dicblur.dic.correlator",
+]
 
 
 @pytest.mark.parametrize("name", MODULES)

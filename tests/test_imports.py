@@ -53,6 +53,15 @@ def test_import_dicblur_dic_pulls_neither_labelled_nor_distributed_nor_models():
         assert not {m for m in ours if m.startswith(f"dicblur.{stage}")}, stage
 
 
+def test_metrics_and_checks_stay_below_the_models_and_the_engine():
+    # pattern_metrics reports image measurements only: the model's blur sensitivity c
+    # (which needs the DIC interpolant) is asked of dicblur.models (issue 16)
+    mods = imported_after("import dicblur.metrics, dicblur.checks")
+    ours = {m for m in mods if m.startswith("dicblur.")}
+    assert not {m for m in ours if m.startswith(("dicblur.models", "dicblur.dic"))}
+    assert "numba" not in top(mods)
+
+
 @pytest.mark.parametrize("argv", [["--version"], ["--help"]])
 def test_cli_version_and_help_import_only_the_cli(argv):
     mods = imported_after(

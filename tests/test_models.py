@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -569,14 +570,20 @@ def test_blur_sensitivity_options_are_checked():
         blur_mismatch_curve(np.full((64, 64), 9.0), [1.0], subset=21)
 
 
-def test_blur_sensitivity_consistency():
+def test_blur_sensitivity_consistency(tmp_path, capsys):
     img = dicblur.speckle_pattern((128, 128), speckle_size=4.0, seed=2)
-    pm = dicblur.pattern_metrics(img, subset=21)
     bs = blur_sensitivity(img, subset=21)
-    assert pm.blur_sensitivity_c == pytest.approx(bs.c, rel=1e-12)
-    assert (
-        dicblur.pattern_metrics(img, subset=21, blur_sensitivity=False).blur_sensitivity_c is None
+    # `dicblur pattern metrics` shows the model's c beside the image metrics, on the same
+    # subsets; the image metrics themselves hold no model quantity (metrics is below models)
+    dicblur.save_image(tmp_path / "p.tif", img, bit_depth=16)
+    from dicblur.cli import main
+
+    assert main(["pattern", "metrics", str(tmp_path / "p.tif"), "--subset", "21", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["blur_sensitivity_c"] == pytest.approx(
+        blur_sensitivity(dicblur.load_image(tmp_path / "p.tif"), subset=21).c, rel=1e-12
     )
+    assert not hasattr(dicblur.pattern_metrics(img, subset=21), "blur_sensitivity_c")
     # intensity scaling does not change c; nor does the sign of the image
     assert blur_sensitivity(-img, subset=21).c == pytest.approx(bs.c, rel=1e-9)
 
@@ -721,7 +728,7 @@ def test_model_from_pattern_follows_the_prediction_and_plans():
 def test_interpolated_noise_covariance_matches_simulation():
     # white noise through the engine's own B-spline interpolant at a fractional offset:
     # the covariance the sub-pixel noise term uses (docs/models.md s. 4)
-    from dicblur._blur_sensitivity import _interpolated_at, _interpolated_noise_covariance
+    from dicblur.models.sensitivity import _interpolated_at, _interpolated_noise_covariance
 
     rng = np.random.default_rng(5)
     noise = rng.standard_normal((64, 4096))

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import dicblur
-from dicblur._blur_sensitivity import _shifts_and_variance
 from dicblur.models import fit_mismatch, mismatch_model, predict_from_pattern
 from dicblur.models.decay import sssig_decay
 from dicblur.models.mismatch import noise_growth
+from dicblur.models.sensitivity import shifts_and_variance
 
 SUB = 31
 
@@ -56,7 +56,7 @@ def test_reference_and_current_shares_match_a_monte_carlo_of_the_engine():
     assert 0 < pr.u_noise_interaction[0] ** 2 < 0.02 * pr.u_noise[0] ** 2
     assert pr.u_noise_reference[0] ** 2 == pytest.approx(mc_ref, rel=0.15)
     assert pr.u_noise_current[0] ** 2 == pytest.approx(mc_cur, rel=0.15)
-    old = _shifts_and_variance(
+    old = shifts_and_variance(
         img,
         [wl],
         pts,
@@ -90,8 +90,8 @@ def test_no_mismatch_no_extra_term():
         chunk=256,
         variance=True,
     )
-    new = _shifts_and_variance(img, [0.0], pts, 21, complete=True, **kw)[1]
-    old = _shifts_and_variance(img, [0.0], pts, 21, complete=False, **kw)[1]
+    new = shifts_and_variance(img, [0.0], pts, 21, complete=True, **kw)[1]
+    old = shifts_and_variance(img, [0.0], pts, 21, complete=False, **kw)[1]
     assert new is not None and old is not None
     np.testing.assert_allclose(new[:2], old[:2], rtol=1e-12)
     np.testing.assert_allclose(new[0], new[1], rtol=1e-10)

@@ -415,7 +415,7 @@ def test_kernel_skew_from_track_and_its_bias():
     """An accelerating blur shifts IC-GN off the time-average position by about
     (kappa_3 / 6) (J^T P J)^-1 J^T P f_ddd, the same sign for every subset; kappa_3 comes
     from the fitted track."""
-    from dicblur._blur_sensitivity import subset_skew_coefficients
+    from dicblur.models.sensitivity import subset_skew_coefficients
     from dicblur.track.kinematics import exposure_skew
 
     fps, f, a, t = 2000.0, 200.0, 10.0, 0.45e-3

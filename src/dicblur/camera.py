@@ -25,7 +25,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validation import as_image, check_choice, check_positive, describe
+from .checks import as_image, check_choice, check_positive, describe
 from .errors import InputError
 from .patterns import SeedLike, make_rng
 

@@ -35,7 +35,7 @@ from typing import IO, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validation import as_image
+from .checks import as_image
 from .errors import ImageReadError, InputError
 
 __all__ = [
@@ -361,11 +361,16 @@ def read_image_header(path: str | os.PathLike[str]) -> ImageHeader:
     except ImageReadError:
         raise
     except Exception as exc:
-        raise ImageReadError(
-            f"path={str(p)!r}: cannot be read as an image ({type(exc).__name__}: "
-            f"{_short(exc)}); is the file truncated or not an image? Supported: TIFF, PNG, "
-            "BMP, JPEG"
-        ) from exc
+        raise _unreadable(p, exc) from exc
+
+
+def _unreadable(p: Path, exc: BaseException) -> ImageReadError:
+    """The error of a file whose decoder failed (``exc``): truncated, or not an image."""
+    return ImageReadError(
+        f"path={str(p)!r}: cannot be read as an image ({type(exc).__name__}: "
+        f"{_short(exc)}); is the file truncated or not an image? Supported: TIFF, PNG, "
+        "BMP, JPEG"
+    )
 
 
 def _short(exc: BaseException) -> str:
@@ -496,11 +501,7 @@ def load_image(
     except (ImageReadError, InputError):
         raise
     except Exception as exc:
-        raise ImageReadError(
-            f"path={str(p)!r}: cannot be read as an image ({type(exc).__name__}: "
-            f"{_short(exc)}); is the file truncated or not an image? Supported: TIFF, PNG, "
-            "BMP, JPEG"
-        ) from exc
+        raise _unreadable(p, exc) from exc
     arr = _to_grey(np.asarray(arr), p)
     if np.iscomplexobj(arr) or arr.dtype == object:
         raise ImageReadError(

@@ -28,8 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from ._blur_sensitivity import subset_blur_coefficients
-from ._validation import (
+from .checks import (
     as_image,
     check_choice,
     check_odd_subset,
@@ -52,6 +51,7 @@ __all__ = [
     "mig",
     "pan_sigma",
     "pattern_metrics",
+    "resolve_points",
     "rms_contrast",
     "speckle_size",
     "sssig",
@@ -134,9 +134,12 @@ def _box_sums(
     return sat[r1, c1] - sat[r0, c1] - sat[r1, c0] + sat[r0, c0]
 
 
-def _resolve_points(
+def resolve_points(
     shape: tuple[int, int], subset: int, step: int | None, points: ArrayLike | None
 ) -> NDArray[np.intp]:
+    """Subset centres ``(row, col)``, shape (n, 2): the grid of ``step`` px (default
+    ``subset``, see :func:`subset_centres`) or the given ``points``, each checked to keep
+    its subset one pixel inside an image of ``shape``."""
     if points is not None and step is not None:
         raise InputError("step and points: give one of them, not both")
     if points is None:
@@ -206,7 +209,7 @@ def sssig(
     check_choice(direction, "direction", ("x", "y"))
     gy, gx = image_gradients(img, gradient=gradient)
     g = gx if direction == "x" else gy
-    pts = _resolve_points(img.shape, subset, step, points)
+    pts = resolve_points(img.shape, subset, step, points)
     return _box_sums(g * g, pts, subset)
 
 
@@ -369,10 +372,8 @@ class PatternMetrics:
 
     Gradients in grey levels / px, SSSIG in (grey levels / px)**2 summed over a subset,
     sizes in px, predictions in px. Prediction fields are ``None`` without a noise level.
-    ``blur_sensitivity_c`` (px / px**2) is the predicted blur-mismatch coefficient ``c``
-    for motion along x and a translation shape function: a sharp reference matched to a copy
-    blurred over ``W`` px scatters by about ``c W**2`` px (std over subsets), see
-    :func:`dicblur.models.blur_sensitivity`; ``None`` when not computed.
+    Image measurements only: the blur sensitivity ``c`` of the pattern is a model quantity
+    (it needs the matcher's interpolant), :func:`dicblur.models.blur_sensitivity`.
     """
 
     shape: tuple[int, int]
@@ -395,7 +396,6 @@ class PatternMetrics:
     match_score_y_mean: float | None = None
     pan_u: float | None = None
     pan_over_match_score: float | None = None
-    blur_sensitivity_c: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of every field."""
@@ -411,7 +411,6 @@ def pattern_metrics(
     noise_sigma: float | None = None,
     step: int | None = None,
     gradient: Gradient = "central",
-    blur_sensitivity: bool = True,
 ) -> PatternMetrics:
     """All pattern metrics of an image as one value.
 
@@ -429,10 +428,6 @@ def pattern_metrics(
     step : int, optional
         Grid step of the subsets (default: ``subset``, non-overlapping).
     gradient : {"central", "sobel"}
-    blur_sensitivity : bool
-        Compute ``blur_sensitivity_c`` (the DIC engine's cubic-spline gradients, ZNSSD,
-        mirror extension, the same subsets; motion along x, translation shape, as
-        :func:`dicblur.models.blur_sensitivity`). ``False`` leaves it ``None``.
 
     Returns
     -------
@@ -467,11 +462,6 @@ def pattern_metrics(
         "sssig_y_std": float(sy.std()),
         "pan_sssig": float(subset**2 * m**2),
     }
-    if blur_sensitivity:
-        pts = _resolve_points(img.shape, subset, step, None)
-        k = subset_blur_coefficients(img, pts, subset, motion=(0.0, 1.0), shape="translation")
-        k = k[np.isfinite(k)]
-        fields["blur_sensitivity_c"] = float(k.std()) if k.size >= 2 else None
     if noise_sigma is not None:
         sigma = check_positive(noise_sigma, "noise_sigma")
         ux = match_score_sigma(sx, sigma)

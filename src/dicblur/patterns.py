@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import integrate, optimize, special
 
-from ._validation import (
+from .checks import (
     check_finite_number,
     check_positive,
     check_seed,

@@ -65,7 +65,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError, InputError
+from ..checks import bad_value, check_choice, check_finite_number, check_integer
+from ..errors import ConfigError, DicblurError, InputError
 from ..io import check_pixels
 
 __all__ = [
@@ -327,37 +328,23 @@ def check_pattern_fits(spec: CampaignSpec, pattern: PatternSpec, shape: tuple[in
 # -- parsing helpers -----------------------------------------------------------------------
 
 
-def _err(key: str, value: Any, why: str) -> ConfigError:
-    text = repr(value)
-    if len(text) > 60:
-        text = text[:57] + "..."
-    return ConfigError(f"{key}={text}: {why}")
+# the shared checks of dicblur.checks, raising ConfigError named by the spec's key
+
+
+def _err(key: str, value: Any, why: str) -> DicblurError:
+    return bad_value(key, value, why, error=ConfigError)
 
 
 def _number(value: Any, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise _err(key, value, "expected a number")
-    x = float(value)
-    if not math.isfinite(x):
-        raise _err(key, value, "must be finite (not nan or inf)")
-    return x
+    return check_finite_number(value, key, strict=True, error=ConfigError)
 
 
 def _int(value: Any, key: str, *, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        else:
-            raise _err(key, value, f"expected an integer >= {minimum}")
-    if value < minimum:
-        raise _err(key, value, f"must be an integer >= {minimum}")
-    return int(value)
+    return check_integer(value, key, minimum=minimum, error=ConfigError)
 
 
 def _choice(value: Any, key: str, choices: tuple[str, ...]) -> str:
-    if not isinstance(value, str) or value not in choices:
-        raise _err(key, value, "unknown option; choose one of " + ", ".join(map(repr, choices)))
-    return value
+    return check_choice(value, key, choices, error=ConfigError)
 
 
 def _list(value: Any, key: str) -> list[Any]:

@@ -114,10 +114,16 @@ def metrics(
     """Print the metrics of IMAGE: SSSIG, MIG, speckle size, contrast, static predictions."""
     from ..io import load_image
     from ..metrics import pattern_metrics
+    from ..models import blur_sensitivity
 
     img = load_image(image)
     pm = pattern_metrics(img, subset=subset, noise_sigma=noise, step=step, gradient=gradient)  # type: ignore[arg-type]
     data = pm.to_dict()
+    # the model's c beside the image metrics (motion along x, translation, the same subsets)
+    try:
+        data["blur_sensitivity_c"] = blur_sensitivity(img, subset=subset, step=step).c
+    except InputError:  # fewer than two textured subsets, or no random texture: no c
+        data["blur_sensitivity_c"] = None
     undefined = [k for k, v in data.items() if isinstance(v, float) and not math.isfinite(v)]
     if undefined:
         # printed as '-' (null in JSON), never as nan or inf

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_positive, describe
+from ..checks import check_positive, describe
 from ..errors import InputError
 from ..io import atomic_path, write_text
 from .family import Candidate

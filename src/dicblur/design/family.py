@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_finite_number, describe
+from ..checks import check_finite_number, describe
 from ..errors import InputError
 
 __all__ = ["DEFAULT_CANDIDATE", "Candidate", "PatternFamily"]

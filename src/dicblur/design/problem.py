@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_finite_number, check_odd_subset, check_positive, describe
+from ..checks import check_finite_number, check_odd_subset, check_positive, describe
 from ..errors import InputError
 
 __all__ = ["DesignProblem", "design_problem", "sine_blur_distribution"]

@@ -36,7 +36,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy import fft as sfft
 
-from .._validation import as_image, check_positive, describe
+from ..checks import as_image, check_positive, describe
 from ..errors import InputError
 from .icgn import N_PARAMS, raw_jacobian
 

@@ -18,7 +18,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import (
+from ..checks import (
     as_image,
     check_choice,
     check_odd_subset,

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from .._validation import check_choice
+from ..checks import check_choice
 from ..errors import InputError
 from . import kernels
 

@@ -20,7 +20,7 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import check_positive, describe
+from ..checks import check_positive, describe
 from ..errors import InputError
 
 __all__ = [

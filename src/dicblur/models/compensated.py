@@ -29,14 +29,13 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_image, check_choice, check_odd_subset, check_positive, describe
+from ..checks import as_blur, as_image, check_choice, check_odd_subset, check_positive, describe
 from ..dic.compensation import blur_reference
 from ..dic.icgn import raw_jacobian
-from ..dic.interpolation import bspline_coefficients, bspline_gradients
 from ..errors import InputError
 from ..metrics import directional_sssig, image_gradients, subset_centres
-from ._checks import as_blur
 from .pattern import PatternPrediction
+from .sensitivity import spline_gradients
 
 __all__ = ["predict_compensated"]
 
@@ -79,9 +78,7 @@ def _gradients(
     if derivative == "central":
         gy, gx = image_gradients(img)
         return gy, gx
-    order = int(derivative[-1])
-    coef = bspline_coefficients(img, order=order, dtype=np.float64)
-    return bspline_gradients(coef, order, img.shape)
+    return spline_gradients(img, derivative)
 
 
 def _noise_variance(

@@ -16,8 +16,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
+from ..checks import as_blur, as_positive
 from ..errors import FitError
-from ._checks import as_blur, as_positive
 from ._result import FitResult, check_ci, make_result
 
 __all__ = [

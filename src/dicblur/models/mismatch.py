@@ -43,7 +43,19 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from .._blur_sensitivity import (
+from ..checks import (
+    as_blur,
+    as_image,
+    as_positive,
+    as_vector,
+    check_odd_subset,
+    check_positive,
+    check_subpixel,
+)
+from ..errors import FitError, InputError
+from ..metrics import resolve_points
+from ._result import FitResult, check_ci, make_result
+from .sensitivity import (
     Boundary,
     Criterion,
     Derivative,
@@ -51,11 +63,6 @@ from .._blur_sensitivity import (
     subset_blur_coefficients,
     subset_blur_shifts,
 )
-from .._validation import as_image, check_odd_subset, check_positive
-from ..errors import FitError, InputError
-from ..metrics import _resolve_points
-from ._checks import as_blur, as_positive, as_vector
-from ._result import FitResult, check_ci, make_result
 
 __all__ = [
     "BlurMismatchCurve",
@@ -68,7 +75,7 @@ __all__ = [
 ]
 
 
-def _subset_inputs(
+def subset_inputs(
     image: ArrayLike,
     subset: int,
     step: int | None,
@@ -80,7 +87,7 @@ def _subset_inputs(
     subset = check_odd_subset(subset)
     if boundary not in ("reflect", "periodic"):
         raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
-    return img, subset, _resolve_points(img.shape, subset, step, points)
+    return img, subset, resolve_points(img.shape, subset, step, points)
 
 
 @dataclass(frozen=True)
@@ -166,7 +173,7 @@ def blur_sensitivity(
     -------
     BlurSensitivity
     """
-    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     k = subset_blur_coefficients(
         img,
         pts,
@@ -286,10 +293,10 @@ def blur_mismatch_curve(
     -------
     BlurMismatchCurve
     """
-    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     w = as_blur(blur, "blur", increasing=False)
     max_shift = check_positive(max_shift, "max_shift")
-    offset = None if subpixel is None else _check_subpixel(subpixel)
+    offset = None if subpixel is None else check_subpixel(subpixel)
     xi = subset_blur_shifts(
         img,
         w,
@@ -327,20 +334,6 @@ def blur_mismatch_curve(
         motion=(float(motion[0]) / n, float(motion[1]) / n),
         shape=str(shape),
     )
-
-
-def _check_subpixel(subpixel: object) -> float:
-    """A sub-pixel offset (px) as a float in [0, 1)."""
-    if (
-        isinstance(subpixel, bool)
-        or not isinstance(subpixel, (int, float))
-        or not (math.isfinite(subpixel) and 0.0 <= subpixel < 1.0)
-    ):
-        raise InputError(
-            f"subpixel={subpixel!r}: give the target's sub-pixel position along "
-            "the motion in [0, 1) px (e.g. 0.5)"
-        )
-    return float(subpixel)
 
 
 def mismatch_terms(

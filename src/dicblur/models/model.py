@@ -11,9 +11,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from .._validation import check_positive
+from ..checks import as_vector, check_positive
 from ..errors import FitError, InputError
-from ._checks import as_vector
 from ._result import FitResult, t_quantile
 from .decay import mbrf as _mbrf
 from .decay import sssig_decay

@@ -7,7 +7,7 @@ image and its exact box blur, subset by subset, for the ZNSSD IC-GN matcher:
   (:func:`~dicblur.models.blur_mismatch_curve`);
 - the noise variance ``var_i(W)``: the response of that fixed point to independent
   Gaussian noise of std ``sigma`` in both images (the sandwich formula of
-  :func:`dicblur._blur_sensitivity.subset_noise_variance`, with the reference's noise
+  :func:`dicblur.models.sensitivity.subset_noise_variance`, with the reference's noise
   through its intensities and its gradients, plus the two noises' second-order
   interaction; at W = 0 the match-score bound, eq. 2). Against a Monte Carlo of the
   engine: within 3 % at W = 0..8 px (BENCHMARKS.md).
@@ -32,20 +32,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._blur_sensitivity import (
+from ..checks import as_blur, check_positive, check_subpixel
+from ..errors import InputError
+from ..metrics import directional_sssig
+from .mismatch import subset_inputs
+from .model import BlurUncertaintyModel
+from .sensitivity import (
     Boundary,
     Derivative,
     Shape,
-    _shifts_and_variance,
-    _spectral,
-    _unit,
+    box_blurred,
+    shifts_and_variance,
+    unit_direction,
 )
-from .._validation import check_positive
-from ..errors import InputError
-from ..metrics import directional_sssig
-from ._checks import as_blur
-from .mismatch import _check_subpixel, _subset_inputs
-from .model import BlurUncertaintyModel
 
 __all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern"]
 
@@ -123,7 +122,7 @@ def _offsets(subpixel: float | str | None) -> list[float | None]:
                 f"subpixel={subpixel!r}: use None, 'average' or an offset in [0, 1) px"
             )
         return [(k + 0.5) / N_OFFSETS for k in range(N_OFFSETS)]
-    return [_check_subpixel(subpixel)]
+    return [check_subpixel(subpixel)]
 
 
 def _terms(
@@ -151,7 +150,7 @@ def _terms(
     # degenerate fixed points (contraction below DEGENERATE) are left out, as DIC's
     # non-converged points; the breakdown counts those below min_contraction
     runs = [
-        _shifts_and_variance(
+        shifts_and_variance(
             img,
             w,
             pts,
@@ -187,14 +186,14 @@ def _terms(
             axis=1
         )
         mis_var = np.nanvar(np.where(ok, xis, np.nan), axis=2).mean(axis=0)
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     angle = math.degrees(math.atan2(dy, dx))
     # SSSIG along the motion as dicblur.sssig and the campaigns compute it
     s = np.array(
         [
             float(
                 directional_sssig(
-                    img if wl == 0 else _spectral(img, boundary, dy, dx, blur=float(wl))[0],
+                    img if wl == 0 else box_blurred(img, boundary, dy, dx, float(wl)),
                     pts,
                     subset=subset,
                     angle=angle,
@@ -274,7 +273,7 @@ def predict_from_pattern(
     Gaussian noise of the same std in both images (for a Poisson-Gaussian camera give the
     noise at the mean level, or use :func:`model_from_pattern` with ``plan_exposure``).
     """
-    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     max_shift = check_positive(max_shift, "max_shift")
     lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
@@ -354,7 +353,7 @@ def model_from_pattern(
     """
     from .fit import fit_blur_model
 
-    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
     if np.unique(w).size < 4:

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from .._validation import as_image, check_positive, check_textured
+from ..checks import as_image, check_positive, check_textured
 from ..errors import InputError
 from .model import BlurUncertaintyModel
 from .units import parse_quantity

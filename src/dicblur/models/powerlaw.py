@@ -50,8 +50,8 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..checks import as_blur, as_positive, as_vector
 from ..errors import InputError
-from ._checks import as_blur, as_positive, as_vector
 from ._result import FitResult, check_ci, make_result
 
 __all__ = ["edge_driven_range", "fit_power_law", "power_law"]

@@ -11,7 +11,7 @@ import math
 import re
 from typing import Literal
 
-from .._validation import describe
+from ..checks import describe
 from ..errors import InputError
 
 __all__ = ["Kind", "parse_quantity"]

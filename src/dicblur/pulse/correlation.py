@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from .._validation import check_positive
+from ..checks import check_positive
 from .signal import PulseTrain, as_widths, check_width, edge_length
 
 __all__ = [

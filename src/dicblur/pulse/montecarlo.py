@@ -49,7 +49,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import check_choice, check_finite_number, check_positive, describe
+from ..checks import check_choice, check_finite_number, check_positive, describe
 from ..errors import InputError
 from ..patterns import SeedLike
 from .correlation import (

@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import check_finite_number, check_positive, describe
+from ..checks import check_finite_number, check_positive, describe
 from ..errors import InputError
 
 __all__ = [
@@ -262,18 +262,37 @@ def closed_form_metrics(train: PulseTrain, w: ArrayLike, *, n_periods: float = 1
     )
 
 
-def _metrics_from_samples(
-    b: NDArray[np.float64], h: float, n_periods: float, w: float, method: str
+def _gradient_stats(
+    f: NDArray[np.float64], d: NDArray[np.float64]
 ) -> tuple[float, float, float, float, float]:
-    d = (np.roll(b, -1) - b) / h  # forward differences over one period (circular)
+    """``(mean |d|, mean d, var d, max f - min f, sum d**2)`` of samples ``f`` of one
+    signal and their derivative ``d``: MIG, gradient mean and variance, contrast, and
+    the SSSIG sum before its scaling to the window."""
     mean = float(d.mean())
-    var = float(np.mean((d - mean) ** 2))
     return (
         float(np.mean(np.abs(d))),
         mean,
-        var,
-        float(b.max() - b.min()),
-        float(n_periods * np.sum(d**2) * h),
+        float(np.mean((d - mean) ** 2)),
+        float(f.max() - f.min()),
+        float(np.sum(d**2)),
+    )
+
+
+def _pulse_metrics(
+    wa: NDArray[np.float64], out: NDArray[np.float64], n_periods: float, method: str
+) -> PulseMetrics:
+    """:class:`PulseMetrics` from the rows of ``out`` (shape (5, n): the metrics of
+    :func:`_gradient_stats`, the SSSIG scaled) at the widths ``wa``."""
+    return PulseMetrics(
+        w=wa,
+        m=np.full(wa.shape, np.nan),
+        mig=out[0],
+        gradient_mean=out[1],
+        gradient_variance=out[2],
+        contrast=out[3],
+        sssig=out[4],
+        n_periods=n_periods,
+        method=method,
     )
 
 
@@ -328,18 +347,10 @@ def numeric_metrics(
         idx = np.arange(kernel.size) % n
         np.add.at(kfull, idx, kernel)
         b = np.fft.irfft(np.fft.rfft(cells) * np.conj(np.fft.rfft(kfull)), n)
-        out[:, i] = _metrics_from_samples(b, h, n_periods, wi, "numeric")
-    return PulseMetrics(
-        w=wa,
-        m=np.full(wa.shape, np.nan),
-        mig=out[0],
-        gradient_mean=out[1],
-        gradient_variance=out[2],
-        contrast=out[3],
-        sssig=out[4],
-        n_periods=n_periods,
-        method=f"numerical convolution, h = 1/{supersample} px",
-    )
+        d = (np.roll(b, -1) - b) / h  # forward differences over one period (circular)
+        stats = _gradient_stats(b, d)
+        out[:, i] = (*stats[:4], float(n_periods * stats[4] * h))
+    return _pulse_metrics(wa, out, n_periods, f"numerical convolution, h = 1/{supersample} px")
 
 
 def pixel_metrics(
@@ -374,25 +385,8 @@ def pixel_metrics(
             d = spectral_derivative(f)
         else:
             raise InputError(f"gradient={gradient!r}: choose 'forward', 'central' or 'spectral'")
-        mean = float(d.mean())
-        out[:, i] = (
-            float(np.mean(np.abs(d))),
-            mean,
-            float(np.mean((d - mean) ** 2)),
-            float(f.max() - f.min()),
-            float(np.sum(d**2)),
-        )
-    return PulseMetrics(
-        w=wa,
-        m=np.full(wa.shape, np.nan),
-        mig=out[0],
-        gradient_mean=out[1],
-        gradient_variance=out[2],
-        contrast=out[3],
-        sssig=out[4],
-        n_periods=float(n_periods),
-        method=f"pixel samples, {gradient} differences",
-    )
+        out[:, i] = _gradient_stats(f, d)
+    return _pulse_metrics(wa, out, float(n_periods), f"pixel samples, {gradient} differences")
 
 
 def spectral_derivative(f: NDArray[np.float64]) -> NDArray[np.float64]:

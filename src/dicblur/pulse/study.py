@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from .._validation import describe
+from ..checks import describe
 from ..errors import InputError
 from ..patterns import SeedLike
 from .correlation import chi2_regime_a, min_chi2

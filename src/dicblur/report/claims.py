@@ -1,8 +1,9 @@
 """The claims table: each claim of Lavatelli & Zappa (2017), our number, and a verdict.
 
 Every verdict follows a stated, numeric criterion; "differs" is reported, not hidden.
-Two small extra experiments (rigid offset, equally blurred reference) are run here on
-pattern #4 because the main campaign cannot answer them.
+The verdicts only judge numbers: the study's (:class:`~dicblur.report.records.StudyData`)
+and those of the claims' own experiments on pattern #4, run before as a stage of their
+own (:mod:`dicblur.report.experiments`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from typing import Any
 import numpy as np
 
 from ._data import series, spearman
+from .experiments import ClaimExperiments
+from .records import StudyData
 
 __all__ = ["evaluate_claims", "judge_interval", "ratio_interval", "spearman_interval"]
 
@@ -77,36 +80,6 @@ def spearman_interval(a: Any, b: Any, *, level: float = 0.95) -> tuple[float, fl
     return rho, math.tanh(z - half), math.tanh(z + half)
 
 
-def algorithm1_translation(image: np.ndarray, blur: float) -> dict[str, float]:
-    """Translation and symmetry of Algorithm 1 measured on the image itself.
-
-    The blurred image's spectrum over the sharp one's is the transfer function H(f) of
-    the blur. For Algorithm 1 along x it is exp(-i pi f X) times a real (Dirichlet) kernel:
-    the phase at the lowest frequency along x gives the translation (X/2 expected), and
-    H(f) exp(i pi f X) must be real at every frequency (a symmetric kernel: no other
-    shift). Returns the measured translation (px) and the largest imaginary residual
-    relative to max |H|.
-    """
-    from ..blur import motion_blur
-
-    img = np.asarray(image, dtype=np.float64)
-    b = motion_blur(img, (0.0, float(blur)))
-    fi = np.fft.fft(img, axis=1)
-    fb = np.fft.fft(b, axis=1)
-    n = img.shape[1]
-    f = np.fft.fftfreq(n)
-    # per-column-frequency transfer function, averaged over rows weighted by |I|^2
-    num = np.sum(fb * np.conj(fi), axis=0)
-    den = np.sum(np.abs(fi) ** 2, axis=0)
-    # the Nyquist bin carries no phase (a real signal): leave it out
-    ok = (den > 1e-12 * den.max()) & (np.abs(f) < 0.5)
-    h = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
-    shift = float(-np.angle(h[1]) / (2 * math.pi * f[1]))
-    centred = h * np.exp(1j * math.pi * f * blur)
-    resid = float(np.max(np.abs(centred.imag[ok])) / np.max(np.abs(h[ok])))
-    return {"translation": shift, "expected": blur / 2.0, "asymmetry": resid}
-
-
 def _claim(
     cid: str, section: str, claim: str, paper: str, ours: str, verdict: str, why: str
 ) -> dict[str, Any]:
@@ -119,54 +92,6 @@ def _claim(
         "verdict": verdict,
         "why": why,
     }
-
-
-def _mini_experiments(
-    image: np.ndarray, settings: Any, blur: tuple[float, ...], replicates: int
-) -> dict[str, Any]:
-    """u_e on pattern #4 with (a) a rigid offset of 0.5 px added to the motion and (b) a
-    reference blurred like the current image (independent noise), against (c) the
-    campaign's case (sharp reference, offset 0). Same noise, subset, step; ``replicates``
-    independent noise realisations of every image, paired across the three cases."""
-    from ..blur import motion_blur
-    from ..camera import add_gaussian_noise
-    from ..dic import Correlator
-
-    rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 21]))
-    sig = settings.main_noise
-    kw = {"subset": settings.subset, "step": settings.poi_step, "shape": "translation"}
-    out: dict[str, Any] = {
-        "blur": list(blur),
-        "replicates": replicates,
-        "sharp_ref": [],
-        "offset": [],
-        "blurred_ref": [],
-    }
-    k = 100
-    t = np.linspace(0.0, 1.0, k + 1)
-    for w in blur:
-        sharp = motion_blur(image, (0.0, w))
-        # the same linear motion with a constant 0.5 px added to every position
-        # (paper Section III: "adding a constant to the values of p")
-        path = np.stack([np.zeros_like(t), 0.5 + w * t], axis=1)
-        shifted = motion_blur(image, None, trajectory=path)
-        per: dict[str, list[float]] = {"sharp_ref": [], "offset": [], "blurred_ref": []}
-        for _ in range(replicates):
-            base = Correlator(add_gaussian_noise(image, sig, rng=rng), **kw)
-            cur = add_gaussian_noise(sharp, sig, rng=rng)
-            cur_off = add_gaussian_noise(shifted, sig, rng=rng)
-            ref_b = Correlator(add_gaussian_noise(sharp, sig, rng=rng), **kw)
-            for key, corr, img in (
-                ("sharp_ref", base, cur),
-                ("offset", base, cur_off),
-                ("blurred_ref", ref_b, cur),
-            ):
-                res = corr.correlate(img)
-                u = np.asarray(res.u)[np.asarray(res.converged)]
-                per[key].append(float(np.std(u, ddof=1)))
-        for key, vals in per.items():
-            out[key].append(vals)
-    return out
 
 
 def _fmt_ci(v: tuple[float, float, float], digits: int = 2) -> str:
@@ -182,25 +107,18 @@ def _combine(verdicts: list[str]) -> str:
     return "inconclusive"
 
 
-def evaluate_claims(
-    *,
-    ds: Any,
-    ds_family: Any,
-    pats: list[Any],
-    static: dict[str, Any],
-    fits: dict[str, Any],
-    models: dict[str, Any],
-    family: list[dict[str, Any]],
-    pulse: Any,
-    settings: Any,
-    valid: dict[str, np.ndarray],
-) -> list[dict[str, Any]]:
-    """Evaluate the claims; returns a list of JSON-ready rows.
+def evaluate_claims(study: StudyData, experiments: ClaimExperiments) -> list[dict[str, Any]]:
+    """Judge the claims on the study's numbers and the claims' experiments (run before,
+    :func:`dicblur.report.experiments.run_claim_experiments`); returns JSON-ready rows.
 
-    ``valid[k]`` marks the blur values where DIC worked (>= 90 % of POIs converged); claims
-    about the random error are judged there only, and say so.
+    ``study.fits.valid[k]`` marks the blur values where DIC worked (>= 90 % of POIs
+    converged); claims about the random error are judged there only, and say so.
     """
-    s = settings
+    s = study.settings
+    pats, static, pulse = study.patterns, study.static, study.pulse
+    ds = study.campaigns.study
+    fits, models, valid = study.fits.fits, study.fits.models, study.fits.valid
+    family = study.fits.family
     n = s.main_noise
     keys = [p.key for p in pats]
     labels = {p.key: p.label for p in pats}
@@ -208,10 +126,9 @@ def evaluate_claims(
     rows: list[dict[str, Any]] = []
 
     # C1: Algorithm 1 on the image itself (a property of the blur, not of DIC).
-    p4 = next(p for p in pats if p.key == "p4")
-    alg = [algorithm1_translation(p4.image, w) for w in (1.0, 3.0, 6.0)]
-    dev = max(abs(r["translation"] - r["expected"]) for r in alg)
-    asym = max(r["asymmetry"] for r in alg)
+    alg = experiments.algorithm1
+    dev = max(abs(r.translation - r.expected) for r in alg)
+    asym = max(r.asymmetry for r in alg)
     rows.append(
         _claim(
             "C1",
@@ -219,7 +136,7 @@ def evaluate_claims(
             "Algorithm 1 returns the image translated by X/2 and blurred by W = |X|.",
             "stated",
             "translation from the spectrum of the blurred / sharp image: "
-            + ", ".join(f"{r['translation']:.6f} px (X = {2 * r['expected']:g})" for r in alg)
+            + ", ".join(f"{r.translation:.6f} px (X = {2 * r.expected:g})" for r in alg)
             + f"; max |translation - X/2| = {dev:.1e} px, kernel asymmetry {asym:.1e}",
             "agrees" if (dev < 1e-6 and asym < 1e-6) else "differs",
             "criterion: translation within 1e-6 px of X/2 and a symmetric (real, centred) "
@@ -254,10 +171,10 @@ def evaluate_claims(
         )
     )
 
-    # Extra experiments on pattern #4, with paired noise replicates.
-    reps = 4 if s.quick else 12
-    mini = _mini_experiments(p4.image, s, (3.0, 6.0), reps)
-    off = [ratio_interval(o, r) for o, r in zip(mini["offset"], mini["sharp_ref"], strict=True)]
+    # The experiments on pattern #4, with paired noise replicates.
+    mini = experiments.paired
+    reps = mini.replicates
+    off = [ratio_interval(o, r) for o, r in zip(mini.offset, mini.sharp_ref, strict=True)]
     rows.append(
         _claim(
             "C3",
@@ -265,14 +182,14 @@ def evaluate_claims(
             "The rigid part of the motion does not change the blur uncertainty.",
             "verified in [35]",
             "u_e(offset 0.5 px) / u_e(offset 0) = "
-            + ", ".join(f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(off, mini["blur"], strict=True)),
+            + ", ".join(f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(off, mini.blur, strict=True)),
             _combine([judge_interval(r[1], r[2], accept=(0.85, 1.15)) for r in off]),
             f"criterion: ratio within 15 % of 1; 95 % interval over {reps} paired noise "
             "realisations (pattern #4); inconclusive when the interval straddles the bound.",
         )
     )
     same = [
-        ratio_interval(o, r) for o, r in zip(mini["blurred_ref"], mini["sharp_ref"], strict=True)
+        ratio_interval(o, r) for o, r in zip(mini.blurred_ref, mini.sharp_ref, strict=True)
     ]
     rows.append(
         _claim(
@@ -282,7 +199,7 @@ def evaluate_claims(
             "(a sharp reference is the worst case).",
             "stated (ref [5])",
             "u_e(blurred ref) / u_e(sharp ref) = "
-            + ", ".join(f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(same, mini["blur"], strict=True)),
+            + ", ".join(f"{_fmt_ci(r)} (W={w:g})" for r, w in zip(same, mini.blur, strict=True)),
             _combine([judge_interval(r[1], r[2], accept=(0.0, 1.0)) for r in same]),
             f"criterion: ratio < 1 at every W tested; 95 % interval over {reps} paired noise "
             "realisations (pattern #4).",

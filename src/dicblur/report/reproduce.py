@@ -31,11 +31,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .._version import package_versions
 from ..errors import InputError
 from ..io import atomic_path, check_output, write_text
 from ._data import series
+from .records import Campaigns, ReproduceSettings, StudyData, StudyFits
 from .study import (
     StudyPattern,
     emulated_camera_pattern3,
@@ -54,84 +56,6 @@ MIN_CONVERGED = 0.9
 
 
 @dataclass(frozen=True)
-class ReproduceSettings:
-    """Settings of a reproduce run.
-
-    Attributes
-    ----------
-    out : Path
-        Output folder.
-    quick : bool
-        Coarser W grid (0..10 px, step 0.5 instead of 0.1), POIs every 20 px instead of
-        10, a smaller family and fewer 1-D trials: same figures and tables.
-    pattern1, pattern2 : Path or None
-        DIC Challenge Sample 13 and Sample 3 images (central crop); None: stand-ins.
-    size : int
-        Side of the square study images (px).
-    subset : int
-        Subset size (px).
-    main_noise : float
-        Noise std (GL) of the paper-like fits.
-    noise_levels : tuple of float
-        Noise levels of the campaign (GL, per image).
-    seed : int
-        Base seed of everything random.
-    blur_step_px, family, trials : optional
-        Override the mode's W step (px), the family's speckle sizes (px) and the 1-D
-        Monte Carlo trials.
-    pulse_dependence : bool
-        Run the 1-D study's dependence on the choices the paper leaves open (signal
-        length, shifted signal, interpolation).
-    workers, scheduler, serial
-        Campaign execution (see :func:`dicblur.campaign.run_campaign`).
-    command : str
-        The command line, recorded in the outputs.
-    """
-
-    out: Path
-    quick: bool = False
-    pattern1: Path | None = None
-    pattern2: Path | None = None
-    size: int = 512
-    subset: int = 31
-    main_noise: float = 2.0
-    noise_levels: tuple[float, ...] = (0.5, 2.0, 4.0)
-    seed: int = 2017
-    blur_step_px: float | None = None
-    family: tuple[float, ...] | None = None
-    trials: int | None = None
-    pulse_dependence: bool = True
-    workers: int | None = None
-    scheduler: str | None = None
-    serial: bool = False
-    command: str = ""
-
-    @property
-    def blur_step(self) -> float:
-        if self.blur_step_px is not None:
-            return self.blur_step_px
-        return 0.5 if self.quick else 0.1
-
-    @property
-    def poi_step(self) -> int:
-        return 20 if self.quick else 10
-
-    @property
-    def family_sizes(self) -> tuple[float, ...]:
-        if self.family is not None:
-            return self.family
-        return (
-            (2.0, 3.0, 4.0, 6.0, 9.0) if self.quick else (2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)
-        )
-
-    @property
-    def pulse_trials(self) -> int:
-        if self.trials is not None:
-            return self.trials
-        return 2000 if self.quick else 10_000
-
-
-@dataclass(frozen=True)
 class ReproduceResult:
     """What a reproduce run produced."""
 
@@ -144,30 +68,39 @@ class ReproduceResult:
 
 
 # ---------------------------------------------------------------------------------------
+#: Patterns #1 and #2: the DIC Challenge image's label, and the stand-in used without it
+#: (label, generator, seed offset, source).
+_STAND_INS = {
+    "p1": (
+        "#1 Sample 13",
+        "#1 stand-in (fine, low contrast)",
+        stand_in_pattern1,
+        1,
+        "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135",
+    ),
+    "p2": (
+        "#2 Sample 3",
+        "#2 stand-in (coarse, high contrast)",
+        stand_in_pattern2,
+        2,
+        "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190",
+    ),
+}
+
+
 def _study_patterns(s: ReproduceSettings) -> list[StudyPattern]:
-    if s.pattern1 is not None:
-        p1 = load_user_pattern("p1", "#1 Sample 13", s.pattern1, s.size)
-    else:
-        p1 = StudyPattern(
-            "p1",
-            "#1 stand-in (fine, low contrast)",
-            stand_in_pattern1(s.size, s.seed + 1),
-            True,
-            "stand_in_pattern1: speckle 2 px, softness 0.9, levels 55..135",
-        )
-    if s.pattern2 is not None:
-        p2 = load_user_pattern("p2", "#2 Sample 3", s.pattern2, s.size)
-    else:
-        p2 = StudyPattern(
-            "p2",
-            "#2 stand-in (coarse, high contrast)",
-            stand_in_pattern2(s.size, s.seed + 2),
-            True,
-            "stand_in_pattern2: speckle 7 px, softness 1.6, levels 30..190",
-        )
+    """The four study patterns: #1 and #2 from the given images or their stand-ins, the
+    emulated camera pattern #3 and the numerical pattern #4."""
+    given = {"p1": s.pattern1, "p2": s.pattern2}
+    pats = []
+    for key, (real, label, make, offset, source) in _STAND_INS.items():
+        path = given[key]
+        if path is not None:
+            pats.append(load_user_pattern(key, real, path, s.size))
+        else:
+            pats.append(StudyPattern(key, label, make(s.size, s.seed + offset), True, source))
     return [
-        p1,
-        p2,
+        *pats,
         emulated_camera_pattern3(s.size, s.seed + 3),
         numerical_pattern4(s.size, s.seed + 4),
     ]
@@ -272,11 +205,9 @@ def _param(fit: Any, name: str) -> dict[str, float]:
 # ---------------------------------------------------------------------------------------
 def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) -> ReproduceResult:
     """Run the whole study and write the report folder (see the module docs)."""
-    from scipy.interpolate import CubicSpline
-
-    from ..metrics import pattern_metrics
-    from ..models import blur_sensitivity, fit_blur_model, predict_from_pattern
-    from ..pulse.study import run_pulse_study
+    from .claims import evaluate_claims
+    from .experiments import run_claim_experiments
+    from .write import write_report
 
     s = settings
     if s.size < 4 * s.subset:
@@ -297,6 +228,95 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
 
     # 1. patterns ------------------------------------------------------------------------
     stage("patterns")
+    pats, static = _stage_patterns(s, out)
+    timings["patterns"] = time.perf_counter() - t0
+
+    # 2. main campaign, and pattern #2 with the compensated and deblurring matchers -------
+    stage("compiling kernels")
+    timings["warm_up"] = _warm_kernels(s)
+    t = time.perf_counter()
+    study_patterns = [{"name": p.key, "path": f"patterns/{p.key}.tif"} for p in pats]
+    ds, run_study = _campaign(s, "study", study_patterns, _blur_grid(s), s.noise_levels, progress)
+    timings["campaign_study"] = time.perf_counter() - t
+    t = time.perf_counter()
+    compensation, comp_runs = _compensation_campaigns(s, pats[1], study_patterns[1], ds, progress)
+    timings["campaign_compensation"] = time.perf_counter() - t
+
+    # 3. family for Fig. 11 --------------------------------------------------------------
+    t = time.perf_counter()
+    fam_specs = _family_specs(s)
+    fam_grid = {"start": 0.0, "stop": 6.0, "step": 1.0 if s.quick else 0.25}
+    ds_fam, run_family = _campaign(s, "family", fam_specs, fam_grid, (s.main_noise,), progress)
+    timings["campaign_family"] = time.perf_counter() - t
+    campaigns = Campaigns(
+        study=ds,
+        family=ds_fam,
+        family_specs=tuple(fam_specs),
+        compensation=compensation,
+        runs={"study": run_study, "family": run_family, **comp_runs},
+    )
+
+    # 4. 1-D analysis --------------------------------------------------------------------
+    t = time.perf_counter()
+    stage("1-D pulse analysis")
+    pulse = _stage_pulse(s)
+    timings["pulse"] = time.perf_counter() - t
+
+    # 5. fits ----------------------------------------------------------------------------
+    t = time.perf_counter()
+    stage("fits")
+    fits = _stage_fits(s, out, pats, static, campaigns)
+    timings["fits"] = time.perf_counter() - t
+
+    # 6. the claims' own experiments (pattern #4) ----------------------------------------
+    t = time.perf_counter()
+    stage("claim experiments")
+    p4 = next(p for p in pats if p.key == "p4")
+    experiments = run_claim_experiments(
+        p4.image,
+        noise_sigma=s.main_noise,
+        subset=s.subset,
+        step=s.poi_step,
+        seed=s.seed,
+        quick=s.quick,
+    )
+    timings["claim_experiments"] = time.perf_counter() - t
+
+    # 7. report --------------------------------------------------------------------------
+    t = time.perf_counter()
+    stage("figures and report")
+    data = StudyData(s, pats, static, campaigns, fits, pulse)
+    claims = evaluate_claims(data, experiments)
+    versions = {
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        **package_versions(),
+    }
+    report_path, figures = write_report(
+        out=out, study=data, claims=claims, versions=versions, timings=timings, clock=(t0, t)
+    )
+    timings["report"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    rj = _write_results(
+        out, data, claims=claims, figures=figures, versions=versions, timings=timings
+    )
+    return ReproduceResult(
+        report_path,
+        rj,
+        tuple(figures),
+        tuple(claims),
+        timings,
+        {"study": run_study, "family": run_family},
+    )
+
+
+def _stage_patterns(
+    s: ReproduceSettings, out: Path
+) -> tuple[list[StudyPattern], dict[str, dict[str, Any]]]:
+    """The four study patterns, written as float64 TIFFs, and their static numbers."""
+    from ..metrics import pattern_metrics
+    from ..models import blur_sensitivity
+
     pats = _study_patterns(s)
     pdir = out / "patterns"
     pdir.mkdir(exist_ok=True)
@@ -313,47 +333,46 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
             "metrics": m.to_dict(),
             "c_static": c.c,
         }
-    timings["patterns"] = time.perf_counter() - t0
+    return pats, static
 
-    # 2. main campaign -------------------------------------------------------------------
-    stage("compiling kernels")
-    timings["warm_up"] = _warm_kernels(s)
-    t = time.perf_counter()
-    blur_grid = {"start": 0.0, "stop": 10.0, "step": s.blur_step}
-    study_patterns = [{"name": p.key, "path": f"patterns/{p.key}.tif"} for p in pats]
-    ds, run_study = _campaign(s, "study", study_patterns, blur_grid, s.noise_levels, progress)
-    timings["campaign_study"] = time.perf_counter() - t
 
-    # 2b. beyond the paper: the same sweep of pattern #2 with the blur-compensated matcher
-    # and with the deblur baseline (issue 18; main noise level only)
-    t = time.perf_counter()
-    comp_key = pats[1].key
-    comp_runs = {
+def _blur_grid(s: ReproduceSettings) -> dict[str, float]:
+    """The study's W grid (px): 0..10 px in steps of ``s.blur_step``."""
+    return {"start": 0.0, "stop": 10.0, "step": s.blur_step}
+
+
+def _compensation_campaigns(
+    s: ReproduceSettings,
+    pattern: StudyPattern,
+    table: dict[str, Any],
+    ds: Any,
+    progress: Progress | None,
+) -> tuple[dict[str, Any], dict[str, dict[str, int]]]:
+    """Beyond the paper: the study sweep of ``pattern`` (#2) with the blur-compensated
+    matcher and with the deblur baseline (issue 18; main noise level only), beside the
+    plain matcher's u_e and the blurred image's static bound from ``ds``."""
+    runs = {
         mode: _campaign(
-            s,
-            f"study_{mode}",
-            [study_patterns[1]],
-            blur_grid,
-            (s.main_noise,),
-            progress,
-            compensation=mode,
+            s, f"study_{mode}", [table], _blur_grid(s), (s.main_noise,), progress, compensation=mode
         )
         for mode in ("given", "deblur")
     }
+    key, n = pattern.key, s.main_noise
     compensation = {
-        "pattern": comp_key,
-        "label": pats[1].label,
+        "pattern": key,
+        "label": pattern.label,
         "blur": np.asarray(ds["blur"].values, dtype=np.float64),
-        "plain": series(ds, "u_e", comp_key, s.main_noise),
-        "given": series(comp_runs["given"][0], "u_e", comp_key, s.main_noise),
-        "deblur": series(comp_runs["deblur"][0], "u_e", comp_key, s.main_noise),
-        "bound": series(ds, "u_match_score", comp_key, s.main_noise),
+        "plain": series(ds, "u_e", key, n),
+        "given": series(runs["given"][0], "u_e", key, n),
+        "deblur": series(runs["deblur"][0], "u_e", key, n),
+        "bound": series(ds, "u_match_score", key, n),
     }
-    timings["campaign_compensation"] = time.perf_counter() - t
+    return compensation, {f"study_{m}": r[1] for m, r in runs.items()}
 
-    # 3. family for Fig. 11 --------------------------------------------------------------
-    t = time.perf_counter()
-    fam_specs = [
+
+def _family_specs(s: ReproduceSettings) -> list[dict[str, Any]]:
+    """The ``[[pattern]]`` tables of the Fig. 11 family (speckle size swept)."""
+    return [
         {
             "name": f"d{d:g}",
             "generator": "speckle",
@@ -365,241 +384,269 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         }
         for i, d in enumerate(s.family_sizes)
     ]
-    fam_grid = {"start": 0.0, "stop": 6.0, "step": 1.0 if s.quick else 0.25}
-    ds_fam, run_family = _campaign(s, "family", fam_specs, fam_grid, (s.main_noise,), progress)
-    timings["campaign_family"] = time.perf_counter() - t
 
-    # 4. 1-D analysis --------------------------------------------------------------------
-    t = time.perf_counter()
-    stage("1-D pulse analysis")
-    pulse = run_pulse_study(
+
+def _stage_pulse(s: ReproduceSettings) -> Any:
+    """The 1-D analysis of Section V (:func:`dicblur.pulse.run_pulse_study`)."""
+    from ..pulse.study import run_pulse_study
+
+    return run_pulse_study(
         trials=s.pulse_trials,
         seed=s.seed,
         dependence_trials=(
             min(s.pulse_trials, 500 if s.quick else 2000) if s.pulse_dependence else None
         ),
     )
-    timings["pulse"] = time.perf_counter() - t
 
-    # 5. fits ----------------------------------------------------------------------------
-    t = time.perf_counter()
-    stage("fits")
+
+def _stage_fits(
+    s: ReproduceSettings,
+    out: Path,
+    pats: list[StudyPattern],
+    static: dict[str, dict[str, Any]],
+    campaigns: Campaigns,
+) -> StudyFits:
+    """Every fit of Section VI per study pattern (models written as JSON, the static
+    prediction added to ``static``), and the family's fits."""
+    ds = campaigns.study
     W = np.asarray(ds["blur"].values, dtype=np.float64)
     fits: dict[str, dict[str, Any]] = {}
-    models: dict[str, Any] = {}
+    models: dict[str, tuple[Any, Any]] = {}
     valid: dict[str, np.ndarray] = {}
     for p in pats:
         k = p.key
         # Points where DIC broke down (< 90 % of POIs converged) measure failure, not the
         # random error the models describe: they are shown but not fitted.
         ok = {lv: series(ds, "converged_fraction", k, lv) >= MIN_CONVERGED for lv in s.noise_levels}
-        v = ok[s.main_noise]
-        valid[k] = v
-        u = series(ds, "u_e", k, s.main_noise)[v]
-        sg = series(ds, "sssig", k, s.main_noise)[v]
-        # RMS contrast: the 2-D analogue of the paper's 1-D contrast (Fig. 8).
-        cref = series(ds, "rms_contrast_ref", k, s.main_noise)[v]
-        con = series(ds, "rms_contrast", k, s.main_noise)[v]
-        prov = {
-            "pattern": p.source,
-            "sha256": p.sha256,
-            "subset": s.subset,
-            "step": s.poi_step,
-            "dic": "translation IC-GN, ZNSSD, bspline3",
-            "noise": "per-exposure Gaussian",
-            "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged",
-        }
-        # the automatic eq. 17 range may fall back on its minimum number of points; the
-        # report states the range it used (table "eq.17 range"), so the warning, which
-        # tells an API user to pass fit_range, is kept as a note instead of printed
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            paper = fit_blur_model(
-                W[v],
-                sg,
-                u,
-                noise_sigma=s.main_noise,
-                contrast_ref=cref,
-                contrast=con,
-                subset=s.subset,
-                c_static=static[k]["c_static"],
-                provenance=prov,
-                mean_level=float(p.image.mean()),
-            )
-        range_notes = [
-            str(wm.message).split(". Pass fit_range")[0]
-            for wm in caught
-            if "edge-driven range" in str(wm.message)
-        ]
-        for wm in caught:
-            if "edge-driven range" not in str(wm.message):
-                warnings.warn_explicit(wm.message, wm.category, wm.filename, wm.lineno)
-        allw = np.concatenate([W[ok[lv]] for lv in s.noise_levels])
-        allu = np.concatenate([series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
-        alls = np.concatenate([series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
-        alln = np.concatenate([np.full(int(ok[lv].sum()), lv) for lv in s.noise_levels])
-        allc = np.concatenate(
-            [
-                (series(ds, "rms_contrast_ref", k, lv) / series(ds, "rms_contrast", k, lv))[ok[lv]]
-                for lv in s.noise_levels
-            ]
-        )
-        full = fit_blur_model(
-            allw,
-            alls,
-            allu,
-            noise_sigma=alln,
-            contrast_ratio=allc,
-            subset=s.subset,
-            c_static=static[k]["c_static"],
-            provenance=prov,
-            mean_level=float(p.image.mean()),
-        )
+        valid[k] = ok[s.main_noise]
+        paper, full, range_notes = _fit_pattern(s, p, static[k]["c_static"], ds, W, ok)
         models[k] = (paper, full)
         paper.to_json(str(out / f"model_{k}.json"))
         full.to_json(str(out / f"model_{k}_all_noise.json"))
-        # the whole u_e(W) from the static image alone, no fit (docs/models.md s. 4); one
-        # call at sigma = 1 GL: the noise term scales with sigma
-        # both terms are smooth in W (u_blur ~ c W^2 at first): predicted every 0.5 px
-        # (the quick grid) and interpolated by cubic splines onto a finer study grid
-        wc = np.union1d(np.arange(0.0, float(W.max()) + 0.25, 0.5), [float(W.max())])
-        unit = predict_from_pattern(
-            p.image, wc, noise_sigma=1.0, subset=s.subset, step=s.poi_step, boundary="periodic"
+        static[k].update(_static_prediction(s, p, W))
+        fits[k] = _fit_numbers(s, k, static[k], ds, W, valid[k], paper, full, range_notes)
+    family = [_fit_family_pattern(s, campaigns.family, row) for row in campaigns.family_specs]
+    return StudyFits(fits=fits, models=models, valid=valid, family=family)
+
+
+def _fit_pattern(
+    s: ReproduceSettings,
+    p: StudyPattern,
+    c_static: float,
+    ds: Any,
+    W: NDArray[np.float64],
+    ok: dict[float, NDArray[np.bool_]],
+) -> tuple[Any, Any, list[str]]:
+    """The paper-like fit of pattern ``p`` at the main noise level, the fit over every
+    level (with the mismatch model) and the notes on eq. 17's automatic range."""
+    from ..models import fit_blur_model
+
+    k = p.key
+    v = ok[s.main_noise]
+    u = series(ds, "u_e", k, s.main_noise)[v]
+    sg = series(ds, "sssig", k, s.main_noise)[v]
+    # RMS contrast: the 2-D analogue of the paper's 1-D contrast (Fig. 8).
+    cref = series(ds, "rms_contrast_ref", k, s.main_noise)[v]
+    con = series(ds, "rms_contrast", k, s.main_noise)[v]
+    prov = {
+        "pattern": p.source,
+        "sha256": p.sha256,
+        "subset": s.subset,
+        "step": s.poi_step,
+        "dic": "translation IC-GN, ZNSSD, bspline3",
+        "noise": "per-exposure Gaussian",
+        "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged",
+    }
+    # the automatic eq. 17 range may fall back on its minimum number of points; the
+    # report states the range it used (table "eq.17 range"), so the warning, which
+    # tells an API user to pass fit_range, is kept as a note instead of printed
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        paper = fit_blur_model(
+            W[v],
+            sg,
+            u,
+            noise_sigma=s.main_noise,
+            contrast_ref=cref,
+            contrast=con,
+            subset=s.subset,
+            c_static=c_static,
+            provenance=prov,
+            mean_level=float(p.image.mean()),
         )
-        # first-order noise scales with sigma, the two noises' interaction with sigma^2
-        assert unit.u_noise_interaction is not None
-        un = np.clip(
-            CubicSpline(
-                wc, np.sqrt(np.maximum(unit.u_noise**2 - unit.u_noise_interaction**2, 0.0))
-            )(W),
-            0.0,
-            None,
-        )
-        ui = np.clip(CubicSpline(wc, unit.u_noise_interaction)(W), 0.0, None)
-        ub = np.clip(CubicSpline(wc, unit.u_blur)(W), 0.0, None)
-        static[k]["predicted_u_e"] = {
+    range_notes = [
+        str(wm.message).split(". Pass fit_range")[0]
+        for wm in caught
+        if "edge-driven range" in str(wm.message)
+    ]
+    for wm in caught:
+        if "edge-driven range" not in str(wm.message):
+            warnings.warn_explicit(wm.message, wm.category, wm.filename, wm.lineno)
+    allw = np.concatenate([W[ok[lv]] for lv in s.noise_levels])
+    allu = np.concatenate([series(ds, "u_e", k, lv)[ok[lv]] for lv in s.noise_levels])
+    alls = np.concatenate([series(ds, "sssig", k, lv)[ok[lv]] for lv in s.noise_levels])
+    alln = np.concatenate([np.full(int(ok[lv].sum()), lv) for lv in s.noise_levels])
+    allc = np.concatenate(
+        [
+            (series(ds, "rms_contrast_ref", k, lv) / series(ds, "rms_contrast", k, lv))[ok[lv]]
+            for lv in s.noise_levels
+        ]
+    )
+    full = fit_blur_model(
+        allw,
+        alls,
+        allu,
+        noise_sigma=alln,
+        contrast_ratio=allc,
+        subset=s.subset,
+        c_static=c_static,
+        provenance=prov,
+        mean_level=float(p.image.mean()),
+    )
+    return paper, full, range_notes
+
+
+def _static_prediction(
+    s: ReproduceSettings, p: StudyPattern, W: NDArray[np.float64]
+) -> dict[str, Any]:
+    """The whole u_e(W) of ``p`` from the static image alone, no fit (docs/models.md s. 4),
+    per noise level, and the W where that prediction stops describing DIC."""
+    from scipy.interpolate import CubicSpline
+
+    from ..models import predict_from_pattern
+
+    # one call at sigma = 1 GL: the noise term scales with sigma
+    # both terms are smooth in W (u_blur ~ c W^2 at first): predicted every 0.5 px
+    # (the quick grid) and interpolated by cubic splines onto a finer study grid
+    wc = np.union1d(np.arange(0.0, float(W.max()) + 0.25, 0.5), [float(W.max())])
+    unit = predict_from_pattern(
+        p.image, wc, noise_sigma=1.0, subset=s.subset, step=s.poi_step, boundary="periodic"
+    )
+    # first-order noise scales with sigma, the two noises' interaction with sigma^2
+    assert unit.u_noise_interaction is not None
+    un = np.clip(
+        CubicSpline(wc, np.sqrt(np.maximum(unit.u_noise**2 - unit.u_noise_interaction**2, 0.0)))(
+            W
+        ),
+        0.0,
+        None,
+    )
+    ui = np.clip(CubicSpline(wc, unit.u_noise_interaction)(W), 0.0, None)
+    ub = np.clip(CubicSpline(wc, unit.u_blur)(W), 0.0, None)
+    return {
+        "predicted_u_e": {
             f"{lv:g}": np.sqrt((lv * un) ** 2 + (lv * lv * ui) ** 2 + ub**2).tolist()
             for lv in s.noise_levels
-        }
+        },
         # where the static prediction stops describing DIC (docs/models.md s. 4)
-        static[k]["breakdown_blur"] = unit.breakdown_blur
-        st = np.asarray(static[k]["predicted_u_e"][f"{s.main_noise:g}"])[v]
-        eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
-        mism = full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch else None
-        fits[k] = {
-            # eq. 17 around SSSIG_0: u_ref (px) = its u_e(0); eta = u_ref SSSIG_0^alpha is
-            # kept as a derived number (its units depend on alpha)
-            "u_ref": _param(paper.power_law, "u_ref"),
-            "eta": paper.eta,
-            "sssig_ref": paper.sssig_ref,
-            "alpha": _param(paper.power_law, "alpha"),
-            "beta": _param(paper.decay, "beta"),
-            "sssig0": _param(paper.decay, "sssig0"),
-            "mbrf": paper.mbrf,
-            "r2_decay": paper.decay.r2,
-            "r2_power_law": paper.power_law.r2,
-            "fit_range": list(paper.fit_range),
-            "range_rule": paper.range_rule,
-            "range_note": "; ".join(range_notes),
-            "mig0": static[k]["metrics"]["mig"],
-            "c_static": static[k]["c_static"],
-            "c_fitted": full.c,
-            "c_fitted_param": _param(full.mismatch, "c") if full.mismatch else None,
-            "comparison": full.comparison,
-            "default_model": full.default,
-            "eq19_max_rel_error": float(np.max(np.abs(eq19 / u - 1))),
-            "mismatch_max_rel_error": (
-                float(np.max(np.abs(mism / u - 1))) if mism is not None else None
-            ),
-            "static_max_rel_error": float(np.max(np.abs(st / u - 1))),
-            "static_rms_log_error": float(np.sqrt(np.mean(np.log(st / u) ** 2))),
-            "w_fitted_max": float(W[v].max()),
-            "bias_max": float(np.nanmax(np.abs(series(ds, "bias", k, s.main_noise)[v]))),
-            "converged_min": float(np.nanmin(series(ds, "converged_fraction", k, s.main_noise))),
-        }
-    fam_rows = []
-    for spec_row in fam_specs:
-        name = str(spec_row["name"])
-        Wf = np.asarray(ds_fam["blur"].values, dtype=np.float64)
-        vf = series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
-        u = series(ds_fam, "u_e", name, s.main_noise)[vf]
-        sg = series(ds_fam, "sssig", name, s.main_noise)[vf]
-        ratio = (
-            series(ds_fam, "rms_contrast_ref", name, s.main_noise)
-            / series(ds_fam, "rms_contrast", name, s.main_noise)
-        )[vf]
-        Wf = Wf[vf]
-        with warnings.catch_warnings():
-            # the family table lists each fit's range; the API hint to pass fit_range
-            # is not actionable here
-            warnings.filterwarnings("ignore", message="edge-driven range")
-            fm = fit_blur_model(
-                Wf,
-                sg,
-                u,
-                noise_sigma=s.main_noise,
-                contrast_ratio=ratio,
-                subset=s.subset,
-                compare=False,
-                default="power_law",
-            )
-        fam_rows.append(
-            {
-                "name": name,
-                "speckle_size": spec_row["speckle_size"],
-                "mig0": float(series(ds_fam, "mig_ref", name, s.main_noise)[0]),
-                "u_ref": fm.u_ref,
-                "alpha": fm.alpha,
-                "beta": fm.beta,
-                "mbrf": fm.mbrf,
-                "u_e0": float(u[0]),
-                "u_e_max": float(u[-1]),
-            }
-        )
-    timings["fits"] = time.perf_counter() - t
-
-    # 6. report --------------------------------------------------------------------------
-    t = time.perf_counter()
-    stage("figures and report")
-    from .claims import evaluate_claims
-    from .write import write_report
-
-    claims = evaluate_claims(
-        ds=ds,
-        ds_family=ds_fam,
-        pats=pats,
-        static=static,
-        fits=fits,
-        models=models,
-        family=fam_rows,
-        pulse=pulse,
-        settings=s,
-        valid=valid,
-    )
-    versions = {
-        "python": sys.version.split()[0],
-        "platform": platform.platform(),
-        **package_versions(),
+        "breakdown_blur": unit.breakdown_blur,
     }
-    report_path, figures = write_report(
-        out=out,
-        settings=s,
-        ds=ds,
-        pats=pats,
-        static=static,
-        fits=fits,
-        models=models,
-        family=fam_rows,
-        pulse=pulse,
-        claims=claims,
-        versions=versions,
-        timings=timings,
-        valid=valid,
-        clock=(t0, t),
-        compensation=compensation,
-    )
-    timings["report"] = time.perf_counter() - t
-    timings["total"] = time.perf_counter() - t0
+
+
+def _fit_numbers(
+    s: ReproduceSettings,
+    k: str,
+    static: dict[str, Any],
+    ds: Any,
+    W: NDArray[np.float64],
+    v: NDArray[np.bool_],
+    paper: Any,
+    full: Any,
+    range_notes: list[str],
+) -> dict[str, Any]:
+    """The JSON-ready numbers of pattern ``k``'s fits and of their errors on ``W[v]``."""
+    u = series(ds, "u_e", k, s.main_noise)[v]
+    st = np.asarray(static["predicted_u_e"][f"{s.main_noise:g}"])[v]
+    eq19 = paper.predict(W[v], s.main_noise, model="power_law").u_e
+    mism = full.predict(W[v], s.main_noise, model="mismatch").u_e if full.mismatch else None
+    return {
+        # eq. 17 around SSSIG_0: u_ref (px) = its u_e(0); eta = u_ref SSSIG_0^alpha is
+        # kept as a derived number (its units depend on alpha)
+        "u_ref": _param(paper.power_law, "u_ref"),
+        "eta": paper.eta,
+        "sssig_ref": paper.sssig_ref,
+        "alpha": _param(paper.power_law, "alpha"),
+        "beta": _param(paper.decay, "beta"),
+        "sssig0": _param(paper.decay, "sssig0"),
+        "mbrf": paper.mbrf,
+        "r2_decay": paper.decay.r2,
+        "r2_power_law": paper.power_law.r2,
+        "fit_range": list(paper.fit_range),
+        "range_rule": paper.range_rule,
+        "range_note": "; ".join(range_notes),
+        "mig0": static["metrics"]["mig"],
+        "c_static": static["c_static"],
+        "c_fitted": full.c,
+        "c_fitted_param": _param(full.mismatch, "c") if full.mismatch else None,
+        "comparison": full.comparison,
+        "default_model": full.default,
+        "eq19_max_rel_error": float(np.max(np.abs(eq19 / u - 1))),
+        "mismatch_max_rel_error": (
+            float(np.max(np.abs(mism / u - 1))) if mism is not None else None
+        ),
+        "static_max_rel_error": float(np.max(np.abs(st / u - 1))),
+        "static_rms_log_error": float(np.sqrt(np.mean(np.log(st / u) ** 2))),
+        "w_fitted_max": float(W[v].max()),
+        "bias_max": float(np.nanmax(np.abs(series(ds, "bias", k, s.main_noise)[v]))),
+        "converged_min": float(np.nanmin(series(ds, "converged_fraction", k, s.main_noise))),
+    }
+
+
+def _fit_family_pattern(
+    s: ReproduceSettings, ds_fam: Any, spec_row: dict[str, Any]
+) -> dict[str, Any]:
+    """The eq. 17-19 fit of one family pattern at the main noise level (Fig. 11)."""
+    from ..models import fit_blur_model
+
+    name = str(spec_row["name"])
+    Wf = np.asarray(ds_fam["blur"].values, dtype=np.float64)
+    vf = series(ds_fam, "converged_fraction", name, s.main_noise) >= MIN_CONVERGED
+    u = series(ds_fam, "u_e", name, s.main_noise)[vf]
+    sg = series(ds_fam, "sssig", name, s.main_noise)[vf]
+    ratio = (
+        series(ds_fam, "rms_contrast_ref", name, s.main_noise)
+        / series(ds_fam, "rms_contrast", name, s.main_noise)
+    )[vf]
+    Wf = Wf[vf]
+    with warnings.catch_warnings():
+        # the family table lists each fit's range; the API hint to pass fit_range
+        # is not actionable here
+        warnings.filterwarnings("ignore", message="edge-driven range")
+        fm = fit_blur_model(
+            Wf,
+            sg,
+            u,
+            noise_sigma=s.main_noise,
+            contrast_ratio=ratio,
+            subset=s.subset,
+            compare=False,
+            default="power_law",
+        )
+    return {
+        "name": name,
+        "speckle_size": spec_row["speckle_size"],
+        "mig0": float(series(ds_fam, "mig_ref", name, s.main_noise)[0]),
+        "u_ref": fm.u_ref,
+        "alpha": fm.alpha,
+        "beta": fm.beta,
+        "mbrf": fm.mbrf,
+        "u_e0": float(u[0]),
+        "u_e_max": float(u[-1]),
+    }
+
+
+def _write_results(
+    out: Path,
+    data: StudyData,
+    *,
+    claims: list[dict[str, Any]],
+    figures: list[str],
+    versions: dict[str, str],
+    timings: dict[str, float],
+) -> Path:
+    """Write ``results.json`` (every number of the run) and ``command.txt``; return the
+    former's path."""
+    s, pulse = data.settings, data.pulse
     results = {
         "command": s.command,
         "versions": versions,
@@ -613,9 +660,9 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
             "main_noise": s.main_noise,
             "seed": s.seed,
         },
-        "patterns": static,
-        "fits": fits,
-        "family": fam_rows,
+        "patterns": data.static,
+        "fits": data.fits.fits,
+        "family": data.fits.family,
         "pulse": {
             "table_ii": list(pulse.table),
             "knee": pulse.knee,
@@ -627,13 +674,10 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         "claims": claims,
         "figures": figures,
         "timings": timings,
-        "campaign_runs": {
-            "study": run_study,
-            "family": run_family,
-            **{f"study_{m}": r[1] for m, r in comp_runs.items()},
-        },
+        "campaign_runs": data.campaigns.runs,
         "compensation": {
-            k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in compensation.items()
+            k: (v.tolist() if isinstance(v, np.ndarray) else v)
+            for k, v in data.campaigns.compensation.items()
         },
     }
     rj = out / "results.json"
@@ -642,14 +686,7 @@ def reproduce(settings: ReproduceSettings, *, progress: Progress | None = None) 
         out / "command.txt",
         s.command + "\n\n" + "\n".join(f"{k}: {v}" for k, v in versions.items()) + "\n",
     )
-    return ReproduceResult(
-        report_path,
-        rj,
-        tuple(figures),
-        tuple(claims),
-        timings,
-        {"study": run_study, "family": run_family},
-    )
+    return rj
 
 
 def _clean(obj: Any) -> Any:

@@ -11,6 +11,7 @@ import numpy as np
 from . import figures as F
 from ._data import series
 from .html import HtmlReport
+from .records import StudyData
 
 __all__ = ["write_report"]
 
@@ -22,29 +23,28 @@ def _ci(p: dict[str, float], digits: int = 3) -> str:
 def write_report(
     *,
     out: Path,
-    settings: Any,
-    ds: Any,
-    pats: list[Any],
-    static: dict[str, Any],
-    fits: dict[str, Any],
-    models: dict[str, Any],
-    family: list[dict[str, Any]],
-    pulse: Any,
+    study: StudyData,
     claims: list[dict[str, Any]],
     versions: dict[str, str],
     timings: dict[str, float],
-    valid: dict[str, np.ndarray],
     clock: tuple[float, float] | None = None,
-    compensation: dict[str, Any] | None = None,
 ) -> tuple[Path, list[str]]:
     """Write figures and ``report.html`` into ``out``; return its path and figure names.
 
-    ``clock = (t_start, t_report)`` (``time.perf_counter`` values at the start of the run
-    and of the report stage) completes the stage-time table with the report and the total.
+    ``study`` holds the settings and every stage's result, ``claims`` the verdicts
+    (:func:`dicblur.report.claims.evaluate_claims`), ``versions`` and ``timings`` the run's
+    environment and stage times (s). ``clock = (t_start, t_report)``
+    (``time.perf_counter`` values at the start of the run and of the report stage)
+    completes the stage-time table with the report and the total.
     """
     from .pulse_figures import plot_min_chi2, plot_regimes, plot_uncertainty
 
-    s = settings
+    s = study.settings
+    pats, static, pulse = study.patterns, study.static, study.pulse
+    ds = study.campaigns.study
+    fits, models, valid = study.fits.fits, study.fits.models, study.fits.valid
+    family = study.fits.family
+    compensation: dict[str, Any] | None = study.campaigns.compensation
     n = s.main_noise
     W = np.asarray(ds["blur"].values, dtype=np.float64)
     lab = {p.key: p.label for p in pats}

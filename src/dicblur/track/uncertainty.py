@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._blur_sensitivity import subset_blur_response
 from ..errors import InputError
 from ..metrics import estimate_noise
+from ..models.sensitivity import subset_blur_response
 
 __all__ = [
     "ANGLE_STEP",
@@ -323,7 +323,7 @@ class SkewTable:
     """Per-point shift per unit third moment of the blur kernel on direction nodes.
 
     ``values`` (a, n, 2): ``(u, v)`` px / px**3
-    (:func:`dicblur._blur_sensitivity.subset_skew_coefficients`).
+    (:func:`dicblur.models.sensitivity.subset_skew_coefficients`).
     """
 
     angles: NDArray[np.float64]
@@ -351,7 +351,7 @@ def build_skew_table(
 ) -> SkewTable:
     """Compute the skew coefficients at the direction nodes around every axis whose
     ``|kappa3|`` exceeds ``min_fraction`` of the largest (at least one node)."""
-    from .._blur_sensitivity import subset_skew_coefficients
+    from ..models.sensitivity import subset_skew_coefficients
 
     a = round(180.0 / ANGLE_STEP)
     angles = np.arange(a, dtype=np.float64) * ANGLE_STEP

@@ -1,5 +1,7 @@
-"""Shared argument checks. Each raises :class:`~dicblur.errors.InputError` with a message
-that names the parameter, the value and the fix."""
+"""The input checks of every stage, in one place. Each raises
+:class:`~dicblur.errors.InputError` (or the ``error`` class given: the campaign spec's
+:class:`~dicblur.errors.ConfigError`) with a one-line message that names the parameter as the
+user gave it, the value and the fix."""
 
 from __future__ import annotations
 
@@ -10,16 +12,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
+from .errors import DicblurError, InputError
 
 __all__ = [
+    "as_blur",
     "as_image",
+    "as_positive",
+    "as_vector",
+    "bad_value",
     "check_choice",
     "check_finite_number",
+    "check_integer",
     "check_odd_subset",
     "check_positive",
     "check_seed",
     "check_shape2d",
+    "check_subpixel",
     "check_subset_fits",
     "check_textured",
     "describe",
@@ -42,6 +50,13 @@ def describe(value: Any) -> str:
         value = value.item()  # -1.0, not np.float64(-1.0)
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+def bad_value(
+    name: str, value: Any, why: str, *, error: type[DicblurError] = InputError
+) -> DicblurError:
+    """The exception ``name=value: why`` (``value`` as :func:`describe` shows it), to raise."""
+    return error(f"{name}={describe(value)}: {why}")
 
 
 def as_image(image: ArrayLike, name: str = "image", *, min_size: int = 2) -> NDArray[np.float64]:
@@ -174,24 +189,47 @@ def check_positive(value: Any, name: str, *, allow_zero: bool = False) -> float:
     return x
 
 
-def check_finite_number(value: Any, name: str) -> float:
-    """Check that ``value`` is a finite real scalar and return it as float."""
+def check_finite_number(
+    value: Any, name: str, *, strict: bool = False, error: type[DicblurError] = InputError
+) -> float:
+    """Check that ``value`` is a finite real scalar and return it as float.
+
+    ``strict``: only an int or a float is a number (a parsed TOML value; no string
+    ``"3"`` converted by ``float``)."""
     if isinstance(value, bool):
-        raise InputError(f"{name}={value!r}: expected a number, not a bool")
+        raise error(f"{name}={value!r}: expected a number, not a bool")
+    if strict and not isinstance(value, int | float):
+        raise bad_value(name, value, "expected a number", error=error)
     try:
         x = float(value)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{name}={describe(value)}: expected a real number") from exc
+        raise bad_value(name, value, "expected a real number", error=error) from exc
     if not math.isfinite(x):
-        raise InputError(f"{name}={describe(value)}: must be finite (not NaN or infinite)")
+        raise bad_value(name, value, "must be finite (not NaN or infinite)", error=error)
     return x
 
 
-def check_choice(value: Any, name: str, choices: Sequence[str]) -> str:
+def check_integer(
+    value: Any, name: str, *, minimum: int, error: type[DicblurError] = InputError
+) -> int:
+    """Check that ``value`` is an integer (or an integral float) >= ``minimum``; return it."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise bad_value(name, value, f"expected an integer >= {minimum}", error=error)
+    if value < minimum:
+        raise bad_value(name, value, f"must be an integer >= {minimum}", error=error)
+    return int(value)
+
+
+def check_choice(
+    value: Any, name: str, choices: Sequence[str], *, error: type[DicblurError] = InputError
+) -> str:
     """Check that ``value`` is one of ``choices`` and return it."""
     if not isinstance(value, str) or value not in choices:
         options = ", ".join(repr(c) for c in choices)
-        raise InputError(f"{name}={describe(value)}: unknown option; choose one of {options}")
+        raise bad_value(name, value, f"unknown option; choose one of {options}", error=error)
     return value
 
 
@@ -209,3 +247,81 @@ def check_shape2d(shape: Any, name: str = "shape", *, min_size: int = 2) -> tupl
     if not ok or rows < min_size or cols < min_size:
         raise InputError(f"{name}={describe(shape)}: rows and cols must be integers >= {min_size}")
     return rows, cols
+
+
+# -- measurement vectors of the model fits ----------------------------------------------
+
+
+def as_vector(x: ArrayLike, name: str, n: int | None = None) -> NDArray[np.float64]:
+    """``x`` as a 1-D float64 array of finite values (``n`` of them when given)."""
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name}={describe(x)}: expected a 1-D array of numbers") from exc
+    if a.ndim == 0:
+        a = a[None]
+    if a.ndim != 1:
+        raise InputError(f"{name}={describe(a)}: expected a 1-D array (one value per point)")
+    if n is not None and a.size != n:
+        raise InputError(f"{name}: {a.size} values but blur has {n}; give one value per blur level")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise InputError(
+            f"{name}: {int(bad.sum())} NaN or infinite value(s) (first at index "
+            f"{int(np.argmax(bad))}); drop those points or fix the data"
+        )
+    return a
+
+
+def as_blur(
+    x: ArrayLike,
+    name: str = "blur",
+    *,
+    increasing: bool = True,
+    groups: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """Blur lengths W (px): a non-empty 1-D array of values >= 0, strictly increasing
+    (within each of ``groups``, e.g. per noise level) unless ``increasing=False``."""
+    w = as_vector(x, name)
+    if w.size == 0:
+        raise InputError(f"{name}: empty; give the blur lengths W (px) of the measurements")
+    if np.any(w < 0):
+        raise InputError(
+            f"{name}: negative blur length {float(w[w < 0][0])!r} px; W = |motion| is >= 0"
+        )
+    if increasing:
+        keys = np.zeros(w.size) if groups is None else groups
+        for g in np.unique(keys):
+            wg = w[keys == g]
+            if np.any(np.diff(wg) <= 0):
+                where = "" if groups is None else f" (noise level {g:g})"
+                raise InputError(
+                    f"{name}: W must be strictly increasing{where}; sort the points by W "
+                    "and average repeated W first"
+                )
+    return w
+
+
+def as_positive(x: ArrayLike, name: str, n: int) -> NDArray[np.float64]:
+    """``n`` finite values > 0 as a 1-D float64 array."""
+    a = as_vector(x, name, n)
+    if np.any(a <= 0):
+        raise InputError(
+            f"{name}: value {float(a[a <= 0][0])!r} at index {int(np.argmax(a <= 0))} is <= 0; "
+            f"{name} must be > 0"
+        )
+    return a
+
+
+def check_subpixel(subpixel: object) -> float:
+    """A sub-pixel offset (px) as a float in [0, 1)."""
+    if (
+        isinstance(subpixel, bool)
+        or not isinstance(subpixel, (int, float))
+        or not (math.isfinite(subpixel) and 0.0 <= subpixel < 1.0)
+    ):
+        raise InputError(
+            f"subpixel={subpixel!r}: give the target's sub-pixel position along "
+            "the motion in [0, 1) px (e.g. 0.5)"
+        )
+    return float(subpixel)

@@ -1,8 +1,8 @@
 """Blur sensitivity of a pattern: the deterministic blur-mismatch shift of subset DIC.
 
-Shared by :mod:`dicblur.metrics` (the ``blur_sensitivity_c`` field of
-:class:`~dicblur.metrics.PatternMetrics`) and :mod:`dicblur.models` (the noise + blur-mismatch
-model). It imports nothing from either, so neither import creates a cycle.
+The subset-level formulas under :func:`dicblur.models.blur_sensitivity`,
+:func:`~dicblur.models.blur_mismatch_curve`, :func:`~dicblur.models.predict_from_pattern`
+(the noise + blur-mismatch model) and the per-point sigma of :mod:`dicblur.track`.
 
 Derivation (docs/models.md has it in full)
 ------------------------------------------
@@ -48,13 +48,27 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
+from ..dic.interpolation import (
+    bspline_at_offset,
+    bspline_coefficients,
+    bspline_gradients,
+    bspline_kernel,
+    bspline_kernel_derivative,
+)
+from ..errors import InputError
 
 __all__ = [
+    "box_blurred",
     "directional_derivatives",
+    "shifts_and_variance",
+    "spectral_derivatives",
+    "spline_gradients",
     "subset_blur_coefficients",
+    "subset_blur_response",
     "subset_blur_shifts",
     "subset_noise_variance",
+    "subset_skew_coefficients",
+    "unit_direction",
 ]
 
 Shape = Literal["translation", "affine"]
@@ -63,7 +77,8 @@ Criterion = Literal["znssd", "ssd"]
 Boundary = Literal["reflect", "periodic"]
 
 
-def _unit(motion: tuple[float, float]) -> tuple[float, float]:
+def unit_direction(motion: tuple[float, float]) -> tuple[float, float]:
+    """The unit vector ``(dy, dx)`` of a motion direction given as any non-zero (dy, dx)."""
     try:
         dy, dx = (float(motion[0]), float(motion[1]))
     except (TypeError, ValueError, IndexError) as exc:
@@ -89,7 +104,7 @@ def _extend(image: NDArray[np.float64], boundary: Boundary) -> NDArray[np.float6
     raise InputError(f"boundary={boundary!r}: choose 'reflect' or 'periodic'")
 
 
-def _spectral(
+def spectral_derivatives(
     image: NDArray[np.float64], boundary: Boundary, dy: float, dx: float, blur: float | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Spectral ``(f_y, f_x, f_dd)``; with ``blur`` the centred box blur along ``(dy, dx)``
@@ -118,13 +133,19 @@ def _spectral(
     return fy, fx, fdd[:rows, :cols]
 
 
-def _spline_gradients(
+def box_blurred(
+    image: NDArray[np.float64], boundary: Boundary, dy: float, dx: float, blur: float
+) -> NDArray[np.float64]:
+    """``image`` blurred by the centred box of length ``blur`` px along the unit ``(dy, dx)``
+    (exact spectral blur, :func:`spectral_derivatives`), shape (rows, cols)."""
+    return spectral_derivatives(image, boundary, dy, dx, blur=blur)[0]
+
+
+def spline_gradients(
     image: NDArray[np.float64], derivative: str
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses)."""
-    # imported here: dicblur.dic imports dicblur.metrics, which imports this module
-    from .dic.interpolation import bspline_coefficients, bspline_gradients
-
+    """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses),
+    ``derivative`` "bspline3" or "bspline5"; shape (rows, cols) each, GL / px."""
     order = 3 if derivative == "bspline3" else 5
     coef = bspline_coefficients(image, order=order, dtype=np.float64)
     return bspline_gradients(coef, order, image.shape)
@@ -138,9 +159,6 @@ def _interpolated_at(
     ``h = image(x - o)`` (exact spectral shift) sampled at the pixels and ``h~`` its B-spline
     interpolant of degree ``order``. ``h~(x + o) = image(x)`` but for the interpolation
     error, which is the matcher's sub-pixel bias (docs/models.md s. 4)."""
-    # imported here: dicblur.dic imports dicblur.metrics, which imports this module
-    from .dic.interpolation import bspline_at_offset, bspline_coefficients
-
     rows, cols = image.shape
     ext = _extend(image, boundary)
     shp = ext.shape
@@ -159,8 +177,6 @@ def _interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[n
     degree ``order`` at the fractional offset ``t`` (px): ``C(d) = sum_m k(m) k(m + d)``
     with ``k`` the interpolator's impulse response, transfer
     ``sum_m beta(t - m) e^{i w m} / sum_m beta(m) e^{-i w m}`` (prefilter, then taps)."""
-    from .dic.interpolation import bspline_kernel
-
     n = 4096
     om = 2.0 * np.pi * np.fft.fftfreq(n)
     lo = -(order - 1) // 2
@@ -187,8 +203,6 @@ def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9) -> NDArr
     ``"central"``: ``(n[j+1] - n[j-1]) / 2``; ``"spectral"``: the ideal derivative
     ``(-1)^(m+1) / m`` of an infinite signal, cut at ``L = 3 subset`` (it decays as 1/m).
     Real and odd."""
-    from .dic.interpolation import bspline_kernel, bspline_kernel_derivative
-
     if derivative == "central":
         return np.array([0.5, 0.0, -0.5])
     if derivative == "spectral":
@@ -324,11 +338,11 @@ def directional_derivatives(
         Grey levels / px and grey levels / px**2.
     """
     _check_derivative(derivative)
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     if derivative != "central":
-        fy, fx, fdd = _spectral(image, boundary, dy, dx)
+        fy, fx, fdd = spectral_derivatives(image, boundary, dy, dx)
         if derivative in ("bspline3", "bspline5"):
-            fy, fx = _spline_gradients(image, derivative)
+            fy, fx = spline_gradients(image, derivative)
         return fy, fx, fdd
     if boundary not in ("reflect", "periodic"):
         _extend(image, boundary)  # raises the boundary error
@@ -462,7 +476,7 @@ def subset_blur_coefficients(
     """
     _check_shape(shape)
     _check_criterion(criterion)
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     fy, fx, fdd = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
     win = _Windows(subset, fx, fy, fdd, image)
     out = np.empty(len(centres))
@@ -535,7 +549,7 @@ def subset_blur_shifts(
         down.
     """
     _check_criterion(criterion)
-    return _shifts_and_variance(
+    return shifts_and_variance(
         image,
         blur,
         centres,
@@ -552,7 +566,7 @@ def subset_blur_shifts(
     )[0]
 
 
-def _shifts_and_variance(
+def shifts_and_variance(
     image: NDArray[np.float64],
     blur: ArrayLike,
     centres: NDArray[np.intp],
@@ -585,7 +599,7 @@ def _shifts_and_variance(
     ``contraction_out``, shape (m, n): filled with the contraction of every subset."""
     _check_shape(shape)
     _check_derivative(derivative)
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     w = np.asarray(blur, dtype=np.float64)
     shifts = np.zeros((len(w), len(centres)))
     var = np.full((3, len(w), len(centres)), np.nan) if variance else None
@@ -743,20 +757,20 @@ def _blurred_subsets(
     subset intensities (W = 0: ``g = f``). With ``offset`` (px along the motion) the
     blurred target is moved by it and seen through the matcher's B-spline interpolant
     (:func:`_interpolated_at`)."""
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
     for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
         if offset is not None:
-            g = image if wl == 0 else _spectral(image, boundary, dy, dx, blur=float(wl))[0]
+            g = image if wl == 0 else box_blurred(image, boundary, dy, dx, float(wl))
             g, ggy, ggx = _interpolated_at(
                 g, boundary, offset * dy, offset * dx, 3 if derivative == "bspline3" else 5
             )
         elif wl == 0:
             g, ggy, ggx = image, fy, fx
         else:
-            g = _spectral(image, boundary, dy, dx, blur=float(wl))[0]
+            g = box_blurred(image, boundary, dy, dx, float(wl))
             if derivative in ("bspline3", "bspline5"):  # no spectral pass needed
-                ggy, ggx = _spline_gradients(g, derivative)
+                ggy, ggx = spline_gradients(g, derivative)
             else:
                 ggy, ggx, _ = directional_derivatives(
                     g, motion, derivative=derivative, boundary=boundary
@@ -803,7 +817,7 @@ def subset_noise_variance(
         ``sigma**4`` interaction of the two noises, which ``predict_from_pattern`` adds, is
         left out); ``nan`` where the subset has no gradient.
     """
-    var = _shifts_and_variance(
+    var = shifts_and_variance(
         image,
         blur,
         centres,
@@ -865,7 +879,7 @@ def subset_blur_response(
     """
     _check_shape(shape)
     _check_derivative(derivative)
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     w = np.asarray(blur, dtype=np.float64)
     n = len(centres)
     shift = np.full((len(w), n, 2), np.nan)
@@ -925,7 +939,7 @@ def subset_skew_coefficients(
     """
     _check_shape(shape)
     _check_derivative(derivative)
-    dy, dx = _unit(motion)
+    dy, dx = unit_direction(motion)
     rows, cols = image.shape
     ext = _extend(image, boundary)
     shp = ext.shape
@@ -934,7 +948,7 @@ def subset_skew_coefficients(
     )
     fddd = np.fft.irfft2(np.fft.rfft2(ext) * k**3, s=shp)[:rows, :cols]
     if derivative in ("bspline3", "bspline5"):
-        fy, fx = _spline_gradients(image, derivative)
+        fy, fx = spline_gradients(image, derivative)
     else:
         fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
     win = _Windows(subset, fx, fy, fddd, image)

@@ -6,6 +6,7 @@ fitted :class:`BlurUncertaintyModel` and exposure planning. See docs/models.md.
 from __future__ import annotations
 
 from ._result import FitResult, ParameterEstimate
+from .compare import PlanComparison, check_same_calibration, compare_plans
 from .compensated import predict_compensated
 from .decay import (
     combined_model,
@@ -48,14 +49,17 @@ __all__ = [
     "ModelComparison",
     "ParameterEstimate",
     "PatternPrediction",
+    "PlanComparison",
     "PoissonGaussianCamera",
     "Prediction",
     "blur_mismatch_curve",
     "blur_sensitivity",
     "check_measurements",
+    "check_same_calibration",
     "combined_model",
     "combined_pan_model",
     "compare_models",
+    "compare_plans",
     "edge_driven_range",
     "fit_blur_model",
     "fit_mismatch",

@@ -115,18 +115,16 @@ def test_calibrate_with_compensation_writes_a_compensated_model(tmp_path):
     """A compensated sweep on a periodic (generated) pattern: the model is compensated,
     and at low noise u_e stays at the interpolation floor (before the periodic margin, the
     blurred reference's mirror boundary put 0.07 px errors on the border subsets)."""
+    kw = {"noise": 0.05, "subset": 31, "step": 12, "size": (128, 128), "serial": True}
     res = calibrate(
-        "speckle",
-        tmp_path / "given",
-        noise=0.05,
-        subset=31,
-        step=12,
-        size=(128, 128),
-        blur=[0.0, 2.0, 4.0, 8.0],
-        serial=True,
-        compensation="given",
+        "speckle", tmp_path / "given", blur=[0.0, 2.0, 4.0, 8.0], compensation="given", **kw
     )
     assert res is not None
+    # W = 0 with the blur given is the plain matcher, bit for bit (same seeds)
+    plain = calibrate("speckle", tmp_path / "plain", blur=[0.0, 1.0, 2.0], **kw)
+    assert plain is not None
+    u0 = float(res.curves["u_e"].sel(blur=0.0).values.ravel()[0])
+    assert u0 == float(plain.curves["u_e"].sel(blur=0.0).values.ravel()[0])
     m = BlurUncertaintyModel.from_json(str(res.model_path))
     assert m.compensation == "given" and m.provenance["compensation"] == "given"
     u = np.asarray(res.curves["u_e"].values).ravel()

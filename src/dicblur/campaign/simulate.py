@@ -178,17 +178,25 @@ def simulate_batch(
     def wrap(img: NDArray[np.float64]) -> NDArray[np.float64]:
         return img if pad == 0 else np.pad(img, pad, mode="wrap")
 
-    correlator = Correlator(
-        wrap(_noisy(reference, spec, batch.noise, ref_seed)),
-        subset=batch.subset,
-        points=points + pad,
-        shape=spec.dic_shape,  # type: ignore[arg-type]
-        interpolation=spec.interpolation,
-        max_iterations=spec.max_iterations,
-        tolerance=spec.tolerance,
-        workers=1,
-        blur="none" if spec.compensation in ("none", "deblur") else spec.compensation,  # type: ignore[arg-type]
-    )
+    def make_correlator(ref: NDArray[np.float64], pts: NDArray[np.intp], blur: str) -> Any:
+        return Correlator(
+            ref,
+            subset=batch.subset,
+            points=pts,
+            shape=spec.dic_shape,  # type: ignore[arg-type]
+            interpolation=spec.interpolation,
+            max_iterations=spec.max_iterations,
+            tolerance=spec.tolerance,
+            workers=1,
+            blur=blur,  # type: ignore[arg-type]
+        )
+
+    noisy_ref = _noisy(reference, spec, batch.noise, ref_seed)
+    mode = "none" if spec.compensation in ("none", "deblur") else spec.compensation
+    correlator = make_correlator(wrap(noisy_ref), points + pad, mode)
+    # W = 0 with the blur given is the plain matcher: it needs no margin, and without one
+    # its result is the plain campaign's bit for bit
+    plain_at_zero: Any = None
     sssig_ref = float(
         np.mean(directional_sssig(reference, points, subset=batch.subset, angle=batch.angle))
     )
@@ -250,7 +258,11 @@ def simulate_batch(
             rep=batch.rep,
         )
         noisy = _noisy(blurred, spec, batch.noise, seed)
-        if spec.compensation == "given":  # the known motion of the exposure (issue 18)
+        if spec.compensation == "given" and pad and length == 0:
+            if plain_at_zero is None:
+                plain_at_zero = make_correlator(noisy_ref, points, "none")
+            result = plain_at_zero.correlate(noisy)
+        elif spec.compensation == "given":  # the known motion of the exposure (issue 18)
             result = correlator.correlate(wrap(noisy), blur_vector=motion)
         elif spec.compensation == "estimate":  # the length estimated along the known angle
             result = correlator.correlate(wrap(noisy), blur_angle=batch.angle)

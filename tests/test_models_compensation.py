@@ -212,3 +212,40 @@ def test_cli_plan_compare(tmp_path, capsys):
     assert "--compare: calibrated with subset 41, MODEL with 31" in err
     assert main(["plan", str(a), "--compare", str(a), *args]) == 2
     assert "both models use the plain matcher" in capsys.readouterr().err
+
+
+def test_pattern_predict_writes_a_compensated_model_to_plan_against(tmp_path, capsys):
+    """Before any campaign: the static predictions of both matchers as models, and the
+    plan with compensation set against the one without."""
+    path = tmp_path / "pat.tif"
+    dicblur.save_image(path, dicblur.speckle_pattern((128, 128), speckle_size=4, seed=3))
+    plain, comp = tmp_path / "plain.json", tmp_path / "comp.json"
+    common = ["pattern", "predict", str(path), "--noise", "2", "--subset", "31", "--step", "8"]
+    assert main([*common, "-o", str(plain)]) == 0
+    assert main([*common, "--compensation", "given", "-o", str(comp)]) == 0
+    capsys.readouterr()
+    p, m = (BlurUncertaintyModel.from_json(str(x)) for x in (plain, comp))
+    assert m.compensation == "given" and p.compensation == "none"
+    assert m.c < 0.1 * p.c  # the mismatch term is gone
+    assert m.domain.pattern_sha256 == p.domain.pattern_sha256 is not None
+    assert m.domain.pattern == p.domain.pattern == "pat"
+    args = ["--velocity", "120mm/s", "--scale", "0.05mm/px", "--full-well", "20000"]
+    assert (
+        main(
+            [
+                "plan",
+                str(plain),
+                "--compare",
+                str(comp),
+                *args,
+                "--read-noise",
+                "5",
+                "--flux",
+                "4e6",
+                "--json",
+            ]
+        )
+        == 0
+    )
+    d = json.loads(capsys.readouterr().out)
+    assert d["exposure_ratio"] > 1 and d["u_e_ratio"] < 1

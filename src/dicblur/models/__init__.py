@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from ._result import FitResult, ParameterEstimate
 from .compare import PlanComparison, check_same_calibration, compare_plans
-from .compensated import predict_compensated
+from .compensated import model_from_compensated, predict_compensated
 from .decay import (
     combined_model,
     combined_pan_model,
@@ -70,6 +70,7 @@ __all__ = [
     "mbrf",
     "mismatch_model",
     "mismatch_terms",
+    "model_from_compensated",
     "model_from_pattern",
     "pan_uncertainty",
     "parse_quantity",

@@ -203,7 +203,9 @@ def test_cli_plan_compare(tmp_path, capsys):
     _model("given", c=0.0).to_json(str(b))
     args = ["--velocity", "120mm/s", "--scale", "0.05mm/px", "--full-well", "20000"]
     args += ["--read-noise", "5", "--flux", "4e6"]
-    assert main(["plan", str(a), "--compare", str(b), *args]) == 0
+    png = tmp_path / "plan.png"
+    assert main(["plan", str(a), "--compare", str(b), *args, "--plot", str(png)]) == 0
+    assert png.stat().st_size > 10_000  # both matchers' curves
     out = capsys.readouterr().out
     assert "plain matcher:" in out and "blur-compensated matcher (blur given):" in out
     assert "the optimum exposure is" in out and "x lower" in out

@@ -553,7 +553,11 @@ def plan_command(
     if plot is not None:
         from ..report.plots import plan_figure
 
-        plan_figure(plan, plot)
+        plan_figure(
+            plan,
+            plot,
+            other=None if comparison is None else next(p for p in plans if p is not plan),
+        )
         typer.echo(f"wrote {plot}")
 
 

@@ -193,7 +193,8 @@ def _sentence(
             f"With the {label} the optimum exposure is {_times(t_ratio)} as long "
             f"({exposures}) and {u_words}."
         )
+    tail = "." if abs(u_ratio - 1.0) < 1e-6 else f"; there {u_words}."
     return (
         f"With the {label} the target {comp.target:g} px holds up to {_times(t_ratio)} "
-        f"the exposure ({exposures}); {u_words} there."
+        f"the exposure ({exposures}){tail}"
     )

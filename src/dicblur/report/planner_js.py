@@ -554,7 +554,7 @@ function comparePlans(a, b, q) {
     "With the " + label + " the optimum exposure is " + times(tr) + " as long (" + exposures +
       ") and " + uWords + "." :
     "With the " + label + " the target " + fmt(pc.target, 3) + " px holds up to " + times(tr) +
-      " the exposure (" + exposures + "); " + uWords + " there.";
+      " the exposure (" + exposures + ")" + (Math.abs(ur - 1.0) < 1e-6 ? "." : "; there " + uWords + ".");
   return {baseline: pb, compensated: pc, baseline_compensation: matcherOf(base),
           compensation: matcherOf(comp), u_e_ratio: ur, exposure_ratio: tr,
           baseline_index: swap ? 1 : 0, sentence: sentence};

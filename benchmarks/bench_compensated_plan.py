@@ -6,9 +6,9 @@ noise 2 and 8 GL per image, subset 31, translation, W = 0..10 px in 0.5 px steps
 repetition), one with the plain matcher and one with ``compensation="given"``; then both
 fitted models (the mismatch model's ``c``, ``a``, residual) and the camera plan set against
 each other (:func:`dicblur.models.compare_plans`: 120 mm/s at 0.05 mm/px, full well 20000
-e-, read noise 5 e-, 4e6 e-/s at the mean level; and fixed noise 4 GL with a 0.005 px
-target). The same with the static-prediction models (``model_from_pattern`` and
-``model_from_compensated``, no DIC run).
+e-, read noise 5 e-, 4e6 e-/s at the mean level; and fixed noise 4 GL with a target of
+twice the plain model's static u_e at 4 GL). The same with the static-prediction models
+(``model_from_pattern`` and ``model_from_compensated``, no DIC run).
 
 Patterns: two generated speckle patterns (256 x 256, speckle 4 px, periodic) and the DIC
 Challenge 1 Sample 3 reference (512 x 512, reflect; skipped when absent).
@@ -55,9 +55,12 @@ def _fit_row(m) -> dict:
 
 def _compare(plain, comp) -> dict:
     cam = compare_plans(plain, comp, camera=CAMERA, **MOTION)
-    fixed = compare_plans(plain, comp, target="0.005px", sigma=4.0, **MOTION)
+    # fixed noise 4 GL, target twice the plain matcher's static u_e there (2 significant
+    # digits): 0.005 px on the generated patterns, Sample 3's weak gradients need more
+    target = float(f"{2 * float(plain.predict([0.0], 4.0).u_e[0]):.2g}")
+    fixed = compare_plans(plain, comp, target=target, sigma=4.0, **MOTION)
     out = {}
-    for name, c in (("camera", cam), ("fixed_4GL_0.005px", fixed)):
+    for name, c in (("camera", cam), ("fixed_4GL", fixed)):
         out[name] = {
             "exposure_plain_s": c.baseline.exposure,
             "exposure_compensated_s": c.compensated.exposure,
@@ -67,6 +70,7 @@ def _compare(plain, comp) -> dict:
             "exposure_ratio": c.exposure_ratio,
             "inside_domain": [c.baseline.inside_domain, c.compensated.inside_domain],
             "sentence": c.sentence,
+            "target_px": c.baseline.target,
         }
         print(f"  {name}: {c.sentence}", flush=True)
     return out

@@ -199,6 +199,99 @@ def accuracy(
     return rows
 
 
+def prediction_check(
+    patterns: list[tuple[str, np.ndarray]],
+    blurs: list[float],
+    angles: list[float],
+    shapes: list[str],
+    target_se: float = 0.02,
+    max_reps: int = 40,
+) -> list[dict]:
+    """The compensated static prediction against u_e measured to a stated precision.
+
+    The std over POIs of one image pair is itself a random number: on a 256 x 256
+    pattern (256 overlapping subsets) it scatters by 7.5-10 % from pair to pair, so the
+    two pairs of :func:`accuracy` leave u_e about 6 % uncertain, too coarse for a 10 %
+    target (at W = 0, 30 deg, seed 11 they read 0.00126 px where 30 pairs give 0.00149
+    and the prediction 0.00152). Here each case gets repetitions until the standard
+    error of its u_e is below ``target_se`` (relative; at least 4, at most
+    ``max_reps``), with one ``blur="given"`` Correlator per noisy reference for all
+    angles and W (its cache holds the blurred references).
+    """
+    rows = []
+    for name, ref in patterns:
+        n = ref.shape[0]
+        roi = (MARGIN, n - MARGIN, MARGIN, n - MARGIN)
+        step = 16 if n > 300 else 12
+        for shape in shapes:
+            kw = {"subset": SUBSET, "step": step, "shape": shape, "roi": roi}
+            grid = Correlator(ref, **kw)
+            pts = np.stack([grid.rows, grid.cols], axis=1)
+            cases = [(a, w) for a in angles for w in blurs]
+            pred = {}
+            for angle in angles:
+                a = math.radians(angle)
+                p = predict_compensated(
+                    ref,
+                    blurs,
+                    noise_sigma=SIGMA,
+                    subset=SUBSET,
+                    points=pts,
+                    motion=(math.sin(a), math.cos(a)),
+                    shape=shape,
+                )
+                for j, w in enumerate(blurs):
+                    pred[(angle, w)] = float(p.u_e[j])
+            blurred = {
+                (a, w): motion_blur(ref, _vector(w, a), substeps=100, boundary="reflect")
+                for a, w in cases
+            }
+            stds: dict[tuple[float, float], list[float]] = {c: [] for c in cases}
+            rng = np.random.default_rng(zlib.crc32(f"prediction/{name}/{shape}".encode()))
+            for rep in range(max_reps):
+                corr = Correlator(ref + rng.normal(0, SIGMA, ref.shape), **kw, blur="given")
+                for a, w in cases:
+                    cur = blurred[(a, w)] + rng.normal(0, SIGMA, ref.shape)
+                    res = corr.correlate(cur, blur_vector=_vector(w, a))
+                    ra = math.radians(a)
+                    along = res.u * math.cos(ra) + res.v * math.sin(ra)
+                    stds[(a, w)].append(float(np.std(along[res.converged], ddof=1)))
+                if rep + 1 >= 4 and all(_rel_se(v) <= target_se for v in stds.values()):
+                    break
+            for a, w in cases:
+                v = np.array(stds[(a, w)])
+                u = float(np.sqrt(np.mean(v**2)))
+                row = {
+                    "pattern": name,
+                    "shape": shape,
+                    "angle": a,
+                    "blur": w,
+                    "reps": int(v.size),
+                    "u_e_given": u,
+                    "u_e_given_rel_se": _rel_se(list(v)),
+                    "u_e_given_first2": float(np.sqrt(np.mean(v[:2] ** 2))),
+                    "u_e_predicted_given": pred[(a, w)],
+                }
+                row["rel_error"] = row["u_e_predicted_given"] / u - 1
+                rows.append(row)
+                print(
+                    f"prediction {name:10s} {shape:11s} {a:4.0f} {w:5.1f} | reps {v.size:2d} "
+                    f"u_e {u:.5f} +- {100 * row['u_e_given_rel_se']:.1f} % (first 2 "
+                    f"{row['u_e_given_first2']:.5f}) | predicted {pred[(a, w)]:.5f} "
+                    f"{100 * row['rel_error']:+.1f} %",
+                    flush=True,
+                )
+    return rows
+
+
+def _rel_se(stds: list[float]) -> float:
+    """Relative standard error of ``sqrt(mean(s^2))`` over repetitions (delta method)."""
+    v = np.asarray(stds) ** 2
+    if v.size < 2:
+        return math.inf
+    return float(np.std(v, ddof=1) / math.sqrt(v.size) / (2 * np.mean(v)))
+
+
 def speed(ref: np.ndarray, repeat: int) -> list[dict]:
     n = ref.shape[0]
     roi = (MARGIN, n - MARGIN, MARGIN, n - MARGIN)
@@ -272,8 +365,9 @@ def _speed_one(
     return row
 
 
-def summary(rows: list[dict]) -> dict:
-    """The issue's targets, each over every (pattern, shape, angle) case."""
+def summary(rows: list[dict], prediction: list[dict] | None = None) -> dict:
+    """The issue's targets, each over every (pattern, shape, angle) case; the prediction
+    target from :func:`prediction_check` when given (u_e measured to 2 %)."""
 
     def ratio(r: dict, m: str) -> float:
         b = r["bound_eq2"] if r["shape"] == "translation" else r["bound_fisher"]
@@ -292,7 +386,8 @@ def summary(rows: list[dict]) -> dict:
             abs((r["blur_length_mean"] or np.nan) - 4) for r in at4
         ),
         "predicted_given_max_rel_error_w_le_8": max(
-            abs(r["u_e_predicted_given"] / r["u_e_given"] - 1) for r in le8
+            abs(r["u_e_predicted_given"] / r["u_e_given"] - 1)
+            for r in (le8 if prediction is None else prediction)
         ),
         "estimate_max_ratio_to_bound_w_le_8": max(
             ratio(r, "estimate") for r in le8 if r["blur"] > 0
@@ -322,10 +417,47 @@ def main() -> None:
         action="store_true",
         help="only the speed table (writes compensation_speed.json)",
     )
+    ap.add_argument(
+        "--prediction-only",
+        action="store_true",
+        help="only the static prediction check (writes compensation_prediction.json)",
+    )
     args = ap.parse_args()
     load0 = os.getloadavg()
     commit = _commit()  # at the start: the code this run imported
     pats = _patterns()
+    if args.prediction_only:
+        t0 = time.perf_counter()
+        pr = prediction_check(
+            pats, [0.0, 2.0, 4.0, 6.0, 8.0], [0.0, 30.0], ["translation", "affine"]
+        )
+        worst = max(abs(r["rel_error"]) for r in pr)
+        n_ok = sum(abs(r["rel_error"]) <= 0.10 for r in pr)
+        print(f"\nwithin 10 %: {n_ok} of {len(pr)} cases; largest |error| {100 * worst:.1f} %")
+        path = OUT.with_name("compensation_prediction.json")
+        path.write_text(
+            json.dumps(
+                {
+                    "commit": commit,
+                    "version": dicblur.__version__,
+                    "machine": {
+                        "python": platform.python_version(),
+                        "cpus": os.cpu_count(),
+                        "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
+                        "load_start": load0,
+                        "load_end": os.getloadavg(),
+                    },
+                    "seconds": time.perf_counter() - t0,
+                    "prediction": pr,
+                    "within_10_percent": n_ok,
+                    "cases": len(pr),
+                    "max_abs_rel_error": worst,
+                },
+                indent=1,
+            )
+        )
+        print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
+        return
     if args.speed_only:
         sp = speed(pats[0][1], 5)
         path = OUT.with_name("compensation_speed.json")
@@ -357,7 +489,12 @@ def main() -> None:
     rows = accuracy(
         pats, blurs, [0.0, 30.0], ["translation", "affine"], reps=1 if args.quick else 2
     )
-    summ = summary(rows)
+    pr = None
+    if not args.quick:  # the prediction target, against u_e measured to 2 %
+        pr = prediction_check(
+            pats, [0.0, 2.0, 4.0, 6.0, 8.0], [0.0, 30.0], ["translation", "affine"]
+        )
+    summ = summary(rows, pr)
     print("\ntargets:")
     for k, v in summ.items():
         print(f"  {k}: {v if isinstance(v, str) else round(v, 4)}")
@@ -378,6 +515,7 @@ def main() -> None:
                 "seconds": time.perf_counter() - t0,
                 "speed": sp,
                 "accuracy": rows,
+                "prediction": pr,
                 "summary": summ,
             },
             indent=1,

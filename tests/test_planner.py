@@ -295,3 +295,135 @@ def test_cli_plan_writes_the_page(tmp_path, capsys):
     assert "--html" in capsys.readouterr().err
     assert main(["plan", str(model_path)]) == 2
     assert "--velocity" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- matcher modes (issue 18)
+def _compensated_model():
+    """The calibration of ``_model()`` with the blur-compensated matcher: no mismatch."""
+    rng = np.random.default_rng(11)
+    w0 = np.arange(0.0, 6.01, 0.5)
+    w = np.tile(w0, 2)
+    sig = np.repeat([2.0, 8.0], w0.size)
+    s = sssig_decay(w, S0, BETA)
+    u = mismatch_model(w, s, sig, c=0.0, a=1.4, floor=9e-4) * np.exp(rng.normal(0, 0.02, w.size))
+    return fit_blur_model(
+        w,
+        s,
+        u,
+        noise_sigma=sig,
+        subset=31,
+        mean_level=120.0,
+        provenance={"pattern": "synthetic.tif"},
+        compensation="given",
+        compare=False,
+    )
+
+
+JS_COMPARE = """
+var P = window.dicblurPlanner, out = [];
+CASES.forEach(function (q) {
+  try {
+    var r = P.comparePlans(P.models[0], P.models[1], q);
+    out.push({u_e_ratio: r.u_e_ratio, exposure_ratio: r.exposure_ratio, sentence: r.sentence,
+              base: r.baseline_compensation, comp: r.compensation});
+  } catch (e) { out.push({error: String(e.message || e)}); }
+});
+var pre = document.createElement("pre");
+pre.id = "dicblur-result";
+pre.textContent = JSON.stringify(out);
+document.body.appendChild(pre);
+"""
+
+
+@needs_browser
+def test_page_compares_matcher_modes_as_python_does():
+    from dicblur.models import compare_plans
+
+    plain, comp = _model(), _compensated_model()
+    rng = np.random.default_rng(5)
+    cases = []
+    for i in range(12):
+        cam = {
+            "full_well": float(rng.uniform(1e4, 4e4)),
+            "read_noise": float(rng.uniform(1, 10)),
+            "flux": float(10 ** rng.uniform(6, 7.5)),
+            "peak_to_mean": 2.0,
+        }
+        cases.append(
+            {
+                "velocity": float(rng.uniform(20, 400)),
+                "scale": 0.05,
+                "target": None if i % 2 else float(rng.uniform(0.004, 0.02)),
+                "sigma": float(rng.uniform(1, 6)) if i % 2 == 0 else None,
+                "camera": None if i % 2 == 0 else cam,
+                "kind": "mismatch",
+                "noise_level": None,
+            }
+        )
+    # the compensated model first: the plain one is still the baseline
+    text = planner_html([comp, plain])
+    got = json.loads(evaluate_in_browser(text, f"var CASES = {json.dumps(cases)};" + JS_COMPARE))
+    for q, js in zip(cases, got, strict=True):
+        cam = None if q["camera"] is None else PoissonGaussianCamera(**q["camera"])
+        py = compare_plans(
+            comp,
+            plain,
+            velocity=q["velocity"],
+            scale=q["scale"],
+            target=q["target"],
+            sigma=q["sigma"],
+            camera=cam,
+            which="mismatch",
+        )
+        assert "error" not in js, (q, js)
+        assert js["base"] == "none" and js["comp"] == "given"
+        assert js["u_e_ratio"] == pytest.approx(py.u_e_ratio, rel=1e-6), (q, py, js)
+        assert js["exposure_ratio"] == pytest.approx(py.exposure_ratio, rel=1e-6), (q, py, js)
+        assert js["sentence"].startswith("With the blur-compensated matcher (blur given)")
+
+
+SCRIPT_MODES = """
+function snap() {
+  return {sentence: document.getElementById("sentence").textContent,
+          boxHidden: document.getElementById("compare-box").hidden,
+          compare: document.getElementById("compare").value,
+          gainHidden: document.getElementById("row-gain").hidden,
+          gain: document.getElementById("out-gain").textContent,
+          curve2: !!document.getElementById("curve2"),
+          options: Array.prototype.map.call(document.getElementById("model").options,
+                                            function (o) { return o.textContent; })};
+}
+window.addEventListener("load", function () {
+  var both = snap();
+  var el = document.getElementById("compare");
+  el.value = "";
+  el.dispatchEvent(new Event("change", {bubbles: true}));
+  var one = snap();
+  var pre = document.createElement("pre");
+  pre.id = "dicblur-result";
+  pre.textContent = JSON.stringify([both, one]);
+  document.body.appendChild(pre);
+});
+"""
+
+
+@needs_browser
+def test_page_shows_both_matcher_modes_and_the_gain(models):
+    plain, comp = _model(), _compensated_model()
+    defaults = PlannerDefaults(full_well=2e4, read_noise=5, flux=4e6)
+    page = planner_html([plain, comp], defaults=defaults)
+    both, one = json.loads(evaluate_in_browser(page, SCRIPT_MODES))
+    assert not both["boxHidden"] and both["compare"] == "1"
+    assert both["curve2"] and not both["gainHidden"]
+    assert "the blur-compensated matcher (blur given) the optimum exposure is" in both["sentence"]
+    assert "blur-compensated matcher (blur given)" in both["options"][1]
+    cam = PoissonGaussianCamera(full_well=2e4, read_noise=5, flux=4e6)
+    from dicblur.models import compare_plans
+
+    py = compare_plans(plain, comp, velocity="120mm/s", scale="0.05mm/px", camera=cam)
+    assert f"u_e {py.u_e_ratio:.3g}x, exposure {py.exposure_ratio:.3g}x" in both["gain"]
+    # switched off: one matcher, one curve, no gain
+    assert not one["curve2"] and one["gainHidden"] and "With the" not in one["sentence"]
+    # models of one matcher mode only: no selector
+    (solo, _) = json.loads(evaluate_in_browser(planner_html(models), SCRIPT_MODES))
+    assert solo["boxHidden"] and not solo["curve2"]

@@ -76,6 +76,7 @@ def calibration_spec(
     seed: int = 1,
     blur: Any = None,
     repetitions: int = 1,
+    compensation: str = "none",
 ) -> CampaignSpec:
     """The campaign spec of a calibration sweep.
 
@@ -95,6 +96,10 @@ def calibration_spec(
         ``dicblur noise`` measures). The paper adds it per sub-frame instead.
     blur : list or dict, optional
         W grid (px); default the paper's 0.1..10 px in 0.1 px steps.
+    compensation : {"none", "given", "estimate", "deblur"}
+        Matcher mode of the sweep (campaign key ``dic.compensation``): the plain matcher
+        (default), the blur-compensated one with the known motion or with the blur
+        estimated, or the deblur baseline. The fitted model records it.
 
     Notes
     -----
@@ -102,6 +107,12 @@ def calibration_spec(
     the region that saw only image content at the largest W); generated patterns are
     periodic and use ``"periodic"``, exactly the paper.
     """
+    from ..models.domain import COMPENSATIONS
+
+    if compensation not in COMPENSATIONS:
+        raise InputError(
+            f"compensation={compensation!r}: choose one of " + ", ".join(map(repr, COMPENSATIONS))
+        )
     name = str(image)
     is_file = Path(name).is_file()
     if is_file:
@@ -132,7 +143,13 @@ def calibration_spec(
                 "boundary": boundary,
             },
             "noise": {"model": noise_model, "levels": _levels(noise)},
-            "dic": {"subsets": [subset], "step": step, "shape": shape},
+            "dic": {
+                "subsets": [subset],
+                "step": step,
+                "shape": shape,
+                # only when on: a plain calibration's spec (and hash) is what it was
+                **({} if compensation == "none" else {"compensation": compensation}),
+            },
         }
     )
 
@@ -163,6 +180,7 @@ def calibrate(
     workers: int | None = None,
     serial: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    compensation: str = "none",
 ) -> CalibrationResult | None:
     """Run the paper's sweep on one pattern and fit the blur-uncertainty model.
 
@@ -194,6 +212,7 @@ def calibrate(
         size=size,
         seed=seed,
         blur=blur,
+        compensation=compensation,
     )
     out = Path(out_dir)
     out.mkdir(exist_ok=True)
@@ -236,6 +255,7 @@ def calibrate(
         # Measured on paper4 512^2 over W = 0..8 px: without it the fit is 24 % rms off
         # and over-predicts W = 3 px by 22-30 %; with it 7 % rms and 1-3 % (BENCHMARKS.md).
         next_term="auto",
+        compensation=spec.compensation,
         provenance={
             "source": "dicblur calibrate",
             "pattern": spec.patterns[0].to_dict(),
@@ -246,6 +266,7 @@ def calibrate(
             "angle": angle,
             "step": step,
             "dic_shape": shape,
+            **({} if spec.compensation == "none" else {"compensation": spec.compensation}),
         },
     )
     model_path = out / "model.json"

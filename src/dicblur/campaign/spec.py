@@ -47,7 +47,8 @@ Example
     interpolation = "bspline3"
     max_iterations = 50
     tolerance = 1e-4
-    compensation = "none"    # "given": blur-compensated matcher; "deblur": Wiener baseline
+    compensation = "none"    # "given": blur-compensated matcher; "estimate": with the blur
+                             # length estimated; "deblur": Wiener baseline
 
     [run]
     blur_chunk = 10          # blur values per task batch (one Correlator per batch)
@@ -84,9 +85,10 @@ BLUR_METHODS = ("transfer", "rendered")
 GENERATORS = ("speckle", "paper4")
 DIC_SHAPES = ("translation", "affine")
 #: ``dic.compensation``: the plain matcher; blur-compensated with the known motion
-#: (``Correlator(blur="given")``, issue 18); or the deblur baseline (Wiener-deblurred
-#: current image with the known kernel, then the plain matcher).
-COMPENSATIONS = ("none", "given", "deblur")
+#: (``Correlator(blur="given")``, issue 18); blur-compensated with the blur length
+#: estimated along the known direction (``Correlator(blur="estimate")``); or the deblur
+#: baseline (Wiener-deblurred current image with the known kernel, then the plain matcher).
+COMPENSATIONS = ("none", "given", "estimate", "deblur")
 INTERPOLATIONS = ("bspline3", "bspline5")
 _MAX_BLUR_VALUES = 100_000
 MAX_TASKS = 10_000_000

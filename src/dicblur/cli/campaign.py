@@ -215,6 +215,13 @@ def calibrate_command(
     workers: int | None = typer.Option(None, "--workers", help="Local worker processes."),
     serial: bool = typer.Option(False, "--serial", help="Run in this process, no Dask."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    compensation: str = typer.Option(
+        "none",
+        "--compensation",
+        help="Matcher of the sweep: none (plain), given (blur-compensated with the known "
+        "motion), estimate (blur length estimated) or deblur (Wiener baseline); the "
+        "model records it (plan --compare sets one against another).",
+    ),
 ) -> int:
     """The paper's blur sweep (W = 0.1..10 px) on IMAGE, then the model fits.
 
@@ -226,6 +233,10 @@ def calibrate_command(
     from ..campaign.calibrate import calibrate
     from ..report.plots import calibration_figures
 
+    if compensation not in ("none", "given", "estimate", "deblur"):
+        raise InputError(
+            f"--compensation={compensation!r}: choose none, given, estimate or deblur"
+        )
     try:
         start, stop, inc = (float(v) for v in blur.split(":"))
     except ValueError as exc:
@@ -250,6 +261,7 @@ def calibrate_command(
             workers=workers,
             serial=serial,
             progress=progress,
+            compensation=compensation,
         )
     if res is None:
         console.print("interrupted: rerun the same command to finish the remaining tasks")
@@ -273,6 +285,7 @@ def calibrate_command(
             "mismatch model: a": None if mm is None or "a" not in mm else mm["a"],
             "mismatch model: c": None if mm is None else mm["c"],
             "default model": m.default,
+            "matcher": m.matcher,
             "validity domain": dom.describe() if dom else None,
             "DIC breaks down from W": None if dom is None else dom.breakdown_blur,
             "model": str(res.model_path),

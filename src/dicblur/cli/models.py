@@ -231,6 +231,12 @@ def fit_command(
     ),
     seed: int | None = typer.Option(None, "--seed", help="Bootstrap seed."),
     as_json: bool = typer.Option(False, "--json", help="Print the model JSON."),
+    compensation: str | None = typer.Option(
+        None,
+        "--compensation",
+        help="Matcher of the data: none, given, estimate or deblur (default: the "
+        "campaign's dic.compensation for a .zarr store, else none).",
+    ),
 ) -> None:
     """Fit the uncertainty models to RESULTS and write the model JSON."""
     from ..io import check_output, file_sha256
@@ -246,6 +252,7 @@ def fit_command(
         except ValueError as exc:
             raise InputError(f"--fit-range={fit_range!r}: expected LO:HI in px, e.g. 0:4") from exc
     sigma: Any = data.get("noise", noise)
+    mode = _results_compensation(results, compensation)
     model = fit_blur_model(
         data["blur"],
         data["sssig"],
@@ -260,6 +267,7 @@ def fit_command(
         converged_fraction=data.get("converged_fraction"),
         shape=str(data["shape"][0]) if "shape" in data else None,
         pattern=str(data["pattern"][0]) if "pattern" in data else None,
+        compensation=mode,
         provenance={
             "results": str(results),
             "select": list(select),
@@ -272,6 +280,30 @@ def fit_command(
     else:
         typer.echo(model.report())
         typer.echo(f"wrote {out}")
+
+
+def _results_compensation(results: Path, given: str | None) -> str:
+    """The matcher mode of RESULTS: ``--compensation``, else a campaign store's spec."""
+    from ..models.domain import COMPENSATIONS
+
+    if given is not None:
+        if given not in COMPENSATIONS:
+            raise InputError(
+                f"--compensation={given!r}: choose {', '.join(COMPENSATIONS[:-1])} or deblur"
+            )
+        return given
+    if results.is_dir() or results.suffix.lower() == ".zarr":
+        import json
+
+        import xarray as xr
+
+        try:
+            spec = json.loads(xr.open_zarr(results).attrs.get("spec", "{}"))
+        except Exception:  # not a campaign store: no recorded mode
+            return "none"
+        mode = spec.get("dic", {}).get("compensation", "none") if isinstance(spec, dict) else "none"
+        return mode if mode in COMPENSATIONS else "none"
+    return "none"
 
 
 def predict_command(
@@ -329,6 +361,7 @@ def predict_command(
         print_json(
             {
                 "model": pred.model,
+                "compensation": pred.compensation,
                 "sigma": pred.sigma,
                 "confidence": pred.confidence,
                 "extrapolated": pred.extrapolated,
@@ -339,6 +372,7 @@ def predict_command(
         )
         return
     pct = f"{100 * pred.confidence:g}%"
+    typer.echo(f"matcher: {model.matcher}")
     for r in rows:
         if r["broken_down"]:
             typer.echo(f"W = {r['blur_px']:.4g} px: no prediction (DIC breaks down) [{pred.model}]")
@@ -382,11 +416,18 @@ def plan_command(
         "file; the options given here are its starting values).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    compare: Path | None = typer.Option(
+        None,
+        "--compare",
+        help="A second model of the same calibration with another matcher mode (e.g. "
+        "calibrate --compensation given): plan both and state the gain of compensation.",
+    ),
 ) -> None:
     """Plan the exposure: longest under --target, or the optimum with a camera.
 
     With --html (alone, or with the other options as starting values), writes a planner
-    page that computes the same answers in the browser as the controls change.
+    page that computes the same answers in the browser as the controls change. With
+    --compare, the plan with blur compensation is set against the one without.
     """
     import numpy as np
 
@@ -408,6 +449,18 @@ def plan_command(
             "0.05mm/px), or --html planner.html for the interactive page"
         )
     model = BlurUncertaintyModel.from_json(str(model_path))
+    other = None
+    if compare is not None:
+        from ..models import check_same_calibration
+
+        other = BlurUncertaintyModel.from_json(str(compare))
+        if other.compensation == model.compensation:
+            raise InputError(
+                f"--compare={str(compare)!r}: both models use the {model.matcher}; give "
+                "one calibrated with blur compensation (dicblur calibrate --compensation "
+                "given) and one without"
+            )
+        check_same_calibration(model, other, names=("MODEL", "--compare"))
     if html_out is not None:
         from ..report.planner import PlannerDefaults, write_planner
 
@@ -420,7 +473,9 @@ def plan_command(
             read_noise=read_noise,
             flux=flux,
         )
-        write_planner([model], html_out, labels=None, defaults=defaults)
+        write_planner(
+            [model] if other is None else [model, other], html_out, labels=None, defaults=defaults
+        )
         typer.echo(f"wrote {html_out}")
         if velocity is None or scale is None:
             return
@@ -461,33 +516,48 @@ def plan_command(
             "--read-noise, --flux); with fixed noise give --noise"
         )
     assert velocity is not None and scale is not None
-    plan = plan_exposure(
-        model,
-        velocity=velocity,
-        scale=scale,
-        target=target,
-        camera=camera,
-        sigma=noise,
-        which=which,
-        noise_level=noise_level,
-        mean_level=mean_level,
-    )
-    if not plan.inside_domain or plan.limited_by_breakdown:
-        _warn_notes(
-            [
-                n
-                for n in plan.notes
-                if "outside the model's validity domain" in n or "breaks down" in n
-            ]
-        )
-    if as_json:
-        print_json(plan.to_dict())
+    kwargs: dict[str, Any] = {
+        "velocity": velocity,
+        "scale": scale,
+        "target": target,
+        "camera": camera,
+        "sigma": noise,
+        "which": which,
+        "noise_level": noise_level,
+        "mean_level": mean_level,
+    }
+    comparison = None
+    if other is not None:
+        from ..models import compare_plans
+
+        comparison = compare_plans(model, other, names=("MODEL", "--compare"), **kwargs)
+        plans = [comparison.baseline, comparison.compensated]
+        plan = plans[0] if comparison.baseline_compensation == model.compensation else plans[1]
     else:
+        plans = [plan := plan_exposure(model, **kwargs)]
+    for p in plans:
+        if not p.inside_domain or p.limited_by_breakdown:
+            _warn_notes(
+                [
+                    n
+                    for n in p.notes
+                    if "outside the model's validity domain" in n or "breaks down" in n
+                ]
+            )
+    if as_json:
+        print_json(plan.to_dict() if comparison is None else comparison.to_dict())
+    elif comparison is None:
         console.print(plan.summary())
+    else:
+        console.print(comparison.summary())
     if plot is not None:
         from ..report.plots import plan_figure
 
-        plan_figure(plan, plot)
+        plan_figure(
+            plan,
+            plot,
+            other=None if comparison is None else next(p for p in plans if p is not plan),
+        )
         typer.echo(f"wrote {plot}")
 
 

@@ -165,7 +165,9 @@ def predict(
         "none",
         "--compensation",
         help="'given': also predict the blur-compensated matcher (dicblur correlate "
-        "--blur-compensation given) and the gain over the plain one.",
+        "--blur-compensation given) and the gain over the plain one; with -o the model "
+        "written is the compensated matcher's (dicblur plan --compare sets it against "
+        "the plain one).",
     ),
 ) -> None:
     """Predict u_e(W) of IMAGE from the static image alone (no simulation, no DIC run)."""
@@ -180,10 +182,9 @@ def predict(
         check_output(out, "--out")
     if compensation not in ("none", "given"):
         raise InputError(f"--compensation={compensation!r}: choose 'none' or 'given'")
-    if compensation == "given" and (out is not None or subpixel is not None):
+    if compensation == "given" and subpixel is not None:
         raise InputError(
-            "--compensation=given: prints the compensated prediction only; "
-            "drop -o/--out and --subpixel"
+            "--compensation=given: the compensated prediction is aligned; drop --subpixel"
         )
     img = load_image(image)
     a = math.radians(angle)
@@ -220,6 +221,19 @@ def predict(
             angle=angle,
             as_json=as_json,
         )
+        if out is not None:
+            from ..models import model_from_compensated
+
+            model_from_compensated(
+                img,
+                noise_sigma=noise,
+                subset=subset,
+                step=step,
+                motion=motion,
+                shape=shape,
+                provenance={"image": str(image)},
+            ).to_json(str(out))
+            console.print(f"wrote {out}: the blur-compensated matcher's model")
         return
     if out is not None:
         model = model_from_pattern(

@@ -6,7 +6,8 @@ fitted :class:`BlurUncertaintyModel` and exposure planning. See docs/models.md.
 from __future__ import annotations
 
 from ._result import FitResult, ParameterEstimate
-from .compensated import predict_compensated
+from .compare import PlanComparison, check_same_calibration, compare_plans
+from .compensated import model_from_compensated, predict_compensated
 from .decay import (
     combined_model,
     combined_pan_model,
@@ -48,14 +49,17 @@ __all__ = [
     "ModelComparison",
     "ParameterEstimate",
     "PatternPrediction",
+    "PlanComparison",
     "PoissonGaussianCamera",
     "Prediction",
     "blur_mismatch_curve",
     "blur_sensitivity",
     "check_measurements",
+    "check_same_calibration",
     "combined_model",
     "combined_pan_model",
     "compare_models",
+    "compare_plans",
     "edge_driven_range",
     "fit_blur_model",
     "fit_mismatch",
@@ -66,6 +70,7 @@ __all__ = [
     "mbrf",
     "mismatch_model",
     "mismatch_terms",
+    "model_from_compensated",
     "model_from_pattern",
     "pan_uncertainty",
     "parse_quantity",

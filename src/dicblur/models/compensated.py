@@ -23,7 +23,11 @@ Gradients are the exact derivatives of the engine's cubic B-spline by default (a
 
 from __future__ import annotations
 
+import hashlib
 import math
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -37,7 +41,10 @@ from ..metrics import directional_sssig, image_gradients, subset_centres
 from .pattern import PatternPrediction
 from .sensitivity import spline_gradients
 
-__all__ = ["predict_compensated"]
+if TYPE_CHECKING:
+    from .model import BlurUncertaintyModel
+
+__all__ = ["model_from_compensated", "predict_compensated"]
 
 
 def _points(
@@ -230,3 +237,92 @@ def predict_compensated(
         shape=shape,
         motion=e,
     )
+
+
+def model_from_compensated(
+    image: ArrayLike,
+    *,
+    noise_sigma: float,
+    subset: int,
+    blur: ArrayLike | None = None,
+    step: int | None = None,
+    points: ArrayLike | None = None,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: str = "translation",
+    provenance: dict[str, Any] | None = None,
+) -> BlurUncertaintyModel:
+    """A model of the blur-compensated matcher fitted to :func:`predict_compensated`.
+
+    The compensated counterpart of :func:`~dicblur.models.model_from_pattern`: the
+    prediction at noise ``sigma/2``, ``sigma`` and ``2 sigma`` over ``blur`` (default
+    W = 0..8 px in steps of 0.5, shorter than the subset) is fitted like campaign data
+    (:func:`~dicblur.models.fit_blur_model` with ``compensation="given"``). The mismatch
+    coefficient comes out near zero; the model records the matcher mode and the same
+    pattern hash as ``model_from_pattern`` of the same image, so
+    :func:`~dicblur.models.compare_plans` (``dicblur plan --compare``) sets the two
+    against each other before any simulation.
+
+    Parameters
+    ----------
+    image : array_like, shape (rows, cols)
+        Sharp reference image, grey levels.
+    noise_sigma : float
+        Noise std (GL) of the images the model is for.
+    subset : int
+        Odd subset size (px).
+    blur : array_like, optional
+        Blur lengths (px, < subset) to predict and fit; at least 4 distinct values.
+    step, points, motion, shape
+        As for :func:`predict_compensated`.
+    provenance : dict, optional
+        Extra JSON-ready fields (``"image"``: its path names the pattern).
+
+    Returns
+    -------
+    BlurUncertaintyModel
+    """
+    from .fit import fit_blur_model
+
+    img = as_image(image, "image", min_size=3)
+    sigma = check_positive(noise_sigma, "noise_sigma")
+    subset = check_odd_subset(subset)
+    w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
+    w = w[w < subset] if blur is None else w
+    if np.unique(w).size < 4:
+        raise InputError(
+            f"blur: {np.unique(w).size} distinct lengths; give at least 4 (e.g. W = 0, 1, 2, 4 px)"
+        )
+    levels = (0.5 * sigma, sigma, 2.0 * sigma)
+    # first order in the noise: u_e is proportional to sigma, one prediction serves all
+    unit = predict_compensated(
+        img, w, noise_sigma=1.0, subset=subset, step=step, points=points, motion=motion, shape=shape
+    )
+    prov: dict[str, Any] = {
+        "source": "static prediction (blur-compensated matcher)",
+        "compensation": "given",
+        "subset": subset,
+        "shape": str(shape),
+        "motion": [float(motion[0]), float(motion[1])],
+        "image_shape": list(img.shape),
+    }
+    prov.update(provenance or {})
+    name = prov.get("pattern")
+    if not isinstance(name, str):
+        name = (Path(prov["image"]).stem or None) if isinstance(prov.get("image"), str) else None
+    model = fit_blur_model(
+        np.concatenate([w] * 3),
+        np.concatenate([unit.sssig] * 3),
+        np.concatenate([lv * unit.u_e for lv in levels]),
+        noise_sigma=np.repeat(levels, w.size),
+        subset=subset,
+        mean_level=float(img.mean()),
+        default="mismatch",
+        provenance=prov,
+        compare=False,
+        shape=str(shape),
+        pattern=name,
+        pattern_sha256=hashlib.sha256(img.tobytes()).hexdigest(),
+        compensation="given",
+    )
+    # fitted on three noise levels: make the model's own noise the one asked for
+    return replace(model, noise_sigma=sigma)

@@ -17,7 +17,25 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ValidityDomain"]
+__all__ = ["COMPENSATIONS", "ValidityDomain", "compensation_label"]
+
+#: The matcher modes a model can be fitted on (``compensation``, as the campaign key
+#: ``dic.compensation`` and ``Correlator(blur=...)``): ``"none"`` the plain matcher (sharp
+#: reference), ``"given"`` the blur-compensated matcher with the known blur vector,
+#: ``"estimate"`` the blur-compensated matcher that estimates the blur length, ``"deblur"``
+#: the plain matcher on Wiener-deblurred current images (the published baseline).
+COMPENSATIONS = ("none", "given", "estimate", "deblur")
+_LABELS = {
+    "none": "plain matcher",
+    "given": "blur-compensated matcher (blur given)",
+    "estimate": "blur-compensated matcher (blur estimated)",
+    "deblur": "plain matcher on Wiener-deblurred images",
+}
+
+
+def compensation_label(compensation: str) -> str:
+    """Words for a matcher mode: ``"given"`` -> ``"blur-compensated matcher (blur given)"``."""
+    return _LABELS.get(compensation, f"matcher {compensation!r}")
 
 
 @dataclass(frozen=True)
@@ -43,6 +61,9 @@ class ValidityDomain:
         converged over the whole fitted range.
     breakdown_rule : str or None
         How ``breakdown_blur`` was found (e.g. ``"converged fraction < 0.9"``).
+    compensation : {"none", "given", "estimate", "deblur"}
+        Matcher mode of the fitted data (:data:`COMPENSATIONS`): ``"none"``, the plain
+        matcher, for files written before it was recorded.
     """
 
     blur_min: float
@@ -55,6 +76,7 @@ class ValidityDomain:
     pattern_sha256: str | None = None
     breakdown_blur: float | None = None
     breakdown_rule: str | None = None
+    compensation: str = "none"
 
     # tolerance of the range checks: W and sigma are read from files and units
     _REL = 1e-9
@@ -94,6 +116,8 @@ class ValidityDomain:
             parts.append(self.shape)
         if self.pattern is not None:
             parts.append(f"pattern {self.pattern}")
+        if self.compensation != "none":
+            parts.append(compensation_label(self.compensation))
         return ", ".join(parts)
 
     def outside_reason(self, blur: NDArray[np.float64], sigma: float | None) -> str | None:
@@ -135,4 +159,5 @@ class ValidityDomain:
             pattern_sha256=d.get("pattern_sha256"),
             breakdown_blur=num("breakdown_blur"),
             breakdown_rule=d.get("breakdown_rule"),
+            compensation=d.get("compensation") or "none",
         )

@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..checks import as_blur, as_positive, as_vector, describe
+from ..checks import as_blur, as_positive, as_vector, check_choice, describe
 from ..errors import FitError, InputError
 from .decay import fit_sssig_decay
-from .domain import ValidityDomain
+from .domain import COMPENSATIONS, ValidityDomain
 from .mismatch import fit_mismatch
 from .model import BlurUncertaintyModel
 from .powerlaw import edge_driven_range, fit_power_law
@@ -100,6 +100,7 @@ def fit_blur_model(
     min_converged: float = 0.9,
     breakdown_blur: float | None = None,
     breakdown_rule: str | None = None,
+    compensation: str = "none",
 ) -> BlurUncertaintyModel:
     """Fit the SSSIG decay, the power law and the noise + blur-mismatch model.
 
@@ -167,6 +168,11 @@ def fit_blur_model(
         points are left out of the fits and the model makes no prediction there.
     breakdown_blur, breakdown_rule : float and str, optional
         A breakdown W (px) found otherwise (e.g. the static prediction's own test) and how.
+    compensation : {"none", "given", "estimate", "deblur"}
+        Matcher mode of the data (campaign key ``dic.compensation``), recorded in the
+        validity domain: ``"none"`` the plain matcher. With a blur-compensated mode and a
+        known ``subset`` the model makes no prediction from W = ``subset`` on (the
+        compensated matcher needs a blur shorter than the subset).
 
     Returns
     -------
@@ -195,6 +201,11 @@ def fit_blur_model(
         )
     if default not in ("auto", "mismatch", "power_law"):
         raise InputError(f"default={default!r}: choose 'mismatch', 'power_law' or 'auto'")
+    compensation = check_choice(compensation, "compensation", COMPENSATIONS)
+    if compensation in ("given", "estimate") and subset is not None:
+        if breakdown_blur is None or breakdown_blur > subset:
+            breakdown_blur = float(subset)
+            breakdown_rule = "the compensated matcher needs a blur shorter than the subset"
     if converged_fraction is not None:
         conv = as_vector(converged_fraction, "converged_fraction", n)
         bad = np.unique(w[conv < min_converged])
@@ -332,6 +343,7 @@ def fit_blur_model(
             pattern_sha256=pattern_sha256,
             breakdown_blur=breakdown_blur,
             breakdown_rule=breakdown_rule if breakdown_blur is not None else None,
+            compensation=compensation,
         ),
     )
     chosen = model.default

@@ -16,7 +16,7 @@ from ..errors import FitError, InputError
 from ._result import FitResult, t_quantile
 from .decay import mbrf as _mbrf
 from .decay import sssig_decay
-from .domain import ValidityDomain
+from .domain import COMPENSATIONS, ValidityDomain, compensation_label
 from .mismatch import mismatch_terms
 from .model_schema import SCHEMA, SCHEMA_V1, validate_model_dict
 
@@ -58,6 +58,9 @@ class Prediction:
         Some W (or the noise) lies outside the domain.
     notes : tuple of str
         One line per reason (extrapolation, breakdown).
+    compensation : str
+        Matcher mode of the model (``"none"``: plain; ``"given"``, ``"estimate"``:
+        blur-compensated; ``"deblur"``), from its validity domain.
     """
 
     blur: NDArray[np.float64]
@@ -74,6 +77,7 @@ class Prediction:
     broken_down: NDArray[np.bool_] | None = None
     extrapolated: bool = False
     notes: tuple[str, ...] = ()
+    compensation: str = "none"
 
 
 @dataclass(frozen=True)
@@ -169,6 +173,18 @@ class BlurUncertaintyModel:
     def mbrf(self) -> float:
         """Motion blur rejection factor ``2 alpha beta`` (1/px**2), paper eq. 22."""
         return _mbrf(self.alpha, self.beta)
+
+    @property
+    def compensation(self) -> str:
+        """Matcher mode the model was fitted on (``domain.compensation``): ``"none"`` (the
+        plain matcher), ``"given"`` / ``"estimate"`` (blur-compensated), ``"deblur"``."""
+        assert self.domain is not None
+        return self.domain.compensation
+
+    @property
+    def matcher(self) -> str:
+        """The matcher mode in words (``"blur-compensated matcher (blur given)"``)."""
+        return compensation_label(self.compensation)
 
     @property
     def c(self) -> float | None:
@@ -369,6 +385,7 @@ class BlurUncertaintyModel:
             broken_down=broken,
             extrapolated=bool((~inside & ~broken).any()),
             notes=tuple(notes),
+            compensation=dom.compensation,
         )
 
     def breakdown_note(self, blur: NDArray[np.float64]) -> str:
@@ -468,6 +485,7 @@ class BlurUncertaintyModel:
         pct = f"{100 * self.confidence:g}%"
         lines = [
             f"dicblur blur-uncertainty model (dicblur {self.version}); default: {self.default}",
+            f"matcher: {self.matcher}",
             f"subset {self.subset} px; noise levels {list(self.noise_levels) or 'unknown'} GL; "
             f"{len(self.data['blur'])} points, W {min(self.data['blur']):g}..."
             f"{max(self.data['blur']):g} px",
@@ -653,6 +671,7 @@ def _domain_from_fields(m: BlurUncertaintyModel) -> ValidityDomain:
     if sha is None and isinstance(hashes, dict) and len(hashes) == 1:
         sha = next(iter(hashes.values()))
     shape = prov.get("dic_shape", prov.get("shape"))
+    comp = prov.get("compensation", "none")
     return ValidityDomain(
         blur_min=float(min(w)),
         blur_max=float(max(w)),
@@ -662,4 +681,5 @@ def _domain_from_fields(m: BlurUncertaintyModel) -> ValidityDomain:
         shape=shape if isinstance(shape, str) else None,
         pattern=name if isinstance(name, str) else None,
         pattern_sha256=sha if isinstance(sha, str) else None,
+        compensation=comp if comp in COMPENSATIONS else "none",
     )

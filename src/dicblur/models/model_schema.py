@@ -193,6 +193,12 @@ DOMAIN_RULES: dict[str, Rule] = {
     "pattern_sha256": Rule(optional(string()), "a hash or null"),
     "breakdown_blur": Rule(optional(number(minimum=0.0)), "a W in px or null"),
     "breakdown_rule": Rule(optional(string()), "a string or null"),
+    # matcher mode (issue 18); files written before it are the plain matcher ("none")
+    "compensation": Rule(
+        string(("none", "given", "estimate", "deblur")),
+        "'none', 'given', 'estimate' or 'deblur'",
+        required=False,
+    ),
 }
 
 

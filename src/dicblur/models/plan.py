@@ -35,6 +35,7 @@ from scipy import optimize
 
 from ..checks import as_image, check_positive, check_textured
 from ..errors import InputError
+from .domain import compensation_label
 from .model import BlurUncertaintyModel
 from .units import parse_quantity
 
@@ -182,7 +183,8 @@ class ExposurePlan:
     the model's validity domain; ``extrapolated`` is its negation. ``limited_by_breakdown``:
     the answer is capped at the blur length where DIC breaks down. ``domain`` is the
     model's :class:`~dicblur.models.ValidityDomain` as a dict. ``notes`` says all of it in
-    words.
+    words. ``compensation``: the model's matcher mode (``"none"``: the plain matcher;
+    ``"given"``, ``"estimate"``: blur-compensated; ``"deblur"``).
     """
 
     model: str
@@ -210,12 +212,13 @@ class ExposurePlan:
     extrapolated: bool = False
     limited_by_breakdown: bool = False
     domain: dict[str, Any] | None = None
+    compensation: str = "none"
 
     def summary(self) -> str:
         """A readable answer."""
         lines = [
             f"motion {self.velocity:g} mm/s at {self.scale:g} mm/px = {self.velocity_px:g} px/s "
-            f"(model: {self.model})",
+            f"(model: {self.model}; {compensation_label(self.compensation)})",
         ]
         kind = "optimal exposure" if self.optimal else "longest exposure under the target"
         lines.append(
@@ -385,6 +388,7 @@ def plan_exposure(
             extrapolated=not inside,
             limited_by_breakdown=limited,
             domain=dom.to_dict(),
+            compensation=dom.compensation,
         )
 
     for attr in ("full_well", "read_noise", "flux"):
@@ -550,4 +554,5 @@ def plan_exposure(
         extrapolated=not inside,
         limited_by_breakdown=limited,
         domain=dom.to_dict(),
+        compensation=dom.compensation,
     )

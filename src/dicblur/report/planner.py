@@ -78,7 +78,10 @@ def planner_payload(model: Any, *, label: str | None = None) -> dict[str, Any]:
     if not isinstance(model, BlurUncertaintyModel):
         raise InputError("model: expected a BlurUncertaintyModel (dicblur fit / calibrate)")
     prov = model.provenance or {}
-    name = label or str(prov.get("pattern") or prov.get("name") or "calibrated pattern")
+    pat = prov.get("pattern")
+    if isinstance(pat, dict):  # dicblur calibrate records the campaign's pattern table
+        pat = pat.get("name")
+    name = label or str(pat or prov.get("name") or "calibrated pattern")
     subset = f", subset {model.subset} px" if model.subset else ""
     dom = model.domain.to_dict() if model.domain is not None else None
     if dom is not None:
@@ -129,7 +132,8 @@ table.out td{padding:.2em 0}
 svg{width:100%;height:auto;background:#fff}
 .frame{fill:none;stroke:#44515c}.tick{stroke:#44515c}.curve{fill:none;stroke:#2a6f97;
 stroke-width:2.5}.target{stroke:#b35900;stroke-dasharray:6 4;stroke-width:1.5}
-.opt{fill:#1a7f37}.now{stroke:#7d6608;stroke-width:1.5}.outside{fill:#e9e3d0}
+.opt{fill:#1a7f37}.curve2{fill:none;stroke:#7b3294;stroke-width:2.5;stroke-dasharray:9 4}
+.opt2{fill:#fff;stroke:#1a7f37;stroke-width:2.5}.now{stroke:#7d6608;stroke-width:1.5}.outside{fill:#e9e3d0}
 svg text{font-size:12px;fill:#1d2329}
 .legend span{display:inline-block;margin-right:1.2em;font-size:.85em}
 .sw{display:inline-block;width:1.4em;height:.7em;vertical-align:middle;margin-right:.3em}
@@ -201,7 +205,9 @@ def planner_html(
 <fieldset><legend>Calibration</legend>
 <label for="model">pattern and subset</label><select id="model"></select>
 <label for="kind">uncertainty model</label><select id="kind"><option value="">model's default
-</option>{kind_opts}</select></fieldset>
+</option>{kind_opts}</select>
+<div id="compare-box" hidden><label for="compare">set against (matcher mode)</label>
+<select id="compare"></select></div></fieldset>
 <fieldset><legend>Motion and optics</legend>
 <label for="velocity">velocity in the image plane (mm/s, m/s, px/s)</label>
 <input type="text" id="velocity" value="{val(d.velocity)}" inputmode="decimal">
@@ -244,6 +250,7 @@ def planner_html(
 <tr><th>validity</th><td id="out-domain"></td></tr>
 <tr><th>longest exposure meeting the target</th><td id="out-max"></td></tr>
 <tr><th>optimum exposure (camera)</th><td id="out-opt"></td></tr>
+<tr id="row-gain" hidden><th>gain of compensation at the optimum</th><td id="out-gain"></td></tr>
 </table>
 <svg id="plot" viewBox="0 0 760 380" role="img"
  aria-label="predicted u_e against exposure"></svg>
@@ -251,7 +258,9 @@ def planner_html(
 <span><i class="sw" style="border-top:2px dashed #b35900"></i>target</span>
 <span><i class="sw" style="background:#1a7f37"></i>optimum</span>
 <span><i class="sw" style="background:#7d6608"></i>chosen exposure</span>
-<span><i class="sw" style="background:#e9e3d0"></i>outside the calibrated range</span></p>
+<span><i class="sw" style="background:#e9e3d0"></i>outside the calibrated range</span>
+<span id="legend-compare" hidden><i class="sw" style="border-top:3px dashed #7b3294"></i>the
+other matcher mode (its optimum: ring)</span></p>
 </section></div>
 <footer>u_e is the predicted random displacement error along the motion (px), with its
 {100 * first.confidence:g} % prediction interval; it comes from the calibration of the selected

@@ -517,9 +517,53 @@ function inDomain(dom, w, sigma) {
   return ok;
 }
 
+// ------------------------------------------------------------------ matcher modes
+// (models/domain.py compensation_label, models/compare.py compare_plans)
+var MATCHER = {"none": "plain matcher", "given": "blur-compensated matcher (blur given)",
+               "estimate": "blur-compensated matcher (blur estimated)",
+               "deblur": "plain matcher on Wiener-deblurred images"};
+function matcherOf(m) { return (m.domain && m.domain.compensation) || "none"; }
+function matcherLabel(c) { return MATCHER[c] || ("matcher '" + c + "'"); }
+function sameCalibration(a, b) {
+  // check_same_calibration: a setting unknown in one of the two is not compared
+  var da = a.domain || {}, db = b.domain || {};
+  var keys = ["pattern_sha256", "pattern", "subset", "shape"];
+  for (var i = 0; i < keys.length; i++) {
+    var va = da[keys[i]], vb = db[keys[i]];
+    if (va != null && vb != null && va !== vb) return keys[i];
+  }
+  return null;
+}
+function times(x) { return fmt(x, 3) + "x"; }
+function comparePlans(a, b, q) {
+  var ca = matcherOf(a), cb = matcherOf(b);
+  if (ca === cb) throw new UnitError("both models use the " + matcherLabel(ca));
+  var diff = sameCalibration(a, b);
+  if (diff) throw new UnitError("the two models were calibrated with different " + diff);
+  var swap = ca !== "none" && cb === "none";
+  var base = swap ? b : a, comp = swap ? a : b;
+  var pb = planExposure(base, q), pc = planExposure(comp, q);
+  var ur = pc.u_e / pb.u_e, tr = pc.exposure / pb.exposure;
+  var label = matcherLabel(matcherOf(comp));
+  var exposures = fmtTime(pc.exposure) + " against " + fmtTime(pb.exposure);
+  var errors = fmt(pc.u_e, 3) + " px against " + fmt(pb.u_e, 3) + " px";
+  var uWords = Math.abs(ur - 1.0) < 1e-6 ? "u_e is " + fmt(pc.u_e, 3) + " px in both" :
+    ur < 1 ? "u_e " + times(1 / ur) + " lower (" + errors + ")" :
+    "u_e " + times(ur) + " higher (" + errors + ")";
+  var sentence = pc.optimal ?
+    "With the " + label + " the optimum exposure is " + times(tr) + " as long (" + exposures +
+      ") and " + uWords + "." :
+    "With the " + label + " the target " + fmt(pc.target, 3) + " px holds up to " + times(tr) +
+      " the exposure (" + exposures + ")" + (Math.abs(ur - 1.0) < 1e-6 ? "." : "; there " + uWords + ".");
+  return {baseline: pb, compensated: pc, baseline_compensation: matcherOf(base),
+          compensation: matcherOf(comp), u_e_ratio: ur, exposure_ratio: tr,
+          baseline_index: swap ? 1 : 0, sentence: sentence};
+}
+
 window.dicblurPlanner = {parseQuantity: parseQuantity, predict: predict, maxBlur: maxBlur,
                          planExposure: planExposure, fminbound: fminbound, brentq: brentq,
-                         domainOf: domainOf, inDomain: inDomain, UnitError: UnitError};
+                         domainOf: domainOf, inDomain: inDomain, UnitError: UnitError,
+                         comparePlans: comparePlans, matcherOf: matcherOf};
 
 // ------------------------------------------------------------------ UI
 if (typeof document === "undefined") return;
@@ -566,18 +610,23 @@ function svgEl(tag, attrs, text) {
   return el;
 }
 
-function drawPlot(m, q, plan) {
-  var svg = $("plot");
-  while (svg.firstChild) svg.removeChild(svg.firstChild);
-  var W = 760, H = 380, L = 70, R = 20, T = 20, B = 50;
+function definedCurve(plan) {
   // the curve where it is defined (t > 0, u finite: none beyond DIC's breakdown)
   var keep = plan.curve_exposure.map(function (t, i) {
     return t > 0 && isFinite(plan.curve_u_e[i]);
   });
-  var ts = plan.curve_exposure.filter(function (t, i) { return keep[i]; });
-  var us = plan.curve_u_e.filter(function (u, i) { return keep[i]; });
-  var tmin = ts[0], tmax = ts[ts.length - 1];
-  var umin = Math.min.apply(null, us), umax = Math.max.apply(null, us);
+  return [plan.curve_exposure.filter(function (t, i) { return keep[i]; }),
+          plan.curve_u_e.filter(function (u, i) { return keep[i]; })];
+}
+
+function drawPlot(m, q, plan, plan2) {
+  var svg = $("plot");
+  while (svg.firstChild) svg.removeChild(svg.firstChild);
+  var W = 760, H = 380, L = 70, R = 20, T = 20, B = 50;
+  var c1 = definedCurve(plan), ts = c1[0], us = c1[1];
+  var c2 = plan2 ? definedCurve(plan2) : [[], []];
+  var tmin = Math.min.apply(null, ts.concat(c2[0])), tmax = Math.max.apply(null, ts.concat(c2[0]));
+  var umin = Math.min.apply(null, us.concat(c2[1])), umax = Math.max.apply(null, us.concat(c2[1]));
   if (plan.target != null) { umin = Math.min(umin, plan.target); umax = Math.max(umax, plan.target); }
   umin /= 1.5; umax *= 1.5;
   function X(t) { return L + (W - L - R) * (Math.log(t / tmin) / Math.log(tmax / tmin)); }
@@ -620,6 +669,16 @@ function drawPlot(m, q, plan) {
   var d = "";
   for (var j = 0; j < ts.length; j++) d += (j ? "L" : "M") + X(ts[j]).toFixed(1) + " " + Y(us[j]).toFixed(1);
   svg.appendChild(svgEl("path", {d: d, "class": "curve", id: "curve"}));
+  if (plan2) {  // the other matcher mode of the same calibration
+    var d2 = "";
+    for (var k = 0; k < c2[0].length; k++) {
+      d2 += (k ? "L" : "M") + X(c2[0][k]).toFixed(1) + " " + Y(c2[1][k]).toFixed(1);
+    }
+    svg.appendChild(svgEl("path", {d: d2, "class": "curve2", id: "curve2"}));
+    if (plan2.optimal) {
+      svg.appendChild(svgEl("circle", {cx: X(plan2.exposure), cy: Y(plan2.u_e), r: 5, "class": "opt2"}));
+    }
+  }
   if (plan.target != null) {
     svg.appendChild(svgEl("line", {x1: L, x2: W - R, y1: Y(plan.target), y2: Y(plan.target), "class": "target"}));
     svg.appendChild(svgEl("text", {x: W - R - 4, y: Y(plan.target) - 5, "text-anchor": "end"}, "target"));
@@ -640,6 +699,11 @@ function update() {
     var wNow = q.velocity / q.scale * q.exposure;
     var sigNow = q.camera ? null : q.sigma;
     var plan = planExposure(m, q);
+    var other = compareModel(), cmp = null, plan2 = null;
+    if (other) {
+      cmp = comparePlans(m, other, q);
+      plan2 = cmp.baseline_index === 0 ? cmp.compensated : cmp.baseline;
+    }
     if (q.camera) {
       var e = q.camera.flux * q.exposure;
       var ml = m.mean_level == null ? 127.5 : m.mean_level;
@@ -679,8 +743,14 @@ function update() {
       $("out-opt").textContent = "needs a camera (noise follows the exposure)";
     }
     if (!inDomain(dom, plan.blur, plan.sigma)) sentence += " (The answer lies outside the calibrated range: extrapolated.)";
+    if (cmp) sentence += " " + cmp.sentence;
     $("sentence").textContent = sentence;
-    drawPlot(m, q, plan);
+    $("row-gain").hidden = !cmp;
+    $("legend-compare").hidden = !cmp;
+    $("out-gain").textContent = cmp ? "u_e " + fmt(cmp.u_e_ratio, 3) + "x, exposure " +
+      fmt(cmp.exposure_ratio, 3) + "x (" + matcherLabel(cmp.compensation) + " over " +
+      matcherLabel(cmp.baseline_compensation) + ")" : "";
+    drawPlot(m, q, plan, plan2);
     document.body.setAttribute("data-ready", "true");
   } catch (err) {
     if (!(err instanceof UnitError)) throw err;
@@ -698,13 +768,48 @@ function toggle() {
   $("grey-box").hidden = flux;
 }
 
+// the models of the selected one's calibration with another matcher mode
+function counterparts(i) {
+  var m = MODELS[i], out = [];
+  MODELS.forEach(function (o, j) {
+    if (j !== i && matcherOf(o) !== matcherOf(m) && !sameCalibration(m, o)) out.push(j);
+  });
+  return out;
+}
+function compareModel() {
+  var v = $("compare").value;
+  return v === "" ? null : MODELS[parseInt(v, 10)];
+}
+function fillCompare() {
+  // shown when the selected calibration exists with another matcher mode; the first such
+  // model is set against it by default (both curves and the gain)
+  var sel = $("compare"), i = parseInt($("model").value, 10) || 0;
+  var js = counterparts(i);
+  while (sel.firstChild) sel.removeChild(sel.firstChild);
+  var none = document.createElement("option");
+  none.value = ""; none.textContent = "none (this matcher only)";
+  sel.appendChild(none);
+  js.forEach(function (j) {
+    var o = document.createElement("option");
+    o.value = String(j); o.textContent = matcherLabel(matcherOf(MODELS[j]));
+    sel.appendChild(o);
+  });
+  sel.value = js.length ? String(js[0]) : "";
+  $("compare-box").hidden = js.length === 0;
+}
+
 document.addEventListener("DOMContentLoaded", function () {
   var sel = $("model");
   MODELS.forEach(function (m, i) {
     var o = document.createElement("option");
-    o.value = String(i); o.textContent = m.label;
+    o.value = String(i);
+    o.textContent = m.label + (matcherOf(m) === "none" ? "" : ", " + matcherLabel(matcherOf(m)));
     sel.appendChild(o);
   });
+  // before the listeners that update the page: the choice must match the new model
+  sel.addEventListener("input", fillCompare);
+  sel.addEventListener("change", fillCompare);
+  fillCompare();
   Array.prototype.forEach.call(document.querySelectorAll("input, select"), function (el) {
     el.addEventListener("input", function () { toggle(); update(); });
     el.addEventListener("change", function () { toggle(); update(); });

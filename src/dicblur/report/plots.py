@@ -129,13 +129,28 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
     return tuple(paths)
 
 
-def plan_figure(plan: Any, path: str | Path) -> Path:
+def plan_figure(plan: Any, path: str | Path, *, other: Any = None) -> Path:
     """u_e against exposure of an exposure plan (:func:`dicblur.models.plan_exposure`),
     with the chosen exposure, the 0.02 px rule of thumb and the target; written to
-    ``path`` (format from the extension). Returns the path."""
+    ``path`` (format from the extension). Returns the path.
+
+    ``other``: a second plan (another matcher mode, :func:`dicblur.models.compare_plans`),
+    drawn dashed with its own exposure."""
     fig, ax = subplots(figsize=(6, 4))
     t = np.asarray(plan.curve_exposure) * 1e3
-    ax.plot(t, plan.curve_u_e, label=f"predicted u_e ({plan.model})")
+    from ..models.domain import compensation_label
+
+    mode = "" if other is None else f", {compensation_label(plan.compensation)}"
+    ax.plot(t, plan.curve_u_e, label=f"predicted u_e ({plan.model}{mode})")
+    if other is not None:
+        ax.plot(
+            np.asarray(other.curve_exposure) * 1e3,
+            other.curve_u_e,
+            color="C4",
+            ls="--",
+            label=f"predicted u_e ({other.model}, {compensation_label(other.compensation)})",
+        )
+        ax.axvline(other.exposure * 1e3, color="C4", ls=":", lw=1)
     ax.axvline(
         plan.exposure * 1e3,
         color="C1",
@@ -150,7 +165,7 @@ def plan_figure(plan: Any, path: str | Path) -> Path:
         ax.set_yscale("log")
     ax.set_xlabel("exposure (ms)")
     ax.set_ylabel("u_e (px)")
-    ax.legend()
+    ax.legend(fontsize="small" if other is not None else None)
     fig.tight_layout()
     _save(fig, path)
     return Path(path)

@@ -13,8 +13,10 @@ translation (u, v) = (0.3, -0.2) px by Fourier shift of the noise-free image):
 Per image and shape: throughput (best of ``--repeats``, wall time with ``--workers``
 threads and CPU time of one thread, the two images timed alternately so the load hits
 both alike), the fraction of POIs returned ``CONVERGED`` more than 0.1 px from the truth
-("wrong unflagged"), the same beyond ``max(0.1 px, 5 predicted sigma)`` (gross), and the
-counts per status. Screening: ``max_residual=2`` (default) and ``median_test=True``.
+("wrong unflagged": any other status is a flag), the same beyond ``max(0.1 px, 5 predicted
+sigma)`` (gross), the share flagged by the screening (``HIGH_RESIDUAL``, ``OUTLIER``,
+``IMPRECISE``) and the counts per status. Screening: ``max_residual=2`` (default),
+``median_test=True``, ``max_predicted_sigma`` 0.1/3 px (default; engines after issue 15).
 Writes ``benchmarks/results/dic_robust.json``.
 
 Usage::
@@ -158,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
             wrong = ok & (err > 0.1)
             pred = np.hypot(r.predicted_sigma_u, r.predicted_sigma_v)
             gross = wrong & (err > 5 * pred)
-            flagged = np.isin(r.status, [6, 7])  # HIGH_RESIDUAL, OUTLIER
+            flagged = np.isin(r.status, [6, 7, 8])  # HIGH_RESIDUAL, OUTLIER, IMPRECISE
             results[f"{name}_{shape}"] = {
                 "poi_per_s": n / min(wall[name]),
                 "poi_per_cpu_s_1thread": n / min(cpu[name]),
@@ -166,6 +168,8 @@ def main(argv: list[str] | None = None) -> int:
                 "gross_unflagged_fraction": float(gross.mean()),
                 "flagged_fraction": float(flagged.mean()),
                 "flagged_but_right_fraction": float((flagged & (err <= 0.1)).mean()),
+                "imprecise_fraction": float((r.status == 8).mean()),
+                "not_converged_fraction": float((~ok).mean()),
                 "mean_iterations": float(r.iterations.mean()),
                 "mean_iterations_converged": float(r.iterations[ok].mean()),
                 # share of all IC-GN iterations spent on POIs that end not CONVERGED
@@ -188,7 +192,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(
         f"{'case':20s} {'POI/s':>9s} {'POI/CPU-s':>10s} {'wrong %':>8s} {'gross %':>8s} "
-        f"{'flagged %':>9s} {'flag-ok %':>9s} {'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
+        f"{'flagged %':>9s} {'flag-ok %':>9s} {'imprec %':>8s} {'not ok %':>8s} "
+        f"{'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
         "  statuses"
     )
     for shape in ("translation", "affine"):
@@ -202,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"{100 * s['gross_unflagged_fraction']:8.2f} "
                 f"{100 * s['flagged_fraction']:9.2f} "
                 f"{100 * s['flagged_but_right_fraction']:9.2f} "
+                f"{100 * s['imprecise_fraction']:8.2f} "
+                f"{100 * s['not_converged_fraction']:8.2f} "
                 f"{s['mean_iterations']:8.2f} {s['mean_iterations_converged']:6.2f} "
                 f"{100 * s['failing_iteration_share']:9.1f}  {counts}"
             )

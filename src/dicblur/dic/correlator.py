@@ -307,11 +307,10 @@ class Correlator:
             self.predicted_sigma_v = np.where(bad, np.nan, pv)
         #: POIs whose predicted random error exceeds ``max_predicted_sigma`` (or None).
         self._imprecise: NDArray[np.bool_] | None = None
-        if self.predicted_sigma_u is not None and self.max_predicted_sigma is not None:
+        pu_, pv_ = self.predicted_sigma_u, self.predicted_sigma_v
+        if pu_ is not None and pv_ is not None and self.max_predicted_sigma is not None:
             with np.errstate(invalid="ignore"):
-                imp = np.hypot(self.predicted_sigma_u, self.predicted_sigma_v) > (
-                    self.max_predicted_sigma
-                )
+                imp = np.hypot(pu_, pv_) > self.max_predicted_sigma
             self._imprecise = imp if imp.any() else None
         # blur compensation: prepared blurred references by (blur vector, point set)
         self._blur_cache: OrderedDict[tuple[Any, ...], _BlurredReference] = OrderedDict()
@@ -599,7 +598,7 @@ class Correlator:
         key = id(idx)
         hit = self._split_cache.get(key)
         if hit is not None and hit[0] is idx:
-            return hit[1]  # type: ignore[no-any-return]
+            return hit[1]
         sel = self._all if idx is None else idx
         imp = self._imprecise[sel]
         out = None
@@ -801,7 +800,9 @@ class Correlator:
         t4 = time.perf_counter()
         noise_var = self._screen(coef, p, z, st)
         if self._imprecise is not None:
-            st[(st == PointStatus.CONVERGED) & self._imprecise] = PointStatus.IMPRECISE
+            # the cause of a predicted-imprecise subset's MAX_ITERATIONS is its reduced limit
+            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
+            st[done & self._imprecise] = PointStatus.IMPRECISE
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,

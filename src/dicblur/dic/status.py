@@ -36,7 +36,8 @@ class PointStatus(IntEnum):
     #: median test, or the neighbours' displacement matches its subset better (a false
     #: optimum; see :func:`dicblur.dic.normalized_median_test`).
     OUTLIER = 7
-    #: Converged, but the subset's predicted random error ``hypot(predicted_sigma_u,
-    #: predicted_sigma_v)`` exceeds ``max_predicted_sigma`` px (``noise_sigma`` given):
-    #: too little texture for the shape function, an error of 0.1 px is likely.
+    #: The subset's predicted random error ``hypot(predicted_sigma_u, predicted_sigma_v)``
+    #: exceeds ``max_predicted_sigma`` px (``noise_sigma`` given): too little texture for
+    #: the shape function, an error of 0.1 px is likely. IC-GN converged or reached the
+    #: reduced iteration limit such subsets get; the screening did not flag it otherwise.
     IMPRECISE = 8

@@ -169,10 +169,11 @@ class Correlator:
         ``blur="estimate"``: a subset whose estimated blur length has a larger standard
         error (px) is flagged as not identifying the blur (``DICResult.blur_identified``).
     max_predicted_sigma : float or None
-        With ``noise_sigma``: converged points whose predicted random error
+        With ``noise_sigma``: points whose predicted random error
         ``hypot(predicted_sigma_u, predicted_sigma_v)`` exceeds this (px; default 0.1/3,
-        so that a 0.1 px error is a 3-sigma event) get status ``IMPRECISE``; such subsets
-        are known before correlating, so they are not retried and (affine) get at most
+        so that a 0.1 px error is a 3-sigma event) and that converged or stopped at their
+        iteration limit get status ``IMPRECISE``; such subsets are known before
+        correlating, so they are not retried and (affine) get at most
         :data:`IMPRECISE_BUDGET` times the median iterations of the converging subsets.
         None: no test.
 
@@ -800,7 +801,8 @@ class Correlator:
         t4 = time.perf_counter()
         noise_var = self._screen(coef, p, z, st)
         if self._imprecise is not None:
-            # the cause of a predicted-imprecise subset's MAX_ITERATIONS is its reduced limit
+            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
+            # cause, so it gets that status too
             done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
             st[done & self._imprecise] = PointStatus.IMPRECISE
         t5 = time.perf_counter()

@@ -9,12 +9,16 @@ translation (u, v) = (0.3, -0.2) px by Fourier shift of the noise-free image):
   amplitude 50..300 GL on a 10 GL background) clipped to [10, 245]. The clipped plateaus
   are not band-limited, so the Fourier-shifted current image is not a spline-warped
   reference, and the sparse texture leaves some subsets with flat or false optima.
+- ``fade``: a speckle (seed 11) whose contrast fades from 1.5x to 0.06x across the columns,
+  clipped to [10, 200] GL (:func:`fade`): low-texture subsets and saturation.
 
 Per image and shape: throughput (best of ``--repeats``, wall time with ``--workers``
 threads and CPU time of one thread, the two images timed alternately so the load hits
 both alike), the fraction of POIs returned ``CONVERGED`` more than 0.1 px from the truth
-("wrong unflagged"), the same beyond ``max(0.1 px, 5 predicted sigma)`` (gross), and the
-counts per status. Screening: ``max_residual=2`` (default) and ``median_test=True``.
+("wrong unflagged": any other status is a flag), the same beyond ``max(0.1 px, 5 predicted
+sigma)`` (gross), the share flagged by the screening (``HIGH_RESIDUAL``, ``OUTLIER``,
+``IMPRECISE``) and the counts per status. Screening: ``max_residual=2`` (default),
+``median_test=True``, ``max_predicted_sigma`` 0.1/3 px (default; engines after issue 15).
 Writes ``benchmarks/results/dic_robust.json``.
 
 Usage::
@@ -41,6 +45,7 @@ import dicblur
 from dicblur import Correlator, speckle_pattern
 
 ROOT = Path(__file__).resolve().parents[1]
+IMAGES = ("clean", "blobs", "fade")
 TRUE_U, TRUE_V = 0.3, -0.2
 
 
@@ -84,12 +89,21 @@ def load() -> float:
         return float("nan")
 
 
+def fade(seed: int = 11) -> np.ndarray:
+    """Speckle whose contrast fades linearly from 1.5x to 0.06x across the columns,
+    clipped to [10, 200] GL (a second hostile image: low texture and saturation)."""
+    img = speckle_pattern((512, 512), speckle_size=4, softness=1.0, seed=seed)
+    ramp = np.linspace(1.0, 0.04, 512)[None, :]
+    return np.clip(128 + (img - img.mean()) * ramp * 1.5, 10, 200)
+
+
 def make_pair(name: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    img = (
-        blobs((512, 512))
-        if name == "blobs"
-        else speckle_pattern((512, 512), speckle_size=4, softness=1.0, seed=seed)
-    )
+    if name == "blobs":
+        img = blobs((512, 512))
+    elif name == "fade":
+        img = fade()
+    else:
+        img = speckle_pattern((512, 512), speckle_size=4, softness=1.0, seed=seed)
     rng = np.random.default_rng([seed, 99])
     ref = img + rng.normal(0, 2.0, img.shape)
     cur = fourier_shift(img, TRUE_V, TRUE_U) + rng.normal(0, 2.0, img.shape)
@@ -126,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         "dicblur": dicblur.__version__,
         "dicblur_path": str(Path(dicblur.__file__).parent),
     }
-    pairs = {name: make_pair(name, args.seed) for name in ("clean", "blobs")}
+    pairs = {name: make_pair(name, args.seed) for name in IMAGES}
     results: dict = {}
     for shape in ("translation", "affine"):
         cors = {
@@ -158,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             wrong = ok & (err > 0.1)
             pred = np.hypot(r.predicted_sigma_u, r.predicted_sigma_v)
             gross = wrong & (err > 5 * pred)
-            flagged = np.isin(r.status, [6, 7])  # HIGH_RESIDUAL, OUTLIER
+            flagged = np.isin(r.status, [6, 7, 8])  # HIGH_RESIDUAL, OUTLIER, IMPRECISE
             results[f"{name}_{shape}"] = {
                 "poi_per_s": n / min(wall[name]),
                 "poi_per_cpu_s_1thread": n / min(cpu[name]),
@@ -166,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
                 "gross_unflagged_fraction": float(gross.mean()),
                 "flagged_fraction": float(flagged.mean()),
                 "flagged_but_right_fraction": float((flagged & (err <= 0.1)).mean()),
+                "imprecise_fraction": float((r.status == 8).mean()),
+                "not_converged_fraction": float((~ok).mean()),
                 "mean_iterations": float(r.iterations.mean()),
                 "mean_iterations_converged": float(r.iterations[ok].mean()),
                 # share of all IC-GN iterations spent on POIs that end not CONVERGED
@@ -179,6 +195,9 @@ def main(argv: list[str] | None = None) -> int:
             results[f"ratio_{shape}_{key}"] = (
                 results[f"blobs_{shape}"][key] / results[f"clean_{shape}"][key]
             )
+            results[f"ratio_fade_{shape}_{key}"] = (
+                results[f"fade_{shape}"][key] / results[f"clean_{shape}"][key]
+            )
     record["load_end"] = load()
     record["results"] = results
     print(
@@ -188,11 +207,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(
         f"{'case':20s} {'POI/s':>9s} {'POI/CPU-s':>10s} {'wrong %':>8s} {'gross %':>8s} "
-        f"{'flagged %':>9s} {'flag-ok %':>9s} {'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
+        f"{'flagged %':>9s} {'flag-ok %':>9s} {'imprec %':>8s} {'not ok %':>8s} "
+        f"{'mean it':>8s} {'it ok':>6s} {'fail it %':>9s}"
         "  statuses"
     )
     for shape in ("translation", "affine"):
-        for name in ("clean", "blobs"):
+        for name in IMAGES:
             s = results[f"{name}_{shape}"]
             counts = {k: v for k, v in s["status_counts"].items() if v}
             print(
@@ -202,12 +222,15 @@ def main(argv: list[str] | None = None) -> int:
                 f"{100 * s['gross_unflagged_fraction']:8.2f} "
                 f"{100 * s['flagged_fraction']:9.2f} "
                 f"{100 * s['flagged_but_right_fraction']:9.2f} "
+                f"{100 * s['imprecise_fraction']:8.2f} "
+                f"{100 * s['not_converged_fraction']:8.2f} "
                 f"{s['mean_iterations']:8.2f} {s['mean_iterations_converged']:6.2f} "
                 f"{100 * s['failing_iteration_share']:9.1f}  {counts}"
             )
         print(
             f"  blobs / clean ({shape}): wall {results[f'ratio_{shape}_poi_per_s']:.2f}, "
-            f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}"
+            f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}; fade / clean: "
+            f"CPU {results[f'ratio_fade_{shape}_poi_per_cpu_s_1thread']:.2f}"
         )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -128,10 +128,38 @@ def test_affine_generic_path_matches_reference():
         assert_allclose(p_k[0, [1, 5]], [0.07, -0.04], atol=2e-3)
 
 
-def _pad_coef(corr, cur):
+@pytest.mark.parametrize("order", [3, 5])
+def test_affine_row_stencil_path_matches_reference(order):
+    # 7% shear du/dy and dv/dx = 0: the subset spans > 1 px (no common base) but each row
+    # spans 0 px, so every row takes the stencil path with its own integer base
+    ref = pattern(96, seed=4)
+    a = np.array([[1.0, 0.07], [0.0, 1.0]])
+    cur = affine_warp(ref, a)
+    corr = Correlator(
+        ref,
+        points=[[48, 48], [40, 56]],
+        subset=21,
+        shape="affine",
+        initial="zero",
+        interpolation=f"bspline{order}",
+    )
+    gx, gy, cc = _spline_setup(ref, cur, order)
+    c = 47.5
+    coef = _pad_coef(corr, cur, order)
+    for k in range(2):
+        r, col = int(corr.rows[k]), int(corr.cols[k])
+        guess = np.array([a[0, 1] * (r - c), 0.0, 0.07, 0.0, 0.0, 0.0]) * 0.9
+        p_k, _, _, st_k = corr._run_icgn(coef, guess[None], corr._status0[[k]], np.array([k]))
+        p, _, _, ok = icgn_reference(ref, gx, gy, cc, order, r, col, 10, "affine", guess)
+        assert ok and st_k[0] == 0
+        assert_allclose(p_k[0], p, atol=3e-4)
+        assert_allclose(p_k[0, 2], 0.07, atol=2e-3)
+
+
+def _pad_coef(corr, cur, order=3):
     buf = np.zeros_like(corr._coef_buf)
     cols = cur.shape[1]
-    itp.bspline_coefficients(cur, order=3, dtype=np.float32, out=buf[:, : cols + 2 * itp.PAD])
+    itp.bspline_coefficients(cur, order=order, dtype=np.float32, out=buf[:, : cols + 2 * itp.PAD])
     return buf
 
 

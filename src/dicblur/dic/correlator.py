@@ -68,6 +68,14 @@ RETRY_BUDGET = 4
 PROBE_CHI2 = 10.0
 #: Only POIs farther than this (px) from their neighbours' median are probed.
 PROBE_DISTANCE = 0.05
+#: Default ``max_predicted_sigma`` (px): a subset whose predicted random error (the
+#: magnitude ``hypot(predicted_sigma_u, predicted_sigma_v)``) exceeds it is ``IMPRECISE``;
+#: at 0.1/3 px an error beyond 0.1 px is a 3-sigma event.
+MAX_PREDICTED_SIGMA = 0.1 / 3
+#: Subsets predicted ``IMPRECISE`` are flagged whatever their outcome, so they get no
+#: retry and (affine) an iteration limit of this many times the median iterations of the
+#: precise POIs that converged in the same pass (at least 4, at most ``max_iterations``).
+IMPRECISE_BUDGET = 1.5
 
 
 #: Most blurred references kept per Correlator (each holds a prepared reference; fewer
@@ -160,6 +168,14 @@ class Correlator:
     max_blur_sigma : float
         ``blur="estimate"``: a subset whose estimated blur length has a larger standard
         error (px) is flagged as not identifying the blur (``DICResult.blur_identified``).
+    max_predicted_sigma : float or None
+        With ``noise_sigma``: points whose predicted random error
+        ``hypot(predicted_sigma_u, predicted_sigma_v)`` exceeds this (px; default 0.1/3,
+        so that a 0.1 px error is a 3-sigma event) and that converged or stopped at their
+        iteration limit get status ``IMPRECISE``; such subsets are known before
+        correlating, so they are not retried and (affine) get at most
+        :data:`IMPRECISE_BUDGET` times the median iterations of the converging subsets.
+        None: no test.
 
     Examples
     --------
@@ -191,6 +207,7 @@ class Correlator:
         median_test: bool = False,
         blur: BlurMode = "none",
         max_blur_sigma: float = 0.5,
+        max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
     ) -> None:
         t0 = time.perf_counter()
         self.blur: str = check_choice(blur, "blur", BLUR_MODES)
@@ -217,6 +234,11 @@ class Correlator:
         self.workers = None if workers is None else _check_int(workers, "workers", 1)
         self.max_residual = (
             None if max_residual is None else check_positive(max_residual, "max_residual")
+        )
+        self.max_predicted_sigma = (
+            None
+            if max_predicted_sigma is None
+            else check_positive(max_predicted_sigma, "max_predicted_sigma")
         )
         if not isinstance(median_test, bool | np.bool_):
             raise InputError(f"median_test={describe(median_test)}: must be True or False")
@@ -261,6 +283,8 @@ class Correlator:
         self._all = np.arange(len(rows), dtype=np.intp)
         self._none = np.zeros(0, dtype=np.intp)
         self._args_cache: dict[int, Any] = {}
+        self._split_cache: dict[int, Any] = {}
+        self._split_ids: set[int] = set()
         self._setup_seeds()
         self._pack_translation()
         self._ref_spectrum = window_spectrum(ref)
@@ -282,6 +306,13 @@ class Correlator:
             bad = status0 != 0
             self.predicted_sigma_u = np.where(bad, np.nan, pu)
             self.predicted_sigma_v = np.where(bad, np.nan, pv)
+        #: POIs whose predicted random error exceeds ``max_predicted_sigma`` (or None).
+        self._imprecise: NDArray[np.bool_] | None = None
+        pu_, pv_ = self.predicted_sigma_u, self.predicted_sigma_v
+        if pu_ is not None and pv_ is not None and self.max_predicted_sigma is not None:
+            with np.errstate(invalid="ignore"):
+                imp = np.hypot(pu_, pv_) > self.max_predicted_sigma
+            self._imprecise = imp if imp.any() else None
         # blur compensation: prepared blurred references by (blur vector, point set)
         self._blur_cache: OrderedDict[tuple[Any, ...], _BlurredReference] = OrderedDict()
         self._last_blur_length: float | None = None
@@ -501,6 +532,10 @@ class Correlator:
             st_full[sel] = status_in
             out = self._translation(coef, full, st_full, sel, self._none, self._none, max_iter)
             return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
+        if max_iter is None and self._imprecise is not None:
+            split = self._imprecise_split(idx)
+            if split is not None:
+                return self._run_split(coef, p0, status_in, idx, split)
         prep = self._prep
         if idx is None:
             rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
@@ -513,7 +548,11 @@ class Correlator:
                 rows, cols = self.rows[idx], self.cols[idx]
                 hinv, jsum, avec = prep.hinv[idx], prep.jsum[idx], prep.avec[idx]
                 fmean, fnorm = prep.fmean[idx], prep.fnorm[idx]
-                if idx is self._seeds or (self._rest is not None and idx is self._rest):
+                if (
+                    idx is self._seeds
+                    or (self._rest is not None and idx is self._rest)
+                    or key in self._split_ids
+                ):
                     self._args_cache[key] = (idx, (rows, cols, hinv, jsum, avec, fmean, fnorm))
         n = len(self.rows) if idx is None else len(idx)
         k = N_PARAMS[self.shape]
@@ -549,6 +588,56 @@ class Correlator:
             out_i,
             out_s,
         )
+        return out_p, out_z, out_i, out_s
+
+    def _imprecise_split(
+        self, idx: NDArray[np.intp] | None
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]] | None:
+        """``idx`` (None: all POIs) split into the precise and the predicted-imprecise POIs:
+        (positions in idx, POIs) of each, or None when none is imprecise."""
+        assert self._imprecise is not None
+        key = id(idx)
+        hit = self._split_cache.get(key)
+        if hit is not None and hit[0] is idx:
+            return hit[1]
+        sel = self._all if idx is None else idx
+        imp = self._imprecise[sel]
+        out = None
+        if imp.any():
+            loc_p, loc_i = np.flatnonzero(~imp), np.flatnonzero(imp)
+            out = (loc_p, sel[loc_p], loc_i, sel[loc_i])
+        if idx is None or idx is self._seeds or idx is self._rest:
+            self._split_cache[key] = (idx, out)
+            if out is not None:
+                self._split_ids.update((id(out[1]), id(out[3])))
+        return out
+
+    def _run_split(
+        self,
+        coef: NDArray[np.float32],
+        p0: NDArray[np.float64],
+        status_in: NDArray[np.uint8],
+        idx: NDArray[np.intp] | None,
+        split: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+        """Affine IC-GN, the predicted-imprecise POIs after the precise ones, within
+        IMPRECISE_BUDGET times the median iterations of the precise converged POIs."""
+        loc_p, pts_p, loc_i, pts_i = split
+        n = len(self.rows) if idx is None else len(idx)
+        k = p0.shape[1]
+        out_p = np.empty((n, k))
+        out_z = np.empty(n)
+        out_i = np.empty(n, np.int64)
+        out_s = np.empty(n, np.uint8)
+        cap = self.max_iterations
+        if loc_p.size:
+            r = self._run_icgn(coef, p0[loc_p], status_in[loc_p], pts_p, cap)
+            out_p[loc_p], out_z[loc_p], out_i[loc_p], out_s[loc_p] = r
+            conv = r[2][r[3] == PointStatus.CONVERGED]
+            if conv.size:
+                cap = min(cap, max(4, math.ceil(IMPRECISE_BUDGET * float(np.median(conv)))))
+        r = self._run_icgn(coef, p0[loc_i], status_in[loc_i], pts_i, cap)
+        out_p[loc_i], out_z[loc_i], out_i[loc_i], out_s[loc_i] = r
         return out_p, out_z, out_i, out_s
 
     def _seeded_icgn(
@@ -711,6 +800,11 @@ class Correlator:
             self._retry(cur, coef, gu, gv, p, z, it, st)
         t4 = time.perf_counter()
         noise_var = self._screen(coef, p, z, st)
+        if self._imprecise is not None:
+            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
+            # cause, so it gets that status too
+            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
+            st[done & self._imprecise] = PointStatus.IMPRECISE
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,
@@ -760,7 +854,11 @@ class Correlator:
         per-subset FFT-CC integer guess, unless it equals the start they already had.
         """
         status0 = self._status0
-        retry = np.flatnonzero(np.isin(st, _RETRY) & (status0 == 0))
+        again = np.isin(st, _RETRY) & (status0 == 0)
+        if self._imprecise is not None:
+            # flagged IMPRECISE even if a retry converged: not worth a second attempt
+            again &= ~self._imprecise
+        retry = np.flatnonzero(again)
         if retry.size == 0:
             return
         ok = st == PointStatus.CONVERGED
@@ -911,6 +1009,7 @@ class Correlator:
             noise_sigma=self.noise_sigma,
             min_zncc=self.min_zncc,
             workers=self.workers,
+            max_predicted_sigma=self.max_predicted_sigma,
         )
         prep = None
         images: tuple[NDArray[np.float64], ...] = ()
@@ -960,6 +1059,7 @@ class Correlator:
             "noise_sigma": self.noise_sigma,
             "min_zncc": self.min_zncc,
             "max_residual": self.max_residual,
+            "max_predicted_sigma": self.max_predicted_sigma,
             "median_test": int(self.median_test),
             "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
             "grid_shape": (
@@ -1289,6 +1389,7 @@ def correlate(
     workers: int | None = None,
     max_residual: float | None = 2.0,
     median_test: bool = False,
+    max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
 ) -> DICResult:
     """One-shot subset DIC of ``current`` against ``reference`` (see :class:`Correlator`).
 
@@ -1312,5 +1413,6 @@ def correlate(
         workers=workers,
         max_residual=max_residual,
         median_test=median_test,
+        max_predicted_sigma=max_predicted_sigma,
     )
     return c.correlate(current, initial=None if isinstance(initial, str) else initial)

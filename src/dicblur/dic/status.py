@@ -11,8 +11,8 @@ class PointStatus(IntEnum):
     """Status code of one POI, stored as ``uint8`` in :class:`~dicblur.dic.DICResult`.
 
     Only ``CONVERGED`` points carry a trusted displacement. ``MAX_ITERATIONS``,
-    ``LOW_CORRELATION``, ``HIGH_RESIDUAL`` and ``OUTLIER`` points keep their last (finite)
-    estimate for inspection; the others carry NaN displacements.
+    ``LOW_CORRELATION``, ``HIGH_RESIDUAL``, ``OUTLIER`` and ``IMPRECISE`` points keep their
+    last (finite) estimate for inspection; the others carry NaN displacements.
     """
 
     #: IC-GN met the tolerance, the ZNCC is above ``min_zncc`` and no screening test
@@ -36,3 +36,8 @@ class PointStatus(IntEnum):
     #: median test, or the neighbours' displacement matches its subset better (a false
     #: optimum; see :func:`dicblur.dic.normalized_median_test`).
     OUTLIER = 7
+    #: The subset's predicted random error ``hypot(predicted_sigma_u, predicted_sigma_v)``
+    #: exceeds ``max_predicted_sigma`` px (``noise_sigma`` given): too little texture for
+    #: the shape function, an error of 0.1 px is likely. IC-GN converged or reached the
+    #: reduced iteration limit such subsets get; the screening did not flag it otherwise.
+    IMPRECISE = 8

@@ -283,6 +283,11 @@ def icgn_affine(
                     st = OUT_OF_BOUNDS
                     break
                 fast = (oxmax - oxmin) < 0.999 and (oymax - oymin) < 0.999
+                # a strained or wandering subset (span >= 1 px) still takes the stencil
+                # path row by row when each row spans < 1 px, with the row's own base
+                rowfast = fast or (
+                    2.0 * half * abs(p[1]) < 0.999 and 2.0 * half * abs(p[4]) < 0.999
+                )
                 bx = int(math.floor(oxmin))
                 by = int(math.floor(oymin))
                 sg = 0.0
@@ -294,7 +299,12 @@ def icgn_affine(
                 p4 = np.float32(p[4])
                 for i in range(size):
                     dy = i - half
-                    if fast and order == 3:
+                    if not fast and rowfast:
+                        rx = p[0] + p[2] * dy
+                        ry = p[3] + p[5] * dy
+                        bx = int(math.floor(min(rx - p[1] * half, rx + p[1] * half)))
+                        by = int(math.floor(min(ry - p[4] * half, ry + p[4] * half)))
+                    if rowfast and order == 3:
                         t0s, t1s, t2s, t3s, t4s, t5s, t6s = _row_affine_cubic(
                             coef,
                             r0 + i + by - lo + PAD,
@@ -313,7 +323,7 @@ def icgn_affine(
                             c0,
                         )
                     else:
-                        if fast:
+                        if rowfast:
                             # offsets t in [0, 2) from the common integer base (bx, by)
                             tx0 = np.float32(p[0] + p[2] * dy - bx)
                             ty0 = np.float32(p[3] + p[5] * dy - by)

@@ -146,6 +146,43 @@ def _levels(noise: float | Sequence[float]) -> list[float]:
     return levels
 
 
+_STATIC_BREAKDOWN = "static prediction: < 90 % of the subsets keep their IC-GN contraction"
+
+
+def _static_terms(
+    image: Any, blur: Any, spec: CampaignSpec, *, subset: int, angle: float, shape: str
+) -> Any:
+    """The static prediction's terms of the calibration (None, with a warning, if the
+    image leaves none: the model then defaults to the fitted mismatch model)."""
+    import math
+    import warnings
+
+    from ..errors import FitError
+    from ..models import static_terms
+    from .simulate import task_points
+
+    rad = math.radians(angle)
+    img = np.asarray(image, dtype=np.float64)
+    try:
+        return static_terms(
+            img,
+            np.asarray(blur, dtype=np.float64),
+            subset=subset,
+            # the campaign's own POIs (inside the region the blur kept on image content)
+            points=task_points(img.shape, spec, subset=subset, angle=angle),
+            motion=(math.sin(rad), math.cos(rad)),
+            shape=shape,  # type: ignore[arg-type]
+            boundary=spec.boundary,  # type: ignore[arg-type]
+        )
+    except (InputError, FitError) as exc:
+        warnings.warn(
+            f"static prediction not tabulated ({exc}); the default model is the fitted "
+            "noise + blur-mismatch model",
+            stacklevel=3,
+        )
+        return None
+
+
 def calibrate(
     image: str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
@@ -177,7 +214,7 @@ def calibrate(
         None when the campaign was interrupted before it finished (rerun to resume).
     """
     from ..io import check_output
-    from ..models import fit_blur_model
+    from ..models import fit_blur_model, with_static_model
     from .engine import run_campaign
     from .store import export_csv, open_results
     from .tasks import make_pattern
@@ -217,6 +254,10 @@ def calibrate(
         [float(v) for v in mean["noise_effective"].mean("blur").values], mean.sizes["blur"]
     )
     hashes = json.loads(ds.attrs["input_hashes"])
+    image_px = make_pattern(spec, spec.patterns[0])
+    terms = _static_terms(
+        image_px, mean["blur"].values, spec, subset=subset, angle=angle, shape=shape
+    )
     model = fit_blur_model(
         w,
         flat(mean["sssig"]),
@@ -227,10 +268,13 @@ def calibrate(
         subset=subset,
         # validity domain: DIC breaks down where < 90 % of the POIs converge (worst rep)
         converged_fraction=flat(ds["converged_fraction"].min("rep")),
+        # ... or where the static prediction's own breakdown test says so
+        breakdown_blur=None if terms is None else terms.breakdown_blur,
+        breakdown_rule=None if terms is None else _STATIC_BREAKDOWN,
         shape=shape,
         pattern=spec.patterns[0].name,
         pattern_sha256=next(iter(hashes.values()), None) if len(hashes) == 1 else None,
-        mean_level=float(np.mean(make_pattern(spec, spec.patterns[0]))),
+        mean_level=float(np.mean(image_px)),
         # the sweep spans the W range the model will be used in (beyond it predictions are
         # flagged as extrapolated): let the AIC add the W^4 term where the data ask for it.
         # Measured on paper4 512^2 over W = 0..8 px: without it the fit is 24 % rms off
@@ -248,6 +292,10 @@ def calibrate(
             "dic_shape": shape,
         },
     )
+    if terms is not None:
+        # the default: the static prediction with its two fitted scales, held to 0.15 rms
+        # log error up to the breakdown W where the closed form is not (BENCHMARKS.md)
+        model = with_static_model(model, terms)
     model_path = out / "model.json"
     model.to_json(str(model_path))
     return CalibrationResult(

@@ -171,6 +171,10 @@ def _static_terms(
             # the campaign's own POIs (inside the region the blur kept on image content)
             points=task_points(img.shape, spec, subset=subset, angle=angle),
             motion=(math.sin(rad), math.cos(rad)),
+            # the table continues to twice the sweep's largest W (or the breakdown):
+            # the static prediction needs no measurement there (flagged as outside the
+            # fitted W range, but not the closed form's extrapolation)
+            extend_to=2.0 * float(np.max(blur)),
             shape=shape,  # type: ignore[arg-type]
             boundary=spec.boundary,  # type: ignore[arg-type]
         )

@@ -432,14 +432,17 @@ def static_terms(
     boundary: Boundary = "reflect",
     max_shift: float = 1.0,
     min_contraction: float = MIN_CONTRACTION,
+    extend_to: float | None = None,
 ) -> StaticTerms:
     """The static prediction's terms on a W grid, for the ``static`` model kind.
 
     Each W is predicted at the campaigns' sub-pixel offset ``W/2 mod 1`` px (a linear
     trajectory centres the blurred target at half its path), as
     :func:`predict_from_pattern` with ``subpixel`` set per W. The grid is ``blur`` with
-    W = 0 added, up to the static prediction's breakdown W (included where its terms are
-    finite); beyond it DIC is not described.
+    W = 0 added and, with ``extend_to``, continued in the grid's own step beyond its
+    largest W up to ``extend_to`` (the static prediction needs no measurement there), up
+    to the static prediction's breakdown W (included where its terms are finite); beyond
+    it DIC is not described.
 
     Parameters
     ----------
@@ -449,6 +452,8 @@ def static_terms(
         Blur lengths W (px) of the calibration.
     subset, step, points, motion, shape, boundary, max_shift, min_contraction
         As for :func:`predict_from_pattern`.
+    extend_to : float, optional
+        Largest W (px) of the grid's extension (none by default).
 
     Returns
     -------
@@ -460,18 +465,37 @@ def static_terms(
     max_shift = check_positive(max_shift, "max_shift")
     lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
     w = np.unique(np.concatenate([[0.0], as_blur(blur, "blur", increasing=False)]))
+    if extend_to is not None and w.size >= 2 and extend_to > w[-1]:
+        dw = float(np.median(np.diff(w)))
+        more = w[-1] + dw * np.arange(1, math.floor((extend_to - w[-1]) / dw + 1e-9) + 1)
+        w = np.concatenate([w, np.round(more, 10)])
     offs = np.round((w / 2.0) % 1.0, 12) % 1.0
     n1, n2, b2, frac = (np.full(w.size, np.nan) for _ in range(4))
-    for off in np.unique(offs):
-        sel = np.nonzero(offs == off)[0]
-        mean_var, mis_var, _, fr = _terms(
-            img, w[sel], pts, subset, motion, shape, "bspline3", boundary, max_shift,
-            float(off), lam_min,
-        )
-        n1[sel] = mean_var[0] + mean_var[1]
-        n2[sel] = mean_var[2]
-        b2[sel] = mis_var
-        frac[sel] = fr
+    # in chunks of increasing W: nothing is computed beyond the first breakdown's chunk
+    start = 0
+    while start < w.size:
+        chunk = np.arange(start, min(start + 20, w.size))
+        for off in np.unique(offs[chunk]):
+            sel = chunk[offs[chunk] == off]
+            try:
+                mean_var, mis_var, _, fr = _terms(
+                    img, w[sel], pts, subset, motion, shape, "bspline3", boundary, max_shift,
+                    float(off), lam_min,
+                )
+            except InputError:
+                if start == 0:
+                    raise
+                frac[sel] = 0.0  # the texture is gone along the motion: broken down
+                continue
+            n1[sel] = mean_var[0] + mean_var[1]
+            n2[sel] = mean_var[2]
+            b2[sel] = mis_var
+            frac[sel] = fr
+        if (frac[chunk] < BREAKDOWN_FRACTION).any():
+            break
+        start += chunk.size
+    done = np.isfinite(frac)
+    w, n1, n2, b2, frac = w[done], n1[done], n2[done], b2[done], frac[done]
     broken = np.nonzero(frac < BREAKDOWN_FRACTION)[0]
     breakdown = float(w[broken[0]]) if broken.size else None
     last = broken[0] if broken.size else w.size - 1

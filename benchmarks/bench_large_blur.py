@@ -179,10 +179,15 @@ def main() -> None:
         )
         scaled = _scaled(fit.x, noise_part, b2[idx])
         # the static kind as calibrate builds it
-        terms = static_terms(img, w_all, subset=subset, step=step, boundary="periodic")
-        conv = np.concatenate(
-            [_series(ds, "converged_fraction", p, lv) for lv in levels]
+        terms = static_terms(
+            img,
+            w_all,
+            subset=subset,
+            step=step,
+            boundary="periodic",
+            extend_to=2.0 * float(w_all.max()),  # as calibrate: the breakdown beyond 10 px
         )
+        conv = np.concatenate([_series(ds, "converged_fraction", p, lv) for lv in levels])
         w_c = np.tile(w_all, len(levels))
         cal = fit_blur_model(
             w_c,
@@ -208,6 +213,7 @@ def main() -> None:
                 "breakdown_blur": cal.domain.breakdown_blur if cal.domain else None,
                 "breakdown_rule": cal.domain.breakdown_rule if cal.domain else None,
                 "table_breakdown_blur": terms.breakdown_blur,
+                "table_max_blur": terms.blur[-1],
                 "scales": list(cal.static.values),
                 "scale_low": list(cal.static.low),
                 "scale_high": list(cal.static.high),

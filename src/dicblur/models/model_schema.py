@@ -217,9 +217,7 @@ STATIC_TABLE_RULES: dict[str, Rule] = {
     "table_noise": Rule(array(number(minimum=0.0)), "noise variances >= 0 px^2/GL^2"),
     "table_noise2": Rule(array(number(minimum=0.0)), "noise interactions >= 0 px^2/GL^4"),
     "table_mismatch": Rule(array(number(minimum=0.0)), "noise-free variances >= 0 px^2"),
-    "table_valid_fraction": Rule(
-        array(number(minimum=0.0)), "fractions of subsets in [0, 1]"
-    ),
+    "table_valid_fraction": Rule(array(number(minimum=0.0)), "fractions of subsets in [0, 1]"),
     "table_breakdown_blur": Rule(optional(number(minimum=0.0)), "a W in px or null"),
     "subpixel": Rule(string(), "the sub-pixel offset rule"),
     "noise_levels": Rule(array(number(minimum=0.0)), "a list of noise stds >= 0 GL"),

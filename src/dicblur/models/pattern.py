@@ -479,8 +479,17 @@ def static_terms(
             sel = chunk[offs[chunk] == off]
             try:
                 mean_var, mis_var, _, fr = _terms(
-                    img, w[sel], pts, subset, motion, shape, "bspline3", boundary, max_shift,
-                    float(off), lam_min,
+                    img,
+                    w[sel],
+                    pts,
+                    subset,
+                    motion,
+                    shape,
+                    "bspline3",
+                    boundary,
+                    max_shift,
+                    float(off),
+                    lam_min,
                 )
             except InputError:
                 if start == 0:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,9 +37,6 @@ from scipy import optimize
 from ..errors import FitError, InputError
 from ._checks import as_positive, as_vector
 from ._result import FitResult, check_ci, make_result
-
-if TYPE_CHECKING:
-    from .model import BlurUncertaintyModel
 
 __all__ = [
     "STATIC_PARAMETERS",
@@ -229,15 +226,16 @@ def fit_static_scales(
 
 
 def with_static_model(
-    model: BlurUncertaintyModel,
+    model: Any,
     terms: StaticTerms,
     *,
     default: bool = True,
     ci: str = "covariance",
     n_boot: int = 500,
     seed: int | np.random.Generator | None = None,
-) -> BlurUncertaintyModel:
-    """``model`` with the static kind fitted to its own data (and made its default).
+) -> Any:
+    """``model`` (a :class:`~dicblur.models.BlurUncertaintyModel`; not imported here: the
+    model imports this module) with the static kind fitted to its own data (and made its default).
 
     The scales are fitted to ``model.data`` (the points below the breakdown W, all noise
     levels). If the model holds a held-out comparison, the static kind is scored on the
@@ -285,12 +283,10 @@ def _held_out(
     except (FitError, InputError):
         return comparison
     kn, kb = f["k_noise"], f["k_blur"]
-    pred = np.array(
-        [
-            math.sqrt(sum(static_variance(f.extra, [wi], float(si), kn, kb))[0])
-            for wi, si in zip(w[test], sig[test], strict=True)
-        ]
-    )
+    pred = np.empty(int(test.sum()))
+    for j, (wi, si) in enumerate(zip(w[test], sig[test], strict=True)):
+        nv, bv = static_variance(f.extra, [wi], float(si), kn, kb)
+        pred[j] = math.sqrt(float(nv[0] + bv[0]))
     r = pred / u[test]
     out = dict(comparison)
     for key, value in (

@@ -185,9 +185,7 @@ def planner_html(
         else (first.mean_level if first.mean_level is not None else 127.5)
     )
     kinds = [
-        k
-        for k in ("static", "mismatch", "power_law")
-        if any(p.get(k) is not None for p in payload)
+        k for k in ("static", "mismatch", "power_law") if any(p.get(k) is not None for p in payload)
     ]
 
     def val(x: Any) -> str:

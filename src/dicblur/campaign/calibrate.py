@@ -6,7 +6,9 @@ several: two levels that bracket the noise of the planned exposure separate the 
 model's floor and cross term and keep a camera plan inside the model's validity domain),
 one subset size, one motion direction; the campaign's dataset is then fitted with
 :func:`dicblur.models.fit_blur_model` (SSSIG decay, eq. 18; power law, eq. 17; noise +
-blur-mismatch model) and written; the report layer draws the figures.
+blur-mismatch model), the static prediction of the pattern is tabulated and scaled to it
+(:func:`dicblur.models.with_static_model`, the model's default: the static kind), and the
+model is written; the report layer draws the figures.
 """
 
 from __future__ import annotations
@@ -211,6 +213,12 @@ def calibrate(
     :func:`dicblur.campaign.run_campaign`. Writes into ``out_dir``: ``results.zarr`` (the
     campaign; rerunning resumes it), ``results.csv`` and ``model.json``. Figures are the
     report layer's (:func:`dicblur.report.plots.calibration_figures`).
+
+    The model's default is the static kind (docs/models.md s. 4): the static prediction
+    of the pattern on the sweep's W grid (continued to twice its largest W, or to the
+    static breakdown W), with one fitted scale per term; the fitted mismatch model and the
+    power law are in the model beside it. If the image leaves no static prediction, the
+    default is the mismatch model (with a warning).
 
     Returns
     -------

@@ -71,11 +71,22 @@ def test_static_kind_predicts_the_scaled_table():
     assert m.default == "static" and m.mismatch is not None  # the fitted mismatch stays
     assert m.static["k_noise"] == pytest.approx(0.95, rel=1e-6)
     assert m.static["k_blur"] == pytest.approx(1.05, rel=1e-6)
-    # at the grid points and between them: the interpolated table, exactly
+    # at the grid points: the table, exactly; between them a natural cubic spline of each
+    # term (scipy's, an independent implementation)
+    from scipy.interpolate import CubicSpline
+
     w = np.array([0.0, 0.25, 1.3, 3.0, 5.99, 6.2])
     p = m.predict(w, 4.0)
     assert p.model == "static"
-    np.testing.assert_allclose(p.u_e, _truth(terms, w, 4.0), rtol=1e-9)
+    nodes = np.isin(w, terms.blur)
+    np.testing.assert_allclose(p.u_e[nodes], _truth(terms, w[nodes], 4.0), rtol=1e-9)
+    x = np.array(terms.blur)
+    n1, n2, b2 = (
+        np.maximum(CubicSpline(x, np.array(v), bc_type="natural")(w), 0.0)
+        for v in (terms.noise, terms.noise2, terms.mismatch)
+    )
+    spline = np.sqrt(0.95**2 * (16.0 * n1 + 256.0 * n2) + 1.05**2 * b2)
+    np.testing.assert_allclose(p.u_e, spline, rtol=1e-6)  # the scales fitted to 1e-6
     np.testing.assert_allclose(p.u_noise**2 + p.u_blur**2, p.u_e**2, rtol=1e-9)
     assert p.inside_domain.tolist() == [True] * 5 + [False]  # 6.2 px beyond the data
     assert p.extrapolated and any("validity domain" in n for n in p.notes)
@@ -83,6 +94,20 @@ def test_static_kind_predicts_the_scaled_table():
     assert m.predict([1.0], 12.0).extrapolated
     # the held-out comparison scores the static kind on the same split
     assert m.comparison["rms_log_error"]["static"] < 1e-6
+
+
+def test_a_camera_plan_optimum_does_not_stick_to_the_grid_points():
+    # with straight segments between grid points the optimum landed on a grid point
+    # (measured: W = 1.0000002 px on a 0.5 px grid, 512^2 paper4); the spline is smooth
+    m, terms = _model(scatter=0.0)
+    cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)
+    blurs = [
+        plan_exposure(m, velocity=f"{v}mm/s", scale="0.05mm/px", camera=cam).blur
+        for v in (60, 90, 120, 150, 200)
+    ]
+    gaps = [min(abs(b - x) for x in terms.blur) for b in blurs]
+    # (with straight segments 2 of these 5 optima sat on a grid point: 1.0 and 1.25 px)
+    assert min(gaps) > 1e-3, blurs
 
 
 def test_refuses_at_and_beyond_the_breakdown():

@@ -16,10 +16,12 @@ The fitted model is
 
 with one scale per term, fitted in log space to the calibration's measured u_e
 (Wald intervals symmetric in log, or a pairs bootstrap, :mod:`dicblur.models._result`).
-Between the grid points each term is interpolated linearly in W (continuous, so root
-finding and the planner page's JavaScript give the same answers); beyond the last point
-it is extrapolated along the last segment, never below the end value (flagged as outside
-the validity domain by the model). On the four reproduce patterns it stays within
+Between the grid points each term is interpolated by a natural cubic spline in W (smooth
+to second order, so a camera plan's optimum does not stick to the grid points as it does
+with straight segments; clipped at 0; the planner page's JavaScript solves the same
+tridiagonal system in the same order); beyond the last point it is extrapolated along the
+spline's end slope, never below the end value (flagged as outside the validity domain by
+the model). On the four reproduce patterns it stays within
 0.15 rms log error on held-out W up to the breakdown W, where the closed-form mismatch
 model does not (BENCHMARKS.md, large-blur regime).
 """
@@ -122,14 +124,41 @@ class StaticTerms:
         )
 
 
+def _second_derivatives(x: list[float], y: list[float]) -> list[float]:
+    """Second derivatives ``M`` of the natural cubic spline through ``(x, y)`` (``M`` = 0
+    at both ends), by the Thomas algorithm in plain floats: the planner page's JavaScript
+    (``splineM``) runs the same operations in the same order."""
+    n = len(x)
+    m = [0.0] * n
+    if n < 3:
+        return m
+    # interior rows i = 1..n-2: h[i-1] M[i-1] + 2 (h[i-1] + h[i]) M[i] + h[i] M[i+1] = r[i]
+    cp = [0.0] * n
+    dp = [0.0] * n
+    for i in range(1, n - 1):
+        h0, h1 = x[i] - x[i - 1], x[i + 1] - x[i]
+        r = 6.0 * ((y[i + 1] - y[i]) / h1 - (y[i] - y[i - 1]) / h0)
+        den = 2.0 * (h0 + h1) - h0 * cp[i - 1]
+        cp[i] = h1 / den
+        dp[i] = (r - h0 * dp[i - 1]) / den
+    for i in range(n - 2, 0, -1):
+        m[i] = dp[i] - cp[i] * m[i + 1]
+    return m
+
+
 def _interp(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64]) -> Any:
-    """Piecewise-linear ``y(w)`` on the grid ``x``; beyond ``x[-1]`` the last segment's
-    slope if it rises, else the end value (the planner's JavaScript does the same)."""
+    """Natural cubic spline ``y(w)`` on the grid ``x``, clipped at 0; beyond ``x[-1]`` the
+    spline's end slope if it rises, else the end value (the planner's JavaScript does the
+    same)."""
+    m = np.array(_second_derivatives(x.tolist(), y.tolist()))
     j = np.clip(np.searchsorted(x, w, side="right") - 1, 0, x.size - 2)
-    x0, x1, y0, y1 = x[j], x[j + 1], y[j], y[j + 1]
-    inner = y0 + (w - x0) / (x1 - x0) * (y1 - y0)
-    slope = max((y[-1] - y[-2]) / (x[-1] - x[-2]), 0.0)
-    return np.where(w > x[-1], y[-1] + slope * (w - x[-1]), inner)
+    h = x[j + 1] - x[j]
+    a = (x[j + 1] - w) / h
+    b = (w - x[j]) / h
+    inner = a * y[j] + b * y[j + 1] + ((a**3 - a) * m[j] + (b**3 - b) * m[j + 1]) * (h * h / 6.0)
+    he = x[-1] - x[-2]
+    slope = max((y[-1] - y[-2]) / he + he * m[-2] / 6.0, 0.0)
+    return np.maximum(np.where(w > x[-1], y[-1] + slope * (w - x[-1]), inner), 0.0)
 
 
 def interpolate_terms(

@@ -110,17 +110,38 @@ function mismatchTerms(m, p, w, s, sigma) {
   return [noise, ub * ub + bw * bw];
 }
 
-// static kind (models/scaled.py _interp): piecewise linear in W; beyond the grid the last
-// segment's slope if it rises, else the end value
-function interpTerm(x, y, w) {
-  var n = x.length, lo = 0, hi = n;
-  while (lo < hi) { var mid = (lo + hi) >> 1; if (x[mid] <= w) lo = mid + 1; else hi = mid; }
-  var j = Math.min(Math.max(lo - 1, 0), n - 2);
-  if (w > x[n - 1]) {
-    var slope = Math.max((y[n - 1] - y[n - 2]) / (x[n - 1] - x[n - 2]), 0.0);
-    return y[n - 1] + slope * (w - x[n - 1]);
+// static kind (models/scaled.py _second_derivatives, _interp): natural cubic spline in W,
+// clipped at 0; beyond the grid the spline's end slope if it rises, else the end value
+function splineM(x, y) {
+  var n = x.length, m = [], cp = [], dp = [], i;
+  for (i = 0; i < n; i++) { m.push(0.0); cp.push(0.0); dp.push(0.0); }
+  if (n < 3) return m;
+  for (i = 1; i < n - 1; i++) {
+    var h0 = x[i] - x[i - 1], h1 = x[i + 1] - x[i];
+    var r = 6.0 * ((y[i + 1] - y[i]) / h1 - (y[i] - y[i - 1]) / h0);
+    var den = 2.0 * (h0 + h1) - h0 * cp[i - 1];
+    cp[i] = h1 / den;
+    dp[i] = (r - h0 * dp[i - 1]) / den;
   }
-  return y[j] + (w - x[j]) / (x[j + 1] - x[j]) * (y[j + 1] - y[j]);
+  for (i = n - 2; i > 0; i--) m[i] = dp[i] - cp[i] * m[i + 1];
+  return m;
+}
+
+function interpTerm(x, y, w) {
+  var n = x.length, lo = 0, hi = n, m = splineM(x, y);
+  while (lo < hi) { var mid = (lo + hi) >> 1; if (x[mid] <= w) lo = mid + 1; else hi = mid; }
+  var v;
+  if (w > x[n - 1]) {
+    var he = x[n - 1] - x[n - 2];
+    var slope = Math.max((y[n - 1] - y[n - 2]) / he + he * m[n - 2] / 6.0, 0.0);
+    v = y[n - 1] + slope * (w - x[n - 1]);
+  } else {
+    var j = Math.min(Math.max(lo - 1, 0), n - 2);
+    var h = x[j + 1] - x[j], a = (x[j + 1] - w) / h, b = (w - x[j]) / h;
+    v = a * y[j] + b * y[j + 1] +
+        ((Math.pow(a, 3) - a) * m[j] + (Math.pow(b, 3) - b) * m[j + 1]) * (h * h / 6.0);
+  }
+  return Math.max(v, 0.0);
 }
 
 // static_variance: [k_noise^2 (sigma^2 noise + sigma^4 noise2), k_blur^2 mismatch]

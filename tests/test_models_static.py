@@ -267,3 +267,27 @@ def test_calibrate_then_predict_beyond_the_sweep_matches_a_direct_simulation(tmp
     plan_args = ["plan", str(model), "--velocity", "120mm/s", "--scale", "0.05mm/px", *cam]
     assert main([*plan_args, "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["model"] == "static"
+
+
+def test_calibrate_tabulates_a_fine_sweep_on_a_coarser_grid(tmp_path):
+    # the paper's 0.1 px sweep: the table on a 0.25 px grid, continued beyond the sweep
+    from dicblur.campaign.calibrate import calibrate
+
+    res = calibrate(
+        "paper4",
+        tmp_path / "cal",
+        noise=2.0,
+        subset=21,
+        step=12,
+        size=(80, 80),
+        blur={"start": 0.1, "stop": 2.0, "step": 0.1},
+        serial=True,
+    )
+    m = res.model
+    tab = m.static.extra["table_blur"]
+    assert m.default == "static" and tab[:3] == [0.0, 0.25, 0.5]
+    assert tab[-1] == pytest.approx(4.0)  # min(2 W_max, W_max + 5 px)
+    assert m.static.n_points == 20 and 0.7 < m.static["k_noise"] < 1.4
+    # the sweep's own W between grid points: the spline, close to the measured u_e
+    err = np.exp(np.abs(m.static.residuals)) - 1
+    assert err.max() < 0.25, err

@@ -148,6 +148,8 @@ def _levels(noise: float | Sequence[float]) -> list[float]:
     return levels
 
 
+TABLE_STEP = 0.25  # px: finest W spacing of the static kind's table
+TABLE_EXTENSION = 5.0  # px: the table continues to min(2 W_max, W_max + this)
 _STATIC_BREAKDOWN = "static prediction: < 90 % of the subsets keep their IC-GN contraction"
 
 
@@ -165,18 +167,27 @@ def _static_terms(
 
     rad = math.radians(angle)
     img = np.asarray(image, dtype=np.float64)
+    w = np.unique(np.asarray(blur, dtype=np.float64))
+    w_max = float(w.max())
+    if w.size > 1 and float(np.min(np.diff(w))) < TABLE_STEP:
+        # a fine sweep (the paper's 0.1 px): the table on a TABLE_STEP grid, the spline
+        # between its points (each static-prediction W costs about as much as a DIC run
+        # of the sweep over all W; the terms are smooth on this scale)
+        w = np.round(np.arange(0.0, w_max + 1e-9, TABLE_STEP), 10)
+        if w[-1] < w_max:
+            w = np.append(w, w_max)
     try:
         return static_terms(
             img,
-            np.asarray(blur, dtype=np.float64),
+            w,
             subset=subset,
             # the campaign's own POIs (inside the region the blur kept on image content)
             points=task_points(img.shape, spec, subset=subset, angle=angle),
             motion=(math.sin(rad), math.cos(rad)),
-            # the table continues to twice the sweep's largest W (or the breakdown):
-            # the static prediction needs no measurement there (flagged as outside the
-            # fitted W range, but not the closed form's extrapolation)
-            extend_to=2.0 * float(np.max(blur)),
+            # the table continues beyond the sweep (up to the breakdown): the static
+            # prediction needs no measurement there (flagged as outside the fitted W
+            # range, but not the closed form's extrapolation)
+            extend_to=min(2.0 * w_max, w_max + TABLE_EXTENSION),
             shape=shape,  # type: ignore[arg-type]
             boundary=spec.boundary,  # type: ignore[arg-type]
         )
@@ -215,8 +226,9 @@ def calibrate(
     report layer's (:func:`dicblur.report.plots.calibration_figures`).
 
     The model's default is the static kind (docs/models.md s. 4): the static prediction
-    of the pattern on the sweep's W grid (continued to twice its largest W, or to the
-    static breakdown W), with one fitted scale per term; the fitted mismatch model and the
+    of the pattern on the sweep's W grid (no finer than 0.25 px; continued to
+    ``min(2 W_max, W_max + 5 px)`` or to the static breakdown W), with one fitted scale
+    per term; the fitted mismatch model and the
     power law are in the model beside it. If the image leaves no static prediction, the
     default is the mismatch model (with a warning).
 

@@ -185,7 +185,9 @@ def main() -> None:
             subset=subset,
             step=step,
             boundary="periodic",
-            extend_to=2.0 * float(w_all.max()),  # as calibrate: the breakdown beyond 10 px
+            # to 20 px: finds #2's breakdown beyond the study (calibrate now stops at
+            # min(2 W_max, W_max + 5 px) = 15 px; the held-out points are all <= 10 px)
+            extend_to=2.0 * float(w_all.max()),
         )
         conv = np.concatenate([_series(ds, "converged_fraction", p, lv) for lv in levels])
         w_c = np.tile(w_all, len(levels))

@@ -10,12 +10,17 @@ that contain the truth, for every parameter of every model:
 - noise + blur-mismatch model without the cross term: ``a``, ``c`` (one noise level,
   13 points, 5 % log scatter);
 - with floor and cross term: ``a``, ``floor``, ``cross``, ``c`` (noise 2 and 8 GL, 26
-  points, 5 % log scatter).
+  points, 5 % log scatter);
+- the static kind (:func:`dicblur.models.fit_static_scales`): ``k_noise``, ``k_blur`` on
+  a tabulated static prediction (W = 0..8 px step 0.25, noise variance ~ 1/SSSIG, a
+  noise-free variance ``(c W^2)^2`` plus a sub-pixel bias swinging with ``W/2 mod 1``);
+  noise 2 and 8 GL, 26 points over W = 0..6 px, 5 % log scatter.
 
 Target: 90-99 % for every parameter. Also records how often the degenerate-covariance
 fallback (seeded bootstrap) was used. Writes ``benchmarks/results/coverage.json``.
 
-Run: ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_coverage.py [--n 200]``
+Run: ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_coverage.py [--n 200] [--only static]``
+(``--only``: those models, written to ``results/coverage_<models>.json``)
 """
 
 from __future__ import annotations
@@ -32,19 +37,49 @@ import numpy as np
 
 import dicblur
 from dicblur.models import (
+    StaticTerms,
     fit_mismatch,
     fit_power_law,
     fit_sssig_decay,
+    fit_static_scales,
     mismatch_model,
     sssig_decay,
 )
 
 OUT = Path(__file__).resolve().parent / "results" / "coverage.json"
+OUT_ONLY = Path(__file__).resolve().parent / "results" / "coverage_{}.json"
 S0, BETA = 2.4e6, 0.03
+
+
+def static_table() -> StaticTerms:
+    """A static-prediction table with the shapes of a real one (module docstring)."""
+    w = np.round(np.arange(0.0, 8.001, 0.25), 10)
+    s = sssig_decay(w, S0, BETA)
+    off = (w / 2) % 1.0
+    return StaticTerms(
+        blur=tuple(w),
+        noise=tuple(1.6 / s),
+        noise2=tuple(2e-10 * (1 + 0.1 * w**2) * S0 / s**2),
+        mismatch=tuple((9e-4 * w**2) ** 2 + (1e-3 * np.sin(np.pi * off)) ** 2),
+        valid_fraction=tuple(np.ones(w.size)),
+        breakdown_blur=None,
+    )
 
 
 def case(which: str, seed: int):
     rng = np.random.default_rng(20_000 + seed)
+    if which == "static":
+        terms = static_table()
+        w1 = np.arange(0.0, 6.01, 0.5)
+        w, sig = np.tile(w1, 2), np.repeat([2.0, 8.0], w1.size)
+        x = np.array(terms.blur)
+        n1, n2, b2 = (
+            np.interp(w, x, np.array(v)) for v in (terms.noise, terms.noise2, terms.mismatch)
+        )
+        truth = {"k_noise": 0.95, "k_blur": 1.05}
+        u = np.sqrt(0.95**2 * (sig**2 * n1 + sig**4 * n2) + 1.05**2 * b2)
+        u = u * np.exp(rng.normal(0, 0.05, w.size))
+        return truth, fit_static_scales(terms, w, sig, u)
     if which == "power_law":
         w = np.arange(0.0, 3.01, 0.25)
         s = sssig_decay(w, S0, BETA) * np.exp(rng.normal(0, 0.01, w.size))
@@ -73,9 +108,12 @@ def case(which: str, seed: int):
     )
 
 
-def run(n: int) -> dict:
+MODELS = ("power_law", "decay", "mismatch", "mismatch_cross", "static")
+
+
+def run(n: int, models: tuple[str, ...] = MODELS) -> dict:
     out: dict = {}
-    for which in ("power_law", "decay", "mismatch", "mismatch_cross"):
+    for which in models:
         t0 = time.perf_counter()
         hits: dict[str, int] = {}
         methods: dict[str, int] = {}
@@ -101,13 +139,14 @@ def run(n: int) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="data sets per model (>= 50)")
+    ap.add_argument("--only", nargs="+", choices=MODELS, default=list(MODELS))
     args = ap.parse_args()
-    res = run(args.n)
+    res = run(args.n, tuple(args.only))
     print(f"{'model':16s} {'parameter':9s} {'coverage':>9s}  ci methods")
     for which, r in res.items():
         for name, c in r["coverage"].items():
             print(f"{which:16s} {name:9s} {100 * c:8.1f}%  {r['ci_methods']}")
-    print(f"(binomial se at 95 %: {100 * res['power_law']['se_at_95']:.1f} %)")
+    print(f"(binomial se at 95 %: {100 * next(iter(res.values()))['se_at_95']:.1f} %)")
     try:
         commit = subprocess.run(
             ["git", "rev-parse", "HEAD"],
@@ -129,9 +168,10 @@ def main() -> None:
             "platform": platform.platform(),
         },
     }
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(doc, indent=1))
-    print(f"wrote {OUT}")
+    out = OUT if set(args.only) == set(MODELS) else Path(str(OUT_ONLY).format("_".join(args.only)))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(doc, indent=1))
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -2,9 +2,11 @@
 against a direct simulation at those settings (issue 14, "done when").
 
 1. ``dicblur calibrate paper4 --size 512x512 --noise 2 --subset 21 --blur 0:8:0.5`` (one
-   noise level, the default model: noise + blur mismatch).
-2. ``dicblur predict model.json --blur 3 --noise 1|4`` against a campaign at that noise
-   and W on the same pattern (fresh noise, ``--reps`` repetitions).
+   noise level; the default model: the static kind, with the fitted noise + blur-mismatch
+   model beside it, whose prediction is recorded too as ``predicted_mismatch``).
+2. ``dicblur predict model.json --blur 3 --noise 1|4`` and ``--blur 7 --noise 4`` (the
+   large-blur regime) against a campaign at that noise and W on the same pattern (fresh
+   noise, ``--reps`` repetitions).
 3. ``dicblur plan model.json --velocity 120mm/s --scale 0.05mm/px --full-well 20000
    --read-noise 5 --flux 4e6``: the predicted u_e at the planned optimum against a
    campaign at the optimum's W and the camera's noise there (Gaussian, std
@@ -98,15 +100,18 @@ def run(size: int, reps: int, work: Path) -> dict:
     model_path = str(work / "cal" / "model.json")
     m = BlurUncertaintyModel.from_json(model_path)
     rows = []
-    for noise in (1.0, 4.0):
-        pred = _cli_json(["predict", model_path, "--blur", "3", "--noise", f"{noise:g}", "--json"])[
-            "predictions"
-        ][0]["u_e_px"]
-        meas, se = _direct(work, f"n{noise:g}", noise=noise, blur=3.0, size=size, reps=reps)
+    for wb, noise in ((3.0, 1.0), (3.0, 4.0), (7.0, 4.0)):
+        pred = _cli_json(
+            ["predict", model_path, "--blur", f"{wb:g}", "--noise", f"{noise:g}", "--json"]
+        )["predictions"][0]["u_e_px"]
+        tag = f"n{noise:g}" if wb == 3.0 else f"w{wb:g}n{noise:g}"
+        meas, se = _direct(work, tag, noise=noise, blur=wb, size=size, reps=reps)
+        mism = float(m.predict([wb], noise, model="mismatch").u_e[0]) if m.mismatch else None
         rows.append(
             {
-                "case": f"predict W=3 px, noise {noise:g} GL",
+                "case": f"predict W={wb:g} px, noise {noise:g} GL",
                 "predicted": pred,
+                "predicted_mismatch": mism,
                 "simulated": meas,
                 "simulated_se": se,
                 "ratio": pred / meas,
@@ -137,6 +142,7 @@ def run(size: int, reps: int, work: Path) -> dict:
             "case": f"camera plan optimum {plan['exposure'] * 1e3:.3g} ms, W "
             f"{plan['blur']:.3g} px, noise {sigma:.3g} GL",
             "predicted": plan["u_e"],
+            "predicted_mismatch": None,
             "simulated": meas,
             "simulated_se": se,
             "ratio": plan["u_e"] / meas,
@@ -168,9 +174,13 @@ def main() -> None:
     args = ap.parse_args()
     res = run(args.size, args.reps, args.out_dir)
     print(f"calibrate {args.size}^2: {res['calibrate_s']:.0f} s, default {res['default']}")
-    print(f"{'case':58s} {'predicted':>10s} {'simulated':>10s} {'ratio':>7s}")
+    print(f"{'case':58s} {'predicted':>10s} {'simulated':>10s} {'ratio':>7s} mismatch ratio")
     for r in res["rows"]:
-        print(f"{r['case']:58s} {r['predicted']:10.4g} {r['simulated']:10.4g} {r['ratio']:7.3f}")
+        mm = r["predicted_mismatch"]
+        print(
+            f"{r['case']:58s} {r['predicted']:10.4g} {r['simulated']:10.4g} {r['ratio']:7.3f}"
+            + ("" if mm is None else f" {mm / r['simulated']:7.3f}")
+        )
     print(f"power law at noise 4 refused: {res['power_law_refused']} ({res['power_law_message']})")
     commit = subprocess.run(
         ["git", "rev-parse", "HEAD"],

@@ -136,7 +136,7 @@ def test_model_records_its_validity_domain_and_flags_extrapolation():
         "p1",
     )
     js = json.loads(m.to_json())
-    assert js["schema"] == "dicblur.BlurUncertaintyModel/2"
+    assert js["schema"] == "dicblur.BlurUncertaintyModel/3"  # /3: the static kind
     assert js["domain"]["blur_max"] == pytest.approx(2.8) and js["domain"]["subset"] == 31
     assert BlurUncertaintyModel.from_json(m.to_json()) == m
     p = m.predict([1.0, 5.0])

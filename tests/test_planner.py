@@ -15,10 +15,12 @@ import pytest
 
 from dicblur.models import (
     PoissonGaussianCamera,
+    StaticTerms,
     fit_blur_model,
     mismatch_model,
     plan_exposure,
     sssig_decay,
+    with_static_model,
 )
 from dicblur.report import find_browser
 from dicblur.report.browser import evaluate_in_browser
@@ -55,12 +57,56 @@ def _model(levels=(2.0, 8.0), seed=1, floor=9e-4, breakdown=None):
     )
 
 
+def synthetic_terms(breakdown=None, step=0.25, top=8.0):
+    """A static-prediction table with the shapes of a real one: the noise variance grows
+    as 1/SSSIG, the noise-free variance as (c W^2)^2 plus a sub-pixel bias that swings
+    with the offset W/2 mod 1."""
+    w = np.round(np.arange(0.0, top + 1e-9, step), 10)
+    s = sssig_decay(w, S0, BETA)
+    off = (w / 2) % 1.0
+    return StaticTerms(
+        blur=tuple(w),
+        noise=tuple(1.6 / s),
+        noise2=tuple(2e-3 / s * (1 + 0.1 * w**2) / s * S0 * 1e-4),
+        mismatch=tuple((9e-4 * w**2) ** 2 + (1e-3 * np.sin(np.pi * off)) ** 2),
+        valid_fraction=tuple(np.where(w >= (breakdown or np.inf), 0.5, 1.0)),
+        breakdown_blur=breakdown,
+    )
+
+
+def _static_model(seed=11, breakdown=6.5):
+    """A model whose default is the static kind, fitted to data the table describes."""
+    terms = synthetic_terms(breakdown=breakdown)
+    rng = np.random.default_rng(seed)
+    w0 = np.arange(0.0, 6.01, 0.5)
+    w = np.tile(w0, 2)
+    sig = np.repeat([2.0, 8.0], w0.size)
+    s = sssig_decay(w, S0, BETA)
+    x = np.array(terms.blur)
+    n1, n2, b2 = (np.interp(w, x, np.array(v)) for v in (terms.noise, terms.noise2, terms.mismatch))
+    u = np.sqrt(0.95**2 * (sig**2 * n1 + sig**4 * n2) + 1.05**2 * b2)
+    u = u * np.exp(rng.normal(0.0, 0.02, w.size))
+    base = fit_blur_model(
+        w,
+        s,
+        u,
+        noise_sigma=sig,
+        subset=31,
+        mean_level=120.0,
+        breakdown_blur=breakdown,
+        breakdown_rule="static prediction",
+    )
+    return with_static_model(base, terms)
+
+
 @pytest.fixture(scope="module")
 def models():
     one = _model(levels=(2.0,), seed=3)
     broken = _model(seed=5, breakdown=4.5)
     assert broken.domain.breakdown_blur is not None
-    return [_model(), one, broken]
+    st = _static_model()
+    assert st.default == "static" and st.domain.breakdown_blur == 6.5
+    return [_model(), one, broken, st]
 
 
 def test_page_is_self_contained_and_small(models, tmp_path):
@@ -129,6 +175,51 @@ def _cases(models):
                 "target": float(rng.uniform(0.004, 0.03)),
                 "sigma": float(rng.uniform(1, 6)),
                 "camera": None,
+            }
+        )
+    # the static kind (model 3, default static): predictions inside, between and beyond
+    # the table's grid points and past the breakdown, fixed-noise and camera plans
+    srng = np.random.default_rng(8)
+    for _ in range(150):
+        mi = int(srng.choice([3, 3, 3, 0]))  # model 0 has no static kind: both refuse
+        cases.append(
+            {
+                "op": "predict",
+                "model": mi,
+                "kind": ["static", "static", "mismatch", None][int(srng.integers(0, 4))],
+                "blur": float(srng.uniform(0, 9)),
+                "sigma": float(srng.uniform(0.5, 10)),
+            }
+        )
+    for _ in range(30):
+        cases.append(
+            {
+                "op": "plan",
+                "model": 3,
+                "kind": str(srng.choice(["static", "static", "mismatch"])),
+                "velocity": float(srng.uniform(20, 400)),
+                "scale": 0.05,
+                "target": float(srng.uniform(0.004, 0.03)),
+                "sigma": float(srng.uniform(1, 6)),
+                "camera": None,
+            }
+        )
+    for _ in range(30):
+        cases.append(
+            {
+                "op": "plan",
+                "model": 3,
+                "kind": "static",
+                "velocity": float(srng.uniform(20, 400)),
+                "scale": 0.05,
+                "target": float(srng.uniform(0.004, 0.03)),
+                "sigma": None,
+                "camera": {
+                    "full_well": float(srng.uniform(1e4, 4e4)),
+                    "read_noise": float(srng.uniform(1, 10)),
+                    "flux": float(10 ** srng.uniform(6, 7.5)),
+                    "peak_to_mean": 2.0,
+                },
             }
         )
     for _ in range(40):
@@ -210,6 +301,15 @@ def test_page_computes_what_python_computes(models):
     assert n_checked >= 200
     # the breakdown was exercised: predictions refused beyond it, plans capped at it
     assert any(c["model"] == 2 and c["op"] == "predict" and c["blur"] >= 4.5 for c in cases)
+    # the static kind was evaluated (not only refused) in predictions and both plans
+    ok_static = [
+        c
+        for c, js in zip(cases, got, strict=True)
+        if c["model"] == 3 and c["kind"] in ("static", None) and "error" not in js
+    ]
+    assert sum(c["op"] == "predict" for c in ok_static) >= 80
+    assert any(c["op"] == "plan" and c["camera"] is None for c in ok_static)
+    assert sum(c["op"] == "plan" and c["camera"] is not None for c in ok_static) >= 20
 
 
 SCRIPT_MOVE = """

@@ -6,7 +6,9 @@ several: two levels that bracket the noise of the planned exposure separate the 
 model's floor and cross term and keep a camera plan inside the model's validity domain),
 one subset size, one motion direction; the campaign's dataset is then fitted with
 :func:`dicblur.models.fit_blur_model` (SSSIG decay, eq. 18; power law, eq. 17; noise +
-blur-mismatch model) and written; the report layer draws the figures.
+blur-mismatch model), the static prediction of the pattern is tabulated and scaled to it
+(:func:`dicblur.models.with_static_model`, the model's default: the static kind), and the
+model is written; the report layer draws the figures.
 """
 
 from __future__ import annotations
@@ -163,6 +165,58 @@ def _levels(noise: float | Sequence[float]) -> list[float]:
     return levels
 
 
+TABLE_STEP = 0.25  # px: finest W spacing of the static kind's table
+TABLE_EXTENSION = 5.0  # px: the table continues to min(2 W_max, W_max + this)
+_STATIC_BREAKDOWN = "static prediction: < 90 % of the subsets keep their IC-GN contraction"
+
+
+def _static_terms(
+    image: Any, blur: Any, spec: CampaignSpec, *, subset: int, angle: float, shape: str
+) -> Any:
+    """The static prediction's terms of the calibration (None, with a warning, if the
+    image leaves none: the model then defaults to the fitted mismatch model)."""
+    import math
+    import warnings
+
+    from ..errors import FitError
+    from ..models import static_terms
+    from .simulate import task_points
+
+    rad = math.radians(angle)
+    img = np.asarray(image, dtype=np.float64)
+    w = np.unique(np.asarray(blur, dtype=np.float64))
+    w_max = float(w.max())
+    if w.size > 1 and float(np.min(np.diff(w))) < TABLE_STEP:
+        # a fine sweep (the paper's 0.1 px): the table on a TABLE_STEP grid, the spline
+        # between its points (each static-prediction W costs about as much as a DIC run
+        # of the sweep over all W; the terms are smooth on this scale)
+        w = np.round(np.arange(0.0, w_max + 1e-9, TABLE_STEP), 10)
+        if w[-1] < w_max:
+            w = np.append(w, w_max)
+    try:
+        return static_terms(
+            img,
+            w,
+            subset=subset,
+            # the campaign's own POIs (inside the region the blur kept on image content)
+            points=task_points(img.shape, spec, subset=subset, angle=angle),
+            motion=(math.sin(rad), math.cos(rad)),
+            # the table continues beyond the sweep (up to the breakdown): the static
+            # prediction needs no measurement there (flagged as outside the fitted W
+            # range, but not the closed form's extrapolation)
+            extend_to=min(2.0 * w_max, w_max + TABLE_EXTENSION),
+            shape=shape,  # type: ignore[arg-type]
+            boundary=spec.boundary,  # type: ignore[arg-type]
+        )
+    except (InputError, FitError) as exc:
+        warnings.warn(
+            f"static prediction not tabulated ({exc}); the default model is the fitted "
+            "noise + blur-mismatch model",
+            stacklevel=3,
+        )
+        return None
+
+
 def calibrate(
     image: str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
@@ -189,13 +243,20 @@ def calibrate(
     campaign; rerunning resumes it), ``results.csv`` and ``model.json``. Figures are the
     report layer's (:func:`dicblur.report.plots.calibration_figures`).
 
+    The model's default is the static kind (docs/models.md s. 4): the static prediction
+    of the pattern on the sweep's W grid (no finer than 0.25 px; continued to
+    ``min(2 W_max, W_max + 5 px)`` or to the static breakdown W), with one fitted scale
+    per term; the fitted mismatch model and the
+    power law are in the model beside it. If the image leaves no static prediction, the
+    default is the mismatch model (with a warning).
+
     Returns
     -------
     CalibrationResult or None
         None when the campaign was interrupted before it finished (rerun to resume).
     """
     from ..io import check_output
-    from ..models import fit_blur_model
+    from ..models import fit_blur_model, with_static_model
     from .engine import run_campaign
     from .store import export_csv, open_results
     from .tasks import make_pattern
@@ -236,6 +297,10 @@ def calibrate(
         [float(v) for v in mean["noise_effective"].mean("blur").values], mean.sizes["blur"]
     )
     hashes = json.loads(ds.attrs["input_hashes"])
+    image_px = make_pattern(spec, spec.patterns[0])
+    terms = _static_terms(
+        image_px, mean["blur"].values, spec, subset=subset, angle=angle, shape=shape
+    )
     model = fit_blur_model(
         w,
         flat(mean["sssig"]),
@@ -246,10 +311,13 @@ def calibrate(
         subset=subset,
         # validity domain: DIC breaks down where < 90 % of the POIs converge (worst rep)
         converged_fraction=flat(ds["converged_fraction"].min("rep")),
+        # ... or where the static prediction's own breakdown test says so
+        breakdown_blur=None if terms is None else terms.breakdown_blur,
+        breakdown_rule=None if terms is None else _STATIC_BREAKDOWN,
         shape=shape,
         pattern=spec.patterns[0].name,
         pattern_sha256=next(iter(hashes.values()), None) if len(hashes) == 1 else None,
-        mean_level=float(np.mean(make_pattern(spec, spec.patterns[0]))),
+        mean_level=float(np.mean(image_px)),
         # the sweep spans the W range the model will be used in (beyond it predictions are
         # flagged as extrapolated): let the AIC add the W^4 term where the data ask for it.
         # Measured on paper4 512^2 over W = 0..8 px: without it the fit is 24 % rms off
@@ -269,6 +337,10 @@ def calibrate(
             **({} if spec.compensation == "none" else {"compensation": spec.compensation}),
         },
     )
+    if terms is not None:
+        # the default: the static prediction with its two fitted scales, held to 0.15 rms
+        # log error up to the breakdown W where the closed form is not (BENCHMARKS.md)
+        model = with_static_model(model, terms)
     model_path = out / "model.json"
     model.to_json(str(model_path))
     return CalibrationResult(

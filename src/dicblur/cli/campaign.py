@@ -284,6 +284,8 @@ def calibrate_command(
             "MBRF = 2 alpha beta": m.mbrf,
             "mismatch model: a": None if mm is None or "a" not in mm else mm["a"],
             "mismatch model: c": None if mm is None else mm["c"],
+            "static kind: k_noise": None if m.static is None else m.static["k_noise"],
+            "static kind: k_blur": None if m.static is None else m.static["k_blur"],
             "default model": m.default,
             "matcher": m.matcher,
             "validity domain": dom.describe() if dom else None,

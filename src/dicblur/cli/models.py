@@ -313,7 +313,9 @@ def predict_command(
     exposure: str | None = typer.Option(None, "--exposure", help="e.g. 1ms."),
     scale: str | None = typer.Option(None, "--scale", help="e.g. 0.05mm/px."),
     noise: float | None = typer.Option(None, "--noise", help="Noise std, GL."),
-    which: str | None = typer.Option(None, "--model", help="mismatch or power_law."),
+    which: str | None = typer.Option(
+        None, "--model", help="static (calibrate's default), mismatch or power_law."
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Predict u_e at blur lengths (--blur) or from velocity x exposure / scale."""
@@ -407,7 +409,9 @@ def plan_command(
         "--noise-level",
         help="Grey level (of the fitted images) at which shot noise is evaluated.",
     ),
-    which: str | None = typer.Option(None, "--model", help="mismatch or power_law."),
+    which: str | None = typer.Option(
+        None, "--model", help="static (calibrate's default), mismatch or power_law."
+    ),
     plot: Path | None = typer.Option(None, "--plot", help="Write u_e(exposure) figure."),
     html_out: Path | None = typer.Option(
         None,

@@ -27,7 +27,7 @@ from .mismatch import (
     mismatch_terms,
 )
 from .model import BlurUncertaintyModel, Prediction
-from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern
+from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern, static_terms
 from .plan import (
     RULE_OF_THUMB_BLUR,
     ExposurePlan,
@@ -36,6 +36,7 @@ from .plan import (
     plan_exposure,
 )
 from .powerlaw import edge_driven_range, fit_power_law, power_law
+from .scaled import StaticTerms, fit_static_scales, with_static_model
 from .static import match_score_uncertainty, pan_uncertainty
 from .units import parse_quantity
 
@@ -52,6 +53,7 @@ __all__ = [
     "PlanComparison",
     "PoissonGaussianCamera",
     "Prediction",
+    "StaticTerms",
     "blur_mismatch_curve",
     "blur_sensitivity",
     "check_measurements",
@@ -65,6 +67,7 @@ __all__ = [
     "fit_mismatch",
     "fit_power_law",
     "fit_sssig_decay",
+    "fit_static_scales",
     "gradient_weighted_level",
     "match_score_uncertainty",
     "mbrf",
@@ -79,5 +82,7 @@ __all__ = [
     "predict_compensated",
     "predict_from_pattern",
     "sssig_decay",
+    "static_terms",
     "taylor_model",
+    "with_static_model",
 ]

@@ -19,11 +19,12 @@ from .decay import sssig_decay
 from .domain import COMPENSATIONS, ValidityDomain, compensation_label
 from .mismatch import mismatch_terms
 from .model_schema import SCHEMA, SCHEMA_V1, validate_model_dict
+from .scaled import static_variance
 
 __all__ = ["BlurUncertaintyModel", "ModelKind", "Prediction"]
 
-ModelKind = Literal["mismatch", "power_law"]
-_KINDS = ("mismatch", "power_law")
+ModelKind = Literal["mismatch", "power_law", "static"]
+_KINDS = ("mismatch", "power_law", "static")
 
 
 @dataclass(frozen=True)
@@ -40,8 +41,8 @@ class Prediction:
         Prediction interval (level ``confidence``) for a new measurement: parameter
         covariance (delta method, in log space) plus the fit's residual scatter.
     u_noise, u_blur : ndarray or None
-        The noise and blur-mismatch terms of the mismatch model (px; ``None`` for the
-        power law).
+        The noise and blur-mismatch terms of the mismatch model or the static kind (px;
+        ``None`` for the power law).
     sigma : float or None
         Noise std (GL) the prediction is for.
     model : str
@@ -86,9 +87,10 @@ class BlurUncertaintyModel:
 
     Attributes
     ----------
-    default : {"mismatch", "power_law"}
+    default : {"mismatch", "power_law", "static"}
         Model used by :meth:`predict`, :meth:`max_blur` and planning when none is named:
-        ``mismatch`` unless asked otherwise (the power law cannot follow the noise).
+        ``static`` when the calibration had the pattern image (``dicblur calibrate``),
+        else ``mismatch`` unless asked otherwise (the power law cannot follow the noise).
     decay : FitResult
         SSSIG(W) decay, eq. 18 (``sssig0`` (GL/px)**2, ``beta`` 1/px**2).
     power_law : FitResult
@@ -121,6 +123,10 @@ class BlurUncertaintyModel:
     domain : ValidityDomain
         Blur and noise ranges, subset, shape, pattern and breakdown blur of the fitted
         data (filled from the other fields for models built without it).
+    static : FitResult or None
+        The static kind (:mod:`dicblur.models.scaled`): scales ``k_noise`` and ``k_blur``
+        of the static prediction's noise and noise-free terms, whose table (computed
+        once from the reference pattern) is in ``static.extra``.
     """
 
     default: str
@@ -140,6 +146,7 @@ class BlurUncertaintyModel:
     version: str
     confidence: float
     domain: ValidityDomain | None = None
+    static: FitResult | None = None
 
     def __post_init__(self) -> None:
         if self.domain is None:
@@ -199,12 +206,20 @@ class BlurUncertaintyModel:
     def _kind(self, model: str | None) -> str:
         kind = self.default if model is None else model
         if kind not in _KINDS:
-            raise InputError(f"model={model!r}: choose 'mismatch' or 'power_law'")
+            raise InputError(f"model={model!r}: choose 'mismatch', 'power_law' or 'static'")
         if kind == "mismatch" and self.mismatch is None:
             raise InputError("model='mismatch': this model has no mismatch fit; use 'power_law'")
+        if kind == "static" and self.static is None:
+            raise InputError(
+                "model='static': this model has no static kind (made by dicblur calibrate "
+                "from the pattern image); use 'mismatch'"
+            )
         return kind
 
     def _fit(self, kind: str) -> FitResult:
+        if kind == "static":
+            assert self.static is not None
+            return self.static
         fit = self.mismatch if kind == "mismatch" else self.power_law
         assert fit is not None
         return fit
@@ -224,6 +239,10 @@ class BlurUncertaintyModel:
             if sigma is not None and ref is not None:
                 lu = lu + kappa * math.log(sigma / ref)
             return lu
+        if kind == "static":
+            assert sigma is not None
+            noise, blur2 = static_variance(fit.extra, w, sigma, p["k_noise"], p["k_blur"])
+            return 0.5 * np.log(noise + blur2)
         noise, blur2 = self._mismatch_terms(p, w, s, sigma)
         return 0.5 * np.log(noise + p.get("floor", 0.0) ** 2 + blur2)
 
@@ -265,8 +284,10 @@ class BlurUncertaintyModel:
         if sigma is not None:
             sigma = check_positive(sigma, "sigma")
         fit = self._fit(kind)
-        has_noise = (kind == "power_law" and fit.extra.get("sigma_ref") is not None) or (
-            kind == "mismatch" and "a" in fit.names
+        has_noise = (
+            (kind == "power_law" and fit.extra.get("sigma_ref") is not None)
+            or (kind == "mismatch" and "a" in fit.names)
+            or kind == "static"
         )
         if sigma is not None and not has_noise:
             raise InputError(
@@ -323,10 +344,11 @@ class BlurUncertaintyModel:
             W >= 0, px.
         sigma : float, optional
             Noise std (GL). Default: the noise of the fitted data (single level).
-        model : {"mismatch", "power_law"}, optional
+        model : {"mismatch", "power_law", "static"}, optional
             Default: ``self.default``. The power law uses eq. 19 (eq. 17 with SSSIG from
             eq. 18) and, at another noise, the scale-consistent factor
-            ``(sigma / sigma_ref)**kappa``.
+            ``(sigma / sigma_ref)**kappa``; ``static`` interpolates the static
+            prediction's tabulated terms (:mod:`dicblur.models.scaled`).
 
         Returns
         -------
@@ -431,6 +453,10 @@ class BlurUncertaintyModel:
             noise, blur2 = self._mismatch_terms(p, w, self.sssig(w), sig)
             u_noise, u_blur = np.sqrt(noise), np.sqrt(blur2)
             u_floor = float(p["floor"]) if "floor" in p else None
+        elif kind == "static":
+            assert sig is not None
+            nv, bv = static_variance(fit.extra, w, sig, fit["k_noise"], fit["k_blur"])
+            u_noise, u_blur = np.sqrt(nv), np.sqrt(bv)
         return lu, half, u_noise, u_blur, u_floor
 
     def taylor(self, blur: ArrayLike) -> NDArray[np.float64]:
@@ -536,12 +562,26 @@ class BlurUncertaintyModel:
                     f"  c predicted from the static image = {self.c_static:.4g} "
                     f"(fitted / predicted = {self.mismatch['c'] / self.c_static:.3f})"
                 )
+        if self.static is not None:
+            st = self.static
+            tab = st.extra["table_blur"]
+            brk = st.extra.get("table_breakdown_blur")
+            lines.append(
+                f"static kind (static prediction x 2 scales), R^2 (log) = {st.r2:.4f}, "
+                f"residual {100 * st.residual_std:.2g}% rms; table W {tab[0]:g}..{tab[-1]:g} "
+                f"px ({len(tab)} points, offset {st.extra.get('subpixel')})"
+                + ("" if brk is None else f", static breakdown W {brk:g} px")
+            )
+            block(st)
         if self.comparison:
             cmp_ = self.comparison
+            static_rms = cmp_["rms_log_error"].get("static")
             lines.append(
                 f"held-out comparison ({cmp_['n_test']} points): rms log error power law "
                 f"{cmp_['rms_log_error']['power_law']:.3g}, mismatch "
-                f"{cmp_['rms_log_error']['mismatch']:.3g} -> {cmp_['better']}"
+                f"{cmp_['rms_log_error']['mismatch']:.3g}"
+                + ("" if static_rms is None else f", static {static_rms:.3g}")
+                + f" -> {cmp_['better']}"
             )
         if self.provenance:
             lines.append("provenance: " + json.dumps(self.provenance, sort_keys=True))
@@ -619,16 +659,17 @@ class BlurUncertaintyModel:
 def model_kwargs(d: dict[str, Any]) -> dict[str, Any]:
     """Constructor arguments of a :class:`BlurUncertaintyModel` from its JSON dict.
 
-    Schema /2 maps field by field. Schema /1 (before the validity domain) is upgraded:
-    the power law, stored as ``eta``, is refitted from the stored data on its fit range
-    around ``sssig_ref = SSSIG_0`` (the same least squares, so ``alpha`` is unchanged and
-    ``u_ref = eta SSSIG_0**-alpha``), and the domain is rebuilt from the data, the subset
-    and the provenance.
+    Schemas /2 and /3 (/3 adds the static kind) map field by field. Schema /1 (before
+    the validity domain) is upgraded: the power law, stored as ``eta``, is refitted from
+    the stored data on its fit range around ``sssig_ref = SSSIG_0`` (the same least
+    squares, so ``alpha`` is unchanged and ``u_ref = eta SSSIG_0**-alpha``), and the
+    domain is rebuilt from the data, the subset and the provenance.
     """
     kw = {k: v for k, v in d.items() if k != "schema"}
     kw["decay"] = FitResult.from_dict(d["decay"])
     kw["power_law"] = FitResult.from_dict(d["power_law"])
     kw["mismatch"] = None if d["mismatch"] is None else FitResult.from_dict(d["mismatch"])
+    kw["static"] = None if d.get("static") is None else FitResult.from_dict(d["static"])
     kw["fit_range"] = (float(d["fit_range"][0]), float(d["fit_range"][1]))
     kw["noise_levels"] = tuple(float(x) for x in d["noise_levels"])
     kw["data"] = {k: tuple(float(x) for x in v) for k, v in d["data"].items()}

@@ -14,6 +14,7 @@ nothing reaches the model's constructor unchecked.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -28,16 +29,18 @@ __all__ = [
     "SCHEMA",
     "SCHEMA_V1",
     "SCHEMA_VERSION",
+    "STATIC_TABLE_RULES",
     "Rule",
     "validate_model_dict",
 ]
 
 SCHEMA_NAME = "dicblur.BlurUncertaintyModel"
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 SCHEMA = f"{SCHEMA_NAME}/{SCHEMA_VERSION}"
 #: /1: the power law as ``eta`` and no validity domain (upgraded on load by the model)
 SCHEMA_V1 = f"{SCHEMA_NAME}/1"
-READABLE_VERSIONS = ("1", "2")
+#: /2: no static kind (``static`` absent; loads as None)
+READABLE_VERSIONS = ("1", "2", "3")
 
 Check = Callable[[Any], str | None]  # returns why the value is wrong, or None
 
@@ -202,6 +205,52 @@ DOMAIN_RULES: dict[str, Rule] = {
 }
 
 
+def _grid(v: Any) -> str | None:
+    """A strictly increasing W grid from 0 px."""
+    why = array(number(minimum=0.0), nonempty=True)(v)
+    if why is not None:
+        return why
+    if len(v) < 2 or float(v[0]) != 0.0:
+        return "not a grid from W = 0 with >= 2 points"
+    if any(float(b) <= float(a) for a, b in itertools.pairwise(v)):
+        return "not strictly increasing"
+    return None
+
+
+#: the static kind's table in its fit's ``extra`` (docs/models.md s. 4)
+STATIC_TABLE_RULES: dict[str, Rule] = {
+    "table_blur": Rule(_grid, "a strictly increasing W grid from 0 px"),
+    "table_noise": Rule(array(number(minimum=0.0)), "noise variances >= 0 px^2/GL^2"),
+    "table_noise2": Rule(array(number(minimum=0.0)), "noise interactions >= 0 px^2/GL^4"),
+    "table_mismatch": Rule(array(number(minimum=0.0)), "noise-free variances >= 0 px^2"),
+    "table_valid_fraction": Rule(array(number(minimum=0.0)), "fractions of subsets in [0, 1]"),
+    "table_breakdown_blur": Rule(optional(number(minimum=0.0)), "a W in px or null"),
+    "subpixel": Rule(string(), "the sub-pixel offset rule"),
+    "noise_levels": Rule(array(number(minimum=0.0)), "a list of noise stds >= 0 GL"),
+}
+
+
+def _static_fit(v: Any) -> str | None:
+    """A fit result of the static kind: two scales and a consistent table."""
+    _fit(v)
+    if list(v["names"]) != ["k_noise", "k_blur"]:
+        raise _Defect(".names", "not ['k_noise', 'k_blur'] (the static kind's scales)")
+    if any(float(x) <= 0 for x in v["values"]):
+        raise _Defect(".values", "a scale <= 0")
+    extra = v.get("extra")
+    if not isinstance(extra, dict):
+        raise _Defect(".extra", "missing (expected the static prediction's table)")
+    try:
+        _check_table(extra, STATIC_TABLE_RULES, "")
+    except _Defect as inner:
+        raise _Defect(f".extra{inner.where}", inner.why) from None
+    n = len(extra["table_blur"])
+    for key in ("table_noise", "table_noise2", "table_mismatch", "table_valid_fraction"):
+        if len(extra[key]) != n:
+            raise _Defect(f".extra.{key}", f"{len(extra[key])} items for {n} grid points")
+    return None
+
+
 def _domain(v: Any) -> str | None:
     if v is None:
         return None
@@ -213,7 +262,9 @@ def _domain(v: Any) -> str | None:
 
 MODEL_RULES: dict[str, Rule] = {
     "schema": Rule(string(), f"{SCHEMA!r}"),
-    "default": Rule(string(("mismatch", "power_law")), "'mismatch' or 'power_law'"),
+    "default": Rule(
+        string(("mismatch", "power_law", "static")), "'mismatch', 'power_law' or 'static'"
+    ),
     "decay": Rule(_fit, "a fit result (SSSIG decay)"),
     "power_law": Rule(_fit, "a fit result (power law)"),
     "mismatch": Rule(optional(_fit), "a fit result or null"),
@@ -230,6 +281,7 @@ MODEL_RULES: dict[str, Rule] = {
     "version": Rule(string(), "a version string"),
     "confidence": Rule(number(low=0.0, high=1.0), "a number in (0, 1)"),
     "domain": Rule(_domain, "a validity-domain table or null", required=False),
+    "static": Rule(optional(_static_fit), "a static-kind fit result or null", required=False),
 }
 
 
@@ -291,6 +343,8 @@ def validate_model_dict(d: Any, source: str = "model") -> dict[str, Any]:
         )
     try:
         _check_table(d, MODEL_RULES, "")
+        if d["default"] == "static" and d.get("static") is None:
+            raise _Defect(".default", "'static' but the file has no static kind")
     except _Defect as defect:
         raise InputError(f"{source}: key {defect.where.lstrip('.')}: {defect.why}; {fix}") from None
     return d

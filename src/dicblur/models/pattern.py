@@ -45,8 +45,9 @@ from .sensitivity import (
     shifts_and_variance,
     unit_direction,
 )
+from .scaled import StaticTerms
 
-__all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern"]
+__all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern", "static_terms"]
 
 
 @dataclass(frozen=True)
@@ -416,6 +417,113 @@ def model_from_pattern(
     )
     # fitted on three noise levels: make the model's own noise the one asked for
     return replace(model, noise_sigma=sigma)
+
+
+def static_terms(
+    image: ArrayLike,
+    blur: ArrayLike,
+    *,
+    subset: int,
+    step: int | None = None,
+    points: ArrayLike | None = None,
+    motion: tuple[float, float] = (0.0, 1.0),
+    shape: Shape = "translation",
+    boundary: Boundary = "reflect",
+    max_shift: float = 1.0,
+    min_contraction: float = MIN_CONTRACTION,
+    extend_to: float | None = None,
+) -> StaticTerms:
+    """The static prediction's terms on a W grid, for the ``static`` model kind.
+
+    Each W is predicted at the campaigns' sub-pixel offset ``W/2 mod 1`` px (a linear
+    trajectory centres the blurred target at half its path), as
+    :func:`predict_from_pattern` with ``subpixel`` set per W. The grid is ``blur`` with
+    W = 0 added and, with ``extend_to``, continued in the grid's own step beyond its
+    largest W up to ``extend_to`` (the static prediction needs no measurement there), up
+    to the static prediction's breakdown W (included where its terms are finite); beyond
+    it DIC is not described.
+
+    Parameters
+    ----------
+    image : array_like, shape (rows, cols)
+        Sharp reference image (grey levels).
+    blur : array_like, shape (m,)
+        Blur lengths W (px) of the calibration.
+    subset, step, points, motion, shape, boundary, max_shift, min_contraction
+        As for :func:`predict_from_pattern`.
+    extend_to : float, optional
+        Largest W (px) of the grid's extension (none by default).
+
+    Returns
+    -------
+    StaticTerms
+        Per W: noise variance per GL**2 and per GL**4, noise-free variance (px**2), the
+        fraction of subsets that hold, and the breakdown W.
+    """
+    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    max_shift = check_positive(max_shift, "max_shift")
+    lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
+    w = np.unique(np.concatenate([[0.0], as_blur(blur, "blur", increasing=False)]))
+    if extend_to is not None and w.size >= 2 and extend_to > w[-1]:
+        dw = float(np.median(np.diff(w)))
+        more = w[-1] + dw * np.arange(1, math.floor((extend_to - w[-1]) / dw + 1e-9) + 1)
+        w = np.concatenate([w, np.round(more, 10)])
+    offs = np.round((w / 2.0) % 1.0, 12) % 1.0
+    n1, n2, b2, frac = (np.full(w.size, np.nan) for _ in range(4))
+    # in chunks of increasing W: nothing is computed beyond the first breakdown's chunk
+    start = 0
+    while start < w.size:
+        chunk = np.arange(start, min(start + 20, w.size))
+        for off in np.unique(offs[chunk]):
+            sel = chunk[offs[chunk] == off]
+            try:
+                mean_var, mis_var, _, fr = _terms(
+                    img,
+                    w[sel],
+                    pts,
+                    subset,
+                    motion,
+                    shape,
+                    "bspline3",
+                    boundary,
+                    max_shift,
+                    float(off),
+                    lam_min,
+                )
+            except InputError:
+                if start == 0:
+                    raise
+                frac[sel] = 0.0  # the texture is gone along the motion: broken down
+                continue
+            n1[sel] = mean_var[0] + mean_var[1]
+            n2[sel] = mean_var[2]
+            b2[sel] = mis_var
+            frac[sel] = fr
+        if (frac[chunk] < BREAKDOWN_FRACTION).any():
+            break
+        start += chunk.size
+    done = np.isfinite(frac)
+    w, n1, n2, b2, frac = w[done], n1[done], n2[done], b2[done], frac[done]
+    broken = np.nonzero(frac < BREAKDOWN_FRACTION)[0]
+    breakdown = float(w[broken[0]]) if broken.size else None
+    last = broken[0] if broken.size else w.size - 1
+    finite = np.isfinite(n1) & np.isfinite(n2) & np.isfinite(b2)
+    if not finite[last]:
+        last -= 1
+    if not finite[: last + 1].all() or last < 1:
+        raise InputError(
+            "image: the static prediction has no finite terms over the W grid below its "
+            "breakdown; use a textured image or shorter blur lengths"
+        )
+    keep = slice(0, last + 1)
+    return StaticTerms(
+        blur=tuple(map(float, w[keep])),
+        noise=tuple(map(float, n1[keep])),
+        noise2=tuple(map(float, np.maximum(n2[keep], 0.0))),
+        mismatch=tuple(map(float, b2[keep])),
+        valid_fraction=tuple(map(float, frac[keep])),
+        breakdown_blur=breakdown,
+    )
 
 
 def _pattern_name(prov: dict[str, Any]) -> str | None:

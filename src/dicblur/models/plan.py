@@ -289,7 +289,7 @@ def plan_exposure(
         With a camera the noise follows the exposure and the optimum is returned.
     sigma : float, optional
         Fixed-noise case: noise std (GL); default the model's.
-    which : {"mismatch", "power_law"}, optional
+    which : {"mismatch", "power_law", "static"}, optional
         Model to use (default: the model's default).
     n_curve : int
         Points of the returned u_e(t) curve.
@@ -406,7 +406,7 @@ def plan_exposure(
             "(eq. 17) predicts only at the noise it was fitted at; plan with "
             "which='mismatch' (CLI: --model mismatch), the noise + blur-mismatch model"
         )
-    if "a" not in fit.names:
+    if kind == "mismatch" and "a" not in fit.names:
         raise InputError(
             "camera: the model was fitted without a noise level, so it cannot follow the "
             "noise with the exposure; refit with noise_sigma"
@@ -477,7 +477,12 @@ def plan_exposure(
     limited = limited and i == grid.size - 1
     sig_opt = float(noise(t_opt))
     levels = model.noise_levels
-    if len(levels) == 1 and not (0.5 <= sig_opt / levels[0] <= 2.0) and "floor" not in fit.names:
+    if (
+        kind == "mismatch"
+        and len(levels) == 1
+        and not (0.5 <= sig_opt / levels[0] <= 2.0)
+        and "floor" not in fit.names
+    ):
         notes.append(
             f"the noise term is extrapolated from one calibration noise level ({levels[0]:g} "
             f"GL) to {sig_opt:.3g} GL at the optimum; a noise-independent floor (sub-pixel "

@@ -93,6 +93,7 @@ def planner_payload(model: Any, *, label: str | None = None) -> dict[str, Any]:
         "label": f"{Path(name).name}{subset}",
         "default": model.default,
         "mismatch": None if model.mismatch is None else _fit_payload(model.mismatch),
+        "static": None if model.static is None else _fit_payload(model.static),
         "power_law": _fit_payload(model.power_law),
         "decay": _fit_payload(model.decay),
         "noise_sigma": model.noise_sigma,
@@ -187,7 +188,9 @@ def planner_html(
         if d.grey_level is not None
         else (first.mean_level if first.mean_level is not None else 127.5)
     )
-    kinds = [k for k in ("mismatch", "power_law") if any(p[k] is not None for p in payload)]
+    kinds = [
+        k for k in ("static", "mismatch", "power_law") if any(p.get(k) is not None for p in payload)
+    ]
 
     def val(x: Any) -> str:
         return html.escape(str(x), quote=True)
@@ -196,7 +199,11 @@ def planner_html(
         v = fallback if x is None or not math.isfinite(x) else x
         return val(f"{v:g}")
 
-    names = {"mismatch": "noise + blur mismatch", "power_law": "power law (paper eq. 19)"}
+    names = {
+        "static": "static prediction, 2 fitted scales",
+        "mismatch": "noise + blur mismatch",
+        "power_law": "power law (paper eq. 19)",
+    }
     kind_opts = "".join(f'<option value="{k}">{names[k]}</option>' for k in kinds)
     page_title = title or "dicblur exposure planner"
     body = f"""<h1>{html.escape(page_title)}</h1>

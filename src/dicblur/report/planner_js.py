@@ -3,7 +3,7 @@
 
 Kept as a Python string so that the page is one self-contained file. The model functions
 mirror :meth:`dicblur.BlurUncertaintyModel.predict` (``_log_u``, ``_mismatch_terms``, the
-delta-method interval) and :func:`dicblur.plan_exposure` line by line; the equality test
+static kind's table interpolation of :mod:`dicblur.models.scaled`, the delta-method interval) and :func:`dicblur.plan_exposure` line by line; the equality test
 (``tests/test_planner.py``) holds them to 1e-9 relative on u_e.
 """
 
@@ -77,14 +77,16 @@ function parseQuantity(value, kind, name, scale) {
 
 // ------------------------------------------------------------------ model (models/model.py)
 function fitOf(m, kind) {
-  var f = kind === "mismatch" ? m.mismatch : m.power_law;
+  var f = kind === "static" ? m.static : (kind === "mismatch" ? m.mismatch : m.power_law);
   if (!f) throw new UnitError("model '" + kind + "' is not in this calibration");
   return f;
 }
 
 function kindOf(m, kind) {
   var k = kind == null ? m["default"] : kind;
-  if (k !== "mismatch" && k !== "power_law") throw new UnitError("model: choose mismatch or power_law");
+  if (k !== "mismatch" && k !== "power_law" && k !== "static") {
+    throw new UnitError("model: choose static, mismatch or power_law");
+  }
   fitOf(m, k);
   return k;
 }
@@ -108,6 +110,49 @@ function mismatchTerms(m, p, w, s, sigma) {
   return [noise, ub * ub + bw * bw];
 }
 
+// static kind (models/scaled.py _second_derivatives, _interp): natural cubic spline in W,
+// clipped at 0; beyond the grid the spline's end slope if it rises, else the end value
+function splineM(x, y) {
+  var n = x.length, m = [], cp = [], dp = [], i;
+  for (i = 0; i < n; i++) { m.push(0.0); cp.push(0.0); dp.push(0.0); }
+  if (n < 3) return m;
+  for (i = 1; i < n - 1; i++) {
+    var h0 = x[i] - x[i - 1], h1 = x[i + 1] - x[i];
+    var r = 6.0 * ((y[i + 1] - y[i]) / h1 - (y[i] - y[i - 1]) / h0);
+    var den = 2.0 * (h0 + h1) - h0 * cp[i - 1];
+    cp[i] = h1 / den;
+    dp[i] = (r - h0 * dp[i - 1]) / den;
+  }
+  for (i = n - 2; i > 0; i--) m[i] = dp[i] - cp[i] * m[i + 1];
+  return m;
+}
+
+function interpTerm(x, y, w) {
+  var n = x.length, lo = 0, hi = n, m = splineM(x, y);
+  while (lo < hi) { var mid = (lo + hi) >> 1; if (x[mid] <= w) lo = mid + 1; else hi = mid; }
+  var v;
+  if (w > x[n - 1]) {
+    var he = x[n - 1] - x[n - 2];
+    var slope = Math.max((y[n - 1] - y[n - 2]) / he + he * m[n - 2] / 6.0, 0.0);
+    v = y[n - 1] + slope * (w - x[n - 1]);
+  } else {
+    var j = Math.min(Math.max(lo - 1, 0), n - 2);
+    var h = x[j + 1] - x[j], a = (x[j + 1] - w) / h, b = (w - x[j]) / h;
+    v = a * y[j] + b * y[j + 1] +
+        ((Math.pow(a, 3) - a) * m[j] + (Math.pow(b, 3) - b) * m[j + 1]) * (h * h / 6.0);
+  }
+  return Math.max(v, 0.0);
+}
+
+// static_variance: [k_noise^2 (sigma^2 noise + sigma^4 noise2), k_blur^2 mismatch]
+function staticTerms(fit, p, w, sigma) {
+  var e = fit.extra, x = e.table_blur;
+  var n1 = interpTerm(x, e.table_noise, w), n2 = interpTerm(x, e.table_noise2, w);
+  var b2 = interpTerm(x, e.table_mismatch, w);
+  return [p.k_noise * p.k_noise * (sigma * sigma * n1 + Math.pow(sigma, 4) * n2),
+          p.k_blur * p.k_blur * b2];
+}
+
 function logU(m, kind, w, sigma, theta) {
   var fit = fitOf(m, kind);
   var nf = fit.names.length, p = {};
@@ -121,6 +166,10 @@ function logU(m, kind, w, sigma, theta) {
     if (sigma != null && ref != null) lu = lu + kappa * Math.log(sigma / ref);
     return lu;
   }
+  if (kind === "static") {
+    var st = staticTerms(fit, p, w, sigma);
+    return 0.5 * Math.log(st[0] + st[1]);
+  }
   var t = mismatchTerms(m, p, w, s, sigma);
   var floor = p.floor || 0.0;
   return 0.5 * Math.log(t[0] + floor * floor + t[1]);
@@ -129,7 +178,7 @@ function logU(m, kind, w, sigma, theta) {
 function sigmaOf(m, kind, sigma) {
   var fit = fitOf(m, kind);
   var hasNoise = (kind === "power_law" && fit.extra.sigma_ref != null) ||
-                 (kind === "mismatch" && fit.names.indexOf("a") >= 0);
+                 (kind === "mismatch" && fit.names.indexOf("a") >= 0) || kind === "static";
   if (sigma != null && !(sigma > 0)) throw new UnitError("noise: must be > 0 GL");
   if (sigma != null && !hasNoise) {
     throw new UnitError("noise: this model was fitted without noise levels; it cannot " +
@@ -225,6 +274,12 @@ function predict(m, blur, sigma, kind) {
       var t = mismatchTerms(m, p, w, sssigDecay(w, theta[nf], theta[nf + 1]), sig);
       out.u_noise.push(broken ? NaN : Math.sqrt(t[0]));
       out.u_blur.push(broken ? NaN : Math.sqrt(t[1]));
+    } else if (k === "static") {
+      var ps = {};
+      for (var i2 = 0; i2 < nf; i2++) ps[fit.names[i2]] = theta[i2];
+      var ts = staticTerms(fit, ps, w, sig);
+      out.u_noise.push(broken ? NaN : Math.sqrt(ts[0]));
+      out.u_blur.push(broken ? NaN : Math.sqrt(ts[1]));
     }
   }
   return out;
@@ -414,7 +469,7 @@ function planExposure(m, q) {
     throw new UnitError("camera: the noise follows the exposure and the power law predicts " +
                         "only at its fitted noise; choose the noise + blur mismatch model");
   }
-  if (fit.names.indexOf("a") < 0) {
+  if (kind === "mismatch" && fit.names.indexOf("a") < 0) {
     throw new UnitError("camera: the model was fitted without a noise level");
   }
   var meanLevel = m.mean_level;

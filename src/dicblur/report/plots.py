@@ -59,8 +59,10 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
             color=col,
             label=f"campaign, noise {float(sig):.3g} GL",
         )
-        for kind, style in (("mismatch", "-"), ("power_law", "--")):
-            if kind == "mismatch" and model.mismatch is None:
+        for kind, style in (("static", "-."), ("mismatch", "-"), ("power_law", "--")):
+            if (kind == "mismatch" and model.mismatch is None) or (
+                kind == "static" and getattr(model, "static", None) is None
+            ):
                 continue
             if kind == "power_law" and i > 0:
                 continue  # the power law predicts at its fitted noise only
@@ -71,7 +73,11 @@ def calibration_figures(result: Any, out: str | Path | None = None) -> tuple[Pat
                 style,
                 color=col,
                 label=(
-                    ("noise + blur mismatch" if kind == "mismatch" else "power law, eq. 19")
+                    {
+                        "static": "static prediction, 2 fitted scales",
+                        "mismatch": "noise + blur mismatch",
+                        "power_law": "power law, eq. 19",
+                    }[kind]
                     + (" (default)" if kind == model.default else "")
                 )
                 if i == 0

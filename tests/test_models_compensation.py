@@ -133,6 +133,9 @@ def test_calibrate_with_compensation_writes_a_compensated_model(tmp_path):
     assert BlurUncertaintyModel.from_json(str(out)).compensation == "none"
     m = BlurUncertaintyModel.from_json(str(res.model_path))
     assert m.compensation == "given" and m.provenance["compensation"] == "given"
+    # the static kind scales the plain matcher's terms: a compensated model has none
+    assert m.static is None and m.default != "static"
+    assert BlurUncertaintyModel.from_json(str(plain.model_path)).default == "static"
     u = np.asarray(res.curves["u_e"].values).ravel()
     # measured: 0.52e-3 px at W = 8 px (without the margin 2.7e-3; plain matcher ~0.05 px)
     assert np.all(u < 1e-3), u

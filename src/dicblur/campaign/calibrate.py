@@ -298,8 +298,12 @@ def calibrate(
     )
     hashes = json.loads(ds.attrs["input_hashes"])
     image_px = make_pattern(spec, spec.patterns[0])
-    terms = _static_terms(
-        image_px, mean["blur"].values, spec, subset=subset, angle=angle, shape=shape
+    # the static kind tabulates the plain matcher's static prediction (noise + mismatch);
+    # a compensated sweep has no mismatch term to scale, so it keeps the fitted default
+    terms = (
+        _static_terms(image_px, mean["blur"].values, spec, subset=subset, angle=angle, shape=shape)
+        if spec.compensation == "none"
+        else None
     )
     model = fit_blur_model(
         w,

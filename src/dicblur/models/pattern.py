@@ -37,6 +37,7 @@ from ..errors import InputError
 from ..metrics import directional_sssig
 from .mismatch import subset_inputs
 from .model import BlurUncertaintyModel
+from .scaled import StaticTerms
 from .sensitivity import (
     Boundary,
     Derivative,
@@ -45,7 +46,6 @@ from .sensitivity import (
     shifts_and_variance,
     unit_direction,
 )
-from .scaled import StaticTerms
 
 __all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern", "static_terms"]
 
@@ -460,7 +460,7 @@ def static_terms(
         Per W: noise variance per GL**2 and per GL**4, noise-free variance (px**2), the
         fraction of subsets that hold, and the breakdown W.
     """
-    img, subset, pts = _subset_inputs(image, subset, step, points, boundary)
+    img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     max_shift = check_positive(max_shift, "max_shift")
     lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
     w = np.unique(np.concatenate([[0.0], as_blur(blur, "blur", increasing=False)]))

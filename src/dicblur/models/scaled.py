@@ -36,8 +36,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
+from ..checks import as_positive, as_vector
 from ..errors import FitError, InputError
-from ._checks import as_positive, as_vector
 from ._result import FitResult, check_ci, make_result
 
 __all__ = [

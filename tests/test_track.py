@@ -464,3 +464,46 @@ def test_reference_in_the_middle_tracks_backwards(tiny):
     assert valid[:9].mean() > 0.6
     assert np.nanmax(np.abs(np.where(valid, eu, np.nan))) < 0.25
     assert np.nanmax(np.abs(np.where(valid, ev, np.nan))) < 0.25
+
+
+# ---------------------------------------------------------------- complete noise term
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_track_noise_term_is_the_static_predictions_complete_term(shape):
+    # the per-point noise part of track's sigma is the complete noise term of the static
+    # prediction (reference gradients x mismatch residual, the negative O(W^2) share, the
+    # sigma^4 interaction; docs/models.md s. 4): its mean over the points equals
+    # predict_from_pattern's u_noise^2 along the motion, at every W and for x and y motion
+    from dicblur.models import predict_from_pattern
+    from dicblur.track import build_blur_table
+
+    img = _pattern(96, seed=4)
+    yy, xx = np.mgrid[28:69:10, 28:69:10]
+    pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
+    sigma, ws = 2.0, np.array([0.0, 2.0, 4.0, 6.0])
+    table = build_blur_table(
+        img, pts, subset=21, shape=shape, blur=np.array([[6.0, 6.0]]), angle=np.array([[0, 90.0]])
+    )
+    first = {}
+    for angle, motion, comp in ((0.0, (0.0, 1.0), 0), (90.0, (1.0, 0.0), 1)):
+        look = table.lookup(
+            np.repeat(ws[:, None], len(pts), axis=1), np.full((ws.size, len(pts)), angle)
+        )
+        su, sv = table.noise_std(look, np.full(len(pts), sigma**2))
+        track_var = np.mean((su, sv)[comp] ** 2, axis=1)
+        pr = predict_from_pattern(
+            img, ws, noise_sigma=sigma, points=pts, subset=21, shape=shape, motion=motion
+        )
+        np.testing.assert_allclose(track_var, pr.u_noise**2, rtol=1e-6)
+        first[angle] = np.mean(sigma**2 * look[..., 2 + comp], axis=1) / pr.u_noise**2
+    # the first-order response alone (reference intensities, no sigma^4) is off by more
+    # than the test's tolerance at W = 6 px (what the complete term corrects)
+    from dicblur._blur_sensitivity import subset_blur_response
+
+    _, cov1, cov4_1 = subset_blur_response(
+        img, ws, pts, 21, motion=(0.0, 1.0), shape=shape, complete=False
+    )
+    assert not cov4_1.any()
+    pr0 = predict_from_pattern(img, ws, noise_sigma=sigma, points=pts, subset=21, shape=shape)
+    off = sigma**2 * cov1[..., 0, 0].mean(axis=1) / pr0.u_noise**2
+    assert off[-1] > 1.15  # measured 1.31 (translation), 1.31 (affine)
+    assert abs(off[0] - 1) < 0.05  # at W = 0 only the small sigma^4 interaction differs

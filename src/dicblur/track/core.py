@@ -683,8 +683,9 @@ def _assemble(
             for a in range(0, n_f, 128):  # frame blocks: bounded temporaries
                 b = slice(a, a + 128)
                 look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
-                sig["sigma_u_noise"][b, pin] = np.sqrt(nv * look[..., 2])
-                sig["sigma_v_noise"][b, pin] = np.sqrt(nv * look[..., 3])
+                su_n, sv_n = table.noise_std(look, nv)
+                sig["sigma_u_noise"][b, pin] = su_n
+                sig["sigma_v_noise"][b, pin] = sv_n
                 sig["sigma_u_blur"][b, pin] = np.abs(look[..., 0])
                 sig["sigma_v_blur"][b, pin] = np.abs(look[..., 1])
 

@@ -39,7 +39,7 @@ from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
 from .kinematics import exposure_motion, exposure_skew
-from .median import normalized_median_test
+from .median import median_test_frames
 from .uncertainty import (
     NoiseEstimate,
     build_blur_table,
@@ -269,15 +269,17 @@ def _median_flags(
     eps: NDArray[np.float64],
     threshold: float,
 ) -> NDArray[np.bool_]:
-    out = np.zeros(u.shape, bool)
     if gshape is None:
-        return out
-    for i in range(u.shape[0]):
-        out[i] = normalized_median_test(
-            np.where(ok[i], u[i], np.nan),
-            np.where(ok[i], v[i], np.nan),
+        return np.zeros(u.shape, bool)
+    # all frames at once (vectorised; the same flags as normalized_median_test per frame)
+    out = np.zeros(u.shape, bool)
+    for a in range(0, u.shape[0], 256):
+        b = slice(a, a + 256)
+        out[b] = median_test_frames(
+            np.where(ok[b], u[b], np.nan),
+            np.where(ok[b], v[b], np.nan),
             gshape,
-            eps=float(eps[i]),
+            eps=eps[b],
             threshold=threshold,
         )
     return out

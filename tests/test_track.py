@@ -507,3 +507,39 @@ def test_track_noise_term_is_the_static_predictions_complete_term(shape):
     off = sigma**2 * cov1[..., 0, 0].mean(axis=1) / pr0.u_noise**2
     assert off[-1] > 1.15  # measured 1.31 (translation), 1.31 (affine)
     assert abs(off[0] - 1) < 0.05  # at W = 0 only the small sigma^4 interaction differs
+
+
+# ---------------------------------------------------------------- speed paths (issue 17)
+def test_median_test_of_all_frames_equals_the_per_frame_test():
+    from dicblur.track.median import median_test_frames
+
+    rng = np.random.default_rng(2)
+    f, rows, cols = 12, 9, 11
+    u = rng.normal(0, 0.05, (f, rows * cols)) + np.linspace(0, 2, rows * cols)
+    v = rng.normal(0, 0.05, (f, rows * cols))
+    u[rng.random(u.shape) < 0.05] += 1.5
+    gone = rng.random(u.shape) < 0.15
+    u[gone] = np.nan
+    v[gone | (rng.random(u.shape) < 0.05)] = np.nan
+    u[3] = np.nan  # a frame without vectors
+    eps = rng.uniform(0.005, 0.1, f)
+    each = np.array(
+        [normalized_median_test(u[i], v[i], (rows, cols), eps=eps[i]) for i in range(f)]
+    )
+    assert each.any()
+    np.testing.assert_array_equal(median_test_frames(u, v, (rows, cols), eps=eps), each)
+
+
+def test_rigid_shift_is_sub_pixel():
+    # the guesses' rigid part: within 0.15 px (the integer phase correlation: up to 0.5)
+    from dicblur.dic.initial import window_spectrum
+    from dicblur.track.core import _rigid_shift
+
+    img = _pattern(160, seed=7)
+    ky = np.fft.fftfreq(160)[:, None]
+    kx = np.fft.fftfreq(160)[None, :]
+    for du, dv in ((0.4, -0.3), (3.5, 1.25), (-7.7, 0.0)):
+        moved = np.fft.ifft2(np.fft.fft2(img) * np.exp(-2j * np.pi * (kx * du + ky * dv))).real
+        u, v, peak = _rigid_shift(window_spectrum(img), moved)
+        assert peak > 0.05
+        assert abs(u - du) < 0.15 and abs(v - dv) < 0.15

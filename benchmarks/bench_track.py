@@ -339,6 +339,7 @@ def speed(rec: Recording, shape: str, workers: int, step: int = 10, n_sample: in
         k: float(ds.attrs[k])
         for k in (
             "tracking_time_s",
+            "correlation_time_s",
             "median_time_s",
             "blur_table_time_s",
             "prediction_time_s",

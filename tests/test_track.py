@@ -543,3 +543,23 @@ def test_rigid_shift_is_sub_pixel():
         u, v, peak = _rigid_shift(window_spectrum(img), moved)
         assert peak > 0.05
         assert abs(u - du) < 0.15 and abs(v - dv) < 0.15
+
+
+def test_affine_start_from_all_parameters():
+    # the previous frame's affine parameters as the start (track's affine guesses): the
+    # same result, fewer iterations on a deformed subset; a wrong shape is an InputError
+    from scipy.ndimage import affine_transform
+
+    img = _pattern(128, seed=5)
+    m = np.array([[1.0 / 1.02, 0.0], [0.01, 1.0 / 1.015]])  # output -> input (row, col)
+    cur = affine_transform(img, m, offset=-(m - np.eye(2)) @ np.array([64.0, 64.0]), order=3)
+    corr = dicblur.Correlator(img, subset=21, step=16, shape="affine")
+    first = corr.correlate(cur, initial=np.zeros((corr.n_points, 2)))
+    ok = first.status == 0
+    assert ok.mean() > 0.6  # the border subsets leave the stretched image
+    p = np.where(np.isfinite(first.params), first.params, 0.0)
+    again = corr.correlate(cur, initial=p)
+    np.testing.assert_allclose(again.u[ok], first.u[ok], atol=2e-3)
+    assert again.iterations[ok].mean() < 0.6 * first.iterations[ok].mean()
+    with pytest.raises(InputError, match="affine parameters"):
+        corr.correlate(cur, initial=np.zeros((corr.n_points, 5)))

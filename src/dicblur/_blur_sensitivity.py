@@ -908,8 +908,9 @@ def subset_blur_response(
         rows = slice(start, start + len(f))
         fh, sf = _normalise(f)
         gh, sg = _normalise(gg)
-        pjg = _project(jg, gh)
-        cross = _gram(jf, pjg)  # J_f^T P_g J_g
+        pf, pg = _project(jf, fh), _project(jf, gh)
+        # J_f^T P_g J_g = (P_g J_f)^T J_g (P_g a symmetric projection: one _project less)
+        cross = _gram(pg, jg)
         sol = None
         sg_ok = np.where(sg > 0, sg, np.nan)
         if w[j] > 0:
@@ -920,11 +921,13 @@ def subset_blur_response(
         else:
             shift[j, rows] = np.where(np.isfinite(sf)[:, None] & (sf > 0)[:, None], 0.0, np.nan)
         ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
-        pf, pg = _project(jf, fh), _project(jf, gh)
         if kernel is not None and sol is not None:
             # residual at the linearised fixed point (orthogonal to J_f), met by the
-            # reference's noisy gradients: the complete noise term
-            r0 = fh - gh - np.matmul(pjg, sol[:, :, None])[:, :, 0] / sg_ok[:, None]
+            # reference's noisy gradients: the complete noise term (P_g J_g p = P_g (J_g p))
+            jp = np.matmul(jg, sol[:, :, None])[:, :, 0]
+            jp -= jp.mean(axis=1, keepdims=True)
+            jp -= gh * np.einsum("np,np->n", gh, jp)[:, None]
+            r0 = fh - gh - jp / sg_ok[:, None]
             mid_ref = _reference_noise_middle(
                 pf, np.sqrt(ratio2), sg, r0, subset, shape, win.ex, win.ey, kernel
             )

@@ -808,15 +808,17 @@ def _assemble(
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
-        def predict() -> None:
-            for a in range(0, n_f, 128):  # frame blocks: bounded temporaries
-                b = slice(a, a + 128)
+        def predict(rows: NDArray[np.intp] | None = None) -> None:
+            sel = np.arange(n_f) if rows is None else rows
+            for a in range(0, sel.size, 128):  # frame blocks: bounded temporaries
+                b = sel[a : a + 128]
                 look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
                 su_n, sv_n = table.noise_std(look, nv)
-                sig["sigma_u_noise"][b, pin] = su_n
-                sig["sigma_v_noise"][b, pin] = sv_n
-                sig["sigma_u_blur"][b, pin] = np.abs(look[..., 0])
-                sig["sigma_v_blur"][b, pin] = np.abs(look[..., 1])
+                ix = np.ix_(b, pin)
+                sig["sigma_u_noise"][ix] = su_n
+                sig["sigma_v_noise"][ix] = sv_n
+                sig["sigma_u_blur"][ix] = np.abs(look[..., 0])
+                sig["sigma_v_blur"][ix] = np.abs(look[..., 1])
 
         predict()
         if gshape is not None:
@@ -833,9 +835,14 @@ def _assemble(
                 outlier |= second
                 good = conv & ~outlier & ~low_zncc
                 wu, wv = motion(good)
+                w_old, ang_old = w, ang
                 w = np.hypot(wu, wv)
                 ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
-                predict()
+                # only the frames whose blur changed (a new flag in their stencil)
+                same = ((w == w_old) | (np.isnan(w) & np.isnan(w_old))) & (
+                    (ang == ang_old) | (np.isnan(ang) & np.isnan(ang_old))
+                )
+                predict(np.flatnonzero(~same.all(axis=1)))
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available]

@@ -80,7 +80,7 @@ class BlurTable:
         """Interpolated ``values`` at ``w`` (px) and ``angle`` (deg), both shape (frames,
         points); returns shape (frames, points, 6) (NaN where ``w`` is NaN or beyond the
         table)."""
-        f, n = w.shape
+        n = w.shape[1]
         a = self.angles.size
         wq = np.where(np.isfinite(w), w, 0.0)
         # linear in W**2 between the nodes
@@ -99,12 +99,19 @@ class BlurTable:
         k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
         k1 = np.where(both, j1, k0)
         ta = np.where(both, ta, 0.0)[..., None]
-        p = np.broadcast_to(np.arange(n), (f, n))
+        m = self.blur.size
+        flat = self.values.reshape(-1, self.values.shape[-1])  # (a * m * n, 6)
+        p = np.arange(n)
 
         def at(j: NDArray[np.intp]) -> NDArray[np.float64]:
-            return np.asarray((1 - tw) * self.values[j, i0, p] + tw * self.values[j, i1, p])
+            # one gather per node through flat row indices (fancy indexing of a 4-d
+            # array with three index arrays is several times slower)
+            lo = np.take(flat, (j * m + i0) * n + p, axis=0)
+            hi = np.take(flat, (j * m + i1) * n + p, axis=0)
+            return np.asarray(lo + tw * (hi - lo))
 
-        out = (1 - ta) * at(k0) + ta * at(k1)
+        out = at(k0)
+        out += ta * (at(k1) - out)
         out[~np.isfinite(w) | (w > self.blur[-1] + 1e-9)] = np.nan
         return np.asarray(out)
 

@@ -144,6 +144,7 @@ def build_blur_table(
     blur: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
     min_blur: float = 0.5,
+    complete: bool = True,
 ) -> BlurTable:
     """Tabulate the blur response of every point for the blur vectors that occur.
 
@@ -159,6 +160,10 @@ def build_blur_table(
         Measured blur lengths (px) and directions (deg); NaN ignored. The direction nodes
         computed are the two around every direction whose blur is >= ``min_blur`` px (the
         one nearest the dominant direction when none is).
+    complete : bool
+        The complete noise term (default); ``False``: the first-order response to the
+        reference's intensities alone, without the ``sigma**4`` interaction (the earlier
+        formula, for comparisons).
     """
     finite = np.isfinite(blur) & np.isfinite(angle)
     w_max = float(np.max(blur[finite])) if finite.any() else 0.0
@@ -191,6 +196,7 @@ def build_blur_table(
             motion=(math.sin(t), math.cos(t)),
             shape=shape,  # type: ignore[arg-type]
             max_shift=1.0,
+            complete=complete,
         )
         values[j, ..., 0:2] = shift
         values[j, ..., 2] = cov[..., 0, 0]

@@ -534,13 +534,13 @@ def track(
             g_abs = np.array([gu, gv]) + np.median(base, axis=0) if peak > 0.05 else None
             guess = _extrapolate(hist)
             if guess is not None and g_abs is not None:
-                last = rig[-min(len(hist), 3) :]
-                if all(r is not None for r in last):
+                rig_last = rig[-min(len(hist), 3) :]
+                if all(r is not None for r in rig_last):
                     # the extrapolated field's non-rigid part plus the measured rigid
                     # shift: the extrapolation of a sine at 10 frames per cycle misses by
                     # ~1-2.5 px (turning points), the phase correlation by ~0.1 px, and
                     # IC-GN needs about half the iterations from there
-                    r = [np.asarray(x) for x in last]
+                    r = [np.asarray(x) for x in rig_last]
                     r_ext = (
                         r[-1]
                         if len(r) == 1

@@ -18,14 +18,18 @@ Gross errors: of the points whose error exceeds 10 predicted sigma, the share fl
 (normalised median test or a non-converged status); false flags: the share of points
 within 3 sigma that the median test flags.
 
-Speed: a 1,000-frame recording (512^2, 8-bit Photron .mraw written here, read lazily)
-tracked at subset 21, step 10 (2,401 POIs): frames/s of the tracking loop, POI/s, and
-the end-to-end time with the noise, blur and sigma prediction and the advice.
+Speed (``--part speed``): a 1,000-frame recording (512^2, 8-bit Photron .mraw written
+here, read lazily) tracked at subset 21, step 10 (2,401 POIs), both shapes, 1 and 2 kernel
+threads (``--threads``, ``--shapes``): end-to-end frames/s and POI/s of ``dicblur.track``
+(reading, guesses, correlation, flags, blur, sigma, advice), of its tracking loop, and in
+the same run the engine alone (one Correlator on 100 of the frames in memory, each started
+from the field track measured: the kernel with the best guesses), so that the ratio
+end-to-end / engine is meaningful on a loaded machine; the time of each stage.
 
 Memory (``--memory`` or ``--part memory``): peak RSS of tracking a 2,000-frame 1024^2
 .mraw at step 20 (2,601 POIs, translation, no advice) in a child process.
 
-Run: ``NUMBA_NUM_THREADS=2 .venv/bin/python benchmarks/bench_track.py [--quick] [--memory]``
+Run: ``NUMBA_NUM_THREADS=2 .venv/bin/python benchmarks/bench_track.py [--part speed] [--quick]``
 """
 
 from __future__ import annotations
@@ -294,45 +298,105 @@ def _write_mraw(path: Path, n: int, n_frames: int, exposure: float) -> Path:
     return head
 
 
-def speed(n: int, n_frames: int, step: int, shape: str, folder: Path) -> dict:
-    head = _write_mraw(folder / "speed", n, n_frames, 0.2e-3)
-    rec = open_recording(head)
+def _engine_only(rec: Recording, ds, shape: str, step: int, workers: int, n_sample: int) -> dict:
+    """The engine alone on the same frames: one prepared Correlator, frames in memory, each
+    started from the field ``track`` measured there (the kernel's speed with the best
+    guesses; no reading, extrapolation, fallback or prediction)."""
+    kw: dict = {"subset": 21, "step": step, "shape": shape, "workers": workers}
+    corr = dicblur.Correlator(rec.frame(0), **kw)
+    frames = np.linspace(10, len(rec) - 1, n_sample).astype(int)
+    imgs = [rec.frame(int(k)) for k in frames]
+    guesses = []
+    for k in frames:
+        g = np.stack([ds["u"].sel(frame=k).values, ds["v"].sel(frame=k).values], axis=1)
+        bad = ~np.isfinite(g).all(axis=1)
+        g[bad] = np.median(g[~bad], axis=0)
+        guesses.append(g)
+    corr.correlate(imgs[0], initial=guesses[0])
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    for img, g in zip(imgs, guesses, strict=True):
+        corr.correlate(img, initial=g)
+    dt = time.perf_counter() - t0
+    cpu = time.process_time() - c0
+    return {
+        "frames": len(imgs),
+        "seconds": dt,
+        "frames_per_s": len(imgs) / dt,
+        "cpu_s": cpu,
+        "frames_per_cpu_s": len(imgs) / cpu,
+    }
+
+
+def speed(rec: Recording, shape: str, workers: int, step: int = 10, n_sample: int = 100) -> dict:
+    """End to end (``dicblur.track`` as a user calls it: reading, guesses, correlation,
+    flags, kinematics, sigma and the advice) against the engine alone in the same run."""
+    n_frames = len(rec)
     dicblur.Correlator(rec.frame(0), subset=21, step=step, shape=shape).warmup()  # type: ignore[arg-type]
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     c0 = time.process_time()
-    ds = dicblur.track(rec, static="0:10", subset=21, step=step, shape=shape)  # type: ignore[arg-type]
+    kw: dict = {"subset": 21, "step": step, "shape": shape, "workers": workers}
+    ds = dicblur.track(rec, static="0:10", **kw)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
+    eng = _engine_only(rec, ds, shape, step, workers, n_sample)
     tr = float(ds.attrs["tracking_time_s"])
     n_p = ds.sizes["point"]
+    stages = {
+        k: float(ds.attrs[k])
+        for k in (
+            "tracking_time_s",
+            "correlation_time_s",
+            "median_time_s",
+            "blur_table_time_s",
+            "prediction_time_s",
+            "advice_time_s",
+        )
+        if k in ds.attrs
+    }
     out = {
-        "size": n,
+        "size": rec.shape[0],
         "frames": n_frames,
         "points": n_p,
         "shape": shape,
+        "workers": workers,
         "step": step,
         "tracking_s": tr,
         "frames_per_s": n_frames / tr,
         "poi_per_s": n_frames * n_p / tr,
         "end_to_end_s": wall,
         "end_to_end_frames_per_s": n_frames / wall,
+        "end_to_end_poi_per_s": n_frames * n_p / wall,
+        "engine_frames_per_s": eng["frames_per_s"],
+        "engine_poi_per_s": eng["frames_per_s"] * n_p,
+        "loop_over_engine": (n_frames / tr) / eng["frames_per_s"],
+        "end_to_end_over_engine": (n_frames / wall) / eng["frames_per_s"],
+        "fallback_frames": int(ds["fallback"].values.sum()),
+        "stages_s": stages,
         "cpu_s": cpu,
         "frames_per_cpu_s": n_frames / cpu,
-        "poi_per_cpu_s": n_frames * n_p / cpu,
-        "prediction_s": float(ds.attrs["prediction_time_s"]),
+        "engine_frames_per_cpu_s": eng["frames_per_cpu_s"],
+        # the same ratio in CPU time: less sensitive to the other processes' load
+        "end_to_end_over_engine_cpu": (n_frames / cpu) / eng["frames_per_cpu_s"],
         "load_start": load0,
         "load_end": os.getloadavg()[0],
         "valid_share": float(ds["valid"].values.mean()),
     }
     print(
-        f"speed {n}^2 x {n_frames} frames, {n_p} POIs ({shape}): tracking "
-        f"{out['frames_per_s']:.1f} frames/s = {out['poi_per_s']:.0f} POI/s; end to end "
-        f"{wall:.1f} s ({out['end_to_end_frames_per_s']:.1f} frames/s; prediction "
-        f"{out['prediction_s']:.1f} s); CPU {cpu:.1f} s = {out['frames_per_cpu_s']:.1f} "
-        f"frames per CPU-s; load {load0:.1f} -> {out['load_end']:.1f}",
+        f"speed {out['size']}^2 x {n_frames} frames, {n_p} POIs ({shape}, {workers} "
+        f"thread(s)): end to end {wall:.1f} s = {out['end_to_end_frames_per_s']:.1f} frames/s "
+        f"= {out['end_to_end_poi_per_s']:.0f} POI/s; tracking loop "
+        f"{out['frames_per_s']:.1f} frames/s; engine alone {eng['frames_per_s']:.1f} frames/s; "
+        f"end to end / engine {out['end_to_end_over_engine']:.2f}, loop / engine "
+        f"{out['loop_over_engine']:.2f}; CPU: end to end {out['frames_per_cpu_s']:.1f}, engine "
+        f"{eng['frames_per_cpu_s']:.1f} frames per CPU-s, ratio "
+        f"{out['end_to_end_over_engine_cpu']:.2f}; stages "
+        f"{', '.join(f'{k[:-7]} {v:.1f}' for k, v in stages.items())} s; "
+        f"fallback {out['fallback_frames']}; load {load0:.1f} -> {out['load_end']:.1f}",
         flush=True,
     )
+    del ds
     return out
 
 
@@ -364,6 +428,8 @@ def main() -> None:
         help="accuracy -> results/track.json, speed (and --memory) -> "
         "results/track_speed.json; memory alone -> results/track_memory.json",
     )
+    ap.add_argument("--threads", default="1,2", help="speed: kernel threads (<= NUMBA_NUM_THREADS)")
+    ap.add_argument("--shapes", default="affine,translation", help="speed: subset shapes")
     ap.add_argument("--memory-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.memory_child:
@@ -410,10 +476,12 @@ def main() -> None:
         out: dict = {k: res[k] for k in ("machine", "commit", "version", "quick")}
         with tempfile.TemporaryDirectory(dir="/tmp") as tmp:
             sn, sf = (256, 200) if args.quick else (512, 1000)
+            rec = open_recording(_write_mraw(Path(tmp) / "speed", sn, sf, 0.2e-3))
+            threads = [int(t) for t in args.threads.split(",")]
             out["speed"] = [
-                speed(sn, sf, 10, "affine", Path(tmp)),
-                speed(sn, sf // 3, 10, "translation", Path(tmp)),
+                speed(rec, shape, t) for shape in args.shapes.split(",") for t in threads
             ]
+            rec.close()
             if args.memory:
                 out["memory"] = _memory(Path(tmp))
         _write(OUT.with_name(f"track_speed{tag}.json"), out)

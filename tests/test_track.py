@@ -464,3 +464,105 @@ def test_reference_in_the_middle_tracks_backwards(tiny):
     assert valid[:9].mean() > 0.6
     assert np.nanmax(np.abs(np.where(valid, eu, np.nan))) < 0.25
     assert np.nanmax(np.abs(np.where(valid, ev, np.nan))) < 0.25
+
+
+# ---------------------------------------------------------------- complete noise term
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_track_noise_term_is_the_static_predictions_complete_term(shape):
+    # the per-point noise part of track's sigma is the complete noise term of the static
+    # prediction (reference gradients x mismatch residual, the negative O(W^2) share, the
+    # sigma^4 interaction; docs/models.md s. 4): its mean over the points equals
+    # predict_from_pattern's u_noise^2 along the motion, at every W and for x and y motion
+    from dicblur.models import predict_from_pattern
+    from dicblur.track import build_blur_table
+
+    img = _pattern(96, seed=4)
+    yy, xx = np.mgrid[28:69:10, 28:69:10]
+    pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
+    sigma, ws = 2.0, np.array([0.0, 2.0, 4.0, 6.0])
+    table = build_blur_table(
+        img, pts, subset=21, shape=shape, blur=np.array([[6.0, 6.0]]), angle=np.array([[0, 90.0]])
+    )
+    for angle, motion, comp in ((0.0, (0.0, 1.0), 0), (90.0, (1.0, 0.0), 1)):
+        look = table.lookup(
+            np.repeat(ws[:, None], len(pts), axis=1), np.full((ws.size, len(pts)), angle)
+        )
+        su, sv = table.noise_std(look, np.full(len(pts), sigma**2))
+        track_var = np.mean((su, sv)[comp] ** 2, axis=1)
+        pr = predict_from_pattern(
+            img, ws, noise_sigma=sigma, points=pts, subset=21, shape=shape, motion=motion
+        )
+        np.testing.assert_allclose(track_var, pr.u_noise**2, rtol=1e-6)
+    # the first-order response alone (reference intensities, no sigma^4: the formula
+    # before) is off by more than the test's tolerance at W = 6 px
+    old = build_blur_table(
+        img,
+        pts,
+        subset=21,
+        shape=shape,
+        blur=np.array([[6.0]]),
+        angle=np.array([[0.0]]),
+        complete=False,
+    )
+    look = old.lookup(np.repeat(ws[:, None], len(pts), axis=1), np.zeros((ws.size, len(pts))))
+    assert not look[..., 4:].any()  # no sigma^4 term
+    pr0 = predict_from_pattern(img, ws, noise_sigma=sigma, points=pts, subset=21, shape=shape)
+    off = sigma**2 * look[..., 2].mean(axis=1) / pr0.u_noise**2
+    assert off[-1] > 1.15  # measured 1.31 (translation), 1.31 (affine)
+    assert abs(off[0] - 1) < 0.05  # at W = 0 only the small sigma^4 interaction differs
+
+
+# ---------------------------------------------------------------- speed paths (issue 17)
+def test_median_test_of_all_frames_equals_the_per_frame_test():
+    from dicblur.track.median import median_test_frames
+
+    rng = np.random.default_rng(2)
+    f, rows, cols = 12, 9, 11
+    u = rng.normal(0, 0.05, (f, rows * cols)) + np.linspace(0, 2, rows * cols)
+    v = rng.normal(0, 0.05, (f, rows * cols))
+    u[rng.random(u.shape) < 0.05] += 1.5
+    gone = rng.random(u.shape) < 0.15
+    u[gone] = np.nan
+    v[gone | (rng.random(u.shape) < 0.05)] = np.nan
+    u[3] = np.nan  # a frame without vectors
+    eps = rng.uniform(0.005, 0.1, f)
+    each = np.array(
+        [normalized_median_test(u[i], v[i], (rows, cols), eps=eps[i]) for i in range(f)]
+    )
+    assert each.any()
+    np.testing.assert_array_equal(median_test_frames(u, v, (rows, cols), eps=eps), each)
+
+
+def test_rigid_shift_is_sub_pixel():
+    # the guesses' rigid part: within 0.15 px (the integer phase correlation: up to 0.5)
+    from dicblur.dic.initial import window_spectrum
+    from dicblur.track.core import _rigid_shift
+
+    img = _pattern(160, seed=7)
+    ky = np.fft.fftfreq(160)[:, None]
+    kx = np.fft.fftfreq(160)[None, :]
+    for du, dv in ((0.4, -0.3), (3.5, 1.25), (-7.7, 0.0)):
+        moved = np.fft.ifft2(np.fft.fft2(img) * np.exp(-2j * np.pi * (kx * du + ky * dv))).real
+        u, v, peak = _rigid_shift(window_spectrum(img), moved)
+        assert peak > 0.05
+        assert abs(u - du) < 0.15 and abs(v - dv) < 0.15
+
+
+def test_affine_start_from_all_parameters():
+    # the previous frame's affine parameters as the start (track's affine guesses): the
+    # same result, fewer iterations on a deformed subset; a wrong shape is an InputError
+    from scipy.ndimage import affine_transform
+
+    img = _pattern(128, seed=5)
+    m = np.array([[1.0 / 1.02, 0.0], [0.01, 1.0 / 1.015]])  # output -> input (row, col)
+    cur = affine_transform(img, m, offset=-(m - np.eye(2)) @ np.array([64.0, 64.0]), order=3)
+    corr = dicblur.Correlator(img, subset=21, step=16, shape="affine")
+    first = corr.correlate(cur, initial=np.zeros((corr.n_points, 2)))
+    ok = first.status == 0
+    assert ok.mean() > 0.6  # the border subsets leave the stretched image
+    p = np.where(np.isfinite(first.params), first.params, 0.0)
+    again = corr.correlate(cur, initial=p)
+    np.testing.assert_allclose(again.u[ok], first.u[ok], atol=2e-3)
+    assert again.iterations[ok].mean() < 0.6 * first.iterations[ok].mean()
+    with pytest.raises(InputError, match="affine parameters"):
+        corr.correlate(cur, initial=np.zeros((corr.n_points, 5)))

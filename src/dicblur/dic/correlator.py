@@ -701,7 +701,9 @@ class Correlator:
             Deformed image, same shape as the reference, grey levels.
         initial : array_like, shape (n, 2) or (2,), optional
             Initial guess ``(u, v)`` per POI (or one for all), px; overrides the
-            initial-guess method.
+            initial-guess method. With ``shape="affine"`` also (n, 6): all parameters,
+            ordered as :attr:`DICResult.params` (e.g. the previous frame's, so IC-GN
+            starts with the subset's deformation too).
         blur_vector : array_like, shape (2,) or (n, 2), optional
             Motion during the exposure ``(dy, dx)`` px, as :func:`dicblur.motion_blur`
             takes it, for the whole image or per POI. Required with ``blur="given"``
@@ -764,13 +766,20 @@ class Correlator:
         n = self.n_points
         status0 = self._status0
         method = self.initial
+        full: NDArray[np.float64] | None = None
         if initial is not None:
             guess = np.asarray(initial, dtype=np.float64)
             if guess.shape == (2,):
                 guess = np.broadcast_to(guess, (n, 2))
+            k = N_PARAMS[self.shape]
+            if k != 2 and guess.shape == (n, k) and np.all(np.isfinite(guess)):
+                # all shape parameters (a previous result's params): fewer iterations
+                full = np.array(guess)
+                guess = full[:, [0, 3]]
             if guess.shape != (n, 2) or not np.all(np.isfinite(guess)):
                 raise InputError(
                     f"initial={describe(guess)}: expected finite (u, v) px, shape (2,) or ({n}, 2)"
+                    + ("" if k == 2 else f", or the {k} affine parameters, shape ({n}, {k})")
                 )
             gu, gv = guess[:, 0].copy(), guess[:, 1].copy()
             method = "given"
@@ -790,7 +799,7 @@ class Correlator:
             gu = np.zeros(n)
             gv = np.zeros(n)
         t2 = time.perf_counter()
-        p0 = self._guess_to_params(gu, gv)
+        p0 = self._guess_to_params(gu, gv) if full is None else full
         if method in ("fftcc", "zero") and self._seeds is not None:
             p, z, it, st = self._seeded_icgn(coef, p0, status0)
         else:

@@ -847,7 +847,8 @@ def subset_blur_response(
     boundary: Boundary = "reflect",
     max_shift: float = 1.0,
     chunk: int = 256,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    complete: bool = True,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Blur-mismatch shift vector and noise covariance of each subset, along x and y.
 
     The same fixed point and linear noise response as :func:`subset_blur_shifts` and
@@ -866,6 +867,12 @@ def subset_blur_response(
         As for :func:`subset_blur_coefficients`.
     max_shift : float
         Breakdown threshold (px) on the linearised shift vector (NaN beyond).
+    complete : bool
+        The complete noise term of :func:`subset_noise_variance` (docs/models.md s. 4:
+        the reference's noisy spline gradients meeting the mismatch residual, and the
+        ``sigma**4`` interaction of the two noises), as ``predict_from_pattern``;
+        ``False``: the first-order response to the reference's intensities only (the
+        earlier formula, for comparisons).
 
     Returns
     -------
@@ -874,8 +881,12 @@ def subset_blur_response(
         breakdown).
     cov : ndarray, shape (m, n, 2, 2)
         Covariance of ``(u, v)`` per unit noise variance in each image (px**2 / GL**2):
-        ``A^-1 [(sigma_g / sigma_f)**2 J_f^T P_f J_f + J_f^T P_g J_f] A^-T`` restricted to
-        the centre displacement (NaN where the subset has no gradient).
+        ``A^-1 [M^T M + J_f^T P_g J_f] A^-T`` restricted to the centre displacement,
+        ``M = (sigma_g / sigma_f) P_f J_f + sigma_g Q`` (``Q = 0`` with
+        ``complete=False``; NaN where the subset has no gradient).
+    cov4 : ndarray, shape (m, n, 2, 2)
+        The interaction of the two noises per unit ``sigma**4`` (px**2 / GL**4; zeros
+        with ``complete=False``): the variance is ``sigma**2 cov + sigma**4 cov4``.
     """
     _check_shape(shape)
     _check_derivative(derivative)
@@ -884,20 +895,39 @@ def subset_blur_response(
     n = len(centres)
     shift = np.full((len(w), n, 2), np.nan)
     cov = np.full((len(w), n, 2, 2), np.nan)
+    cov4 = np.zeros((len(w), n, 2, 2))
     k = 2 if shape == "translation" else 6
     iu, iv = 0, (1 if shape == "translation" else 3)
     e = np.zeros((2, k))
     e[0, iu] = 1.0
     e[1, iv] = 1.0
+    win = _Windows(subset)
+    kernel = _derivative_kernel(derivative, subset) if complete else None
+    gmat = np.zeros((k, k))
+    if kernel is not None:
+        # the sigma**4 interaction as _shifts_and_variance (no sub-pixel offset: the
+        # current noise is sampled as is): R(0) G on the same-axis columns
+        wts = (
+            np.ones((subset * subset, 1))
+            if shape == "translation"
+            else np.stack([np.ones(subset * subset), win.ex[0], win.ey[0]], axis=1)
+        )
+        r00 = float(np.dot(kernel, kernel))
+        kx = wts.shape[1]
+        gmat[:kx, :kx] = r00 * (wts.T @ wts)
+        gmat[kx:, kx:] = r00 * (wts.T @ wts)
     for j, start, jf, jg, f, gg in _blurred_subsets(
         image, w, centres, subset, (dy, dx), shape, derivative, boundary, chunk
     ):
         rows = slice(start, start + len(f))
         fh, sf = _normalise(f)
         gh, sg = _normalise(gg)
-        cross = _gram(jf, _project(jg, gh))  # J_f^T P_g J_g
+        pf, pg = _project(jf, fh), _project(jf, gh)
+        # J_f^T P_g J_g = (P_g J_f)^T J_g (P_g a symmetric projection: one _project less)
+        cross = _gram(pg, jg)
+        sol = None
+        sg_ok = np.where(sg > 0, sg, np.nan)
         if w[j] > 0:
-            sg_ok = np.where(sg > 0, sg, np.nan)
             sol = _solve(cross / sg_ok[:, None, None], _tdot(jf, fh - gh))
             uv = np.stack([sol[:, iu], sol[:, iv]], axis=1)
             uv[~(np.hypot(uv[:, 0], uv[:, 1]) <= max_shift)] = np.nan
@@ -905,14 +935,27 @@ def subset_blur_response(
         else:
             shift[j, rows] = np.where(np.isfinite(sf)[:, None] & (sf > 0)[:, None], 0.0, np.nan)
         ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
-        pf, pg = _project(jf, fh), _project(jf, gh)
-        mid = ratio2[:, None, None] * _gram(pf, pf) + _gram(pg, pg)
+        if kernel is not None and sol is not None:
+            # residual at the linearised fixed point (orthogonal to J_f), met by the
+            # reference's noisy gradients: the complete noise term (P_g J_g p = P_g (J_g p))
+            jp = np.matmul(jg, sol[:, :, None])[:, :, 0]
+            jp -= jp.mean(axis=1, keepdims=True)
+            jp -= gh * np.einsum("np,np->n", gh, jp)[:, None]
+            r0 = fh - gh - jp / sg_ok[:, None]
+            mid_ref = _reference_noise_middle(
+                pf, np.sqrt(ratio2), sg, r0, subset, shape, win.ex, win.ey, kernel
+            )
+        else:
+            mid_ref = ratio2[:, None, None] * _gram(pf, pf)
+        mid = mid_ref + _gram(pg, pg)
         at = np.transpose(cross, (0, 2, 1))
         z = np.stack(
             [_solve(at, np.broadcast_to(e[c], (len(f), k)).copy()) for c in range(2)], axis=1
         )  # (m, 2, k): A^T z_c = e_c
         cov[j, rows] = np.einsum("nci,nij,ndj->ncd", z, mid, z)
-    return shift, cov
+        if kernel is not None:
+            cov4[j, rows] = np.einsum("nci,ij,ndj->ncd", z, gmat, z)
+    return shift, cov, cov4
 
 
 def subset_skew_coefficients(

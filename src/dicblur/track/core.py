@@ -33,13 +33,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..dic import Correlator, PointStatus
-from ..dic.initial import global_shift, window_spectrum
+from ..dic.initial import window_spectrum
 from ..errors import DicblurError, InputError
 from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
 from .kinematics import exposure_motion, exposure_skew
-from .median import normalized_median_test
+from .median import median_test_frames
 from .uncertainty import (
     NoiseEstimate,
     build_blur_table,
@@ -200,12 +200,94 @@ def _extrapolate(
     return g
 
 
+def _rigid_shift(
+    spectrum: NDArray[np.complex64], img: NDArray[np.float64]
+) -> tuple[float, float, float]:
+    """Sub-pixel rigid shift ``(u, v)`` (px) of ``img`` against the reference whose
+    :func:`~dicblur.dic.initial.window_spectrum` is ``spectrum``, and the peak height:
+    the phase correlation of :func:`~dicblur.dic.initial.global_shift` with a parabola
+    through the peak and its neighbours along each axis (about 0.1 px on blurred speckle
+    frames, where the integer shift is up to 0.5 px off)."""
+    from scipy import fft as sfft
+
+    fb = window_spectrum(img)
+    cross = fb * np.conj(spectrum)
+    cross /= np.maximum(np.abs(cross), 1e-12)
+    wr = min(128, img.shape[0])
+    wc = min(128, img.shape[1])
+    corr = sfft.irfft2(cross, s=(wr, wc))
+    idx = int(np.argmax(corr))
+    dy, dx = (int(i) for i in np.unravel_index(idx, corr.shape))
+    c0 = float(corr[dy, dx])
+
+    def vertex(cm: float, cp: float) -> float:
+        den = cm - 2.0 * c0 + cp
+        return 0.5 * (cm - cp) / den if den < 0 else 0.0
+
+    fy = vertex(float(corr[(dy - 1) % wr, dx]), float(corr[(dy + 1) % wr, dx]))
+    fx = vertex(float(corr[dy, (dx - 1) % wc]), float(corr[dy, (dx + 1) % wc]))
+    v = (dy if dy <= wr // 2 else dy - wr) + fy
+    u = (dx if dx <= wc // 2 else dx - wc) + fx
+    return u, v, c0
+
+
+#: Every SEED_EVERY-th point is a seed: correlated first from the guesses, their median
+#: correction moves the guesses of all points (a common error of the extrapolation).
+SEED_EVERY = 16
+
+
+def _seed_correlator(
+    reference: NDArray[np.float64], corr: Correlator, opts: dict[str, Any]
+) -> tuple[Correlator, NDArray[np.intp]] | None:
+    """A Correlator on every :data:`SEED_EVERY`-th POI of ``corr`` (its reference image
+    ``reference``), or None when there are too few POIs for seeds to pay."""
+    idx = np.arange(0, corr.n_points, SEED_EVERY)
+    if idx.size < 16:
+        return None
+    pts = np.stack([corr.rows[idx], corr.cols[idx]], axis=1)
+    kw = {k: v for k, v in opts.items() if k != "step"}
+    return Correlator(reference, points=pts, **kw), idx
+
+
+def _seed_correction(
+    seeds: tuple[Correlator, NDArray[np.intp]] | None,
+    img: NDArray[np.float64],
+    guess: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """``guess`` (n, 2, relative to the seeds' reference) moved by the median error of
+    the guesses at the converged seeds (unchanged when fewer than half converge)."""
+    if seeds is None:
+        return guess
+    sc, idx = seeds
+    g = guess[idx]
+    r = sc.correlate(img, initial=g)
+    ok = r.status == PointStatus.CONVERGED
+    if ok.sum() < max(8, idx.size // 2):
+        return guess
+    d = np.median(np.stack([r.u[ok] - g[ok, 0], r.v[ok] - g[ok, 1]], axis=1), axis=0)
+    return guess + d
+
+
 @dataclass(frozen=True)
 class _FrameResult:
     u: NDArray[np.float64]
     v: NDArray[np.float64]
     zncc: NDArray[np.float64]
     status: NDArray[np.uint8]
+    params: NDArray[np.float64]
+
+
+def _gradients(res: _FrameResult) -> NDArray[np.float64] | None:
+    """The displacement gradients (n, 4) of an affine result for the next frame's start
+    (the median of the converged points where a point did not converge), or None."""
+    if res.params.shape[1] != 6:
+        return None
+    ok = (res.status == PointStatus.CONVERGED) & np.isfinite(res.params).all(axis=1)
+    if not ok.any():
+        return None
+    g = res.params[:, [1, 2, 4, 5]].copy()
+    g[~ok] = np.median(g[ok], axis=0)
+    return g
 
 
 def _correlate_frame(
@@ -213,17 +295,24 @@ def _correlate_frame(
     img: NDArray[np.float64],
     guess: NDArray[np.float64] | None,
     ok0: NDArray[np.bool_],
+    grads: NDArray[np.float64] | None = None,
 ) -> tuple[_FrameResult, bool]:
-    """Correlate one frame from ``guess``; where too many points fail, run the engine's
-    FFT-CC start too and keep, per point, the better of the two (converged, higher ZNCC)."""
+    """Correlate one frame from ``guess`` (and, affine, the displacement gradients
+    ``grads`` of the previous frame: IC-GN then needs about a quarter of the iterations);
+    where too many points fail, run the engine's FFT-CC start too and keep, per point, the
+    better of the two (converged, higher ZNCC)."""
     if guess is None:
         r = corr.correlate(img)
-        return _FrameResult(r.u, r.v, r.zncc, r.status), True
-    res = corr.correlate(img, initial=guess)
+        return _FrameResult(r.u, r.v, r.zncc, r.status, r.params), True
+    init = guess
+    if grads is not None and corr.shape == "affine":
+        g = grads
+        init = np.stack([guess[:, 0], g[:, 0], g[:, 1], guess[:, 1], g[:, 2], g[:, 3]], axis=1)
+    res = corr.correlate(img, initial=init)
     # a subset that leaves the frame (the target moved it out) is no reason to restart
     failed = ~np.isin(res.status, (PointStatus.CONVERGED, PointStatus.OUT_OF_BOUNDS)) & ok0
     if failed.sum() <= FALLBACK_SHARE * max(int(ok0.sum()), 1):
-        return _FrameResult(res.u, res.v, res.zncc, res.status), False
+        return _FrameResult(res.u, res.v, res.zncc, res.status, res.params), False
     alt = corr.correlate(img)
     take = (alt.status == PointStatus.CONVERGED) & (
         (res.status != PointStatus.CONVERGED) | (alt.zncc > res.zncc + 1e-9)
@@ -233,6 +322,7 @@ def _correlate_frame(
         np.where(take, alt.v, res.v),
         np.where(take, alt.zncc, res.zncc),
         np.where(take, alt.status, res.status).astype(np.uint8),
+        np.where(take[:, None], alt.params, res.params),
     ), True
 
 
@@ -269,15 +359,17 @@ def _median_flags(
     eps: NDArray[np.float64],
     threshold: float,
 ) -> NDArray[np.bool_]:
-    out = np.zeros(u.shape, bool)
     if gshape is None:
-        return out
-    for i in range(u.shape[0]):
-        out[i] = normalized_median_test(
-            np.where(ok[i], u[i], np.nan),
-            np.where(ok[i], v[i], np.nan),
+        return np.zeros(u.shape, bool)
+    # all frames at once (vectorised; the same flags as normalized_median_test per frame)
+    out = np.zeros(u.shape, bool)
+    for a in range(0, u.shape[0], 256):
+        b = slice(a, a + 256)
+        out[b] = median_test_frames(
+            np.where(ok[b], u[b], np.nan),
+            np.where(ok[b], v[b], np.nan),
             gshape,
-            eps=float(eps[i]),
+            eps=eps[b],
             threshold=threshold,
         )
     return out
@@ -405,6 +497,10 @@ def track(
         "workers": workers,
     }
     corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
+    seeds0 = seeds = _seed_correlator(ref_img, corr0, opts)
+    # the last frame's displacement gradients (affine: the next frame's start)
+    grads: NDArray[np.float64] | None = None
+    grads0: NDArray[np.float64] | None = None
     corr = corr0
     n_pts = corr0.n_points
     # points that can be correlated at all (set from the reference frame's own result)
@@ -413,36 +509,62 @@ def track(
     out = _Tracked([], [], [], [], [], [])
     refs: list[int] = []
     hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    # the rigid shift of each frame in hist (sub-pixel phase correlation; None: no peak)
+    rig: list[NDArray[np.float64] | None] = []
+    rig_ref: NDArray[np.float64] | None = None
     ref_field: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     base = np.zeros((n_pts, 2))  # displacement of the current reference's POIs (px)
     ref_now, ref_share = reference, 1.0
     spectrum = {reference: window_spectrum(ref_img)}
-    ref_img_now = ref_img
     prev: tuple[int, NDArray[np.float64]] | None = None
     error: BaseException | None = None
     t_start = time.perf_counter()
+    t_corr = 0.0  # inside Correlator.correlate (the engine, with the loop's guesses)
     try:
         for k in order:
             if k == reference - 1:  # backwards from the reference, on the first one
                 hist = [ref_field] if ref_field is not None else []
+                rig = [rig_ref] if ref_field is not None else []
                 corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
-                ref_img_now = ref_img
+                seeds = seeds0
+                grads = grads0
             img = rec.frame(k)
+            # the frame's rigid shift (sub-pixel phase correlation of the central window)
+            gu, gv, peak = _rigid_shift(spectrum[ref_now], img)
+            g_abs = np.array([gu, gv]) + np.median(base, axis=0) if peak > 0.05 else None
             guess = _extrapolate(hist)
+            if guess is not None and g_abs is not None:
+                rig_last = rig[-min(len(hist), 3) :]
+                if all(r is not None for r in rig_last):
+                    # the extrapolated field's non-rigid part plus the measured rigid
+                    # shift: the extrapolation of a sine at 10 frames per cycle misses by
+                    # ~1-2.5 px (turning points), the phase correlation by ~0.1 px, and
+                    # IC-GN needs about half the iterations from there
+                    r = [np.asarray(x) for x in rig_last]
+                    r_ext = (
+                        r[-1]
+                        if len(r) == 1
+                        else 2 * r[-1] - r[-2]
+                        if len(r) == 2
+                        else 3 * r[-1] - 3 * r[-2] + r[-3]
+                    )
+                    guess = guess + (g_abs - r_ext)
+                else:
+                    # no rigid shift for the frames of the extrapolation: move the guesses
+                    # by the whole px when the shift is more than 1 px from their median
+                    dmed = g_abs - np.median(guess, axis=0)
+                    if np.hypot(*dmed) > 1.0:
+                        guess = guess + np.rint(dmed)
+            t_c = time.perf_counter()
             if guess is not None:
-                # fast motion: when the rigid shift (phase correlation, integer px) is
-                # more than 1 px from the extrapolated field's median, move the guesses
-                # by the difference (the extrapolation of a sine at 10 frames per cycle
-                # misses by ~2.5 px at the turning points)
-                gu, gv, peak = global_shift(
-                    ref_img_now, img, workers=1, reference_spectrum=spectrum[ref_now]
-                )
-                dmed = (
-                    np.array([gu, gv], float) + np.median(base, axis=0) - np.median(guess, axis=0)
-                )
-                if peak > 0.05 and np.hypot(*dmed) > 1.0:
-                    guess = guess + np.rint(dmed)
-            res, fb = _correlate_frame(corr, img, None if guess is None else guess - base, ok0)
+                # the seeds (1/16 of the points) from the guesses first: the median of
+                # their corrections removes the guesses' common error (~0.1-0.5 px after
+                # the rigid shift), so the rest need fewer iterations
+                guess = _seed_correction(seeds, img, guess - base) + base
+            res, fb = _correlate_frame(
+                corr, img, None if guess is None else guess - base, ok0, grads
+            )
+            t_corr += time.perf_counter() - t_c
             share = float(np.mean(res.status[ok0] == PointStatus.CONVERGED)) if ok0.any() else 0.0
             if k == reference:
                 ok0 = ~np.isin(res.status, (PointStatus.LOW_TEXTURE, PointStatus.OUT_OF_BOUNDS))
@@ -471,8 +593,8 @@ def track(
                         # increments of the subset now centred at the rounded position:
                         # within half a px of the material point, the field locally uniform
                         corr, base, ref_now, fb = new, last, prev[0], fb or fb2
+                        seeds = _seed_correlator(prev[1], new, opts)
                         spectrum[ref_now] = window_spectrum(prev[1])
-                        ref_img_now = prev[1]
                         res = res2
             out.frames.append(k)
             out.u.append(np.asarray(res.u, np.float64) + base[:, 0])
@@ -483,8 +605,11 @@ def track(
             refs.append(ref_now)
             good = res.status == PointStatus.CONVERGED
             hist.append((np.where(good, out.u[-1], np.nan), np.where(good, out.v[-1], np.nan)))
+            rig.append(g_abs)
+            del rig[:-3]
+            grads = _gradients(res)
             if k == reference:
-                ref_field = hist[-1]
+                ref_field, rig_ref, grads0 = hist[-1], g_abs, grads
             del hist[:-3]  # the extrapolation uses the last three
             prev = (k, img)
             if progress is not None:
@@ -511,6 +636,7 @@ def track(
         "bit_depth": rec.bit_depth,
         "n_frames_recording": n_total,
         "tracking_time_s": elapsed,
+        "correlation_time_s": t_corr,
     }
     noise_est: NoiseEstimate | None = None
     notes: list[str] = []
@@ -610,7 +736,9 @@ def _assemble(
         notes.append("POIs not on a grid: no normalised median test")
     # pass 1: the median test at its fixed eps (catches errors of tenths of a px) and the
     # ZNCC test; pass 2, once sigma is known, at eps = 2 x the frame's median sigma
+    t_med = time.perf_counter()
     outlier = _median_flags(u, v, conv, gshape, np.full(n_f, eps), threshold)
+    settings["median_time_s"] = time.perf_counter() - t_med
     low_zncc = zncc_flags(zn, conv)
     contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
 
@@ -676,17 +804,21 @@ def _assemble(
             blur=np.where(good[:, pin], w[:, pin], np.nan),
             angle=ang[:, pin],
         )
+        settings["blur_table_time_s"] = time.perf_counter() - t0
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
-        def predict() -> None:
-            for a in range(0, n_f, 128):  # frame blocks: bounded temporaries
-                b = slice(a, a + 128)
+        def predict(rows: NDArray[np.intp] | None = None) -> None:
+            sel = np.arange(n_f) if rows is None else rows
+            for a in range(0, sel.size, 128):  # frame blocks: bounded temporaries
+                b = sel[a : a + 128]
                 look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
-                sig["sigma_u_noise"][b, pin] = np.sqrt(nv * look[..., 2])
-                sig["sigma_v_noise"][b, pin] = np.sqrt(nv * look[..., 3])
-                sig["sigma_u_blur"][b, pin] = np.abs(look[..., 0])
-                sig["sigma_v_blur"][b, pin] = np.abs(look[..., 1])
+                su_n, sv_n = table.noise_std(look, nv)
+                ix = np.ix_(b, pin)
+                sig["sigma_u_noise"][ix] = su_n
+                sig["sigma_v_noise"][ix] = sv_n
+                sig["sigma_u_blur"][ix] = np.abs(look[..., 0])
+                sig["sigma_v_blur"][ix] = np.abs(look[..., 1])
 
         predict()
         if gshape is not None:
@@ -703,9 +835,14 @@ def _assemble(
                 outlier |= second
                 good = conv & ~outlier & ~low_zncc
                 wu, wv = motion(good)
+                w_old, ang_old = w, ang
                 w = np.hypot(wu, wv)
                 ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
-                predict()
+                # only the frames whose blur changed (a new flag in their stencil)
+                same = ((w == w_old) | (np.isnan(w) & np.isnan(w_old))) & (
+                    (ang == ang_old) | (np.isnan(ang) & np.isnan(ang_old))
+                )
+                predict(np.flatnonzero(~same.all(axis=1)))
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available]
@@ -766,6 +903,7 @@ def _assemble(
             }
         )
     if advice and noise is not None and valid.any():
+        t_adv = time.perf_counter()
         try:
             adv = advise_exposure(
                 ref_img,
@@ -783,6 +921,7 @@ def _assemble(
             attrs.update({f"advice_{k}": v for k, v in adv.to_dict().items()})
         except DicblurError as exc:
             notes.append(f"no exposure advice: {exc}")
+        attrs["advice_time_s"] = time.perf_counter() - t_adv
     if notes:
         attrs["notes"] = " | ".join(notes)
     fr = ("frame", "point")

@@ -201,15 +201,16 @@ def exposure_skew(
     for a in range(0, n_f, block):
         b = np.arange(a, min(a + block, n_f))
         idx = starts[b][:, None] + np.arange(width)[None, :]  # (B, width)
-        xs = np.einsum("bgw,bwn->bgn", wts[b], uu[idx])  # (B, G, n) positions along x
-        ys = np.einsum("bgw,bwn->bgn", wts[b], vv[idx])
-        xs -= np.einsum("g,bgn->bn", gw, xs)[:, None]
-        ys -= np.einsum("g,bgn->bn", gw, ys)[:, None]
-        cxx = np.einsum("g,bgn->bn", gw, xs * xs)
-        cyy = np.einsum("g,bgn->bn", gw, ys * ys)
-        cxy = np.einsum("g,bgn->bn", gw, xs * ys)
+        # batched matrix products (BLAS) instead of einsum's loops
+        xs = np.matmul(wts[b], uu[idx])  # (B, G, n) positions along x
+        ys = np.matmul(wts[b], vv[idx])
+        xs -= np.matmul(gw, xs)[:, None]
+        ys -= np.matmul(gw, ys)[:, None]
+        cxx = np.matmul(gw, xs * xs)
+        cyy = np.matmul(gw, ys * ys)
+        cxy = np.matmul(gw, xs * ys)
         th = 0.5 * np.arctan2(2 * cxy, cxx - cyy)
         s = xs * np.cos(th)[:, None] + ys * np.sin(th)[:, None]
-        k3[b] = np.einsum("g,bgn->bn", gw, s**3)
+        k3[b] = np.matmul(gw, s * s * s)
         axis[b] = np.mod(np.degrees(th), 180.0)
     return k3, axis

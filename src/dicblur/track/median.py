@@ -10,27 +10,67 @@ uniform flows, and ``r_0 > 2`` marks an outlier.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 
-__all__ = ["normalized_median_test", "normalized_residual"]
+__all__ = ["median_test_frames", "normalized_median_test", "normalized_residual"]
 
 
 def _neighbours(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The 8 neighbours of every grid node, shape (8, rows, cols); NaN outside the grid."""
-    p = np.pad(a, 1, constant_values=np.nan)
-    rows, cols = a.shape
-    out = [
-        p[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + cols]
-        for dr in (-1, 0, 1)
-        for dc in (-1, 0, 1)
-        if (dr, dc) != (0, 0)
-    ]
-    return np.stack(out)
+    """The 8 neighbours of every grid node of ``a`` (..., rows, cols), shape
+    (8, ..., rows, cols); NaN outside the grid."""
+    rows, cols = a.shape[-2:]
+    pad = [(0, 0)] * (a.ndim - 2) + [(1, 1), (1, 1)]
+    p = np.pad(a, pad, constant_values=np.nan)
+    out = np.empty((8, *a.shape))
+    i = 0
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if (dr, dc) != (0, 0):
+                out[i] = p[..., 1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + cols]
+                i += 1
+    return out
+
+
+# Batcher's odd-even merge sort of 8 values: 19 compare-exchanges, vectorised over points
+_NETWORK_8 = (
+    (0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (1, 2), (5, 6),
+    (0, 4), (3, 7), (1, 5), (2, 6), (1, 4), (3, 6), (2, 4), (3, 5), (3, 4),
+)  # fmt: skip
+
+
+def _nanmedian8(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """Median over the first axis (8 values) ignoring NaN (NaN where all are), and the
+    count of finite values: the middle of the sorted finite values, as ``np.nanmedian``
+    (the same numbers), through a sorting network with NaN as +inf."""
+    count = np.isfinite(x).sum(axis=0)
+    s = np.where(np.isnan(x), np.inf, x)
+    for i, j in _NETWORK_8:
+        lo = np.minimum(s[i], s[j])
+        np.maximum(s[i], s[j], out=s[j])
+        s[i] = lo
+    lo_i = np.maximum((count - 1) // 2, 0)
+    hi_i = np.minimum(count // 2, 7)
+    lo_v = np.take_along_axis(s, lo_i[None], axis=0)[0]
+    hi_v = np.take_along_axis(s, hi_i[None], axis=0)[0]
+    with np.errstate(invalid="ignore"):
+        med = np.where(count > 0, (lo_v + hi_v) / 2, np.nan)
+    return med, count
+
+
+def _residuals(
+    a: NDArray[np.float64], eps: NDArray[np.float64] | float, min_neighbours: int
+) -> NDArray[np.float64]:
+    """``r_0`` of grids ``a`` (..., rows, cols); ``eps`` broadcast against the leading axes."""
+    nb = _neighbours(a)
+    med, count = _nanmedian8(nb)
+    with np.errstate(invalid="ignore"):
+        rm, _ = _nanmedian8(np.abs(nb - med[None]))
+        r0 = np.abs(a - med) / (rm + eps)
+    r0[(count < min_neighbours) | ~np.isfinite(a)] = np.nan
+    return r0
 
 
 def normalized_residual(
@@ -53,15 +93,48 @@ def normalized_residual(
     ndarray, shape (rows * cols,)
     """
     a = np.asarray(values, dtype=np.float64).reshape(grid_shape)
-    nb = _neighbours(a)
-    count = np.isfinite(nb).sum(axis=0)
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN neighbourhoods: counted
-        med = np.nanmedian(nb, axis=0)
-        rm = np.nanmedian(np.abs(nb - med[None]), axis=0)
-        r0 = np.abs(a - med) / (rm + eps)
-    r0[(count < min_neighbours) | ~np.isfinite(a)] = np.nan
-    return r0.ravel()
+    return _residuals(a, eps, min_neighbours).ravel()
+
+
+def median_test_frames(
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    grid_shape: tuple[int, int],
+    *,
+    eps: ArrayLike,
+    threshold: float = 2.0,
+    block: int = 64,
+) -> NDArray[np.bool_]:
+    """:func:`normalized_median_test` of every frame at once.
+
+    Parameters
+    ----------
+    u, v : ndarray, shape (frames, rows * cols)
+        Displacements (px) on the POI grid, NaN = no vector.
+    grid_shape : (rows, cols)
+    eps : array_like, shape (frames,) or scalar
+        Noise level of each frame's estimates, px (> 0).
+    threshold : float
+    block : int
+        Frames per pass (bounded temporaries: 8 neighbours x 8 bytes per point and frame).
+
+    Returns
+    -------
+    ndarray of bool, shape (frames, rows * cols)
+    """
+    rows, cols = (int(grid_shape[0]), int(grid_shape[1]))
+    n_f = u.shape[0]
+    e = np.broadcast_to(np.asarray(eps, dtype=np.float64), (n_f,))
+    out = np.zeros(u.shape, bool)
+    for a in range(0, n_f, block):
+        b = slice(a, a + block)
+        eb = e[b][:, None, None]
+        ru = _residuals(np.asarray(u[b], np.float64).reshape(-1, rows, cols), eb, 3)
+        rv = _residuals(np.asarray(v[b], np.float64).reshape(-1, rows, cols), eb, 3)
+        with np.errstate(invalid="ignore"):
+            flag = (np.nan_to_num(ru) > threshold) | (np.nan_to_num(rv) > threshold)
+        out[b] = flag.reshape(-1, rows * cols)
+    return out
 
 
 def normalized_median_test(

@@ -4,9 +4,13 @@ Both terms come from the static reference subset of each point (docs/models.md s
 machinery of :func:`dicblur.models.predict_from_pattern`), evaluated at the point's own
 blur length ``W`` and direction in that frame:
 
-- noise: the linear response of the ZNSSD IC-GN fixed point to the image noise, a 2x2
-  covariance per unit noise variance, times the noise variance of the static frames (at
-  the subset's gradient-weighted grey level when the noise depends on the level);
+- noise: the response of the ZNSSD IC-GN fixed point to the noise of both images, the
+  complete noise term of the static prediction (docs/models.md s. 4: the reference's
+  intensities and its noisy spline gradients meeting the mismatch residual, a negative
+  O(W**2) share, plus the ``sigma**4`` interaction of the two noises), per component
+  ``var = sigma**2 c + sigma**4 c4`` with the noise variance ``sigma**2`` of the static
+  frames (at the subset's gradient-weighted grey level when the noise depends on the
+  level);
 - blur: the mismatch shift ``xi(W)`` of the subset against its exactly blurred copy, a
   deterministic error of that subset at that ``W`` (its quadratic mean over the subsets
   is the field's ``u_blur``); its magnitude per component is the blur part of sigma.
@@ -58,9 +62,11 @@ class BlurTable:
         blur is the same for theta and theta + 180.
     available : ndarray of bool, shape (a,)
         Nodes that were computed.
-    values : ndarray, shape (a, m, n, 4)
-        ``(xi_u, xi_v, c_uu, c_vv)``: mismatch shift (px) and noise variance per unit
-        noise variance (px**2 / GL**2) of each point (NaN: no gradient or breakdown).
+    values : ndarray, shape (a, m, n, 6)
+        ``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)``: mismatch shift (px), noise variance
+        per unit noise variance (px**2 / GL**2) and the interaction of the two noises per
+        unit ``sigma**4`` (px**2 / GL**4) of each point (NaN: no gradient or breakdown);
+        :meth:`noise_variance` combines the last four.
     """
 
     blur: NDArray[np.float64]
@@ -71,10 +77,10 @@ class BlurTable:
     def lookup(
         self, w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
     ) -> NDArray[np.float64]:
-        """Interpolated ``(xi_u, xi_v, c_uu, c_vv)`` at ``w`` (px) and ``angle`` (deg), both
-        shape (frames, points); returns shape (frames, points, 4) (NaN where ``w`` is NaN
-        or beyond the table)."""
-        f, n = w.shape
+        """Interpolated ``values`` at ``w`` (px) and ``angle`` (deg), both shape (frames,
+        points); returns shape (frames, points, 6) (NaN where ``w`` is NaN or beyond the
+        table)."""
+        n = w.shape[1]
         a = self.angles.size
         wq = np.where(np.isfinite(w), w, 0.0)
         # linear in W**2 between the nodes
@@ -93,14 +99,33 @@ class BlurTable:
         k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
         k1 = np.where(both, j1, k0)
         ta = np.where(both, ta, 0.0)[..., None]
-        p = np.broadcast_to(np.arange(n), (f, n))
+        m = self.blur.size
+        flat = self.values.reshape(-1, self.values.shape[-1])  # (a * m * n, 6)
+        p = np.arange(n)
 
         def at(j: NDArray[np.intp]) -> NDArray[np.float64]:
-            return np.asarray((1 - tw) * self.values[j, i0, p] + tw * self.values[j, i1, p])
+            # one gather per node through flat row indices (fancy indexing of a 4-d
+            # array with three index arrays is several times slower)
+            lo = np.take(flat, (j * m + i0) * n + p, axis=0)
+            hi = np.take(flat, (j * m + i1) * n + p, axis=0)
+            return np.asarray(lo + tw * (hi - lo))
 
-        out = (1 - ta) * at(k0) + ta * at(k1)
+        out = at(k0)
+        out += ta * (at(k1) - out)
         out[~np.isfinite(w) | (w > self.blur[-1] + 1e-9)] = np.nan
         return np.asarray(out)
+
+    @staticmethod
+    def noise_std(
+        look: NDArray[np.float64], variance: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Noise parts ``(sigma_u, sigma_v)`` (px) of looked-up values ``look`` (..., 6) at
+        the noise variance ``variance`` (GL**2, broadcast against ``look[..., 0]``):
+        ``sqrt(sigma**2 c + sigma**4 c4)`` (the complete noise term)."""
+        v = np.asarray(variance, dtype=np.float64)
+        su = np.sqrt(v * look[..., 2] + v * v * look[..., 4])
+        sv = np.sqrt(v * look[..., 3] + v * v * look[..., 5])
+        return su, sv
 
     def _nearest(self) -> NDArray[np.intp]:
         a = self.angles.size
@@ -119,6 +144,7 @@ def build_blur_table(
     blur: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
     min_blur: float = 0.5,
+    complete: bool = True,
 ) -> BlurTable:
     """Tabulate the blur response of every point for the blur vectors that occur.
 
@@ -134,6 +160,10 @@ def build_blur_table(
         Measured blur lengths (px) and directions (deg); NaN ignored. The direction nodes
         computed are the two around every direction whose blur is >= ``min_blur`` px (the
         one nearest the dominant direction when none is).
+    complete : bool
+        The complete noise term (default); ``False``: the first-order response to the
+        reference's intensities alone, without the ``sigma**4`` interaction (the earlier
+        formula, for comparisons).
     """
     finite = np.isfinite(blur) & np.isfinite(angle)
     w_max = float(np.max(blur[finite])) if finite.any() else 0.0
@@ -155,10 +185,10 @@ def build_blur_table(
         else:
             dom = 0.0
         need[round(dom / ANGLE_STEP) % a] = True
-    values = np.full((a, nodes.size, len(centres), 4), np.nan)
+    values = np.full((a, nodes.size, len(centres), 6), np.nan)
     for j in np.flatnonzero(need):
         t = math.radians(angles[j])
-        shift, cov = subset_blur_response(
+        shift, cov, cov4 = subset_blur_response(
             reference,
             nodes,
             centres,
@@ -166,10 +196,13 @@ def build_blur_table(
             motion=(math.sin(t), math.cos(t)),
             shape=shape,  # type: ignore[arg-type]
             max_shift=1.0,
+            complete=complete,
         )
         values[j, ..., 0:2] = shift
         values[j, ..., 2] = cov[..., 0, 0]
         values[j, ..., 3] = cov[..., 1, 1]
+        values[j, ..., 4] = cov4[..., 0, 0]
+        values[j, ..., 5] = cov4[..., 1, 1]
     return BlurTable(blur=nodes, angles=angles, available=need, values=values)
 
 

@@ -905,7 +905,7 @@ def subset_blur_response(
     kernel = _derivative_kernel(derivative, subset) if complete else None
     gmat = np.zeros((k, k))
     if kernel is not None:
-        # the sigma**4 interaction as _shifts_and_variance (no sub-pixel offset: the
+        # the sigma**4 interaction as shifts_and_variance (no sub-pixel offset: the
         # current noise is sampled as is): R(0) G on the same-axis columns
         wts = (
             np.ones((subset * subset, 1))

@@ -27,7 +27,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,7 +50,10 @@ from .uncertainty import (
 
 __all__ = [
     "ZNCC_RATIO",
+    "ChunkRunner",
     "TrackInterrupted",
+    "correlate_frame",
+    "frame_guess",
     "parse_frame_range",
     "parse_rate",
     "track",
@@ -167,6 +170,26 @@ def _grid_shape(rows: NDArray[np.int64], cols: NDArray[np.int64]) -> tuple[int, 
     return int(ur.size), int(uc.size)
 
 
+class ChunkRunner(Protocol):
+    """Runs the correlation of :func:`track` in chunks (:class:`.parallel.ChunkedRun`).
+
+    ``run`` returns a mapping with the lists ``frames``, ``u``, ``v``, ``zncc``,
+    ``status``, ``fallback`` (one entry per frame tracked) and ``error`` (the exception
+    that stopped it, or None).
+    """
+
+    def run(
+        self,
+        rec: Recording,
+        corr: Correlator,
+        *,
+        reference: int,
+        order: list[int],
+        correlator: dict[str, Any],
+        progress: Callable[[int, int], None] | None,
+    ) -> dict[str, Any]: ...
+
+
 @dataclass
 class _Tracked:
     """Raw per-frame results of the correlation loop, in frame order."""
@@ -200,6 +223,30 @@ def _extrapolate(
     return g
 
 
+def frame_guess(
+    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    img: NDArray[np.float64],
+    reference: NDArray[np.float64],
+    spectrum: Any,
+    base: NDArray[np.float64],
+) -> NDArray[np.float64] | None:
+    """Initial guess (n, 2) px of the next frame ``img`` from the last fields ``hist``
+    (quadratic extrapolation; None without history), moved by the frame's rigid shift
+    against ``reference`` (its ``window_spectrum``) when that is more than 1 px away;
+    ``base`` is the displacement of the current reference's POIs."""
+    guess = _extrapolate(hist)
+    if guess is not None:
+        # fast motion: when the rigid shift (phase correlation, integer px) is
+        # more than 1 px from the extrapolated field's median, move the guesses
+        # by the difference (the extrapolation of a sine at 10 frames per cycle
+        # misses by ~2.5 px at the turning points)
+        gu, gv, peak = global_shift(reference, img, workers=1, reference_spectrum=spectrum)
+        dmed = np.array([gu, gv], float) + np.median(base, axis=0) - np.median(guess, axis=0)
+        if peak > 0.05 and np.hypot(*dmed) > 1.0:
+            guess = guess + np.rint(dmed)
+    return guess
+
+
 @dataclass(frozen=True)
 class _FrameResult:
     u: NDArray[np.float64]
@@ -208,7 +255,7 @@ class _FrameResult:
     status: NDArray[np.uint8]
 
 
-def _correlate_frame(
+def correlate_frame(
     corr: Correlator,
     img: NDArray[np.float64],
     guess: NDArray[np.float64] | None,
@@ -306,6 +353,8 @@ def track(
     advice: bool = True,
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    chunks: ChunkRunner | None = None,
+    compensate_blur: bool = False,
 ) -> Any:
     """Track a recording and predict the random error of every point in every frame.
 
@@ -347,7 +396,16 @@ def track(
     workers : int, optional
         Threads of the correlation kernels.
     progress : callable(done, total), optional
-        Called after every frame.
+        Called after every frame (every chunk with ``chunks``).
+    chunks : ChunkRunner, optional
+        Track in chunks of frames, in parallel and resumable:
+        :class:`dicblur.track.parallel.ChunkedRun` (Dask workers, a scheduler, a store of
+        the finished chunks). Not with ``update_reference``.
+    compensate_blur : bool
+        Correlate every frame again with the blur-compensated matcher
+        (``Correlator(blur="given")``, the blur vector of each point from the first
+        pass's track) and predict sigma for that matcher (no mismatch term; the noise
+        term from the blurred reference): :mod:`.compensate`.
 
     Returns
     -------
@@ -386,6 +444,11 @@ def track(
     f0, f1 = (0, n_total) if frames is None else parse_frame_range(frames, n_total, "frames")
     if not f0 <= reference < f1:
         raise InputError(f"reference={reference}: must be one of the tracked frames {f0}..{f1 - 1}")
+    if chunks is not None and update_reference:
+        raise InputError(
+            "--update-reference: not available with --workers/--scheduler/--chunk-frames "
+            "(each renewal depends on all the frames before it); run without them"
+        )
     st_range = None
     if static is not None:
         st_range = parse_frame_range(static, n_total, "static")
@@ -421,28 +484,35 @@ def track(
     prev: tuple[int, NDArray[np.float64]] | None = None
     error: BaseException | None = None
     t_start = time.perf_counter()
+    if chunks is not None:
+        # chunks of frames, in parallel and resumable (track.parallel): the same per-frame
+        # step, each chunk started by the frames before it in place of the serial history
+        got = chunks.run(
+            rec,
+            corr0,
+            reference=reference,
+            order=order,
+            correlator={"roi": roi, "points": points, **opts},
+            progress=progress,
+        )
+        out = _Tracked(
+            list(got["frames"]),
+            list(got["u"]),
+            list(got["v"]),
+            list(got["zncc"]),
+            list(got["status"]),
+            list(got["fallback"]),
+        )
+        refs, error = [reference] * len(out.frames), got["error"]
     try:
-        for k in order:
+        for k in order if chunks is None else ():
             if k == reference - 1:  # backwards from the reference, on the first one
                 hist = [ref_field] if ref_field is not None else []
                 corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
                 ref_img_now = ref_img
             img = rec.frame(k)
-            guess = _extrapolate(hist)
-            if guess is not None:
-                # fast motion: when the rigid shift (phase correlation, integer px) is
-                # more than 1 px from the extrapolated field's median, move the guesses
-                # by the difference (the extrapolation of a sine at 10 frames per cycle
-                # misses by ~2.5 px at the turning points)
-                gu, gv, peak = global_shift(
-                    ref_img_now, img, workers=1, reference_spectrum=spectrum[ref_now]
-                )
-                dmed = (
-                    np.array([gu, gv], float) + np.median(base, axis=0) - np.median(guess, axis=0)
-                )
-                if peak > 0.05 and np.hypot(*dmed) > 1.0:
-                    guess = guess + np.rint(dmed)
-            res, fb = _correlate_frame(corr, img, None if guess is None else guess - base, ok0)
+            guess = frame_guess(hist, img, ref_img_now, spectrum[ref_now], base)
+            res, fb = correlate_frame(corr, img, None if guess is None else guess - base, ok0)
             share = float(np.mean(res.status[ok0] == PointStatus.CONVERGED)) if ok0.any() else 0.0
             if k == reference:
                 ok0 = ~np.isin(res.status, (PointStatus.LOW_TEXTURE, PointStatus.OUT_OF_BOUNDS))
@@ -465,7 +535,7 @@ def track(
                     ).astype(int)
                     new = Correlator(prev[1], points=pts, **opts)
                     g2 = None if guess is None else guess - last
-                    res2, fb2 = _correlate_frame(new, img, g2, ok0)
+                    res2, fb2 = correlate_frame(new, img, g2, ok0)
                     share2 = float(np.mean(res2.status[ok0] == PointStatus.CONVERGED))
                     if share2 > share:
                         # increments of the subset now centred at the rounded position:
@@ -531,6 +601,8 @@ def track(
         except (DicblurError, OSError) as exc:
             if noise_est is None:
                 notes.append(f"no noise estimate: {exc}")
+    if chunks is not None:
+        settings.update({f"chunks_{k}": v for k, v in getattr(chunks, "summary", {}).items()})
     settings["update_reference"] = int(update_reference)
     settings["n_reference_updates"] = len(set(refs)) - 1
     ds = _assemble(

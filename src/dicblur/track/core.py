@@ -38,6 +38,7 @@ from ..errors import DicblurError, InputError
 from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
+from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
 from .kinematics import exposure_motion, exposure_skew
 from .median import normalized_median_test
 from .uncertainty import (
@@ -561,6 +562,23 @@ def track(
                 progress(len(out.frames), len(order))
     except (DicblurError, KeyboardInterrupt, OSError, MemoryError) as exc:
         error = exc
+    comp_info: dict[str, Any] = {"matcher": MATCHER_PLAIN}
+    if compensate_blur and out.frames and error is None:
+        try:
+            comp_info = compensate_track(
+                rec,
+                out,
+                reference=reference,
+                correlator={"roi": roi, "points": points, **opts},
+                fps=fps_v,
+                exposure=t_exp,
+                half_window=half_window,
+                grid_shape=corr0.grid_shape,
+                runner=chunks,
+                progress=progress,
+            )
+        except (DicblurError, KeyboardInterrupt, OSError, MemoryError) as exc:
+            error = exc  # the first (plain) pass is kept
     elapsed = time.perf_counter() - t_start
     if not out.frames:
         if error is not None:
@@ -603,6 +621,7 @@ def track(
                 notes.append(f"no noise estimate: {exc}")
     if chunks is not None:
         settings.update({f"chunks_{k}": v for k, v in getattr(chunks, "summary", {}).items()})
+    settings.update(comp_info)
     settings["update_reference"] = int(update_reference)
     settings["n_reference_updates"] = len(set(refs)) - 1
     ds = _assemble(
@@ -621,6 +640,11 @@ def track(
         threshold=median_threshold,
         advice=advice and error is None,
         ref_img=ref_img,
+        blur_table=(
+            build_compensated_table
+            if comp_info["matcher"] != MATCHER_PLAIN
+            else build_blur_table
+        ),
     )
     if error is not None:
         what = "interrupted" if isinstance(error, KeyboardInterrupt) else f"stopped: {error}"
@@ -651,6 +675,7 @@ def _assemble(
     threshold: float,
     advice: bool,
     ref_img: NDArray[np.float64],
+    blur_table: Callable[..., Any] = build_blur_table,
 ) -> Any:
     import xarray as xr
 
@@ -740,7 +765,7 @@ def _assemble(
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
-        table = build_blur_table(
+        table = blur_table(
             ref_img,
             centres[pin],
             subset=corr.subset,

@@ -173,10 +173,11 @@ def _write_frames(folder, rec, n):
 @pytest.mark.numba_cache
 def test_local_dask_cluster_equals_serial_chunks(tmp_path):
     """Two worker processes, each reading its frames from the folder: the same results as
-    the chunks run in this process, bit for bit."""
+    the chunks run in this process, bit for bit (both passes of --compensate-blur)."""
     frames = tmp_path / "frames"
     _write_frames(frames, _target().recording(14), 14)
     kw = {**KW, "noise": 2.0, "static": None, "exposure": "0.4ms", "fps": 2000}
+    kw["compensate_blur"] = True
     here = dicblur.track(str(frames), chunks=ChunkedRun(chunk_frames=4), **kw)
     run = ChunkedRun(workers=2, chunk_frames=4, store=tmp_path / "track.chunks")
     dask = dicblur.track(str(frames), chunks=run, **kw)
@@ -205,3 +206,27 @@ def test_cli_chunks_resume(tmp_path, capsys):
     assert "0 run, 3 resumed of 3" in capsys.readouterr().out
     assert main([*args, "--workers", "2", "--scheduler", "tcp://h:1"]) == 2
     assert "--workers and --scheduler" in capsys.readouterr().err
+
+
+def test_compensated_pass_in_chunks_agrees_and_resumes(serial, tmp_path):
+    """--compensate-blur with chunks: the compensated pass runs in chunks too (stored
+    beside the first pass's), agreeing with the serial run within the IC-GN tolerance."""
+    rec, _ = serial
+    kw = {**KW, "compensate_blur": True}
+    a = dicblur.track(rec, reference=6, **kw)
+    store = tmp_path / "track.chunks"
+    run = ChunkedRun(store=store, chunk_frames=8)
+    b = dicblur.track(rec, reference=6, chunks=run, **kw)
+    assert b.attrs["matcher"] == a.attrs["matcher"] != "plain"
+    assert b.attrs["compensation_passes"] == a.attrs["compensation_passes"]
+    np.testing.assert_array_equal(a["status"].values, b["status"].values)
+    conv = a["status"].values == dicblur.PointStatus.CONVERGED
+    for c in ("u", "v"):
+        assert np.all(np.abs(a[c].values - b[c].values)[conv] < 1e-4)
+    passes = int(b.attrs["compensation_passes"])
+    assert (tmp_path / f"track.chunks-compensated-{passes}" / "store.json").is_file()
+    again = ChunkedRun(store=store, chunk_frames=8)
+    c = dicblur.track(rec, reference=6, chunks=again, **kw)
+    assert again.summary["n_run"] == 0 and again.summary["compensated_n_run"] == 0
+    for name in RAW:
+        np.testing.assert_array_equal(c[name].values, b[name].values, err_msg=name)

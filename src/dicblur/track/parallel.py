@@ -39,9 +39,19 @@ from ..dic import Correlator, PointStatus
 from ..dic.initial import window_spectrum
 from ..errors import DicblurError, ImageReadError, InputError
 from ..sequence import Recording, open_recording
+from .compensate import pass_frames
 from .core import correlate_frame, frame_guess
 
-__all__ = ["HISTORY", "Chunk", "ChunkedRun", "TrackJob", "plan_chunks", "track_chunk"]
+__all__ = [
+    "HISTORY",
+    "Chunk",
+    "ChunkedRun",
+    "CompensationChunk",
+    "TrackJob",
+    "compensate_chunk",
+    "plan_chunks",
+    "track_chunk",
+]
 
 #: Frames of history the per-frame guess uses (quadratic extrapolation of the last three).
 HISTORY = 3
@@ -66,6 +76,20 @@ class Chunk:
     index: int
     frames: tuple[int, ...]
     warm: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class CompensationChunk:
+    """Frames of one task of the compensated pass, with their guesses and blur vectors
+    (the previous pass's ``u``, ``v``, ``blur_u``, ``blur_v``, ``status``, (m, n_points))."""
+
+    index: int
+    frames: tuple[int, ...]
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    blur_u: NDArray[np.float64]
+    blur_v: NDArray[np.float64]
+    status: NDArray[np.uint8]
 
 
 def plan_chunks(order: Sequence[int], reference: int, chunk_frames: int) -> list[Chunk]:
@@ -210,6 +234,18 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
     return out
 
 
+def compensate_chunk(job: TrackJob, chunk: CompensationChunk) -> dict[str, Any]:
+    """One chunk of the compensated pass (the task a worker runs)."""
+    rec, corr, _, _ = _prepared(job)
+    res = pass_frames(
+        rec, corr, np.asarray(chunk.frames, np.int64), chunk.u, chunk.v, chunk.blur_u,
+        chunk.blur_v, chunk.status, progress=None,
+    )  # fmt: skip
+    res["n_zeroed"] = np.int64(res["n_zeroed"])
+    res["max_groups"] = np.int64(res["max_groups"])
+    return res
+
+
 def _crc(a: NDArray[Any]) -> int:
     return zlib.crc32(np.ascontiguousarray(a).tobytes())
 
@@ -258,6 +294,7 @@ class ChunkedRun:
     scheduler: str | None = None
     chunk_frames: int = 100
     summary: dict[str, Any] = field(default_factory=dict)
+    _passes: int = field(default=0, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.workers is not None and (
@@ -287,6 +324,7 @@ class ChunkedRun:
     ) -> dict[str, Any]:
         """Track the frames of ``order`` (see :class:`~dicblur.track.core.ChunkRunner`)."""
         chunks = plan_chunks(order, reference, self.chunk_frames)
+        self._passes = 0
         # the points that can be correlated at all: the reference frame's own result, as
         # the serial loop sets them
         ref_img = rec.frame(reference)
@@ -323,36 +361,73 @@ class ChunkedRun:
             key=hashlib.sha256(repr(sorted(key.items())).encode()).hexdigest()
             + ("" if isinstance(source, str) else f"-{id(rec)}"),
         )
-        results: dict[int, dict[str, Any]] = {}
-        total = len(order)
-        error: BaseException | None = None
-        store_cm: Any = (
-            ChunkStore(Path(self.store), key=key, n_chunks=len(chunks))
-            if self.store is not None
-            else nullcontext(None)
+        results, error, self.summary = self._execute(
+            rec,
+            track_chunk,
+            chunks,
+            job,
+            key=key,
+            store=None if self.store is None else Path(self.store),
+            total=len(order),
+            progress=progress,
         )
-        with store_cm as store:
-            if store is not None:
-                for i in sorted(store.done()):
-                    results[i] = store.read(i)
+        got: dict[str, Any] = {k: [] for k in ("frames", "u", "v", "zncc", "status", "fallback")}
+        for c in chunks:
+            res = results.get(c.index)
+            if res is None:
+                continue
+            for j in range(len(c.frames)):
+                got["frames"].append(int(res["frames"][j]))
+                got["u"].append(res["u"][j])
+                got["v"].append(res["v"][j])
+                got["zncc"].append(res["zncc"][j])
+                got["status"].append(res["status"][j])
+                got["fallback"].append(bool(res["fallback"][j]))
+        got["error"] = error
+        return got
+
+    def _execute(
+        self,
+        rec: Recording,
+        task: Callable[..., dict[str, Any]],
+        chunks: Sequence[Any],
+        job: Any,
+        *,
+        key: dict[str, Any],
+        store: Path | None,
+        total: int,
+        progress: Callable[[int, int], None] | None,
+    ) -> tuple[dict[int, dict[str, Any]], BaseException | None, dict[str, Any]]:
+        """Run the chunks not yet in ``store`` through the campaign engine, storing each as
+        it finishes; returns the results by chunk index, the exception that stopped the
+        run (a ``KeyboardInterrupt`` for Ctrl-C) and the run's summary."""
+        results: dict[int, dict[str, Any]] = {}
+        error: BaseException | None = None
+        summary = None
+        store_cm: Any = (
+            ChunkStore(store, key=key, n_chunks=len(chunks)) if store is not None else nullcontext()
+        )
+        with store_cm as st:
+            if st is not None:
+                for i in sorted(st.done()):
+                    results[i] = st.read(i)
             n_resumed = len(results)
             pending = [c for c in chunks if c.index not in results]
             done_frames = [sum(len(chunks[i].frames) for i in results)]
             if progress is not None:
                 progress(done_frames[0], total)
 
-            def finish(chunk: Chunk, res: dict[str, Any]) -> None:
-                if store is not None:
-                    store.write(chunk.index, res)
+            def finish(chunk: Any, res: dict[str, Any]) -> None:
+                if st is not None:
+                    st.write(chunk.index, res)
                 results[chunk.index] = res
                 done_frames[0] += len(chunk.frames)
                 if progress is not None:
                     progress(done_frames[0], total)
 
-            summary = None
             try:
                 summary = run_tasks(
-                    track_chunk,
+                    task,
                     pending,
                     finish,
                     args=lambda c, shared: (shared["job"], c),
@@ -369,7 +444,7 @@ class ChunkedRun:
                     _release_own(rec)
             if summary is not None and summary.interrupted:
                 error = KeyboardInterrupt()
-        self.summary = {
+        stats = {
             "n_chunks": len(chunks),
             "n_resumed": n_resumed,
             "n_run": len(results) - n_resumed,
@@ -377,17 +452,91 @@ class ChunkedRun:
             "scheduler": "serial" if summary is None else summary.scheduler,
             "chunk_frames": self.chunk_frames,
         }
-        got: dict[str, Any] = {k: [] for k in ("frames", "u", "v", "zncc", "status", "fallback")}
-        for c in chunks:
-            res = results.get(c.index)
-            if res is None:
-                continue
-            for j in range(len(c.frames)):
-                got["frames"].append(int(res["frames"][j]))
-                got["u"].append(res["u"][j])
-                got["v"].append(res["v"][j])
-                got["zncc"].append(res["zncc"][j])
-                got["status"].append(res["status"][j])
-                got["fallback"].append(bool(res["fallback"][j]))
-        got["error"] = error
-        return got
+        return results, error, stats
+
+    def compensate(
+        self,
+        rec: Recording,
+        frames: NDArray[np.int64],
+        u: NDArray[np.float64],
+        v: NDArray[np.float64],
+        blur_u: NDArray[np.float64],
+        blur_v: NDArray[np.float64],
+        status: NDArray[np.uint8],
+        *,
+        reference: int,
+        correlator: dict[str, Any],
+        progress: Callable[[int, int], None] | None,
+    ) -> dict[str, Any]:
+        """:func:`.compensate.compensated_pass` in chunks (stored beside :attr:`store` as
+        ``<store>-compensated-N``, N the pass, its key holding a checksum of the inputs).
+
+        Raises
+        ------
+        KeyboardInterrupt, DicblurError
+            When a chunk fails or the run is interrupted (the finished chunks are kept).
+        """
+        self._passes += 1
+        n = self.chunk_frames
+        chunks = [
+            CompensationChunk(
+                index=j,
+                frames=tuple(int(k) for k in frames[a : a + n]),
+                u=u[a : a + n],
+                v=v[a : a + n],
+                blur_u=blur_u[a : a + n],
+                blur_v=blur_v[a : a + n],
+                status=status[a : a + n],
+            )
+            for j, a in enumerate(range(0, len(frames), n))
+        ]
+        opts = dict(correlator)
+        if not self.serial:
+            opts["workers"] = 1
+        source: Any = (
+            os.path.abspath(rec.source) if rec.kind in _FILE_KINDS and not self.serial else rec
+        )
+        inputs = zlib.crc32(
+            b"".join(_crc(a).to_bytes(4, "little") for a in (u, v, blur_u, blur_v, status))
+        )
+        key = {
+            "job": "dicblur track compensated pass",
+            "pass": self._passes,
+            "source": os.path.abspath(rec.source) if rec.kind in _FILE_KINDS else rec.source,
+            "n_frames": len(rec),
+            "shape": list(rec.shape),
+            "reference": reference,
+            "frames": [int(frames[0]), int(frames[-1]), len(frames)],
+            "inputs_crc32": inputs,
+            "chunk_frames": n,
+            "correlator": {k: _jsonable(x) for k, x in correlator.items() if k != "workers"},
+        }
+        job = TrackJob(
+            source=source,
+            n_frames=len(rec),
+            shape=(int(rec.shape[0]), int(rec.shape[1])),
+            reference=reference,
+            correlator={**opts, "blur": "given"},
+            ok0=np.ones(0, bool),
+            key=hashlib.sha256(repr(sorted(key.items())).encode()).hexdigest()
+            + ("" if isinstance(source, str) else f"-{id(rec)}"),
+        )
+        store = (
+            None
+            if self.store is None
+            else Path(self.store).with_name(f"{Path(self.store).name}-compensated-{self._passes}")
+        )
+        results, error, stats = self._execute(
+            rec, compensate_chunk, chunks, job, key=key, store=store, total=len(frames),
+            progress=progress,
+        )  # fmt: skip
+        self.summary.update({f"compensated_{k}": x for k, x in stats.items() if k.startswith("n_")})
+        if error is not None:
+            raise error
+        out: dict[str, Any] = {
+            k: np.concatenate([results[c.index][k] for c in chunks])
+            for k in ("u", "v", "zncc", "status")
+        }
+        out["n_zeroed"] = int(sum(int(results[c.index]["n_zeroed"]) for c in chunks))
+        out["max_groups"] = int(max(int(results[c.index]["max_groups"]) for c in chunks))
+        return out

@@ -108,3 +108,29 @@ def test_group_vectors_rounds_and_caps():
     assert np.max(np.abs(out[keep] - vec[keep])) <= 0.4
     fine, _ = group_vectors(vec[keep], subset=21, max_groups=100)
     assert np.max(np.abs(fine - vec[keep])) <= 0.025 + 1e-12
+
+
+def test_cli_compensate_blur_report_shows_the_matcher(tmp_path, capsys):
+    import xarray as xr
+
+    from dicblur.cli import main
+
+    tgt = _target(96)
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k in range(12):
+        dicblur.save_image(folder / f"f{k}.png", tgt.render(k), bit_depth=8)
+    out = tmp_path / "out"
+    args = [
+        "track", str(folder), "--exposure", "0.45ms", "--fps", "2kHz", "--static", "0:6",
+        "--step", "12", "--shape", "translation", "--compensate-blur", "--chunk-frames", "6",
+        "-o", str(out),
+    ]  # fmt: skip
+    assert main(args) == 0
+    assert "compensated" in capsys.readouterr().out
+    ds = xr.open_dataset(out / "track.nc", engine="scipy")
+    assert ds.attrs["matcher"] == MATCHER_COMPENSATED and ds.attrs["chunks_n_chunks"] == 2
+    ds.close()
+    page = (out / "report.html").read_text()
+    assert "blur-compensated, blur vector per point from the track" in page
+    assert "2 chunks of 6 frames (serial, 0 resumed)" in page

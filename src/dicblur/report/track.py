@@ -19,12 +19,12 @@ from .html import HtmlReport
 
 __all__ = [
     "auto_points",
-    "matcher_label",
     "fig_blur_share",
     "fig_sigma_map",
     "fig_status",
     "fig_time_series",
     "fig_w_histogram",
+    "matcher_label",
     "write_track_report",
 ]
 

@@ -230,3 +230,48 @@ def test_compensated_pass_in_chunks_agrees_and_resumes(serial, tmp_path):
     assert again.summary["n_run"] == 0 and again.summary["compensated_n_run"] == 0
     for name in RAW:
         np.testing.assert_array_equal(c[name].values, b[name].values, err_msg=name)
+
+
+@pytest.mark.slow  # two CLI runs in subprocesses
+def test_killed_cli_run_resumes_to_the_uninterrupted_output(tmp_path):
+    """SIGKILL a `dicblur track --chunk-frames 2` run once two chunks are stored; the same
+    command again finishes it, and its track.nc equals an uninterrupted run's."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import xarray as xr
+
+    frames = tmp_path / "frames"
+    _write_frames(frames, _target().recording(16), 16)
+
+    def args(out):
+        return [
+            sys.executable, "-m", "dicblur", "track", str(frames), "--exposure", "0.4ms",
+            "--fps", "2000", "--noise", "2", "--shape", "translation", "--step", "12",
+            "--chunk-frames", "2", "--no-report", "-o", str(out),
+        ]  # fmt: skip
+
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    whole = subprocess.run(args(tmp_path / "whole"), env=env, capture_output=True, timeout=600)
+    assert whole.returncode == 0, whole.stderr.decode()
+    out = tmp_path / "killed"
+    proc = subprocess.Popen(args(out), env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 300
+    while len(list((out / "track.chunks").glob("chunk-*.npz"))) < 2:
+        assert proc.poll() is None and time.monotonic() < deadline, "run ended before the kill"
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=60)
+    n_kept = len(list((out / "track.chunks").glob("chunk-*.npz")))
+    assert 2 <= n_kept < 8 and not (out / "track.nc").exists()
+    again = subprocess.run(args(out), env=env, capture_output=True, timeout=600)
+    assert again.returncode == 0, again.stderr.decode()
+    assert f"{8 - n_kept} run, {n_kept} resumed of 8" in again.stdout.decode()
+    a = xr.open_dataset(tmp_path / "whole" / "track.nc", engine="scipy")
+    b = xr.open_dataset(out / "track.nc", engine="scipy")
+    for name in a.data_vars:
+        np.testing.assert_array_equal(b[name].values, a[name].values, err_msg=name)
+    a.close()
+    b.close()

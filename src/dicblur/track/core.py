@@ -176,7 +176,8 @@ class ChunkRunner(Protocol):
 
     ``run`` returns a mapping with the lists ``frames``, ``u``, ``v``, ``zncc``,
     ``status``, ``fallback`` (one entry per frame tracked) and ``error`` (the exception
-    that stopped it, or None).
+    that stopped it, or None). With ``compensate_blur`` the runner's ``compensate`` (the
+    signature of :func:`.compensate.compensated_pass`) runs the compensated passes.
     """
 
     def run(

@@ -8,7 +8,10 @@ and VI). The pieces:
 - :mod:`~dicblur.campaign.tasks`: batches and deterministic task seeds.
 - :mod:`~dicblur.campaign.simulate`: the task itself (:func:`simulate_batch`).
 - :mod:`~dicblur.campaign.store`: the Zarr store, written batch by batch, resumable.
-- :mod:`~dicblur.campaign.engine`: serial or Dask execution (:func:`run_campaign`).
+- :mod:`~dicblur.campaign.engine`: serial or Dask execution (:func:`run_campaign`; any
+  independent tasks: :func:`run_tasks`).
+- :mod:`~dicblur.campaign.chunks`: a resumable store of finished chunks of any job
+  (:class:`ChunkStore`, used by ``dicblur track --workers``).
 - :mod:`~dicblur.campaign.calibrate`: the paper's sweep on one pattern plus the model fits.
 
 Nothing here imports Dask, Zarr or xarray at module level: they are imported when a
@@ -17,7 +20,16 @@ campaign runs or a store is opened.
 
 from __future__ import annotations
 
-from .engine import CampaignStatus, RunSummary, campaign_status, run_campaign
+from .chunks import ChunkStore
+from .engine import (
+    CampaignStatus,
+    RunSummary,
+    TasksSummary,
+    campaign_status,
+    check_scheduler_address,
+    run_campaign,
+    run_tasks,
+)
 from .simulate import directional_sssig, simulate_batch
 from .spec import CampaignSpec, PatternSpec, load_spec, parse_spec
 from .store import VARIABLES, CampaignStore, export_csv, open_results
@@ -29,9 +41,12 @@ __all__ = [
     "CampaignSpec",
     "CampaignStatus",
     "CampaignStore",
+    "ChunkStore",
     "PatternSpec",
     "RunSummary",
+    "TasksSummary",
     "campaign_status",
+    "check_scheduler_address",
     "directional_sssig",
     "export_csv",
     "input_hashes",
@@ -41,6 +56,7 @@ __all__ = [
     "open_results",
     "parse_spec",
     "run_campaign",
+    "run_tasks",
     "simulate_batch",
     "task_seed",
 ]

@@ -14,7 +14,7 @@ import logging
 import os
 import re
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +31,16 @@ from .tasks import Batch, input_hashes, iter_batches, make_pattern
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CampaignStatus", "RunSummary", "TaskFunction", "campaign_status", "run_campaign"]
+__all__ = [
+    "CampaignStatus",
+    "RunSummary",
+    "TaskFunction",
+    "TasksSummary",
+    "campaign_status",
+    "check_scheduler_address",
+    "run_campaign",
+    "run_tasks",
+]
 
 
 TaskFunction = Callable[[NDArray[np.float64], Batch, CampaignSpec], Mapping[str, Any]]
@@ -473,6 +482,158 @@ def _run_dask(
     connect_timeout: float,
     started: list[float],
 ) -> tuple[int, str, bool]:
+    # Larger blur costs more DIC iterations: start the batches of large W first
+    # (longest-first scheduling shortens the idle tail of the last workers).
+    return _map_dask(
+        _timed_task,
+        pending,
+        lambda b, remote: (fn, remote[b.pattern], b, spec),
+        finish,
+        shared=images,
+        priority=lambda b: int(b.loc[5]),
+        key=lambda b: f"dicblur-batch-{b.index}",
+        warm_up=getattr(fn, "warm_up", None),
+        scheduler=scheduler,
+        workers=workers,
+        connect_timeout=connect_timeout,
+        started=started,
+    )
+
+
+@dataclass(frozen=True)
+class TasksSummary:
+    """What a call of :func:`run_tasks` did.
+
+    Attributes
+    ----------
+    n_run : int
+        Tasks finished (their ``finish`` called).
+    interrupted : bool
+        True if Ctrl-C stopped the run; the tasks finished before were passed to ``finish``.
+    workers : int
+        Worker processes (1 for serial).
+    scheduler : str
+        ``"serial"``, ``"local"`` or the scheduler address.
+    wall_s : float
+        Wall time (s), cluster start-up included.
+    """
+
+    n_run: int
+    interrupted: bool
+    workers: int
+    scheduler: str
+    wall_s: float
+
+
+def run_tasks(
+    func: Callable[..., Any],
+    items: Sequence[Any],
+    finish: Callable[[Any, Any], None],
+    *,
+    args: Callable[[Any, Mapping[str, Any]], tuple[Any, ...]] | None = None,
+    shared: Mapping[str, Any] | None = None,
+    serial: bool = False,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    priority: Callable[[Any], int] | None = None,
+    warm_up: Callable[[], Any] | None = None,
+    name: str = "task",
+    connect_timeout: float = 10.0,
+) -> TasksSummary:
+    """Run independent tasks serially or on Dask (the campaign engine's machinery), handing
+    each result to ``finish`` in this process, in completion order (one writer).
+
+    Parameters
+    ----------
+    func : callable
+        Module-level (importable by the workers); called as ``func(*args(item, shared))``.
+    items : sequence
+        One task each (picklable).
+    finish : callable(item, result)
+        Called in this process as each task finishes (e.g. to store its result).
+    args : callable(item, shared) -> tuple, optional
+        Arguments of ``func`` for ``item``; ``shared`` maps the names of ``shared`` to the
+        objects (serial) or to their copies already on the workers (Dask: each travels to
+        every worker once). Default ``(item,)``.
+    shared : mapping, optional
+        Large objects every task needs.
+    serial : bool
+        Run in this process, without Dask.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:port``); default a local
+        cluster of ``workers`` single-threaded processes.
+    workers : int, optional
+        Processes of the local cluster (default all cores).
+    priority : callable(item) -> int, optional
+        Higher starts first.
+    warm_up : callable, optional
+        Run once on every worker before the tasks (e.g. loading compiled kernels).
+    name : str
+        Prefix of the Dask task keys.
+    connect_timeout : float
+        Seconds to wait for ``scheduler``.
+
+    Returns
+    -------
+    TasksSummary
+
+    Notes
+    -----
+    Ctrl-C cancels the pending tasks, shuts the local cluster down and returns with
+    ``interrupted=True``; so does a ``KeyboardInterrupt`` raised by ``finish``. A task's
+    exception is re-raised after the results finished before it were passed to ``finish``.
+    """
+    t0 = time.perf_counter()
+    if scheduler is not None and not serial:
+        check_scheduler_address(scheduler)
+    call_args = args if args is not None else (lambda item, _shared: (item,))
+    share = dict(shared or {})
+    count = [0]
+
+    def done(item: Any, result: Any) -> None:
+        finish(item, result)
+        count[0] += 1
+
+    if serial or not items:
+        interrupted = False
+        try:
+            for it in items:
+                done(it, func(*call_args(it, share)))
+        except KeyboardInterrupt:
+            interrupted = True
+        return TasksSummary(count[0], interrupted, 1, "serial", time.perf_counter() - t0)
+    n_workers, where, interrupted = _map_dask(
+        func,
+        list(items),
+        call_args,
+        done,
+        shared=share,
+        priority=priority,
+        key=lambda it: f"dicblur-{name}",
+        warm_up=warm_up,
+        scheduler=scheduler,
+        workers=workers,
+        connect_timeout=connect_timeout,
+        started=[0.0],
+    )
+    return TasksSummary(count[0], interrupted, n_workers, where, time.perf_counter() - t0)
+
+
+def _map_dask(
+    func: Callable[..., Any],
+    items: list[Any],
+    args: Callable[[Any, Mapping[str, Any]], tuple[Any, ...]],
+    finish: Callable[[Any, Any], None],
+    *,
+    shared: Mapping[str, Any],
+    priority: Callable[[Any], int] | None,
+    key: Callable[[Any], str],
+    warm_up: Callable[[], Any] | None,
+    scheduler: str | None,
+    workers: int | None,
+    connect_timeout: float,
+    started: list[float],
+) -> tuple[int, str, bool]:
     import dask
     from distributed import Client, LocalCluster, as_completed
 
@@ -524,14 +685,13 @@ def _run_dask(
             info = client.scheduler_info(n_workers=-1).get("workers", {})
             n_workers = max(1, len(info))
             # Load the task's compiled code (numba cache) on every worker at once, as part
-            # of the start-up, rather than inside each worker's first batch. A task per
+            # of the start-up, rather than inside each worker's first task. A task per
             # worker (not client.run), so that Ctrl-C can interrupt a long compilation.
-            warm = getattr(fn, "warm_up", None)
-            if callable(warm):
+            if callable(warm_up):
                 _wait_all(
                     [
                         client.submit(
-                            warm,
+                            warm_up,
                             workers=[addr],
                             allow_other_workers=False,
                             pure=False,
@@ -541,28 +701,23 @@ def _run_dask(
                     ],
                     interrupt,
                 )
-            # Each pattern image travels to every worker once, not once per batch.
+            # Each shared object travels to every worker once, not once per task.
             remote = {
-                name: client.scatter(img, broadcast=True, hash=False)
-                for name, img in images.items()
+                name: client.scatter(obj, broadcast=True, hash=False)
+                for name, obj in shared.items()
             }
             interrupt.check()
             started[0] = time.perf_counter()
-            by_key: dict[Any, Batch] = {}
-            for b in pending:
-                # Larger blur costs more DIC iterations: start the batches of large W first
-                # (longest-first scheduling shortens the idle tail of the last workers).
+            by_key: dict[Any, Any] = {}
+            for i, it in enumerate(items):
                 fut = client.submit(
-                    _timed_task,
-                    fn,
-                    remote[b.pattern],
-                    b,
-                    spec,
+                    func,
+                    *args(it, remote),
                     pure=False,
-                    priority=b.loc[5],
-                    key=f"dicblur-batch-{b.index}-{os.urandom(4).hex()}",
+                    priority=0 if priority is None else priority(it),
+                    key=f"{key(it)}-{i}-{os.urandom(4).hex()}",
                 )
-                by_key[fut.key] = b
+                by_key[fut.key] = it
                 futures.append(fut)
             ready = as_completed(futures)
             while not ready.is_empty():

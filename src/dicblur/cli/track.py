@@ -74,13 +74,46 @@ def track_command(
     csv: Annotated[bool, typer.Option("--csv", help="Also write track.csv (long).")] = False,
     report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
     workers: Annotated[
-        int | None, typer.Option("--workers", help="Threads of the correlation kernels.")
+        int | None,
+        typer.Option(
+            "--workers",
+            help="Worker processes (local Dask cluster): the frames run in chunks, "
+            "resumable from OUT/track.chunks.",
+        ),
     ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Dask scheduler tcp://HOST:PORT for the chunks (instead of --workers).",
+        ),
+    ] = None,
+    chunk_frames: Annotated[
+        int | None,
+        typer.Option(
+            "--chunk-frames",
+            help="Frames per chunk (default 100 with --workers/--scheduler; alone: chunks "
+            "in this process, resumable).",
+        ),
+    ] = None,
+    threads: Annotated[
+        int | None, typer.Option("--threads", help="Threads of the correlation kernels.")
+    ] = None,
+    compensate_blur: Annotated[
+        bool,
+        typer.Option(
+            "--compensate-blur",
+            help="Correlate again with the blur-compensated matcher (blur vector per point "
+            "from the track) and predict sigma for it.",
+        ),
+    ] = False,
 ) -> None:
     """Track RECORDING and predict the random error (noise + motion blur) of every point in
     every frame; writes OUT/track.nc (or .zarr), OUT/report.html and, with --csv,
     OUT/track.csv. A run that stops part-way writes what was tracked (attribute
-    complete = 0) before reporting the error."""
+    complete = 0) before reporting the error. With --workers, --scheduler or
+    --chunk-frames the frames run in chunks stored in OUT/track.chunks: the same command
+    again continues from the finished chunks."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -110,6 +143,18 @@ def track_command(
     out.mkdir(parents=True, exist_ok=True)
     rec = open_recording(recording)
     target = out / ("track.nc" if fmt == "netcdf" else "track.zarr")
+    chunks = None
+    if workers is not None or scheduler is not None or chunk_frames is not None:
+        from ..track.parallel import ChunkedRun
+
+        if workers is not None and scheduler is not None:
+            raise InputError("--workers and --scheduler: give one of them")
+        chunks = ChunkedRun(
+            store=out / "track.chunks",
+            workers=workers,
+            scheduler=scheduler,
+            chunk_frames=100 if chunk_frames is None else chunk_frames,
+        )
     with Progress(
         TextColumn("tracking"),
         BarColumn(),
@@ -141,8 +186,10 @@ def track_command(
                 reference=reference,
                 frames=frames,
                 update_reference=update_reference,
-                workers=workers,
+                workers=threads,
                 progress=progress,
+                chunks=chunks,
+                compensate_blur=compensate_blur,
             )
         except TrackInterrupted as exc:
             if exc.dataset is not None:
@@ -188,6 +235,13 @@ def track_command(
             "valid_share": float(valid.mean()),
             "outliers": int(ds["n_outliers"].values.sum()),
             "frames_per_s": int(ds.sizes["frame"]) / max(float(a["tracking_time_s"]), 1e-9),
+            "matcher": str(a.get("matcher", "plain")),
+            "chunks": (
+                f"{a['chunks_n_run']} run, {a['chunks_n_resumed']} resumed of "
+                f"{a['chunks_n_chunks']} ({a['chunks_scheduler']})"
+                if "chunks_n_chunks" in a
+                else "-"
+            ),
             "advice": str(a.get("advice_sentence", "-")),
         },
         {"exposure": "s", "fps": "Hz", "noise_sigma": "GL"},

@@ -44,7 +44,7 @@ from .sensitivity import spline_gradients
 if TYPE_CHECKING:
     from .model import BlurUncertaintyModel
 
-__all__ = ["model_from_compensated", "predict_compensated"]
+__all__ = ["compensated_covariance", "model_from_compensated", "predict_compensated"]
 
 
 def _points(
@@ -326,3 +326,74 @@ def model_from_compensated(
     )
     # fitted on three noise levels: make the model's own noise the one asked for
     return replace(model, noise_sigma=sigma)
+
+
+def compensated_covariance(
+    blurred: ArrayLike,
+    blurred_twice: ArrayLike,
+    points: ArrayLike,
+    *,
+    subset: int,
+    shape: str = "affine",
+    derivative: str = "bspline3",
+) -> NDArray[np.float64]:
+    """Per-subset 2x2 covariance of (u, v) of the blur-compensated matcher per unit noise
+    variance (px^2 / GL^2), from the blurred reference (the module docstring's two terms).
+
+    Parameters
+    ----------
+    blurred : array_like, shape (rows, cols)
+        The reference blurred by the blur vector, ``f_W`` (:func:`dicblur.dic.blur_reference`).
+    blurred_twice : array_like, shape (rows, cols)
+        ``f_W`` blurred once more by the same vector, ``B f_W``: the gradients through which
+        the blurred reference's own noise enters.
+    points : array_like, shape (n, 2)
+        Subset centres (row, col), px; each subset inside the image.
+    subset : int
+        Odd subset size, px.
+    shape : {"translation", "affine"}
+    derivative : {"bspline3", "bspline5", "central"}
+
+    Returns
+    -------
+    ndarray, shape (n, 2, 2)
+        ``A^-1 + A^-1 C A^-1`` restricted to (u, v), with ``A`` and ``C`` the ZNSSD Fisher
+        matrices of the current image's (``f_W``) and the reference's (``B f_W``) gradients;
+        NaN for a subset without gradient. Times the noise variance: the covariance.
+    """
+    fw = as_image(blurred, "blurred", min_size=3)
+    fww = as_image(blurred_twice, "blurred_twice", min_size=3)
+    subset = check_odd_subset(subset)
+    shape = check_choice(shape, "shape", ("translation", "affine"))
+    derivative = check_choice(derivative, "derivative", ("bspline3", "bspline5", "central"))
+    pts = _points(fw, subset, None, points)
+    half = subset // 2
+    size = subset
+    gy, gx = _gradients(fw, derivative)
+    hy, hx = _gradients(fww, derivative)
+    r, c = pts[:, 0] - half, pts[:, 1] - half
+    f, gxp, gyp, hxp, hyp = (
+        np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), size * size)
+        for a in (fw, gx, gy, hx, hy)
+    )
+    fc = f - f.mean(axis=1, keepdims=True)
+    fn = np.sqrt(np.einsum("ij,ij->i", fc, fc))
+    fh = fc / np.where(fn > 0, fn, 1.0)[:, None]
+
+    def perp(jac: NDArray[np.float64]) -> NDArray[np.float64]:
+        jc = jac - jac.mean(axis=1, keepdims=True)
+        a = np.einsum("npk,np->nk", jc, fh)
+        return np.asarray(jc - fh[:, :, None] * a[:, None, :])
+
+    j1 = perp(raw_jacobian(gxp, gyp, half, shape))
+    j2 = perp(raw_jacobian(hxp, hyp, half, shape))
+    amat = np.matmul(j1.transpose(0, 2, 1), j1)
+    cmat = np.matmul(j2.transpose(0, 2, 1), j2)
+    out = np.full((len(pts), 2, 2), np.nan)
+    ok = np.isfinite(amat).all(axis=(1, 2)) & (np.linalg.cond(amat) < 1e12) & (fn > 0)
+    if ok.any():
+        ainv = np.linalg.inv(amat[ok])
+        cov = ainv + ainv @ cmat[ok] @ ainv
+        iv = 1 if shape == "translation" else 3  # v's column (raw_jacobian's order)
+        out[ok] = cov[:, [0, iv]][:, :, [0, iv]]
+    return out

@@ -24,6 +24,7 @@ __all__ = [
     "fig_status",
     "fig_time_series",
     "fig_w_histogram",
+    "matcher_label",
     "write_track_report",
 ]
 
@@ -32,6 +33,26 @@ def _figure(w: float, h: float) -> Any:
     from matplotlib.figure import Figure
 
     return Figure(figsize=(w, h), dpi=100)
+
+
+def matcher_label(attrs: Any) -> str:
+    """The matcher of a track, for the report: plain or blur-compensated (with its passes)
+    and, with chunks, how they ran."""
+    m = str(attrs.get("matcher", "plain"))
+    text = (
+        "plain (sigma: noise + blur-mismatch terms)"
+        if m == "plain"
+        else f"blur-compensated, blur vector per point from the track, "
+        f"{int(attrs.get('compensation_passes', 1))} pass(es) (sigma: noise term of the "
+        "blurred reference, no mismatch term)"
+    )
+    if "chunks_n_chunks" in attrs:
+        text += (
+            f"; {int(attrs['chunks_n_chunks'])} chunks of {int(attrs['chunks_chunk_frames'])} "
+            f"frames ({attrs.get('chunks_scheduler', 'serial')}, "
+            f"{int(attrs.get('chunks_n_resumed', 0))} resumed)"
+        )
+    return text
 
 
 def auto_points(ds: Any, n: int = 3) -> list[int]:
@@ -202,6 +223,7 @@ def write_track_report(
         {"quantity": "exposure (ms)", "value": float(a.get("exposure", np.nan)) * 1e3},
         {"quantity": "frame rate (Hz)", "value": float(a.get("fps", np.nan))},
         {"quantity": "noise (GL)", "value": float(a.get("noise_sigma", np.nan))},
+        {"quantity": "matcher", "value": matcher_label(a)},
         {"quantity": "valid point-frames (%)", "value": 100 * float(valid.mean())},
         {
             "quantity": "median sigma (px)",

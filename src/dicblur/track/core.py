@@ -27,7 +27,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -38,6 +38,7 @@ from ..errors import DicblurError, InputError
 from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
+from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
 from .kinematics import exposure_motion, exposure_skew
 from .median import median_test_frames
 from .uncertainty import (
@@ -50,7 +51,10 @@ from .uncertainty import (
 
 __all__ = [
     "ZNCC_RATIO",
+    "ChunkRunner",
     "TrackInterrupted",
+    "correlate_frame",
+    "frame_guess",
     "parse_frame_range",
     "parse_rate",
     "track",
@@ -167,6 +171,27 @@ def _grid_shape(rows: NDArray[np.int64], cols: NDArray[np.int64]) -> tuple[int, 
     return int(ur.size), int(uc.size)
 
 
+class ChunkRunner(Protocol):
+    """Runs the correlation of :func:`track` in chunks (:class:`.parallel.ChunkedRun`).
+
+    ``run`` returns a mapping with the lists ``frames``, ``u``, ``v``, ``zncc``,
+    ``status``, ``fallback`` (one entry per frame tracked) and ``error`` (the exception
+    that stopped it, or None). With ``compensate_blur`` the runner's ``compensate`` (the
+    signature of :func:`.compensate.compensated_pass`) runs the compensated passes.
+    """
+
+    def run(
+        self,
+        rec: Recording,
+        corr: Correlator,
+        *,
+        reference: int,
+        order: list[int],
+        correlator: dict[str, Any],
+        progress: Callable[[int, int], None] | None,
+    ) -> dict[str, Any]: ...
+
+
 @dataclass
 class _Tracked:
     """Raw per-frame results of the correlation loop, in frame order."""
@@ -236,7 +261,7 @@ def _rigid_shift(
 SEED_EVERY = 16
 
 
-def _seed_correlator(
+def seed_correlator(
     reference: NDArray[np.float64], corr: Correlator, opts: dict[str, Any]
 ) -> tuple[Correlator, NDArray[np.intp]] | None:
     """A Correlator on every :data:`SEED_EVERY`-th POI of ``corr`` (its reference image
@@ -245,7 +270,7 @@ def _seed_correlator(
     if idx.size < 16:
         return None
     pts = np.stack([corr.rows[idx], corr.cols[idx]], axis=1)
-    kw = {k: v for k, v in opts.items() if k != "step"}
+    kw = {k: v for k, v in opts.items() if k not in ("step", "roi", "points")}
     return Correlator(reference, points=pts, **kw), idx
 
 
@@ -268,6 +293,52 @@ def _seed_correction(
     return guess + d
 
 
+def frame_guess(
+    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    rig: list[NDArray[np.float64] | None],
+    img: NDArray[np.float64],
+    spectrum: NDArray[np.complex64],
+    base: NDArray[np.float64],
+    seeds: tuple[Correlator, NDArray[np.intp]] | None,
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """Initial guess (n, 2) px of the next frame ``img`` (None without history) and the
+    frame's rigid shift (2,) px (None without a phase-correlation peak), from the last
+    fields ``hist`` and their rigid shifts ``rig``, against the current reference (its
+    ``window_spectrum``); ``base`` is the displacement of that reference's POIs. The
+    serial loop and each chunk of :mod:`dicblur.track.parallel` call this one step."""
+    gu, gv, peak = _rigid_shift(spectrum, img)
+    g_abs = np.array([gu, gv]) + np.median(base, axis=0) if peak > 0.05 else None
+    guess = _extrapolate(hist)
+    if guess is not None and g_abs is not None:
+        rig_last = rig[-min(len(hist), 3) :]
+        if all(r is not None for r in rig_last):
+            # the extrapolated field's non-rigid part plus the measured rigid shift: the
+            # extrapolation of a sine at 10 frames per cycle misses by ~1-2.5 px (turning
+            # points), the phase correlation by ~0.1 px, and IC-GN needs about half the
+            # iterations from there
+            r = [np.asarray(x) for x in rig_last]
+            r_ext = (
+                r[-1]
+                if len(r) == 1
+                else 2 * r[-1] - r[-2]
+                if len(r) == 2
+                else 3 * r[-1] - 3 * r[-2] + r[-3]
+            )
+            guess = guess + (g_abs - r_ext)
+        else:
+            # no rigid shift for the frames of the extrapolation: move the guesses by the
+            # whole px when the shift is more than 1 px from their median
+            dmed = g_abs - np.median(guess, axis=0)
+            if np.hypot(*dmed) > 1.0:
+                guess = guess + np.rint(dmed)
+    if guess is not None:
+        # the seeds (1/16 of the points) from the guesses first: the median of their
+        # corrections removes the guesses' common error (~0.1-0.5 px after the rigid
+        # shift), so the rest need fewer iterations
+        guess = _seed_correction(seeds, img, guess - base) + base
+    return guess, g_abs
+
+
 @dataclass(frozen=True)
 class _FrameResult:
     u: NDArray[np.float64]
@@ -277,7 +348,7 @@ class _FrameResult:
     params: NDArray[np.float64]
 
 
-def _gradients(res: _FrameResult) -> NDArray[np.float64] | None:
+def frame_gradients(res: _FrameResult) -> NDArray[np.float64] | None:
     """The displacement gradients (n, 4) of an affine result for the next frame's start
     (the median of the converged points where a point did not converge), or None."""
     if res.params.shape[1] != 6:
@@ -290,7 +361,7 @@ def _gradients(res: _FrameResult) -> NDArray[np.float64] | None:
     return g
 
 
-def _correlate_frame(
+def correlate_frame(
     corr: Correlator,
     img: NDArray[np.float64],
     guess: NDArray[np.float64] | None,
@@ -398,6 +469,8 @@ def track(
     advice: bool = True,
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    chunks: ChunkRunner | None = None,
+    compensate_blur: bool = False,
 ) -> Any:
     """Track a recording and predict the random error of every point in every frame.
 
@@ -439,7 +512,16 @@ def track(
     workers : int, optional
         Threads of the correlation kernels.
     progress : callable(done, total), optional
-        Called after every frame.
+        Called after every frame (every chunk with ``chunks``).
+    chunks : ChunkRunner, optional
+        Track in chunks of frames, in parallel and resumable:
+        :class:`dicblur.track.parallel.ChunkedRun` (Dask workers, a scheduler, a store of
+        the finished chunks). Not with ``update_reference``.
+    compensate_blur : bool
+        Correlate every frame again with the blur-compensated matcher
+        (``Correlator(blur="given")``, the blur vector of each point from the first
+        pass's track) and predict sigma for that matcher (no mismatch term; the noise
+        term from the blurred reference): :mod:`.compensate`.
 
     Returns
     -------
@@ -478,6 +560,11 @@ def track(
     f0, f1 = (0, n_total) if frames is None else parse_frame_range(frames, n_total, "frames")
     if not f0 <= reference < f1:
         raise InputError(f"reference={reference}: must be one of the tracked frames {f0}..{f1 - 1}")
+    if chunks is not None and update_reference:
+        raise InputError(
+            "--update-reference: not available with --workers/--scheduler/--chunk-frames "
+            "(each renewal depends on all the frames before it); run without them"
+        )
     st_range = None
     if static is not None:
         st_range = parse_frame_range(static, n_total, "static")
@@ -497,7 +584,7 @@ def track(
         "workers": workers,
     }
     corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
-    seeds0 = seeds = _seed_correlator(ref_img, corr0, opts)
+    seeds0 = seeds = seed_correlator(ref_img, corr0, opts)
     # the last frame's displacement gradients (affine: the next frame's start)
     grads: NDArray[np.float64] | None = None
     grads0: NDArray[np.float64] | None = None
@@ -520,8 +607,28 @@ def track(
     error: BaseException | None = None
     t_start = time.perf_counter()
     t_corr = 0.0  # inside Correlator.correlate (the engine, with the loop's guesses)
+    if chunks is not None:
+        # chunks of frames, in parallel and resumable (track.parallel): the same per-frame
+        # step, each chunk started by the frames before it in place of the serial history
+        got = chunks.run(
+            rec,
+            corr0,
+            reference=reference,
+            order=order,
+            correlator={"roi": roi, "points": points, **opts},
+            progress=progress,
+        )
+        out = _Tracked(
+            list(got["frames"]),
+            list(got["u"]),
+            list(got["v"]),
+            list(got["zncc"]),
+            list(got["status"]),
+            list(got["fallback"]),
+        )
+        refs, error = [reference] * len(out.frames), got["error"]
     try:
-        for k in order:
+        for k in order if chunks is None else ():
             if k == reference - 1:  # backwards from the reference, on the first one
                 hist = [ref_field] if ref_field is not None else []
                 rig = [rig_ref] if ref_field is not None else []
@@ -529,39 +636,9 @@ def track(
                 seeds = seeds0
                 grads = grads0
             img = rec.frame(k)
-            # the frame's rigid shift (sub-pixel phase correlation of the central window)
-            gu, gv, peak = _rigid_shift(spectrum[ref_now], img)
-            g_abs = np.array([gu, gv]) + np.median(base, axis=0) if peak > 0.05 else None
-            guess = _extrapolate(hist)
-            if guess is not None and g_abs is not None:
-                rig_last = rig[-min(len(hist), 3) :]
-                if all(r is not None for r in rig_last):
-                    # the extrapolated field's non-rigid part plus the measured rigid
-                    # shift: the extrapolation of a sine at 10 frames per cycle misses by
-                    # ~1-2.5 px (turning points), the phase correlation by ~0.1 px, and
-                    # IC-GN needs about half the iterations from there
-                    r = [np.asarray(x) for x in rig_last]
-                    r_ext = (
-                        r[-1]
-                        if len(r) == 1
-                        else 2 * r[-1] - r[-2]
-                        if len(r) == 2
-                        else 3 * r[-1] - 3 * r[-2] + r[-3]
-                    )
-                    guess = guess + (g_abs - r_ext)
-                else:
-                    # no rigid shift for the frames of the extrapolation: move the guesses
-                    # by the whole px when the shift is more than 1 px from their median
-                    dmed = g_abs - np.median(guess, axis=0)
-                    if np.hypot(*dmed) > 1.0:
-                        guess = guess + np.rint(dmed)
+            guess, g_abs = frame_guess(hist, rig, img, spectrum[ref_now], base, seeds)
             t_c = time.perf_counter()
-            if guess is not None:
-                # the seeds (1/16 of the points) from the guesses first: the median of
-                # their corrections removes the guesses' common error (~0.1-0.5 px after
-                # the rigid shift), so the rest need fewer iterations
-                guess = _seed_correction(seeds, img, guess - base) + base
-            res, fb = _correlate_frame(
+            res, fb = correlate_frame(
                 corr, img, None if guess is None else guess - base, ok0, grads
             )
             t_corr += time.perf_counter() - t_c
@@ -587,13 +664,13 @@ def track(
                     ).astype(int)
                     new = Correlator(prev[1], points=pts, **opts)
                     g2 = None if guess is None else guess - last
-                    res2, fb2 = _correlate_frame(new, img, g2, ok0)
+                    res2, fb2 = correlate_frame(new, img, g2, ok0)
                     share2 = float(np.mean(res2.status[ok0] == PointStatus.CONVERGED))
                     if share2 > share:
                         # increments of the subset now centred at the rounded position:
                         # within half a px of the material point, the field locally uniform
                         corr, base, ref_now, fb = new, last, prev[0], fb or fb2
-                        seeds = _seed_correlator(prev[1], new, opts)
+                        seeds = seed_correlator(prev[1], new, opts)
                         spectrum[ref_now] = window_spectrum(prev[1])
                         res = res2
             out.frames.append(k)
@@ -607,7 +684,7 @@ def track(
             hist.append((np.where(good, out.u[-1], np.nan), np.where(good, out.v[-1], np.nan)))
             rig.append(g_abs)
             del rig[:-3]
-            grads = _gradients(res)
+            grads = frame_gradients(res)
             if k == reference:
                 ref_field, rig_ref, grads0 = hist[-1], g_abs, grads
             del hist[:-3]  # the extrapolation uses the last three
@@ -616,6 +693,23 @@ def track(
                 progress(len(out.frames), len(order))
     except (DicblurError, KeyboardInterrupt, OSError, MemoryError) as exc:
         error = exc
+    comp_info: dict[str, Any] = {"matcher": MATCHER_PLAIN}
+    if compensate_blur and out.frames and error is None:
+        try:
+            comp_info = compensate_track(
+                rec,
+                out,
+                reference=reference,
+                correlator={"roi": roi, "points": points, **opts},
+                fps=fps_v,
+                exposure=t_exp,
+                half_window=half_window,
+                grid_shape=corr0.grid_shape,
+                runner=chunks,
+                progress=progress,
+            )
+        except (DicblurError, KeyboardInterrupt, OSError, MemoryError) as exc:
+            error = exc  # the first (plain) pass is kept
     elapsed = time.perf_counter() - t_start
     if not out.frames:
         if error is not None:
@@ -657,6 +751,9 @@ def track(
         except (DicblurError, OSError) as exc:
             if noise_est is None:
                 notes.append(f"no noise estimate: {exc}")
+    if chunks is not None:
+        settings.update({f"chunks_{k}": v for k, v in getattr(chunks, "summary", {}).items()})
+    settings.update(comp_info)
     settings["update_reference"] = int(update_reference)
     settings["n_reference_updates"] = len(set(refs)) - 1
     ds = _assemble(
@@ -675,6 +772,11 @@ def track(
         threshold=median_threshold,
         advice=advice and error is None,
         ref_img=ref_img,
+        blur_table=(
+            build_compensated_table
+            if comp_info["matcher"] != MATCHER_PLAIN
+            else build_blur_table
+        ),
     )
     if error is not None:
         what = "interrupted" if isinstance(error, KeyboardInterrupt) else f"stopped: {error}"
@@ -705,6 +807,7 @@ def _assemble(
     threshold: float,
     advice: bool,
     ref_img: NDArray[np.float64],
+    blur_table: Callable[..., Any] = build_blur_table,
 ) -> Any:
     import xarray as xr
 
@@ -796,7 +899,7 @@ def _assemble(
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
-        table = build_blur_table(
+        table = blur_table(
             ref_img,
             centres[pin],
             subset=corr.subset,

@@ -253,9 +253,13 @@ class Correlator:
         self._gx32[:, :cols_img] = gx
         self._gy32 = np.zeros_like(self._f32)
         self._gy32[:, :cols_img] = gy
-        self._kernel_args = tuple(
-            np.ascontiguousarray(a)
-            for a in (rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm)
+        # the kernels' records (dicblur.dic.kernels.common)
+        self._images = kernels.ReferenceImages(self._f32, self._gx32, self._gy32)
+        self._subsets = kernels.Subsets(
+            *(
+                np.ascontiguousarray(a)
+                for a in (rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm)
+            )
         )
         self._coef_buf = np.zeros((rows_img + 2 * PAD, cols_img + 2 * PAD + extra), np.float32)
         self._all = np.arange(len(rows), dtype=np.intp)
@@ -395,21 +399,25 @@ class Correlator:
         n = self.n_points if self.shape == "translation" else 0
         if 3 * 4 * n * ng > self.pack_limit_bytes:
             n = 0
-        self._packed = tuple(np.zeros((n, ng), np.float32) for _ in range(3))
+        self._packed = kernels.Packed(*(np.zeros((n, ng), np.float32) for _ in range(3)))
         if n:
-            rows, cols, _, _, _, fmean, _ = self._kernel_args
             kernels.pack_reference(
-                self._f32,
-                self._gx32,
-                self._gy32,
-                fmean,
-                rows,
-                cols,
-                self.half,
-                self._w,
-                self._status0,
-                *self._packed,
+                self._images, self._subsets, self.half, self._w, self._status0, self._packed
             )
+
+    def _settings(self, width: int, max_iter: int | None) -> kernels.Settings:
+        """The kernels' scalar record (``max_iter`` None: ``max_iterations``)."""
+        return kernels.settings(
+            self.image_shape[0],
+            self.image_shape[1],
+            self.order,
+            self.half,
+            width,
+            self.max_iterations if max_iter is None else max_iter,
+            self.tolerance,
+            self.min_zncc,
+            float(self.subset),
+        )
 
     @property
     def n_points(self) -> int:
@@ -444,46 +452,20 @@ class Correlator:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
         """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
         ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
-        rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
-        n = self.n_points
-        out_p = np.empty((n, 2))
-        out_z = np.empty(n)
-        out_i = np.empty(n, np.int64)
-        out_s = np.empty(n, np.uint8)
-        kernels.icgn_translation(  # type: ignore[call-arg]
+        out = kernels.outputs(self.n_points, 2)
+        kernels.icgn_translation(
             coef,
-            self.image_shape[0],
-            self.image_shape[1],
-            self.order,
-            self._f32,
-            self._gx32,
-            self._gy32,
-            rows,
-            cols,
-            self.half,
-            self._w,
-            hinv,
-            jsum,
-            avec,
-            fmean,
-            fnorm,
+            self._images,
+            self._subsets,
+            self._packed,
+            self._settings(self._w, max_iter),
             p0,
             status_in,
-            self.max_iterations if max_iter is None else max_iter,
-            self.tolerance,
-            self.min_zncc,
-            float(self.subset),
-            first,
-            second,
-            source,
+            kernels.Passes(first, second, source),
             numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
-            *self._packed,
-            out_p,
-            out_z,
-            out_i,
-            out_s,
+            out,
         )
-        return out_p, out_z, out_i, out_s
+        return out.p, out.zncc, out.iterations, out.status
 
     def _run_icgn(
         self,
@@ -501,55 +483,29 @@ class Correlator:
             st_full[sel] = status_in
             out = self._translation(coef, full, st_full, sel, self._none, self._none, max_iter)
             return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
-        prep = self._prep
         if idx is None:
-            rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
+            subsets = self._subsets
         else:
             key = id(idx)
             cached = self._args_cache.get(key)
             if cached is not None and cached[0] is idx:
-                rows, cols, hinv, jsum, avec, fmean, fnorm = cached[1]
+                subsets = cached[1]
             else:
-                rows, cols = self.rows[idx], self.cols[idx]
-                hinv, jsum, avec = prep.hinv[idx], prep.jsum[idx], prep.avec[idx]
-                fmean, fnorm = prep.fmean[idx], prep.fnorm[idx]
+                subsets = kernels.Subsets(*(a[idx] for a in self._subsets))
                 if idx is self._seeds or (self._rest is not None and idx is self._rest):
-                    self._args_cache[key] = (idx, (rows, cols, hinv, jsum, avec, fmean, fnorm))
+                    self._args_cache[key] = (idx, subsets)
         n = len(self.rows) if idx is None else len(idx)
-        k = N_PARAMS[self.shape]
-        out_p = np.empty((n, k))
-        out_z = np.empty(n)
-        out_i = np.empty(n, np.int64)
-        out_s = np.empty(n, np.uint8)
+        out = kernels.outputs(n, N_PARAMS[self.shape])
         kernels.icgn_affine(
             coef,
-            self.image_shape[0],
-            self.image_shape[1],
-            self.order,
-            self._f32,
-            self._gx32,
-            self._gy32,
-            rows,
-            cols,
-            self.half,
-            self._tw,
-            hinv,
-            jsum,
-            avec,
-            fmean,
-            fnorm,
+            self._images,
+            subsets,
+            self._settings(self._tw, max_iter),
             np.ascontiguousarray(p0),
             np.ascontiguousarray(status_in),
-            self.max_iterations if max_iter is None else max_iter,
-            self.tolerance,
-            self.min_zncc,
-            float(self.subset),
-            out_p,
-            out_z,
-            out_i,
-            out_s,
+            out,
         )
-        return out_p, out_z, out_i, out_s
+        return out.p, out.zncc, out.iterations, out.status
 
     def _seeded_icgn(
         self, coef: NDArray[np.float32], p0: NDArray[np.float64], status0: NDArray[np.uint8]

@@ -32,7 +32,19 @@ correlation compiles only the modules its shape calls.
 from __future__ import annotations
 
 from .affine import icgn_affine
-from .common import PAD, STALL_ITERATIONS, compose_inverse_affine
+from .common import (
+    PAD,
+    STALL_ITERATIONS,
+    Outputs,
+    Packed,
+    Passes,
+    ReferenceImages,
+    Settings,
+    Subsets,
+    compose_inverse_affine,
+    outputs,
+    settings,
+)
 from .prefilter import prefilter_padded
 from .spline import weights
 from .translation import flat_lengths, flat_width, icgn_translation, pack_reference
@@ -40,12 +52,20 @@ from .translation import flat_lengths, flat_width, icgn_translation, pack_refere
 __all__ = [
     "PAD",
     "STALL_ITERATIONS",
+    "Outputs",
+    "Packed",
+    "Passes",
+    "ReferenceImages",
+    "Settings",
+    "Subsets",
     "compose_inverse_affine",
     "flat_lengths",
     "flat_width",
     "icgn_affine",
     "icgn_translation",
+    "outputs",
     "pack_reference",
     "prefilter_padded",
+    "settings",
     "weights",
 ]

@@ -7,7 +7,13 @@ import importlib
 
 import pytest
 
-MODULES = ["dicblur.blur", "dicblur.patterns", "dicblur.metrics", "dicblur.dic.correlator"]
+MODULES = [
+    "dicblur.blur",
+    "dicblur.patterns",
+    "dicblur.metrics",
+    "dicblur.dic.correlator",
+    "dicblur.dic.settings",
+]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -168,12 +168,8 @@ def simulate_batch(
     )
     correlator = Correlator(
         _noisy(reference, spec, batch.noise, ref_seed),
-        subset=batch.subset,
+        settings=spec.matcher(batch.subset),
         points=points,
-        shape=spec.dic_shape,  # type: ignore[arg-type]
-        interpolation=spec.interpolation,
-        max_iterations=spec.max_iterations,
-        tolerance=spec.tolerance,
         workers=1,
         blur="given" if spec.compensation == "given" else "none",
     )

@@ -63,10 +63,13 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import ConfigError, InputError
 from ..io import check_pixels
+
+if TYPE_CHECKING:
+    from ..dic.settings import MatcherSettings
 
 __all__ = [
     "BLUR_METHODS",
@@ -208,6 +211,19 @@ class CampaignSpec:
     base_dir: str = field(default=".", compare=False)
 
     # -- derived ------------------------------------------------------------------------
+    def matcher(self, subset: int) -> MatcherSettings:
+        """The DIC matcher settings of the ``dic`` section for one of its ``subsets``."""
+        from ..dic.settings import MatcherSettings
+
+        return MatcherSettings(
+            subset=subset,
+            step=self.step,
+            shape=self.dic_shape,  # type: ignore[arg-type]
+            interpolation=self.interpolation,  # type: ignore[arg-type]
+            max_iterations=self.max_iterations,
+            tolerance=self.tolerance,
+        )
+
     @property
     def dims(self) -> dict[str, int]:
         """Size of each dimension of the results, in storage order."""

@@ -182,8 +182,9 @@ def icgn_affine(coef, images, subsets, cfg, p0, status_in, out):  # pragma: no c
     span less than one pixel, one integer base covers the subset and every sample reads
     the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
     with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
-    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout as in
-    :func:`icgn_translation`.
+    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
+    :func:`icgn_translation` (``cfg.width`` = ``tw``, a multiple of 16 >= subset); ``p0``
+    (n, 6), ``status_in`` (n,).
     """
     n = subsets.rows.shape[0]
     # chunks of 16 POIs, each a call of the serial _affine_points: a parfor whose body is

@@ -370,16 +370,22 @@ def icgn_translation(
     norm ``sqrt(sum (f - fmean)^2)`` of the reference subset. See ``icgn.py`` for the
     algebra (the update needs only five running sums per iteration).
 
-    Two passes in one call (one dispatch): the POIs ``first`` start at ``p0[k]``; then each
-    POI ``second[m]`` starts at the result of POI ``source[m]`` when that converged, else at
-    its own ``p0``. Outputs (all of length n, indexed by POI) are written only for the POIs
-    listed. ``status_in[k] != 0`` is passed through. ``nthr``: numba's thread count limit
-    (``numba.config.NUMBA_NUM_THREADS``, sizes the per-thread buffers).
+    Arguments are records (:mod:`.common`): ``images`` (:class:`ReferenceImages`),
+    ``subsets`` (:class:`Subsets`, the per-POI data above), ``packed`` (:class:`Packed`),
+    ``cfg`` (:class:`Settings`, ``width`` = ``w``), ``passes`` (:class:`Passes`), ``out``
+    (:class:`Outputs`); ``p0`` (n, 2) and ``status_in`` (n,) per call.
+
+    Two passes in one call (one dispatch): the POIs ``passes.first`` start at ``p0[k]``;
+    then each POI ``second[m]`` starts at the result of POI ``source[m]`` when that
+    converged, else at its own ``p0``. Outputs (all of length n, indexed by POI) are
+    written only for the POIs listed. ``status_in[k] != 0`` is passed through. ``nthr``:
+    numba's thread count limit (``numba.config.NUMBA_NUM_THREADS``, sizes the per-thread
+    buffers).
 
     Layout: ``coef`` holds the padded coefficients of the current image (image pixel
     ``(r, c)`` at ``(r + PAD, c + PAD)``) with at least ``w`` extra columns on the right;
-    ``f``, ``gx``, ``gy`` are float32 images with at least ``w`` extra columns. ``w`` is
-    :func:`flat_width`. ``fpk``, ``gxpk``, ``gypk``: the flat reference subsets from
+    ``images.f``, ``.gx``, ``.gy`` are float32 images with at least ``w`` extra columns.
+    ``w`` is :func:`flat_width`. ``packed``: the flat reference subsets from
     :func:`pack_reference`, shape (n, ng), or shape (0, ng) to copy them per POI into
     per-thread buffers instead (when n x ng is too large to keep).
     """

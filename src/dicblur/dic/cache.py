@@ -2,7 +2,7 @@
 
 The kernels of :mod:`dicblur.dic.kernels` are compiled by numba on their first call
 (``cache=True``: once per installation and kernel source, then loaded from disk in about a
-second). The first run after an install therefore spends 10-15 s compiling; the CLI
+second). The first run after an install therefore spends about 20 s compiling; the CLI
 says so before it starts (:func:`kernels_cached`). Only the kernels of the requested shape
 function are compiled: numba compiles lazily, per kernel and argument types.
 """
@@ -14,7 +14,7 @@ from typing import Literal
 __all__ = ["COMPILE_NOTICE", "compile_kernels", "kernels_cached"]
 
 #: The line the CLI prints on stderr before a cold compile.
-COMPILE_NOTICE = "compiling the DIC kernels, first run only (~15 s)"
+COMPILE_NOTICE = "compiling the DIC kernels, first run only (~20 s)"
 
 # The entry points a correlation calls, per shape function (their callees are inlined or
 # cached with them).

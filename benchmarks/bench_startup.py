@@ -7,6 +7,13 @@ shared machine), plus the number of modules the case imported (dicblur's and all
 Usage::
 
     .venv/bin/python benchmarks/bench_startup.py [--repeats 7] [--src OTHER/src] [--tag before]
+    .venv/bin/python benchmarks/bench_startup.py --cold-compile [--src OTHER/src] [--tag before]
+
+``--cold-compile`` instead times the first ``dicblur correlate`` of a 512^2 pair (speckle
+4 px, softness 1, shift (0.3, -0.2) px, noise 2 GL; default settings: subset 21, step 10,
+affine; then ``--shape translation``) in a fresh interpreter with an empty numba cache
+(``NUMBA_CACHE_DIR`` a new folder), ``--repeats`` times per shape (default 1 there), and
+numba's compile time per kernel (its compile events, CPU s, exclusive of the callees).
 
 ``--src`` puts another source tree first on ``PYTHONPATH`` (e.g. an exported older commit),
 so the same interpreter and dependencies measure the old and the new code side by side.
@@ -56,16 +63,111 @@ def run_case(code: str, env: dict[str, str]) -> tuple[float, float, list[int]]:
     return wall, cpu, counts
 
 
+_COLD = """
+import json, sys, time
+from numba.core import event
+records = []
+class Listen(event.Listener):
+    def on_start(self, e):
+        records.append((time.process_time(), 1, e))
+    def on_end(self, e):
+        records.append((time.process_time(), 0, e))
+event.register("numba:compile", Listen())
+from dicblur.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit:
+    pass
+stack, excl = [], {}
+for t, start, e in records:
+    name = e.data["dispatcher"].py_func.__name__
+    if start:
+        stack.append([name, t, 0.0])
+    else:
+        name, t0, inner = stack.pop()
+        excl[name] = excl.get(name, 0.0) + (t - t0) - inner
+        if stack:
+            stack[-1][2] += t - t0
+print(json.dumps(excl), file=sys.stderr)
+"""
+
+
+def cold_compile(opts: argparse.Namespace, env: dict[str, str], run: Run) -> None:
+    import tempfile
+
+    import numpy as np
+
+    from dicblur import speckle_pattern
+    from dicblur.io import save_image
+
+    tmp = tempfile.mkdtemp(prefix="dicblur-cold-")
+    ky = np.fft.fftfreq(512)[:, None]
+    kx = np.fft.fftfreq(512)[None, :]
+    rng = np.random.default_rng([2024, 99])
+    ref0 = speckle_pattern((512, 512), speckle_size=4, softness=1.0, seed=2024)
+    cur0 = np.fft.ifft2(np.fft.fft2(ref0) * np.exp(-2j * np.pi * (ky * -0.2 + kx * 0.3))).real
+    for name, img in (("ref.tif", ref0), ("cur.tif", cur0)):
+        save_image(f"{tmp}/{name}", np.clip(img + rng.normal(0, 2.0, img.shape), 0, 255))
+    rows = []
+    print("| shape | wall (s) | CPU (s) | compile CPU (s) | top kernels (compile CPU s) |")
+    print("|---|---|---|---|---|")
+    for shape in ("affine", "translation"):
+        for _ in range(opts.repeats):
+            cache = tempfile.mkdtemp(prefix="numba-cold-")
+            args = ["correlate", f"{tmp}/ref.tif", f"{tmp}/cur.tif"]
+            if shape != "affine":
+                args += ["--shape", shape]
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t0 = time.perf_counter()
+            proc = subprocess.run(
+                [sys.executable, "-c", _COLD, *args],
+                env=dict(env, NUMBA_CACHE_DIR=cache),
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            wall = time.perf_counter() - t0
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+            excl = json.loads(proc.stderr.strip().splitlines()[-1])
+            top = sorted(excl.items(), key=lambda kv: -kv[1])[:6]
+            row = {
+                "shape": shape,
+                "wall_s": round(wall, 2),
+                "cpu_s": round(cpu, 2),
+                "compile_cpu_s": round(sum(excl.values()), 2),
+                "kernels_cpu_s": {k: round(v, 2) for k, v in top},
+                "notice": "first run only" in proc.stderr,
+            }
+            rows.append(row)
+            tops = ", ".join(f"{k} {v:.1f}" for k, v in top)
+            print(
+                f"| {shape} | {wall:.1f} | {cpu:.1f} | {row['compile_cpu_s']:.1f} | {tops} |",
+                flush=True,
+            )
+    out = run.write({"src": opts.src, "cold_compile": rows})
+    print(f"load {run.load_start} -> {run.record({})['provenance']['load_end']}; wrote {out}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--repeats", type=int, default=None, help="default 7 (1 with --cold-compile)")
+    ap.add_argument(
+        "--cold-compile", action="store_true", help="first correlate on an empty numba cache"
+    )
     ap.add_argument("--src", default=None, help="source tree to import instead")
     ap.add_argument("--tag", default="", help="suffix of the result file")
     opts = ap.parse_args()
-    run = Run("startup" + (f"_{opts.tag}" if opts.tag else ""))
+    if opts.repeats is None:
+        opts.repeats = 1 if opts.cold_compile else 7
+    stem = "cold_compile" if opts.cold_compile else "startup"
+    run = Run(stem + (f"_{opts.tag}" if opts.tag else ""))
     env = dict(os.environ)
     if opts.src:
         env["PYTHONPATH"] = opts.src + os.pathsep + env.get("PYTHONPATH", "")
+    if opts.cold_compile:
+        cold_compile(opts, env, run)
+        return
     rows = []
     print("| case | wall median (s) | CPU median (s) | modules | dicblur modules |")
     print("|---|---|---|---|---|")

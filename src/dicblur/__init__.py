@@ -45,7 +45,7 @@ _SUBMODULES: dict[str, tuple[str, ...]] = {
         "design_problem",
         "export_pattern",
     ),
-    "dic": ("Correlator", "DICResult", "PointStatus", "correlate"),
+    "dic": ("Correlator", "DICResult", "MatcherSettings", "PointStatus", "correlate"),
     "errors": (
         "ConfigError",
         "DicblurError",
@@ -140,7 +140,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
         design_problem,
         export_pattern,
     )
-    from .dic import Correlator, DICResult, PointStatus, correlate
+    from .dic import Correlator, DICResult, MatcherSettings, PointStatus, correlate
     from .errors import (
         ConfigError,
         DicblurError,
@@ -217,6 +217,7 @@ __all__ = [
     "FitError",
     "ImageReadError",
     "InputError",
+    "MatcherSettings",
     "PatternFamily",
     "PatternMetrics",
     "PatternPrediction",

@@ -181,12 +181,8 @@ def simulate_batch(
     def make_correlator(ref: NDArray[np.float64], pts: NDArray[np.intp], blur: str) -> Any:
         return Correlator(
             ref,
-            subset=batch.subset,
+            settings=spec.matcher(batch.subset),
             points=pts,
-            shape=spec.dic_shape,  # type: ignore[arg-type]
-            interpolation=spec.interpolation,
-            max_iterations=spec.max_iterations,
-            tolerance=spec.tolerance,
             workers=1,
             blur=blur,  # type: ignore[arg-type]
         )

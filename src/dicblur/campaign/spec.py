@@ -64,11 +64,14 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..checks import bad_value, check_choice, check_finite_number, check_integer
 from ..errors import ConfigError, DicblurError, InputError
 from ..io import check_pixels
+
+if TYPE_CHECKING:
+    from ..dic.settings import MatcherSettings
 
 __all__ = [
     "BLUR_METHODS",
@@ -211,6 +214,19 @@ class CampaignSpec:
     base_dir: str = field(default=".", compare=False)
 
     # -- derived ------------------------------------------------------------------------
+    def matcher(self, subset: int) -> MatcherSettings:
+        """The DIC matcher settings of the ``dic`` section for one of its ``subsets``."""
+        from ..dic.settings import MatcherSettings
+
+        return MatcherSettings(
+            subset=subset,
+            step=self.step,
+            shape=self.dic_shape,  # type: ignore[arg-type]
+            interpolation=self.interpolation,  # type: ignore[arg-type]
+            max_iterations=self.max_iterations,
+            tolerance=self.tolerance,
+        )
+
     @property
     def dims(self) -> dict[str, int]:
         """Size of each dimension of the results, in storage order."""

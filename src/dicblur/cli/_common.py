@@ -87,7 +87,7 @@ def notice_on_start(progress: Any, shape: str, enabled: bool) -> Any:
 
 def notice_compile(shape: str = "affine") -> None:
     """Say on stderr, before a cold numba compile of the DIC kernels, that it is one
-    (the first run after an install compiles for ~20 s with nothing else on screen)."""
+    (the first run after an install compiles for about 20 s with nothing else on screen)."""
     import sys
 
     from ..dic.cache import COMPILE_NOTICE, kernels_cached

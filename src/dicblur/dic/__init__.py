@@ -12,11 +12,13 @@ from .compensation import blur_reference, deblur_wiener
 from .correlator import Correlator, correlate
 from .outliers import neighbour_median, normalized_median_test
 from .result import DICResult
+from .settings import MatcherSettings
 from .status import PointStatus
 
 __all__ = [
     "Correlator",
     "DICResult",
+    "MatcherSettings",
     "PointStatus",
     "blur_reference",
     "correlate",

@@ -2,7 +2,7 @@
 
 The kernels of :mod:`dicblur.dic.kernels` are compiled by numba on their first call
 (``cache=True``: once per installation and kernel source, then loaded from disk in about a
-second). The first run after an install therefore spends 20 s or more compiling; the CLI
+second). The first run after an install therefore spends about 20 s compiling; the CLI
 says so before it starts (:func:`kernels_cached`). Only the kernels of the requested shape
 function are compiled: numba compiles lazily, per kernel and argument types.
 """
@@ -22,13 +22,13 @@ _ENTRY = {
     "translation": (
         ("translation", "icgn_translation"),
         ("translation", "pack_reference"),
-        ("prefilter", "filter_axis0"),
-        ("prefilter", "filter_axis1"),
+        ("prefilter", "prefilter_parallel"),
+        ("prefilter", "prefilter_serial"),
     ),
     "affine": (
         ("affine", "icgn_affine"),
-        ("prefilter", "filter_axis0"),
-        ("prefilter", "filter_axis1"),
+        ("prefilter", "prefilter_parallel"),
+        ("prefilter", "prefilter_serial"),
     ),
 }
 

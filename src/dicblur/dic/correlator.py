@@ -12,6 +12,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from enum import Enum
 from typing import Any, Literal
 
 import numba
@@ -21,7 +22,6 @@ from numpy.typing import ArrayLike, NDArray
 from ..checks import (
     as_image,
     check_choice,
-    check_odd_subset,
     check_positive,
     check_subset_fits,
     check_textured,
@@ -39,19 +39,24 @@ from .compensation import (
 )
 from .icgn import N_PARAMS, prepare_subsets
 from .initial import global_shift, subset_fftcc, window_spectrum
-from .interpolation import PAD, bspline_coefficients, bspline_gradients, order_of
+from .interpolation import PAD, bspline_coefficients, bspline_gradients
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen, neighbour_medians
 from .result import DICResult
+from .settings import INITIAL_METHODS, SHAPES, MatcherSettings, Shape, check_integer
 from .status import PointStatus
 
 __all__ = ["INITIAL_METHODS", "SHAPES", "Correlator", "correlate"]
 
-Shape = Literal["affine", "translation"]
 BlurMode = Literal["none", "given", "estimate"]
-SHAPES: tuple[str, ...] = ("affine", "translation")
-#: ``fftcc``: global phase correlation, then per-subset FFT-CC for the POIs that fail;
-#: ``subset``: per-subset FFT-CC for every POI; ``zero``: start every POI at (0, 0).
-INITIAL_METHODS: tuple[str, ...] = ("fftcc", "subset", "zero")
+
+
+class _Unset(Enum):
+    """Marks a matcher keyword of :class:`Correlator` that was not given."""
+
+    UNSET = 0
+
+
+_UNSET = _Unset.UNSET
 
 _RETRY = (
     PointStatus.MAX_ITERATIONS,
@@ -101,12 +106,6 @@ class _BlurredReference:
     images: tuple[NDArray[np.float64], ...] = ()
 
 
-def _check_int(value: Any, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise InputError(f"{name}={describe(value)}: must be an integer >= {minimum}")
-    return int(value)
-
-
 class Correlator:
     """Subset DIC against one prepared reference image.
 
@@ -123,6 +122,10 @@ class Correlator:
     ----------
     reference : array_like, shape (rows, cols)
         Reference image, grey levels (finite).
+    settings : MatcherSettings, optional
+        The matcher's settings in one record (:class:`~dicblur.dic.MatcherSettings`).
+        The keywords ``subset`` to ``median_test`` below build one, or override the
+        fields of ``settings`` they name; :attr:`settings` holds the result.
     subset : int
         Odd subset size, px.
     step : int
@@ -191,57 +194,77 @@ class Correlator:
         self,
         reference: ArrayLike,
         *,
-        subset: int = 21,
-        step: int = 10,
+        settings: MatcherSettings | None = None,
+        subset: int | _Unset = _UNSET,
+        step: int | _Unset = _UNSET,
         roi: Sequence[int] | None = None,
         points: ArrayLike | None = None,
-        shape: Shape = "affine",
-        interpolation: str = "bspline3",
-        initial: str = "fftcc",
-        max_iterations: int = 50,
-        tolerance: float = 1e-4,
+        shape: Shape | _Unset = _UNSET,
+        interpolation: str | _Unset = _UNSET,
+        initial: str | _Unset = _UNSET,
+        max_iterations: int | _Unset = _UNSET,
+        tolerance: float | _Unset = _UNSET,
         noise_sigma: float | None = None,
-        min_zncc: float = 0.6,
+        min_zncc: float | _Unset = _UNSET,
         workers: int | None = None,
-        max_residual: float | None = 2.0,
-        median_test: bool = False,
+        max_residual: float | _Unset | None = _UNSET,
+        median_test: bool | _Unset = _UNSET,
         blur: BlurMode = "none",
         max_blur_sigma: float = 0.5,
         max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
     ) -> None:
         t0 = time.perf_counter()
+        given: dict[str, Any] = {
+            k: v
+            for k, v in (
+                ("subset", subset),
+                ("step", step),
+                ("shape", shape),
+                ("interpolation", interpolation),
+                ("initial", initial),
+                ("max_iterations", max_iterations),
+                ("tolerance", tolerance),
+                ("min_zncc", min_zncc),
+                ("max_residual", max_residual),
+                ("median_test", median_test),
+            )
+            if v is not _UNSET
+        }
+        if settings is not None and not isinstance(settings, MatcherSettings):
+            raise InputError(
+                f"settings={describe(settings)}: expected a dicblur.dic.MatcherSettings"
+            )
+        # validated once, by MatcherSettings
+        cfg = replace(settings, **given) if settings is not None else MatcherSettings(**given)
+        #: The matcher's settings (subset, step, shape, interpolation, ...).
+        self.settings: MatcherSettings = cfg
         self.blur: str = check_choice(blur, "blur", BLUR_MODES)
         self.max_blur_sigma = check_positive(max_blur_sigma, "max_blur_sigma")
         ref = as_image(reference, "reference", min_size=3)
-        self.subset = check_odd_subset(subset)
+        self.subset = cfg.subset
         check_subset_fits(self.subset, ref.shape)
         check_textured(ref, "reference")
-        self.step = _check_int(step, "step", 1)
-        self.shape: str = check_choice(shape, "shape", SHAPES)
-        self.interpolation = interpolation
-        self.order = order_of(interpolation)
-        self.initial = check_choice(initial, "initial", INITIAL_METHODS)
-        self.max_iterations = _check_int(max_iterations, "max_iterations", 1)
-        self.tolerance = check_positive(tolerance, "tolerance")
+        self.step = cfg.step
+        self.shape: str = cfg.shape
+        self.interpolation: str = cfg.interpolation
+        self.order = cfg.order
+        self.initial: str = cfg.initial
+        self.max_iterations = cfg.max_iterations
+        self.tolerance = cfg.tolerance
         self.noise_sigma = (
             None
             if noise_sigma is None
             else check_positive(noise_sigma, "noise_sigma", allow_zero=True)
         )
-        self.min_zncc = float(min_zncc)
-        if not -1.0 <= self.min_zncc <= 1.0:
-            raise InputError(f"min_zncc={min_zncc!r}: must lie in [-1, 1]")
-        self.workers = None if workers is None else _check_int(workers, "workers", 1)
-        self.max_residual = (
-            None if max_residual is None else check_positive(max_residual, "max_residual")
-        )
+        self.min_zncc = cfg.min_zncc
+        self.workers = None if workers is None else check_integer(workers, "workers", 1)
+        self.max_residual = cfg.max_residual
         self.max_predicted_sigma = (
             None
             if max_predicted_sigma is None
             else check_positive(max_predicted_sigma, "max_predicted_sigma")
         )
-        if not isinstance(median_test, bool | np.bool_):
-            raise InputError(f"median_test={describe(median_test)}: must be True or False")
+        median_test = cfg.median_test
         self.image_shape: tuple[int, int] = (int(ref.shape[0]), int(ref.shape[1]))
         half = self.subset // 2
         self.half = half
@@ -275,9 +298,13 @@ class Correlator:
         self._gx32[:, :cols_img] = gx
         self._gy32 = np.zeros_like(self._f32)
         self._gy32[:, :cols_img] = gy
-        self._kernel_args = tuple(
-            np.ascontiguousarray(a)
-            for a in (rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm)
+        # the kernels' records (dicblur.dic.kernels.common)
+        self._images = kernels.ReferenceImages(self._f32, self._gx32, self._gy32)
+        self._subsets = kernels.Subsets(
+            *(  # type: ignore[arg-type]
+                np.ascontiguousarray(a)
+                for a in (rows, cols, prep.hinv, prep.jsum, prep.avec, prep.fmean, prep.fnorm)
+            )
         )
         self._coef_buf = np.zeros((rows_img + 2 * PAD, cols_img + 2 * PAD + extra), np.float32)
         self._all = np.arange(len(rows), dtype=np.intp)
@@ -426,21 +453,25 @@ class Correlator:
         n = self.n_points if self.shape == "translation" else 0
         if 3 * 4 * n * ng > self.pack_limit_bytes:
             n = 0
-        self._packed = tuple(np.zeros((n, ng), np.float32) for _ in range(3))
+        self._packed = kernels.Packed(*(np.zeros((n, ng), np.float32) for _ in range(3)))
         if n:
-            rows, cols, _, _, _, fmean, _ = self._kernel_args
             kernels.pack_reference(
-                self._f32,
-                self._gx32,
-                self._gy32,
-                fmean,
-                rows,
-                cols,
-                self.half,
-                self._w,
-                self._status0,
-                *self._packed,
+                self._images, self._subsets, self.half, self._w, self._status0, self._packed
             )
+
+    def _settings(self, width: int, max_iter: int | None) -> kernels.Settings:
+        """The kernels' scalar record (``max_iter`` None: ``max_iterations``)."""
+        return kernels.settings(
+            self.image_shape[0],
+            self.image_shape[1],
+            self.order,
+            self.half,
+            width,
+            self.max_iterations if max_iter is None else max_iter,
+            self.tolerance,
+            self.min_zncc,
+            float(self.subset),
+        )
 
     @property
     def n_points(self) -> int:
@@ -475,46 +506,20 @@ class Correlator:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
         """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
         ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
-        rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
-        n = self.n_points
-        out_p = np.empty((n, 2))
-        out_z = np.empty(n)
-        out_i = np.empty(n, np.int64)
-        out_s = np.empty(n, np.uint8)
-        kernels.icgn_translation(  # type: ignore[call-arg]
+        out = kernels.outputs(self.n_points, 2)
+        kernels.icgn_translation(
             coef,
-            self.image_shape[0],
-            self.image_shape[1],
-            self.order,
-            self._f32,
-            self._gx32,
-            self._gy32,
-            rows,
-            cols,
-            self.half,
-            self._w,
-            hinv,
-            jsum,
-            avec,
-            fmean,
-            fnorm,
+            self._images,
+            self._subsets,
+            self._packed,
+            self._settings(self._w, max_iter),
             p0,
             status_in,
-            self.max_iterations if max_iter is None else max_iter,
-            self.tolerance,
-            self.min_zncc,
-            float(self.subset),
-            first,
-            second,
-            source,
+            kernels.Passes(first, second, source),
             numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
-            *self._packed,
-            out_p,
-            out_z,
-            out_i,
-            out_s,
+            out,
         )
-        return out_p, out_z, out_i, out_s
+        return out.p, out.zncc, out.iterations, out.status
 
     def _run_icgn(
         self,
@@ -536,59 +541,33 @@ class Correlator:
             split = self._imprecise_split(idx)
             if split is not None:
                 return self._run_split(coef, p0, status_in, idx, split)
-        prep = self._prep
         if idx is None:
-            rows, cols, hinv, jsum, avec, fmean, fnorm = self._kernel_args
+            subsets = self._subsets
         else:
             key = id(idx)
             cached = self._args_cache.get(key)
             if cached is not None and cached[0] is idx:
-                rows, cols, hinv, jsum, avec, fmean, fnorm = cached[1]
+                subsets = cached[1]
             else:
-                rows, cols = self.rows[idx], self.cols[idx]
-                hinv, jsum, avec = prep.hinv[idx], prep.jsum[idx], prep.avec[idx]
-                fmean, fnorm = prep.fmean[idx], prep.fnorm[idx]
+                subsets = kernels.Subsets(*(a[idx] for a in self._subsets))  # type: ignore[arg-type]
                 if (
                     idx is self._seeds
                     or (self._rest is not None and idx is self._rest)
                     or key in self._split_ids
                 ):
-                    self._args_cache[key] = (idx, (rows, cols, hinv, jsum, avec, fmean, fnorm))
+                    self._args_cache[key] = (idx, subsets)
         n = len(self.rows) if idx is None else len(idx)
-        k = N_PARAMS[self.shape]
-        out_p = np.empty((n, k))
-        out_z = np.empty(n)
-        out_i = np.empty(n, np.int64)
-        out_s = np.empty(n, np.uint8)
+        out = kernels.outputs(n, N_PARAMS[self.shape])
         kernels.icgn_affine(
             coef,
-            self.image_shape[0],
-            self.image_shape[1],
-            self.order,
-            self._f32,
-            self._gx32,
-            self._gy32,
-            rows,
-            cols,
-            self.half,
-            self._tw,
-            hinv,
-            jsum,
-            avec,
-            fmean,
-            fnorm,
+            self._images,
+            subsets,
+            self._settings(self._tw, max_iter),
             np.ascontiguousarray(p0),
             np.ascontiguousarray(status_in),
-            self.max_iterations if max_iter is None else max_iter,
-            self.tolerance,
-            self.min_zncc,
-            float(self.subset),
-            out_p,
-            out_z,
-            out_i,
-            out_s,
+            out,
         )
-        return out_p, out_z, out_i, out_s
+        return out.p, out.zncc, out.iterations, out.status
 
     def _imprecise_split(
         self, idx: NDArray[np.intp] | None
@@ -1384,20 +1363,21 @@ def correlate(
     reference: ArrayLike,
     current: ArrayLike,
     *,
-    subset: int = 21,
-    step: int = 10,
+    settings: MatcherSettings | None = None,
+    subset: int | _Unset = _UNSET,
+    step: int | _Unset = _UNSET,
     roi: Sequence[int] | None = None,
     points: ArrayLike | None = None,
-    shape: Shape = "affine",
-    interpolation: str = "bspline3",
+    shape: Shape | _Unset = _UNSET,
+    interpolation: str | _Unset = _UNSET,
     initial: str | ArrayLike = "fftcc",
-    max_iterations: int = 50,
-    tolerance: float = 1e-4,
+    max_iterations: int | _Unset = _UNSET,
+    tolerance: float | _Unset = _UNSET,
     noise_sigma: float | None = None,
-    min_zncc: float = 0.6,
+    min_zncc: float | _Unset = _UNSET,
     workers: int | None = None,
-    max_residual: float | None = 2.0,
-    median_test: bool = False,
+    max_residual: float | _Unset | None = _UNSET,
+    median_test: bool | _Unset = _UNSET,
     max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
 ) -> DICResult:
     """One-shot subset DIC of ``current`` against ``reference`` (see :class:`Correlator`).
@@ -1405,9 +1385,12 @@ def correlate(
     ``initial`` is a method name (``"fftcc"``, ``"subset"``, ``"zero"``) or an array of
     initial guesses ``(u, v)`` px of shape (n, 2) or (2,).
     """
-    method = initial if isinstance(initial, str) else "fftcc"
+    method = initial if isinstance(initial, str) else _UNSET
+    if settings is None and method is _UNSET:
+        method = "fftcc"
     c = Correlator(
         reference,
+        settings=settings,
         subset=subset,
         step=step,
         roi=roi,

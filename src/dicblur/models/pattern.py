@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -46,6 +46,9 @@ from .sensitivity import (
     shifts_and_variance,
     unit_direction,
 )
+
+if TYPE_CHECKING:
+    from ..dic.settings import MatcherSettings
 
 __all__ = ["PatternPrediction", "model_from_pattern", "predict_from_pattern", "static_terms"]
 
@@ -212,7 +215,7 @@ def predict_from_pattern(
     blur: ArrayLike,
     *,
     noise_sigma: float,
-    subset: int,
+    subset: int | None = None,
     step: int | None = None,
     points: ArrayLike | None = None,
     motion: tuple[float, float] = (0.0, 1.0),
@@ -222,6 +225,7 @@ def predict_from_pattern(
     max_shift: float = 1.0,
     subpixel: float | str | None = None,
     min_contraction: float = 0.1,
+    settings: MatcherSettings | None = None,
 ) -> PatternPrediction:
     """Predict the DIC random error u_e(W) of a pattern from its static image alone.
 
@@ -234,7 +238,7 @@ def predict_from_pattern(
     noise_sigma : float
         Gaussian noise std (GL) in each image (reference and blurred current).
     subset : int
-        Odd subset size (px).
+        Odd subset size (px); required unless ``settings`` gives it.
     step, points
         Subset grid step (px, default ``subset``) or explicit (n, 2) (row, col) centres.
     motion : (dy, dx)
@@ -260,6 +264,10 @@ def predict_from_pattern(
         such subsets (DIC does, while they converge) but leave out the degenerate ones,
         contraction < 0.02, which made the predicted noise term spike (to ~5 px on 2 px
         speckles at W = 8.5 px). ``0`` switches both off.
+    settings : dicblur.dic.MatcherSettings, optional
+        The matcher's settings in one record (as the Correlator and the campaigns take
+        them): its ``subset`` and ``step`` (unless given here), ``shape`` and
+        ``interpolation`` (for ``derivative``) are used.
 
     Returns
     -------
@@ -274,6 +282,13 @@ def predict_from_pattern(
     Gaussian noise of the same std in both images (for a Poisson-Gaussian camera give the
     noise at the mean level, or use :func:`model_from_pattern` with ``plan_exposure``).
     """
+    if settings is not None:
+        subset = settings.subset if subset is None else subset
+        step = settings.step if step is None and points is None else step
+        shape = settings.shape
+        derivative = settings.interpolation
+    if subset is None:
+        raise InputError("subset=None: give the odd subset size (px) or settings")
     img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     max_shift = check_positive(max_shift, "max_shift")

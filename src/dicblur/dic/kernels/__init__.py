@@ -27,12 +27,33 @@ Modules: :mod:`.common` (flags, status codes, shared inlined helpers), :mod:`.pr
 :mod:`.spline`, :mod:`.translation`, :mod:`.affine`, :mod:`.blur` (the blur-estimating
 step of the compensated matcher). Numba compiles each kernel on its first call, so a
 correlation compiles only the modules its shape calls.
+
+Compile time (issue 16): a parallel kernel (``parallel=True``, ``prange``) is a thin loop
+whose body is one call of a serial function (``icgn_affine`` -> ``_affine_points``,
+``icgn_translation`` -> ``_points_translation``, ``prefilter_parallel`` -> the block
+functions): the parfor machinery then compiles a call, not the whole loop nest, and the
+callee is compiled once (its index passed as int64: the parfor's own index is unsigned
+and would compile a second signature). Arguments travel in named-tuple records
+(:class:`ReferenceImages`, :class:`Subsets`, :class:`Packed`, :class:`Passes`,
+:class:`Settings`, :class:`Outputs`) instead of 26-39 positionals.
 """
 
 from __future__ import annotations
 
 from .affine import icgn_affine
-from .common import PAD, STALL_ITERATIONS, compose_inverse_affine
+from .common import (
+    PAD,
+    STALL_ITERATIONS,
+    Outputs,
+    Packed,
+    Passes,
+    ReferenceImages,
+    Settings,
+    Subsets,
+    compose_inverse_affine,
+    outputs,
+    settings,
+)
 from .prefilter import prefilter_padded
 from .spline import weights
 from .translation import flat_lengths, flat_width, icgn_translation, pack_reference
@@ -40,12 +61,20 @@ from .translation import flat_lengths, flat_width, icgn_translation, pack_refere
 __all__ = [
     "PAD",
     "STALL_ITERATIONS",
+    "Outputs",
+    "Packed",
+    "Passes",
+    "ReferenceImages",
+    "Settings",
+    "Subsets",
     "compose_inverse_affine",
     "flat_lengths",
     "flat_width",
     "icgn_affine",
     "icgn_translation",
+    "outputs",
     "pack_reference",
     "prefilter_padded",
+    "settings",
     "weights",
 ]

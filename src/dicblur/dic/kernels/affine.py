@@ -171,34 +171,7 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
 
 
 @nb.njit(parallel=True, fastmath=FASTMATH, cache=True)
-def icgn_affine(
-    coef,
-    himg,
-    wimg,
-    order,
-    f,
-    gx,
-    gy,
-    rows,
-    cols,
-    half,
-    tw,
-    hinv,
-    jsum,
-    avec,
-    fmean,
-    fnorm,
-    p0,
-    status_in,
-    max_iter,
-    tol,
-    min_zncc,
-    max_step,
-    out_p,
-    out_zncc,
-    out_iter,
-    out_status,
-):  # pragma: no cover - compiled
+def icgn_affine(coef, images, subsets, cfg, p0, status_in, out):  # pragma: no cover - compiled
     """IC-GN with the first-order (affine) shape function, ZNSSD criterion.
 
     Parameters ``p = (u, du/dx, du/dy, v, dv/dx, dv/dy)``; the warp of a subset pixel at
@@ -209,9 +182,27 @@ def icgn_affine(
     span less than one pixel, one integer base covers the subset and every sample reads
     the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
     with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
-    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout as in
-    :func:`icgn_translation`.
+    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
+    :func:`icgn_translation` (``cfg.width`` = ``tw``, a multiple of 16 >= subset); ``p0``
+    (n, 6), ``status_in`` (n,).
     """
+    n = subsets.rows.shape[0]
+    # chunks of 16 POIs, each a call of the serial _affine_points: a parfor whose body is
+    # one call compiles in a fraction of the time of the whole loop inlined (issue 16)
+    chunk = 16
+    for ch in nb.prange((n + chunk - 1) // chunk):
+        # int64: the parfor's own index is unsigned, which would compile a second signature
+        c = np.int64(ch)
+        _affine_points(c, c + 1, coef, images, subsets, cfg, p0, status_in, out)
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  # pragma: no cover
+    """IC-GN affine of the POI chunks ``ch0:ch1`` (16 POIs each) of :func:`icgn_affine`."""
+    f, gx, gy = images
+    rows, cols, hinv, jsum, avec, fmean, fnorm = subsets
+    himg, wimg, order, half, tw, max_iter, tol, min_zncc, max_step = cfg
+    out_p, out_zncc, out_iter, out_status = out
     n = rows.shape[0]
     size = 2 * half + 1
     lo = (order - 1) // 2
@@ -224,7 +215,7 @@ def icgn_affine(
         dxs[j] = j - half
     # chunks of 16 POIs: the scratch arrays are allocated once per chunk, not per POI
     chunk = 16
-    for ch in nb.prange((n + chunk - 1) // chunk):
+    for ch in range(ch0, ch1):
         q = np.empty(6, dtype=np.float64)
         p = np.empty(6, dtype=np.float64)
         dstep = np.empty(6, dtype=np.float64)

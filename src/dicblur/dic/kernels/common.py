@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
+import numpy as np
+from numpy.typing import NDArray
 
 from ..status import PointStatus
 
@@ -15,6 +19,12 @@ __all__ = [
     "OUT_OF_BOUNDS",
     "PAD",
     "STALL_ITERATIONS",
+    "Outputs",
+    "Packed",
+    "Passes",
+    "ReferenceImages",
+    "Settings",
+    "Subsets",
     "compose_inverse_affine",
 ]
 
@@ -69,3 +79,98 @@ def compose_inverse_affine(p, du, dux, duy, dv, dvx, dvy):  # pragma: no cover -
     p[4] = m21 * i11 + m22 * i21
     p[5] = m21 * i12 + m22 * i22 - 1.0
     return True
+
+
+# Records of the IC-GN kernels' arguments (numba takes named tuples of arrays and scalars
+# as one argument each; a field read compiles to a plain load). Built once per Correlator
+# except Settings (its max_iterations changes per call) and Outputs.
+class ReferenceImages(NamedTuple):
+    """Float32 reference image and its spline gradients, with zero columns on the right
+    (at least the kernel's row width) so that padded row slices stay inside."""
+
+    f: NDArray[np.float32]
+    gx: NDArray[np.float32]
+    gy: NDArray[np.float32]
+
+
+class Subsets(NamedTuple):
+    """Per-POI data of the prepared reference subsets (n POIs; k = 2 or 6 parameters)."""
+
+    rows: NDArray[np.int64]  # (n,) POI centre row, px
+    cols: NDArray[np.int64]  # (n,) POI centre column, px
+    hinv: NDArray[np.float64]  # (n, k, k) inverse ZNSSD Gauss-Newton Hessian
+    jsum: NDArray[np.float64]  # (n, k) sums of the raw steepest-descent images
+    avec: NDArray[np.float64]  # (n, k) their projections on the normalised subset
+    fmean: NDArray[np.float64]  # (n,) mean of the reference subset, GL
+    fnorm: NDArray[np.float64]  # (n,) norm sqrt(sum (f - fmean)^2), GL
+
+
+class Packed(NamedTuple):
+    """Flat reference subsets of the translation kernel, (n, ng) float32 each (or (0, ng):
+    copied per call instead): ``f - fmean``, ``gx``, ``gy``."""
+
+    f: NDArray[np.float32]
+    gx: NDArray[np.float32]
+    gy: NDArray[np.float32]
+
+
+class Passes(NamedTuple):
+    """POI indices of the translation kernel's two passes: ``first`` start at ``p0``; then
+    ``second[m]`` starts at the result of ``source[m]`` when that converged."""
+
+    first: NDArray[np.intp]
+    second: NDArray[np.intp]
+    source: NDArray[np.intp]
+
+
+class Settings(NamedTuple):
+    """Scalars of one IC-GN kernel call (build with :func:`settings` for stable types)."""
+
+    image_rows: int
+    image_cols: int
+    order: int  # spline degree, 3 or 5
+    half: int  # subset half-width, px
+    width: int  # padded row width of the kernel's buffers, px (tw or w)
+    max_iterations: int
+    tolerance: float  # px
+    min_zncc: float
+    max_step: float  # px: a larger move from the start is DIVERGED
+
+
+def settings(
+    image_rows: int,
+    image_cols: int,
+    order: int,
+    half: int,
+    width: int,
+    max_iterations: int,
+    tolerance: float,
+    min_zncc: float,
+    max_step: float,
+) -> Settings:
+    """A :class:`Settings` with Python int and float fields (one compiled signature)."""
+    return Settings(
+        int(image_rows),
+        int(image_cols),
+        int(order),
+        int(half),
+        int(width),
+        int(max_iterations),
+        float(tolerance),
+        float(min_zncc),
+        float(max_step),
+    )
+
+
+class Outputs(NamedTuple):
+    """Per-POI outputs written by a kernel (n POIs)."""
+
+    p: NDArray[np.float64]  # (n, k) parameters
+    zncc: NDArray[np.float64]  # (n,)
+    iterations: NDArray[np.int64]  # (n,)
+    status: NDArray[np.uint8]  # (n,) PointStatus
+
+
+def outputs(n: int, k: int) -> Outputs:
+    """Uninitialised :class:`Outputs` for ``n`` POIs and ``k`` parameters."""
+    return Outputs(np.empty((n, k)), np.empty(n), np.empty(n, np.int64), np.empty(n, np.uint8))

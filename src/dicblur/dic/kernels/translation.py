@@ -84,27 +84,28 @@ def _load_reference(f, gx, gy, fmean, r0, c0, size, w, fp, gxp, gyp):  # pragma:
             gyp[o + j] = gy[r, cc + j]
 
 
-@nb.njit(parallel=True, fastmath=FASTMATH, cache=True)
-def pack_reference(
-    f, gx, gy, fmean, rows, cols, half, w, status, fpk, gxpk, gypk
-):  # pragma: no cover - compiled
-    """Flat reference subsets of all POIs (rows of ``fpk``, ``gxpk``, ``gypk``, shape
-    (n, ng)) for :func:`icgn_translation`, prepared once with the reference."""
+@nb.njit(cache=True)
+def pack_reference(images, subsets, half, w, status, packed):  # pragma: no cover - compiled
+    """Flat reference subsets of all POIs (rows of ``packed.f``, ``.gx``, ``.gy``, shape
+    (n, ng)) for :func:`icgn_translation`, prepared once with the reference (one thread: a
+    few ms, and no parallel variant to compile)."""
     size = 2 * half + 1
-    for k in nb.prange(rows.shape[0]):
+    rows = subsets.rows
+    cols = subsets.cols
+    for k in range(rows.shape[0]):
         if status[k] == 0:
             _load_reference(
-                f,
-                gx,
-                gy,
-                fmean[k],
+                images.f,
+                images.gx,
+                images.gy,
+                subsets.fmean[k],
                 rows[k] - half,
                 cols[k] - half,
                 size,
                 w,
-                fpk[k],
-                gxpk[k],
-                gypk[k],
+                packed.f[k],
+                packed.gx[k],
+                packed.gy[k],
             )
 
 
@@ -189,56 +190,21 @@ def _sums_translation(
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _points_translation(
-    todo,
-    m0,
-    m1,
-    source,
-    p0,
-    status_in,
-    coef,
-    himg,
-    wimg,
-    order,
-    w,
-    f,
-    gx,
-    gy,
-    rows,
-    cols,
-    half,
-    hinv,
-    jsum,
-    avec,
-    fmean,
-    fnorm,
-    max_iter,
-    tol,
-    min_zncc,
-    max_step,
-    maskf,
-    cbuf,
-    hbuf,
-    fps,
-    gxps,
-    gyps,
-    fpk,
-    gxpk,
-    gypk,
-    out_p,
-    out_zncc,
-    out_iter,
-    out_status,
+    todo, m0, m1, source, coef, images, subsets, packed, cfg, p0, status_in, bufs, out
 ):  # pragma: no cover
     """IC-GN translation of the POIs ``todo[m0:m1]`` (see :func:`icgn_translation`): one call
-    per chunk of POIs keeps the call overhead of the many array arguments off each POI."""
-    packed = fpk.shape[0] > 0
+    per chunk of POIs; ``bufs``: this thread's flat buffers ``(maskf, cbuf, hbuf, fp, gxp,
+    gyp)``."""
+    out_p, out_zncc, out_iter, out_status = out
+    is_packed = packed.f.shape[0] > 0
     # tap weights: private to this call (per-thread rows of one small array would share a
     # cache line between the threads and bounce it on every iteration)
-    taps = order + 1
+    taps = cfg.order + 1
     wx = np.empty(taps, dtype=np.float64)
     wy = np.empty(taps, dtype=np.float64)
     wxf = np.empty(taps, dtype=np.float32)
     wyf = np.empty(taps, dtype=np.float32)
+    maskf, cbuf, hbuf, fps, gxps, gyps = bufs
     for m in range(m0, m1):
         k = todo[m]
         if status_in[k] != 0:
@@ -255,133 +221,49 @@ def _points_translation(
             if out_status[s] == CONVERGED:
                 u = out_p[s, 0]
                 v = out_p[s, 1]
-        if packed:
-            _point_translation(
-                k,
-                u,
-                v,
-                coef,
-                himg,
-                wimg,
-                order,
-                w,
-                f,
-                gx,
-                gy,
-                rows,
-                cols,
-                half,
-                hinv,
-                jsum,
-                avec,
-                fmean,
-                fnorm,
-                max_iter,
-                tol,
-                min_zncc,
-                max_step,
-                maskf,
-                wx,
-                wy,
-                wxf,
-                wyf,
-                cbuf,
-                hbuf,
-                fpk[k],
-                gxpk[k],
-                gypk[k],
-                False,
-                out_p,
-                out_zncc,
-                out_iter,
-                out_status,
-            )
+        # one call site (one compiled signature): the packed rows or this thread's buffers
+        if is_packed:
+            fp = packed.f[k]
+            gxp = packed.gx[k]
+            gyp = packed.gy[k]
         else:
-            _point_translation(
-                k,
-                u,
-                v,
-                coef,
-                himg,
-                wimg,
-                order,
-                w,
-                f,
-                gx,
-                gy,
-                rows,
-                cols,
-                half,
-                hinv,
-                jsum,
-                avec,
-                fmean,
-                fnorm,
-                max_iter,
-                tol,
-                min_zncc,
-                max_step,
-                maskf,
-                wx,
-                wy,
-                wxf,
-                wyf,
-                cbuf,
-                hbuf,
-                fps,
-                gxps,
-                gyps,
-                True,
-                out_p,
-                out_zncc,
-                out_iter,
-                out_status,
-            )
+            fp = fps
+            gxp = gxps
+            gyp = gyps
+        _point_translation(
+            k,
+            u,
+            v,
+            coef,
+            images,
+            subsets,
+            cfg,
+            maskf,
+            wx,
+            wy,
+            wxf,
+            wyf,
+            cbuf,
+            hbuf,
+            fp,
+            gxp,
+            gyp,
+            not is_packed,
+            out,
+        )
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _point_translation(
-    k,
-    u,
-    v,
-    coef,
-    himg,
-    wimg,
-    order,
-    w,
-    f,
-    gx,
-    gy,
-    rows,
-    cols,
-    half,
-    hinv,
-    jsum,
-    avec,
-    fmean,
-    fnorm,
-    max_iter,
-    tol,
-    min_zncc,
-    max_step,
-    maskf,
-    wx,
-    wy,
-    wxf,
-    wyf,
-    cbuf,
-    hbuf,
-    fp,
-    gxp,
-    gyp,
-    load,
-    out_p,
-    out_zncc,
-    out_iter,
-    out_status,
+    k, u, v, coef, images, subsets, cfg, maskf, wx, wy, wxf, wyf, cbuf, hbuf, fp, gxp, gyp, load,
+    out,
 ):  # pragma: no cover - compiled
     """IC-GN translation of POI ``k`` started at ``(u, v)``; writes row ``k`` of the
     outputs."""
+    f, gx, gy = images
+    rows, cols, hinv, jsum, avec, fmean, fnorm = subsets
+    himg, wimg, order, half, w, max_iter, tol, min_zncc, max_step = cfg
+    out_p, out_zncc, out_iter, out_status = out
     size = 2 * half + 1
     taps = order + 1
     lo = (order - 1) // 2
@@ -478,39 +360,7 @@ def _point_translation(
 
 @nb.njit(parallel=True, fastmath=FASTMATH, cache=True)
 def icgn_translation(
-    coef,
-    himg,
-    wimg,
-    order,
-    f,
-    gx,
-    gy,
-    rows,
-    cols,
-    half,
-    w,
-    hinv,
-    jsum,
-    avec,
-    fmean,
-    fnorm,
-    p0,
-    status_in,
-    max_iter,
-    tol,
-    min_zncc,
-    max_step,
-    first,
-    second,
-    source,
-    nthr,
-    fpk,
-    gxpk,
-    gypk,
-    out_p,
-    out_zncc,
-    out_iter,
-    out_status,
+    coef, images, subsets, packed, cfg, p0, status_in, passes, nthr, out
 ):  # pragma: no cover - compiled
     """IC-GN with the zero-order (translation) shape function, ZNSSD criterion.
 
@@ -520,19 +370,59 @@ def icgn_translation(
     norm ``sqrt(sum (f - fmean)^2)`` of the reference subset. See ``icgn.py`` for the
     algebra (the update needs only five running sums per iteration).
 
-    Two passes in one call (one dispatch): the POIs ``first`` start at ``p0[k]``; then each
-    POI ``second[m]`` starts at the result of POI ``source[m]`` when that converged, else at
-    its own ``p0``. Outputs (all of length n, indexed by POI) are written only for the POIs
-    listed. ``status_in[k] != 0`` is passed through. ``nthr``: numba's thread count limit
-    (``numba.config.NUMBA_NUM_THREADS``, sizes the per-thread buffers).
+    Arguments are records (:mod:`.common`): ``images`` (:class:`ReferenceImages`),
+    ``subsets`` (:class:`Subsets`, the per-POI data above), ``packed`` (:class:`Packed`),
+    ``cfg`` (:class:`Settings`, ``width`` = ``w``), ``passes`` (:class:`Passes`), ``out``
+    (:class:`Outputs`); ``p0`` (n, 2) and ``status_in`` (n,) per call.
+
+    Two passes in one call (one dispatch): the POIs ``passes.first`` start at ``p0[k]``;
+    then each POI ``second[m]`` starts at the result of POI ``source[m]`` when that
+    converged, else at its own ``p0``. Outputs (all of length n, indexed by POI) are
+    written only for the POIs listed. ``status_in[k] != 0`` is passed through. ``nthr``:
+    numba's thread count limit (``numba.config.NUMBA_NUM_THREADS``, sizes the per-thread
+    buffers).
 
     Layout: ``coef`` holds the padded coefficients of the current image (image pixel
     ``(r, c)`` at ``(r + PAD, c + PAD)``) with at least ``w`` extra columns on the right;
-    ``f``, ``gx``, ``gy`` are float32 images with at least ``w`` extra columns. ``w`` is
-    :func:`flat_width`. ``fpk``, ``gxpk``, ``gypk``: the flat reference subsets from
+    ``images.f``, ``.gx``, ``.gy`` are float32 images with at least ``w`` extra columns.
+    ``w`` is :func:`flat_width`. ``packed``: the flat reference subsets from
     :func:`pack_reference`, shape (n, ng), or shape (0, ng) to copy them per POI into
     per-thread buffers instead (when n x ng is too large to keep).
     """
+    maskf, cbufs, hbufs, fps, gxps, gyps = _translation_buffers(cfg, nthr, packed.f.shape[0] == 0)
+    first, second, source = passes
+    chunk = 16
+    for npass in range(2):
+        todo = first if npass == 0 else second
+        src = source[:0] if npass == 0 else source
+        nch = (todo.shape[0] + chunk - 1) // chunk
+        for c in nb.prange(nch):
+            t = nb.get_thread_id()
+            m0 = np.int64(c) * chunk  # int64: the parfor's own index is unsigned
+            _points_translation(
+                todo,
+                m0,
+                min(todo.shape[0], m0 + chunk),
+                src,
+                coef,
+                images,
+                subsets,
+                packed,
+                cfg,
+                p0,
+                status_in,
+                (maskf, cbufs[t], hbufs[t], fps[t], gxps[t], gyps[t]),
+                out,
+            )
+
+
+@nb.njit(cache=True)
+def _translation_buffers(cfg, nthr, copy):  # pragma: no cover - compiled
+    """Mask and per-thread flat buffers of :func:`icgn_translation` (``copy``: buffers for
+    the per-call copies of the reference subsets too)."""
+    half = cfg.half
+    w = cfg.width
+    order = cfg.order
     size = 2 * half + 1
     ng = 32 * ((size * w + 31) // 32)
     nh = 32 * ((ng + order * w + 31) // 32)
@@ -543,55 +433,8 @@ def icgn_translation(
     # per-thread buffers (zeros: whatever the masked-out tails hold must be finite)
     cbufs = np.zeros((nthr, nh + 32), dtype=np.float32)
     hbufs = np.zeros((nthr, nh), dtype=np.float32)
-    nl = ng if fpk.shape[0] == 0 else 0
+    nl = ng if copy else 0
     fps = np.zeros((nthr, nl), dtype=np.float32)
     gxps = np.zeros((nthr, nl), dtype=np.float32)
     gyps = np.zeros((nthr, nl), dtype=np.float32)
-    chunk = 16
-    for npass in range(2):
-        todo = first if npass == 0 else second
-        src = source[:0] if npass == 0 else source
-        nch = (todo.shape[0] + chunk - 1) // chunk
-        for c in nb.prange(nch):
-            t = nb.get_thread_id()
-            _points_translation(
-                todo,
-                c * chunk,
-                min(todo.shape[0], (c + 1) * chunk),
-                src,
-                p0,
-                status_in,
-                coef,
-                himg,
-                wimg,
-                order,
-                w,
-                f,
-                gx,
-                gy,
-                rows,
-                cols,
-                half,
-                hinv,
-                jsum,
-                avec,
-                fmean,
-                fnorm,
-                max_iter,
-                tol,
-                min_zncc,
-                max_step,
-                maskf,
-                cbufs[t],
-                hbufs[t],
-                fps[t],
-                gxps[t],
-                gyps[t],
-                fpk,
-                gxpk,
-                gypk,
-                out_p,
-                out_zncc,
-                out_iter,
-                out_status,
-            )
+    return maskf, cbufs, hbufs, fps, gxps, gyps

@@ -80,8 +80,10 @@ def test_imprecise_subsets_are_flagged_cheap_and_not_retried(blob_pair):
     assert off.iterations[imp].max() > res.iterations[imp].max()
     # a looser threshold flags fewer; without noise_sigma there is no prediction, no test
     loose = Correlator(ref, **kw, max_predicted_sigma=0.08).correlate(cur)
-    assert 0 < np.count_nonzero(loose.status == PointStatus.IMPRECISE) < np.count_nonzero(
-        res.status == PointStatus.IMPRECISE
+    assert (
+        0
+        < np.count_nonzero(loose.status == PointStatus.IMPRECISE)
+        < np.count_nonzero(res.status == PointStatus.IMPRECISE)
     )
     plain = Correlator(ref, subset=21, step=10, shape="affine").correlate(cur)
     assert not np.any(plain.status == PointStatus.IMPRECISE)

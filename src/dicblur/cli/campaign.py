@@ -234,9 +234,7 @@ def calibrate_command(
     from ..report.plots import calibration_figures
 
     if compensation not in ("none", "given", "estimate", "deblur"):
-        raise InputError(
-            f"--compensation={compensation!r}: choose none, given, estimate or deblur"
-        )
+        raise InputError(f"--compensation={compensation!r}: choose none, given, estimate or deblur")
     try:
         start, stop, inc = (float(v) for v in blur.split(":"))
     except ValueError as exc:

@@ -188,9 +188,7 @@ def evaluate_claims(study: StudyData, experiments: ClaimExperiments) -> list[dic
             "realisations (pattern #4); inconclusive when the interval straddles the bound.",
         )
     )
-    same = [
-        ratio_interval(o, r) for o, r in zip(mini.blurred_ref, mini.sharp_ref, strict=True)
-    ]
+    same = [ratio_interval(o, r) for o, r in zip(mini.blurred_ref, mini.sharp_ref, strict=True)]
     rows.append(
         _claim(
             "C4",

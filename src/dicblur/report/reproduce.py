@@ -525,9 +525,7 @@ def _static_prediction(
     # first-order noise scales with sigma, the two noises' interaction with sigma^2
     assert unit.u_noise_interaction is not None
     un = np.clip(
-        CubicSpline(wc, np.sqrt(np.maximum(unit.u_noise**2 - unit.u_noise_interaction**2, 0.0)))(
-            W
-        ),
+        CubicSpline(wc, np.sqrt(np.maximum(unit.u_noise**2 - unit.u_noise_interaction**2, 0.0)))(W),
         0.0,
         None,
     )

@@ -773,9 +773,7 @@ def track(
         advice=advice and error is None,
         ref_img=ref_img,
         blur_table=(
-            build_compensated_table
-            if comp_info["matcher"] != MATCHER_PLAIN
-            else build_blur_table
+            build_compensated_table if comp_info["matcher"] != MATCHER_PLAIN else build_blur_table
         ),
     )
     if error is not None:

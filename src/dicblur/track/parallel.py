@@ -229,9 +229,7 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
     for k in (*chunk.warm, *chunk.frames):
         img = rec.frame(k)
         guess, g_abs = frame_guess(hist, rig, img, spectrum, base, seeds)
-        res, fb = correlate_frame(
-            corr, img, guess, ones if k == job.reference else job.ok0, grads
-        )
+        res, fb = correlate_frame(corr, img, guess, ones if k == job.reference else job.ok0, grads)
         u = np.asarray(res.u, np.float64) + base[:, 0]
         v = np.asarray(res.v, np.float64) + base[:, 1]
         good = res.status == PointStatus.CONVERGED

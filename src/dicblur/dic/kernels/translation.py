@@ -255,7 +255,24 @@ def _points_translation(
 
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _point_translation(
-    k, u, v, coef, images, subsets, cfg, maskf, wx, wy, wxf, wyf, cbuf, hbuf, fp, gxp, gyp, load,
+    k,
+    u,
+    v,
+    coef,
+    images,
+    subsets,
+    cfg,
+    maskf,
+    wx,
+    wy,
+    wxf,
+    wyf,
+    cbuf,
+    hbuf,
+    fp,
+    gxp,
+    gyp,
+    load,
     out,
 ):  # pragma: no cover - compiled
     """IC-GN translation of POI ``k`` started at ``(u, v)``; writes row ``k`` of the

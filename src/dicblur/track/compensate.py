@@ -44,7 +44,7 @@ from ..models.compensated import compensated_covariance
 from ..sequence import Recording
 from .kinematics import exposure_motion
 from .median import normalized_median_test
-from .uncertainty import ANGLE_STEP, BLUR_STEP, BlurTable
+from .uncertainty import BlurTable, table_nodes
 
 __all__ = [
     "ITERATE_PX",
@@ -242,20 +242,8 @@ def build_compensated_table(
     """The compensated matcher's response table (as :func:`~.uncertainty.build_blur_table`,
     same nodes): mismatch shift zero, noise variance per unit noise variance
     ``A^-1 + A^-1 C A^-1`` of the blurred reference's subset at each node."""
-    finite = np.isfinite(blur) & np.isfinite(angle)
-    w_max = float(np.max(blur[finite])) if finite.any() else 0.0
-    nodes = np.arange(0.0, BLUR_STEP * (math.ceil(w_max / BLUR_STEP) + 1) + 1e-9, BLUR_STEP)
-    if nodes.size < 2:
-        nodes = np.array([0.0, BLUR_STEP])
-    a = round(180.0 / ANGLE_STEP)
-    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
-    th = np.mod(angle[finite & (blur >= min_blur)], 180.0) / ANGLE_STEP
-    need = np.zeros(a, bool)
-    if th.size:
-        need[np.floor(th).astype(int) % a] = True
-        need[(np.floor(th).astype(int) + 1) % a] = True
-    else:
-        need[0] = True  # no blur worth a direction: W = 0 is the same for every angle
+    nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
+    a = angles.size
     # (xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv) as the plain table (track.uncertainty): no
     # mismatch shift; the sigma**4 interaction is left out (at 2 GL it is 0.2-0.4 % of the
     # noise variance at W = 0, measured on the test target)

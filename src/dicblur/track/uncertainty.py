@@ -43,6 +43,7 @@ __all__ = [
     "build_blur_table",
     "estimate_static_noise",
     "subset_levels",
+    "table_nodes",
 ]
 
 ANGLE_STEP = 15.0  # deg between direction nodes of the table
@@ -135,6 +136,40 @@ class BlurTable:
         return np.asarray(idx[np.argmin(d, axis=1)], dtype=np.intp)
 
 
+def table_nodes(
+    blur: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    *,
+    min_blur: float = 0.5,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Nodes of a blur table for the measured ``blur`` (px) and ``angle`` (deg), both
+    shape (frames, points), NaN ignored: the W nodes (every ``BLUR_STEP`` from 0 past the
+    largest W), the direction nodes (every ``ANGLE_STEP`` in [0, 180)) and which of them to
+    compute (the two around every direction whose blur is >= ``min_blur`` px; the one
+    nearest the blur-weighted dominant direction when none is)."""
+    finite = np.isfinite(blur) & np.isfinite(angle)
+    w_max = float(np.max(blur[finite])) if finite.any() else 0.0
+    nodes = np.arange(0.0, BLUR_STEP * (math.ceil(w_max / BLUR_STEP) + 1) + 1e-9, BLUR_STEP)
+    if nodes.size < 2:
+        nodes = np.array([0.0, BLUR_STEP])
+    a = round(180.0 / ANGLE_STEP)
+    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
+    th = np.mod(angle[finite & (blur >= min_blur)], 180.0) / ANGLE_STEP
+    need = np.zeros(a, bool)
+    if th.size:
+        need[np.floor(th).astype(int) % a] = True
+        need[(np.floor(th).astype(int) + 1) % a] = True
+    else:
+        if finite.any():
+            ww = blur[finite]
+            mu = np.average(np.exp(2j * np.deg2rad(angle[finite])), weights=ww + 1e-12)
+            dom = (np.rad2deg(np.angle(mu)) / 2.0) % 180.0
+        else:
+            dom = 0.0
+        need[round(dom / ANGLE_STEP) % a] = True
+    return nodes, angles, need
+
+
 def build_blur_table(
     reference: NDArray[np.float64],
     centres: NDArray[np.intp],
@@ -165,26 +200,8 @@ def build_blur_table(
         reference's intensities alone, without the ``sigma**4`` interaction (the earlier
         formula, for comparisons).
     """
-    finite = np.isfinite(blur) & np.isfinite(angle)
-    w_max = float(np.max(blur[finite])) if finite.any() else 0.0
-    nodes = np.arange(0.0, BLUR_STEP * (math.ceil(w_max / BLUR_STEP) + 1) + 1e-9, BLUR_STEP)
-    if nodes.size < 2:
-        nodes = np.array([0.0, BLUR_STEP])
-    a = round(180.0 / ANGLE_STEP)
-    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
-    th = np.mod(angle[finite & (blur >= min_blur)], 180.0) / ANGLE_STEP
-    need = np.zeros(a, bool)
-    if th.size:
-        need[np.floor(th).astype(int) % a] = True
-        need[(np.floor(th).astype(int) + 1) % a] = True
-    else:
-        if finite.any():
-            ww = blur[finite]
-            mu = np.average(np.exp(2j * np.deg2rad(angle[finite])), weights=ww + 1e-12)
-            dom = (np.rad2deg(np.angle(mu)) / 2.0) % 180.0
-        else:
-            dom = 0.0
-        need[round(dom / ANGLE_STEP) % a] = True
+    nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
+    a = angles.size
     values = np.full((a, nodes.size, len(centres), 6), np.nan)
     for j in np.flatnonzero(need):
         t = math.radians(angles[j])

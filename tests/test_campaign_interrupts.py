@@ -263,6 +263,7 @@ def _kill_and_resume(
     return out
 
 
+@pytest.mark.slow  # 7-11 s: keeps the README's test command under 4 min (CI runs it)
 def test_two_kills_one_in_creation_resume_bit_identical(tmp_path):
     out = _kill_and_resume(tmp_path, 2, real_task=False, cache=None, seed=1)
     assert campaign_status(out).complete

@@ -95,6 +95,7 @@ def _runner(tmp_path: Path, out: Path, delay: float = 0.0) -> list[str]:
     return [sys.executable, str(script)]
 
 
+@pytest.mark.slow  # 7-11 s: keeps the README's test command under 4 min (CI runs it)
 def test_two_concurrent_runners_on_a_new_store(tmp_path):
     # Before the lock: one crashed (FileNotFoundError '.creating' -> store) or both
     # computed every task.

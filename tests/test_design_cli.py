@@ -104,6 +104,7 @@ def test_design_cli_usage_error(capsys):
     assert "--out" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # 7-11 s: keeps the README's test command under 4 min (CI runs it)
 def test_design_cli_velocity_and_range(tmp_path, capsys):
     out = tmp_path / "v"
     assert (

@@ -52,6 +52,7 @@ def test_campaign_spec_runs_and_fits(tmp_path, capsys):
     assert model["noise_levels"] == [1.0, 2.0]
 
 
+@pytest.mark.slow  # 7-11 s: keeps the README's test command under 4 min (CI runs it)
 def test_walkthrough_calibrates_predicts_and_plans(tmp_path):
     proc = run_script("walkthrough.sh", tmp_path / "w")
     assert proc.returncode == 0, proc.stderr

@@ -249,6 +249,26 @@ def test_model_loader_mutations(
     assert u.shape == (2,)
 
 
+def test_renamed_fit_parameters_are_refused_on_load(corpus: Path) -> None:
+    """A blank, unknown or repeated parameter name in any fit is a damaged file (found by
+    the fuzzer above: a blank name of the decay fit loaded, then predict raised KeyError)."""
+    d0 = json.loads((corpus / "model.json").read_text())
+    cases = 0
+    for key, fit in d0.items():
+        if not (isinstance(fit, dict) and isinstance(fit.get("names"), list)):
+            continue
+        for i in range(len(fit["names"])):
+            for bad in ("", "bogus", fit["names"][i - 1] if i else None):
+                if bad is None or bad == fit["names"][i]:
+                    continue
+                d = json.loads(json.dumps(d0))
+                d[key]["names"][i] = bad
+                with pytest.raises(InputError, match=r"names"):
+                    BlurUncertaintyModel.from_json(json.dumps(d))
+                cases += 1
+    assert cases >= 8
+
+
 def test_model_round_trip_still_exact(corpus: Path) -> None:
     text = (corpus / "model.json").read_text()
     model = BlurUncertaintyModel.from_json(text)

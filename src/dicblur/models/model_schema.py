@@ -185,6 +185,42 @@ def _fit(v: Any) -> str | None:
     return None
 
 
+def _fit_of(allowed: frozenset[str], *required: frozenset[str]) -> Callable[[Any], str | None]:
+    """A fit result whose parameter names are unique, among ``allowed``, and cover one of
+    each ``required`` set (in ``names`` or ``fixed``): a renamed or blank parameter is a
+    damaged file, not a KeyError at prediction time."""
+
+    def check(v: Any) -> str | None:
+        why = _fit(v)
+        if why is not None:
+            return why
+        names = list(v["names"])
+        if len(set(names)) != len(names):
+            raise _Defect(".names", f"repeated parameter names {names}")
+        odd = [n for n in names if n not in allowed]
+        if odd:
+            raise _Defect(".names", f"unknown parameter {odd[0]!r} (expected {sorted(allowed)})")
+        have = set(names) | set(v["fixed"])
+        for need in required:
+            if not have & need:
+                raise _Defect(".names", f"no parameter {' or '.join(sorted(need))!r}")
+        return None
+
+    return check
+
+
+_DECAY_FIT = _fit_of(frozenset({"sssig0", "beta"}), frozenset({"sssig0"}), frozenset({"beta"}))
+# "eta": the schema-1 power law (u_e = eta SSSIG^-alpha), converted on load
+_POWER_FIT = _fit_of(
+    frozenset({"u_ref", "eta", "alpha", "kappa"}), frozenset({"u_ref", "eta"}), frozenset({"alpha"})
+)
+_MISMATCH_FIT = _fit_of(
+    frozenset({"a", "k", "gamma", "noise_blur2", "noise_blur", "floor", "cross", "c", "c4"}),
+    frozenset({"a", "k"}),
+    frozenset({"c"}),
+)
+
+
 DOMAIN_RULES: dict[str, Rule] = {
     "blur_min": Rule(number(minimum=0.0), "W_min >= 0 px"),
     "blur_max": Rule(number(finite=False, minimum=0.0), "W_max >= 0 px"),
@@ -265,9 +301,9 @@ MODEL_RULES: dict[str, Rule] = {
     "default": Rule(
         string(("mismatch", "power_law", "static")), "'mismatch', 'power_law' or 'static'"
     ),
-    "decay": Rule(_fit, "a fit result (SSSIG decay)"),
-    "power_law": Rule(_fit, "a fit result (power law)"),
-    "mismatch": Rule(optional(_fit), "a fit result or null"),
+    "decay": Rule(_DECAY_FIT, "a fit result (SSSIG decay)"),
+    "power_law": Rule(_POWER_FIT, "a fit result (power law)"),
+    "mismatch": Rule(optional(_MISMATCH_FIT), "a fit result or null"),
     "fit_range": Rule(array(number(minimum=0.0), length=2), "[W_lo, W_hi] in px"),
     "range_rule": Rule(string(), "a string"),
     "noise_sigma": Rule(optional(number(minimum=0.0)), "a noise std >= 0 GL or null"),

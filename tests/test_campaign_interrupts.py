@@ -74,7 +74,13 @@ def _has_workers(pid: int) -> bool:
         kids = psutil.Process(pid).children()
     except psutil.Error:
         return False
-    return sum("spawn_main" in " ".join(k.cmdline()) for k in kids) >= 2
+    n = 0
+    for k in kids:
+        try:  # a child may exit (a zombie) between the listing and the read
+            n += "spawn_main" in " ".join(k.cmdline())
+        except psutil.Error:
+            continue
+    return n >= 2
 
 
 def _cli_run(tmp_path: Path, phase: str, *, group: bool) -> tuple[int, str, Path]:

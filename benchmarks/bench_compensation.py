@@ -29,16 +29,13 @@ Run: ``NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_compensation.py [--
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
-import platform
-import subprocess
 import time
 import zlib
 from pathlib import Path
 
 import numpy as np
+from _harness import Run
 
 import dicblur
 from dicblur.blur import motion_blur
@@ -396,19 +393,6 @@ def summary(rows: list[dict], prediction: list[dict] | None = None) -> dict:
     }
 
 
-def _commit() -> str | None:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=Path(__file__).parent,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
-
-
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
@@ -423,8 +407,7 @@ def main() -> None:
         help="only the static prediction check (writes compensation_prediction.json)",
     )
     args = ap.parse_args()
-    load0 = os.getloadavg()
-    commit = _commit()  # at the start: the code this run imported
+    run = Run("compensation")  # the start load; provenance when each file is written
     pats = _patterns()
     if args.prediction_only:
         t0 = time.perf_counter()
@@ -435,49 +418,27 @@ def main() -> None:
         n_ok = sum(abs(r["rel_error"]) <= 0.10 for r in pr)
         print(f"\nwithin 10 %: {n_ok} of {len(pr)} cases; largest |error| {100 * worst:.1f} %")
         path = OUT.with_name("compensation_prediction.json")
-        path.write_text(
-            json.dumps(
-                {
-                    "commit": commit,
-                    "version": dicblur.__version__,
-                    "machine": {
-                        "python": platform.python_version(),
-                        "cpus": os.cpu_count(),
-                        "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
-                        "load_start": load0,
-                        "load_end": os.getloadavg(),
-                    },
-                    "seconds": time.perf_counter() - t0,
-                    "prediction": pr,
-                    "within_10_percent": n_ok,
-                    "cases": len(pr),
-                    "max_abs_rel_error": worst,
-                },
-                indent=1,
-            )
+        run.write(
+            {
+                "seconds": time.perf_counter() - t0,
+                "prediction": pr,
+                "within_10_percent": n_ok,
+                "cases": len(pr),
+                "max_abs_rel_error": worst,
+            },
+            path,
         )
         print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
         return
     if args.speed_only:
         sp = speed(pats[0][1], 5)
         path = OUT.with_name("compensation_speed.json")
-        path.write_text(
-            json.dumps(
-                {
-                    "commit": commit,
-                    "version": dicblur.__version__,
-                    "machine": {
-                        "python": platform.python_version(),
-                        "cpus": os.cpu_count(),
-                        "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
-                        "load_start": load0,
-                        "load_end": os.getloadavg(),
-                    },
-                    "pattern": pats[0][0],
-                    "speed": sp,
-                },
-                indent=1,
-            )
+        run.write(
+            {
+                "pattern": pats[0][0],
+                "speed": sp,
+            },
+            path,
         )
         print(f"wrote {path}")
         return
@@ -498,28 +459,16 @@ def main() -> None:
     print("\ntargets:")
     for k, v in summ.items():
         print(f"  {k}: {v if isinstance(v, str) else round(v, 4)}")
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(
-        json.dumps(
-            {
-                "commit": commit,
-                "version": dicblur.__version__,
-                "machine": {
-                    "python": platform.python_version(),
-                    "cpus": os.cpu_count(),
-                    "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
-                    "load_start": load0,
-                    "load_end": os.getloadavg(),
-                },
-                "quick": args.quick,
-                "seconds": time.perf_counter() - t0,
-                "speed": sp,
-                "accuracy": rows,
-                "prediction": pr,
-                "summary": summ,
-            },
-            indent=1,
-        )
+    run.write(
+        {
+            "quick": args.quick,
+            "seconds": time.perf_counter() - t0,
+            "speed": sp,
+            "accuracy": rows,
+            "prediction": pr,
+            "summary": summ,
+        },
+        OUT,
     )
     print(f"wrote {OUT} ({time.perf_counter() - t0:.0f} s)")
 

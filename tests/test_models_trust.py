@@ -25,6 +25,21 @@ from dicblur.models import (
 
 S0, BETA = 2.4e6, 0.03
 
+# the camera plan the tests run: 120 mm/s at 0.05 mm/px, 20000 e- full well, 5 e- read
+# noise, 4e6 e-/s
+_CAMERA_PLAN = [
+    "--velocity",
+    "120mm/s",
+    "--scale",
+    "0.05mm/px",
+    "--full-well",
+    "20000",
+    "--read-noise",
+    "5",
+    "--flux",
+    "4e6",
+]
+
 
 def _power_law_winning_data(seed: int = 11):
     """One noise level, 11 blur levels, data of a power law with alpha = 1.5: the held-out
@@ -88,26 +103,7 @@ def test_cli_predict_and_plan_default_to_the_mismatch_model(tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert "mismatch" in err and len(err.strip().splitlines()) == 1
-    assert (
-        main(
-            [
-                "plan",
-                str(model),
-                "--velocity",
-                "120mm/s",
-                "--scale",
-                "0.05mm/px",
-                "--full-well",
-                "20000",
-                "--read-noise",
-                "5",
-                "--flux",
-                "4e6",
-                "--json",
-            ]
-        )
-        == 0
-    )
+    assert main(["plan", str(model), *_CAMERA_PLAN, "--json"]) == 0
     plan = json.loads(capsys.readouterr().out)
     assert plan["model"] == "mismatch"
     assert plan["rule_of_thumb_u_e"] < 1.0  # was "rule of thumb gives u_e 3.14e+03 px"
@@ -250,20 +246,7 @@ def test_cli_plan_uses_the_reference_mean_level(tmp_path, capsys):
     rng = np.random.default_rng(0)
     save_image(ref, np.clip(80 + 40 * rng.standard_normal((64, 64)), 0, 255), bit_depth=8)
     capsys.readouterr()
-    args = [
-        "plan",
-        str(model),
-        "--velocity",
-        "120mm/s",
-        "--scale",
-        "0.05mm/px",
-        "--full-well",
-        "20000",
-        "--read-noise",
-        "5",
-        "--flux",
-        "4e6",
-    ]
+    args = ["plan", str(model), *_CAMERA_PLAN]
     assert main(args) == 0
     assert "assumed 127.5 GL" in capsys.readouterr().out  # truly unknown: said so
     assert main([*args, "--reference", str(ref)]) == 0
@@ -460,26 +443,7 @@ def test_calibrate_then_predict_and_plan_match_a_direct_simulation(tmp_path, cap
     pred = json.loads(capsys.readouterr().out)["predictions"][0]["u_e_px"]
     meas = _direct_u_e(tmp_path, "n4", noise=4.0, blur=3.0, size=128, reps=8)
     assert pred == pytest.approx(meas, rel=0.10), (pred, meas)
-    assert (
-        main(
-            [
-                "plan",
-                str(model),
-                "--velocity",
-                "120mm/s",
-                "--scale",
-                "0.05mm/px",
-                "--full-well",
-                "20000",
-                "--read-noise",
-                "5",
-                "--flux",
-                "4e6",
-                "--json",
-            ]
-        )
-        == 0
-    )
+    assert main(["plan", str(model), *_CAMERA_PLAN, "--json"]) == 0
     plan = json.loads(capsys.readouterr().out)
     m = BlurUncertaintyModel.from_json(str(model))
     cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)

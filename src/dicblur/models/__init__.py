@@ -17,14 +17,12 @@ from .decay import (
     taylor_model,
 )
 from .fit import ModelComparison, check_measurements, compare_models, fit_blur_model
-from .mismatch import (
+from .mismatch import fit_mismatch, mismatch_model, mismatch_terms
+from .mismatch_prediction import (
     BlurMismatchCurve,
     BlurSensitivity,
     blur_mismatch_curve,
     blur_sensitivity,
-    fit_mismatch,
-    mismatch_model,
-    mismatch_terms,
 )
 from .model import BlurUncertaintyModel, Prediction
 from .pattern import PatternPrediction, model_from_pattern, predict_from_pattern, static_terms

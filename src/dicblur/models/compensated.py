@@ -23,10 +23,7 @@ Gradients are the exact derivatives of the engine's cubic B-spline by default (a
 
 from __future__ import annotations
 
-import hashlib
 import math
-from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -38,8 +35,8 @@ from ..dic.compensation import blur_reference
 from ..dic.icgn import raw_jacobian
 from ..errors import InputError
 from ..metrics import directional_sssig, image_gradients, subset_centres
-from .pattern import PatternPrediction
-from .sensitivity import spline_gradients
+from .pattern import NOISE_FACTORS, PatternPrediction, fit_prediction, model_blur
+from .sensitivity import spline_gradients, unit_direction
 
 if TYPE_CHECKING:
     from .model import BlurUncertaintyModel
@@ -88,6 +85,47 @@ def _gradients(
     return spline_gradients(img, derivative)
 
 
+def _windows(
+    fw: NDArray[np.float64],
+    fww: NDArray[np.float64],
+    pts: NDArray[np.intp],
+    half: int,
+    derivative: str,
+) -> tuple[NDArray[np.float64], ...]:
+    """Flat subsets (n, size**2) of ``f_W`` and of the gradients of ``f_W`` and ``B f_W``:
+    ``f, gx, gy, hx, hy``."""
+    size = 2 * half + 1
+    gy, gx = _gradients(fw, derivative)
+    hy, hx = _gradients(fww, derivative)
+    r, c = pts[:, 0] - half, pts[:, 1] - half
+    return tuple(
+        np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), size * size)
+        for a in (fw, gx, gy, hx, hy)
+    )
+
+
+def _fisher(
+    windows: tuple[NDArray[np.float64], ...], half: int, shape: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """ZNSSD Fisher matrices ``A`` (current image, ``f_W``) and ``C`` (reference, ``B
+    f_W``) of each subset, (n, k, k), and the norm of the centred subset ``f_W``, (n,)."""
+    f, gxp, gyp, hxp, hyp = windows
+    fc = f - f.mean(axis=1, keepdims=True)
+    fn = np.sqrt(np.einsum("ij,ij->i", fc, fc))
+    fh = fc / np.where(fn > 0, fn, 1.0)[:, None]
+
+    def perp(jac: NDArray[np.float64]) -> NDArray[np.float64]:
+        jc = jac - jac.mean(axis=1, keepdims=True)
+        a = np.einsum("npk,np->nk", jc, fh)
+        return np.asarray(jc - fh[:, :, None] * a[:, None, :])
+
+    j1 = perp(raw_jacobian(gxp, gyp, half, shape))
+    j2 = perp(raw_jacobian(hxp, hyp, half, shape))
+    amat = np.matmul(j1.transpose(0, 2, 1), j1)
+    cmat = np.matmul(j2.transpose(0, 2, 1), j2)
+    return amat, cmat, fn
+
+
 def _noise_variance(
     fw: NDArray[np.float64],
     fww: NDArray[np.float64],
@@ -98,37 +136,17 @@ def _noise_variance(
     derivative: str,
 ) -> NDArray[np.float64]:
     """Per-subset variance along ``e`` (dy, dx) per unit noise variance, px^2 / GL^2."""
-    size = 2 * half + 1
-    npx = size * size
-    gy, gx = _gradients(fw, derivative)
-    hy, hx = _gradients(fww, derivative)
-    r, c = pts[:, 0] - half, pts[:, 1] - half
-    views = [
-        np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), npx)
-        for a in (fw, gx, gy, hx, hy)
-    ]
-    f, gxp, gyp, hxp, hyp = views
+    windows = _windows(fw, fww, pts, half, derivative)
     if shape == "translation":
         # eq. 2 form (diagonal), as the plain matcher's prediction
+        _, gxp, gyp, hxp, hyp = windows
         ge = e[1] * gxp + e[0] * gyp
         he = e[1] * hxp + e[0] * hyp
         s1 = np.einsum("ij,ij->i", ge, ge)
         s2 = np.einsum("ij,ij->i", he, he)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.asarray(1.0 / s1 + s2 / s1**2)
-    fc = f - f.mean(axis=1, keepdims=True)
-    fn = np.sqrt(np.einsum("ij,ij->i", fc, fc))
-    fh = fc / np.where(fn > 0, fn, 1.0)[:, None]
-
-    def perp(jac: NDArray[np.float64]) -> NDArray[np.float64]:
-        jc = jac - jac.mean(axis=1, keepdims=True)
-        a = np.einsum("npk,np->nk", jc, fh)
-        return np.asarray(jc - fh[:, :, None] * a[:, None, :])
-
-    j1 = perp(raw_jacobian(gxp, gyp, half, "affine"))
-    j2 = perp(raw_jacobian(hxp, hyp, half, "affine"))
-    amat = np.matmul(j1.transpose(0, 2, 1), j1)
-    cmat = np.matmul(j2.transpose(0, 2, 1), j2)
+    amat, cmat, _ = _fisher(windows, half, "affine")
     ainv = np.linalg.inv(amat)
     cov = ainv + ainv @ cmat @ ainv
     w = np.zeros(6)
@@ -193,14 +211,7 @@ def predict_compensated(
     shape = check_choice(shape, "shape", ("translation", "affine"))
     derivative = check_choice(derivative, "derivative", ("bspline3", "bspline5", "central"))
     w = as_blur(blur, "blur", increasing=False)
-    try:
-        my, mx = (float(x) for x in motion)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"motion={describe(motion)}: expected a direction (dy, dx)") from exc
-    norm = math.hypot(my, mx)
-    if not (math.isfinite(norm) and norm > 0):
-        raise InputError(f"motion={describe(motion)}: expected a non-zero finite (dy, dx)")
-    e = (my / norm, mx / norm)
+    e = unit_direction(motion)
     if np.any(w >= subset):
         raise InputError(
             f"blur: {float(w.max()):g} px is not shorter than the subset "
@@ -281,18 +292,10 @@ def model_from_compensated(
     -------
     BlurUncertaintyModel
     """
-    from .fit import fit_blur_model
-
     img = as_image(image, "image", min_size=3)
     sigma = check_positive(noise_sigma, "noise_sigma")
     subset = check_odd_subset(subset)
-    w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
-    w = w[w < subset] if blur is None else w
-    if np.unique(w).size < 4:
-        raise InputError(
-            f"blur: {np.unique(w).size} distinct lengths; give at least 4 (e.g. W = 0, 1, 2, 4 px)"
-        )
-    levels = (0.5 * sigma, sigma, 2.0 * sigma)
+    w = model_blur(blur, below=subset)
     # first order in the noise: u_e is proportional to sigma, one prediction serves all
     unit = predict_compensated(
         img, w, noise_sigma=1.0, subset=subset, step=step, points=points, motion=motion, shape=shape
@@ -306,26 +309,17 @@ def model_from_compensated(
         "image_shape": list(img.shape),
     }
     prov.update(provenance or {})
-    name = prov.get("pattern")
-    if not isinstance(name, str):
-        name = (Path(prov["image"]).stem or None) if isinstance(prov.get("image"), str) else None
-    model = fit_blur_model(
-        np.concatenate([w] * 3),
-        np.concatenate([unit.sssig] * 3),
-        np.concatenate([lv * unit.u_e for lv in levels]),
-        noise_sigma=np.repeat(levels, w.size),
+    return fit_prediction(
+        img,
+        w,
+        unit.sssig,
+        [f * sigma * unit.u_e for f in NOISE_FACTORS],
+        noise_sigma=sigma,
         subset=subset,
-        mean_level=float(img.mean()),
-        default="mismatch",
-        provenance=prov,
-        compare=False,
         shape=str(shape),
-        pattern=name,
-        pattern_sha256=hashlib.sha256(img.tobytes()).hexdigest(),
+        provenance=prov,
         compensation="given",
     )
-    # fitted on three noise levels: make the model's own noise the one asked for
-    return replace(model, noise_sigma=sigma)
 
 
 def compensated_covariance(
@@ -368,27 +362,7 @@ def compensated_covariance(
     derivative = check_choice(derivative, "derivative", ("bspline3", "bspline5", "central"))
     pts = _points(fw, subset, None, points)
     half = subset // 2
-    size = subset
-    gy, gx = _gradients(fw, derivative)
-    hy, hx = _gradients(fww, derivative)
-    r, c = pts[:, 0] - half, pts[:, 1] - half
-    f, gxp, gyp, hxp, hyp = (
-        np.asarray(sliding_window_view(a, (size, size))[r, c]).reshape(len(r), size * size)
-        for a in (fw, gx, gy, hx, hy)
-    )
-    fc = f - f.mean(axis=1, keepdims=True)
-    fn = np.sqrt(np.einsum("ij,ij->i", fc, fc))
-    fh = fc / np.where(fn > 0, fn, 1.0)[:, None]
-
-    def perp(jac: NDArray[np.float64]) -> NDArray[np.float64]:
-        jc = jac - jac.mean(axis=1, keepdims=True)
-        a = np.einsum("npk,np->nk", jc, fh)
-        return np.asarray(jc - fh[:, :, None] * a[:, None, :])
-
-    j1 = perp(raw_jacobian(gxp, gyp, half, shape))
-    j2 = perp(raw_jacobian(hxp, hyp, half, shape))
-    amat = np.matmul(j1.transpose(0, 2, 1), j1)
-    cmat = np.matmul(j2.transpose(0, 2, 1), j2)
+    amat, cmat, fn = _fisher(_windows(fw, fww, pts, half, derivative), half, shape)
     out = np.full((len(pts), 2, 2), np.nan)
     ok = np.isfinite(amat).all(axis=(1, 2)) & (np.linalg.cond(amat) < 1e12) & (fn > 0)
     if ok.any():

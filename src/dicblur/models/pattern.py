@@ -24,9 +24,11 @@ and 6 px speckles with noise 2 GL, noisy IC-GN lands within 5 % of it for W = 0.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import warnings
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -35,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..checks import as_blur, check_positive, check_subpixel
 from ..errors import InputError
 from ..metrics import directional_sssig
-from .mismatch import subset_inputs
+from .mismatch_prediction import subset_inputs
 from .model import BlurUncertaintyModel
 from .scaled import StaticTerms
 from .sensitivity import (
@@ -114,6 +116,63 @@ BREAKDOWN_FRACTION = 0.9  # as the campaigns: DIC broken down below 90 % of the 
 MIN_CONTRACTION = 0.1  # default breakdown test of a subset (predict_from_pattern)
 DEGENERATE = 0.02  # contraction below which a subset's fixed point is left out
 N_OFFSETS = 8  # sub-pixel positions averaged by subpixel="average" (midpoint rule)
+NOISE_FACTORS = (0.5, 1.0, 2.0)  # noise levels (times sigma) a prediction is fitted on
+
+
+def model_blur(blur: ArrayLike | None, *, below: int | None = None) -> NDArray[np.float64]:
+    """Blur lengths (px) a model of a static prediction is fitted on: ``blur``, or by
+    default W = 0..8 px in steps of 0.5 (those shorter than ``below`` px, when given);
+    at least 4 distinct values."""
+    w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
+    if blur is None and below is not None:
+        w = w[w < below]
+    if np.unique(w).size < 4:
+        raise InputError(
+            f"blur: {np.unique(w).size} distinct lengths; give at least 4 (e.g. W = 0, 1, 2, 4 px)"
+        )
+    return w
+
+
+def fit_prediction(
+    image: NDArray[np.float64],
+    blur: NDArray[np.float64],
+    sssig: NDArray[np.float64],
+    u_e: list[NDArray[np.float64]],
+    *,
+    noise_sigma: float,
+    subset: int,
+    shape: str,
+    provenance: dict[str, Any],
+    **options: Any,
+) -> BlurUncertaintyModel:
+    """A :class:`BlurUncertaintyModel` fitted to a static prediction like campaign data.
+
+    ``u_e[j]`` (px, over ``blur``) is predicted at the noise ``NOISE_FACTORS[j] *
+    noise_sigma``; the mismatch model is fitted on all of them
+    (:func:`~dicblur.models.fit_blur_model`, ``options`` passed on) and the model's own
+    noise is made ``noise_sigma``. The pattern is named from ``provenance``
+    (:func:`pattern_name`) and hashed from ``image``.
+    """
+    from .fit import fit_blur_model
+
+    levels = tuple(f * noise_sigma for f in NOISE_FACTORS)
+    model = fit_blur_model(
+        np.concatenate([blur] * len(levels)),
+        np.concatenate([sssig] * len(levels)),
+        np.concatenate(u_e),
+        noise_sigma=np.repeat(levels, blur.size),
+        subset=subset,
+        mean_level=float(image.mean()),
+        default="mismatch",
+        provenance=provenance,
+        compare=False,
+        shape=str(shape),
+        pattern=pattern_name(provenance),
+        pattern_sha256=hashlib.sha256(image.tobytes()).hexdigest(),
+        **options,
+    )
+    # fitted on three noise levels: make the model's own noise the one asked for
+    return replace(model, noise_sigma=noise_sigma)
 
 
 def _offsets(subpixel: float | str | None) -> list[float | None]:
@@ -301,7 +360,6 @@ def predict_from_pattern(
     breakdown = float(w[broken].min()) if broken.any() else None
     u_noise = np.sqrt(sigma**2 * (mean_var[0] + mean_var[1]) + sigma**4 * mean_var[2])
     u_blur = np.sqrt(mis_var)
-    n = math.hypot(float(motion[0]), float(motion[1]))
     return PatternPrediction(
         blur=w,
         u_e=np.hypot(u_noise, u_blur),
@@ -312,7 +370,7 @@ def predict_from_pattern(
         noise_sigma=sigma,
         subset=subset,
         shape=str(shape),
-        motion=(float(motion[0]) / n, float(motion[1]) / n),
+        motion=unit_direction(motion),
         u_noise_reference=sigma * np.sqrt(mean_var[0]),
         u_noise_current=sigma * np.sqrt(mean_var[1]),
         u_noise_interaction=sigma**2 * np.sqrt(mean_var[2]),
@@ -367,15 +425,9 @@ def model_from_pattern(
     -------
     BlurUncertaintyModel
     """
-    from .fit import fit_blur_model
-
     img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
-    w = as_blur(np.arange(0.0, 8.01, 0.5) if blur is None else blur, "blur", increasing=True)
-    if np.unique(w).size < 4:
-        raise InputError(
-            f"blur: {np.unique(w).size} distinct lengths; give at least 4 (e.g. W = 0, 1, 2, 4 px)"
-        )
+    w = model_blur(blur)
     mean_var, mis_var, s, frac = _terms(
         img, w, pts, subset, motion, shape, "bspline3", boundary, 1.0, subpixel, MIN_CONTRACTION
     )
@@ -388,14 +440,11 @@ def model_from_pattern(
             "pattern's texture is erased along the motion beyond W = "
             f"{w[keep][-1] if keep.any() else 0:g} px (give shorter blur lengths)"
         )
-    levels = (0.5 * sigma, sigma, 2.0 * sigma)
-    ww = np.concatenate([w[keep]] * 3)
-    ss = np.concatenate([s[keep]] * 3)
     var1 = mean_var[0] + mean_var[1]
-    uu = np.concatenate(
-        [np.sqrt(lv**2 * var1[keep] + lv**4 * mean_var[2][keep] + mis_var[keep]) for lv in levels]
-    )
-    nn = np.repeat(levels, int(keep.sum()))
+    u_e = [
+        np.sqrt(lv**2 * var1[keep] + lv**4 * mean_var[2][keep] + mis_var[keep])
+        for lv in (f * sigma for f in NOISE_FACTORS)
+    ]
     prov: dict[str, Any] = {
         "source": "static prediction",
         "subset": subset,
@@ -409,29 +458,21 @@ def model_from_pattern(
     # validity domain: the static prediction's own breakdown test ends it
     broken = np.nonzero(~keep)[0]
     w_break = float(w[broken[0]]) if broken.size else None
-    import hashlib
-
-    model = fit_blur_model(
-        ww,
-        ss,
-        uu,
-        noise_sigma=nn,
+    return fit_prediction(
+        img,
+        w[keep],
+        s[keep],
+        u_e,
+        noise_sigma=sigma,
         subset=subset,
-        mean_level=float(img.mean()),
-        next_term=True,
-        default="mismatch",
-        provenance=prov,
-        compare=False,
         shape=str(shape),
-        pattern=_pattern_name(prov),
-        pattern_sha256=hashlib.sha256(img.tobytes()).hexdigest(),
+        provenance=prov,
+        next_term=True,
         breakdown_blur=w_break,
         breakdown_rule="static prediction: < 90 % of the subsets keep a shift below 1 px"
         if w_break is not None
         else None,
     )
-    # fitted on three noise levels: make the model's own noise the one asked for
-    return replace(model, noise_sigma=sigma)
 
 
 def static_terms(
@@ -541,12 +582,11 @@ def static_terms(
     )
 
 
-def _pattern_name(prov: dict[str, Any]) -> str | None:
-    """Pattern name for the validity domain: ``provenance["pattern"]`` or the image's stem."""
-    if isinstance(prov.get("pattern"), str):
-        return str(prov["pattern"])
-    if isinstance(prov.get("image"), str):
-        from pathlib import Path
-
-        return Path(prov["image"]).stem or None
+def pattern_name(provenance: dict[str, Any]) -> str | None:
+    """Pattern name for the validity domain: ``provenance["pattern"]`` or the stem of
+    ``provenance["image"]`` (a path)."""
+    if isinstance(provenance.get("pattern"), str):
+        return str(provenance["pattern"])
+    if isinstance(provenance.get("image"), str):
+        return Path(provenance["image"]).stem or None
     return None

@@ -1155,55 +1155,41 @@ class Correlator:
         NDArray[np.uint8],
     ]:
         """Joint (shape, blur length) Gauss-Newton from the compensated IC-GN result."""
-        from .kernels.blur import joint_blur_step
+        from .kernels.blur import (
+            BlurImages,
+            BlurTerms,
+            blur_outputs,
+            blur_settings,
+            joint_blur_step,
+        )
 
         sp = entry.step
-        f0, gx, gy, dimg = entry.images
         c = cur_corr
         n = len(res)
         k = res.params.shape[1]
-        out_p = np.empty((n, k))
-        out_lam = np.empty(n)
-        out_z = np.empty(n)
-        out_r = np.empty(n)
-        out_i = np.empty(n, np.int64)
-        out_s = np.empty(n, np.uint8)
+        out = blur_outputs(n, k)
         st_in = np.where(res.status == PointStatus.CONVERGED, 0, res.status).astype(np.uint8)
         st_in[~sp.ok & (st_in == 0)] = int(PointStatus.LOW_TEXTURE)
         joint_blur_step(
             c._coef_buf,
-            self.image_shape[0],
-            self.image_shape[1],
-            self.order,
-            f0,
-            gx,
-            gy,
-            dimg,
-            c.rows,
-            c.cols,
-            self.half,
-            self.shape == "affine",
-            sp.hinv,
-            sp.fmean,
-            sp.fnorm,
-            sp.jsum,
-            sp.avec,
-            sp.evec,
-            sp.dsum,
-            sp.bval,
-            sp.dd,
+            BlurImages(*entry.images),
+            kernels.Subsets(c.rows, c.cols, sp.hinv, sp.jsum, sp.avec, sp.fmean, sp.fnorm),
+            BlurTerms(sp.evec, sp.dsum, sp.bval, sp.dd),
+            blur_settings(
+                self.image_shape[0],
+                self.image_shape[1],
+                self.order,
+                self.half,
+                self.shape == "affine",
+                max_iter,
+                self.tolerance,
+                _BLUR_TOLERANCE,
+            ),
             np.ascontiguousarray(res.params),
             st_in,
-            max_iter,
-            self.tolerance,
-            _BLUR_TOLERANCE,
-            out_p,
-            out_lam,
-            out_z,
-            out_r,
-            out_i,
-            out_s,
+            out,
         )
+        out_p, out_lam, out_z, out_r, out_i, out_s = out
         npx = self.subset**2
         with np.errstate(invalid="ignore", divide="ignore"):
             sig = np.sqrt(np.maximum(out_r, 0.0) / (npx - k - 1) * sp.hinv[:, k, k])

@@ -19,23 +19,114 @@ tangent vectors have the closed forms used below (``a = J_c^T fh``, ``b = D_c^T 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from numpy.typing import NDArray
 
-from ..status import PointStatus
-from .common import PAD, compose_inverse_affine
+from .common import CONVERGED, DIVERGED, MAX_ITERATIONS, OUT_OF_BOUNDS, PAD, compose_inverse_affine
+from .spline import beta5
 
-__all__ = ["joint_blur_step"]
+__all__ = [
+    "BlurImages",
+    "BlurOutputs",
+    "BlurSettings",
+    "BlurTerms",
+    "blur_outputs",
+    "blur_settings",
+    "joint_blur_step",
+]
 
-_CONVERGED = int(PointStatus.CONVERGED)
-_MAX_ITERATIONS = int(PointStatus.MAX_ITERATIONS)
-_OUT_OF_BOUNDS = int(PointStatus.OUT_OF_BOUNDS)
-_DIVERGED = int(PointStatus.DIVERGED)
+# reassociation only (vectorised sums); no 'nnan'/'ninf', so the finiteness checks stay.
+# The spline helpers are compiled functions of their own, not inlined into the parfor body
+# at each of their call sites: a third less compile time for the same bits.
+_FASTMATH = {"reassoc", "contract", "arcp", "nsz"}
 
 
-@nb.njit(inline="always", cache=True)
+# Records of the joint step's arguments, as the IC-GN kernels' (kernels/common.py); the
+# per-POI subset data travel in a common.Subsets.
+class BlurImages(NamedTuple):
+    """Float64 reference blurred to the length ``W0``, its spline x / y derivatives and its
+    derivative with respect to the blur length, ``d f0 / dW`` (rows, cols) each."""
+
+    f: NDArray[np.float64]
+    gx: NDArray[np.float64]
+    gy: NDArray[np.float64]
+    d: NDArray[np.float64]
+
+
+class BlurTerms(NamedTuple):
+    """Per-POI projections of the blur tangent ``D`` (n POIs, k shape parameters)."""
+
+    evec: NDArray[np.float64]  # (n, k) J_c^T D_c
+    dsum: NDArray[np.float64]  # (n,) sum D
+    bval: NDArray[np.float64]  # (n,) D_c^T fh
+    dd: NDArray[np.float64]  # (n,) D_c^T D_c
+
+
+class BlurSettings(NamedTuple):
+    """Scalars of one joint-step call (build with :func:`blur_settings` for stable types)."""
+
+    image_rows: int
+    image_cols: int
+    order: int  # spline degree, 3 or 5
+    half: int  # subset half-width, px
+    affine: bool  # shape function: affine (6 parameters) or translation (2)
+    max_iterations: int
+    tolerance: float  # px, the IC-GN norm of the shape step
+    length_tolerance: float  # px, the blur-length step
+
+
+def blur_settings(
+    image_rows: int,
+    image_cols: int,
+    order: int,
+    half: int,
+    affine: bool,
+    max_iterations: int,
+    tolerance: float,
+    length_tolerance: float,
+) -> BlurSettings:
+    """A :class:`BlurSettings` with Python int, bool and float fields (one signature)."""
+    return BlurSettings(
+        int(image_rows),
+        int(image_cols),
+        int(order),
+        int(half),
+        bool(affine),
+        int(max_iterations),
+        float(tolerance),
+        float(length_tolerance),
+    )
+
+
+class BlurOutputs(NamedTuple):
+    """Per-POI outputs of the joint step (n POIs, k shape parameters)."""
+
+    p: NDArray[np.float64]  # (n, k) parameters
+    lam: NDArray[np.float64]  # (n,) blur-length correction, px
+    zncc: NDArray[np.float64]  # (n,)
+    res2: NDArray[np.float64]  # (n,) normalised squared residual
+    iterations: NDArray[np.int64]  # (n,)
+    status: NDArray[np.uint8]  # (n,) PointStatus
+
+
+def blur_outputs(n: int, k: int) -> BlurOutputs:
+    """Uninitialised :class:`BlurOutputs` for ``n`` POIs and ``k`` shape parameters."""
+    return BlurOutputs(
+        np.empty((n, k)),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n, np.int64),
+        np.empty(n, np.uint8),
+    )
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH)
 def _bspline(x, order):  # pragma: no cover - compiled
+    """Centred B-spline of degree ``order`` (3: piecewise form; 5: :func:`.spline.beta5`)."""
     a = abs(x)
     if order == 3:
         if a < 1.0:
@@ -44,27 +135,12 @@ def _bspline(x, order):  # pragma: no cover - compiled
             b = 2.0 - a
             return b * b * b / 6.0
         return 0.0
-    if a < 1.0:
-        a2 = a * a
-        return 0.55 - 0.5 * a2 + 0.25 * a2 * a2 - a2 * a2 * a / 12.0
-    if a < 2.0:
-        a2 = a * a
-        return (
-            17.0 / 40.0
-            + 0.625 * a
-            - 1.75 * a2
-            + 1.25 * a2 * a
-            - 0.375 * a2 * a2
-            + a2 * a2 * a / 24.0
-        )
-    if a < 3.0:
-        b = 3.0 - a
-        return b * b * b * b * b / 120.0
-    return 0.0
+    return beta5(x)
 
 
-@nb.njit(inline="always", cache=True)
+@nb.njit(cache=True, fastmath=_FASTMATH)
 def _sample(coef, order, y, x, wy, wx):  # pragma: no cover - compiled
+    """One spline sample at image position (y, x), tap weights into ``wy``, ``wx``."""
     lo = (order - 1) // 2
     ix = int(math.floor(x))  # noqa: RUF046 - numba needs the int
     iy = int(math.floor(y))  # noqa: RUF046 - numba needs the int
@@ -84,52 +160,52 @@ def _sample(coef, order, y, x, wy, wx):  # pragma: no cover - compiled
     return g
 
 
-# reassociation only (vectorised sums); no 'nnan'/'ninf', so the finiteness checks stay
-@nb.njit(parallel=True, cache=True, fastmath={"reassoc", "contract", "arcp", "nsz"})
+@nb.njit(cache=True)
+def _store(out, pt, status, iterations, keep, p, lam, zncc, res2):  # pragma: no cover
+    """Write POI ``pt``'s results into ``out`` (a :class:`BlurOutputs`): the parameters
+    ``p``, ``lam``, ``zncc`` and ``res2`` when ``keep``, else NaN.
+
+    A call, not stores in the parfor body: numba's parfor dead-code elimination drops
+    stores into arrays reached through a tuple argument (its alias analysis skips
+    immutable types, and a named tuple is one; seen with numba 0.68.1: ``lam``, ``zncc``
+    and ``res2`` came out NaN), so every output goes through this function."""
+    out_p, out_lam, out_z, out_res2, out_iter, out_status = out
+    out_status[pt] = status
+    out_iter[pt] = iterations
+    for m in range(p.shape[0]):
+        out_p[pt, m] = p[m] if keep else np.nan
+    out_lam[pt] = lam if keep else np.nan
+    out_z[pt] = zncc if keep else np.nan
+    out_res2[pt] = res2 if keep else np.nan
+
+
+@nb.njit(parallel=True, cache=True, fastmath=_FASTMATH)
 def joint_blur_step(
-    coef,
-    himg,
-    wimg,
-    order,
-    f,
-    gx,
-    gy,
-    dimg,
-    rows,
-    cols,
-    half,
-    affine,
-    hinv,
-    fmean,
-    fnorm,
-    jsum,
-    avec,
-    evec,
-    dsum,
-    bval,
-    dd,
-    p_in,
-    status_in,
-    max_iter,
-    tol,
-    lam_tol,
-    out_p,
-    out_lam,
-    out_z,
-    out_res2,
-    out_iter,
-    out_status,
+    coef, images, subsets, terms, cfg, p_in, status_in, out
 ):  # pragma: no cover - compiled
     """Joint Gauss-Newton in the shape parameters and the blur-length correction ``lam``.
+
+    ``coef`` the padded spline coefficients of the current image; ``images``
+    (:class:`BlurImages`) the reference blurred to ``W0`` and its derivatives;
+    ``subsets`` (:class:`~dicblur.dic.kernels.Subsets`, ``hinv`` of shape (n, k+1, k+1):
+    the inverse Gauss-Newton matrix in ``(p, lam)``) and ``terms`` (:class:`BlurTerms`)
+    the prepared per-POI quantities (:func:`dicblur.dic.compensation.prepare_blur_step`);
+    ``cfg`` (:class:`BlurSettings`, from :func:`blur_settings`) the scalars; ``p_in``
+    (n, k) and ``status_in`` (n,) the compensated IC-GN result; ``out``
+    (:class:`BlurOutputs`, from :func:`blur_outputs`) written in place.
 
     Points with ``status_in != 0`` are copied through (``lam`` NaN). ``p`` as the IC-GN
     kernels (translation ``(u, v)``; affine ``(u, ux, uy, v, vx, vy)``), updated by inverse
     composition; ``lam`` additively. Outputs: parameters, ``lam`` (px), ZNCC of the model
     ``Fh`` with the warped current subset, the normalised squared residual
     ``|gh - Fh|^2 = 2 - 2 zncc``, iterations, status (``OUT_OF_BOUNDS``, ``DIVERGED``,
-    ``MAX_ITERATIONS`` or ``CONVERGED``). Converged when the shape step meets ``tol``
-    (the IC-GN norm) and the length step ``lam_tol`` (px).
+    ``MAX_ITERATIONS`` or ``CONVERGED``). Converged when the shape step meets
+    ``cfg.tolerance`` (the IC-GN norm) and the length step ``cfg.length_tolerance`` (px).
     """
+    f, gx, gy, dimg = images
+    rows, cols, hinv, jsum, avec, fmean, fnorm = subsets
+    evec, dsum, bval, dd = terms
+    himg, wimg, order, half, affine, max_iter, tol, lam_tol = cfg
     n = rows.shape[0]
     k = 6 if affine else 2
     size = 2 * half + 1
@@ -145,13 +221,8 @@ def joint_blur_step(
         grow = np.empty(size)
         for m in range(k):
             p[m] = p_in[pt, m]
-            out_p[pt, m] = p_in[pt, m]
-        out_lam[pt] = np.nan
-        out_z[pt] = np.nan
-        out_res2[pt] = np.nan
-        out_iter[pt] = 0
         if status_in[pt] != 0:
-            out_status[pt] = status_in[pt]
+            _store(out, pt, status_in[pt], 0, True, p, np.nan, np.nan, np.nan)
             continue
         lam = 0.0
         xc = cols[pt]
@@ -159,7 +230,7 @@ def joint_blur_step(
         r0 = yc - half
         c0 = xc - half
         df = fnorm[pt]
-        st = _MAX_ITERATIONS
+        st = MAX_ITERATIONS
         zf = np.nan
         nit = 0
         for it in range(max_iter):
@@ -177,7 +248,7 @@ def joint_blur_step(
                     if not (x >= 0.0 and y >= 0.0 and x <= wimg - 1 and y <= himg - 1):
                         inside = False
             if not inside:
-                st = _OUT_OF_BOUNDS
+                st = OUT_OF_BOUNDS
                 break
             sg = 0.0
             sgg = 0.0
@@ -260,12 +331,12 @@ def joint_blur_step(
             gm = sg / npx
             dg2 = sgg - npx * gm * gm
             if not dg2 > 1e-12 * (sgg + 1e-30):
-                st = _DIVERGED
+                st = DIVERGED
                 break
             dg = math.sqrt(dg2)
             nf2 = df * df + 2.0 * lam * df * bval[pt] + lam * lam * dd[pt]
             if not nf2 > 0.0:
-                st = _DIVERGED
+                st = DIVERGED
                 break
             nf = math.sqrt(nf2)
             zn0 = (sfg - fmean[pt] * sg) / (df * dg)
@@ -288,7 +359,7 @@ def joint_blur_step(
             if affine:
                 du, dux, duy, dv, dvx, dvy = stp[0], stp[1], stp[2], stp[3], stp[4], stp[5]
                 if not compose_inverse_affine(p, du, dux, duy, dv, dvx, dvy):
-                    st = _DIVERGED
+                    st = DIVERGED
                     break
                 norm = math.sqrt(
                     du * du
@@ -305,19 +376,10 @@ def joint_blur_step(
                 if not math.isfinite(p[m]):
                     finite = False
             if not finite or abs(lam) > size:
-                st = _DIVERGED
+                st = DIVERGED
                 break
             if norm < tol and abs(stp[k]) < lam_tol:
-                st = _CONVERGED
+                st = CONVERGED
                 break
-        out_status[pt] = st
-        out_iter[pt] = nit
-        if st == _CONVERGED or st == _MAX_ITERATIONS:
-            for m in range(k):
-                out_p[pt, m] = p[m]
-            out_lam[pt] = lam
-            out_z[pt] = zf
-            out_res2[pt] = 2.0 - 2.0 * zf
-        else:
-            for m in range(k):
-                out_p[pt, m] = np.nan
+        keep = st == CONVERGED or st == MAX_ITERATIONS
+        _store(out, pt, st, nit, keep, p, lam, zf, 2.0 - 2.0 * zf)

@@ -17,7 +17,7 @@ from typing import Any
 from ..errors import InputError
 from .domain import compensation_label
 from .model import BlurUncertaintyModel
-from .plan import ExposurePlan, plan_exposure
+from .plan import ExposurePlan, format_time, plan_exposure
 
 __all__ = ["PlanComparison", "check_same_calibration", "compare_plans"]
 
@@ -168,19 +168,10 @@ def _times(x: float) -> str:
     return f"{x:.3g}x"
 
 
-def _fmt_time(t: float) -> str:
-    # as ExposurePlan.summary
-    if t >= 1:
-        return f"{t:.4g} s"
-    if t >= 1e-3:
-        return f"{t * 1e3:.4g} ms"
-    return f"{t * 1e6:.4g} us"
-
-
 def _sentence(
     base: ExposurePlan, comp: ExposurePlan, label: str, u_ratio: float, t_ratio: float
 ) -> str:
-    exposures = f"{_fmt_time(comp.exposure)} against {_fmt_time(base.exposure)}"
+    exposures = f"{format_time(comp.exposure)} against {format_time(base.exposure)}"
     errors = f"{comp.u_e:.3g} px against {base.u_e:.3g} px"
     if abs(u_ratio - 1.0) < 1e-6:
         u_words = f"u_e is {comp.u_e:.3g} px in both"

@@ -35,7 +35,7 @@ from scipy import optimize
 
 from ..checks import as_image, check_positive, check_textured
 from ..errors import InputError
-from .domain import compensation_label
+from .domain import ValidityDomain, compensation_label
 from .model import BlurUncertaintyModel
 from .units import parse_quantity
 
@@ -222,7 +222,7 @@ class ExposurePlan:
         ]
         kind = "optimal exposure" if self.optimal else "longest exposure under the target"
         lines.append(
-            f"{kind}: {_fmt_time(self.exposure)} -> blur {self.blur:.3g} px, "
+            f"{kind}: {format_time(self.exposure)} -> blur {self.blur:.3g} px, "
             f"u_e {self.u_e:.3g} px [{self.u_e_low:.3g}, {self.u_e_high:.3g}] "
             f"= {self.u_e * self.scale * 1e3:.3g} um"
         )
@@ -230,14 +230,14 @@ class ExposurePlan:
             if self.max_exposure is None:
                 lines.append(f"target {self.target:g} px: not reachable at any exposure")
             else:
-                lo = "" if self.min_exposure is None else f"{_fmt_time(self.min_exposure)} .. "
+                lo = "" if self.min_exposure is None else f"{format_time(self.min_exposure)} .. "
                 lines.append(
                     f"target {self.target:g} px met for exposures {lo}"
-                    f"{_fmt_time(self.max_exposure)}"
+                    f"{format_time(self.max_exposure)}"
                 )
         lines.append(
             f"rule of thumb (blur <= {RULE_OF_THUMB_BLUR} px): exposure "
-            f"{_fmt_time(self.rule_of_thumb_exposure)}, u_e {self.rule_of_thumb_u_e:.3g} px; "
+            f"{format_time(self.rule_of_thumb_exposure)}, u_e {self.rule_of_thumb_u_e:.3g} px; "
             f"planned exposure = {self.exposure / self.rule_of_thumb_exposure:.3g} x that"
         )
         lines += list(self.notes)
@@ -251,12 +251,22 @@ class ExposurePlan:
         return d
 
 
-def _fmt_time(t: float) -> str:
+def format_time(t: float) -> str:
+    """An exposure time (s) in s, ms or us, four significant digits."""
     if t >= 1:
         return f"{t:.4g} s"
     if t >= 1e-3:
         return f"{t * 1e3:.4g} ms"
     return f"{t * 1e6:.4g} us"
+
+
+def domain_note(what: str, inside: bool, domain: ValidityDomain) -> str:
+    """The plan's note on whether ``what`` (a planned W) lies inside the model's
+    validity domain."""
+    return (
+        f"{what} lies {'inside' if inside else 'outside'} the model's validity domain "
+        f"({domain.describe()})" + ("" if inside else ": extrapolated")
+    )
 
 
 def plan_exposure(
@@ -357,11 +367,12 @@ def plan_exposure(
         assert at.inside_domain is not None
         inside = bool(at.inside_domain[0])  # blur and noise range (power law: fit range)
         notes.append(
-            f"planned W = {w_max:.3g} px"
-            + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL")
-            + (" lies inside" if inside else " lies outside")
-            + f" the model's validity domain ({dom.describe()})"
-            + ("" if inside else ": extrapolated")
+            domain_note(
+                f"planned W = {w_max:.3g} px"
+                + ("" if dom.inside_noise(sig_used) else f" at noise {sig_used:.3g} GL"),
+                inside,
+                dom,
+            )
         )
         return ExposurePlan(
             model=kind,
@@ -524,10 +535,7 @@ def plan_exposure(
     assert at.inside_domain is not None
     inside = bool(at.inside_domain[0])
     notes.append(
-        f"the optimum (W = {w_opt:.3g} px, noise {sig_opt:.3g} GL) lies "
-        + ("inside" if inside else "outside")
-        + f" the model's validity domain ({dom.describe()})"
-        + ("" if inside else ": extrapolated")
+        domain_note(f"the optimum (W = {w_opt:.3g} px, noise {sig_opt:.3g} GL)", inside, dom)
     )
     return ExposurePlan(
         model=kind,

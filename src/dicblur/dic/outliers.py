@@ -76,6 +76,20 @@ def _sorted_median(buf, n):  # pragma: no cover - compiled
     return 0.5 * (buf[(n - 1) // 2] + buf[n // 2])
 
 
+@nb.njit(cache=True, inline="always")
+def _gather(a, c, ok, y, x, buf):  # pragma: no cover - compiled
+    """Copy component ``c`` of the valid 3x3 neighbours of grid point ``(y, x)`` of ``a``
+    (k, ny, nx) into ``buf``; returns their number (0..8)."""
+    ny, nx = ok.shape
+    n = 0
+    for yy in range(max(0, y - 1), min(ny, y + 2)):
+        for xx in range(max(0, x - 1), min(nx, x + 2)):
+            if ok[yy, xx] and not (yy == y and xx == x):
+                buf[n] = a[c, yy, xx]
+                n += 1
+    return n
+
+
 @nb.njit(cache=True)
 def _neighbour_medians(a, ok, med, res, count):  # pragma: no cover - compiled
     """Per component ``c`` and grid point of ``a`` (k, ny, nx): median of the valid 3x3
@@ -84,15 +98,9 @@ def _neighbour_medians(a, ok, med, res, count):  # pragma: no cover - compiled
     k, ny, nx = a.shape
     buf = np.empty(8)
     for c in range(k):
-        ac = a[c]
         for y in range(ny):
             for x in range(nx):
-                n = 0
-                for yy in range(max(0, y - 1), min(ny, y + 2)):
-                    for xx in range(max(0, x - 1), min(nx, x + 2)):
-                        if ok[yy, xx] and not (yy == y and xx == x):
-                            buf[n] = ac[yy, xx]
-                            n += 1
+                n = _gather(a, c, ok, y, x, buf)
                 count[y, x] = n
                 if n == 0:
                     med[c, y, x] = np.nan
@@ -144,12 +152,7 @@ def _screen_kernel(a, ntest, ok, eps, thr, min_nb, within, flag, med):  # pragma
                 if skip:
                     continue
             for c in range(k):
-                m = 0
-                for yy in range(max(0, y - 1), min(ny, y + 2)):
-                    for xx in range(max(0, x - 1), min(nx, x + 2)):
-                        if ok[yy, xx] and not (yy == y and xx == x):
-                            buf[m] = a[c, yy, xx]
-                            m += 1
+                _gather(a, c, ok, y, x, buf)
                 um = _sorted_median(buf, n)
                 med[c, y, x] = um
                 if c < ntest:
@@ -220,18 +223,13 @@ def _medians(
 def _medians_at(a, ok, ys, xs, out):  # pragma: no cover - compiled
     """Neighbour medians of the points ``(ys[m], xs[m])`` for each component of ``a``
     (k, ny, nx) over the ``ok`` points into ``out`` (k, m); NaN without a neighbour."""
-    k, ny, nx = a.shape
+    k = a.shape[0]
     buf = np.empty(8)
     for m in range(ys.shape[0]):
         y = ys[m]
         x = xs[m]
         for c in range(k):
-            n = 0
-            for yy in range(max(0, y - 1), min(ny, y + 2)):
-                for xx in range(max(0, x - 1), min(nx, x + 2)):
-                    if ok[yy, xx] and not (yy == y and xx == x):
-                        buf[n] = a[c, yy, xx]
-                        n += 1
+            n = _gather(a, c, ok, y, x, buf)
             out[c, m] = _sorted_median(buf, n) if n > 0 else np.nan
 
 

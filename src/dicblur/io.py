@@ -46,6 +46,7 @@ __all__ = [
     "check_output",
     "check_pixels",
     "file_sha256",
+    "fsync_path",
     "load_image",
     "max_pixels",
     "read_image_header",
@@ -158,13 +159,18 @@ def check_output(
     return p
 
 
+def fsync_path(path: str | os.PathLike[str]) -> None:
+    """Flush a file or folder to disk (``fsync`` of a read-only descriptor of it)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 def _fsync_dir(folder: Path) -> None:
     with contextlib.suppress(OSError):  # not every file system syncs a directory
-        fd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        fsync_path(folder)
 
 
 @contextlib.contextmanager

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from .._version import package_versions
 from ..errors import StoreError
+from ..io import fsync_path
 from .lock import StoreLock
 
 __all__ = ["CHUNKS_LAYOUT", "ChunkStore"]
@@ -60,14 +61,6 @@ def _crc(arr: NDArray[Any]) -> int:
     a = np.ascontiguousarray(arr)
     head = f"{a.dtype.str}{a.shape}".encode()
     return zlib.crc32(a.tobytes(), zlib.crc32(head))
-
-
-def _fsync(path: str | os.PathLike[str]) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 class ChunkStore:
@@ -244,7 +237,7 @@ class ChunkStore:
             finally:
                 os.close(fd)
             os.replace(tmp, target)
-            _fsync(self.path)
+            fsync_path(self.path)
         except OSError as exc:
             tmp.unlink(missing_ok=True)
             raise StoreError(

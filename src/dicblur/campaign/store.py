@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from .._version import package_versions
 from ..errors import StoreError
+from ..io import fsync_path
 from .spec import CampaignSpec
 from .tasks import Batch
 
@@ -168,14 +169,6 @@ def half_created(path: str | os.PathLike[str]) -> bool:
         return False
 
 
-def _fsync_path(path: str | os.PathLike[str]) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 _SYNCFS: list[Any] = []
 
 
@@ -206,8 +199,8 @@ def _fsync_tree(root: Path) -> None:
     """fsync every file and folder under ``root`` (files first, then their folders)."""
     for folder, _, files in os.walk(root, topdown=False):
         for f in files:
-            _fsync_path(os.path.join(folder, f))
-        _fsync_path(folder)
+            fsync_path(os.path.join(folder, f))
+        fsync_path(folder)
 
 
 def _task_checksums(values: Mapping[str, NDArray[np.float64]], n: int) -> NDArray[np.uint32]:
@@ -311,7 +304,7 @@ class CampaignStore:
         ds.to_zarr(tmp, mode="w-", encoding=encoding, compute=False, consolidated=False)
         _fsync_tree(tmp)
         os.replace(tmp, p)
-        _fsync_path(p.parent)
+        fsync_path(p.parent)
         return cls.open(p)
 
     @classmethod
@@ -543,8 +536,8 @@ class CampaignStore:
         # batch is damaged, and redone), so a flag never vouches for lost values.
         if not _syncfs(self.path):
             for target in written:
-                _fsync_path(target)
-                _fsync_path(os.path.dirname(target))
+                fsync_path(target)
+                fsync_path(os.path.dirname(target))
 
     def _write_raw(self, name: str, batch: Batch, values: NDArray[Any]) -> str:
         """Write one chunk (temporary file renamed over it); return the chunk's path."""
@@ -563,7 +556,7 @@ class CampaignStore:
                     d = folder
                     while len(d) > len(top):
                         d = os.path.dirname(d)
-                        _fsync_path(d)
+                        fsync_path(d)
             self._folders.add(folder)
         target = os.path.join(folder, str(key[-1]))
         tmp = os.path.join(folder, f".{key[-1]}.{os.getpid()}.partial")

@@ -127,6 +127,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=2024)
     ap.add_argument("--no-screen", action="store_true", help="median_test off")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "dic_robust.json"))
+    ap.add_argument(
+        "--dump",
+        default=None,
+        help="also write every POI's params, status and iterations to this .npz "
+        "(to compare two engines' results bit for bit)",
+    )
     args = ap.parse_args(argv)
     import numba
 
@@ -142,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     pairs = {name: make_pair(name, args.seed) for name in IMAGES}
     results: dict = {}
+    dump: dict[str, np.ndarray] = {}
     for shape in ("translation", "affine"):
         cors = {
             name: (
@@ -167,6 +174,8 @@ def main(argv: list[str] | None = None) -> int:
                 cpu[name].append(time.process_time() - t0)
         for name, r in res.items():
             n = len(r)
+            for field in ("params", "status", "iterations", "zncc"):
+                dump[f"{name}_{shape}_{field}"] = np.asarray(getattr(r, field))
             err = np.hypot(r.u - TRUE_U, r.v - TRUE_V)
             ok = r.converged
             wrong = ok & (err > 0.1)
@@ -236,6 +245,9 @@ def main(argv: list[str] | None = None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(record, indent=2))
     print(f"wrote {out}")
+    if args.dump:
+        np.savez_compressed(args.dump, **dump)
+        print(f"wrote {args.dump}")
     return 0
 
 

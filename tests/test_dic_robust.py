@@ -270,3 +270,67 @@ def test_neighbour_median_and_bad_arguments():
         normalized_median_test(a, a, (3, 3), min_neighbours=0)
     with pytest.raises(InputError, match="eps"):
         normalized_median_test(a, a, (3, 3), eps=-1)
+
+
+# ---------------------------------------------------------------- --max-predicted-sigma
+def _statuses(path):
+    with path.open() as fh:
+        return [r["status_name"] for r in csv.DictReader(fh)]
+
+
+def test_cli_max_predicted_sigma(tmp_path, capsys):
+    # the IMPRECISE threshold from the command line: a unit string, none to turn it off;
+    # the clean 96^2 pattern's predicted sigmas are ~0.005 px at 2 GL
+    ref = pattern(96, seed=7)
+    cur = fourier_shift(ref, 0.0, 0.4)
+    save_image(tmp_path / "r.tif", ref, bit_depth=16)
+    save_image(tmp_path / "c.tif", cur, bit_depth=16)
+    base = ["correlate", str(tmp_path / "r.tif"), str(tmp_path / "c.tif"), "--step", "20"]
+    base += ["--shape", "translation", "--noise", "2"]
+    runs = {}
+    for value in (None, "0.001px", "0.001", "none", "OFF"):
+        out = tmp_path / f"f{len(runs)}.csv"
+        extra = [] if value is None else ["--max-predicted-sigma", value]
+        assert main([*base, *extra, "-o", str(out)]) == 0
+        runs[value] = _statuses(out)
+    capsys.readouterr()
+    assert set(runs[None]) == {"converged"}  # the default 0.1/3 px flags nothing here
+    assert set(runs["0.001px"]) == {"imprecise"} and runs["0.001"] == runs["0.001px"]
+    assert runs["none"] == runs["OFF"] == runs[None]
+    # a threshold needs the noise level
+    code = main([*base[:-2], "--max-predicted-sigma", "0.05px"])
+    assert code == 2 and "--noise" in capsys.readouterr().err
+
+
+def test_track_max_predicted_sigma(tmp_path):
+    import xarray as xr
+
+    import dicblur
+    from dicblur.track.synthetic import VibratingTarget
+
+    p = dicblur.speckle_pattern((96, 96), speckle_size=4, density=0.5, softness=0.5, seed=1)
+    tgt = VibratingTarget(
+        30 + 180 * (p - p.min()) / (p.max() - p.min()),
+        fps=2000.0,
+        exposure=0.4e-3,
+        amplitude=2.0,
+        frequency=200.0,
+        static=4,
+        seed=3,
+    )
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k in range(6):
+        dicblur.save_image(folder / f"f{k}.png", tgt.render(k), bit_depth=8)
+    args = ["track", str(folder), "--exposure", "0.4ms", "--fps", "2kHz", "--static", "0:4"]
+    args += ["--subset", "21", "--step", "16", "--shape", "translation", "--no-report"]
+    assert main([*args, "-o", str(tmp_path / "a")]) == 0
+    assert main([*args, "--max-predicted-sigma", "0.001px", "-o", str(tmp_path / "b")]) == 0
+    a = xr.open_dataset(tmp_path / "a" / "track.nc", engine="scipy")
+    b = xr.open_dataset(tmp_path / "b" / "track.nc", engine="scipy")
+    assert not np.any(a["status"].values == PointStatus.IMPRECISE)  # default: no test
+    assert a["valid"].values.mean() > 0.8
+    # every subset's predicted sigma (~0.01 px) exceeds 0.001 px: all flagged, none valid
+    assert np.all(b["status"].values[0] == PointStatus.IMPRECISE)
+    assert not b["valid"].values.any()
+    assert float(b.attrs["max_predicted_sigma"]) == pytest.approx(0.001)

@@ -150,8 +150,11 @@ class Correlator:
     max_iterations : int
         IC-GN iteration limit.
     tolerance : float
-        Convergence threshold on the update norm ``sqrt(du^2 + dv^2 + h^2 |grad|^2)``, px
-        (``h`` = subset half-width).
+        Convergence threshold, px: the estimated error left in the parameters (as
+        :class:`~dicblur.dic.MatcherSettings`): the Gauss-Newton step norm
+        ``|d| = sqrt(du^2 + dv^2 + h^2 |grad|^2)`` (``h`` = subset half-width) below it, or,
+        for steps contracting linearly by ``q = |d| / |d_prev| > 0.03``, ``|d| q / (1 - q)``
+        below it.
     noise_sigma : float, optional
         Image noise std, grey levels (assumed in both images); enables the per-point
         predicted sigma.

@@ -19,7 +19,8 @@ both alike), the fraction of POIs returned ``CONVERGED`` more than 0.1 px from t
 sigma)`` (gross), the share flagged by the screening (``HIGH_RESIDUAL``, ``OUTLIER``,
 ``IMPRECISE``) and the counts per status. Screening: ``max_residual=2`` (default),
 ``median_test=True``, ``max_predicted_sigma`` 0.1/3 px (default; engines after issue 15).
-Writes ``benchmarks/results/dic_robust.json``.
+Writes ``benchmarks/results/dic_robust.json`` (through ``_harness.Run``: with provenance);
+``--dump FILE.npz`` also writes every POI's params, status, iterations and ZNCC.
 
 Usage::
 
@@ -32,7 +33,6 @@ then dropped), to measure the engine before the change on the same images.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import Run
 
 import dicblur
 from dicblur import Correlator, speckle_pattern
@@ -134,6 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         "(to compare two engines' results bit for bit)",
     )
     args = ap.parse_args(argv)
+    run = Run("dic_robust")
     import numba
 
     numba.set_num_threads(min(args.workers, numba.config.NUMBA_NUM_THREADS))
@@ -241,9 +243,9 @@ def main(argv: list[str] | None = None) -> int:
             f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}; fade / clean: "
             f"CPU {results[f'ratio_fade_{shape}_poi_per_cpu_s_1thread']:.2f}"
         )
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(record, indent=2))
+    # with the shared provenance block (commit of this script's checkout; dicblur_path says
+    # which engine ran, e.g. another checkout first on PYTHONPATH)
+    out = run.write(record, args.out)
     print(f"wrote {out}")
     if args.dump:
         np.savez_compressed(args.dump, **dump)

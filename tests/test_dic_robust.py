@@ -92,6 +92,27 @@ def test_imprecise_subsets_are_flagged_cheap_and_not_retried(blob_pair):
 
 
 @pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_linear_convergence_stops_on_the_error_left(blob_pair, shape):
+    # the blob image's precise subsets converge linearly (steps shrinking 0.03-0.25 per
+    # iteration): IC-GN stops when the rest of the series |d| q / (1 - q) is below the
+    # tolerance instead of waiting for |d| itself (before: 3.86 affine / 2.84 translation
+    # iterations per converged POI on this pair)
+    ref, cur = blob_pair
+    kw = dict(subset=21, step=10, shape=shape, noise_sigma=2.0)
+    res = Correlator(ref, **kw).correlate(cur)
+    ok = res.converged
+    assert res.iterations[ok].mean() < (3.4 if shape == "affine" else 2.7)
+    # the error left is what the tolerance says: iterated to 1e-7 px instead, the converged
+    # POIs move by a few 1e-5 px (random error here: 0.01 px)
+    fine = Correlator(ref, **kw, tolerance=1e-7, max_iterations=200).correlate(cur)
+    both = ok & fine.converged
+    cv = 1 if shape == "translation" else 3
+    d = np.abs(res.params[both][:, [0, cv]] - fine.params[both][:, [0, cv]]).max(axis=1)
+    assert both.mean() > 0.85
+    assert np.percentile(d, 99) < 1e-4 and d.max() < 5e-4
+
+
+@pytest.mark.parametrize("shape", ["translation", "affine"])
 def test_clean_pattern_has_no_false_flags(shape):
     img = pattern(256, seed=4)
     rng = np.random.default_rng(2)

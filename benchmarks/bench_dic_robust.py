@@ -19,7 +19,8 @@ both alike), the fraction of POIs returned ``CONVERGED`` more than 0.1 px from t
 sigma)`` (gross), the share flagged by the screening (``HIGH_RESIDUAL``, ``OUTLIER``,
 ``IMPRECISE``) and the counts per status. Screening: ``max_residual=2`` (default),
 ``median_test=True``, ``max_predicted_sigma`` 0.1/3 px (default; engines after issue 15).
-Writes ``benchmarks/results/dic_robust.json``.
+Writes ``benchmarks/results/dic_robust.json`` (through ``_harness.Run``: with provenance);
+``--dump FILE.npz`` also writes every POI's params, status, iterations and ZNCC.
 
 Usage::
 
@@ -32,7 +33,6 @@ then dropped), to measure the engine before the change on the same images.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import Run
 
 import dicblur
 from dicblur import Correlator, speckle_pattern
@@ -127,7 +128,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=2024)
     ap.add_argument("--no-screen", action="store_true", help="median_test off")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "dic_robust.json"))
+    ap.add_argument(
+        "--dump",
+        default=None,
+        help="also write every POI's params, status and iterations to this .npz "
+        "(to compare two engines' results bit for bit)",
+    )
     args = ap.parse_args(argv)
+    run = Run("dic_robust")
     import numba
 
     numba.set_num_threads(min(args.workers, numba.config.NUMBA_NUM_THREADS))
@@ -142,6 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     pairs = {name: make_pair(name, args.seed) for name in IMAGES}
     results: dict = {}
+    dump: dict[str, np.ndarray] = {}
     for shape in ("translation", "affine"):
         cors = {
             name: (
@@ -167,6 +176,8 @@ def main(argv: list[str] | None = None) -> int:
                 cpu[name].append(time.process_time() - t0)
         for name, r in res.items():
             n = len(r)
+            for field in ("params", "status", "iterations", "zncc"):
+                dump[f"{name}_{shape}_{field}"] = np.asarray(getattr(r, field))
             err = np.hypot(r.u - TRUE_U, r.v - TRUE_V)
             ok = r.converged
             wrong = ok & (err > 0.1)
@@ -232,10 +243,13 @@ def main(argv: list[str] | None = None) -> int:
             f"CPU {results[f'ratio_{shape}_poi_per_cpu_s_1thread']:.2f}; fade / clean: "
             f"CPU {results[f'ratio_fade_{shape}_poi_per_cpu_s_1thread']:.2f}"
         )
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(record, indent=2))
+    # with the shared provenance block (commit of this script's checkout; dicblur_path says
+    # which engine ran, e.g. another checkout first on PYTHONPATH)
+    out = run.write(record, args.out)
     print(f"wrote {out}")
+    if args.dump:
+        np.savez_compressed(args.dump, **dump)
+        print(f"wrote {args.dump}")
     return 0
 
 

@@ -92,6 +92,27 @@ def test_imprecise_subsets_are_flagged_cheap_and_not_retried(blob_pair):
 
 
 @pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_linear_convergence_stops_on_the_error_left(blob_pair, shape):
+    # the blob image's precise subsets converge linearly (steps shrinking 0.03-0.25 per
+    # iteration): IC-GN stops when the rest of the series |d| q / (1 - q) is below the
+    # tolerance instead of waiting for |d| itself (before: 3.86 affine / 2.84 translation
+    # iterations per converged POI on this pair)
+    ref, cur = blob_pair
+    kw = dict(subset=21, step=10, shape=shape, noise_sigma=2.0)
+    res = Correlator(ref, **kw).correlate(cur)
+    ok = res.converged
+    assert res.iterations[ok].mean() < (3.4 if shape == "affine" else 2.7)
+    # the error left is what the tolerance says: iterated to 1e-7 px instead, the converged
+    # POIs move by a few 1e-5 px (random error here: 0.01 px)
+    fine = Correlator(ref, **kw, tolerance=1e-7, max_iterations=200).correlate(cur)
+    both = ok & fine.converged
+    cv = 1 if shape == "translation" else 3
+    d = np.abs(res.params[both][:, [0, cv]] - fine.params[both][:, [0, cv]]).max(axis=1)
+    assert both.mean() > 0.85
+    assert np.percentile(d, 99) < 1e-4 and d.max() < 5e-4
+
+
+@pytest.mark.parametrize("shape", ["translation", "affine"])
 def test_clean_pattern_has_no_false_flags(shape):
     img = pattern(256, seed=4)
     rng = np.random.default_rng(2)
@@ -270,3 +291,67 @@ def test_neighbour_median_and_bad_arguments():
         normalized_median_test(a, a, (3, 3), min_neighbours=0)
     with pytest.raises(InputError, match="eps"):
         normalized_median_test(a, a, (3, 3), eps=-1)
+
+
+# ---------------------------------------------------------------- --max-predicted-sigma
+def _statuses(path):
+    with path.open() as fh:
+        return [r["status_name"] for r in csv.DictReader(fh)]
+
+
+def test_cli_max_predicted_sigma(tmp_path, capsys):
+    # the IMPRECISE threshold from the command line: a unit string, none to turn it off;
+    # the clean 96^2 pattern's predicted sigmas are ~0.005 px at 2 GL
+    ref = pattern(96, seed=7)
+    cur = fourier_shift(ref, 0.0, 0.4)
+    save_image(tmp_path / "r.tif", ref, bit_depth=16)
+    save_image(tmp_path / "c.tif", cur, bit_depth=16)
+    base = ["correlate", str(tmp_path / "r.tif"), str(tmp_path / "c.tif"), "--step", "20"]
+    base += ["--shape", "translation", "--noise", "2"]
+    runs = {}
+    for value in (None, "0.001px", "0.001", "none", "OFF"):
+        out = tmp_path / f"f{len(runs)}.csv"
+        extra = [] if value is None else ["--max-predicted-sigma", value]
+        assert main([*base, *extra, "-o", str(out)]) == 0
+        runs[value] = _statuses(out)
+    capsys.readouterr()
+    assert set(runs[None]) == {"converged"}  # the default 0.1/3 px flags nothing here
+    assert set(runs["0.001px"]) == {"imprecise"} and runs["0.001"] == runs["0.001px"]
+    assert runs["none"] == runs["OFF"] == runs[None]
+    # a threshold needs the noise level
+    code = main([*base[:-2], "--max-predicted-sigma", "0.05px"])
+    assert code == 2 and "--noise" in capsys.readouterr().err
+
+
+def test_track_max_predicted_sigma(tmp_path):
+    import xarray as xr
+
+    import dicblur
+    from dicblur.track.synthetic import VibratingTarget
+
+    p = dicblur.speckle_pattern((96, 96), speckle_size=4, density=0.5, softness=0.5, seed=1)
+    tgt = VibratingTarget(
+        30 + 180 * (p - p.min()) / (p.max() - p.min()),
+        fps=2000.0,
+        exposure=0.4e-3,
+        amplitude=2.0,
+        frequency=200.0,
+        static=4,
+        seed=3,
+    )
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k in range(6):
+        dicblur.save_image(folder / f"f{k}.png", tgt.render(k), bit_depth=8)
+    args = ["track", str(folder), "--exposure", "0.4ms", "--fps", "2kHz", "--static", "0:4"]
+    args += ["--subset", "21", "--step", "16", "--shape", "translation", "--no-report"]
+    assert main([*args, "-o", str(tmp_path / "a")]) == 0
+    assert main([*args, "--max-predicted-sigma", "0.001px", "-o", str(tmp_path / "b")]) == 0
+    a = xr.open_dataset(tmp_path / "a" / "track.nc", engine="scipy")
+    b = xr.open_dataset(tmp_path / "b" / "track.nc", engine="scipy")
+    assert not np.any(a["status"].values == PointStatus.IMPRECISE)  # default: no test
+    assert a["valid"].values.mean() > 0.8
+    # every subset's predicted sigma (~0.01 px) exceeds 0.001 px: all flagged, none valid
+    assert np.all(b["status"].values[0] == PointStatus.IMPRECISE)
+    assert not b["valid"].values.any()
+    assert float(b.attrs["max_predicted_sigma"]) == pytest.approx(0.001)

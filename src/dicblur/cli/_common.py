@@ -28,6 +28,29 @@ def parse_size(text: str, name: str = "--size") -> tuple[int, int]:
     return values[0], values[1]
 
 
+#: ``--max-predicted-sigma`` of ``correlate`` and ``track`` (one help text for both).
+MAX_SIGMA_HELP = (
+    "Flag IMPRECISE the points whose predicted random error (from the reference subset and "
+    "the noise) exceeds this, px (e.g. 0.05px; none: no test). correlate: default 0.1/3 px "
+    "with --noise; track: default none."
+)
+
+
+def parse_max_sigma(text: str | None, name: str = "--max-predicted-sigma") -> float | None:
+    """``--max-predicted-sigma``: a displacement > 0 px (``0.05``, ``"0.05px"``), or
+    ``none``/``off`` (no test: None)."""
+    if text is None or text.strip().lower() in ("none", "off"):
+        return None
+    from ..models import parse_quantity
+
+    value = parse_quantity(text, "displacement", name=name)
+    if not value > 0:
+        raise InputError(
+            f"{name}={text!r}: must be > 0 px (e.g. 0.05px), or none to turn the test off"
+        )
+    return value
+
+
 def fmt(value: Any) -> str:
     """Readable number formatting for tables."""
     if value is None:

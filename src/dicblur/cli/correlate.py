@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
-from ._common import console, notice_compile, print_mapping
+from ._common import MAX_SIGMA_HELP, console, notice_compile, parse_max_sigma, print_mapping
 
 _UNITS = {
     "mean_u": "px",
@@ -53,6 +53,9 @@ def correlate_command(
             "(eps 0.1 px, threshold 2) and a probe of the neighbours' displacement.",
         ),
     ] = False,
+    max_predicted_sigma: Annotated[
+        str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
+    ] = None,
     blur_compensation: Annotated[
         str,
         typer.Option(
@@ -99,6 +102,14 @@ def correlate_command(
         )
     if mode == "none" and blur is not None:
         raise InputError(f"--blur={blur}: only used with --blur-compensation given or estimate")
+    extra: dict[str, float | None] = {}
+    if max_predicted_sigma is not None:
+        extra["max_predicted_sigma"] = parse_max_sigma(max_predicted_sigma)
+        if noise is None and extra["max_predicted_sigma"] is not None:
+            raise InputError(
+                f"--max-predicted-sigma={max_predicted_sigma!r}: needs --noise (grey levels): "
+                "the predicted random error comes from the noise level"
+            )
     vector = None
     if blur is not None and (mode == "given" or blur > 0):
         rad = math.radians(angle)
@@ -115,6 +126,7 @@ def correlate_command(
         workers=workers,
         median_test=median_test,
         blur=mode,  # type: ignore[arg-type]
+        **extra,  # type: ignore[arg-type]
     )
     notice_compile(shape)
     compile_s = corr.warmup()

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import InputError
-from ._common import console, print_mapping
+from ._common import MAX_SIGMA_HELP, console, parse_max_sigma, print_mapping
 
 
 def _ints(text: str, name: str, count: int | None = None) -> list[int]:
@@ -99,6 +99,9 @@ def track_command(
     threads: Annotated[
         int | None, typer.Option("--threads", help="Threads of the correlation kernels.")
     ] = None,
+    max_predicted_sigma: Annotated[
+        str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
+    ] = None,
     compensate_blur: Annotated[
         bool,
         typer.Option(
@@ -138,6 +141,7 @@ def track_command(
         pairs = [p for p in points.split(";") if p.strip()]
         pts = [_ints(p, "--points", 2) for p in pairs]
     roi_v = None if roi is None else _ints(roi, "--roi", 4)
+    max_sigma = parse_max_sigma(max_predicted_sigma)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
@@ -190,6 +194,7 @@ def track_command(
                 progress=progress,
                 chunks=chunks,
                 compensate_blur=compensate_blur,
+                max_predicted_sigma=max_sigma,
             )
         except TrackInterrupted as exc:
             if exc.dataset is not None:

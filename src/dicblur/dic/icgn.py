@@ -33,7 +33,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from .interpolation import interpolate_reference
-from .kernels import STALL_ITERATIONS
+from .kernels import GAIN_MIN, RATE_MIN, STALL_ITERATIONS
 from .status import PointStatus
 
 __all__ = ["PreparedSubsets", "compose_affine", "icgn_reference", "prepare_subsets", "raw_jacobian"]
@@ -184,8 +184,11 @@ def icgn_reference(
     """Plain IC-GN for one POI (direct ZNSSD formulas, no precomputed sums): reference.
 
     Returns ``(p, zncc, iterations, converged)``; ``p`` as in the kernels (translation
-    ``(u, v)``, affine ``(u, ux, uy, v, vx, vy)``), px. ``step_gain=False`` takes plain
-    Gauss-Newton steps (no Aitken gain, see ``kernels.translation._aitken_gain``).
+    ``(u, v)``, affine ``(u, ux, uy, v, vx, vy)``), px. Stops as the kernels: the step norm
+    below ``tolerance``, or, when the steps contract by ``q = |d| / |d_prev| > RATE_MIN``,
+    the estimated error left ``|d| q / (1 - q)`` below it (``kernels.RATE_MIN``).
+    ``step_gain=False`` takes plain Gauss-Newton steps and stops on the step norm only (no
+    Aitken gain, see ``kernels.translation._aitken_gain``).
     """
     size = 2 * half + 1
     d = np.arange(size, dtype=np.float64) - half
@@ -202,8 +205,7 @@ def icgn_reference(
     hess = jh.T @ jh
     p = np.array(p0, dtype=np.float64)
     zncc = float("nan")
-    prev = np.zeros(2)
-    prev6 = np.zeros(6)
+    prev = np.zeros(len(p))  # the last plain step (zero after a jump)
     best, ibest = np.inf, 0
     for it in range(max_iterations):
         if shape == "translation":
@@ -216,45 +218,30 @@ def icgn_reference(
         gh = gc / np.linalg.norm(gc)
         zncc = float(fh @ gh)
         dp = np.linalg.solve(hess, -jh.T @ (fh - gh))
-        if shape == "translation":
-            # Aitken step gain, as the compiled kernel (kernels.translation._aitken_gain)
-            gain = 1.0
-            pp = float(prev @ prev)
-            dot = float(dp @ prev)
-            rho = dot / pp if pp > 0 else 0.0
-            if (
-                step_gain
-                and pp > 0
-                and 0.3 < rho < 0.97
-                and dot * dot > 0.9025 * float(dp @ dp) * pp
-            ):
-                gain, prev = 1.0 / (1.0 - rho), np.zeros(2)
-            else:
-                prev = dp.copy()
-            p = p - gain * dp
+        # the norm of the convergence test and the 6-vector of the step gain: (du, dv) for
+        # translation, (du, h dux, h duy, dv, h dvx, h dvy) for affine
+        sc = np.ones(2) if shape == "translation" else np.array([1.0, half, half, 1.0, half, half])
+        norm = float(np.linalg.norm(dp * sc))
+        # Aitken step gain, aligned contraction rho and step ratio q, as the compiled
+        # kernels (kernels.translation._aitken_gain, kernels.affine._aitken_gain6)
+        a, b = dp * sc, prev * sc
+        pp, dot = float(b @ b), float(a @ b)
+        ratio = float(np.sqrt(a @ a / pp)) if pp > 0 else 0.0
+        rho = dot / pp if pp > 0 and dot > 0 and dot * dot > 0.9025 * float(a @ a) * pp else 0.0
+        if not step_gain:
+            rho = ratio = 0.0
+        gain = 1.0
+        if GAIN_MIN < rho < 0.97:
+            gain, prev = 1.0 / (1.0 - rho), np.zeros_like(dp)
         else:
-            # the same gain on the weighted 6-vector (kernels.affine._aitken_gain6)
-            sc = np.array([1.0, half, half, 1.0, half, half])
-            a, b = dp * sc, prev6 * sc
-            pp, dot = float(b @ b), float(a @ b)
-            rho = dot / pp if pp > 0 else 0.0
-            gain = 1.0
-            if step_gain and pp > 0 and 0.3 < rho < 0.97 and dot * dot > 0.9025 * float(a @ a) * pp:
-                gain, prev6 = 1.0 / (1.0 - rho), np.zeros(6)
-            else:
-                prev6 = dp.copy()
-            p = compose_affine(p, gain * dp)
-        if shape == "translation":
-            norm = float(np.hypot(dp[0], dp[1]))
-        else:
-            norm = float(
-                np.sqrt(
-                    dp[0] ** 2
-                    + dp[3] ** 2
-                    + half**2 * (dp[1] ** 2 + dp[2] ** 2 + dp[4] ** 2 + dp[5] ** 2)
-                )
-            )
-        if norm < tolerance:
+            prev = dp.copy()
+        # the stop on the estimated error left (kernels.RATE_MIN): |d| q / (1 - q) below the
+        # tolerance when the steps contract by q > RATE_MIN; an aligned step then jumps
+        linear = RATE_MIN < ratio < 0.97 and norm * ratio < tolerance * (1.0 - ratio)
+        if linear and rho > 0:
+            gain = 1.0 / (1.0 - rho)
+        p = p - gain * dp if shape == "translation" else compose_affine(p, gain * dp)
+        if norm < tolerance or linear:
             return p, zncc, it + 1, True
         # stall test, as the kernels (kernels.STALL_ITERATIONS)
         if norm < best:

@@ -55,7 +55,11 @@ class MatcherSettings:
     max_iterations : int
         IC-GN iteration limit.
     tolerance : float
-        Convergence threshold on the update norm ``sqrt(du^2 + dv^2 + h^2 |grad|^2)``, px.
+        Convergence threshold, px: the estimated error left in the parameters, in the norm
+        ``|d| = sqrt(du^2 + dv^2 + h^2 |grad|^2)`` of the Gauss-Newton step (``h`` = subset
+        half-width). IC-GN stops when ``|d| < tolerance``, or, when its steps contract
+        linearly by ``q = |d| / |d_prev| > 0.03`` (``kernels.RATE_MIN``), when the rest of
+        that series ``|d| q / (1 - q)`` is below it (docs/dic.md, "IC-GN with ZNSSD").
     min_zncc : float
         Converged points with a lower ZNCC get status ``LOW_CORRELATION``.
     max_residual : float or None

@@ -1,6 +1,7 @@
 """A tiny unit parser for the planning inputs (no external unit library).
 
-Base units: length mm, time s, velocity mm/s, image scale mm/px, blur px. A quantity is a
+Base units: length mm, time s, velocity mm/s, image scale mm/px, blur px, displacement px
+(px only: no scale). A quantity is a
 float in the base unit or a string ``"<number><unit>"`` such as ``"120mm/s"``, ``"0.12 m/s"``,
 ``"1ms"``, ``"0.05mm/px"``, ``"20px/mm"``, ``"0.01px"``, ``"800px/s"``.
 """
@@ -16,7 +17,7 @@ from ..errors import InputError
 
 __all__ = ["Kind", "parse_quantity"]
 
-Kind = Literal["length", "time", "velocity", "scale", "blur"]
+Kind = Literal["length", "time", "velocity", "scale", "blur", "displacement"]
 
 _LENGTH = {"m": 1e3, "cm": 10.0, "mm": 1.0, "um": 1e-3, "µm": 1e-3, "μm": 1e-3, "nm": 1e-6}
 _TIME = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "ns": 1e-9, "min": 60.0}
@@ -27,8 +28,16 @@ _EXAMPLES = {
     "velocity": "'120mm/s', '0.12m/s' or '800px/s'",
     "scale": "'0.05mm/px' or '20px/mm'",
     "blur": "'0.01px' or '2um' (with a scale)",
+    "displacement": "'0.033px'",
 }
-_BASE = {"length": "mm", "time": "s", "velocity": "mm/s", "scale": "mm/px", "blur": "px"}
+_BASE = {
+    "length": "mm",
+    "time": "s",
+    "velocity": "mm/s",
+    "scale": "mm/px",
+    "blur": "px",
+    "displacement": "px",
+}
 
 
 def _fail(value: object, name: str, kind: str, why: str) -> InputError:
@@ -47,7 +56,7 @@ def parse_quantity(
     ----------
     value : float or str
         A number (already in the base unit) or ``"<number><unit>"``.
-    kind : {"length", "time", "velocity", "scale", "blur"}
+    kind : {"length", "time", "velocity", "scale", "blur", "displacement"}
     name : str
         Parameter name for error messages.
     scale : float, optional
@@ -80,6 +89,8 @@ def parse_quantity(
     if unit == "":
         return x
     num, _, den = unit.partition("/")
+    if kind == "displacement" and unit == "px":
+        return x
     if kind in ("length", "blur") and not den:
         if num == "px":
             if kind == "blur":

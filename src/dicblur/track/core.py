@@ -32,6 +32,7 @@ from typing import Any, Literal, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..checks import check_positive
 from ..dic import Correlator, PointStatus
 from ..dic.initial import window_spectrum
 from ..errors import DicblurError, InputError
@@ -471,6 +472,7 @@ def track(
     progress: Callable[[int, int], None] | None = None,
     chunks: ChunkRunner | None = None,
     compensate_blur: bool = False,
+    max_predicted_sigma: float | None = None,
 ) -> Any:
     """Track a recording and predict the random error of every point in every frame.
 
@@ -522,6 +524,10 @@ def track(
         (``Correlator(blur="given")``, the blur vector of each point from the first
         pass's track) and predict sigma for that matcher (no mismatch term; the noise
         term from the blurred reference): :mod:`.compensate`.
+    max_predicted_sigma : float, optional
+        Flag ``IMPRECISE`` (not valid) the points whose predicted random error from the
+        reference subset and the noise (the Correlator's test, ``noise`` or the static
+        frames' noise std) exceeds this, px. None (default): no test.
 
     Returns
     -------
@@ -583,6 +589,15 @@ def track(
         "min_zncc": min_zncc,
         "workers": workers,
     }
+    if max_predicted_sigma is not None:
+        limit = check_positive(max_predicted_sigma, "max_predicted_sigma")
+        if noise is not None:
+            level = float(noise)
+        else:
+            assert st_range is not None
+            level = estimate_static_noise(rec, *st_range).sigma
+        # only the IMPRECISE test: no residual screening (max_residual=None)
+        opts.update(noise_sigma=level, max_residual=None, max_predicted_sigma=limit)
     corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
     seeds0 = seeds = seed_correlator(ref_img, corr0, opts)
     # the last frame's displacement gradients (affine: the next frame's start)
@@ -720,6 +735,7 @@ def track(
         "shape": corr0.shape,
         "reference": reference,
         "min_zncc": min_zncc,
+        "max_predicted_sigma": max_predicted_sigma,
         "half_window": half_window,
         "median_eps": median_eps,
         "median_threshold": median_threshold,

@@ -42,7 +42,9 @@ from __future__ import annotations
 
 from .affine import icgn_affine
 from .common import (
+    GAIN_MIN,
     PAD,
+    RATE_MIN,
     STALL_ITERATIONS,
     Outputs,
     Packed,
@@ -59,7 +61,9 @@ from .spline import weights
 from .translation import flat_lengths, flat_width, icgn_translation, pack_reference
 
 __all__ = [
+    "GAIN_MIN",
     "PAD",
+    "RATE_MIN",
     "STALL_ITERATIONS",
     "Outputs",
     "Packed",

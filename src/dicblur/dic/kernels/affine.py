@@ -12,10 +12,12 @@ from .common import (
     CONVERGED,
     DIVERGED,
     FASTMATH,
+    GAIN_MIN,
     LOW_CORRELATION,
     MAX_ITERATIONS,
     OUT_OF_BOUNDS,
     PAD,
+    RATE_MIN,
     STALL_ITERATIONS,
     compose_inverse_affine,
 )
@@ -148,7 +150,10 @@ def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
 def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
     """Step gain of IC-GN affine (as :func:`_aitken_gain`), ratio measured on the 6-vector
     ``(du, h dux, h duy, dv, h dvx, h dvy)`` (``h`` = subset half-width, the weights of
-    the convergence norm); updates the remembered step ``prev`` in place."""
+    the convergence norm); updates the remembered step ``prev`` in place. Returns
+    ``(gain, rho, ratio)``: ``rho`` = ``(d . prev) / |prev|^2`` when the two steps are
+    aligned (cos > 0.95), else 0; ``ratio`` = ``|d| / |prev|`` (0 without a previous plain
+    step): the contraction of the stop test (``common.RATE_MIN``)."""
     pp = 0.0
     dd = 0.0
     dot = 0.0
@@ -159,15 +164,19 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
         pp += b * b
         dd += a * a
         dot += a * b
+    rho = 0.0
+    ratio = 0.0
     if pp > 0.0:
-        rho = dot / pp
-        if 0.3 < rho < 0.97 and dot * dot > 0.9025 * dd * pp:
-            for m in range(6):
-                prev[m] = 0.0
-            return 1.0 / (1.0 - rho)
+        ratio = math.sqrt(dd / pp)
+        if dot > 0.0 and dot * dot > 0.9025 * dd * pp:
+            rho = dot / pp
+            if GAIN_MIN < rho < 0.97:
+                for m in range(6):
+                    prev[m] = 0.0
+                return 1.0 / (1.0 - rho), rho, ratio
     for m in range(6):
         prev[m] = d[m]
-    return 1.0
+    return 1.0, rho, ratio
 
 
 @nb.njit(parallel=True, fastmath=FASTMATH, cache=True)
@@ -382,13 +391,18 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                 dstep[3] = dv
                 dstep[4] = dvx
                 dstep[5] = dvy
-                gain = _aitken_gain6(dstep, dprev, half)
-                du0 = du
-                dux0 = dux
-                duy0 = duy
-                dv0 = dv
-                dvx0 = dvx
-                dvy0 = dvy
+                gain, rho, ratio = _aitken_gain6(dstep, dprev, half)
+                # convergence on the plain (unscaled) Gauss-Newton step, as the translation:
+                # |d| < tol, or the error left |d| q / (1 - q) < tol when the steps contract
+                # by q = |d| / |d_prev| > RATE_MIN (then an aligned step jumps to the limit)
+                norm = math.sqrt(
+                    du * du
+                    + dv * dv
+                    + half * half * (dux * dux + duy * duy + dvx * dvx + dvy * dvy)
+                )
+                linear = RATE_MIN < ratio < 0.97 and norm * ratio < tol * (1.0 - ratio)
+                if linear and rho > 0.0:
+                    gain = 1.0 / (1.0 - rho)
                 du *= gain
                 dux *= gain
                 duy *= gain
@@ -406,13 +420,7 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                 if not finite:
                     st = DIVERGED
                     break
-                # convergence on the plain (unscaled) Gauss-Newton step, as the translation
-                norm = math.sqrt(
-                    du0 * du0
-                    + dv0 * dv0
-                    + half * half * (dux0 * dux0 + duy0 * duy0 + dvx0 * dvx0 + dvy0 * dvy0)
-                )
-                if norm < tol:
+                if norm < tol or linear:
                     st = CONVERGED
                     break
                 if norm < best:

@@ -12,10 +12,12 @@ from .common import (
     CONVERGED,
     DIVERGED,
     FASTMATH,
+    GAIN_MIN,
     LOW_CORRELATION,
     MAX_ITERATIONS,
     OUT_OF_BOUNDS,
     PAD,
+    RATE_MIN,
     STALL_ITERATIONS,
 )
 from .spline import weights_into
@@ -25,24 +27,32 @@ __all__ = ["flat_lengths", "flat_width", "icgn_translation", "pack_reference"]
 
 @nb.njit(cache=True, inline="always")
 def _aitken_gain(du, dv, pdu, pdv):  # pragma: no cover - compiled
-    """Step gain of IC-GN translation, and the previous step to remember.
+    """Step gain of IC-GN translation, the measured contraction, and the previous step to
+    remember: ``(gain, rho, ratio, pdu, pdv)``.
 
     Against a blurred current image the sharp reference's Gauss-Newton steps shrink
     geometrically, by a factor rho per iteration (slow linear convergence: 88 iterations
     on average at W = 10 px). Two plain, aligned steps give rho = (d . d_prev) / |d_prev|^2;
     scaling the step by 1 / (1 - rho) jumps to the limit of the geometric series (Aitken's
-    delta-squared process). Fast-converging subsets (rho < 0.3) keep plain steps, and after
-    a jump the memory is cleared so the next ratio is measured on plain steps again.
+    delta-squared process). Fast-converging subsets (rho < ``GAIN_MIN``) keep plain steps,
+    and after a jump the memory is cleared so the next ratio is measured on plain steps
+    again. ``rho`` is 0 unless the steps are aligned (cos > 0.95); ``ratio`` =
+    ``|d| / |d_prev|`` (0 without a previous plain step) is the contraction of the stop
+    test (``common.RATE_MIN``).
     """
     pp = pdu * pdu + pdv * pdv
     if pp > 0.0:
         dd = du * du + dv * dv
         dot = du * pdu + dv * pdv
-        rho = dot / pp
+        ratio = math.sqrt(dd / pp)
         # aligned (cos > 0.95) and shrinking by a steady factor
-        if 0.3 < rho < 0.97 and dot * dot > 0.9025 * dd * pp:
-            return 1.0 / (1.0 - rho), 0.0, 0.0
-    return 1.0, du, dv
+        if dot > 0.0 and dot * dot > 0.9025 * dd * pp:
+            rho = dot / pp
+            if GAIN_MIN < rho < 0.97:
+                return 1.0 / (1.0 - rho), rho, ratio, 0.0, 0.0
+            return 1.0, rho, ratio, du, dv
+        return 1.0, 0.0, ratio, du, dv
+    return 1.0, 0.0, 0.0, du, dv
 
 
 # Translation IC-GN on flat padded buffers: the subset's rows are copied into per-thread
@@ -342,7 +352,13 @@ def _point_translation(
         q1 = ((sy - jsum[k, 1] * gm) / dg - avec[k, 1] * zn) / fnorm[k]
         du = hinv[k, 0, 0] * q0 + hinv[k, 0, 1] * q1
         dv = hinv[k, 1, 0] * q0 + hinv[k, 1, 1] * q1
-        gain, pdu, pdv = _aitken_gain(du, dv, pdu, pdv)
+        gain, rho, ratio, pdu, pdv = _aitken_gain(du, dv, pdu, pdv)
+        # stop: |d| < tol, or the error left |d| q / (1 - q) < tol when the steps contract
+        # by q = |d| / |d_prev| > RATE_MIN (then an aligned step jumps to the limit)
+        norm = math.sqrt(du * du + dv * dv)
+        linear = RATE_MIN < ratio < 0.97 and norm * ratio < tol * (1.0 - ratio)
+        if linear and rho > 0.0:
+            gain = 1.0 / (1.0 - rho)
         # inverse composition: W(p) <- W(p) o W(dp)^-1
         u -= gain * du
         v -= gain * dv
@@ -350,8 +366,7 @@ def _point_translation(
         if not (math.isfinite(u) and math.isfinite(v)):
             st = DIVERGED
             break
-        norm = math.sqrt(du * du + dv * dv)
-        if norm < tol:
+        if norm < tol or linear:
             st = CONVERGED
             break
         if norm < best:

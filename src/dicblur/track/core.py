@@ -939,11 +939,27 @@ def _assemble(
                 w_old, ang_old = w, ang
                 w = np.hypot(wu, wv)
                 ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
-                # only the frames whose blur changed (a new flag in their stencil)
-                same = ((w == w_old) | (np.isnan(w) & np.isnan(w_old))) & (
-                    (ang == ang_old) | (np.isnan(ang) & np.isnan(ang_old))
-                )
-                predict(np.flatnonzero(~same.all(axis=1)))
+                w_in = np.where(good[:, pin], w[:, pin], np.nan)
+                if np.any(w_in > table.blur[-1]):
+                    # the new blur reaches past the table's last node: add the nodes
+                    # (build_blur_table keeps the computed ones) and predict every frame
+                    more = {"have": table} if blur_table is build_blur_table else {}
+                    table = blur_table(
+                        ref_img,
+                        centres[pin],
+                        subset=corr.subset,
+                        shape=corr.shape,
+                        blur=w_in,
+                        angle=ang[:, pin],
+                        **more,
+                    )
+                    predict()
+                else:
+                    # only the frames whose blur changed (a new flag in their stencil)
+                    same = ((w == w_old) | (np.isnan(w) & np.isnan(w_old))) & (
+                        (ang == ang_old) | (np.isnan(ang) & np.isnan(ang_old))
+                    )
+                    predict(np.flatnonzero(~same.all(axis=1)))
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available]

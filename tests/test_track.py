@@ -531,6 +531,13 @@ def test_median_test_of_all_frames_equals_the_per_frame_test():
     )
     assert each.any()
     np.testing.assert_array_equal(median_test_frames(u, v, (rows, cols), eps=eps), each)
+    # the critical eps (track's two passes from one median pass) gives the same flags
+    from dicblur.track.median import median_critical_eps
+
+    crit = median_critical_eps(u, v, (rows, cols))
+    np.testing.assert_array_equal(crit > eps[:, None], each)
+    for e in (0.01, 0.1, 0.5):
+        np.testing.assert_array_equal(crit > e, median_test_frames(u, v, (rows, cols), eps=e))
 
 
 def test_rigid_shift_is_sub_pixel():

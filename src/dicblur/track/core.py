@@ -40,7 +40,7 @@ from ..sequence import Recording, open_recording
 from .advice import advise_exposure
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
 from .kinematics import exposure_motion, exposure_skew
-from .median import median_test_frames
+from .median import median_critical_eps
 from .uncertainty import (
     NoiseEstimate,
     build_blur_table,
@@ -422,25 +422,30 @@ def zncc_flags(
     return np.asarray(converged & np.isfinite(score) & (score > ratio))
 
 
-def _median_flags(
+def _median_critical(
     u: NDArray[np.float64],
     v: NDArray[np.float64],
     ok: NDArray[np.bool_],
     gshape: tuple[int, int] | None,
-    eps: NDArray[np.float64],
     threshold: float,
-) -> NDArray[np.bool_]:
+    frames: NDArray[np.intp] | None = None,
+    out: NDArray[np.float32] | None = None,
+) -> NDArray[np.float32]:
+    """:func:`.median.median_critical_eps` of the points ``ok`` (the others missing) of
+    ``frames`` (default all), written into ``out`` (frames, points); ``-inf`` everywhere
+    without a grid. The normalised median test at ``eps`` per frame is ``out > eps``."""
+    n_f = u.shape[0]
+    if out is None:
+        out = np.full(u.shape, -np.inf, np.float32)
     if gshape is None:
-        return np.zeros(u.shape, bool)
-    # all frames at once (vectorised; the same flags as normalized_median_test per frame)
-    out = np.zeros(u.shape, bool)
-    for a in range(0, u.shape[0], 256):
-        b = slice(a, a + 256)
-        out[b] = median_test_frames(
+        return out
+    sel = np.arange(n_f) if frames is None else np.asarray(frames)
+    for a in range(0, sel.size, 256):
+        b = sel[a : a + 256]
+        out[b] = median_critical_eps(
             np.where(ok[b], u[b], np.nan),
             np.where(ok[b], v[b], np.nan),
             gshape,
-            eps=eps[b],
             threshold=threshold,
         )
     return out
@@ -838,7 +843,9 @@ def _assemble(
     # pass 1: the median test at its fixed eps (catches errors of tenths of a px) and the
     # ZNCC test; pass 2, once sigma is known, at eps = 2 x the frame's median sigma
     t_med = time.perf_counter()
-    outlier = _median_flags(u, v, conv, gshape, np.full(n_f, eps), threshold)
+    # the largest eps at which the test flags each point: both passes from one median pass
+    crit = _median_critical(u, v, conv, gshape, threshold)
+    outlier = crit > eps
     settings["median_time_s"] = time.perf_counter() - t_med
     low_zncc = zncc_flags(zn, conv)
     contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
@@ -931,7 +938,20 @@ def _assemble(
                 warnings.simplefilter("ignore", RuntimeWarning)
                 eps_k = 2.0 * np.nanmedian(np.where(good, s_max, np.nan), axis=1)
             eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
-            second = _median_flags(u, v, conv & ~low_zncc, gshape, eps_k, threshold)
+            # the second pass leaves out the low-ZNCC points too: the medians change only
+            # in the frames that have some
+            t_med = time.perf_counter()
+            _median_critical(
+                u,
+                v,
+                conv & ~low_zncc,
+                gshape,
+                threshold,
+                frames=np.flatnonzero((conv & low_zncc).any(axis=1)),
+                out=crit,
+            )
+            second = crit > eps_k[:, None]
+            settings["median_time_s"] += time.perf_counter() - t_med
             if (second & ~outlier).any():
                 outlier |= second
                 good = conv & ~outlier & ~low_zncc
@@ -964,6 +984,7 @@ def _assemble(
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available]
         )
+    del crit
     # the bias of an accelerating blur: the kernel's third moment from the fitted track
     # times each subset's skew coefficient (a shift common to nearly all points)
     bias = np.full((n_f, n_p, 2), np.nan, np.float32)

@@ -159,27 +159,30 @@ def direction_nodes(
     across it, ``blur |sin(angle - node)|``, is at most ``tolerance``, else the two around
     it; the node of the dominant direction when no sample has ``blur >= min_blur``."""
     a = round(180.0 / ANGLE_STEP)
-    finite = np.isfinite(blur) & np.isfinite(angle)
-    big = finite & (blur >= min_blur)
+    w_all = np.asarray(blur, dtype=np.float64).ravel()
+    t_all = np.asarray(angle, dtype=np.float64).ravel()
+    finite = np.isfinite(w_all) & np.isfinite(t_all)
+    big = finite & (w_all >= min_blur)
     use = big if big.any() else finite
-    if use.any():
-        ww = np.asarray(blur[use], dtype=np.float64)
-        mu = np.sum((ww + 1e-12) * np.exp(2j * np.deg2rad(angle[use])))
-        dom = (float(np.rad2deg(np.angle(mu))) / 2.0) % 180.0 if abs(mu) > 0 else 0.0
-    else:
-        dom = 0.0
+    ww, tt = w_all[use], t_all[use]
+    dom = 0.0
+    if ww.size:
+        r2 = np.deg2rad(2.0 * tt)
+        wt = ww + 1e-12
+        c, s = float(np.dot(wt, np.cos(r2))), float(np.dot(wt, np.sin(r2)))
+        dom = (math.degrees(math.atan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
     phase = dom % ANGLE_STEP
     angles = phase + np.arange(a, dtype=np.float64) * ANGLE_STEP
     need = np.zeros(a, bool)
     if big.any():
-        th = np.mod(angle[big] - phase, 180.0) / ANGLE_STEP
-        lo = np.floor(th)
+        th = np.mod(tt - phase, 180.0) / ANGLE_STEP  # big == use here
         near = np.rint(th)
-        across = blur[big] * np.abs(np.sin(np.deg2rad((th - near) * ANGLE_STEP)))
+        across = ww * np.abs(np.sin(np.deg2rad((th - near) * ANGLE_STEP)))
         one = across <= tolerance
-        need[near[one].astype(int) % a] = True
-        need[lo[~one].astype(int) % a] = True
-        need[(lo[~one].astype(int) + 1) % a] = True
+        need |= np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
+        lo = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
+        need[lo] = True
+        need[(lo + 1) % a] = True
     else:
         need[round((dom - phase) / ANGLE_STEP) % a] = True
     return angles, need

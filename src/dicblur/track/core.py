@@ -430,6 +430,7 @@ def _median_critical(
     threshold: float,
     frames: NDArray[np.intp] | None = None,
     out: NDArray[np.float32] | None = None,
+    threads: int = 1,
 ) -> NDArray[np.float32]:
     """:func:`.median.median_critical_eps` of the points ``ok`` (the others missing) of
     ``frames`` (default all), written into ``out`` (frames, points); ``-inf`` everywhere
@@ -440,15 +441,35 @@ def _median_critical(
     if gshape is None:
         return out
     sel = np.arange(n_f) if frames is None else np.asarray(frames)
-    for a in range(0, sel.size, 256):
-        b = sel[a : a + 256]
+
+    def one(b: NDArray[np.intp]) -> None:
         out[b] = median_critical_eps(
             np.where(ok[b], u[b], np.nan),
             np.where(ok[b], v[b], np.nan),
             gshape,
             threshold=threshold,
         )
+
+    _blocks(one, sel, 128, threads)
     return out
+
+
+def _blocks(
+    fn: Callable[[NDArray[np.intp]], None], sel: NDArray[np.intp], size: int, threads: int
+) -> None:
+    """``fn(block)`` for the consecutive blocks of ``size`` of the frame indices ``sel``,
+    on ``threads`` threads (numpy releases the GIL in its array loops; each block writes
+    its own frames, so the result is the same on any number of threads)."""
+    parts = [sel[a : a + size] for a in range(0, sel.size, size)]
+    if threads <= 1 or len(parts) <= 1:
+        for b in parts:
+            fn(b)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for _ in pool.map(fn, parts):
+            pass
 
 
 def track(
@@ -777,6 +798,7 @@ def track(
         threshold=median_threshold,
         advice=advice and error is None,
         ref_img=ref_img,
+        threads=max(1, int(workers or 1), int(getattr(chunks, "threads", 1))),
         blur_table=(
             build_compensated_table if comp_info["matcher"] != MATCHER_PLAIN else build_blur_table
         ),
@@ -811,6 +833,7 @@ def _assemble(
     advice: bool,
     ref_img: NDArray[np.float64],
     blur_table: Callable[..., Any] = build_blur_table,
+    threads: int = 1,
 ) -> Any:
     import xarray as xr
 
@@ -844,7 +867,7 @@ def _assemble(
     # ZNCC test; pass 2, once sigma is known, at eps = 2 x the frame's median sigma
     t_med = time.perf_counter()
     # the largest eps at which the test flags each point: both passes from one median pass
-    crit = _median_critical(u, v, conv, gshape, threshold)
+    crit = _median_critical(u, v, conv, gshape, threshold, threads=threads)
     outlier = crit > eps
     settings["median_time_s"] = time.perf_counter() - t_med
     low_zncc = zncc_flags(zn, conv)
@@ -904,6 +927,7 @@ def _assemble(
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
+        more: dict[str, Any] = {"threads": threads} if blur_table is build_blur_table else {}
         table = blur_table(
             ref_img,
             centres[pin],
@@ -911,15 +935,14 @@ def _assemble(
             shape=corr.shape,
             blur=np.where(good[:, pin], w[:, pin], np.nan),
             angle=ang[:, pin],
+            **more,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
         def predict(rows: NDArray[np.intp] | None = None) -> None:
-            sel = np.arange(n_f) if rows is None else rows
-            for a in range(0, sel.size, 128):  # frame blocks: bounded temporaries
-                b = sel[a : a + 128]
+            def one(b: NDArray[np.intp]) -> None:  # frame blocks: bounded temporaries
                 look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
                 su_n, sv_n = table.noise_std(look, nv)
                 ix = np.ix_(b, pin)
@@ -927,6 +950,8 @@ def _assemble(
                 sig["sigma_v_noise"][ix] = sv_n
                 sig["sigma_u_blur"][ix] = np.abs(look[..., 0])
                 sig["sigma_v_blur"][ix] = np.abs(look[..., 1])
+
+            _blocks(one, np.arange(n_f) if rows is None else rows, 128, threads)
 
         predict()
         if gshape is not None:
@@ -949,6 +974,7 @@ def _assemble(
                 threshold,
                 frames=np.flatnonzero((conv & low_zncc).any(axis=1)),
                 out=crit,
+                threads=threads,
             )
             second = crit > eps_k[:, None]
             settings["median_time_s"] += time.perf_counter() - t_med
@@ -963,7 +989,8 @@ def _assemble(
                 if np.any(w_in > table.blur[-1]):
                     # the new blur reaches past the table's last node: add the nodes
                     # (build_blur_table keeps the computed ones) and predict every frame
-                    more = {"have": table} if blur_table is build_blur_table else {}
+                    if blur_table is build_blur_table:
+                        more["have"] = table
                     table = blur_table(
                         ref_img,
                         centres[pin],
@@ -1001,9 +1028,11 @@ def _assemble(
         skew = build_skew_table(
             ref_img, centres[pin], subset=corr.subset, shape=corr.shape, axis=axis, kappa3=k3
         )
-        for a in range(0, n_f, 128):
-            b = slice(a, a + 128)
-            bias[b, pin] = skew.bias(k3[b], axis[b])
+
+        def one_bias(b: NDArray[np.intp]) -> None:
+            bias[b[0] : b[-1] + 1, pin] = skew.bias(k3[b[0] : b[-1] + 1], axis[b[0] : b[-1] + 1])
+
+        _blocks(one_bias, np.arange(n_f), 128, threads)
         del k3, axis
     settings["prediction_time_s"] = time.perf_counter() - t0
     # after a reference renewal the increments add to the renewal frame's displacement:

@@ -121,7 +121,8 @@ class BlurTable:
             return np.asarray(lo + tw * (hi - lo))
 
         out = at(k0)
-        out += ta * (at(k1) - out)
+        if both.any():  # a single direction node (a 1-d motion): nothing to interpolate
+            out += ta * (at(k1) - out)
         out[~np.isfinite(w) | (w > self.blur[-1] + 1e-9)] = np.nan
         return np.asarray(out)
 
@@ -218,6 +219,7 @@ def build_blur_table(
     min_blur: float = 0.5,
     complete: bool = True,
     have: BlurTable | None = None,
+    threads: int = 1,
 ) -> BlurTable:
     """Tabulate the blur response of every point for the blur vectors that occur.
 
@@ -241,6 +243,9 @@ def build_blur_table(
         A table built earlier for the same points and settings: its nodes are kept and
         only the missing ones computed (the second pass of :func:`~dicblur.track.track`,
         whose blur may reach a little further).
+    threads : int
+        Threads computing the nodes at the same time (each W node on its own: the same
+        values on any number of threads).
     """
     nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
     if have is not None and np.allclose(have.angles, angles):
@@ -253,20 +258,37 @@ def build_blur_table(
     values = np.full((a, nodes.size, len(centres), 6), np.nan)
     # W = 0 (no blur, no direction) is the same for every direction: computed once
     zero = None if have is None else have.values[np.flatnonzero(have.available)[0], :1]
+    jobs: list[tuple[int, NDArray[np.intp]]] = []  # (direction node, W nodes)
     for j in np.flatnonzero(need):
         start = 0
         if have is not None and have.available[j]:
             start = have.blur.size
             values[j, :start] = have.values[j]
         todo = np.arange(start, nodes.size)
-        if zero is not None and todo.size and todo[0] == 0:
-            values[j, 0] = zero[0]
-            todo = todo[1:]
+        if todo.size and todo[0] == 0 and (zero is not None or jobs):
+            todo = todo[1:]  # copied from the first direction's W = 0 below
+        # W nodes split over the threads (each computed alone: the same values)
+        jobs += [(int(j), t) for t in np.array_split(todo, max(1, min(threads, todo.size)))]
+
+    def run(job: tuple[int, NDArray[np.intp]]) -> None:
+        j, todo = job
         if todo.size:
-            got = _response(reference, nodes[todo], centres, subset, shape, angles[j], complete)
-            values[j, todo] = got
-            if todo[0] == 0:
-                zero = got[:1]
+            values[j, todo] = _response(
+                reference, nodes[todo], centres, subset, shape, angles[j], complete
+            )
+
+    if threads > 1 and len(jobs) > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            list(pool.map(run, jobs))
+    else:
+        for job in jobs:
+            run(job)
+    if zero is None:
+        zero = values[np.flatnonzero(need)[0], :1]
+    for j in np.flatnonzero(need):
+        values[j, 0] = zero[0]
     return BlurTable(blur=nodes, angles=angles, available=need, values=values)
 
 

@@ -881,6 +881,7 @@ def _assemble(
                 fps=fps,
                 exposure=t_exp,
                 half_window=half_window,
+                threads=threads,
             )
             return mu_.astype(np.float32), mv_.astype(np.float32)
         nan = np.full((n_f, n_p), np.nan, np.float32)
@@ -1023,6 +1024,7 @@ def _assemble(
             fps=fps,
             exposure=t_exp,
             half_window=half_window,
+            threads=threads,
         )
         k3, axis = k3[:, pin], axis[:, pin]
         skew = build_skew_table(

@@ -24,7 +24,9 @@ threads (``--threads``, ``--shapes``): end-to-end frames/s and POI/s of ``dicblu
 (reading, guesses, correlation, flags, blur, sigma, advice), of its tracking loop, and in
 the same run the engine alone (one Correlator on 100 of the frames in memory, each started
 from the field track measured: the kernel with the best guesses), so that the ratio
-end-to-end / engine is meaningful on a loaded machine; the time of each stage.
+end-to-end / engine is meaningful on a loaded machine; the time of each stage;
+``--modes kernel,chunks``: the serial loop on kernel threads and/or chunks of 100 frames on
+``--threads`` threads of the process (``ChunkedRun(threads=N)``).
 
 Memory (``--memory`` or ``--part memory``): peak RSS of tracking a 2,000-frame 1024^2
 .mraw at step 20 (2,601 POIs, translation, no advice) in a child process.

@@ -536,7 +536,9 @@ def track(
     advice : bool
         Compute the exposure advice (a static prediction of the reference, a few s).
     workers : int, optional
-        Threads of the correlation kernels.
+        Threads of the correlation kernels, and of the post-processing (median test,
+        tables, lookups, kinematics: the same numbers on any count; with
+        ``ChunkedRun(threads=N)`` at least N).
     progress : callable(done, total), optional
         Called after every frame (every chunk with ``chunks``).
     chunks : ChunkRunner, optional

@@ -228,6 +228,16 @@ def test_cli_chunks_resume(tmp_path, capsys):
     assert "0 run, 3 resumed of 3" in capsys.readouterr().out
     assert main([*args, "--workers", "2", "--scheduler", "tcp://h:1"]) == 2
     assert "--workers and --scheduler" in capsys.readouterr().err
+    # --threads with --chunk-frames alone: the chunks on two threads, the same dataset
+    out2 = tmp_path / "out2"
+    args2 = [*args[:-1], str(out2), "--threads", "2"]
+    assert main(args2) == 0
+    import xarray as xr
+
+    with xr.open_dataset(out / "track.nc") as a, xr.open_dataset(out2 / "track.nc") as b:
+        assert b.attrs["chunks_threads"] in (1, 2)  # 1 where numba's layer is workqueue
+        for name in ("u", "v", "status", "sigma_u"):
+            np.testing.assert_array_equal(a[name].values, b[name].values)
 
 
 def test_compensated_pass_in_chunks_agrees_and_resumes(serial, tmp_path):

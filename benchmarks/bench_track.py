@@ -24,7 +24,9 @@ threads (``--threads``, ``--shapes``): end-to-end frames/s and POI/s of ``dicblu
 (reading, guesses, correlation, flags, blur, sigma, advice), of its tracking loop, and in
 the same run the engine alone (one Correlator on 100 of the frames in memory, each started
 from the field track measured: the kernel with the best guesses), so that the ratio
-end-to-end / engine is meaningful on a loaded machine; the time of each stage.
+end-to-end / engine is meaningful on a loaded machine; the time of each stage;
+``--modes kernel,chunks``: the serial loop on kernel threads and/or chunks of 100 frames on
+``--threads`` threads of the process (``ChunkedRun(threads=N)``).
 
 Memory (``--memory`` or ``--part memory``): peak RSS of tracking a 2,000-frame 1024^2
 .mraw at step 20 (2,601 POIs, translation, no advice) in a child process.
@@ -35,6 +37,7 @@ Run: ``NUMBA_NUM_THREADS=2 .venv/bin/python benchmarks/bench_track.py [--part sp
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import os
@@ -328,15 +331,29 @@ def _engine_only(rec: Recording, ds, shape: str, step: int, workers: int, n_samp
     }
 
 
-def speed(rec: Recording, shape: str, workers: int, step: int = 10, n_sample: int = 100) -> dict:
+def speed(
+    rec: Recording,
+    shape: str,
+    workers: int,
+    step: int = 10,
+    n_sample: int = 100,
+    mode: str = "kernel",
+) -> dict:
     """End to end (``dicblur.track`` as a user calls it: reading, guesses, correlation,
-    flags, kinematics, sigma and the advice) against the engine alone in the same run."""
+    flags, kinematics, sigma and the advice) against the engine alone in the same run.
+    ``mode`` "kernel": the serial loop on ``workers`` kernel threads; "chunks": chunks of
+    100 frames on ``workers`` threads of this process (``ChunkedRun(threads=workers)``,
+    single-threaded kernels)."""
+    from dicblur.track.parallel import ChunkedRun
+
     n_frames = len(rec)
     dicblur.Correlator(rec.frame(0), subset=21, step=step, shape=shape).warmup()  # type: ignore[arg-type]
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     c0 = time.process_time()
     kw: dict = {"subset": 21, "step": step, "shape": shape, "workers": workers}
+    if mode == "chunks":
+        kw["chunks"] = ChunkedRun(threads=workers)
     ds = dicblur.track(rec, static="0:10", **kw)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
@@ -361,6 +378,7 @@ def speed(rec: Recording, shape: str, workers: int, step: int = 10, n_sample: in
         "points": n_p,
         "shape": shape,
         "workers": workers,
+        "mode": mode,
         "step": step,
         "tracking_s": tr,
         "frames_per_s": n_frames / tr,
@@ -385,7 +403,8 @@ def speed(rec: Recording, shape: str, workers: int, step: int = 10, n_sample: in
     }
     print(
         f"speed {out['size']}^2 x {n_frames} frames, {n_p} POIs ({shape}, {workers} "
-        f"thread(s)): end to end {wall:.1f} s = {out['end_to_end_frames_per_s']:.1f} frames/s "
+        f"thread(s), {mode}): end to end {wall:.1f} s = "
+        f"{out['end_to_end_frames_per_s']:.1f} frames/s "
         f"= {out['end_to_end_poi_per_s']:.0f} POI/s; tracking loop "
         f"{out['frames_per_s']:.1f} frames/s; engine alone {eng['frames_per_s']:.1f} frames/s; "
         f"end to end / engine {out['end_to_end_over_engine']:.2f}, loop / engine "
@@ -430,6 +449,12 @@ def main() -> None:
     )
     ap.add_argument("--threads", default="1,2", help="speed: kernel threads (<= NUMBA_NUM_THREADS)")
     ap.add_argument("--shapes", default="affine,translation", help="speed: subset shapes")
+    ap.add_argument(
+        "--modes",
+        default="kernel,chunks",
+        help="speed: kernel (serial loop, --threads kernel threads) and/or chunks (chunks "
+        "of 100 frames on --threads threads of the process)",
+    )
     ap.add_argument("--memory-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.memory_child:
@@ -478,8 +503,15 @@ def main() -> None:
             sn, sf = (256, 200) if args.quick else (512, 1000)
             rec = open_recording(_write_mraw(Path(tmp) / "speed", sn, sf, 0.2e-3))
             threads = [int(t) for t in args.threads.split(",")]
+            # imported once per process, not per recording: outside the timing
+            importlib.import_module("dicblur.track")
+
             out["speed"] = [
-                speed(rec, shape, t) for shape in args.shapes.split(",") for t in threads
+                speed(rec, shape, t, mode=m)
+                for shape in args.shapes.split(",")
+                for m in args.modes.split(",")
+                for t in threads
+                if not (m == "chunks" and t == 1 and "kernel" in args.modes)
             ]
             rec.close()
             if args.memory:

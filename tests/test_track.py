@@ -531,6 +531,13 @@ def test_median_test_of_all_frames_equals_the_per_frame_test():
     )
     assert each.any()
     np.testing.assert_array_equal(median_test_frames(u, v, (rows, cols), eps=eps), each)
+    # the critical eps (track's two passes from one median pass) gives the same flags
+    from dicblur.track.median import median_critical_eps
+
+    crit = median_critical_eps(u, v, (rows, cols))
+    np.testing.assert_array_equal(crit > eps[:, None], each)
+    for e in (0.01, 0.1, 0.5):
+        np.testing.assert_array_equal(crit > e, median_test_frames(u, v, (rows, cols), eps=e))
 
 
 def test_rigid_shift_is_sub_pixel():
@@ -566,3 +573,142 @@ def test_affine_start_from_all_parameters():
     assert again.iterations[ok].mean() < 0.6 * first.iterations[ok].mean()
     with pytest.raises(InputError, match="affine parameters"):
         corr.correlate(cur, initial=np.zeros((corr.n_points, 5)))
+
+
+# ---------------------------------------------------------------- fixed costs (issue 17)
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_advice_is_the_static_predictions_point_value_without_a_fit(shape, monkeypatch):
+    # the advice evaluates the static prediction directly (no fitted model, so no
+    # bootstrap of its intervals): its RMS errors equal those of the model that
+    # model_from_pattern fits to the same prediction (the advice before) within the
+    # model form's misfit, and the optimal exposure is the same or a neighbouring node
+    import dicblur.models.fit as fit
+    from dicblur.models import PoissonGaussianCamera, model_from_pattern
+    from dicblur.track.advice import advise_exposure
+    from dicblur.track.uncertainty import NoiseEstimate
+
+    img = _pattern(128, seed=6)
+    yy, xx = np.mgrid[20:109:8, 20:109:8]
+    pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
+    rng = np.random.default_rng(1)
+    t_exp, fps = 0.2e-3, 2000.0
+    speed = np.abs(rng.normal(0.0, 7000.0, 3000))  # px/s: W up to ~5 px at 0.2 ms
+    angle = np.full(speed.size, 20.0)
+    noise = NoiseEstimate(
+        sigma=2.0, read_variance=4.0, slope=0.0, level_dependent=False, source="given"
+    )
+    level = float(img.mean())
+    kw = dict(exposure=t_exp, fps=fps, noise=noise, level=level, subset=21, shape=shape)
+
+    def no_fit(*a, **k):
+        raise AssertionError("the advice fitted a model")
+
+    with monkeypatch.context() as m:
+        m.setattr(fit, "fit_blur_model", no_fit)
+        adv = advise_exposure(img, pts, speed, angle, bit_depth=8, **kw)
+    # the advice before: the fitted model's prediction at the same exposures
+    t = math.radians(20.0)
+    model = model_from_pattern(
+        img, noise_sigma=2.0, subset=21, points=pts, motion=(math.sin(t), math.cos(t)), shape=shape
+    )
+    gain = noise.sigma**2 / level
+    cam = PoissonGaussianCamera(
+        full_well=255 / gain,
+        read_noise=0.0,
+        flux=level / (gain * t_exp),
+        peak_to_mean=max(float(img.max()) / level, 1.0),
+    )
+
+    def fitted_rms(te):
+        sig = float(cam.noise_gl(te, level, level))
+        return float(np.sqrt(np.mean(np.asarray(model.predict(speed * te, sig).u_e) ** 2)))
+
+    assert adv.rms_error == pytest.approx(fitted_rms(t_exp), rel=0.08)
+    assert adv.optimal_rms_error == pytest.approx(fitted_rms(adv.optimal_exposure), rel=0.08)
+    grid = np.geomspace(t_exp / 50.0, 1.0 / fps, 60)
+    best = grid[np.nanargmin([fitted_rms(x) for x in grid])]
+    assert abs(np.log(adv.optimal_exposure / best)) <= 2.5 * np.log(grid[1] / grid[0])
+
+
+def test_blur_table_nodes_only_where_the_motion_needs_them():
+    # a 1-d motion along 20 deg: one direction node on it (not the two around it), W
+    # nodes up to the largest blur, W = 0 computed once for all directions; a second
+    # build from the first keeps its values and adds only the missing W nodes
+    from dicblur.track.uncertainty import build_blur_table, table_nodes
+
+    rng = np.random.default_rng(3)
+    w = rng.uniform(0.0, 2.6, (30, 16))
+    ang = 20.0 + rng.normal(0.0, 0.3, w.shape) / np.maximum(w, 0.5)
+    nodes, angles, need = table_nodes(w, ang)
+    np.testing.assert_allclose(nodes, [0.0, 1.0, 2.0, 3.0])
+    assert need.sum() == 1 and angles[need][0] == pytest.approx(20.0, abs=0.5)
+    # a spread of directions needs the two nodes around each off-node one (dominant 5
+    # deg: nodes at 5, 20, ..., 170; 0 and 10 deg lie between 170 | 5 and 5 | 20)
+    _, angles2, need2 = table_nodes(np.full((1, 3), 3.0), np.array([[0.0, 5.0, 10.0]]))
+    np.testing.assert_allclose(np.sort(angles2[need2]), [5.0, 20.0, 170.0])
+    img = _pattern(96, seed=4)
+    yy, xx = np.mgrid[28:69:20, 28:69:20]
+    pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
+    two = build_blur_table(
+        img,
+        pts,
+        subset=21,
+        shape="affine",
+        blur=np.array([[1.5, 1.5]]),
+        angle=np.array([[0, 90.0]]),
+    )
+    assert two.available.sum() == 2
+    j0, j1 = np.flatnonzero(two.available)
+    np.testing.assert_array_equal(two.values[j0, 0], two.values[j1, 0])
+    more = build_blur_table(
+        img,
+        pts,
+        subset=21,
+        shape="affine",
+        blur=np.array([[3.5, 1.5]]),
+        angle=np.array([[0, 90.0]]),
+        have=two,
+    )
+    assert more.blur.size == 5 and two.blur.size == 3
+    np.testing.assert_array_equal(more.values[:, :3][two.available], two.values[two.available])
+    fresh = build_blur_table(
+        img,
+        pts,
+        subset=21,
+        shape="affine",
+        blur=np.array([[3.5, 1.5]]),
+        angle=np.array([[0, 90.0]]),
+    )
+    np.testing.assert_allclose(more.values, fresh.values, rtol=1e-12, equal_nan=True)
+    # W = 0 copied from the first direction is what the second computes itself
+    from dicblur.models.sensitivity import subset_blur_response
+
+    t = np.radians(two.angles[j1])
+    _, cov, cov4 = subset_blur_response(
+        img, [0.0], pts, 21, motion=(np.sin(t), np.cos(t)), shape="affine", max_shift=1.0
+    )
+    np.testing.assert_allclose(two.values[j1, 0, :, 2], cov[0, :, 0, 0], rtol=1e-12)
+    np.testing.assert_allclose(two.values[j1, 0, :, 5], cov4[0, :, 1, 1], rtol=1e-12)
+    # the nodes on two threads: the same values
+    threaded = build_blur_table(
+        img,
+        pts,
+        subset=21,
+        shape="affine",
+        blur=np.array([[3.5, 1.5]]),
+        angle=np.array([[0, 90.0]]),
+        threads=2,
+    )
+    np.testing.assert_array_equal(threaded.values, fresh.values)
+
+
+def test_post_processing_on_threads_gives_the_same_dataset(tiny):
+    # workers=2: the median test, the table nodes, the lookups and the skew bias run in
+    # blocks on two threads; every variable is bit for bit the one-thread result
+    tgt, one = tiny
+    two = dicblur.track(
+        tgt.recording(24), static="0:4", subset=21, step=12, shape="translation", workers=2
+    )
+    for name in one.data_vars:
+        np.testing.assert_array_equal(one[name].values, two[name].values, err_msg=name)
+    assert one.attrs["advice_sentence"] == two.attrs["advice_sentence"]

@@ -77,6 +77,27 @@ def test_chunked_agrees_with_serial(serial):
         np.testing.assert_allclose(b[c].values, a[c].values, rtol=1e-2, equal_nan=True)
 
 
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_chunks_on_threads_equal_chunks_one_after_the_other(serial, shape):
+    """ChunkedRun(threads=2): the chunks run at the same time on two threads of this
+    process (each with its own Correlator; the kernels release the GIL), the results bit
+    for bit those of one thread."""
+    from dicblur.track.parallel import thread_safe_kernels
+
+    rec, _ = serial
+    kw = {**KW, "shape": shape}
+    one = dicblur.track(rec, reference=6, chunks=ChunkedRun(chunk_frames=3), **kw)
+    two = dicblur.track(rec, reference=6, chunks=ChunkedRun(chunk_frames=3, threads=2), **kw)
+    if not thread_safe_kernels():
+        pytest.skip("numba's threading layer is not thread-safe here (workqueue)")
+    assert two.attrs["chunks_scheduler"] == "threads" and two.attrs["chunks_threads"] == 2
+    assert one.attrs["chunks_scheduler"] == "serial"
+    for name in (*RAW, "outlier", "valid", "W", "sigma_u", "sigma_v"):
+        np.testing.assert_array_equal(one[name].values, two[name].values, err_msg=name)
+    with pytest.raises(InputError, match="threads"):
+        ChunkedRun(threads=0)
+
+
 def test_interrupted_run_resumes_to_the_uninterrupted_result(serial, tmp_path):
     rec, _ = serial
     whole = dicblur.track(rec, reference=6, chunks=ChunkedRun(chunk_frames=4), **KW)
@@ -207,6 +228,16 @@ def test_cli_chunks_resume(tmp_path, capsys):
     assert "0 run, 3 resumed of 3" in capsys.readouterr().out
     assert main([*args, "--workers", "2", "--scheduler", "tcp://h:1"]) == 2
     assert "--workers and --scheduler" in capsys.readouterr().err
+    # --threads with --chunk-frames alone: the chunks on two threads, the same dataset
+    out2 = tmp_path / "out2"
+    args2 = [*args[:-1], str(out2), "--threads", "2"]
+    assert main(args2) == 0
+    import xarray as xr
+
+    with xr.open_dataset(out / "track.nc") as a, xr.open_dataset(out2 / "track.nc") as b:
+        assert b.attrs["chunks_threads"] in (1, 2)  # 1 where numba's layer is workqueue
+        for name in ("u", "v", "status", "sigma_u"):
+            np.testing.assert_array_equal(a[name].values, b[name].values)
 
 
 def test_compensated_pass_in_chunks_agrees_and_resumes(serial, tmp_path):

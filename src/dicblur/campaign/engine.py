@@ -539,6 +539,7 @@ def run_tasks(
     warm_up: Callable[[], Any] | None = None,
     name: str = "task",
     connect_timeout: float = 10.0,
+    threads: int = 1,
 ) -> TasksSummary:
     """Run independent tasks serially or on Dask (the campaign engine's machinery), handing
     each result to ``finish`` in this process, in completion order (one writer).
@@ -572,6 +573,10 @@ def run_tasks(
         Prefix of the Dask task keys.
     connect_timeout : float
         Seconds to wait for ``scheduler``.
+    threads : int
+        With ``serial``: run the tasks on this many threads of this process (``func``
+        must be thread-safe and release the GIL for this to pay, e.g. ``nogil`` compiled
+        kernels); results still reach ``finish`` in this thread, in completion order.
 
     Returns
     -------
@@ -594,6 +599,9 @@ def run_tasks(
         finish(item, result)
         count[0] += 1
 
+    if (serial or not items) and threads > 1 and len(items) > 1:
+        interrupted = _map_threads(func, list(items), call_args, done, share, threads)
+        return TasksSummary(count[0], interrupted, 1, "threads", time.perf_counter() - t0)
     if serial or not items:
         interrupted = False
         try:
@@ -617,6 +625,53 @@ def run_tasks(
         started=[0.0],
     )
     return TasksSummary(count[0], interrupted, n_workers, where, time.perf_counter() - t0)
+
+
+def _map_threads(
+    func: Callable[..., Any],
+    items: list[Any],
+    args: Callable[[Any, Mapping[str, Any]], tuple[Any, ...]],
+    finish: Callable[[Any, Any], None],
+    shared: Mapping[str, Any],
+    threads: int,
+) -> bool:
+    """:func:`run_tasks` on ``threads`` threads of this process; returns whether Ctrl-C
+    stopped it (the pending tasks are cancelled, the running ones finish first). A task's
+    exception is re-raised once the tasks running beside it have finished and been passed
+    to ``finish``."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    pool = ThreadPoolExecutor(max_workers=int(threads), thread_name_prefix="dicblur-task")
+    futures = {pool.submit(func, *args(it, shared)): it for it in items}
+    pending = set(futures)
+    error: BaseException | None = None
+    interrupted = False
+    try:
+        while pending:
+            done_now, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            for fut in sorted(done_now, key=lambda f: items.index(futures[f])):
+                exc = fut.exception()
+                if exc is not None:
+                    error = error or exc
+                    continue
+                finish(futures[fut], fut.result())
+            if error is not None:
+                for fut in pending:
+                    fut.cancel()
+                rest = [f for f in pending if not f.cancelled()]
+                for fut in wait(rest)[0]:
+                    if fut.exception() is None:
+                        finish(futures[fut], fut.result())
+                pending = set()
+    except KeyboardInterrupt:
+        interrupted = True
+        for fut in pending:
+            fut.cancel()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    if error is not None:
+        raise error
+    return interrupted
 
 
 def _map_dask(

@@ -97,7 +97,12 @@ def track_command(
         ),
     ] = None,
     threads: Annotated[
-        int | None, typer.Option("--threads", help="Threads of the correlation kernels.")
+        int | None,
+        typer.Option(
+            "--threads",
+            help="Threads of the correlation kernels; with --chunk-frames alone: threads "
+            "that track chunks at the same time (single-threaded kernels each).",
+        ),
     ] = None,
     max_predicted_sigma: Annotated[
         str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
@@ -158,6 +163,7 @@ def track_command(
             workers=workers,
             scheduler=scheduler,
             chunk_frames=100 if chunk_frames is None else chunk_frames,
+            threads=threads if threads and workers is None and scheduler is None else 1,
         )
     with Progress(
         TextColumn("tracking"),

@@ -2,12 +2,20 @@
 
 For the measured velocities (the blur of every valid point in every frame divided by the
 exposure), the random error at another exposure ``T'`` follows the static prediction of the
-reference frame (:func:`dicblur.models.model_from_pattern`) with blur ``v T'`` and the
-noise of a Poisson-Gaussian camera at ``T'`` (:class:`dicblur.models.PoissonGaussianCamera`
-built from the noise measured on the static frames: ``var = read + slope * level``, signal
+reference frame (:func:`dicblur.models.predict_from_pattern`, evaluated directly: the
+point value, no fitted model form and no intervals) with blur ``v T'`` and the noise of a
+Poisson-Gaussian camera at ``T'`` (:class:`dicblur.models.PoissonGaussianCamera` built
+from the noise measured on the static frames: ``var = read + slope * level``, signal
 proportional to the exposure). The optimum minimises the RMS error over all points and
 frames; the gain is the ratio of the RMS errors at the actual and the optimal exposure.
 Without a measurable level dependence the camera is taken as shot-noise limited.
+
+The prediction is computed once, at one noise level, on the W nodes ``0, 1, 2, ...`` px up
+to the largest blur the search reaches (``v_max T'_max``, at most :data:`MAX_BLUR`); its
+parts scale with the noise as the static prediction's do (the reference and current
+shares ``~ sigma``, their interaction ``~ sigma**2``, the mismatch not at all) and are
+interpolated linearly in ``W**2`` between the nodes (the mismatch shift's leading order is
+``k W**2``). Blur beyond the prediction's breakdown leaves that exposure out of the search.
 """
 
 from __future__ import annotations
@@ -19,10 +27,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..models import PoissonGaussianCamera, model_from_pattern
+from ..errors import InputError
+from ..models import PoissonGaussianCamera, predict_from_pattern
 from .uncertainty import NoiseEstimate
 
-__all__ = ["ExposureAdvice", "advise_exposure"]
+__all__ = ["MAX_BLUR", "ExposureAdvice", "advise_exposure", "static_error_curve"]
+
+#: Largest blur (px) of the advice's prediction nodes: longer exposures are not searched.
+MAX_BLUR = 16.0
 
 
 @dataclass(frozen=True)
@@ -44,6 +56,53 @@ class ExposureAdvice:
 
 def _fmt(t: float) -> str:
     return f"{t * 1e3:.3g} ms" if t >= 1e-3 else f"{t * 1e6:.3g} us"
+
+
+def static_error_curve(
+    reference: NDArray[np.float64],
+    points: NDArray[np.intp],
+    *,
+    w_max: float,
+    noise_sigma: float,
+    subset: int,
+    motion: tuple[float, float],
+    shape: str,
+) -> Any:
+    """The static prediction's random error ``u_e(W, sigma)`` (px) of the subsets at
+    ``points`` along ``motion``, as a function of blur lengths ``W`` (px, array) and a
+    noise std ``sigma`` (GL): computed at ``noise_sigma`` on the nodes 0, 1, ... px up to
+    ``w_max`` (module docstring); NaN beyond the largest node and where the prediction has
+    no value (breakdown)."""
+    nodes = np.arange(0.0, math.ceil(max(w_max, 1.0) - 1e-9) + 1.0)
+    pred = predict_from_pattern(
+        reference,
+        nodes,
+        noise_sigma=noise_sigma,
+        subset=subset,
+        points=points,
+        motion=motion,
+        shape=shape,  # type: ignore[arg-type]
+    )
+    assert pred.u_noise_reference is not None and pred.u_noise_current is not None
+    assert pred.u_noise_interaction is not None
+    lin = (pred.u_noise_reference**2 + pred.u_noise_current**2) / noise_sigma**2
+    quad = pred.u_noise_interaction**2 / noise_sigma**4
+    mis = pred.u_blur
+    if pred.breakdown_blur is not None:  # DIC is not described from there on
+        cut = nodes >= pred.breakdown_blur
+        lin, quad, mis = (np.where(cut, np.nan, a) for a in (lin, quad, mis))
+    b2 = nodes**2
+
+    def u_e(w: NDArray[np.float64], sigma: float) -> NDArray[np.float64]:
+        w2 = np.asarray(w, dtype=np.float64) ** 2
+        out = np.sqrt(
+            sigma**2 * np.interp(w2, b2, lin)
+            + sigma**4 * np.interp(w2, b2, quad)
+            + np.interp(w2, b2, mis) ** 2
+        )
+        return np.where(w2 <= b2[-1] * (1 + 1e-12), out, np.nan)
+
+    return u_e
 
 
 def advise_exposure(
@@ -98,14 +157,6 @@ def advise_exposure(
         dom = math.radians((math.degrees(np.angle(mu)) / 2.0) % 180.0)
     else:
         dom = 0.0
-    model = model_from_pattern(
-        reference,
-        noise_sigma=noise.sigma,
-        subset=subset,
-        points=pts,
-        motion=(math.sin(dom), math.cos(dom)),
-        shape=shape,  # type: ignore[arg-type]
-    )
     mean_level = float(reference.mean())
     top = float(2 ** min(int(bit_depth), 16) - 1)
     if noise.level_dependent and noise.slope > 0:
@@ -130,19 +181,39 @@ def advise_exposure(
     t_max = max(t_max, exposure)
     grid = np.geomspace(exposure / 50.0, t_max, 60)
     grid = np.unique(np.append(grid, exposure))
+    if not v.size:
+        v = np.zeros(1)
+    v_max = float(v.max())
+    # the prediction's nodes reach the longest exposure's blur (up to MAX_BLUR px)
+    w_need = min(v_max * float(grid[-1]), MAX_BLUR)
+    if v_max * exposure > MAX_BLUR:
+        raise InputError(
+            f"blur: the measured blur reaches {v_max * exposure:.3g} px, beyond the "
+            f"advice's {MAX_BLUR:g} px; no exposure advice"
+        )
+    grid = grid[(grid <= exposure) | (v_max * grid <= MAX_BLUR)]
+    u_e = static_error_curve(
+        reference,
+        pts,
+        w_max=w_need,
+        noise_sigma=noise.sigma,
+        subset=subset,
+        motion=(math.sin(dom), math.cos(dom)),
+        shape=shape,
+    )
 
     def rms(t: float) -> float:
         sig = float(cam.noise_gl(t, mean_level, level))
-        if not v.size:
-            ue = model.predict([0.0], sig).u_e
-        else:
-            ue = model.predict(v * t, sig).u_e
-        return float(np.sqrt(np.mean(np.asarray(ue, dtype=np.float64) ** 2)))
+        return float(np.sqrt(np.mean(u_e(v * t, sig) ** 2)))
 
     errs = np.array([rms(t) for t in grid])
+    e_now = float(errs[grid == exposure][0])
+    if not math.isfinite(e_now):
+        raise InputError(
+            "blur: the static prediction breaks down at the measured blur; no exposure advice"
+        )
     i = int(np.nanargmin(errs))
     t_opt = float(grid[i])
-    e_now = float(errs[grid == exposure][0])
     e_opt = float(errs[i])
     limit = (
         "the frame interval"

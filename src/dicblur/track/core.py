@@ -41,7 +41,7 @@ from ..sequence import Recording, open_recording
 from .advice import advise_exposure
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
 from .kinematics import exposure_motion, exposure_skew
-from .median import median_test_frames
+from .median import median_critical_eps
 from .uncertainty import (
     NoiseEstimate,
     build_blur_table,
@@ -423,28 +423,54 @@ def zncc_flags(
     return np.asarray(converged & np.isfinite(score) & (score > ratio))
 
 
-def _median_flags(
+def _median_critical(
     u: NDArray[np.float64],
     v: NDArray[np.float64],
     ok: NDArray[np.bool_],
     gshape: tuple[int, int] | None,
-    eps: NDArray[np.float64],
     threshold: float,
-) -> NDArray[np.bool_]:
+    frames: NDArray[np.intp] | None = None,
+    out: NDArray[np.float32] | None = None,
+    threads: int = 1,
+) -> NDArray[np.float32]:
+    """:func:`.median.median_critical_eps` of the points ``ok`` (the others missing) of
+    ``frames`` (default all), written into ``out`` (frames, points); ``-inf`` everywhere
+    without a grid. The normalised median test at ``eps`` per frame is ``out > eps``."""
+    n_f = u.shape[0]
+    if out is None:
+        out = np.full(u.shape, -np.inf, np.float32)
     if gshape is None:
-        return np.zeros(u.shape, bool)
-    # all frames at once (vectorised; the same flags as normalized_median_test per frame)
-    out = np.zeros(u.shape, bool)
-    for a in range(0, u.shape[0], 256):
-        b = slice(a, a + 256)
-        out[b] = median_test_frames(
+        return out
+    sel = np.arange(n_f) if frames is None else np.asarray(frames)
+
+    def one(b: NDArray[np.intp]) -> None:
+        out[b] = median_critical_eps(
             np.where(ok[b], u[b], np.nan),
             np.where(ok[b], v[b], np.nan),
             gshape,
-            eps=eps[b],
             threshold=threshold,
         )
+
+    _blocks(one, sel, 128, threads)
     return out
+
+
+def _blocks(
+    fn: Callable[[NDArray[np.intp]], None], sel: NDArray[np.intp], size: int, threads: int
+) -> None:
+    """``fn(block)`` for the consecutive blocks of ``size`` of the frame indices ``sel``,
+    on ``threads`` threads (numpy releases the GIL in its array loops; each block writes
+    its own frames, so the result is the same on any number of threads)."""
+    parts = [sel[a : a + size] for a in range(0, sel.size, size)]
+    if threads <= 1 or len(parts) <= 1:
+        for b in parts:
+            fn(b)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for _ in pool.map(fn, parts):
+            pass
 
 
 def track(
@@ -512,7 +538,9 @@ def track(
     advice : bool
         Compute the exposure advice (a static prediction of the reference, a few s).
     workers : int, optional
-        Threads of the correlation kernels.
+        Threads of the correlation kernels, and of the post-processing (median test,
+        tables, lookups, kinematics: the same numbers on any count; with
+        ``ChunkedRun(threads=N)`` at least N).
     progress : callable(done, total), optional
         Called after every frame (every chunk with ``chunks``).
     chunks : ChunkRunner, optional
@@ -788,6 +816,7 @@ def track(
         threshold=median_threshold,
         advice=advice and error is None,
         ref_img=ref_img,
+        threads=max(1, int(workers or 1), int(getattr(chunks, "threads", 1))),
         blur_table=(
             build_compensated_table if comp_info["matcher"] != MATCHER_PLAIN else build_blur_table
         ),
@@ -822,6 +851,7 @@ def _assemble(
     advice: bool,
     ref_img: NDArray[np.float64],
     blur_table: Callable[..., Any] = build_blur_table,
+    threads: int = 1,
 ) -> Any:
     import xarray as xr
 
@@ -854,7 +884,9 @@ def _assemble(
     # pass 1: the median test at its fixed eps (catches errors of tenths of a px) and the
     # ZNCC test; pass 2, once sigma is known, at eps = 2 x the frame's median sigma
     t_med = time.perf_counter()
-    outlier = _median_flags(u, v, conv, gshape, np.full(n_f, eps), threshold)
+    # the largest eps at which the test flags each point: both passes from one median pass
+    crit = _median_critical(u, v, conv, gshape, threshold, threads=threads)
+    outlier = crit > eps
     settings["median_time_s"] = time.perf_counter() - t_med
     low_zncc = zncc_flags(zn, conv)
     contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
@@ -867,6 +899,7 @@ def _assemble(
                 fps=fps,
                 exposure=t_exp,
                 half_window=half_window,
+                threads=threads,
             )
             return mu_.astype(np.float32), mv_.astype(np.float32)
         nan = np.full((n_f, n_p), np.nan, np.float32)
@@ -913,6 +946,7 @@ def _assemble(
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
+        more: dict[str, Any] = {"threads": threads} if blur_table is build_blur_table else {}
         table = blur_table(
             ref_img,
             centres[pin],
@@ -920,15 +954,14 @@ def _assemble(
             shape=corr.shape,
             blur=np.where(good[:, pin], w[:, pin], np.nan),
             angle=ang[:, pin],
+            **more,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
         def predict(rows: NDArray[np.intp] | None = None) -> None:
-            sel = np.arange(n_f) if rows is None else rows
-            for a in range(0, sel.size, 128):  # frame blocks: bounded temporaries
-                b = sel[a : a + 128]
+            def one(b: NDArray[np.intp]) -> None:  # frame blocks: bounded temporaries
                 look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
                 su_n, sv_n = table.noise_std(look, nv)
                 ix = np.ix_(b, pin)
@@ -936,6 +969,8 @@ def _assemble(
                 sig["sigma_v_noise"][ix] = sv_n
                 sig["sigma_u_blur"][ix] = np.abs(look[..., 0])
                 sig["sigma_v_blur"][ix] = np.abs(look[..., 1])
+
+            _blocks(one, np.arange(n_f) if rows is None else rows, 128, threads)
 
         predict()
         if gshape is not None:
@@ -947,7 +982,21 @@ def _assemble(
                 warnings.simplefilter("ignore", RuntimeWarning)
                 eps_k = 2.0 * np.nanmedian(np.where(good, s_max, np.nan), axis=1)
             eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
-            second = _median_flags(u, v, conv & ~low_zncc, gshape, eps_k, threshold)
+            # the second pass leaves out the low-ZNCC points too: the medians change only
+            # in the frames that have some
+            t_med = time.perf_counter()
+            _median_critical(
+                u,
+                v,
+                conv & ~low_zncc,
+                gshape,
+                threshold,
+                frames=np.flatnonzero((conv & low_zncc).any(axis=1)),
+                out=crit,
+                threads=threads,
+            )
+            second = crit > eps_k[:, None]
+            settings["median_time_s"] += time.perf_counter() - t_med
             if (second & ~outlier).any():
                 outlier |= second
                 good = conv & ~outlier & ~low_zncc
@@ -955,15 +1004,33 @@ def _assemble(
                 w_old, ang_old = w, ang
                 w = np.hypot(wu, wv)
                 ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
-                # only the frames whose blur changed (a new flag in their stencil)
-                same = ((w == w_old) | (np.isnan(w) & np.isnan(w_old))) & (
-                    (ang == ang_old) | (np.isnan(ang) & np.isnan(ang_old))
-                )
-                predict(np.flatnonzero(~same.all(axis=1)))
+                w_in = np.where(good[:, pin], w[:, pin], np.nan)
+                if np.any(w_in > table.blur[-1]):
+                    # the new blur reaches past the table's last node: add the nodes
+                    # (build_blur_table keeps the computed ones) and predict every frame
+                    if blur_table is build_blur_table:
+                        more["have"] = table
+                    table = blur_table(
+                        ref_img,
+                        centres[pin],
+                        subset=corr.subset,
+                        shape=corr.shape,
+                        blur=w_in,
+                        angle=ang[:, pin],
+                        **more,
+                    )
+                    predict()
+                else:
+                    # only the frames whose blur changed (a new flag in their stencil)
+                    same = ((w == w_old) | (np.isnan(w) & np.isnan(w_old))) & (
+                        (ang == ang_old) | (np.isnan(ang) & np.isnan(ang_old))
+                    )
+                    predict(np.flatnonzero(~same.all(axis=1)))
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available]
         )
+    del crit
     # the bias of an accelerating blur: the kernel's third moment from the fitted track
     # times each subset's skew coefficient (a shift common to nearly all points)
     bias = np.full((n_f, n_p, 2), np.nan, np.float32)
@@ -975,14 +1042,17 @@ def _assemble(
             fps=fps,
             exposure=t_exp,
             half_window=half_window,
+            threads=threads,
         )
         k3, axis = k3[:, pin], axis[:, pin]
         skew = build_skew_table(
             ref_img, centres[pin], subset=corr.subset, shape=corr.shape, axis=axis, kappa3=k3
         )
-        for a in range(0, n_f, 128):
-            b = slice(a, a + 128)
-            bias[b, pin] = skew.bias(k3[b], axis[b])
+
+        def one_bias(b: NDArray[np.intp]) -> None:
+            bias[b[0] : b[-1] + 1, pin] = skew.bias(k3[b[0] : b[-1] + 1], axis[b[0] : b[-1] + 1])
+
+        _blocks(one_bias, np.arange(n_f), 128, threads)
         del k3, axis
     settings["prediction_time_s"] = time.perf_counter() - t0
     # after a reference renewal the increments add to the renewal frame's displacement:

@@ -20,6 +20,7 @@ stencil, so the whole recording is one banded matrix product.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -97,6 +98,7 @@ def exposure_motion(
     exposure: float,
     half_window: int = 2,
     block: int = 128,
+    threads: int = 1,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Blur vector ``(W_u, W_v)`` of every point in every frame from its track.
 
@@ -114,6 +116,8 @@ def exposure_motion(
     block : int
         Points per pass (the stencils of a pass take frames x (2 h + 1) x block x 8 bytes
         per component).
+    threads : int
+        Threads running the passes (the same result on any number).
 
     Returns
     -------
@@ -130,7 +134,8 @@ def exposure_motion(
     starts, wts = _rise_weights(uu.shape[0], exposure * fps, half_window)
     idx = starts[:, None] + np.arange(wts.shape[1])[None, :]  # (frames, width)
     out = (np.empty(uu.shape), np.empty(vv.shape))
-    for a in range(0, uu.shape[1], block):
+
+    def one(a: int) -> None:
         b = slice(a, a + block)
         su, sv = uu[:, b][idx], vv[:, b][idx]  # (frames, width, block)
         # a gap anywhere in a frame's stencil leaves its blur unknown (filling the gap by
@@ -138,7 +143,22 @@ def exposure_motion(
         complete = (np.isfinite(su) & np.isfinite(sv)).all(axis=1)
         for o, st in zip(out, (su, sv), strict=True):
             o[:, b] = np.where(complete, np.einsum("fw,fwn->fn", wts, np.nan_to_num(st)), np.nan)
+
+    _each(one, range(0, uu.shape[1], block), threads)
     return out
+
+
+def _each(fn: Any, items: Any, threads: int) -> None:
+    """``fn(item)`` for every item, on ``threads`` threads (numpy releases the GIL in its
+    array loops; each item writes its own slice of the outputs)."""
+    if threads <= 1:
+        for it in items:
+            fn(it)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        list(pool.map(fn, items))
 
 
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(12)
@@ -172,6 +192,7 @@ def exposure_skew(
     exposure: float,
     half_window: int = 2,
     block: int = 64,
+    threads: int = 1,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Third central moment of the blur kernel of every point in every frame.
 
@@ -198,7 +219,8 @@ def exposure_skew(
     gw = 0.5 * _WEIGHTS
     k3 = np.full((n_f, n_p), np.nan, np.float32)
     axis = np.full((n_f, n_p), np.nan, np.float32)
-    for a in range(0, n_f, block):
+
+    def one(a: int) -> None:
         b = np.arange(a, min(a + block, n_f))
         idx = starts[b][:, None] + np.arange(width)[None, :]  # (B, width)
         # batched matrix products (BLAS) instead of einsum's loops
@@ -213,4 +235,6 @@ def exposure_skew(
         s = xs * np.cos(th)[:, None] + ys * np.sin(th)[:, None]
         k3[b] = np.matmul(gw, s * s * s)
         axis[b] = np.mod(np.degrees(th), 180.0)
+
+    _each(one, range(0, n_f, block), threads)
     return k3, axis

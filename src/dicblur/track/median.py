@@ -15,7 +15,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 
-__all__ = ["median_test_frames", "normalized_median_test", "normalized_residual"]
+__all__ = [
+    "median_critical_eps",
+    "median_test_frames",
+    "normalized_median_test",
+    "normalized_residual",
+]
 
 
 def _neighbours(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -134,6 +139,50 @@ def median_test_frames(
         with np.errstate(invalid="ignore"):
             flag = (np.nan_to_num(ru) > threshold) | (np.nan_to_num(rv) > threshold)
         out[b] = flag.reshape(-1, rows * cols)
+    return out
+
+
+def median_critical_eps(
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    grid_shape: tuple[int, int],
+    *,
+    threshold: float = 2.0,
+    block: int = 64,
+) -> NDArray[np.float32]:
+    """The largest ``eps`` at which :func:`median_test_frames` still flags each point:
+    ``max over u, v of |u_0 - u_m| / threshold - r_m`` (``r_0 > threshold`` holds exactly
+    for ``eps`` below it), ``-inf`` where the point is not tested; so the flags at any
+    ``eps`` per frame are ``critical > eps[:, None]`` without a second median pass.
+
+    Parameters
+    ----------
+    u, v : ndarray, shape (frames, rows * cols)
+        Displacements (px) on the POI grid, NaN = no vector.
+    grid_shape : (rows, cols)
+    threshold : float
+    block : int
+        Frames per pass.
+
+    Returns
+    -------
+    ndarray of float32, shape (frames, rows * cols)
+    """
+    rows, cols = (int(grid_shape[0]), int(grid_shape[1]))
+    out = np.empty(u.shape, np.float32)
+    for a in range(0, u.shape[0], block):
+        b = slice(a, a + block)
+        crit = np.full((2, *np.shape(u[b])), -np.inf)
+        for c, comp in enumerate((u, v)):
+            g = np.asarray(comp[b], np.float64).reshape(-1, rows, cols)
+            nb = _neighbours(g)
+            med, count = _nanmedian8(nb)
+            with np.errstate(invalid="ignore"):
+                rm, _ = _nanmedian8(np.abs(nb - med[None]))
+                e = np.abs(g - med) / threshold - rm
+            e[(count < 3) | ~np.isfinite(g) | ~np.isfinite(e)] = -np.inf
+            crit[c] = e.reshape(-1, rows * cols)
+        out[b] = np.maximum(crit[0], crit[1])
     return out
 
 

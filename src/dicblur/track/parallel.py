@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import threading
 import zlib
 from collections.abc import Callable, Sequence
 from contextlib import nullcontext
@@ -50,6 +51,7 @@ __all__ = [
     "TrackJob",
     "compensate_chunk",
     "plan_chunks",
+    "thread_safe_kernels",
     "track_chunk",
 ]
 
@@ -148,18 +150,47 @@ class TrackJob:
     key: str
 
 
-# a worker process keeps the last job's recording and prepared Correlator
+# a worker process keeps the last job's recording and prepared Correlator (one per
+# thread: ChunkedRun(threads=N) runs chunks on N threads of this process), keyed by
+# "job key@thread id"
 _PREPARED: dict[str, tuple[Recording, Correlator, NDArray[np.float64], Any]] = {}
 # ... and the seed POIs of its Correlator (track.core.seed_correlator)
 _SEEDS: dict[str, Any] = {}
 # recordings this module opened (closed when dropped)
 _OPENED: set[int] = set()
+# one reader at a time: a recording's frames are read by seek + read on one file handle
+_READ = threading.Lock()
+_PREPARE = threading.Lock()
+
+
+def _key(job: TrackJob) -> str:
+    return f"{job.key}@{threading.get_ident()}"
+
+
+def _frame(rec: Recording, k: int) -> NDArray[np.float64]:
+    with _READ:
+        return rec.frame(k)
+
+
+def thread_safe_kernels() -> bool:
+    """Whether the compiled kernels may run on several threads of this process at once:
+    numba's threading layer is thread-safe (``omp`` or ``tbb``; ``workqueue`` aborts the
+    process on concurrent calls). Call after a first correlation (the layer is chosen on
+    the first parallel kernel call)."""
+    import numba
+
+    try:
+        return str(numba.threading_layer()) in ("omp", "tbb")
+    except ValueError:  # no parallel kernel has run yet
+        return False
 
 
 def _prepared(job: TrackJob) -> tuple[Recording, Correlator, NDArray[np.float64], Any]:
-    got = _PREPARED.get(job.key)
-    if got is None:
-        _release()
+    got = _PREPARED.get(_key(job))
+    if got is not None:
+        return got
+    with _PREPARE:
+        _release(keep=job.key)
         if isinstance(job.source, str):
             rec = open_recording(job.source)
             _OPENED.add(id(rec))
@@ -171,19 +202,21 @@ def _prepared(job: TrackJob) -> tuple[Recording, Correlator, NDArray[np.float64]
                 f"of {rec.shape}, the run started with {job.n_frames} of {job.shape}; "
                 "the recording changed during the run"
             )
-        ref = rec.frame(job.reference)
+        ref = _frame(rec, job.reference)
         corr = Correlator(ref, **job.correlator)
         got = (rec, corr, ref, window_spectrum(ref))
-        _PREPARED[job.key] = got
+        _PREPARED[_key(job)] = got
     return got
 
 
-def _release() -> None:
-    """Drop the prepared job (closing a recording this module opened)."""
+def _release(keep: str | None = None) -> None:
+    """Drop the prepared jobs but ``keep`` (closing a recording this module opened)."""
     for key in list(_PREPARED):
+        if keep is not None and key.split("@")[0] == keep:
+            continue
         rec = _PREPARED.pop(key)[0]
         _SEEDS.pop(key, None)
-        if id(rec) in _OPENED:
+        if id(rec) in _OPENED and not any(v[0] is rec for v in _PREPARED.values()):
             _OPENED.discard(id(rec))
             rec.close()
 
@@ -206,9 +239,9 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
         n_points) uint8, ``fallback`` (m,) bool: as the serial loop records them.
     """
     rec, corr, ref, spectrum = _prepared(job)
-    if job.key not in _SEEDS:
-        _SEEDS[job.key] = seed_correlator(ref, corr, job.correlator)
-    seeds = _SEEDS[job.key]
+    if _key(job) not in _SEEDS:
+        _SEEDS[_key(job)] = seed_correlator(ref, corr, job.correlator)
+    seeds = _SEEDS[_key(job)]
     n = corr.n_points
     base = np.zeros((n, 2))
     ones = np.ones(n, bool)
@@ -227,7 +260,7 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
     }
     keep = {k: i for i, k in enumerate(chunk.frames)}
     for k in (*chunk.warm, *chunk.frames):
-        img = rec.frame(k)
+        img = _frame(rec, k)
         guess, g_abs = frame_guess(hist, rig, img, spectrum, base, seeds)
         res, fb = correlate_frame(corr, img, guess, ones if k == job.reference else job.ok0, grads)
         u = np.asarray(res.u, np.float64) + base[:, 0]
@@ -281,12 +314,19 @@ class ChunkedRun:
         it nothing is kept between runs.
     workers : int, optional
         Processes of a local Dask cluster. With neither ``workers`` nor ``scheduler`` the
-        chunks run one after the other in this process (resumable all the same).
+        chunks run in this process (resumable all the same): one after the other, or on
+        ``threads`` threads.
     scheduler : str, optional
         Address of an existing Dask scheduler, ``tcp://HOST:PORT`` (its workers must see
         the recording at the same path).
     chunk_frames : int
         Frames per chunk (each chunk also tracks the :data:`HISTORY` frames before it).
+    threads : int
+        Without ``workers`` and ``scheduler``: threads of this process that track chunks
+        at the same time, each with its own Correlator on single-threaded kernels (the
+        compiled kernels release the GIL). The results equal those of ``threads=1`` bit
+        for bit (each chunk is computed alone either way). Falls back to one thread when
+        numba's threading layer is not thread-safe (:func:`thread_safe_kernels`).
 
     Attributes
     ----------
@@ -306,6 +346,7 @@ class ChunkedRun:
     workers: int | None = None
     scheduler: str | None = None
     chunk_frames: int = 100
+    threads: int = 1
     summary: dict[str, Any] = field(default_factory=dict)
     _passes: int = field(default=0, init=False, repr=False)
 
@@ -319,6 +360,9 @@ class ChunkedRun:
         if isinstance(self.chunk_frames, bool) or int(self.chunk_frames) < 1:
             raise InputError(f"--chunk-frames={self.chunk_frames!r}: must be >= 1, e.g. 100")
         self.chunk_frames = int(self.chunk_frames)
+        if isinstance(self.threads, bool) or int(self.threads) != self.threads or self.threads < 1:
+            raise InputError(f"threads={self.threads!r}: must be an integer >= 1, e.g. 2")
+        self.threads = int(self.threads)
 
     @property
     def serial(self) -> bool:
@@ -344,8 +388,8 @@ class ChunkedRun:
         first, _ = correlate_frame(corr, ref_img, None, np.ones(corr.n_points, bool))
         ok0 = ~np.isin(first.status, (PointStatus.LOW_TEXTURE, PointStatus.OUT_OF_BOUNDS))
         opts = dict(correlator)
-        if not self.serial:
-            opts["workers"] = 1  # one single-threaded process per core
+        if not self.serial or self.threads > 1:
+            opts["workers"] = 1  # one single-threaded process (thread) per core
         # a worker re-opens a file recording from its path; in this process, or without a
         # path (a synthetic recording: lazy, no frame in it), the recording itself is used
         source: Any = (
@@ -383,6 +427,7 @@ class ChunkedRun:
             store=None if self.store is None else Path(self.store),
             total=len(order),
             progress=progress,
+            threads=self.threads,
         )
         got: dict[str, Any] = {k: [] for k in ("frames", "u", "v", "zncc", "status", "fallback")}
         for c in chunks:
@@ -410,10 +455,12 @@ class ChunkedRun:
         store: Path | None,
         total: int,
         progress: Callable[[int, int], None] | None,
+        threads: int = 1,
     ) -> tuple[dict[int, dict[str, Any]], BaseException | None, dict[str, Any]]:
-        """Run the chunks not yet in ``store`` through the campaign engine, storing each as
-        it finishes; returns the results by chunk index, the exception that stopped the
-        run (a ``KeyboardInterrupt`` for Ctrl-C) and the run's summary."""
+        """Run the chunks not yet in ``store`` through the campaign engine (in this
+        process on ``threads`` threads when serial), storing each as it finishes; returns
+        the results by chunk index, the exception that stopped the run (a
+        ``KeyboardInterrupt`` for Ctrl-C) and the run's summary."""
         results: dict[int, dict[str, Any]] = {}
         error: BaseException | None = None
         summary = None
@@ -449,6 +496,7 @@ class ChunkedRun:
                     scheduler=self.scheduler,
                     workers=self.workers,
                     name="track-chunk",
+                    threads=threads if self.serial and thread_safe_kernels() else 1,
                 )
             except (DicblurError, OSError, MemoryError) as exc:
                 error = exc
@@ -464,6 +512,7 @@ class ChunkedRun:
             "workers": 1 if summary is None else summary.workers,
             "scheduler": "serial" if summary is None else summary.scheduler,
             "chunk_frames": self.chunk_frames,
+            "threads": threads if summary is not None and summary.scheduler == "threads" else 1,
         }
         return results, error, stats
 

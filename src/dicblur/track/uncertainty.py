@@ -16,10 +16,13 @@ blur length ``W`` and direction in that frame:
   is the field's ``u_blur``); its magnitude per component is the blur part of sigma.
 
 The per-point responses are tabulated once per recording on a grid of ``W`` (1 px steps
-up to the largest measured blur; 2.1 s per node for 2,401 affine
-subsets of a 512^2 frame on the loaded machine) and of directions (15 degree nodes, only those the
-measured motion needs), then interpolated (linearly in ``W**2``: the shift's leading
-order is ``k W**2``; between the two nearest direction nodes).
+up to the largest measured blur; about 0.3 s per node for 2,401 affine subsets of a
+512^2 frame) and of directions (nodes 15 degrees apart, one of them on the blur-weighted
+dominant direction; only those the measured motion needs: a direction whose nearest node
+is within :data:`ANGLE_TOLERANCE_PX` of perpendicular blur needs that node alone, others
+the two around it), then interpolated (linearly in ``W**2``: the shift's leading order is
+``k W**2``; between the two nearest direction nodes). ``W = 0`` (no blur, no direction)
+is computed once for all directions.
 """
 
 from __future__ import annotations
@@ -37,10 +40,12 @@ from ..models.sensitivity import subset_blur_response
 
 __all__ = [
     "ANGLE_STEP",
+    "ANGLE_TOLERANCE_PX",
     "BLUR_STEP",
     "BlurTable",
     "NoiseEstimate",
     "build_blur_table",
+    "direction_nodes",
     "estimate_static_noise",
     "subset_levels",
     "table_nodes",
@@ -48,6 +53,9 @@ __all__ = [
 
 ANGLE_STEP = 15.0  # deg between direction nodes of the table
 BLUR_STEP = 1.0  # px between blur nodes of the table
+#: A direction whose blur ``W`` is at most this far (px) across the nearest direction
+#: node (``W |sin(angle - node)|``) uses that node alone.
+ANGLE_TOLERANCE_PX = 0.05
 
 
 @dataclass(frozen=True)
@@ -59,8 +67,9 @@ class BlurTable:
     blur : ndarray, shape (m,)
         Blur lengths W (px), from 0 in steps of :data:`BLUR_STEP`.
     angles : ndarray, shape (a,)
-        Direction nodes (deg in [0, 180), from the x axis towards +y (rows)); a centred box
-        blur is the same for theta and theta + 180.
+        Direction nodes (deg, from the x axis towards +y (rows)): ``angles[0] +
+        k ANGLE_STEP``, ``angles[0]`` in [0, ANGLE_STEP); a centred box blur is the same
+        for theta and theta + 180.
     available : ndarray of bool, shape (a,)
         Nodes that were computed.
     values : ndarray, shape (a, m, n, 6)
@@ -90,7 +99,7 @@ class BlurTable:
         i1 = np.clip(np.searchsorted(b2, s2, side="right"), 1, b2.size - 1)
         i0 = i1 - 1
         tw = np.clip((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0, 1.0)[..., None]
-        th = np.mod(np.where(np.isfinite(angle), angle, 0.0), 180.0) / ANGLE_STEP
+        th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - self.angles[0], 180.0) / ANGLE_STEP
         j0 = np.floor(th).astype(np.intp) % a
         j1 = (j0 + 1) % a
         ta = th - np.floor(th)
@@ -112,7 +121,8 @@ class BlurTable:
             return np.asarray(lo + tw * (hi - lo))
 
         out = at(k0)
-        out += ta * (at(k1) - out)
+        if both.any():  # a single direction node (a 1-d motion): nothing to interpolate
+            out += ta * (at(k1) - out)
         out[~np.isfinite(w) | (w > self.blur[-1] + 1e-9)] = np.nan
         return np.asarray(out)
 
@@ -136,6 +146,49 @@ class BlurTable:
         return np.asarray(idx[np.argmin(d, axis=1)], dtype=np.intp)
 
 
+def direction_nodes(
+    blur: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    *,
+    min_blur: float = 0.5,
+    tolerance: float = ANGLE_TOLERANCE_PX,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Direction nodes of a table for blur lengths ``blur`` (px; for the skew table any
+    weight) along ``angle`` (deg), NaN ignored: the nodes (every :data:`ANGLE_STEP`, one
+    on the ``blur``-weighted dominant direction of the samples with ``blur >= min_blur``)
+    and which of them to compute: the nearest node of every such direction when the blur
+    across it, ``blur |sin(angle - node)|``, is at most ``tolerance``, else the two around
+    it; the node of the dominant direction when no sample has ``blur >= min_blur``."""
+    a = round(180.0 / ANGLE_STEP)
+    w_all = np.asarray(blur, dtype=np.float64).ravel()
+    t_all = np.asarray(angle, dtype=np.float64).ravel()
+    finite = np.isfinite(w_all) & np.isfinite(t_all)
+    big = finite & (w_all >= min_blur)
+    use = big if big.any() else finite
+    ww, tt = w_all[use], t_all[use]
+    dom = 0.0
+    if ww.size:
+        r2 = np.deg2rad(2.0 * tt)
+        wt = ww + 1e-12
+        c, s = float(np.dot(wt, np.cos(r2))), float(np.dot(wt, np.sin(r2)))
+        dom = (math.degrees(math.atan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
+    phase = dom % ANGLE_STEP
+    angles = phase + np.arange(a, dtype=np.float64) * ANGLE_STEP
+    need = np.zeros(a, bool)
+    if big.any():
+        th = np.mod(tt - phase, 180.0) / ANGLE_STEP  # big == use here
+        near = np.rint(th)
+        across = ww * np.abs(np.sin(np.deg2rad((th - near) * ANGLE_STEP)))
+        one = across <= tolerance
+        need |= np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
+        lo = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
+        need[lo] = True
+        need[(lo + 1) % a] = True
+    else:
+        need[round((dom - phase) / ANGLE_STEP) % a] = True
+    return angles, need
+
+
 def table_nodes(
     blur: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
@@ -143,30 +196,15 @@ def table_nodes(
     min_blur: float = 0.5,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
     """Nodes of a blur table for the measured ``blur`` (px) and ``angle`` (deg), both
-    shape (frames, points), NaN ignored: the W nodes (every ``BLUR_STEP`` from 0 past the
-    largest W), the direction nodes (every ``ANGLE_STEP`` in [0, 180)) and which of them to
-    compute (the two around every direction whose blur is >= ``min_blur`` px; the one
-    nearest the blur-weighted dominant direction when none is)."""
+    shape (frames, points), NaN ignored: the W nodes (every ``BLUR_STEP`` from 0 up to
+    the first at or beyond the largest W) and the direction nodes with which of them to
+    compute (:func:`direction_nodes`)."""
     finite = np.isfinite(blur) & np.isfinite(angle)
     w_max = float(np.max(blur[finite])) if finite.any() else 0.0
-    nodes = np.arange(0.0, BLUR_STEP * (math.ceil(w_max / BLUR_STEP) + 1) + 1e-9, BLUR_STEP)
-    if nodes.size < 2:
-        nodes = np.array([0.0, BLUR_STEP])
-    a = round(180.0 / ANGLE_STEP)
-    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
-    th = np.mod(angle[finite & (blur >= min_blur)], 180.0) / ANGLE_STEP
-    need = np.zeros(a, bool)
-    if th.size:
-        need[np.floor(th).astype(int) % a] = True
-        need[(np.floor(th).astype(int) + 1) % a] = True
-    else:
-        if finite.any():
-            ww = blur[finite]
-            mu = np.average(np.exp(2j * np.deg2rad(angle[finite])), weights=ww + 1e-12)
-            dom = (np.rad2deg(np.angle(mu)) / 2.0) % 180.0
-        else:
-            dom = 0.0
-        need[round(dom / ANGLE_STEP) % a] = True
+    nodes = np.arange(
+        0.0, BLUR_STEP * max(math.ceil(w_max / BLUR_STEP - 1e-9), 1) + 1e-9, BLUR_STEP
+    )
+    angles, need = direction_nodes(blur, angle, min_blur=min_blur)
     return nodes, angles, need
 
 
@@ -180,6 +218,8 @@ def build_blur_table(
     angle: NDArray[np.floating[Any]],
     min_blur: float = 0.5,
     complete: bool = True,
+    have: BlurTable | None = None,
+    threads: int = 1,
 ) -> BlurTable:
     """Tabulate the blur response of every point for the blur vectors that occur.
 
@@ -199,28 +239,88 @@ def build_blur_table(
         The complete noise term (default); ``False``: the first-order response to the
         reference's intensities alone, without the ``sigma**4`` interaction (the earlier
         formula, for comparisons).
+    have : BlurTable, optional
+        A table built earlier for the same points and settings: its nodes are kept and
+        only the missing ones computed (the second pass of :func:`~dicblur.track.track`,
+        whose blur may reach a little further).
+    threads : int
+        Threads computing the nodes at the same time (each W node on its own: the same
+        values on any number of threads).
     """
     nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
+    if have is not None and np.allclose(have.angles, angles):
+        # keep what the earlier table computed: more W nodes, more directions at most
+        nodes = have.blur if have.blur[-1] >= nodes[-1] else nodes
+        need = need | have.available
+    elif have is not None:
+        have = None  # another dominant direction: other nodes
     a = angles.size
     values = np.full((a, nodes.size, len(centres), 6), np.nan)
+    # W = 0 (no blur, no direction) is the same for every direction: computed once
+    zero = None if have is None else have.values[np.flatnonzero(have.available)[0], :1]
+    jobs: list[tuple[int, NDArray[np.intp]]] = []  # (direction node, W nodes)
     for j in np.flatnonzero(need):
-        t = math.radians(angles[j])
-        shift, cov, cov4 = subset_blur_response(
-            reference,
-            nodes,
-            centres,
-            subset,
-            motion=(math.sin(t), math.cos(t)),
-            shape=shape,  # type: ignore[arg-type]
-            max_shift=1.0,
-            complete=complete,
-        )
-        values[j, ..., 0:2] = shift
-        values[j, ..., 2] = cov[..., 0, 0]
-        values[j, ..., 3] = cov[..., 1, 1]
-        values[j, ..., 4] = cov4[..., 0, 0]
-        values[j, ..., 5] = cov4[..., 1, 1]
+        start = 0
+        if have is not None and have.available[j]:
+            start = have.blur.size
+            values[j, :start] = have.values[j]
+        todo = np.arange(start, nodes.size)
+        if todo.size and todo[0] == 0 and (zero is not None or jobs):
+            todo = todo[1:]  # copied from the first direction's W = 0 below
+        # W nodes split over the threads (each computed alone: the same values)
+        jobs += [(int(j), t) for t in np.array_split(todo, max(1, min(threads, todo.size)))]
+
+    def run(job: tuple[int, NDArray[np.intp]]) -> None:
+        j, todo = job
+        if todo.size:
+            values[j, todo] = _response(
+                reference, nodes[todo], centres, subset, shape, angles[j], complete
+            )
+
+    if threads > 1 and len(jobs) > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            list(pool.map(run, jobs))
+    else:
+        for job in jobs:
+            run(job)
+    if zero is None:
+        zero = values[np.flatnonzero(need)[0], :1]
+    for j in np.flatnonzero(need):
+        values[j, 0] = zero[0]
     return BlurTable(blur=nodes, angles=angles, available=need, values=values)
+
+
+def _response(
+    reference: NDArray[np.float64],
+    nodes: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    shape: str,
+    angle: float,
+    complete: bool,
+) -> NDArray[np.float64]:
+    """``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)`` of every point at the blur lengths
+    ``nodes`` along ``angle`` (deg), shape (m, n, 6)."""
+    t = math.radians(angle)
+    shift, cov, cov4 = subset_blur_response(
+        reference,
+        nodes,
+        centres,
+        subset,
+        motion=(math.sin(t), math.cos(t)),
+        shape=shape,  # type: ignore[arg-type]
+        max_shift=1.0,
+        complete=complete,
+    )
+    out = np.empty((nodes.size, len(centres), 6))
+    out[..., 0:2] = shift
+    out[..., 2] = cov[..., 0, 0]
+    out[..., 3] = cov[..., 1, 1]
+    out[..., 4] = cov4[..., 0, 0]
+    out[..., 5] = cov4[..., 1, 1]
+    return out
 
 
 @dataclass(frozen=True)
@@ -347,13 +447,17 @@ def subset_levels(
 
 
 def _angle_interp(
-    values: NDArray[np.float64], available: NDArray[np.bool_], angle: NDArray[np.floating[Any]]
+    values: NDArray[np.float64],
+    available: NDArray[np.bool_],
+    angle: NDArray[np.floating[Any]],
+    phase: float = 0.0,
 ) -> NDArray[np.float64]:
-    """``values`` (a, n, c) on the direction nodes, linearly interpolated at ``angle``
-    (frames, n) deg; a missing node is replaced by the nearest computed one."""
+    """``values`` (a, n, c) on the direction nodes ``phase + k ANGLE_STEP``, linearly
+    interpolated at ``angle`` (frames, n) deg; a missing node is replaced by the nearest
+    computed one."""
     a = values.shape[0]
     f, n = angle.shape
-    th = np.mod(np.where(np.isfinite(angle), angle, 0.0), 180.0) / ANGLE_STEP
+    th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - phase, 180.0) / ANGLE_STEP
     j0 = np.floor(th).astype(np.intp) % a
     j1 = (j0 + 1) % a
     ta = th - np.floor(th)
@@ -385,7 +489,7 @@ class SkewTable:
     ) -> NDArray[np.float64]:
         """Predicted shift ``(u, v)`` (frames, points, 2), px, of kernels with third
         moment ``kappa3`` (px**3) along ``axis`` (deg)."""
-        q = _angle_interp(self.values, self.available, axis)
+        q = _angle_interp(self.values, self.available, axis, float(self.angles[0]))
         return np.asarray(q * np.where(np.isfinite(kappa3), kappa3, np.nan)[..., None])
 
 
@@ -399,23 +503,16 @@ def build_skew_table(
     kappa3: NDArray[np.floating[Any]],
     min_fraction: float = 0.05,
 ) -> SkewTable:
-    """Compute the skew coefficients at the direction nodes around every axis whose
-    ``|kappa3|`` exceeds ``min_fraction`` of the largest (at least one node)."""
+    """Compute the skew coefficients at the direction nodes of the axes whose
+    ``|kappa3|`` exceeds ``min_fraction`` of the largest (:func:`direction_nodes`, weights
+    ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across)."""
     from ..models.sensitivity import subset_skew_coefficients
 
-    a = round(180.0 / ANGLE_STEP)
-    angles = np.arange(a, dtype=np.float64) * ANGLE_STEP
     ok = np.isfinite(kappa3) & np.isfinite(axis)
-    need = np.zeros(a, bool)
-    if ok.any():
-        big = ok & (
-            np.abs(np.where(ok, kappa3, 0.0)) >= min_fraction * np.nanmax(np.abs(kappa3[ok]))
-        )
-        th = np.mod(axis[big], 180.0) / ANGLE_STEP
-        need[np.floor(th).astype(int) % a] = True
-        need[(np.floor(th).astype(int) + 1) % a] = True
-    if not need.any():
-        need[0] = True
+    top = float(np.max(np.abs(kappa3[ok]))) if ok.any() else 0.0
+    rel = np.where(ok, np.abs(np.where(ok, kappa3, 0.0)) / (top if top > 0 else 1.0), np.nan)
+    angles, need = direction_nodes(rel, axis, min_blur=min_fraction if top > 0 else np.inf)
+    a = angles.size
     values = np.full((a, len(centres), 2), np.nan)
     for j in np.flatnonzero(need):
         t = math.radians(angles[j])

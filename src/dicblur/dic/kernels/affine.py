@@ -179,7 +179,7 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
     return 1.0, rho, ratio
 
 
-@nb.njit(parallel=True, fastmath=FASTMATH, cache=True)
+@nb.njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True)
 def icgn_affine(coef, images, subsets, cfg, p0, status_in, out):  # pragma: no cover - compiled
     """IC-GN with the first-order (affine) shape function, ZNSSD criterion.
 

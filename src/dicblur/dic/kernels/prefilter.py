@@ -173,7 +173,7 @@ _ROWS = 16
 _COLS = 64
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def prefilter_parallel(image, out, poles, tol):  # pragma: no cover - compiled
     """Padded B-spline coefficients of ``image`` into ``out`` (see
     :func:`prefilter_padded`), each stage parallel over blocks. The loop bodies are calls

@@ -390,7 +390,7 @@ def _point_translation(
     out_iter[k] = nit
 
 
-@nb.njit(parallel=True, fastmath=FASTMATH, cache=True)
+@nb.njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True)
 def icgn_translation(
     coef, images, subsets, packed, cfg, p0, status_in, passes, nthr, out
 ):  # pragma: no cover - compiled

@@ -22,13 +22,15 @@ _ENTRY = {
     "translation": (
         ("translation", "icgn_translation"),
         ("translation", "pack_reference"),
-        ("prefilter", "prefilter_parallel"),
-        ("prefilter", "prefilter_serial"),
+        ("prefilter", "_rows_block"),
+        ("prefilter", "_columns_block"),
+        ("prefilter", "_margin"),
     ),
     "affine": (
-        ("affine", "icgn_affine"),
-        ("prefilter", "prefilter_parallel"),
-        ("prefilter", "prefilter_serial"),
+        ("affine", "_affine_points"),
+        ("prefilter", "_rows_block"),
+        ("prefilter", "_columns_block"),
+        ("prefilter", "_margin"),
     ),
 }
 

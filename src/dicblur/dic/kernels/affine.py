@@ -21,12 +21,13 @@ from .common import (
     STALL_ITERATIONS,
     blocks_of,
     compose_inverse_affine,
+    example_args,
     run_blocks,
     threads,
 )
 from .spline import beta, sample
 
-__all__ = ["CHUNK", "icgn_affine"]
+__all__ = ["CHUNK", "compile_icgn", "icgn_affine"]
 
 
 # Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
@@ -212,6 +213,12 @@ def icgn_affine(
     nthr = threads() if nthreads is None else nthreads
     args = (coef, images, subsets, cfg, p0, status_in, out)
     run_blocks(lambda c0, c1, t: _affine_points(c0, c1, *args), nch, blocks_of(nch, nthr), nthr)
+
+
+def compile_icgn() -> None:
+    """Compile (or load from numba's cache) the affine IC-GN kernel for the argument types
+    of a correlation, running it on no POI (:func:`dicblur.dic.cache.compile_in_background`)."""
+    _affine_points(0, 0, *example_args(6))
 
 
 @nb.njit(fastmath=FASTMATH, cache=True, nogil=True)

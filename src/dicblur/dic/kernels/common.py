@@ -32,6 +32,7 @@ __all__ = [
     "Subsets",
     "blocks_of",
     "compose_inverse_affine",
+    "example_args",
     "run_blocks",
     "threads",
 ]
@@ -262,3 +263,22 @@ def blocks_of(n: int, nthreads: int, *, per_thread: int = 4, multiple: int = 1) 
     scheduling evens out uneven work and a loaded core), a multiple of ``multiple``."""
     b = max(1, -(-n // max(1, nthreads * per_thread)))
     return multiple * -(-b // multiple)
+
+
+def example_args(k: int) -> tuple[Any, ...]:
+    """Tiny IC-GN arguments with no POI, of the types the Correlator passes (``k`` = 2 or 6
+    parameters): ``(coef, images, subsets, cfg, p0, status_in, out)``. Calling a kernel
+    with them compiles (or loads) exactly the machine code a correlation uses."""
+    z2 = np.zeros((8, 40), np.float32)
+    images = ReferenceImages(z2, z2.copy(), z2.copy())
+    subsets = Subsets(
+        np.zeros(0, np.int64),
+        np.zeros(0, np.int64),
+        np.zeros((0, k, k)),
+        np.zeros((0, k)),
+        np.zeros((0, k)),
+        np.zeros(0),
+        np.zeros(0),
+    )
+    cfg = settings(8, 8, 3, 1, 16, 1, 0.01, 0.0, 1.0)
+    return (z2.copy(), images, subsets, cfg, np.zeros((0, k)), np.zeros(0, np.uint8), outputs(0, k))

@@ -11,6 +11,7 @@ meanwhile (:func:`compile_in_background`).
 
 from __future__ import annotations
 
+import threading
 from typing import Any, Literal
 
 __all__ = [
@@ -115,6 +116,7 @@ def compile_kernels(
 _CHILD = "from dicblur.dic.kernels.{module} import compile_icgn; compile_icgn()"
 _BACKGROUND: dict[str, Any] = {}  # shape -> subprocess.Popen, until waited for
 _CHECKED: set[str] = set()
+_LOCK = threading.Lock()
 #: What the background compiles did in this process (benchmarks/bench_startup.py reads it):
 #: per child ``shape``, this process's CPU time (s) at its start and at the wait, the
 #: child's CPU time and whether it compiled.
@@ -142,12 +144,19 @@ def compile_in_background(shape: Literal["affine", "translation"] = "affine") ->
     compiles the kernel itself.
     """
     import os
+
+    with _LOCK:  # Correlators made in several threads at once: one check, one child
+        if shape in _CHECKED or os.environ.get("DICBLUR_COMPILE_CHILD", "1") == "0":
+            return False
+        _CHECKED.add(shape)  # once per process: the look at the cache costs a few ms
+        return _start_child(shape)
+
+
+def _start_child(shape: str) -> bool:
+    import os
     import subprocess
     import sys
 
-    if shape in _CHECKED or os.environ.get("DICBLUR_COMPILE_CHILD", "1") == "0":
-        return False
-    _CHECKED.add(shape)  # once per process: the look at the cache costs a few ms
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux

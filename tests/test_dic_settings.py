@@ -135,7 +135,7 @@ for shape in ("affine", "translation"):
     Correlator(ref, subset=21, step=12, shape=shape).correlate(np.roll(ref, 2, axis=1))
 print(json.dumps({f.__name__: len(f.signatures) for f in (
     affine._affine_points, translation._point_translation, translation._points_translation,
-    prefilter._columns_block, prefilter._rows_block, prefilter._margin)}))
+    prefilter._columns_block, prefilter._rows_block)}))
 """
 
 
@@ -162,4 +162,3 @@ def test_each_compiled_kernel_has_one_signature_per_call_path(tmp_path):
     # float32 (current image) and float64 (reference): one each
     assert n["_columns_block"] == 2
     assert n["_rows_block"] == 2
-    assert n["_margin"] == 2

@@ -33,13 +33,11 @@ _ENTRY = {
         ("translation", "pack_reference"),
         ("prefilter", "_rows_block"),
         ("prefilter", "_columns_block"),
-        ("prefilter", "_margin"),
     ),
     "affine": (
         ("affine", "_affine_points"),
         ("prefilter", "_rows_block"),
         ("prefilter", "_columns_block"),
-        ("prefilter", "_margin"),
     ),
 }
 

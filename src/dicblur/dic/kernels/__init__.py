@@ -33,7 +33,7 @@ Compile time (issue 16): numba links every callee's LLVM module into each caller
 re-optimises it there, and a parfor (``parallel=True``, ``prange``) adds two such levels
 (about 1.5-2 s of first-run compile each). The affine IC-GN (:func:`icgn_affine` ->
 the serial ``_affine_points``) and the prefilter (:func:`prefilter_padded` ->
-``_rows_block``, ``_columns_block``, ``_margin``) are therefore plain Python functions
+``_rows_block``, ``_columns_block``; the margin in numpy) are therefore plain Python functions
 that run serial ``nogil`` kernels over blocks of POIs (image lines) on Python threads
 (:func:`.common.run_blocks`: dynamic scheduling, so a core slowed by another process does
 less; each item is computed by the same code whatever the thread: same bytes on any

@@ -156,27 +156,28 @@ def _rows_block(src, dst, b0, b1, poles, tol, gain):  # pragma: no cover - compi
                 row[c] = t[c, r]
 
 
-@nb.njit(cache=True)
-def _mirror(i, n):  # pragma: no cover - compiled
+def _mirror(i: np.ndarray, n: int) -> np.ndarray:
+    """Whole-sample mirror of the indices ``i`` into ``0:n``."""
     if n == 1:
-        return 0
+        return np.zeros_like(i)
     period = 2 * n - 2
-    i = abs(i) % period
-    return period - i if i >= n else i
+    i = np.abs(i) % period
+    return np.where(i >= n, period - i, i)
 
 
-@nb.njit(cache=True, nogil=True)
-def _margin(out, rows, cols, pad):  # pragma: no cover - compiled
-    """The mirrored margin of ``out`` (the coefficients at its centre): a few thousand
-    copies, serial."""
-    for r in range(rows + 2 * pad):
-        sr = _mirror(r - pad, rows) + pad
-        for c in range(pad):
-            out[r, c] = out[sr, _mirror(c - pad, cols) + pad]
-            out[r, cols + pad + c] = out[sr, _mirror(cols + c, cols) + pad]
-        if sr != r:
-            for c in range(pad, cols + pad):
-                out[r, c] = out[sr, c]
+def _margin(out: np.ndarray, rows: int, cols: int, pad: int) -> None:
+    """The mirrored margin of ``out`` (the coefficients at its centre): copies only, in
+    numpy (no kernel to compile). The margin columns of the centre rows first, then the
+    margin rows as whole copies of their mirrored centre rows."""
+    src = _mirror(np.arange(-pad, 0), cols) + pad
+    out[pad : pad + rows, :pad] = out[pad : pad + rows, src]
+    src = _mirror(np.arange(cols, cols + pad), cols) + pad
+    out[pad : pad + rows, cols + pad : cols + 2 * pad] = out[pad : pad + rows, src]
+    width = cols + 2 * pad
+    top = _mirror(np.arange(-pad, 0), rows) + pad
+    out[:pad, :width] = out[top, :width]
+    bottom = _mirror(np.arange(rows, rows + pad), rows) + pad
+    out[rows + pad : rows + 2 * pad, :width] = out[bottom, :width]
 
 
 def prefilter_blocks(

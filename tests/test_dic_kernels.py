@@ -254,3 +254,76 @@ def test_affine_step_gain_speeds_up_a_strongly_blurred_image():
         with_gain.append(it)
         plain.append(it0 if ok0 else 200)
     assert np.mean(with_gain) < 0.5 * np.mean(plain)
+
+
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+@pytest.mark.parametrize("interp", ["bspline3", "bspline5"])
+def test_threads_give_the_same_bytes_as_one_thread(shape, interp, monkeypatch):
+    # the kernels run on Python threads over blocks of POIs (rows, columns for the
+    # prefilter) taken dynamically: each POI and each image line is computed by one call
+    # whatever the thread that takes it, so any thread count gives the same bytes
+    import numba
+
+    ref = pattern(160, seed=8)
+    cur = fourier_shift(ref, 0.37, -0.21)
+    monkeypatch.setattr(numba, "set_num_threads", lambda n: None)
+    res = []
+    for nthr in (1, 3):  # numba's thread count, which the kernels follow
+        monkeypatch.setattr(numba, "get_num_threads", lambda nthr=nthr: nthr)
+        res.append(
+            Correlator(ref, subset=17, step=7, shape=shape, interpolation=interp).correlate(cur)
+        )
+    a, b = res
+    assert a.converged.mean() > 0.95
+    np.testing.assert_array_equal(a.params, b.params)
+    np.testing.assert_array_equal(a.zncc, b.zncc)
+    np.testing.assert_array_equal(a.iterations, b.iterations)
+    np.testing.assert_array_equal(a.status, b.status)
+    c32 = [np.zeros((160 + 2 * kernels.PAD, 160 + 2 * kernels.PAD), np.float32) for _ in "ab"]
+    from dicblur.dic.kernels import prefilter
+
+    for out, nthr in zip(c32, (1, 3), strict=True):
+        prefilter.prefilter_blocks(cur, out, prefilter._POLES5, 1e-7, nthr)
+    np.testing.assert_array_equal(c32[0], c32[1])
+
+
+def test_run_blocks_covers_every_item_once_and_raises_from_a_thread():
+    from dicblur.dic.kernels.common import blocks_of, run_blocks
+
+    seen = np.zeros(1003, np.int64)
+    used = set()
+
+    def work(i0, i1, t):
+        seen[i0:i1] += 1
+        used.add(t)
+
+    run_blocks(work, seen.size, blocks_of(seen.size, 3), 3)
+    assert (seen == 1).all() and used <= {0, 1, 2}
+    assert blocks_of(1003, 3, multiple=64) % 64 == 0
+
+    def fail(i0, i1, t):
+        if i0 >= 500:
+            raise ValueError("boom")
+
+    with pytest.raises(ValueError, match="boom"):
+        run_blocks(fail, 1000, 10, 2)
+
+
+def test_affine_and_prefilter_kernels_are_no_parfors():
+    # issue 16, first-run compile: a numba parfor re-links and re-optimises its whole body
+    # (1.5-2 s of compile each); the correlation kernels are serial nogil functions run on
+    # Python threads instead (affine, prefilter)
+    from dicblur.dic.kernels import affine, prefilter, translation
+
+    found = 0
+    for module in (affine, prefilter):
+        for name in dir(module):
+            fn = getattr(module, name)
+            if hasattr(fn, "targetoptions") and hasattr(fn, "py_func"):
+                found += 1
+                assert not fn.targetoptions.get("parallel"), name
+    assert found >= 8
+    assert affine._affine_points.targetoptions.get("nogil")
+    # translation keeps its parfor: the same serial code called from Python threads ran
+    # 35 % slower (the parfor's re-optimised copy of _points_translation is faster)
+    assert translation.icgn_translation.targetoptions.get("parallel")

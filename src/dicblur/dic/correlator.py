@@ -29,7 +29,7 @@ from ..checks import (
 )
 from ..errors import InputError
 from ..metrics import image_gradients, subset_centres
-from . import kernels
+from . import cache, kernels
 from .compensation import (
     BLUR_MODES,
     blur_reference,
@@ -275,6 +275,8 @@ class Correlator:
         )
         median_test = cfg.median_test
         self.image_shape: tuple[int, int] = (int(ref.shape[0]), int(ref.shape[1]))
+        # a cold numba cache: a child process compiles the IC-GN kernel meanwhile (issue 16)
+        cache.compile_in_background(self.shape)
         half = self.subset // 2
         self.half = half
 
@@ -516,6 +518,7 @@ class Correlator:
         """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
         ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
         out = kernels.outputs(self.n_points, 2)
+        cache.wait_for_background("translation")
         kernels.icgn_translation(
             coef,
             self._images,
@@ -567,6 +570,7 @@ class Correlator:
                     self._args_cache[key] = (idx, subsets)
         n = len(self.rows) if idx is None else len(idx)
         out = kernels.outputs(n, N_PARAMS[self.shape])
+        cache.wait_for_background("affine")
         kernels.icgn_affine(
             coef,
             self._images,

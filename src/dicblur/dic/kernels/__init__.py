@@ -15,27 +15,38 @@ kernel                     reference
 Speed notes (measured on the 512x512, subset 21, step 10 benchmark): float32 working
 arrays; the prefilter runs down the rows with the recursion vectorised across columns
 (along the rows, blocks of 16 rows are transposed into scratch so the recursion is
-vectorised across them); IC-GN is parallel over POIs. Translation works on flat padded
-buffers (row width :func:`flat_width`, lengths multiples of 32): the reference subsets are
-packed once (:func:`pack_reference`), each iteration copies the coefficient rows under the
-subset, filters them with one horizontal and one vertical 4-tap (6-tap) pass (a rigidly
-translated subset shares one set of tap weights) and reduces the five sums in one masked
-flat loop. Affine reads contiguous row slices of the coefficient image and of the
-reference gradients, with a common-base 5x5 stencil fast path.
+vectorised across them); IC-GN is parallel over POIs (see "Compile time" for how).
+Translation works on flat padded buffers (row width :func:`flat_width`, lengths
+multiples of 32): the reference subsets are packed once (:func:`pack_reference`), each
+iteration copies the coefficient rows under the subset, filters them with one horizontal
+and one vertical 4-tap (6-tap) pass (a rigidly translated subset shares one set of tap
+weights) and reduces the five sums in one masked flat loop. Affine reads contiguous row
+slices of the coefficient image and of the reference gradients, with a common-base 5x5
+stencil fast path.
 
-Modules: :mod:`.common` (flags, status codes, shared inlined helpers), :mod:`.prefilter`,
-:mod:`.spline`, :mod:`.translation`, :mod:`.affine`, :mod:`.blur` (the blur-estimating
-step of the compensated matcher). Numba compiles each kernel on its first call, so a
-correlation compiles only the modules its shape calls.
+Modules: :mod:`.common` (flags, status codes, records, threads, shared inlined helpers),
+:mod:`.prefilter`, :mod:`.spline`, :mod:`.translation`, :mod:`.affine`, :mod:`.blur`
+(the blur-estimating step of the compensated matcher). Numba compiles each kernel on its
+first call, so a correlation compiles only the modules its shape calls.
 
-Compile time (issue 16): a parallel kernel (``parallel=True``, ``prange``) is a thin loop
-whose body is one call of a serial function (``icgn_affine`` -> ``_affine_points``,
-``icgn_translation`` -> ``_points_translation``, ``prefilter_parallel`` -> the block
-functions): the parfor machinery then compiles a call, not the whole loop nest, and the
-callee is compiled once (its index passed as int64: the parfor's own index is unsigned
-and would compile a second signature). Arguments travel in named-tuple records
-(:class:`ReferenceImages`, :class:`Subsets`, :class:`Packed`, :class:`Passes`,
-:class:`Settings`, :class:`Outputs`) instead of 26-39 positionals.
+Compile time (issue 16): numba links every callee's LLVM module into each caller and
+re-optimises it there, and a parfor (``parallel=True``, ``prange``) adds two such levels
+(about 1.5-2 s of first-run compile each). The affine IC-GN (:func:`icgn_affine` ->
+the serial ``_affine_points``) and the prefilter (:func:`prefilter_padded` ->
+``_rows_block``, ``_columns_block``; the margin in numpy) are therefore plain Python functions
+that run serial ``nogil`` kernels over blocks of POIs (image lines) on Python threads
+(:func:`.common.run_blocks`: dynamic scheduling, so a core slowed by another process does
+less; each item is computed by the same code whatever the thread: same bytes on any
+thread count). :func:`icgn_translation` keeps its thin ``prange`` over calls of the serial
+``_points_translation``: called from Python threads the same serial code ran 35 % slower
+than the parfor's re-optimised copy (measured, cause not found). On a cold numba cache
+:func:`dicblur.dic.cache.compile_in_background` compiles the IC-GN kernel of the shape in
+a child process (``compile_icgn`` of :mod:`.affine` / :mod:`.translation`, on no POI with
+arguments of the Correlator's types, :func:`.common.example_args`) while this process
+compiles the prefilter; the first IC-GN call waits for the child and loads the kernel from
+the cache. Arguments travel in named-tuple records (:class:`ReferenceImages`,
+:class:`Subsets`, :class:`Packed`, :class:`Passes`, :class:`Settings`, :class:`Outputs`)
+instead of 26-39 positionals.
 """
 
 from __future__ import annotations

@@ -19,11 +19,15 @@ from .common import (
     PAD,
     RATE_MIN,
     STALL_ITERATIONS,
+    blocks_of,
     compose_inverse_affine,
+    example_args,
+    run_blocks,
+    threads,
 )
 from .spline import beta, sample
 
-__all__ = ["icgn_affine"]
+__all__ = ["CHUNK", "compile_icgn", "icgn_affine"]
 
 
 # Row helpers: small non-parallel functions, compiled on their own so that LLVM vectorises
@@ -179,8 +183,13 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
     return 1.0, rho, ratio
 
 
-@nb.njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True)
-def icgn_affine(coef, images, subsets, cfg, p0, status_in, out):  # pragma: no cover - compiled
+#: POIs per chunk of :func:`_affine_points` (its ``chunk``: scratch arrays per chunk).
+CHUNK = 16
+
+
+def icgn_affine(
+    coef, images, subsets, cfg, p0, status_in, out, *, nthreads: int | None = None
+) -> None:
     """IC-GN with the first-order (affine) shape function, ZNSSD criterion.
 
     Parameters ``p = (u, du/dx, du/dy, v, dv/dx, dv/dy)``; the warp of a subset pixel at
@@ -194,18 +203,25 @@ def icgn_affine(coef, images, subsets, cfg, p0, status_in, out):  # pragma: no c
     Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
     :func:`icgn_translation` (``cfg.width`` = ``tw``, a multiple of 16 >= subset); ``p0``
     (n, 6), ``status_in`` (n,).
+
+    Runs the compiled serial ``nogil`` :func:`_affine_points` over chunks of
+    :data:`CHUNK` POIs on ``nthreads`` threads (default: numba's thread count), scheduled
+    dynamically (:func:`~.common.run_blocks`; no parfor to compile, issue 16).
     """
     n = subsets.rows.shape[0]
-    # chunks of 16 POIs, each a call of the serial _affine_points: a parfor whose body is
-    # one call compiles in a fraction of the time of the whole loop inlined (issue 16)
-    chunk = 16
-    for ch in nb.prange((n + chunk - 1) // chunk):
-        # int64: the parfor's own index is unsigned, which would compile a second signature
-        c = np.int64(ch)
-        _affine_points(c, c + 1, coef, images, subsets, cfg, p0, status_in, out)
+    nch = (n + CHUNK - 1) // CHUNK
+    nthr = threads() if nthreads is None else nthreads
+    args = (coef, images, subsets, cfg, p0, status_in, out)
+    run_blocks(lambda c0, c1, t: _affine_points(c0, c1, *args), nch, blocks_of(nch, nthr), nthr)
 
 
-@nb.njit(fastmath=FASTMATH, cache=True)
+def compile_icgn() -> None:
+    """Compile (or load from numba's cache) the affine IC-GN kernel for the argument types
+    of a correlation, running it on no POI (:func:`dicblur.dic.cache.compile_in_background`)."""
+    _affine_points(0, 0, *example_args(6))
+
+
+@nb.njit(fastmath=FASTMATH, cache=True, nogil=True)
 def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  # pragma: no cover
     """IC-GN affine of the POI chunks ``ch0:ch1`` (16 POIs each) of :func:`icgn_affine`."""
     f, gx, gy = images

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -27,7 +30,11 @@ __all__ = [
     "ReferenceImages",
     "Settings",
     "Subsets",
+    "blocks_of",
     "compose_inverse_affine",
+    "example_args",
+    "run_blocks",
+    "threads",
 ]
 
 #: Margin (px) of mirrored coefficients around the image (quintic needs 3 taps + 1).
@@ -193,3 +200,85 @@ class Outputs(NamedTuple):
 def outputs(n: int, k: int) -> Outputs:
     """Uninitialised :class:`Outputs` for ``n`` POIs and ``k`` parameters."""
     return Outputs(np.empty((n, k)), np.empty(n), np.empty(n, np.int64), np.empty(n, np.uint8))
+
+
+# ------------------------------------------------------------------ threads
+# The kernels are serial ``nogil`` functions over a range of work items; this runs them on
+# a small pool of Python threads instead of a numba parfor (issue 16: a parfor re-links and
+# re-optimises its whole body, about 1.5-2 s of first-run compile per parallel kernel, and
+# numba's static schedule leaves a core idle when the other is busy).
+_POOL: list[tuple[int, ThreadPoolExecutor]] = []
+_POOL_LOCK = threading.Lock()
+
+
+def _pool(size: int) -> ThreadPoolExecutor:
+    """The shared worker threads (at least ``size``), started on first use."""
+    with _POOL_LOCK:
+        if not _POOL or _POOL[0][0] < size:
+            if _POOL:
+                _POOL.pop()[1].shutdown(wait=False)
+            _POOL.append((size, ThreadPoolExecutor(size, thread_name_prefix="dicblur-dic")))
+        return _POOL[0][1]
+
+
+def threads() -> int:
+    """Threads the kernels run on: numba's thread count (:func:`numba.get_num_threads`,
+    set by ``Correlator(workers=...)``)."""
+    return int(nb.get_num_threads())
+
+
+def run_blocks(work: Callable[[int, int, int], Any], n: int, block: int, nthreads: int) -> None:
+    """``work(i0, i1, t)`` over the items ``0:n`` in blocks of ``block`` items on
+    ``nthreads`` threads (``t``: the thread's number, ``0 <= t < nthreads``, e.g. for its
+    scratch buffers), with dynamic scheduling: each thread takes the next block when done
+    with its last, so a thread slowed by another process (a loaded machine) does fewer.
+    ``work`` calls serial ``nogil`` kernels (they release the GIL). One thread or one
+    block: one call ``work(0, n, 0)`` in this thread. Returns when all blocks are done;
+    the first exception raised in a thread is raised here."""
+    if n <= 0:
+        return
+    nblk = (n + block - 1) // block
+    nthr = max(1, min(nthreads, nblk))
+    if nthr == 1:
+        work(0, n, 0)
+        return
+    starts = iter(range(0, n, block))
+
+    def loop(t: int) -> None:
+        # next() on a shared iterator is atomic under the GIL
+        for i0 in starts:
+            work(i0, min(n, i0 + block), t)
+
+    pool = _pool(nthr - 1)
+    futures = [pool.submit(loop, t) for t in range(1, nthr)]
+    try:
+        loop(0)
+    finally:
+        for fut in futures:
+            fut.result()
+
+
+def blocks_of(n: int, nthreads: int, *, per_thread: int = 4, multiple: int = 1) -> int:
+    """Block size for :func:`run_blocks`: about ``per_thread`` blocks per thread (dynamic
+    scheduling evens out uneven work and a loaded core), a multiple of ``multiple``."""
+    b = max(1, -(-n // max(1, nthreads * per_thread)))
+    return multiple * -(-b // multiple)
+
+
+def example_args(k: int) -> tuple[Any, ...]:
+    """Tiny IC-GN arguments with no POI, of the types the Correlator passes (``k`` = 2 or 6
+    parameters): ``(coef, images, subsets, cfg, p0, status_in, out)``. Calling a kernel
+    with them compiles (or loads) exactly the machine code a correlation uses."""
+    z2 = np.zeros((8, 40), np.float32)
+    images = ReferenceImages(z2, z2.copy(), z2.copy())
+    subsets = Subsets(
+        np.zeros(0, np.int64),
+        np.zeros(0, np.int64),
+        np.zeros((0, k, k)),
+        np.zeros((0, k)),
+        np.zeros((0, k)),
+        np.zeros(0),
+        np.zeros(0),
+    )
+    cfg = settings(8, 8, 3, 1, 16, 1, 0.01, 0.0, 1.0)
+    return (z2.copy(), images, subsets, cfg, np.zeros((0, k)), np.zeros(0, np.uint8), outputs(0, k))

@@ -19,10 +19,19 @@ from .common import (
     PAD,
     RATE_MIN,
     STALL_ITERATIONS,
+    Packed,
+    Passes,
+    example_args,
 )
 from .spline import weights_into
 
-__all__ = ["flat_lengths", "flat_width", "icgn_translation", "pack_reference"]
+__all__ = [
+    "compile_icgn",
+    "flat_lengths",
+    "flat_width",
+    "icgn_translation",
+    "pack_reference",
+]
 
 
 @nb.njit(cache=True, inline="always")
@@ -470,3 +479,15 @@ def _translation_buffers(cfg, nthr, copy):  # pragma: no cover - compiled
     gxps = np.zeros((nthr, nl), dtype=np.float32)
     gyps = np.zeros((nthr, nl), dtype=np.float32)
     return maskf, cbufs, hbufs, fps, gxps, gyps
+
+
+def compile_icgn() -> None:
+    """Compile (or load from numba's cache) the translation IC-GN kernel for the argument
+    types of a correlation, running it on no POI
+    (:func:`dicblur.dic.cache.compile_in_background`)."""
+    coef, images, subsets, cfg, p0, status_in, out = example_args(2)
+    none = np.zeros(0, np.intp)
+    packed = Packed(*(np.zeros((0, 32), np.float32) for _ in range(3)))
+    icgn_translation(
+        coef, images, subsets, packed, cfg, p0, status_in, Passes(none, none, none), 1, out
+    )

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -111,26 +111,45 @@ def spectral_derivatives(
     of length ``blur`` px replaces ``f_dd`` (transfer ``sinc(blur * k.d)``, real: no shift).
     """
     rows, cols = image.shape
-    ext = _extend(image, boundary)
-    shp = ext.shape
-    spec = np.fft.rfft2(ext)
+    spec, shp = _spectrum(image, boundary)
     fy_ = np.fft.fftfreq(shp[0])[:, None]
     fx_ = np.fft.rfftfreq(shp[1])[None, :]
     if blur is not None:
-        out = np.fft.irfft2(spec * np.sinc(blur * (dy * fy_ + dx * fx_)), s=shp)
-        return out[:rows, :cols], out[:rows, :cols], out[:rows, :cols]
+        out = _crop(np.fft.irfft2(spec * np.sinc(blur * (dy * fy_ + dx * fx_)), s=shp), rows, cols)
+        return out, out, out
     ky, kx = 2j * np.pi * fy_, 2j * np.pi * fx_
     ky_odd, kx_odd = ky.copy(), kx.copy()
     if shp[0] % 2 == 0:  # the Nyquist bin of an odd derivative is not real
         ky_odd[shp[0] // 2] = 0
     if shp[1] % 2 == 0:
         kx_odd[:, -1] = 0
-    fy = np.fft.irfft2(spec * ky_odd, s=shp)[:rows, :cols]
-    fx = np.fft.irfft2(spec * kx_odd, s=shp)[:rows, :cols]
+    fy = _crop(np.fft.irfft2(spec * ky_odd, s=shp), rows, cols)
+    fx = _crop(np.fft.irfft2(spec * kx_odd, s=shp), rows, cols)
+    return fy, fx, _second(spec, shp, dy, dx, rows, cols)
+
+
+def _spectrum(image: NDArray[np.float64], boundary: Boundary) -> tuple[Any, tuple[int, int]]:
+    """``rfft2`` of the extended image and the extended shape."""
+    ext = _extend(image, boundary)
+    return np.fft.rfft2(ext), (int(ext.shape[0]), int(ext.shape[1]))
+
+
+def _crop(full: NDArray[np.float64], rows: int, cols: int) -> NDArray[np.float64]:
+    """The image's part of an extended result, as its own array: a view would keep the
+    extended buffer (4x the image) alive (a long track's memory, issue 17)."""
+    return np.ascontiguousarray(full[:rows, :cols])
+
+
+def _second(
+    spec: Any, shp: tuple[int, int], dy: float, dx: float, rows: int, cols: int
+) -> NDArray[np.float64]:
+    """Second derivative along ``(dy, dx)`` from the spectrum of the extended image."""
+    ky = 2j * np.pi * np.fft.fftfreq(shp[0])[:, None]
+    kx = 2j * np.pi * np.fft.rfftfreq(shp[1])[None, :]
     fdd = np.fft.irfft2(
         spec * (dx * dx * kx * kx + 2 * dx * dy * ky * kx + dy * dy * ky * ky), s=shp
     )
-    return fy, fx, fdd[:rows, :cols]
+    return _crop(fdd, rows, cols)
 
 
 def box_blurred(
@@ -339,11 +358,15 @@ def directional_derivatives(
     """
     _check_derivative(derivative)
     dy, dx = unit_direction(motion)
-    if derivative != "central":
-        fy, fx, fdd = spectral_derivatives(image, boundary, dy, dx)
-        if derivative in ("bspline3", "bspline5"):
-            fy, fx = spline_gradients(image, derivative)
+    if derivative in ("bspline3", "bspline5"):
+        # the spline's own gradients; only the second derivative is spectral
+        spec, shp = _spectrum(image, boundary)
+        fdd = _second(spec, shp, dy, dx, *image.shape)
+        del spec
+        fy, fx = spline_gradients(image, derivative)
         return fy, fx, fdd
+    if derivative != "central":
+        return spectral_derivatives(image, boundary, dy, dx)
     if boundary not in ("reflect", "periodic"):
         _extend(image, boundary)  # raises the boundary error
     p = np.pad(image, 1, mode="symmetric" if boundary == "reflect" else "wrap")
@@ -989,7 +1012,12 @@ def subset_skew_coefficients(
     k = (2j * np.pi) * (
         dy * np.fft.fftfreq(shp[0])[:, None] + dx * np.fft.rfftfreq(shp[1])[None, :]
     )
-    fddd = np.fft.irfft2(np.fft.rfft2(ext) * k**3, s=shp)[:rows, :cols]
+    spec = np.fft.rfft2(ext)
+    del ext
+    spec *= k**3  # in place: the same products, one extended array fewer
+    del k
+    fddd = _crop(np.fft.irfft2(spec, s=shp), rows, cols)
+    del spec
     if derivative in ("bspline3", "bspline5"):
         fy, fx = spline_gradients(image, derivative)
     else:

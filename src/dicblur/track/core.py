@@ -893,15 +893,16 @@ def _assemble(
 
     def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         if n_f >= 2 and contiguous:
-            mu_, mv_ = exposure_motion(
-                np.where(good, u, np.nan),
-                np.where(good, v, np.nan),
+            return exposure_motion(
+                u,
+                v,
+                valid=good,
+                dtype=np.float32,
                 fps=fps,
                 exposure=t_exp,
                 half_window=half_window,
                 threads=threads,
             )
-            return mu_.astype(np.float32), mv_.astype(np.float32)
         nan = np.full((n_f, n_p), np.nan, np.float32)
         return nan, nan.copy()
 
@@ -938,10 +939,12 @@ def _assemble(
     )
     # derived per-point fields in float32 (7 significant digits; halves the memory of a
     # long recording), displacements stay float64
-    sig = {
-        k: np.full((n_f, n_p), np.nan, np.float32)
-        for k in ("sigma_u_noise", "sigma_v_noise", "sigma_u_blur", "sigma_v_blur")
-    }
+    names = ("sigma_u_noise", "sigma_v_noise", "sigma_u_blur", "sigma_v_blur")
+
+    def nan_fields() -> dict[str, NDArray[np.float32]]:
+        return {k: np.full((n_f, n_p), np.nan, np.float32) for k in names}
+
+    sig: dict[str, NDArray[np.float32]] = {}
     blur_dom = np.full(n_f, np.nan)
     t0 = time.perf_counter()
     if noise is not None and inside.any():
@@ -957,6 +960,9 @@ def _assemble(
             **more,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
+        # allocated after the table: its FFTs of the reference are the peak of a long
+        # recording's memory (issue 17: < 1 GB for 2,000 frames of 1 Mpx)
+        sig = nan_fields()
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
@@ -1025,20 +1031,24 @@ def _assemble(
                     same = ((w == w_old) | (np.isnan(w) & np.isnan(w_old))) & (
                         (ang == ang_old) | (np.isnan(ang) & np.isnan(ang_old))
                     )
+                    del w_old, ang_old
                     predict(np.flatnonzero(~same.all(axis=1)))
         settings["blur_table_max_px"] = float(table.blur[-1])
         settings["blur_table_angles_deg"] = ",".join(
             f"{a:g}" for a in table.angles[table.available]
         )
+    if not sig:
+        sig = nan_fields()
     del crit
     # the bias of an accelerating blur: the kernel's third moment from the fitted track
     # times each subset's skew coefficient (a shift common to nearly all points)
-    bias = np.full((n_f, n_p, 2), np.nan, np.float32)
+    bias: NDArray[np.float32] | None = None
     if noise is not None and inside.any() and n_f >= 2 and contiguous:
         pin = np.flatnonzero(inside)
         k3, axis = exposure_skew(
-            np.where(good, u, np.nan),
-            np.where(good, v, np.nan),
+            u,
+            v,
+            valid=good,
             fps=fps,
             exposure=t_exp,
             half_window=half_window,
@@ -1048,12 +1058,16 @@ def _assemble(
         skew = build_skew_table(
             ref_img, centres[pin], subset=corr.subset, shape=corr.shape, axis=axis, kappa3=k3
         )
+        skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
 
         def one_bias(b: NDArray[np.intp]) -> None:
-            bias[b[0] : b[-1] + 1, pin] = skew.bias(k3[b[0] : b[-1] + 1], axis[b[0] : b[-1] + 1])
+            r = slice(b[0], b[-1] + 1)
+            skew_bias[r, pin] = skew.bias(k3[r], axis[r])
 
         _blocks(one_bias, np.arange(n_f), 128, threads)
         del k3, axis
+    if bias is None:
+        bias = np.full((n_f, n_p, 2), np.nan, np.float32)
     settings["prediction_time_s"] = time.perf_counter() - t0
     # after a reference renewal the increments add to the renewal frame's displacement:
     # its predicted variance carries over (into the noise part: a random error)

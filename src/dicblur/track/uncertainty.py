@@ -146,6 +146,10 @@ class BlurTable:
         return np.asarray(idx[np.argmin(d, axis=1)], dtype=np.intp)
 
 
+# samples per block of :func:`direction_nodes` (a few MB of temporaries per block)
+_SAMPLE_BLOCK = 1 << 18
+
+
 def direction_nodes(
     blur: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
@@ -160,30 +164,45 @@ def direction_nodes(
     across it, ``blur |sin(angle - node)|``, is at most ``tolerance``, else the two around
     it; the node of the dominant direction when no sample has ``blur >= min_blur``."""
     a = round(180.0 / ANGLE_STEP)
-    w_all = np.asarray(blur, dtype=np.float64).ravel()
-    t_all = np.asarray(angle, dtype=np.float64).ravel()
-    finite = np.isfinite(w_all) & np.isfinite(t_all)
-    big = finite & (w_all >= min_blur)
-    use = big if big.any() else finite
-    ww, tt = w_all[use], t_all[use]
-    dom = 0.0
-    if ww.size:
-        r2 = np.deg2rad(2.0 * tt)
-        wt = ww + 1e-12
-        c, s = float(np.dot(wt, np.cos(r2))), float(np.dot(wt, np.sin(r2)))
-        dom = (math.degrees(math.atan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
+    # in blocks of the flattened samples: a long recording has millions (frames x points)
+    # and whole-array float64 temporaries cost hundreds of MB (issue 17's memory target)
+    w_all = np.asarray(blur).ravel()
+    t_all = np.asarray(angle).ravel()
+    starts = range(0, w_all.size, _SAMPLE_BLOCK)
+
+    def block(i: int, which: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        w = w_all[i : i + _SAMPLE_BLOCK].astype(np.float64)
+        t = t_all[i : i + _SAMPLE_BLOCK].astype(np.float64)
+        keep = np.isfinite(w) & np.isfinite(t)
+        if which == "big":
+            keep &= w >= min_blur
+        return w[keep], t[keep]
+
+    has_big = any(block(i, "big")[0].size for i in starts)
+    use = "big" if has_big else "finite"
+    c = s = 0.0
+    for i in starts:
+        ww, tt = block(i, use)
+        if ww.size:
+            r2 = np.deg2rad(2.0 * tt)
+            wt = ww + 1e-12
+            c += float(np.dot(wt, np.cos(r2)))
+            s += float(np.dot(wt, np.sin(r2)))
+    dom = (math.degrees(math.atan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
     phase = dom % ANGLE_STEP
     angles = phase + np.arange(a, dtype=np.float64) * ANGLE_STEP
     need = np.zeros(a, bool)
-    if big.any():
-        th = np.mod(tt - phase, 180.0) / ANGLE_STEP  # big == use here
-        near = np.rint(th)
-        across = ww * np.abs(np.sin(np.deg2rad((th - near) * ANGLE_STEP)))
-        one = across <= tolerance
-        need |= np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
-        lo = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
-        need[lo] = True
-        need[(lo + 1) % a] = True
+    if has_big:
+        for i in starts:
+            ww, tt = block(i, "big")
+            th = np.mod(tt - phase, 180.0) / ANGLE_STEP
+            near = np.rint(th)
+            across = ww * np.abs(np.sin(np.deg2rad((th - near) * ANGLE_STEP)))
+            one = across <= tolerance
+            need |= np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
+            lo = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
+            need[lo] = True
+            need[(lo + 1) % a] = True
     else:
         need[round((dom - phase) / ANGLE_STEP) % a] = True
     return angles, need

@@ -525,3 +525,15 @@ def test_metrics_never_print_nan(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert values and not [v for v in values if v.lower() in ("nan", "inf", "-inf")]
     assert "-" in values  # the undefined ones
     assert "undefined" in out.err
+
+
+
+@pytest.mark.parametrize("value", [False, 3, "x", []])
+def test_static_fit_that_is_not_a_table_is_a_damaged_file(corpus: Path, value: object) -> None:
+    """Found by the model-loader fuzzer (CI, session 6): a model whose ``static`` fit is
+    not a table raised TypeError in the schema check instead of naming the key."""
+    d = json.loads((corpus / "model.json").read_text())
+    assert "static" in d
+    d["static"] = value
+    with pytest.raises(InputError, match="static"):
+        BlurUncertaintyModel.from_json(json.dumps(d))

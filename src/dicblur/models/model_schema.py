@@ -268,7 +268,9 @@ STATIC_TABLE_RULES: dict[str, Rule] = {
 
 def _static_fit(v: Any) -> str | None:
     """A fit result of the static kind: two scales and a consistent table."""
-    _fit(v)
+    why = _fit(v)
+    if why is not None:
+        return why
     if list(v["names"]) != ["k_noise", "k_blur"]:
         raise _Defect(".names", "not ['k_noise', 'k_blur'] (the static kind's scales)")
     if any(float(x) <= 0 for x in v["values"]):

@@ -59,3 +59,14 @@ def test_every_output_option_is_dash_o_and_double_dash_out():
                 and param.param_type_name == "option"
             ):
                 assert {"-o", "--out"} <= set(param.opts), path
+
+
+def test_abandoned_coroutine_warning_after_an_interrupt_is_not_shown(capsys):
+    """Seen in CI (session 6): a SIGINT during a campaign's cluster start-up left zarr's
+    coroutines unawaited, and their RuntimeWarnings followed the one "interrupted" line."""
+    from dicblur.cli import _show_warning
+
+    _show_warning(RuntimeWarning("coroutine '_runner' was never awaited"), RuntimeWarning, "f", 1)
+    assert capsys.readouterr().err == ""
+    _show_warning(UserWarning("the exposure is long"), UserWarning, "f", 1)
+    assert capsys.readouterr().err == "warning: the exposure is long\n"

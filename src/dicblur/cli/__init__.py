@@ -179,7 +179,15 @@ from . import track as _track  # noqa: E402
 _track.register(app)
 
 
+_ABANDONED = re.compile(r"^coroutine '[^']*' was never awaited$")
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None):
+    # a Ctrl-C inside a store's async I/O (zarr's event loop) leaves its coroutines
+    # unawaited; their RuntimeWarning at collection says nothing to the user, whose one
+    # line is the "interrupted" message (issue 15)
+    if issubclass(category, RuntimeWarning) and _ABANDONED.match(str(message)):
+        return
     print(f"warning: {message}", file=sys.stderr)
 
 

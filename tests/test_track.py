@@ -630,6 +630,42 @@ def test_advice_is_the_static_predictions_point_value_without_a_fit(shape, monke
     assert abs(np.log(adv.optimal_exposure / best)) <= 2.5 * np.log(grid[1] / grid[0])
 
 
+def test_compensated_advice_follows_the_compensated_prediction():
+    # with --compensate-blur the advice plans for that matcher: its RMS error at the
+    # recording's exposure is the compensated prediction's (no mismatch term), below the
+    # plain matcher's at the same blur, and its best exposure is at least as long
+    from dicblur.models import predict_compensated
+    from dicblur.track.advice import advise_exposure
+    from dicblur.track.uncertainty import NoiseEstimate
+
+    img = _pattern(128, seed=6)
+    yy, xx = np.mgrid[20:109:8, 20:109:8]
+    pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
+    speed = np.full(400, 20000.0)  # px/s: W = 4 px at 0.2 ms
+    angle = np.zeros(speed.size)
+    noise = NoiseEstimate(
+        sigma=2.0, read_variance=4.0, slope=0.0, level_dependent=False, source="given"
+    )
+    kw = dict(
+        exposure=0.2e-3,
+        fps=2000.0,
+        noise=noise,
+        level=float(img.mean()),
+        subset=21,
+        shape="translation",
+        bit_depth=8,
+    )
+    plain = advise_exposure(img, pts, speed, angle, **kw)
+    comp = advise_exposure(img, pts, speed, angle, compensated=True, **kw)
+    direct = predict_compensated(
+        img, [4.0], noise_sigma=2.0, subset=21, points=pts, motion=(0.0, 1.0)
+    )
+    # W = 4 px is a node: the advice's value there is the prediction's (no interpolation)
+    assert comp.rms_error == pytest.approx(float(np.sqrt(np.mean(direct.u_noise**2))), rel=1e-6)
+    assert comp.rms_error < plain.rms_error
+    assert comp.optimal_exposure >= plain.optimal_exposure
+
+
 def test_blur_table_nodes_only_where_the_motion_needs_them():
     # a 1-d motion along 20 deg: one direction node on it (not the two around it), W
     # nodes up to the largest blur, W = 0 computed once for all directions; a second

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
-from ..models import PoissonGaussianCamera, predict_from_pattern
+from ..models import PoissonGaussianCamera, predict_compensated, predict_from_pattern
 from .uncertainty import NoiseEstimate
 
 __all__ = ["MAX_BLUR", "ExposureAdvice", "advise_exposure", "static_error_curve"]
@@ -67,13 +67,29 @@ def static_error_curve(
     subset: int,
     motion: tuple[float, float],
     shape: str,
+    compensated: bool = False,
 ) -> Any:
     """The static prediction's random error ``u_e(W, sigma)`` (px) of the subsets at
     ``points`` along ``motion``, as a function of blur lengths ``W`` (px, array) and a
     noise std ``sigma`` (GL): computed at ``noise_sigma`` on the nodes 0, 1, ... px up to
     ``w_max`` (module docstring); NaN beyond the largest node and where the prediction has
-    no value (breakdown)."""
+    no value (breakdown). ``compensated``: the blur-compensated matcher's prediction
+    (:func:`dicblur.models.predict_compensated`: no mismatch term, a noise term that grows
+    as the blurred reference loses its gradients), for ``dicblur track --compensate-blur``.
+    """
     nodes = np.arange(0.0, math.ceil(max(w_max, 1.0) - 1e-9) + 1.0)
+    if compensated:
+        comp = predict_compensated(
+            reference,
+            nodes,
+            noise_sigma=noise_sigma,
+            subset=subset,
+            points=points,
+            motion=motion,
+            shape=shape,
+        )
+        # u_e = u_noise, linear in the noise std (u_blur = 0)
+        return _curve(nodes, comp.u_noise**2 / noise_sigma**2, 0.0 * nodes, 0.0 * nodes)
     pred = predict_from_pattern(
         reference,
         nodes,
@@ -91,6 +107,17 @@ def static_error_curve(
     if pred.breakdown_blur is not None:  # DIC is not described from there on
         cut = nodes >= pred.breakdown_blur
         lin, quad, mis = (np.where(cut, np.nan, a) for a in (lin, quad, mis))
+    return _curve(nodes, lin, quad, mis)
+
+
+def _curve(
+    nodes: NDArray[np.float64],
+    lin: NDArray[np.float64],
+    quad: NDArray[np.float64],
+    mis: NDArray[np.float64],
+) -> Any:
+    """``u_e(W, sigma)`` from the terms per unit sigma^2, sigma^4 and the mismatch (px) at
+    ``nodes``, linear in W^2 between them; NaN beyond the last node."""
     b2 = nodes**2
 
     def u_e(w: NDArray[np.float64], sigma: float) -> NDArray[np.float64]:
@@ -118,6 +145,7 @@ def advise_exposure(
     subset: int,
     shape: str,
     bit_depth: int,
+    compensated: bool = False,
     max_points: int = 300,
     max_samples: int = 20000,
     seed: int = 0,
@@ -141,6 +169,9 @@ def advise_exposure(
         Gradient-weighted grey level of the reference.
     bit_depth : int
         Of the data (the top grey level sets the saturation exposure).
+    compensated : bool
+        The recording was tracked with the blur-compensated matcher (``--compensate-blur``):
+        advise for that matcher (:func:`static_error_curve`).
     """
     rng = np.random.default_rng(seed)
     pts = (
@@ -200,6 +231,7 @@ def advise_exposure(
         subset=subset,
         motion=(math.sin(dom), math.cos(dom)),
         shape=shape,
+        compensated=compensated,
     )
 
     def rms(t: float) -> float:

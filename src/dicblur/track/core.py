@@ -820,6 +820,7 @@ def track(
         blur_table=(
             build_compensated_table if comp_info["matcher"] != MATCHER_PLAIN else build_blur_table
         ),
+        compensated=comp_info["matcher"] != MATCHER_PLAIN,
     )
     if error is not None:
         what = "interrupted" if isinstance(error, KeyboardInterrupt) else f"stopped: {error}"
@@ -852,6 +853,7 @@ def _assemble(
     ref_img: NDArray[np.float64],
     blur_table: Callable[..., Any] = build_blur_table,
     threads: int = 1,
+    compensated: bool = False,
 ) -> Any:
     import xarray as xr
 
@@ -1118,6 +1120,7 @@ def _assemble(
                 subset=corr.subset,
                 shape=corr.shape,
                 bit_depth=rec.bit_depth,
+                compensated=compensated,
             )
             attrs.update({f"advice_{k}": v for k, v in adv.to_dict().items()})
         except DicblurError as exc:

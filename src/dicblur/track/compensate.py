@@ -44,7 +44,8 @@ from ..models.compensated import compensated_covariance
 from ..sequence import Recording
 from .kinematics import exposure_motion
 from .median import normalized_median_test
-from .uncertainty import BlurTable, table_nodes
+from .threads import each
+from .uncertainty import BlurTable, reused_nodes
 
 __all__ = [
     "ITERATE_PX",
@@ -238,11 +239,13 @@ def build_compensated_table(
     blur: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
     min_blur: float = 0.5,
+    have: BlurTable | None = None,
+    threads: int = 1,
 ) -> BlurTable:
     """The compensated matcher's response table (as :func:`~.uncertainty.build_blur_table`,
-    same nodes): mismatch shift zero, noise variance per unit noise variance
-    ``A^-1 + A^-1 C A^-1`` of the blurred reference's subset at each node."""
-    nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
+    same nodes, ``have`` and ``threads``): mismatch shift zero, noise variance per unit
+    noise variance ``A^-1 + A^-1 C A^-1`` of the blurred reference's subset at each node."""
+    nodes, angles, need, have = reused_nodes(blur, angle, min_blur=min_blur, have=have)
     a = angles.size
     # (xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv) as the plain table (track.uncertainty): no
     # mismatch shift; the sigma**4 interaction is left out (at 2 GL it is 0.2-0.4 % of the
@@ -251,15 +254,25 @@ def build_compensated_table(
     values[..., 0:2] = 0.0
     values[..., 4:6] = 0.0
     ref = np.asarray(reference, dtype=np.float64)
+    jobs: list[tuple[int, int]] = []  # (direction node, W node)
     for j in np.flatnonzero(need):
-        t = math.radians(angles[j])
-        for i, w in enumerate(nodes):
-            vec = (w * math.sin(t), w * math.cos(t))
-            fw = blur_reference(ref, vec)[0] if w > 0 else ref
-            fww = blur_reference(fw, vec)[0] if w > 0 else ref
-            cov = compensated_covariance(fw, fww, centres, subset=subset, shape=shape)
-            values[j, i, :, 2] = cov[:, 0, 0]
-            values[j, i, :, 3] = cov[:, 1, 1]
+        start = 0
+        if have is not None and have.available[j]:
+            start = have.blur.size
+            values[j, :start] = have.values[j]
+        jobs += [(int(j), i) for i in range(start, nodes.size)]
+
+    def run(job: tuple[int, int]) -> None:
+        j, i = job
+        t, w = math.radians(angles[j]), float(nodes[i])
+        vec = (w * math.sin(t), w * math.cos(t))
+        fw = blur_reference(ref, vec)[0] if w > 0 else ref
+        fww = blur_reference(fw, vec)[0] if w > 0 else ref
+        cov = compensated_covariance(fw, fww, centres, subset=subset, shape=shape)
+        values[j, i, :, 2] = cov[:, 0, 0]
+        values[j, i, :, 3] = cov[:, 1, 1]
+
+    each(run, jobs, threads)
     return BlurTable(blur=nodes, angles=angles, available=need, values=values)
 
 

@@ -42,6 +42,7 @@ from .advice import advise_exposure
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
 from .kinematics import exposure_motion, exposure_skew
 from .median import median_critical_eps
+from .threads import each
 from .uncertainty import (
     NoiseEstimate,
     build_blur_table,
@@ -461,16 +462,7 @@ def _blocks(
     """``fn(block)`` for the consecutive blocks of ``size`` of the frame indices ``sel``,
     on ``threads`` threads (numpy releases the GIL in its array loops; each block writes
     its own frames, so the result is the same on any number of threads)."""
-    parts = [sel[a : a + size] for a in range(0, sel.size, size)]
-    if threads <= 1 or len(parts) <= 1:
-        for b in parts:
-            fn(b)
-        return
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for _ in pool.map(fn, parts):
-            pass
+    each(fn, (sel[a : a + size] for a in range(0, sel.size, size)), threads)
 
 
 def track(
@@ -951,7 +943,6 @@ def _assemble(
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
-        more: dict[str, Any] = {"threads": threads} if blur_table is build_blur_table else {}
         table = blur_table(
             ref_img,
             centres[pin],
@@ -959,7 +950,7 @@ def _assemble(
             shape=corr.shape,
             blur=np.where(good[:, pin], w[:, pin], np.nan),
             angle=ang[:, pin],
-            **more,
+            threads=threads,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
         # allocated after the table: its FFTs of the reference are the peak of a long
@@ -1015,9 +1006,7 @@ def _assemble(
                 w_in = np.where(good[:, pin], w[:, pin], np.nan)
                 if np.any(w_in > table.blur[-1]):
                     # the new blur reaches past the table's last node: add the nodes
-                    # (build_blur_table keeps the computed ones) and predict every frame
-                    if blur_table is build_blur_table:
-                        more["have"] = table
+                    # (the computed ones are kept) and predict every frame
                     table = blur_table(
                         ref_img,
                         centres[pin],
@@ -1025,7 +1014,8 @@ def _assemble(
                         shape=corr.shape,
                         blur=w_in,
                         angle=ang[:, pin],
-                        **more,
+                        have=table,
+                        threads=threads,
                     )
                     predict()
                 else:

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
+from .threads import each
 
 __all__ = ["blur_weights", "exposure_motion"]
 
@@ -155,21 +156,8 @@ def exposure_motion(
         for o, st in zip(out, (su, sv), strict=True):
             o[:, b] = np.where(complete, np.einsum("fw,fwn->fn", wts, np.nan_to_num(st)), np.nan)
 
-    _each(one, range(0, uu.shape[1], block), threads)
+    each(one, range(0, uu.shape[1], block), threads)
     return out
-
-
-def _each(fn: Any, items: Any, threads: int) -> None:
-    """``fn(item)`` for every item, on ``threads`` threads (numpy releases the GIL in its
-    array loops; each item writes its own slice of the outputs)."""
-    if threads <= 1:
-        for it in items:
-            fn(it)
-        return
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        list(pool.map(fn, items))
 
 
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(12)
@@ -259,5 +247,5 @@ def exposure_skew(
         k3[b] = np.matmul(gw, s * s * s)
         axis[b] = np.mod(np.degrees(th), 180.0)
 
-    _each(one, range(0, n_f, block), threads)
+    each(one, range(0, n_f, block), threads)
     return k3, axis

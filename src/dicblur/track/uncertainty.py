@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from ..errors import InputError
 from ..metrics import estimate_noise
 from ..models.sensitivity import subset_blur_response
+from .threads import each
 
 __all__ = [
     "ANGLE_STEP",
@@ -227,6 +228,23 @@ def table_nodes(
     return nodes, angles, need
 
 
+def reused_nodes(
+    blur: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    *,
+    min_blur: float,
+    have: BlurTable | None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], BlurTable | None]:
+    """:func:`table_nodes`, merged with the nodes of a table ``have`` built earlier for the
+    same points (kept: more W nodes and more directions at most); ``have`` comes back as
+    None when its direction nodes differ (another dominant direction: nothing to keep)."""
+    nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
+    if have is None or not np.allclose(have.angles, angles):
+        return nodes, angles, need, None
+    nodes = have.blur if have.blur[-1] >= nodes[-1] else nodes
+    return nodes, angles, need | have.available, have
+
+
 def build_blur_table(
     reference: NDArray[np.float64],
     centres: NDArray[np.intp],
@@ -266,13 +284,7 @@ def build_blur_table(
         Threads computing the nodes at the same time (each W node on its own: the same
         values on any number of threads).
     """
-    nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
-    if have is not None and np.allclose(have.angles, angles):
-        # keep what the earlier table computed: more W nodes, more directions at most
-        nodes = have.blur if have.blur[-1] >= nodes[-1] else nodes
-        need = need | have.available
-    elif have is not None:
-        have = None  # another dominant direction: other nodes
+    nodes, angles, need, have = reused_nodes(blur, angle, min_blur=min_blur, have=have)
     a = angles.size
     values = np.full((a, nodes.size, len(centres), 6), np.nan)
     # W = 0 (no blur, no direction) is the same for every direction: computed once
@@ -296,14 +308,7 @@ def build_blur_table(
                 reference, nodes[todo], centres, subset, shape, angles[j], complete
             )
 
-    if threads > 1 and len(jobs) > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            list(pool.map(run, jobs))
-    else:
-        for job in jobs:
-            run(job)
+    each(run, jobs, threads)
     if zero is None:
         zero = values[np.flatnonzero(need)[0], :1]
     for j in np.flatnonzero(need):

@@ -33,7 +33,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from .interpolation import interpolate_reference
-from .kernels import GAIN_MIN, RATE_MIN, STALL_ITERATIONS
+from .kernels import GAIN_MIN, JUMP_SLACK, STALL_ITERATIONS
 from .status import PointStatus
 
 __all__ = ["PreparedSubsets", "compose_affine", "icgn_reference", "prepare_subsets", "raw_jacobian"]
@@ -185,8 +185,9 @@ def icgn_reference(
 
     Returns ``(p, zncc, iterations, converged)``; ``p`` as in the kernels (translation
     ``(u, v)``, affine ``(u, ux, uy, v, vx, vy)``), px. Stops as the kernels: the step norm
-    below ``tolerance``, or, when the steps contract by ``q = |d| / |d_prev| > RATE_MIN``,
-    the estimated error left ``|d| q / (1 - q)`` below it (``kernels.RATE_MIN``).
+    below ``tolerance``, or, when the steps contract by ``q = |d| / |d_prev|``, the
+    estimated error left ``|d| q / (1 - q)`` below it (below ``kernels.JUMP_SLACK`` x it
+    when the step is an Aitken jump).
     ``step_gain=False`` takes plain Gauss-Newton steps and stops on the step norm only (no
     Aitken gain, see ``kernels.translation._aitken_gain``).
     """
@@ -235,9 +236,10 @@ def icgn_reference(
             gain, prev = 1.0 / (1.0 - rho), np.zeros_like(dp)
         else:
             prev = dp.copy()
-        # the stop on the estimated error left (kernels.RATE_MIN): |d| q / (1 - q) below the
-        # tolerance when the steps contract by q > RATE_MIN; an aligned step then jumps
-        linear = RATE_MIN < ratio < 0.97 and norm * ratio < tolerance * (1.0 - ratio)
+        # the stop on the estimated error left (kernels.JUMP_SLACK): |d| q / (1 - q) below
+        # the tolerance (JUMP_SLACK x it after an Aitken jump); an aligned step then jumps
+        lim = tolerance * JUMP_SLACK if gain > 1.0 else tolerance
+        linear = 0.0 < ratio < 0.97 and norm * ratio < lim * (1.0 - ratio)
         if linear and rho > 0:
             gain = 1.0 / (1.0 - rho)
         p = p - gain * dp if shape == "translation" else compose_affine(p, gain * dp)

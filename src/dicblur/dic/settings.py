@@ -57,9 +57,10 @@ class MatcherSettings:
     tolerance : float
         Convergence threshold, px: the estimated error left in the parameters, in the norm
         ``|d| = sqrt(du^2 + dv^2 + h^2 |grad|^2)`` of the Gauss-Newton step (``h`` = subset
-        half-width). IC-GN stops when ``|d| < tolerance``, or, when its steps contract
-        linearly by ``q = |d| / |d_prev| > 0.03`` (``kernels.RATE_MIN``), when the rest of
-        that series ``|d| q / (1 - q)`` is below it (docs/dic.md, "IC-GN with ZNSSD").
+        half-width). IC-GN stops when ``|d| < tolerance``, or, when its steps contract by
+        ``q = |d| / |d_prev|``, when the rest of that series ``|d| q / (1 - q)`` is below it
+        (below 4 x it when the step is an Aitken jump to the series' limit,
+        ``kernels.JUMP_SLACK``; docs/dic.md, "IC-GN with ZNSSD").
     min_zncc : float
         Converged points with a lower ZNCC get status ``LOW_CORRELATION``.
     max_residual : float or None

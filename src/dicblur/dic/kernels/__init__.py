@@ -54,8 +54,8 @@ from __future__ import annotations
 from .affine import icgn_affine
 from .common import (
     GAIN_MIN,
+    JUMP_SLACK,
     PAD,
-    RATE_MIN,
     STALL_ITERATIONS,
     Outputs,
     Packed,
@@ -73,8 +73,8 @@ from .translation import flat_lengths, flat_width, icgn_translation, pack_refere
 
 __all__ = [
     "GAIN_MIN",
+    "JUMP_SLACK",
     "PAD",
-    "RATE_MIN",
     "STALL_ITERATIONS",
     "Outputs",
     "Packed",

@@ -13,11 +13,11 @@ from .common import (
     DIVERGED,
     FASTMATH,
     GAIN_MIN,
+    JUMP_SLACK,
     LOW_CORRELATION,
     MAX_ITERATIONS,
     OUT_OF_BOUNDS,
     PAD,
-    RATE_MIN,
     STALL_ITERATIONS,
     blocks_of,
     compose_inverse_affine,
@@ -157,7 +157,7 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
     the convergence norm); updates the remembered step ``prev`` in place. Returns
     ``(gain, rho, ratio)``: ``rho`` = ``(d . prev) / |prev|^2`` when the two steps are
     aligned (cos > 0.95), else 0; ``ratio`` = ``|d| / |prev|`` (0 without a previous plain
-    step): the contraction of the stop test (``common.RATE_MIN``)."""
+    step): the contraction of the stop test (``common.JUMP_SLACK``)."""
     pp = 0.0
     dd = 0.0
     dot = 0.0
@@ -409,14 +409,15 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                 dstep[5] = dvy
                 gain, rho, ratio = _aitken_gain6(dstep, dprev, half)
                 # convergence on the plain (unscaled) Gauss-Newton step, as the translation:
-                # |d| < tol, or the error left |d| q / (1 - q) < tol when the steps contract
-                # by q = |d| / |d_prev| > RATE_MIN (then an aligned step jumps to the limit)
+                # |d| < tol, or the error left |d| q / (1 - q) < tol (JUMP_SLACK x tol when
+                # the step is an Aitken jump) when the steps contract by q = |d| / |d_prev|
                 norm = math.sqrt(
                     du * du
                     + dv * dv
                     + half * half * (dux * dux + duy * duy + dvx * dvx + dvy * dvy)
                 )
-                linear = RATE_MIN < ratio < 0.97 and norm * ratio < tol * (1.0 - ratio)
+                lim = tol * JUMP_SLACK if gain > 1.0 else tol
+                linear = 0.0 < ratio < 0.97 and norm * ratio < lim * (1.0 - ratio)
                 if linear and rho > 0.0:
                     gain = 1.0 / (1.0 - rho)
                 du *= gain

@@ -13,11 +13,11 @@ from .common import (
     DIVERGED,
     FASTMATH,
     GAIN_MIN,
+    JUMP_SLACK,
     LOW_CORRELATION,
     MAX_ITERATIONS,
     OUT_OF_BOUNDS,
     PAD,
-    RATE_MIN,
     STALL_ITERATIONS,
     Packed,
     Passes,
@@ -47,7 +47,7 @@ def _aitken_gain(du, dv, pdu, pdv):  # pragma: no cover - compiled
     and after a jump the memory is cleared so the next ratio is measured on plain steps
     again. ``rho`` is 0 unless the steps are aligned (cos > 0.95); ``ratio`` =
     ``|d| / |d_prev|`` (0 without a previous plain step) is the contraction of the stop
-    test (``common.RATE_MIN``).
+    test (``common.JUMP_SLACK``).
     """
     pp = pdu * pdu + pdv * pdv
     if pp > 0.0:
@@ -362,10 +362,11 @@ def _point_translation(
         du = hinv[k, 0, 0] * q0 + hinv[k, 0, 1] * q1
         dv = hinv[k, 1, 0] * q0 + hinv[k, 1, 1] * q1
         gain, rho, ratio, pdu, pdv = _aitken_gain(du, dv, pdu, pdv)
-        # stop: |d| < tol, or the error left |d| q / (1 - q) < tol when the steps contract
-        # by q = |d| / |d_prev| > RATE_MIN (then an aligned step jumps to the limit)
+        # stop: |d| < tol, or the error left |d| q / (1 - q) < tol (JUMP_SLACK x tol when the
+        # step is an Aitken jump) when the steps contract by q = |d| / |d_prev|
         norm = math.sqrt(du * du + dv * dv)
-        linear = RATE_MIN < ratio < 0.97 and norm * ratio < tol * (1.0 - ratio)
+        lim = tol * JUMP_SLACK if gain > 1.0 else tol
+        linear = 0.0 < ratio < 0.97 and norm * ratio < lim * (1.0 - ratio)
         if linear and rho > 0.0:
             gain = 1.0 / (1.0 - rho)
         # inverse composition: W(p) <- W(p) o W(dp)^-1

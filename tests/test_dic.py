@@ -232,3 +232,27 @@ def test_result_exports(ref128, tmp_path):
     assert set(corr.last_timings) >= {"prefilter_s", "icgn_s"}
     corr.warmup()  # compiles (or loads) this configuration's kernels: now in numba's cache
     assert kernels_cached(corr.shape)
+
+
+def test_prefilter_shared_between_correlators():
+    # issue 17: one prefilter per frame for several Correlators of the same layout (the
+    # track's seed points and its frame): the same bytes as correlating the array
+    from dicblur.dic import PreparedImage
+
+    ref = pattern(96, seed=3)
+    cur = np.roll(ref, (1, 2), axis=(0, 1))
+    corr = Correlator(ref, subset=21, step=12, shape="affine", workers=1)
+    seeds = Correlator(ref, points=[[40, 40], [52, 64]], subset=21, shape="affine", workers=1)
+    prep = corr.prefilter(cur)
+    assert isinstance(prep, PreparedImage)
+    for c in (corr, seeds):
+        a = c.correlate(cur, initial=(2.0, 1.0))
+        b = c.correlate(prep, initial=(2.0, 1.0))
+        assert np.array_equal(a.params, b.params, equal_nan=True)
+        assert np.array_equal(a.status, b.status)
+    # a Correlator of another layout refuses it, naming the fix
+    other = Correlator(ref, subset=31, step=12, workers=1)
+    with pytest.raises(InputError, match="prefilter"):
+        other.correlate(prep)
+    with pytest.raises(InputError, match="prefilter"):
+        Correlator(ref[:80], subset=21, step=12, workers=1).correlate(prep)

@@ -9,7 +9,7 @@ Stages, one module each (OpenCorr/DICe style): :mod:`.interpolation`, :mod:`.ini
 from __future__ import annotations
 
 from .compensation import blur_reference, deblur_wiener
-from .correlator import Correlator, correlate
+from .correlator import Correlator, PreparedImage, correlate
 from .outliers import neighbour_median, normalized_median_test
 from .result import DICResult
 from .settings import MatcherSettings
@@ -20,6 +20,7 @@ __all__ = [
     "DICResult",
     "MatcherSettings",
     "PointStatus",
+    "PreparedImage",
     "blur_reference",
     "correlate",
     "deblur_wiener",

@@ -307,3 +307,75 @@ def test_killed_cli_run_resumes_to_the_uninterrupted_output(tmp_path):
         np.testing.assert_array_equal(b[name].values, a[name].values, err_msg=name)
     a.close()
     b.close()
+
+
+def test_cli_default_chunks_on_threads_and_serial_opt_out(tmp_path, capsys):
+    """issue 17: on several cores `dicblur track` runs chunks of 100 frames on --threads
+    threads by default (not stored); --chunk-frames 0 is the serial loop; bad values are
+    refused before anything is written."""
+    from dicblur.cli import main
+
+    frames = tmp_path / "frames"
+    _write_frames(frames, _target().recording(10), 10)
+    base = [
+        "track", str(frames), "--exposure", "0.4ms", "--fps", "2000", "--noise", "2",
+        "--shape", "translation", "--step", "12", "--no-report",
+    ]  # fmt: skip
+    import xarray as xr
+
+    assert main([*base, "--threads", "2", "-o", str(tmp_path / "a")]) == 0
+    assert "1 run, 0 resumed of 1" in capsys.readouterr().out
+    assert not (tmp_path / "a" / "track.chunks").exists()
+    assert main([*base, "--threads", "2", "--chunk-frames", "0", "-o", str(tmp_path / "b")]) == 0
+    assert main([*base, "--threads", "1", "-o", str(tmp_path / "c")]) == 0
+    with (
+        xr.open_dataset(tmp_path / "a" / "track.nc") as a,
+        xr.open_dataset(tmp_path / "b" / "track.nc") as b,
+        xr.open_dataset(tmp_path / "c" / "track.nc") as c,
+    ):
+        assert a.attrs["chunks_n_chunks"] == 1
+        assert "chunks_n_chunks" not in b.attrs and "chunks_n_chunks" not in c.attrs
+        # one chunk from the reference: the serial loop's frames, bit for bit
+        for name in ("u", "v", "status"):
+            np.testing.assert_array_equal(a[name].values, b[name].values)
+            np.testing.assert_array_equal(b[name].values, c[name].values)
+    capsys.readouterr()
+    for bad, what in (
+        (["--chunk-frames", "-1"], "--chunk-frames=-1"),
+        (["--threads", "0"], "--threads=0"),
+        (["--chunk-frames", "0", "--workers", "2"], "--chunk-frames 0"),
+    ):
+        out = tmp_path / "bad"
+        assert main([*base, *bad, "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert what in err and "Traceback" not in err
+        assert not out.exists()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_chunk_keeps_the_frames_before_a_bad_frame(tmp_path, threads):
+    """A frame of another size in the middle of a chunk: the frames tracked before it in
+    that chunk are kept (as in the serial loop; they were lost before), the finished
+    chunks too, and the error names the frame."""
+    import tifffile
+
+    frames = tmp_path / "frames"
+    _write_frames(frames, _target().recording(20), 20)
+    tifffile.imwrite(frames / "f13.tif", np.zeros((96, 90), np.uint8))
+    run = ChunkedRun(chunk_frames=5, threads=threads)
+    with pytest.raises(TrackInterrupted, match="f13") as info:
+        dicblur.track(str(frames), exposure="0.4ms", fps=2000, noise=2, chunks=run, **{
+            k: v for k, v in KW.items() if k != "static"
+        })  # fmt: skip
+    ds = info.value.dataset
+    got = set(ds["frame"].values.tolist())
+    assert set(range(13)) <= got and 13 not in got and 14 not in got
+    assert int(ds.attrs["complete"]) == 0
+    if threads == 1:
+        assert got == set(range(13))
+        # the serial loop's frames, as far as they go (chunk 0 starts at the reference)
+        ser = dicblur.track(str(frames), exposure="0.4ms", fps=2000, noise=2, frames="0:13", **{
+            k: v for k, v in KW.items() if k != "static"
+        })  # fmt: skip
+        np.testing.assert_array_equal(ds["status"].values, ser["status"].values)
+        assert np.nanmax(np.abs(ds["u"].values - ser["u"].values)) < 2e-4

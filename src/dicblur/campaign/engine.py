@@ -637,8 +637,8 @@ def _map_threads(
 ) -> bool:
     """:func:`run_tasks` on ``threads`` threads of this process; returns whether Ctrl-C
     stopped it (the pending tasks are cancelled, the running ones finish first). A task's
-    exception is re-raised once the tasks running beside it have finished and been passed
-    to ``finish``."""
+    exception, or one raised by ``finish``, is re-raised once the tasks running beside it
+    have finished and been passed to ``finish``."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     pool = ThreadPoolExecutor(max_workers=int(threads), thread_name_prefix="dicblur-task")
@@ -651,17 +651,17 @@ def _map_threads(
             done_now, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
             for fut in sorted(done_now, key=lambda f: items.index(futures[f])):
                 exc = fut.exception()
+                if exc is None:
+                    exc = _finish_or_error(finish, futures[fut], fut.result())
                 if exc is not None:
                     error = error or exc
-                    continue
-                finish(futures[fut], fut.result())
             if error is not None:
                 for fut in pending:
                     fut.cancel()
                 rest = [f for f in pending if not f.cancelled()]
                 for fut in wait(rest)[0]:
                     if fut.exception() is None:
-                        finish(futures[fut], fut.result())
+                        _finish_or_error(finish, futures[fut], fut.result())
                 pending = set()
     except KeyboardInterrupt:
         interrupted = True
@@ -672,6 +672,19 @@ def _map_threads(
     if error is not None:
         raise error
     return interrupted
+
+
+def _finish_or_error(
+    finish: Callable[[Any, Any], None], item: Any, result: Any
+) -> Exception | None:
+    """``finish(item, result)``, returning the exception it raised (a KeyboardInterrupt
+    propagates): an error raised while passing a result on stops the run as the task's
+    own error would, once the tasks running beside it are passed on too."""
+    try:
+        finish(item, result)
+    except Exception as exc:
+        return exc
+    return None
 
 
 def _map_dask(

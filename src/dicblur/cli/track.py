@@ -92,16 +92,19 @@ def track_command(
         int | None,
         typer.Option(
             "--chunk-frames",
-            help="Frames per chunk (default 100 with --workers/--scheduler; alone: chunks "
-            "in this process, resumable).",
+            help="Frames per chunk (default 100). Given alone: chunks in this process, "
+            "resumable from OUT/track.chunks; 0: one serial loop over the frames (kernel "
+            "threads).",
         ),
     ] = None,
     threads: Annotated[
         int | None,
         typer.Option(
             "--threads",
-            help="Threads of the correlation kernels; with --chunk-frames alone: threads "
-            "that track chunks at the same time (single-threaded kernels each).",
+            help="Threads (default: all cores, NUMBA_NUM_THREADS). Without --workers, "
+            "--scheduler or --update-reference: threads that track chunks of frames at the "
+            "same time (single-threaded kernels each); with --chunk-frames 0 or "
+            "--update-reference: threads of the correlation kernels.",
         ),
     ] = None,
     max_predicted_sigma: Annotated[
@@ -121,7 +124,9 @@ def track_command(
     OUT/track.csv. A run that stops part-way writes what was tracked (attribute
     complete = 0) before reporting the error. With --workers, --scheduler or
     --chunk-frames the frames run in chunks stored in OUT/track.chunks: the same command
-    again continues from the finished chunks."""
+    again continues from the finished chunks. By default, on a machine with several cores,
+    the frames run in chunks of 100 on --threads threads of this process (not stored:
+    --chunk-frames N stores them; --chunk-frames 0 tracks frame after frame)."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -147,13 +152,40 @@ def track_command(
         pts = [_ints(p, "--points", 2) for p in pairs]
     roi_v = None if roi is None else _ints(roi, "--roi", 4)
     max_sigma = parse_max_sigma(max_predicted_sigma)
+    if chunk_frames is not None and chunk_frames < 0:
+        raise InputError(f"--chunk-frames={chunk_frames}: must be >= 0 (0: no chunks), e.g. 100")
+    if threads is not None and threads < 1:
+        raise InputError(f"--threads={threads}: must be >= 1, e.g. 2")
+    if chunk_frames == 0 and (workers is not None or scheduler is not None):
+        raise InputError(
+            "--chunk-frames 0: --workers and --scheduler run chunks; give --chunk-frames >= 1"
+        )
     if out.exists() and not out.is_dir():
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     rec = open_recording(recording)
     target = out / ("track.nc" if fmt == "netcdf" else "track.zarr")
     chunks = None
-    if workers is not None or scheduler is not None or chunk_frames is not None:
+    if threads is not None:
+        n_threads = threads
+    else:
+        import numba
+
+        n_threads = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    if (
+        chunk_frames is None
+        and workers is None
+        and scheduler is None
+        and not update_reference
+        and n_threads > 1
+    ):
+        from ..track.parallel import ChunkedRun
+
+        # the default on several cores: chunks of frames on threads of this process (each
+        # thread its own frames: faster than kernel threads over each frame's points,
+        # docs/track.md), not stored between runs
+        chunks = ChunkedRun(chunk_frames=100, threads=n_threads)
+    elif workers is not None or scheduler is not None or chunk_frames:
         from ..track.parallel import ChunkedRun
 
         if workers is not None and scheduler is not None:

@@ -41,7 +41,7 @@ from ..dic.initial import window_spectrum
 from ..errors import DicblurError, ImageReadError, InputError
 from ..sequence import Recording, open_recording
 from .compensate import pass_frames
-from .core import correlate_frame, frame_gradients, frame_guess, seed_correlator
+from .core import correlate_frame, frame_gradients, frame_guess, poi_grid, seed_correlator
 
 __all__ = [
     "HISTORY",
@@ -236,19 +236,16 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
     -------
     dict
         ``frames`` (m,), ``u``, ``v``, ``zncc`` (m, n_points) float64, ``status`` (m,
-        n_points) uint8, ``fallback`` (m,) bool: as the serial loop records them.
+        n_points) uint8, ``fallback`` (m,) bool: as the serial loop records them. When a
+        frame cannot be read or tracked after some of the chunk's frames were, the frames
+        before it and ``error`` (the exception): nothing tracked is lost, as in the
+        serial loop (:meth:`ChunkedRun.run` keeps them and stops there).
     """
     rec, corr, ref, spectrum = _prepared(job)
     if _key(job) not in _SEEDS:
         _SEEDS[_key(job)] = seed_correlator(ref, corr, job.correlator)
     seeds = _SEEDS[_key(job)]
     n = corr.n_points
-    base = np.zeros((n, 2))
-    ones = np.ones(n, bool)
-    # the serial loop's state (track.core.track): fields, rigid shifts, affine gradients
-    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
-    rig: list[NDArray[np.float64] | None] = []
-    grads: NDArray[np.float64] | None = None
     m = len(chunk.frames)
     out: dict[str, Any] = {
         "frames": np.asarray(chunk.frames, np.int64),
@@ -258,10 +255,43 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
         "status": np.empty((m, n), np.uint8),
         "fallback": np.zeros(m, bool),
     }
+    done = [0]
+    try:
+        _track_frames(job, chunk, rec, corr, spectrum, seeds, out, done)
+    except (DicblurError, OSError) as exc:
+        if done[0] == 0:
+            raise
+        part: dict[str, Any] = {k: a[: done[0]] for k, a in out.items()}
+        part["error"] = exc
+        return part
+    return out
+
+
+def _track_frames(
+    job: TrackJob,
+    chunk: Chunk,
+    rec: Recording,
+    corr: Correlator,
+    spectrum: NDArray[np.complex64],
+    seeds: Any,
+    out: dict[str, Any],
+    done: list[int],
+) -> None:
+    """The frame loop of :func:`track_chunk`, writing into ``out`` (``done[0]``: the
+    chunk's frames finished so far, in order)."""
     keep = {k: i for i, k in enumerate(chunk.frames)}
+    grid = poi_grid(corr)
+    n = corr.n_points
+    base = np.zeros((n, 2))
+    ones = np.ones(n, bool)
+    # the serial loop's state (track.core.track): fields, rigid shifts, affine gradients
+    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    rig: list[NDArray[np.float64] | None] = []
+    grads: NDArray[np.float64] | None = None
     for k in (*chunk.warm, *chunk.frames):
-        img = _frame(rec, k)
-        guess, g_abs = frame_guess(hist, rig, img, spectrum, base, seeds)
+        # one prefilter for the seeds, the frame and a fallback
+        img = corr.prefilter(_frame(rec, k))
+        guess, g_abs = frame_guess(hist, rig, img, spectrum, base, seeds, grid, grads)
         res, fb = correlate_frame(corr, img, guess, ones if k == job.reference else job.ok0, grads)
         u = np.asarray(res.u, np.float64) + base[:, 0]
         v = np.asarray(res.v, np.float64) + base[:, 1]
@@ -277,7 +307,7 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
             out["zncc"][i] = np.asarray(res.zncc, np.float64)
             out["status"][i] = np.asarray(res.status, np.uint8)
             out["fallback"][i] = bool(fb)
-    return out
+            done[0] = i + 1
 
 
 def compensate_chunk(job: TrackJob, chunk: CompensationChunk) -> dict[str, Any]:
@@ -434,7 +464,7 @@ class ChunkedRun:
             res = results.get(c.index)
             if res is None:
                 continue
-            for j in range(len(c.frames)):
+            for j in range(len(res["frames"])):
                 got["frames"].append(int(res["frames"][j]))
                 got["u"].append(res["u"][j])
                 got["v"].append(res["v"][j])
@@ -478,6 +508,15 @@ class ChunkedRun:
                 progress(done_frames[0], total)
 
             def finish(chunk: Any, res: dict[str, Any]) -> None:
+                failed = res.pop("error", None)
+                if failed is not None:
+                    # the frames of a chunk before a bad frame: kept, not stored (the
+                    # chunk is not finished), then the run stops as on the task's error
+                    results[chunk.index] = res
+                    done_frames[0] += len(res["frames"])
+                    if progress is not None:
+                        progress(done_frames[0], total)
+                    raise failed
                 if st is not None:
                     st.write(chunk.index, res)
                 results[chunk.index] = res

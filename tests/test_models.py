@@ -500,8 +500,12 @@ def test_mismatch_curve_matches_the_icgn_fixed_point_at_finite_blur(shape, motio
                 ys = r + oy + p[3] + p[4] * ox + p[5] * oy
             return jac.T @ _znssd_resid(_fourier_eval(spec_b, xs, ys), ref)
 
-        sol = optimize.root(stationarity, np.zeros(jac.shape[1]), tol=1e-14)
-        assert sol.success
+        p0 = np.zeros(jac.shape[1])
+        sol = optimize.root(stationarity, p0, tol=1e-14)
+        # MINPACK may stop at "xtol too small, no further improvement" with the root found
+        # to rounding (seen on AMD EPYC / OpenBLAS): the residual decides
+        f0 = np.abs(stationarity(p0)).max()
+        assert sol.success or np.abs(sol.fun).max() < 1e-10 * f0
         u, v = (sol.x[0], sol.x[1]) if shape == "translation" else (sol.x[0], sol.x[3])
         along = d[1] * u + d[0] * v
         # linearised in the shift only: the error grows with the whole shift vector (which

@@ -232,38 +232,42 @@ def smooth_on_grid(
     -------
     ndarray, shape (n, k)
     """
-    from scipy.ndimage import correlate
-
     n_cells = grid[0] * grid[1]
     k = values.shape[1]
     ok = np.isfinite(values).all(axis=1)
-    w_flat = np.zeros(n_cells)
-    w_flat[cells[ok]] = 1.0
-    f_flat = np.zeros((n_cells, k))
-    f_flat[cells[ok]] = values[ok]
-    w = w_flat.reshape(grid)
-    f = f_flat.reshape(*grid, k)
-    dx = np.tile([-1.0, 0.0, 1.0], (3, 1))  # neighbour offset along the grid's columns
-    dy = dx.T
-    one = np.ones((3, 3))
-
-    def near(a: NDArray[np.float64], ker: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.asarray(correlate(a, ker, mode="constant", cval=0.0))
-
-    # normal equations of f(dx, dy) = a0 + a1 dx + a2 dy over the weighted neighbours
-    s0, sx, sy = near(w, one), near(w, dx), near(w, dy)
-    sxx, sxy, syy = near(w, dx * dx), near(w, dx * dy), near(w, dy * dy)
-    m = np.stack([s0, sx, sy, sx, sxx, sxy, sy, sxy, syy], axis=-1).reshape(*grid, 3, 3)
-    det = np.linalg.det(m)
+    # channel 0 the weights, 1.. the values, on the grid with a margin of one empty cell
+    a = np.zeros((1 + k, grid[0] + 2, grid[1] + 2))
+    r, c = np.divmod(cells[ok], grid[1])
+    a[0, r + 1, c + 1] = 1.0
+    a[1:, r + 1, c + 1] = values[ok].T
+    # separable 3-tap sums (R) and differences (D, the offset -1, 0, +1) along x, then y
+    rx = a[:, :, :-2] + a[:, :, 1:-1] + a[:, :, 2:]
+    dxa = a[:, :, 2:] - a[:, :, :-2]
+    s_all = rx[:, :-2] + rx[:, 1:-1] + rx[:, 2:]  # sum of weights / values
+    x_all = dxa[:, :-2] + dxa[:, 1:-1] + dxa[:, 2:]  # sum of dx * (weight / value)
+    y_all = rx[:, 2:] - rx[:, :-2]  # sum of dy * (weight / value)
+    w = a[0]
+    ex = w[:, :-2] + w[:, 2:]  # weights of the neighbours with dx = +-1
+    sxx = ex[:-2] + ex[1:-1] + ex[2:]
+    syy = s_all[0] - (rx[0, 1:-1])  # the rows dy = +-1
+    sxy = dxa[0, 2:] - dxa[0, :-2]
+    s0, sx, sy = s_all[0], x_all[0], y_all[0]
+    b0 = np.moveaxis(s_all[1:], 0, -1)
+    bx = np.moveaxis(x_all[1:], 0, -1)
+    by = np.moveaxis(y_all[1:], 0, -1)
+    # a0 of the normal equations [[s0 sx sy] [sx sxx sxy] [sy sxy syy]] a = b, by the
+    # first row of the cofactors (the matrix is symmetric)
+    c0 = sxx * syy - sxy * sxy
+    c1 = sy * sxy - sx * syy
+    c2 = sx * sxy - sxx * sy
+    det = s0 * c0 + sx * c1 + sy * c2
     plane = (s0 >= 3) & (np.abs(det) > 1e-6)
-    m[~plane] = np.eye(3)
-    out = np.full((*grid, k), np.nan)
-    for j in range(k):
-        b = np.stack([near(f[..., j], one), near(f[..., j], dx), near(f[..., j], dy)], axis=-1)
-        a0 = np.linalg.solve(m, b[..., None])[..., 0, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(s0 > 0, b[..., 0] / np.maximum(s0, 1e-300), np.nan)
-        out[..., j] = np.where(plane, a0, mean)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a0 = (c0[..., None] * b0 + c1[..., None] * bx + c2[..., None] * by) / np.where(
+            plane, det, 1.0
+        )[..., None]
+        mean = b0 / np.where(s0 > 0, s0, np.nan)[..., None]
+    out = np.where(plane[..., None], a0, mean)
     return np.asarray(out.reshape(n_cells, k)[cells])
 
 

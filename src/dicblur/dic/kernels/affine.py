@@ -235,7 +235,7 @@ def icgn_affine(
     the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
     with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
     Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
-    :func:`icgn_translation` (``cfg.width`` = ``tw``, a multiple of 16 >= subset); ``p0``
+    :func:`icgn_translation` (``cfg.width`` = ``tw``, a multiple of 8 >= subset); ``p0``
     (n, 6), ``status_in`` (n,).
 
     Runs the compiled serial ``nogil`` :func:`_affine_points` over chunks of

@@ -538,6 +538,25 @@ def test_median_test_of_all_frames_equals_the_per_frame_test():
     np.testing.assert_array_equal(crit > eps[:, None], each)
     for e in (0.01, 0.1, 0.5):
         np.testing.assert_array_equal(crit > e, median_test_frames(u, v, (rows, cols), eps=e))
+    # the compiled pass gives the numbers of the vectorised formulation (the same network)
+    from dicblur.track.median import _nanmedian8, _neighbours
+
+    want = np.full((2, *u.shape), -np.inf)
+    for c, comp in enumerate((u, v)):
+        g = comp.reshape(-1, rows, cols)
+        nb = _neighbours(g)
+        med, count = _nanmedian8(nb)
+        with np.errstate(invalid="ignore"):
+            e = np.abs(g - med) / 2.0 - _nanmedian8(np.abs(nb - med[None]))[0]
+        e[(count < 3) | ~np.isfinite(g) | ~np.isfinite(e)] = -np.inf
+        want[c] = e.reshape(u.shape)
+    np.testing.assert_array_equal(crit, np.maximum(want[0], want[1]).astype(np.float32))
+    # valid= masks in the pass: the same as NaN in a masked copy
+    ok = rng.random(u.shape) > 0.1
+    np.testing.assert_array_equal(
+        median_critical_eps(u, v, (rows, cols), valid=ok),
+        median_critical_eps(np.where(ok, u, np.nan), np.where(ok, v, np.nan), (rows, cols)),
+    )
 
 
 def test_rigid_shift_is_sub_pixel():

@@ -445,12 +445,8 @@ def _median_critical(
     sel = np.arange(n_f) if frames is None else np.asarray(frames)
 
     def one(b: NDArray[np.intp]) -> None:
-        out[b] = median_critical_eps(
-            np.where(ok[b], u[b], np.nan),
-            np.where(ok[b], v[b], np.nan),
-            gshape,
-            threshold=threshold,
-        )
+        # the mask goes into the compiled pass (no masked float64 copies)
+        out[b] = median_critical_eps(u[b], v[b], gshape, threshold=threshold, valid=ok[b])
 
     _blocks(one, sel, 128, threads)
     return out

@@ -767,3 +767,29 @@ def test_post_processing_on_threads_gives_the_same_dataset(tiny):
     for name in one.data_vars:
         np.testing.assert_array_equal(one[name].values, two[name].values, err_msg=name)
     assert one.attrs["advice_sentence"] == two.attrs["advice_sentence"]
+
+
+def test_direction_nodes_tolerance_edge_and_threads():
+    # a direction whose blur across its nearest node is just within / beyond the
+    # tolerance needs that node alone / the two around it (the sine evaluated only where
+    # its bounds leave the test open), on any number of threads
+    from dicblur.track import uncertainty as un
+
+    tol = un.ANGLE_TOLERANCE_PX
+    w = np.array([2.0, 2.0])
+    for side, want in ((0.999, 1), (1.001, 3)):
+        off = np.degrees(np.arcsin(side * tol / 2.0))  # W |sin(off)| = side * tol
+        t = np.array([30.0 - off, 30.0 + off])  # dominant direction 30 deg: a node
+        for threads in (1, 2):
+            angles, need = un.direction_nodes(w, t, threads=threads)
+            # within: the 30 deg node alone; beyond: the two around each direction
+            assert int(need.sum()) == want
+            assert np.isclose(angles[need][want // 2], 30.0)
+    rng = np.random.default_rng(3)
+    big = np.abs(rng.normal(1.5, 1.0, 700_000)).astype(np.float32)
+    ang = np.mod(rng.normal(60.0, 4.0, big.size), 180.0).astype(np.float32)
+    big[::17] = np.nan
+    one = un.direction_nodes(big, ang, threads=1)
+    two = un.direction_nodes(big, ang, threads=2)
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])

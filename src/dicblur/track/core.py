@@ -1044,7 +1044,13 @@ def _assemble(
         )
         k3, axis = k3[:, pin], axis[:, pin]
         skew = build_skew_table(
-            ref_img, centres[pin], subset=corr.subset, shape=corr.shape, axis=axis, kappa3=k3
+            ref_img,
+            centres[pin],
+            subset=corr.subset,
+            shape=corr.shape,
+            axis=axis,
+            kappa3=k3,
+            threads=threads,
         )
         skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
 

@@ -955,11 +955,17 @@ def _assemble(
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
+        # all points inside (the usual grid): plain slices, no fancy-indexed copies
+        cols: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin
+
         def predict(rows: NDArray[np.intp] | None = None) -> None:
             def one(b: NDArray[np.intp]) -> None:  # frame blocks: bounded temporaries
-                look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
+                fb: slice | NDArray[np.intp] = b
+                if b.size and b[-1] - b[0] + 1 == b.size:  # consecutive frames
+                    fb = slice(int(b[0]), int(b[-1]) + 1)
+                look = table.lookup(w[fb][:, cols], ang[fb][:, cols])  # NaN: blur unknown
                 su_n, sv_n = table.noise_std(look, nv)
-                ix = np.ix_(b, pin)
+                ix = (fb, cols) if isinstance(fb, slice) else np.ix_(b, pin)
                 sig["sigma_u_noise"][ix] = su_n
                 sig["sigma_v_noise"][ix] = sv_n
                 sig["sigma_u_blur"][ix] = np.abs(look[..., 0])

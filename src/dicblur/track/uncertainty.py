@@ -507,7 +507,7 @@ def _angle_interp(
     interpolated at ``angle`` (frames, n) deg; a missing node is replaced by the nearest
     computed one."""
     a = values.shape[0]
-    f, n = angle.shape
+    n = angle.shape[1]
     th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - phase, 180.0) / ANGLE_STEP
     j0 = np.floor(th).astype(np.intp) % a
     j1 = (j0 + 1) % a
@@ -519,8 +519,13 @@ def _angle_interp(
     k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
     k1 = np.where(both, j1, k0)
     ta = np.where(both, ta, 0.0)[..., None]
-    p = np.broadcast_to(np.arange(n), (f, n))
-    return np.asarray((1 - ta) * values[k0, p] + ta * values[k1, p])
+    # one gather per node through flat row indices (as BlurTable.lookup: indexing the
+    # 3-d array with two index arrays is several times slower)
+    flat = values.reshape(a * n, -1)
+    p = np.arange(n)
+    v0 = np.take(flat, k0 * n + p, axis=0)
+    v1 = np.take(flat, k1 * n + p, axis=0)
+    return np.asarray((1 - ta) * v0 + ta * v1)
 
 
 @dataclass(frozen=True)

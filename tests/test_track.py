@@ -793,3 +793,23 @@ def test_direction_nodes_tolerance_edge_and_threads():
     two = un.direction_nodes(big, ang, threads=2)
     np.testing.assert_array_equal(one[0], two[0])
     np.testing.assert_array_equal(one[1], two[1])
+
+
+def test_nanmedian_rows_equals_numpy():
+    # the rows' median of the flags and the second median pass: np.nanmedian's numbers
+    # and dtype (small and long rows, ties, all-NaN rows, float32 and float64)
+    import warnings
+
+    from dicblur.track.core import _nanmedian_last
+
+    rng = np.random.default_rng(5)
+    for f, p, dt in ((7, 5, np.float32), (40, 700, np.float64), (650, 9, np.float32)):
+        x = np.round(rng.normal(size=(f, p)), 1).astype(dt)
+        x[rng.random(x.shape) < 0.3] = np.nan
+        x[1] = np.nan
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            want = np.nanmedian(x, axis=1)
+        got = _nanmedian_last(x)
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)

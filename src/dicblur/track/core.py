@@ -406,6 +406,21 @@ def correlate_frame(
 ZNCC_RATIO = 4.0
 
 
+def _nanmedian_last(x: NDArray[Any]) -> NDArray[Any]:
+    """``np.nanmedian(x, axis=-1)``, the same numbers and dtype (NaN where a row has no
+    value, without the warning): one vectorised sort of the rows (NaN sorts last) instead
+    of a partition per row (thousands of Python-level calls on a (frames, points) array).
+    """
+    s = np.sort(x, axis=-1)
+    n = np.count_nonzero(~np.isnan(x), axis=-1)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
+    hi = np.take_along_axis(s, (n // 2)[..., None], axis=-1)[..., 0] if s.shape[-1] else lo
+    with np.errstate(invalid="ignore", over="ignore"):
+        # np.median: the middle value, or the mean of the two middle ones in x's dtype
+        mid = np.where(n % 2 == 1, lo, (lo + hi) / 2)
+    return np.where(n > 0, mid, np.nan).astype(x.dtype, copy=False)
+
+
 def zncc_flags(
     zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *, ratio: float = ZNCC_RATIO
 ) -> NDArray[np.bool_]:
@@ -419,9 +434,9 @@ def zncc_flags(
     q = np.where(converged, 1.0 - zncc, np.nan)
     with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
-        med_f = np.nanmedian(q, axis=1, keepdims=True)
+        med_f = _nanmedian_last(q)[:, None]
         rel = np.where(med_f > 0, q / med_f, np.nan)
-        med_p = np.nanmedian(rel, axis=0, keepdims=True)
+        med_p = _nanmedian_last(rel.T)[None, :]
         score = rel / med_p
     return np.asarray(converged & np.isfinite(score) & (score > ratio))
 
@@ -929,8 +944,8 @@ def _assemble(
         if sel.sum() >= 2:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                mu = np.nanmedian(np.where(good[sel], u[sel], np.nan), axis=1)
-                mv = np.nanmedian(np.where(good[sel], v[sel], np.nan), axis=1)
+                mu = _nanmedian_last(np.where(good[sel], u[sel], np.nan))
+                mv = _nanmedian_last(np.where(good[sel], v[sel], np.nan))
             spread = float(max(np.nanmax(mu) - np.nanmin(mu), np.nanmax(mv) - np.nanmin(mv)))
             settings["static_motion_px"] = spread
             if spread > STATIC_MOTION_PX:
@@ -1002,7 +1017,7 @@ def _assemble(
             )
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                eps_k = 2.0 * np.nanmedian(np.where(good, s_max, np.nan), axis=1)
+                eps_k = 2.0 * _nanmedian_last(np.where(good, s_max, np.nan))
             eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
             # the second pass leaves out the low-ZNCC points too: the medians change only
             # in the frames that have some

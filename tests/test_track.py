@@ -759,7 +759,8 @@ def test_blur_table_nodes_only_where_the_motion_needs_them():
 
 def test_post_processing_on_threads_gives_the_same_dataset(tiny):
     # workers=2: the median test, the table nodes, the lookups and the skew bias run in
-    # blocks on two threads; every variable is bit for bit the one-thread result
+    # blocks on two threads, the exposure advice beside the skew bias; every variable is
+    # bit for bit the one-thread result, and so is the advice
     tgt, one = tiny
     two = dicblur.track(
         tgt.recording(24), static="0:4", subset=21, step=12, shape="translation", workers=2
@@ -767,6 +768,10 @@ def test_post_processing_on_threads_gives_the_same_dataset(tiny):
     for name in one.data_vars:
         np.testing.assert_array_equal(one[name].values, two[name].values, err_msg=name)
     assert one.attrs["advice_sentence"] == two.attrs["advice_sentence"]
+    adv = [k for k in one.attrs if k.startswith("advice_") and k != "advice_time_s"]
+    assert len(adv) > 3
+    for k in adv:
+        assert str(one.attrs[k]) == str(two.attrs[k]), k
 
 
 def test_direction_nodes_tolerance_edge_and_threads():

@@ -1070,6 +1070,59 @@ def _assemble(
     if not sig:
         sig = nan_fields()
     del crit
+    # after a reference renewal the increments add to the renewal frame's displacement:
+    # its predicted variance carries over (into the noise part: a random error)
+    pos = {int(f): i for i, f in enumerate(frames)}
+    ref0 = int(settings["reference"])
+    for i in sorted(range(n_f), key=lambda i: abs(int(frames[i]) - ref0)):
+        j = pos.get(int(ref_of[i]))
+        if int(ref_of[i]) != ref0 and j is not None:
+            for c in ("u", "v"):
+                carry = np.hypot(sig[f"sigma_{c}_noise"][j], sig[f"sigma_{c}_blur"][j])
+                sig[f"sigma_{c}_noise"][i] = np.hypot(sig[f"sigma_{c}_noise"][i], carry)
+    sigma_u = np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"])
+    sigma_v = np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"])
+    outlier |= low_zncc
+    valid = good & np.isfinite(sigma_u) & np.isfinite(sigma_v) & np.isfinite(w)
+    with np.errstate(invalid="ignore"):
+        dom = np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"]) > np.hypot(
+            sig["sigma_u_noise"], sig["sigma_v_noise"]
+        )
+        cnt = valid.sum(axis=1)
+        blur_dom = np.where(cnt > 0, (dom & valid).sum(axis=1) / np.maximum(cnt, 1), np.nan)
+    # the exposure advice needs only the final blur and valid points: on threads > 1 it
+    # runs on a side thread beside the skew table and the bias (both mostly serial)
+    want_advice = bool(advice and noise is not None and valid.any())
+    adv_out: dict[str, Any] = {}
+
+    def run_advice() -> None:
+        assert noise is not None
+        t_adv = time.perf_counter()
+        try:
+            adv_out["advice"] = advise_exposure(
+                ref_img,
+                centres[inside],
+                (w / t_exp)[valid],
+                ang[valid],
+                exposure=t_exp,
+                fps=fps,
+                noise=noise,
+                level=float(np.median(subset_levels(ref_img, centres[inside], corr.subset))),
+                subset=corr.subset,
+                shape=corr.shape,
+                bit_depth=rec.bit_depth,
+                compensated=compensated,
+            )
+        except DicblurError as exc:
+            adv_out["note"] = f"no exposure advice: {exc}"
+        except BaseException as exc:  # re-raised by the main thread
+            adv_out["error"] = exc
+        adv_out["time"] = time.perf_counter() - t_adv
+
+    side: threading.Thread | None = None
+    if want_advice and threads > 1:
+        side = threading.Thread(target=run_advice, name="dicblur-advice", daemon=True)
+        side.start()
     # the bias of an accelerating blur: the kernel's third moment from the fitted track
     # times each subset's skew coefficient (a shift common to nearly all points)
     bias: NDArray[np.float32] | None = None
@@ -1105,26 +1158,6 @@ def _assemble(
     if bias is None:
         bias = np.full((n_f, n_p, 2), np.nan, np.float32)
     settings["prediction_time_s"] = time.perf_counter() - t0
-    # after a reference renewal the increments add to the renewal frame's displacement:
-    # its predicted variance carries over (into the noise part: a random error)
-    pos = {int(f): i for i, f in enumerate(frames)}
-    ref0 = int(settings["reference"])
-    for i in sorted(range(n_f), key=lambda i: abs(int(frames[i]) - ref0)):
-        j = pos.get(int(ref_of[i]))
-        if int(ref_of[i]) != ref0 and j is not None:
-            for c in ("u", "v"):
-                carry = np.hypot(sig[f"sigma_{c}_noise"][j], sig[f"sigma_{c}_blur"][j])
-                sig[f"sigma_{c}_noise"][i] = np.hypot(sig[f"sigma_{c}_noise"][i], carry)
-    sigma_u = np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"])
-    sigma_v = np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"])
-    outlier |= low_zncc
-    valid = good & np.isfinite(sigma_u) & np.isfinite(sigma_v) & np.isfinite(w)
-    with np.errstate(invalid="ignore"):
-        dom = np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"]) > np.hypot(
-            sig["sigma_u_noise"], sig["sigma_v_noise"]
-        )
-        cnt = valid.sum(axis=1)
-        blur_dom = np.where(cnt > 0, (dom & valid).sum(axis=1) / np.maximum(cnt, 1), np.nan)
     attrs: dict[str, Any] = {
         **{k: v for k, v in settings.items() if v is not None},
         "dicblur_version": __version__,
@@ -1139,27 +1172,18 @@ def _assemble(
                 for k, v in noise.to_dict().items()
             }
         )
-    if advice and noise is not None and valid.any():
-        t_adv = time.perf_counter()
-        try:
-            adv = advise_exposure(
-                ref_img,
-                centres[inside],
-                (w / t_exp)[valid],
-                ang[valid],
-                exposure=t_exp,
-                fps=fps,
-                noise=noise,
-                level=float(np.median(subset_levels(ref_img, centres[inside], corr.subset))),
-                subset=corr.subset,
-                shape=corr.shape,
-                bit_depth=rec.bit_depth,
-                compensated=compensated,
-            )
-            attrs.update({f"advice_{k}": v for k, v in adv.to_dict().items()})
-        except DicblurError as exc:
-            notes.append(f"no exposure advice: {exc}")
-        attrs["advice_time_s"] = time.perf_counter() - t_adv
+    if want_advice:
+        if side is None:
+            run_advice()
+        else:
+            side.join()
+        if "error" in adv_out:
+            raise adv_out["error"]
+        if "advice" in adv_out:
+            attrs.update({f"advice_{k}": v for k, v in adv_out["advice"].to_dict().items()})
+        else:
+            notes.append(adv_out["note"])
+        attrs["advice_time_s"] = adv_out["time"]
     if notes:
         attrs["notes"] = " | ".join(notes)
     if importing is not None:

@@ -119,7 +119,11 @@ class BlurTable:
             # array with three index arrays is several times slower)
             lo = np.take(flat, (j * m + i0) * n + p, axis=0)
             hi = np.take(flat, (j * m + i1) * n + p, axis=0)
-            return np.asarray(lo + tw * (hi - lo))
+            # lo + tw (hi - lo) in place in the gathered copy (no temporaries)
+            np.subtract(hi, lo, out=hi)
+            np.multiply(hi, tw, out=hi)
+            np.add(hi, lo, out=hi)
+            return hi
 
         out = at(k0)
         if both.any():  # a single direction node (a 1-d motion): nothing to interpolate

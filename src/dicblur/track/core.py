@@ -882,7 +882,6 @@ def _assemble(
 ) -> Any:
     from .._version import __version__
 
-    importing = _prefetch_xarray()
     idx = np.argsort(out.frames)
     frames = np.asarray(out.frames, dtype=np.int64)[idx]
 
@@ -971,6 +970,7 @@ def _assemble(
         return {k: np.full((n_f, n_p), np.nan, np.float32) for k in names}
 
     sig: dict[str, NDArray[np.float32]] = {}
+    importing: threading.Thread | None = None
     blur_dom = np.full(n_f, np.nan)
     t0 = time.perf_counter()
     if noise is not None and inside.any():
@@ -985,6 +985,9 @@ def _assemble(
             threads=threads,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
+        # after the table: its FFTs are the memory peak of a long recording, and the
+        # modules imported stay resident
+        importing = _prefetch_xarray()
         # allocated after the table: its FFTs of the reference are the peak of a long
         # recording's memory (issue 17: < 1 GB for 2,000 frames of 1 Mpx)
         sig = nan_fields()

@@ -1140,7 +1140,8 @@ def _assemble(
             half_window=half_window,
             threads=threads,
         )
-        k3, axis = k3[:, pin], axis[:, pin]
+        at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
+        k3, axis = k3[:, at], axis[:, at]
         skew = build_skew_table(
             ref_img,
             centres[pin],
@@ -1154,7 +1155,7 @@ def _assemble(
 
         def one_bias(b: NDArray[np.intp]) -> None:
             r = slice(b[0], b[-1] + 1)
-            skew_bias[r, pin] = skew.bias(k3[r], axis[r])
+            skew_bias[r, at] = skew.bias(k3[r], axis[r])
 
         _blocks(one_bias, np.arange(n_f), 128, threads)
         del k3, axis

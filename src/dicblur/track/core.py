@@ -406,13 +406,18 @@ def correlate_frame(
 ZNCC_RATIO = 4.0
 
 
-def _nanmedian_last(x: NDArray[Any]) -> NDArray[Any]:
+def _nanmedian_last(x: NDArray[Any], *, overwrite: bool = False) -> NDArray[Any]:
     """``np.nanmedian(x, axis=-1)``, the same numbers and dtype (NaN where a row has no
     value, without the warning): one vectorised sort of the rows (NaN sorts last) instead
     of a partition per row (thousands of Python-level calls on a (frames, points) array).
+    ``overwrite``: sort ``x`` itself (a temporary of the caller: no sorted copy).
     """
-    s = np.sort(x, axis=-1)
-    n = np.count_nonzero(~np.isnan(x), axis=-1)
+    n = x.shape[-1] - np.count_nonzero(np.isnan(x), axis=-1)
+    if overwrite:
+        x.sort(axis=-1)
+        s = x
+    else:
+        s = np.sort(x, axis=-1)
     lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
     hi = np.take_along_axis(s, (n // 2)[..., None], axis=-1)[..., 0] if s.shape[-1] else lo
     with np.errstate(invalid="ignore", over="ignore"):
@@ -985,9 +990,10 @@ def _assemble(
             threads=threads,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
-        # after the table: its FFTs are the memory peak of a long recording, and the
-        # modules imported stay resident
-        importing = _prefetch_xarray()
+        # on threads > 1 only (one thread asked for: no second core), after the table;
+        # the modules it loads (about 50 MB) stay resident: the 2,000-frame 1 Mpx memory
+        # target runs on one thread
+        importing = _prefetch_xarray() if threads > 1 else None
         # allocated after the table: its FFTs of the reference are the peak of a long
         # recording's memory (issue 17: < 1 GB for 2,000 frames of 1 Mpx)
         sig = nan_fields()
@@ -1020,7 +1026,9 @@ def _assemble(
             )
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                eps_k = 2.0 * _nanmedian_last(np.where(good, s_max, np.nan))
+                s_max[~good] = np.nan  # in place: s_max is a temporary
+                eps_k = 2.0 * _nanmedian_last(s_max, overwrite=True)
+            del s_max
             eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
             # the second pass leaves out the low-ZNCC points too: the medians change only
             # in the frames that have some

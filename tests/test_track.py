@@ -538,6 +538,25 @@ def test_median_test_of_all_frames_equals_the_per_frame_test():
     np.testing.assert_array_equal(crit > eps[:, None], each)
     for e in (0.01, 0.1, 0.5):
         np.testing.assert_array_equal(crit > e, median_test_frames(u, v, (rows, cols), eps=e))
+    # the compiled pass gives the numbers of the vectorised formulation (the same network)
+    from dicblur.track.median import _nanmedian8, _neighbours
+
+    want = np.full((2, *u.shape), -np.inf)
+    for c, comp in enumerate((u, v)):
+        g = comp.reshape(-1, rows, cols)
+        nb = _neighbours(g)
+        med, count = _nanmedian8(nb)
+        with np.errstate(invalid="ignore"):
+            e = np.abs(g - med) / 2.0 - _nanmedian8(np.abs(nb - med[None]))[0]
+        e[(count < 3) | ~np.isfinite(g) | ~np.isfinite(e)] = -np.inf
+        want[c] = e.reshape(u.shape)
+    np.testing.assert_array_equal(crit, np.maximum(want[0], want[1]).astype(np.float32))
+    # valid= masks in the pass: the same as NaN in a masked copy
+    ok = rng.random(u.shape) > 0.1
+    np.testing.assert_array_equal(
+        median_critical_eps(u, v, (rows, cols), valid=ok),
+        median_critical_eps(np.where(ok, u, np.nan), np.where(ok, v, np.nan), (rows, cols)),
+    )
 
 
 def test_rigid_shift_is_sub_pixel():
@@ -740,7 +759,8 @@ def test_blur_table_nodes_only_where_the_motion_needs_them():
 
 def test_post_processing_on_threads_gives_the_same_dataset(tiny):
     # workers=2: the median test, the table nodes, the lookups and the skew bias run in
-    # blocks on two threads; every variable is bit for bit the one-thread result
+    # blocks on two threads, the exposure advice beside the skew bias; every variable is
+    # bit for bit the one-thread result, and so is the advice
     tgt, one = tiny
     two = dicblur.track(
         tgt.recording(24), static="0:4", subset=21, step=12, shape="translation", workers=2
@@ -748,6 +768,56 @@ def test_post_processing_on_threads_gives_the_same_dataset(tiny):
     for name in one.data_vars:
         np.testing.assert_array_equal(one[name].values, two[name].values, err_msg=name)
     assert one.attrs["advice_sentence"] == two.attrs["advice_sentence"]
+    adv = [k for k in one.attrs if k.startswith("advice_") and k != "advice_time_s"]
+    assert len(adv) > 3
+    for k in adv:
+        assert str(one.attrs[k]) == str(two.attrs[k]), k
+
+
+def test_direction_nodes_tolerance_edge_and_threads():
+    # a direction whose blur across its nearest node is just within / beyond the
+    # tolerance needs that node alone / the two around it (the sine evaluated only where
+    # its bounds leave the test open), on any number of threads
+    from dicblur.track import uncertainty as un
+
+    tol = un.ANGLE_TOLERANCE_PX
+    w = np.array([2.0, 2.0])
+    for side, want in ((0.999, 1), (1.001, 3)):
+        off = np.degrees(np.arcsin(side * tol / 2.0))  # W |sin(off)| = side * tol
+        t = np.array([30.0 - off, 30.0 + off])  # dominant direction 30 deg: a node
+        for threads in (1, 2):
+            angles, need = un.direction_nodes(w, t, threads=threads)
+            # within: the 30 deg node alone; beyond: the two around each direction
+            assert int(need.sum()) == want
+            assert np.isclose(angles[need][want // 2], 30.0)
+    rng = np.random.default_rng(3)
+    big = np.abs(rng.normal(1.5, 1.0, 700_000)).astype(np.float32)
+    ang = np.mod(rng.normal(60.0, 4.0, big.size), 180.0).astype(np.float32)
+    big[::17] = np.nan
+    one = un.direction_nodes(big, ang, threads=1)
+    two = un.direction_nodes(big, ang, threads=2)
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+
+
+def test_nanmedian_rows_equals_numpy():
+    # the rows' median of the flags and the second median pass: np.nanmedian's numbers
+    # and dtype (small and long rows, ties, all-NaN rows, float32 and float64)
+    import warnings
+
+    from dicblur.track.core import _nanmedian_last
+
+    rng = np.random.default_rng(5)
+    for f, p, dt in ((7, 5, np.float32), (40, 700, np.float64), (650, 9, np.float32)):
+        x = np.round(rng.normal(size=(f, p)), 1).astype(dt)
+        x[rng.random(x.shape) < 0.3] = np.nan
+        x[1] = np.nan
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            want = np.nanmedian(x, axis=1)
+        got = _nanmedian_last(x)
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
 
 
 def test_smooth_on_grid_is_exact_for_linear_fields_and_averages_noise():

@@ -413,7 +413,16 @@ class _Windows:
         if shape == "translation":
             return np.stack([gx, gy], axis=2)
         ex, ey = self.ex, self.ey
-        return np.stack([gx, gx * ex, gx * ey, gy, gy * ex, gy * ey], axis=2)
+        # the products written into their columns (no temporaries to stack)
+        out = np.empty((*gx.shape, 6))
+        for c, (g, e) in enumerate(
+            ((gx, None), (gx, ex), (gx, ey), (gy, None), (gy, ex), (gy, ey))
+        ):
+            if e is None:
+                out[:, :, c] = g
+            else:
+                np.multiply(g, e, out=out[:, :, c])
+        return out
 
 
 def _normalise(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -427,7 +436,8 @@ def _project(jac: NDArray[np.float64], hat: NDArray[np.float64]) -> NDArray[np.f
     """``P jac``: remove from each column the constant and the component along ``hat``
     (zero-mean, unit-norm rows): the ZNSSD offset and scale nuisance parameters."""
     z = jac - jac.mean(axis=1, keepdims=True)
-    return z - hat[:, :, None] * np.matmul(hat[:, None, :], z)
+    z -= hat[:, :, None] * np.matmul(hat[:, None, :], z)  # in place: one temporary fewer
+    return z
 
 
 def _gram(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -245,7 +245,9 @@ def build_compensated_table(
     """The compensated matcher's response table (as :func:`~.uncertainty.build_blur_table`,
     same nodes, ``have`` and ``threads``): mismatch shift zero, noise variance per unit
     noise variance ``A^-1 + A^-1 C A^-1`` of the blurred reference's subset at each node."""
-    nodes, angles, need, have = reused_nodes(blur, angle, min_blur=min_blur, have=have)
+    nodes, angles, need, have = reused_nodes(
+        blur, angle, min_blur=min_blur, have=have, threads=threads
+    )
     a = angles.size
     # (xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv) as the plain table (track.uncertainty): no
     # mismatch shift; the sigma**4 interaction is left out (at 2 GL it is 0.2-0.4 % of the

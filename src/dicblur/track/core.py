@@ -23,6 +23,8 @@ carries the Dataset of the frames tracked so far, with steps 2-6 done on them.
 from __future__ import annotations
 
 import math
+import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -500,6 +502,26 @@ def correlate_frame(
 ZNCC_RATIO = 4.0
 
 
+def _nanmedian_last(x: NDArray[Any], *, overwrite: bool = False) -> NDArray[Any]:
+    """``np.nanmedian(x, axis=-1)``, the same numbers and dtype (NaN where a row has no
+    value, without the warning): one vectorised sort of the rows (NaN sorts last) instead
+    of a partition per row (thousands of Python-level calls on a (frames, points) array).
+    ``overwrite``: sort ``x`` itself (a temporary of the caller: no sorted copy).
+    """
+    n = x.shape[-1] - np.count_nonzero(np.isnan(x), axis=-1)
+    if overwrite:
+        x.sort(axis=-1)
+        s = x
+    else:
+        s = np.sort(x, axis=-1)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
+    hi = np.take_along_axis(s, (n // 2)[..., None], axis=-1)[..., 0] if s.shape[-1] else lo
+    with np.errstate(invalid="ignore", over="ignore"):
+        # np.median: the middle value, or the mean of the two middle ones in x's dtype
+        mid = np.where(n % 2 == 1, lo, (lo + hi) / 2)
+    return np.where(n > 0, mid, np.nan).astype(x.dtype, copy=False)
+
+
 def zncc_flags(
     zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *, ratio: float = ZNCC_RATIO
 ) -> NDArray[np.bool_]:
@@ -513,9 +535,9 @@ def zncc_flags(
     q = np.where(converged, 1.0 - zncc, np.nan)
     with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
-        med_f = np.nanmedian(q, axis=1, keepdims=True)
+        med_f = _nanmedian_last(q)[:, None]
         rel = np.where(med_f > 0, q / med_f, np.nan)
-        med_p = np.nanmedian(rel, axis=0, keepdims=True)
+        med_p = _nanmedian_last(rel.T)[None, :]
         score = rel / med_p
     return np.asarray(converged & np.isfinite(score) & (score > ratio))
 
@@ -541,12 +563,8 @@ def _median_critical(
     sel = np.arange(n_f) if frames is None else np.asarray(frames)
 
     def one(b: NDArray[np.intp]) -> None:
-        out[b] = median_critical_eps(
-            np.where(ok[b], u[b], np.nan),
-            np.where(ok[b], v[b], np.nan),
-            gshape,
-            threshold=threshold,
-        )
+        # the mask goes into the compiled pass (no masked float64 copies)
+        out[b] = median_critical_eps(u[b], v[b], gshape, threshold=threshold, valid=ok[b])
 
     _blocks(one, sel, 128, threads)
     return out
@@ -926,6 +944,26 @@ def track(
     return ds
 
 
+def _prefetch_xarray() -> threading.Thread | None:
+    """Import xarray and what its first Dataset imports (pandas, dask's arrays: about
+    0.8 CPU-s in a fresh process) on a side thread while the post-processing runs, off
+    its critical path; None when already done. Join before building the Dataset."""
+    if "xarray" in sys.modules and "dask.array" in sys.modules:
+        return None
+
+    def run() -> None:
+        try:
+            import xarray as xr
+
+            xr.Dataset({"x": ("x", np.zeros(1))})
+        except Exception:  # the main thread's own import reports any problem
+            pass
+
+    t = threading.Thread(target=run, name="dicblur-import-xarray", daemon=True)
+    t.start()
+    return t
+
+
 def _assemble(
     rec: Recording,
     corr: Correlator,
@@ -947,8 +985,6 @@ def _assemble(
     threads: int = 1,
     compensated: bool = False,
 ) -> Any:
-    import xarray as xr
-
     from .._version import __version__
 
     idx = np.argsort(out.frames)
@@ -1012,8 +1048,8 @@ def _assemble(
         if sel.sum() >= 2:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                mu = np.nanmedian(np.where(good[sel], u[sel], np.nan), axis=1)
-                mv = np.nanmedian(np.where(good[sel], v[sel], np.nan), axis=1)
+                mu = _nanmedian_last(np.where(good[sel], u[sel], np.nan))
+                mv = _nanmedian_last(np.where(good[sel], v[sel], np.nan))
             spread = float(max(np.nanmax(mu) - np.nanmin(mu), np.nanmax(mv) - np.nanmin(mv)))
             settings["static_motion_px"] = spread
             if spread > STATIC_MOTION_PX:
@@ -1039,6 +1075,7 @@ def _assemble(
         return {k: np.full((n_f, n_p), np.nan, np.float32) for k in names}
 
     sig: dict[str, NDArray[np.float32]] = {}
+    importing: threading.Thread | None = None
     blur_dom = np.full(n_f, np.nan)
     t0 = time.perf_counter()
     if noise is not None and inside.any():
@@ -1053,17 +1090,27 @@ def _assemble(
             threads=threads,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
+        # on threads > 1 only (one thread asked for: no second core), after the table;
+        # the modules it loads (about 50 MB) stay resident: the 2,000-frame 1 Mpx memory
+        # target runs on one thread
+        importing = _prefetch_xarray() if threads > 1 else None
         # allocated after the table: its FFTs of the reference are the peak of a long
         # recording's memory (issue 17: < 1 GB for 2,000 frames of 1 Mpx)
         sig = nan_fields()
         levels = subset_levels(ref_img, centres[pin], corr.subset)
         nv = noise.variance(levels)[None, :]
 
+        # all points inside (the usual grid): plain slices, no fancy-indexed copies
+        cols: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin
+
         def predict(rows: NDArray[np.intp] | None = None) -> None:
             def one(b: NDArray[np.intp]) -> None:  # frame blocks: bounded temporaries
-                look = table.lookup(w[b][:, pin], ang[b][:, pin])  # NaN: blur unknown
+                fb: slice | NDArray[np.intp] = b
+                if b.size and b[-1] - b[0] + 1 == b.size:  # consecutive frames
+                    fb = slice(int(b[0]), int(b[-1]) + 1)
+                look = table.lookup(w[fb][:, cols], ang[fb][:, cols])  # NaN: blur unknown
                 su_n, sv_n = table.noise_std(look, nv)
-                ix = np.ix_(b, pin)
+                ix = (fb, cols) if isinstance(fb, slice) else np.ix_(b, pin)
                 sig["sigma_u_noise"][ix] = su_n
                 sig["sigma_v_noise"][ix] = sv_n
                 sig["sigma_u_blur"][ix] = np.abs(look[..., 0])
@@ -1079,7 +1126,9 @@ def _assemble(
             )
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                eps_k = 2.0 * np.nanmedian(np.where(good, s_max, np.nan), axis=1)
+                s_max[~good] = np.nan  # in place: s_max is a temporary
+                eps_k = 2.0 * _nanmedian_last(s_max, overwrite=True)
+            del s_max
             eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
             # the second pass leaves out the low-ZNCC points too: the medians change only
             # in the frames that have some
@@ -1132,35 +1181,6 @@ def _assemble(
     if not sig:
         sig = nan_fields()
     del crit
-    # the bias of an accelerating blur: the kernel's third moment from the fitted track
-    # times each subset's skew coefficient (a shift common to nearly all points)
-    bias: NDArray[np.float32] | None = None
-    if noise is not None and inside.any() and n_f >= 2 and contiguous:
-        pin = np.flatnonzero(inside)
-        k3, axis = exposure_skew(
-            u,
-            v,
-            valid=good,
-            fps=fps,
-            exposure=t_exp,
-            half_window=half_window,
-            threads=threads,
-        )
-        k3, axis = k3[:, pin], axis[:, pin]
-        skew = build_skew_table(
-            ref_img, centres[pin], subset=corr.subset, shape=corr.shape, axis=axis, kappa3=k3
-        )
-        skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
-
-        def one_bias(b: NDArray[np.intp]) -> None:
-            r = slice(b[0], b[-1] + 1)
-            skew_bias[r, pin] = skew.bias(k3[r], axis[r])
-
-        _blocks(one_bias, np.arange(n_f), 128, threads)
-        del k3, axis
-    if bias is None:
-        bias = np.full((n_f, n_p, 2), np.nan, np.float32)
-    settings["prediction_time_s"] = time.perf_counter() - t0
     # after a reference renewal the increments add to the renewal frame's displacement:
     # its predicted variance carries over (into the noise part: a random error)
     pos = {int(f): i for i, f in enumerate(frames)}
@@ -1181,6 +1201,75 @@ def _assemble(
         )
         cnt = valid.sum(axis=1)
         blur_dom = np.where(cnt > 0, (dom & valid).sum(axis=1) / np.maximum(cnt, 1), np.nan)
+    # the exposure advice needs only the final blur and valid points: on threads > 1 it
+    # runs on a side thread beside the skew table and the bias (both mostly serial)
+    want_advice = bool(advice and noise is not None and valid.any())
+    adv_out: dict[str, Any] = {}
+
+    def run_advice() -> None:
+        assert noise is not None
+        t_adv = time.perf_counter()
+        try:
+            adv_out["advice"] = advise_exposure(
+                ref_img,
+                centres[inside],
+                (w / t_exp)[valid],
+                ang[valid],
+                exposure=t_exp,
+                fps=fps,
+                noise=noise,
+                level=float(np.median(subset_levels(ref_img, centres[inside], corr.subset))),
+                subset=corr.subset,
+                shape=corr.shape,
+                bit_depth=rec.bit_depth,
+                compensated=compensated,
+            )
+        except DicblurError as exc:
+            adv_out["note"] = f"no exposure advice: {exc}"
+        except BaseException as exc:  # re-raised by the main thread
+            adv_out["error"] = exc
+        adv_out["time"] = time.perf_counter() - t_adv
+
+    side: threading.Thread | None = None
+    if want_advice and threads > 1:
+        side = threading.Thread(target=run_advice, name="dicblur-advice", daemon=True)
+        side.start()
+    # the bias of an accelerating blur: the kernel's third moment from the fitted track
+    # times each subset's skew coefficient (a shift common to nearly all points)
+    bias: NDArray[np.float32] | None = None
+    if noise is not None and inside.any() and n_f >= 2 and contiguous:
+        pin = np.flatnonzero(inside)
+        k3, axis = exposure_skew(
+            u,
+            v,
+            valid=good,
+            fps=fps,
+            exposure=t_exp,
+            half_window=half_window,
+            threads=threads,
+        )
+        at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
+        k3, axis = k3[:, at], axis[:, at]
+        skew = build_skew_table(
+            ref_img,
+            centres[pin],
+            subset=corr.subset,
+            shape=corr.shape,
+            axis=axis,
+            kappa3=k3,
+            threads=threads,
+        )
+        skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
+
+        def one_bias(b: NDArray[np.intp]) -> None:
+            r = slice(b[0], b[-1] + 1)
+            skew_bias[r, at] = skew.bias(k3[r], axis[r])
+
+        _blocks(one_bias, np.arange(n_f), 128, threads)
+        del k3, axis
+    if bias is None:
+        bias = np.full((n_f, n_p, 2), np.nan, np.float32)
+    settings["prediction_time_s"] = time.perf_counter() - t0
     attrs: dict[str, Any] = {
         **{k: v for k, v in settings.items() if v is not None},
         "dicblur_version": __version__,
@@ -1195,29 +1284,24 @@ def _assemble(
                 for k, v in noise.to_dict().items()
             }
         )
-    if advice and noise is not None and valid.any():
-        t_adv = time.perf_counter()
-        try:
-            adv = advise_exposure(
-                ref_img,
-                centres[inside],
-                (w / t_exp)[valid],
-                ang[valid],
-                exposure=t_exp,
-                fps=fps,
-                noise=noise,
-                level=float(np.median(subset_levels(ref_img, centres[inside], corr.subset))),
-                subset=corr.subset,
-                shape=corr.shape,
-                bit_depth=rec.bit_depth,
-                compensated=compensated,
-            )
-            attrs.update({f"advice_{k}": v for k, v in adv.to_dict().items()})
-        except DicblurError as exc:
-            notes.append(f"no exposure advice: {exc}")
-        attrs["advice_time_s"] = time.perf_counter() - t_adv
+    if want_advice:
+        if side is None:
+            run_advice()
+        else:
+            side.join()
+        if "error" in adv_out:
+            raise adv_out["error"]
+        if "advice" in adv_out:
+            attrs.update({f"advice_{k}": v for k, v in adv_out["advice"].to_dict().items()})
+        else:
+            notes.append(adv_out["note"])
+        attrs["advice_time_s"] = adv_out["time"]
     if notes:
         attrs["notes"] = " | ".join(notes)
+    if importing is not None:
+        importing.join()
+    import xarray as xr
+
     fr = ("frame", "point")
     pu = {"units": "px"}
     data = {

@@ -56,12 +56,17 @@ def _rise_weights(
     rise = np.array([a**p - (-a) ** p for p in range(degree + 1)])
     starts = np.empty(n_frames, np.intp)
     wts = np.empty((n_frames, width))
+    # the weights depend on the frame only through its place in the stencil (start - k):
+    # one inverse per place (the same numbers as one per frame), not one per frame
+    done: dict[int, NDArray[np.float64]] = {}
     for k in range(n_frames):
         start = min(max(k - width // 2, 0), n_frames - width)
-        tau = np.arange(start, start + width, dtype=np.float64) - k
-        # exact interpolation of the window averages: c = A^-1 u
         starts[k] = start
-        wts[k] = rise @ np.linalg.inv(_window_average_row(tau, a, degree))
+        if start - k not in done:
+            tau = np.arange(start, start + width, dtype=np.float64) - k
+            # exact interpolation of the window averages: c = A^-1 u
+            done[start - k] = rise @ np.linalg.inv(_window_average_row(tau, a, degree))
+        wts[k] = done[start - k]
     return starts, wts
 
 
@@ -175,11 +180,14 @@ def _node_weights(
     nodes = tau[:, None] ** np.arange(degree + 1)[None, :]
     starts = np.empty(n_frames, np.intp)
     wts = np.empty((n_frames, _NODES.size, width))
+    done: dict[int, NDArray[np.float64]] = {}  # one inverse per place in the stencil
     for k in range(n_frames):
         start = min(max(k - width // 2, 0), n_frames - width)
-        t = np.arange(start, start + width, dtype=np.float64) - k
         starts[k] = start
-        wts[k] = nodes @ np.linalg.inv(_window_average_row(t, a, degree))
+        if start - k not in done:
+            t = np.arange(start, start + width, dtype=np.float64) - k
+            done[start - k] = nodes @ np.linalg.inv(_window_average_row(t, a, degree))
+        wts[k] = done[start - k]
     return starts, wts
 
 

@@ -10,6 +10,7 @@ uniform flows, and ``r_0 > 2`` marks an outlier.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -142,6 +143,102 @@ def median_test_frames(
     return out
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _median8(x: NDArray[np.float64], srt: NDArray[np.float64]) -> tuple[float, int]:
+    """:func:`_nanmedian8` of one point's 8 values ``x`` (``srt``: scratch of 8): the same
+    network (unrolled on scalars, branch-free: no NaN left) and the same arithmetic, so
+    the same numbers."""
+    count = 0
+    for i in range(8):
+        if np.isfinite(x[i]):
+            count += 1
+    if count == 0:
+        return np.nan, 0
+    s0 = np.inf if np.isnan(x[0]) else x[0]
+    s1 = np.inf if np.isnan(x[1]) else x[1]
+    s2 = np.inf if np.isnan(x[2]) else x[2]
+    s3 = np.inf if np.isnan(x[3]) else x[3]
+    s4 = np.inf if np.isnan(x[4]) else x[4]
+    s5 = np.inf if np.isnan(x[5]) else x[5]
+    s6 = np.inf if np.isnan(x[6]) else x[6]
+    s7 = np.inf if np.isnan(x[7]) else x[7]
+    s0, s1 = min(s0, s1), max(s0, s1)
+    s2, s3 = min(s2, s3), max(s2, s3)
+    s4, s5 = min(s4, s5), max(s4, s5)
+    s6, s7 = min(s6, s7), max(s6, s7)
+    s0, s2 = min(s0, s2), max(s0, s2)
+    s1, s3 = min(s1, s3), max(s1, s3)
+    s4, s6 = min(s4, s6), max(s4, s6)
+    s5, s7 = min(s5, s7), max(s5, s7)
+    s1, s2 = min(s1, s2), max(s1, s2)
+    s5, s6 = min(s5, s6), max(s5, s6)
+    s0, s4 = min(s0, s4), max(s0, s4)
+    s3, s7 = min(s3, s7), max(s3, s7)
+    s1, s5 = min(s1, s5), max(s1, s5)
+    s2, s6 = min(s2, s6), max(s2, s6)
+    s1, s4 = min(s1, s4), max(s1, s4)
+    s3, s6 = min(s3, s6), max(s3, s6)
+    s2, s4 = min(s2, s4), max(s2, s4)
+    s3, s5 = min(s3, s5), max(s3, s5)
+    s3, s4 = min(s3, s4), max(s3, s4)
+    srt[0] = s0
+    srt[1] = s1
+    srt[2] = s2
+    srt[3] = s3
+    srt[4] = s4
+    srt[5] = s5
+    srt[6] = s6
+    srt[7] = s7
+    return (srt[max((count - 1) // 2, 0)] + srt[min(count // 2, 7)]) / 2, count
+
+
+@nb.njit(cache=True, nogil=True)
+def _critical_frames(
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    ok: NDArray[np.bool_],
+    rows: int,
+    cols: int,
+    threshold: float,
+    out: NDArray[np.float32],
+) -> None:
+    """:func:`median_critical_eps` of the frames of ``u``, ``v`` (frames, rows * cols)
+    with the points ``~ok`` missing, into ``out``: one pass per point (8 neighbours, two
+    network medians) instead of (8, frames, points) float64 temporaries."""
+    nb8 = np.empty(8)
+    srt = np.empty(8)
+    for f in range(u.shape[0]):
+        for r in range(rows):
+            for c in range(cols):
+                best = -np.inf
+                for comp in range(2):
+                    a = u if comp == 0 else v
+                    g = a[f, r * cols + c] if ok[f, r * cols + c] else np.nan
+                    if not np.isfinite(g):
+                        continue
+                    i = 0
+                    for dr in range(-1, 2):
+                        for dc in range(-1, 2):
+                            if dr == 0 and dc == 0:
+                                continue
+                            rr, cc = r + dr, c + dc
+                            val = np.nan
+                            if 0 <= rr < rows and 0 <= cc < cols and ok[f, rr * cols + cc]:
+                                val = a[f, rr * cols + cc]
+                            nb8[i] = val
+                            i += 1
+                    med, count = _median8(nb8, srt)
+                    if count < 3:
+                        continue
+                    for k in range(8):
+                        nb8[k] = abs(nb8[k] - med)
+                    rm, _ = _median8(nb8, srt)
+                    e = abs(g - med) / threshold - rm
+                    if np.isfinite(e) and e > best:
+                        best = e
+                out[f, r * cols + c] = best
+
+
 def median_critical_eps(
     u: NDArray[np.float64],
     v: NDArray[np.float64],
@@ -149,6 +246,7 @@ def median_critical_eps(
     *,
     threshold: float = 2.0,
     block: int = 64,
+    valid: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float32]:
     """The largest ``eps`` at which :func:`median_test_frames` still flags each point:
     ``max over u, v of |u_0 - u_m| / threshold - r_m`` (``r_0 > threshold`` holds exactly
@@ -162,27 +260,21 @@ def median_critical_eps(
     grid_shape : (rows, cols)
     threshold : float
     block : int
-        Frames per pass.
+        Frames per pass (kept for compatibility: the compiled pass needs no temporaries).
+    valid : ndarray of bool, shape (frames, rows * cols), optional
+        Vectors to use; the others count as missing (as NaN), without a masked copy.
 
     Returns
     -------
     ndarray of float32, shape (frames, rows * cols)
     """
     rows, cols = (int(grid_shape[0]), int(grid_shape[1]))
-    out = np.empty(u.shape, np.float32)
-    for a in range(0, u.shape[0], block):
-        b = slice(a, a + block)
-        crit = np.full((2, *np.shape(u[b])), -np.inf)
-        for c, comp in enumerate((u, v)):
-            g = np.asarray(comp[b], np.float64).reshape(-1, rows, cols)
-            nb = _neighbours(g)
-            med, count = _nanmedian8(nb)
-            with np.errstate(invalid="ignore"):
-                rm, _ = _nanmedian8(np.abs(nb - med[None]))
-                e = np.abs(g - med) / threshold - rm
-            e[(count < 3) | ~np.isfinite(g) | ~np.isfinite(e)] = -np.inf
-            crit[c] = e.reshape(-1, rows * cols)
-        out[b] = np.maximum(crit[0], crit[1])
+    uu = np.ascontiguousarray(u, np.float64)
+    vv = np.ascontiguousarray(v, np.float64)
+    ok = np.ones(uu.shape, bool) if valid is None else np.ascontiguousarray(valid, bool)
+    out = np.empty(uu.shape, np.float32)
+    if uu.size:
+        _critical_frames(uu, vv, ok, rows, cols, float(threshold), out)
     return out
 
 

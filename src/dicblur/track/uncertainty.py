@@ -119,7 +119,11 @@ class BlurTable:
             # array with three index arrays is several times slower)
             lo = np.take(flat, (j * m + i0) * n + p, axis=0)
             hi = np.take(flat, (j * m + i1) * n + p, axis=0)
-            return np.asarray(lo + tw * (hi - lo))
+            # lo + tw (hi - lo) in place in the gathered copy (no temporaries)
+            np.subtract(hi, lo, out=hi)
+            np.multiply(hi, tw, out=hi)
+            np.add(hi, lo, out=hi)
+            return hi
 
         out = at(k0)
         if both.any():  # a single direction node (a 1-d motion): nothing to interpolate
@@ -157,13 +161,15 @@ def direction_nodes(
     *,
     min_blur: float = 0.5,
     tolerance: float = ANGLE_TOLERANCE_PX,
+    threads: int = 1,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Direction nodes of a table for blur lengths ``blur`` (px; for the skew table any
     weight) along ``angle`` (deg), NaN ignored: the nodes (every :data:`ANGLE_STEP`, one
     on the ``blur``-weighted dominant direction of the samples with ``blur >= min_blur``)
     and which of them to compute: the nearest node of every such direction when the blur
     across it, ``blur |sin(angle - node)|``, is at most ``tolerance``, else the two around
-    it; the node of the dominant direction when no sample has ``blur >= min_blur``."""
+    it; the node of the dominant direction when no sample has ``blur >= min_blur``.
+    ``threads``: threads sharing the blocks of samples (the same result on any number)."""
     a = round(180.0 / ANGLE_STEP)
     # in blocks of the flattened samples: a long recording has millions (frames x points)
     # and whole-array float64 temporaries cost hundreds of MB (issue 17's memory target)
@@ -181,29 +187,49 @@ def direction_nodes(
 
     has_big = any(block(i, "big")[0].size for i in starts)
     use = "big" if has_big else "finite"
-    c = s = 0.0
-    for i in starts:
+    sums: dict[int, tuple[float, float]] = {}
+
+    def dominant(i: int) -> None:
         ww, tt = block(i, use)
         if ww.size:
             r2 = np.deg2rad(2.0 * tt)
             wt = ww + 1e-12
-            c += float(np.dot(wt, np.cos(r2)))
-            s += float(np.dot(wt, np.sin(r2)))
+            sums[i] = (float(np.dot(wt, np.cos(r2))), float(np.dot(wt, np.sin(r2))))
+
+    each(dominant, starts, threads)
+    c = s = 0.0
+    for i in starts:  # summed in block order: the same sums on any number of threads
+        if i in sums:
+            c += sums[i][0]
+            s += sums[i][1]
     dom = (math.degrees(math.atan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
     phase = dom % ANGLE_STEP
     angles = phase + np.arange(a, dtype=np.float64) * ANGLE_STEP
     need = np.zeros(a, bool)
     if has_big:
-        for i in starts:
+        found: list[NDArray[np.bool_]] = []
+
+        def needed(i: int) -> None:
             ww, tt = block(i, "big")
             th = np.mod(tt - phase, 180.0) / ANGLE_STEP
             near = np.rint(th)
-            across = ww * np.abs(np.sin(np.deg2rad((th - near) * ANGLE_STEP)))
-            one = across <= tolerance
-            need |= np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
-            lo = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
-            need[lo] = True
-            need[(lo + 1) % a] = True
+            y = np.deg2rad((th - near) * ANGLE_STEP)  # within 7.5 deg
+            x = np.abs(y)
+            # |x| - |x|**3 / 6 <= |sin x| <= |x|: the sine only where the bounds (with a
+            # margin for rounding) leave the test open, so the same flags as with it
+            lo = ww * (x - x * x * x / 6.0)
+            one = ww * x <= tolerance * (1.0 - 1e-9)
+            open_ = ~one & (lo < tolerance * (1.0 + 1e-9))
+            one[open_] = ww[open_] * np.abs(np.sin(y[open_])) <= tolerance
+            hit = np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
+            lo_n = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
+            hit[lo_n] = True
+            hit[(lo_n + 1) % a] = True
+            found.append(hit)
+
+        each(needed, starts, threads)
+        for hit in found:
+            need |= hit
     else:
         need[round((dom - phase) / ANGLE_STEP) % a] = True
     return angles, need
@@ -214,17 +240,18 @@ def table_nodes(
     angle: NDArray[np.floating[Any]],
     *,
     min_blur: float = 0.5,
+    threads: int = 1,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
     """Nodes of a blur table for the measured ``blur`` (px) and ``angle`` (deg), both
     shape (frames, points), NaN ignored: the W nodes (every ``BLUR_STEP`` from 0 up to
     the first at or beyond the largest W) and the direction nodes with which of them to
-    compute (:func:`direction_nodes`)."""
+    compute (:func:`direction_nodes`, on ``threads`` threads)."""
     finite = np.isfinite(blur) & np.isfinite(angle)
     w_max = float(np.max(blur[finite])) if finite.any() else 0.0
     nodes = np.arange(
         0.0, BLUR_STEP * max(math.ceil(w_max / BLUR_STEP - 1e-9), 1) + 1e-9, BLUR_STEP
     )
-    angles, need = direction_nodes(blur, angle, min_blur=min_blur)
+    angles, need = direction_nodes(blur, angle, min_blur=min_blur, threads=threads)
     return nodes, angles, need
 
 
@@ -234,11 +261,13 @@ def reused_nodes(
     *,
     min_blur: float,
     have: BlurTable | None,
+    threads: int = 1,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], BlurTable | None]:
     """:func:`table_nodes`, merged with the nodes of a table ``have`` built earlier for the
     same points (kept: more W nodes and more directions at most); ``have`` comes back as
-    None when its direction nodes differ (another dominant direction: nothing to keep)."""
-    nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur)
+    None when its direction nodes differ (another dominant direction: nothing to keep);
+    ``threads`` as :func:`table_nodes`."""
+    nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur, threads=threads)
     if have is None or not np.allclose(have.angles, angles):
         return nodes, angles, need, None
     nodes = have.blur if have.blur[-1] >= nodes[-1] else nodes
@@ -284,7 +313,9 @@ def build_blur_table(
         Threads computing the nodes at the same time (each W node on its own: the same
         values on any number of threads).
     """
-    nodes, angles, need, have = reused_nodes(blur, angle, min_blur=min_blur, have=have)
+    nodes, angles, need, have = reused_nodes(
+        blur, angle, min_blur=min_blur, have=have, threads=threads
+    )
     a = angles.size
     values = np.full((a, nodes.size, len(centres), 6), np.nan)
     # W = 0 (no blur, no direction) is the same for every direction: computed once
@@ -480,7 +511,7 @@ def _angle_interp(
     interpolated at ``angle`` (frames, n) deg; a missing node is replaced by the nearest
     computed one."""
     a = values.shape[0]
-    f, n = angle.shape
+    n = angle.shape[1]
     th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - phase, 180.0) / ANGLE_STEP
     j0 = np.floor(th).astype(np.intp) % a
     j1 = (j0 + 1) % a
@@ -492,8 +523,13 @@ def _angle_interp(
     k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
     k1 = np.where(both, j1, k0)
     ta = np.where(both, ta, 0.0)[..., None]
-    p = np.broadcast_to(np.arange(n), (f, n))
-    return np.asarray((1 - ta) * values[k0, p] + ta * values[k1, p])
+    # one gather per node through flat row indices (as BlurTable.lookup: indexing the
+    # 3-d array with two index arrays is several times slower)
+    flat = values.reshape(a * n, -1)
+    p = np.arange(n)
+    v0 = np.take(flat, k0 * n + p, axis=0)
+    v1 = np.take(flat, k1 * n + p, axis=0)
+    return np.asarray((1 - ta) * v0 + ta * v1)
 
 
 @dataclass(frozen=True)
@@ -526,16 +562,20 @@ def build_skew_table(
     axis: NDArray[np.floating[Any]],
     kappa3: NDArray[np.floating[Any]],
     min_fraction: float = 0.05,
+    threads: int = 1,
 ) -> SkewTable:
     """Compute the skew coefficients at the direction nodes of the axes whose
     ``|kappa3|`` exceeds ``min_fraction`` of the largest (:func:`direction_nodes`, weights
-    ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across)."""
+    ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across; on
+    ``threads`` threads)."""
     from ..models.sensitivity import subset_skew_coefficients
 
     ok = np.isfinite(kappa3) & np.isfinite(axis)
     top = float(np.max(np.abs(kappa3[ok]))) if ok.any() else 0.0
     rel = np.where(ok, np.abs(np.where(ok, kappa3, 0.0)) / (top if top > 0 else 1.0), np.nan)
-    angles, need = direction_nodes(rel, axis, min_blur=min_fraction if top > 0 else np.inf)
+    angles, need = direction_nodes(
+        rel, axis, min_blur=min_fraction if top > 0 else np.inf, threads=threads
+    )
     a = angles.size
     values = np.full((a, len(centres), 2), np.nan)
     for j in np.flatnonzero(need):

@@ -379,3 +379,34 @@ def test_chunk_keeps_the_frames_before_a_bad_frame(tmp_path, threads):
         })  # fmt: skip
         np.testing.assert_array_equal(ds["status"].values, ser["status"].values)
         assert np.nanmax(np.abs(ds["u"].values - ser["u"].values)) < 2e-4
+
+
+def test_blur_estimated_within_each_run_of_frames_around_a_gap(tmp_path):
+    """Frames tracked with a gap (chunks resumed from a store on both sides of a chunk that
+    met a bad frame): the blur and sigma are estimated within each run of consecutive
+    frames (before, a gap anywhere left every frame without them)."""
+    import tifffile
+
+    frames = tmp_path / "frames"
+    _write_frames(frames, _target().recording(20), 20)
+    kw = {k: v for k, v in KW.items() if k != "static"}
+    kw.update(exposure="0.4ms", fps=2000, noise=2)
+    store = tmp_path / "track.chunks"
+    full = dicblur.track(str(frames), chunks=ChunkedRun(store=store, chunk_frames=5), **kw)
+    (store / "chunk-000002.npz").unlink()  # frames 10..14 run again, and meet a bad frame
+    tifffile.imwrite(frames / "f12.tif", np.zeros((96, 90), np.uint8))
+    with pytest.raises(TrackInterrupted, match="f12") as info:
+        dicblur.track(str(frames), chunks=ChunkedRun(store=store, chunk_frames=5), **kw)
+    ds = info.value.dataset
+    got = ds["frame"].values
+    assert set(got.tolist()) == set(range(12)) | set(range(15, 20))
+    assert "separate runs" in ds.attrs["notes"]
+    for run in (got < 12, got >= 15):
+        ok = ds["status"].values[run] == dicblur.PointStatus.CONVERGED
+        share = full["W"].sel(frame=got[run]).values[ok]
+        assert np.isfinite(ds["W"].values[run][ok]).mean() > 0.8 * np.isfinite(share).mean()
+        assert np.isfinite(ds["sigma_u"].values[run][ok]).mean() > 0.8
+    # inside a run, away from its ends, the blur is the uninterrupted run's
+    mid = (got >= 2) & (got <= 9)
+    ref = full["W"].sel(frame=got[mid]).values
+    np.testing.assert_allclose(ds["W"].values[mid], ref, rtol=1e-5, atol=1e-6)

@@ -22,6 +22,7 @@ carries the Dataset of the frames tracked so far, with steps 2-6 done on them.
 
 from __future__ import annotations
 
+import itertools
 import math
 import sys
 import threading
@@ -990,8 +991,6 @@ def _assemble(
     idx = np.argsort(out.frames)
     frames = np.asarray(out.frames, dtype=np.int64)[idx]
 
-    # frames tracked may have a gap only at the start (backwards part not reached): the
-    # kinematics needs consecutive frames, so keep the contiguous run around the reference
     def stacked(lst: list[Any], dtype: Any) -> Any:
         """Frames in order, one copy; the list is emptied (memory of long recordings)."""
         a = np.empty((len(lst), *np.shape(lst[0])), dtype)
@@ -1019,25 +1018,33 @@ def _assemble(
     outlier = crit > eps
     settings["median_time_s"] = time.perf_counter() - t_med
     low_zncc = zncc_flags(zn, conv)
-    contiguous = bool(n_f < 2 or np.all(np.diff(frames) == 1))
+    # runs of consecutive frames (one, unless tracking stopped in the middle of chunks run
+    # side by side): the kinematics fits each run on its own
+    cuts = [0, *(np.flatnonzero(np.diff(frames) != 1) + 1).tolist(), n_f]
+    runs = [slice(a, b) for a, b in itertools.pairwise(cuts) if b - a >= 2]
+    kin: dict[str, Any] = {
+        "fps": fps,
+        "exposure": t_exp,
+        "half_window": half_window,
+        "threads": threads,
+    }
 
     def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        if n_f >= 2 and contiguous:
-            return exposure_motion(
-                u,
-                v,
-                valid=good,
-                dtype=np.float32,
-                fps=fps,
-                exposure=t_exp,
-                half_window=half_window,
-                threads=threads,
-            )
-        nan = np.full((n_f, n_p), np.nan, np.float32)
-        return nan, nan.copy()
+        if len(runs) == 1 and runs[0] == slice(0, n_f):
+            return exposure_motion(u, v, valid=good, dtype=np.float32, **kin)
+        wu = np.full((n_f, n_p), np.nan, np.float32)
+        wv = wu.copy()
+        for r in runs:
+            wu[r], wv[r] = exposure_motion(u[r], v[r], valid=good[r], dtype=np.float32, **kin)
+        return wu, wv
 
-    if not (n_f >= 2 and contiguous):
+    if not runs:
         notes.append("fewer than 2 consecutive frames: no blur estimate")
+    elif len(cuts) > 2:
+        notes.append(
+            f"the frames tracked form {len(cuts) - 1} separate runs (tracking stopped "
+            "part-way): the blur is estimated within each run of 2 frames or more"
+        )
     good = conv & ~outlier & ~low_zncc
     wu, wv = motion(good)
     w = np.hypot(wu, wv)
@@ -1237,17 +1244,15 @@ def _assemble(
     # the bias of an accelerating blur: the kernel's third moment from the fitted track
     # times each subset's skew coefficient (a shift common to nearly all points)
     bias: NDArray[np.float32] | None = None
-    if noise is not None and inside.any() and n_f >= 2 and contiguous:
+    if noise is not None and inside.any() and runs:
         pin = np.flatnonzero(inside)
-        k3, axis = exposure_skew(
-            u,
-            v,
-            valid=good,
-            fps=fps,
-            exposure=t_exp,
-            half_window=half_window,
-            threads=threads,
-        )
+        if len(runs) == 1 and runs[0] == slice(0, n_f):
+            k3, axis = exposure_skew(u, v, valid=good, **kin)
+        else:
+            k3 = np.full((n_f, n_p), np.nan, np.float32)
+            axis = np.full((n_f, n_p), np.nan)
+            for r in runs:
+                k3[r], axis[r] = exposure_skew(u[r], v[r], valid=good[r], **kin)
         at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
         k3, axis = k3[:, at], axis[:, at]
         skew = build_skew_table(

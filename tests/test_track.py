@@ -864,7 +864,7 @@ def test_guess_extrapolates_the_smoothed_increment():
     spec = window_spectrum(rng.normal(100, 20, (128, 128)))
     base = np.zeros((900, 2))
     raw, _ = frame_guess(hist, [None] * 3, img, spec, base, None)
-    smooth, _ = frame_guess(hist, [None] * 3, img, spec, base, None, ((30, 30), cells))
+    smooth, _ = frame_guess(hist, [None] * 3, img, spec, base, None, grid=((30, 30), cells))
     truth = field(4.0)
     err_raw = np.sqrt(np.mean((raw - truth) ** 2))
     err_smooth = np.sqrt(np.mean((smooth - truth) ** 2))

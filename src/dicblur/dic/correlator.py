@@ -10,7 +10,8 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Any, Literal
@@ -721,19 +722,31 @@ class Correlator:
         """
         cur = self._checked(current)
         coef = np.zeros_like(self._coef_buf)
+        # on this Correlator's threads, as correlate() (one in a chunk thread of dicblur
+        # track: numba's two there cost 2.45 instead of ~1.4 ms)
+        with self._kernel_threads():
+            self._coefficients_into(cur, coef)
+        return PreparedImage(cur, coef, self.order)
+
+    def _coefficients_into(self, cur: NDArray[np.float64], buf: NDArray[np.float32]) -> None:
+        """The float32 B-spline coefficients of ``cur`` into ``buf`` (the padded layout of
+        ``_coef_buf``; its zero columns on the right stay zero)."""
         cols_img = self.image_shape[1]
+        bspline_coefficients(
+            cur, order=self.order, dtype=np.float32, out=buf[:, : cols_img + 2 * PAD]
+        )
+
+    @contextmanager
+    def _kernel_threads(self) -> Iterator[None]:
+        """numba's thread count set to ``workers`` (numba's setting is per calling thread)
+        for the block, restored after it."""
         old_threads = numba.get_num_threads()
         if self.workers is not None:
-            # as correlate(): the prefilter runs on this Correlator's threads (one in a
-            # chunk thread of dicblur track: two there cost 2.45 instead of ~1.4 ms)
             numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
         try:
-            bspline_coefficients(
-                cur, order=self.order, dtype=np.float32, out=coef[:, : cols_img + 2 * PAD]
-            )
+            yield
         finally:
             numba.set_num_threads(old_threads)
-        return PreparedImage(cur, coef, self.order)
 
     def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
         cur = as_image(current, "current", min_size=3)
@@ -797,10 +810,7 @@ class Correlator:
             cur, coef = current.image, current.coefficients
         else:
             cur = self._checked(current)
-        old_threads = numba.get_num_threads()
-        if self.workers is not None:
-            numba.set_num_threads(min(self.workers, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
-        try:
+        with self._kernel_threads():
             if self.blur == "none":
                 if blur_vector is not None or blur_angle is not None:
                     raise InputError(
@@ -823,8 +833,6 @@ class Correlator:
                 vec = check_blur_vector(blur_vector, n_points=self.n_points, subset=self.subset)
                 return self._correlate_given(cur, initial, vec)
             return self._correlate_estimate(cur, initial, blur_vector, blur_angle)
-        finally:
-            numba.set_num_threads(old_threads)
 
     def _correlate(
         self,
@@ -833,12 +841,9 @@ class Correlator:
         prepared: NDArray[np.float32] | None = None,
     ) -> DICResult:
         t0 = time.perf_counter()
-        cols_img = self.image_shape[1]
         if prepared is None:
             coef = self._coef_buf
-            bspline_coefficients(
-                cur, order=self.order, dtype=np.float32, out=coef[:, : cols_img + 2 * PAD]
-            )
+            self._coefficients_into(cur, coef)
         else:
             coef = prepared
         t1 = time.perf_counter()

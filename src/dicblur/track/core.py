@@ -354,6 +354,17 @@ def seed_correlator(
     return Correlator(reference, points=pts, **kw), idx
 
 
+def _start(
+    corr: Correlator, guess: NDArray[np.float64], grads: NDArray[np.float64] | None
+) -> NDArray[np.float64]:
+    """IC-GN start of ``corr``'s points: ``guess`` (n, 2) px, with the displacement
+    gradients ``grads`` (n, 4) as the affine parameters (n, 6) when both apply."""
+    if grads is None or corr.shape != "affine":
+        return guess
+    g = grads
+    return np.stack([guess[:, 0], g[:, 0], g[:, 1], guess[:, 1], g[:, 2], g[:, 3]], axis=1)
+
+
 def _seed_correction(
     seeds: tuple[Correlator, NDArray[np.intp]] | None,
     img: NDArray[np.float64] | PreparedImage,
@@ -367,11 +378,7 @@ def _seed_correction(
         return guess
     sc, idx = seeds
     g = guess[idx]
-    init = g
-    if grads is not None and sc.shape == "affine":
-        gr = grads[idx]
-        init = np.stack([g[:, 0], gr[:, 0], gr[:, 1], g[:, 1], gr[:, 2], gr[:, 3]], axis=1)
-    r = sc.correlate(img, initial=init)
+    r = sc.correlate(img, initial=_start(sc, g, None if grads is None else grads[idx]))
     ok = r.status == PointStatus.CONVERGED
     if ok.sum() < max(8, idx.size // 2):
         return guess
@@ -386,6 +393,7 @@ def frame_guess(
     spectrum: NDArray[np.complex64],
     base: NDArray[np.float64],
     seeds: tuple[Correlator, NDArray[np.intp]] | None,
+    *,
     grid: tuple[tuple[int, int], NDArray[np.intp]] | None = None,
     grads: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
@@ -476,11 +484,7 @@ def correlate_frame(
     if guess is None:
         r = corr.correlate(img)
         return _FrameResult(r.u, r.v, r.zncc, r.status, r.params), True
-    init = guess
-    if grads is not None and corr.shape == "affine":
-        g = grads
-        init = np.stack([guess[:, 0], g[:, 0], g[:, 1], guess[:, 1], g[:, 2], g[:, 3]], axis=1)
-    res = corr.correlate(img, initial=init)
+    res = corr.correlate(img, initial=_start(corr, guess, grads))
     # a subset that leaves the frame (the target moved it out) is no reason to restart
     failed = ~np.isin(res.status, (PointStatus.CONVERGED, PointStatus.OUT_OF_BOUNDS)) & ok0
     if failed.sum() <= FALLBACK_SHARE * max(int(ok0.sum()), 1):
@@ -739,6 +743,7 @@ def track(
     grads: NDArray[np.float64] | None = None
     grads0: NDArray[np.float64] | None = None
     corr = corr0
+    grid = poi_grid(corr0)  # the current Correlator's grid (the guesses' smoothing)
     n_pts = corr0.n_points
     # points that can be correlated at all (set from the reference frame's own result)
     ok0 = np.ones(n_pts, bool)
@@ -783,13 +788,14 @@ def track(
                 hist = [ref_field] if ref_field is not None else []
                 rig = [rig_ref] if ref_field is not None else []
                 corr, base, ref_now, prev = corr0, np.zeros((n_pts, 2)), reference, None
+                grid = poi_grid(corr0)
                 seeds = seeds0
                 grads = grads0
             img = rec.frame(k)
             # one prefilter for the seeds, the frame and a fallback
             frame = corr.prefilter(img)
             guess, g_abs = frame_guess(
-                hist, rig, frame, spectrum[ref_now], base, seeds, poi_grid(corr), grads
+                hist, rig, frame, spectrum[ref_now], base, seeds, grid=grid, grads=grads
             )
             t_c = time.perf_counter()
             res, fb = correlate_frame(
@@ -824,6 +830,7 @@ def track(
                         # increments of the subset now centred at the rounded position:
                         # within half a px of the material point, the field locally uniform
                         corr, base, ref_now, fb = new, last, prev[0], fb or fb2
+                        grid = poi_grid(new)
                         seeds = seed_correlator(prev[1], new, opts)
                         spectrum[ref_now] = window_spectrum(prev[1])
                         res = res2
@@ -945,6 +952,30 @@ def track(
     return ds
 
 
+def _by_runs(
+    fn: Callable[..., tuple[NDArray[Any], NDArray[Any]]],
+    runs: list[slice],
+    n_f: int,
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    good: NDArray[np.bool_],
+    **kw: Any,
+) -> tuple[NDArray[Any], NDArray[Any]]:
+    """``fn(u, v, valid=good, **kw)`` (two (frames, points) arrays, a kinematics function
+    of :mod:`.kinematics`) fitted on each run of consecutive frames ``runs`` (slices of
+    the ``n_f`` frames, at least one) on its own, NaN between them; one call on the whole
+    track when it is one run."""
+    if len(runs) == 1 and runs[0] == slice(0, n_f):
+        return fn(u, v, valid=good, **kw)
+    parts = [(r, fn(u[r], v[r], valid=good[r], **kw)) for r in runs]
+    a0, b0 = parts[0][1]
+    a = np.full((n_f, *a0.shape[1:]), np.nan, a0.dtype)
+    b = np.full((n_f, *b0.shape[1:]), np.nan, b0.dtype)
+    for r, (pa, pb) in parts:
+        a[r], b[r] = pa, pb
+    return a, b
+
+
 def _prefetch_xarray() -> threading.Thread | None:
     """Import xarray and what its first Dataset imports (pandas, dask's arrays: about
     0.8 CPU-s in a fresh process) on a side thread while the post-processing runs, off
@@ -1030,13 +1061,10 @@ def _assemble(
     }
 
     def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        if len(runs) == 1 and runs[0] == slice(0, n_f):
-            return exposure_motion(u, v, valid=good, dtype=np.float32, **kin)
-        wu = np.full((n_f, n_p), np.nan, np.float32)
-        wv = wu.copy()
-        for r in runs:
-            wu[r], wv[r] = exposure_motion(u[r], v[r], valid=good[r], dtype=np.float32, **kin)
-        return wu, wv
+        if not runs:
+            nan = np.full((n_f, n_p), np.nan, np.float32)
+            return nan, nan.copy()
+        return _by_runs(exposure_motion, runs, n_f, u, v, good, dtype=np.float32, **kin)
 
     if not runs:
         notes.append("fewer than 2 consecutive frames: no blur estimate")
@@ -1246,13 +1274,7 @@ def _assemble(
     bias: NDArray[np.float32] | None = None
     if noise is not None and inside.any() and runs:
         pin = np.flatnonzero(inside)
-        if len(runs) == 1 and runs[0] == slice(0, n_f):
-            k3, axis = exposure_skew(u, v, valid=good, **kin)
-        else:
-            k3 = np.full((n_f, n_p), np.nan, np.float32)
-            axis = np.full((n_f, n_p), np.nan)
-            for r in runs:
-                k3[r], axis[r] = exposure_skew(u[r], v[r], valid=good[r], **kin)
+        k3, axis = _by_runs(exposure_skew, runs, n_f, u, v, good, **kin)
         at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
         k3, axis = k3[:, at], axis[:, at]
         skew = build_skew_table(

@@ -291,7 +291,7 @@ def _track_frames(
     for k in (*chunk.warm, *chunk.frames):
         # one prefilter for the seeds, the frame and a fallback
         img = corr.prefilter(_frame(rec, k))
-        guess, g_abs = frame_guess(hist, rig, img, spectrum, base, seeds, grid, grads)
+        guess, g_abs = frame_guess(hist, rig, img, spectrum, base, seeds, grid=grid, grads=grads)
         res, fb = correlate_frame(corr, img, guess, ones if k == job.reference else job.ok0, grads)
         u = np.asarray(res.u, np.float64) + base[:, 0]
         v = np.asarray(res.v, np.float64) + base[:, 1]

@@ -255,59 +255,46 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
         "status": np.empty((m, n), np.uint8),
         "fallback": np.zeros(m, bool),
     }
-    done = [0]
-    try:
-        _track_frames(job, chunk, rec, corr, spectrum, seeds, out, done)
-    except (DicblurError, OSError) as exc:
-        if done[0] == 0:
-            raise
-        part: dict[str, Any] = {k: a[: done[0]] for k, a in out.items()}
-        part["error"] = exc
-        return part
-    return out
-
-
-def _track_frames(
-    job: TrackJob,
-    chunk: Chunk,
-    rec: Recording,
-    corr: Correlator,
-    spectrum: NDArray[np.complex64],
-    seeds: Any,
-    out: dict[str, Any],
-    done: list[int],
-) -> None:
-    """The frame loop of :func:`track_chunk`, writing into ``out`` (``done[0]``: the
-    chunk's frames finished so far, in order)."""
     keep = {k: i for i, k in enumerate(chunk.frames)}
     grid = poi_grid(corr)
-    n = corr.n_points
     base = np.zeros((n, 2))
     ones = np.ones(n, bool)
     # the serial loop's state (track.core.track): fields, rigid shifts, affine gradients
     hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
     rig: list[NDArray[np.float64] | None] = []
     grads: NDArray[np.float64] | None = None
-    for k in (*chunk.warm, *chunk.frames):
-        # one prefilter for the seeds, the frame and a fallback
-        img = corr.prefilter(_frame(rec, k))
-        guess, g_abs = frame_guess(hist, rig, img, spectrum, base, seeds, grid=grid, grads=grads)
-        res, fb = correlate_frame(corr, img, guess, ones if k == job.reference else job.ok0, grads)
-        u = np.asarray(res.u, np.float64) + base[:, 0]
-        v = np.asarray(res.v, np.float64) + base[:, 1]
-        good = res.status == PointStatus.CONVERGED
-        hist.append((np.where(good, u, np.nan), np.where(good, v, np.nan)))
-        del hist[:-HISTORY]
-        rig.append(g_abs)
-        del rig[:-HISTORY]
-        grads = frame_gradients(res)
-        i = keep.get(k)
-        if i is not None:
-            out["u"][i], out["v"][i] = u, v
-            out["zncc"][i] = np.asarray(res.zncc, np.float64)
-            out["status"][i] = np.asarray(res.status, np.uint8)
-            out["fallback"][i] = bool(fb)
-            done[0] = i + 1
+    done = 0  # the chunk's frames finished, in order
+    try:
+        for k in (*chunk.warm, *chunk.frames):
+            # one prefilter for the seeds, the frame and a fallback
+            img = corr.prefilter(_frame(rec, k))
+            guess, g_abs = frame_guess(
+                hist, rig, img, spectrum, base, seeds, grid=grid, grads=grads
+            )
+            ok0 = ones if k == job.reference else job.ok0
+            res, fb = correlate_frame(corr, img, guess, ok0, grads)
+            u = np.asarray(res.u, np.float64) + base[:, 0]
+            v = np.asarray(res.v, np.float64) + base[:, 1]
+            good = res.status == PointStatus.CONVERGED
+            hist.append((np.where(good, u, np.nan), np.where(good, v, np.nan)))
+            del hist[:-HISTORY]
+            rig.append(g_abs)
+            del rig[:-HISTORY]
+            grads = frame_gradients(res)
+            i = keep.get(k)
+            if i is not None:
+                out["u"][i], out["v"][i] = u, v
+                out["zncc"][i] = np.asarray(res.zncc, np.float64)
+                out["status"][i] = np.asarray(res.status, np.uint8)
+                out["fallback"][i] = bool(fb)
+                done = i + 1
+    except (DicblurError, OSError) as exc:
+        if done == 0:
+            raise
+        part: dict[str, Any] = {key: a[:done] for key, a in out.items()}
+        part["error"] = exc
+        return part
+    return out
 
 
 def compensate_chunk(job: TrackJob, chunk: CompensationChunk) -> dict[str, Any]:

@@ -550,6 +550,16 @@ CASES += [
         must=("--max-predicted-sigma",),
     ),
     Case(
+        "track-tolerance-zero",
+        ("track", "{d}/good*.tif", "-o", "{o}/t", "--noise", "2", "--tolerance", "0"),
+        must=("--tolerance", "auto"),
+    ),
+    Case(
+        "track-tolerance-unit",
+        ("track", "{d}/good*.tif", "-o", "{o}/t", "--noise", "2", "--tolerance", "1ms"),
+        must=("--tolerance", "px"),
+    ),
+    Case(
         "pattern-predict-subpixel",
         ("pattern", "predict", "{d}/good.tif", "--noise", "2", "--subset", "21", "--subpixel", "7"),
         must=("--subpixel",),

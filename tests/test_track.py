@@ -870,3 +870,58 @@ def test_guess_extrapolates_the_smoothed_increment():
     err_smooth = np.sqrt(np.mean((smooth - truth) ** 2))
     assert err_raw > 3.5 * sigma  # 4.4 sigma
     assert err_smooth < 1.9 * sigma  # sqrt(1 + (3.7 / 3)^2) = 1.6 sigma
+
+
+# ---------------------------------------------------------------- IC-GN tolerance "auto"
+def test_auto_tolerance_is_half_the_low_noise_floor_within_bounds():
+    """tolerance="auto": a quarter of the 5th percentile of sqrt(2 sigma**2 / SSSIG) (the better
+    direction of each subset, at its noise level), clipped to [1e-4, 1e-3] px; computed
+    here from dicblur.sssig (a separate path from the function's summed-area tables)."""
+    from dicblur.track.core import TOLERANCE_MAX, TOLERANCE_MIN, auto_tolerance
+    from dicblur.track.uncertainty import NoiseEstimate
+
+    img = _pattern(96, seed=4)
+    pts = dicblur.subset_centres(img.shape, subset=21, step=8)
+    best = np.maximum(
+        dicblur.sssig(img, subset=21, points=pts, direction="x"),
+        dicblur.sssig(img, subset=21, points=pts, direction="y"),
+    )
+
+    def noise(s):
+        return NoiseEstimate(s, s * s, 0.0, False, "given")
+
+    unit_floor = np.quantile(np.sqrt(2.0 / best), 0.05)
+    mid = 4e-4 / (0.25 * unit_floor)  # the noise std that gives 4e-4 px
+    assert auto_tolerance(img, pts, 21, noise(mid)) == pytest.approx(4e-4, rel=1e-9)
+    assert auto_tolerance(img, pts, 21, noise(mid / 100)) == TOLERANCE_MIN == 1e-4
+    assert auto_tolerance(img, pts, 21, noise(mid * 100)) == TOLERANCE_MAX == 1e-3
+    assert auto_tolerance(img, pts, 21, None) == TOLERANCE_MIN
+    # points whose subset leaves the image are left out (none left: the default)
+    off = np.array([[2, 2], [95, 50]])
+    assert auto_tolerance(img, off, 21, noise(mid)) == TOLERANCE_MIN
+    both = np.concatenate([pts, off])
+    assert auto_tolerance(img, both, 21, noise(mid)) == pytest.approx(4e-4, rel=1e-9)
+
+
+def test_track_tolerance_auto_given_and_bad(tiny):
+    """The default tolerance is "auto" (recorded with its source); a given one is used as
+    is; the error it leaves against a 1e-5 px run is small against the predicted sigma
+    (rms < 20 % of its 5th percentile: measured 15 % here, at a blur up to 3 px); bad
+    values name the parameter."""
+    tgt, ds = tiny
+    tol = float(ds.attrs["tolerance"])
+    assert ds.attrs["tolerance_source"] == "auto" and 1e-4 <= tol <= 1e-3
+    rec = tgt.recording(24)
+    tight = dicblur.track(
+        rec, static="0:4", subset=21, step=12, shape="translation", tolerance=1e-5
+    )
+    assert tight.attrs["tolerance"] == 1e-5 and tight.attrs["tolerance_source"] == "given"
+    np.testing.assert_array_equal(ds["status"].values, tight["status"].values)
+    conv = ds["status"].values == dicblur.PointStatus.CONVERGED
+    for c in ("u", "v"):
+        d = (ds[c].values - tight[c].values)[conv]
+        floor = np.nanpercentile(ds[f"sigma_{c}"].values, 5)
+        assert np.sqrt(np.mean(d**2)) < 0.2 * floor and np.abs(d).max() < 5 * tol
+    for bad in (0, -1e-3, float("nan"), "fast"):
+        with pytest.raises(InputError, match="tolerance"):
+            dicblur.track(rec, static="0:4", subset=21, step=12, tolerance=bad)

@@ -52,11 +52,14 @@ def test_plan_chunks_cover_the_order_with_history():
 
 def test_chunked_agrees_with_serial(serial):
     """Frames whose chunk's warm-up reaches back to the reference are bit-identical to the
-    serial run; the others converge within 2e-4 px of it (each run stops when its estimated
-    error left is below the IC-GN tolerance, 1e-4 px, so two starts may differ by twice
-    that; measured 9.7e-5 px here) with identical statuses, fallbacks and outlier flags."""
+    serial run; the others converge within twice the IC-GN tolerance of it (each run stops
+    when its estimated error left is below the tolerance, so two starts may differ by
+    twice that; measured 2.2e-4 px at 1e-3 here) with identical statuses, fallbacks and
+    outlier flags."""
     rec, a = serial
     b = dicblur.track(rec, reference=6, chunks=ChunkedRun(chunk_frames=5), **KW)
+    tol = float(a.attrs["tolerance"])
+    assert b.attrs["tolerance"] == tol and 1e-4 <= tol <= 1e-3
     assert b.attrs["chunks_n_chunks"] == 5 and b.attrs["chunks_n_run"] == 5
     np.testing.assert_array_equal(a["frame"].values, b["frame"].values)
     for name in ("status", "fallback", "outlier", "valid"):
@@ -65,14 +68,14 @@ def test_chunked_agrees_with_serial(serial):
     assert conv.mean() > 0.8
     for c in ("u", "v"):
         d = np.abs(a[c].values - b[c].values)
-        assert np.all(d[conv] < 2e-4), float(d[conv].max())
+        assert np.all(d[conv] < 2 * tol), float(d[conv].max())
         # chunk 0 (frames 6..10) starts at the reference, chunk 3 (5..1) is warmed by it
         same = np.isin(a["frame"].values, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10])
         np.testing.assert_array_equal(a[c].values[same], b[c].values[same])
-    # derived after all chunks from the whole track: the blur within 4e-4 px (the local
-    # trajectory fit's gain on the 2e-4 px bound above is below 2; measured 1.6e-4), the
-    # sigma (tabulated, measured <= 0.2 %) within 1 %
-    np.testing.assert_allclose(b["W"].values, a["W"].values, atol=4e-4, equal_nan=True)
+    # derived after all chunks from the whole track: the blur within 4 x the tolerance
+    # (the local trajectory fit's gain on the bound above is below 2), the sigma
+    # (tabulated, measured <= 0.2 %) within 1 %
+    np.testing.assert_allclose(b["W"].values, a["W"].values, atol=4 * tol, equal_nan=True)
     for c in ("sigma_u", "sigma_v"):
         np.testing.assert_allclose(b[c].values, a[c].values, rtol=1e-2, equal_nan=True)
 
@@ -254,7 +257,7 @@ def test_compensated_pass_in_chunks_agrees_and_resumes(serial, tmp_path):
     np.testing.assert_array_equal(a["status"].values, b["status"].values)
     conv = a["status"].values == dicblur.PointStatus.CONVERGED
     for c in ("u", "v"):
-        assert np.all(np.abs(a[c].values - b[c].values)[conv] < 1e-4)
+        assert np.all(np.abs(a[c].values - b[c].values)[conv] < 2 * a.attrs["tolerance"])
     passes = int(b.attrs["compensation_passes"])
     assert (tmp_path / f"track.chunks-compensated-{passes}" / "store.json").is_file()
     again = ChunkedRun(store=store, chunk_frames=8)
@@ -378,7 +381,7 @@ def test_chunk_keeps_the_frames_before_a_bad_frame(tmp_path, threads):
             k: v for k, v in KW.items() if k != "static"
         })  # fmt: skip
         np.testing.assert_array_equal(ds["status"].values, ser["status"].values)
-        assert np.nanmax(np.abs(ds["u"].values - ser["u"].values)) < 2e-4
+        assert np.nanmax(np.abs(ds["u"].values - ser["u"].values)) < 2 * ser.attrs["tolerance"]
 
 
 def test_blur_estimated_within_each_run_of_frames_around_a_gap(tmp_path):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from typing import Any, Literal
 
 from rich.console import Console
 from rich.table import Table
@@ -48,6 +48,19 @@ def parse_max_sigma(text: str | None, name: str = "--max-predicted-sigma") -> fl
         raise InputError(
             f"{name}={text!r}: must be > 0 px (e.g. 0.05px), or none to turn the test off"
         )
+    return value
+
+
+def parse_tolerance(text: str, name: str = "--tolerance") -> float | Literal["auto"]:
+    """``--tolerance``: ``auto`` or an IC-GN convergence tolerance > 0 px (``0.001``,
+    ``"0.001px"``)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    from ..models import parse_quantity
+
+    value = parse_quantity(text, "displacement", name=name)
+    if not value > 0:
+        raise InputError(f"{name}={text!r}: must be auto or > 0 px, e.g. 0.001px")
     return value
 
 

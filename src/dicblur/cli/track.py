@@ -8,7 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import InputError
-from ._common import MAX_SIGMA_HELP, console, parse_max_sigma, print_mapping
+from ._common import MAX_SIGMA_HELP, console, parse_max_sigma, parse_tolerance, print_mapping
 
 
 def _ints(text: str, name: str, count: int | None = None) -> list[int]:
@@ -110,6 +110,14 @@ def track_command(
     max_predicted_sigma: Annotated[
         str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
     ] = None,
+    tolerance: Annotated[
+        str,
+        typer.Option(
+            "--tolerance",
+            help="IC-GN convergence tolerance, px (e.g. 0.001px), or auto: a quarter of the "
+            "5th percentile of the points' static noise floor, within 0.0001-0.001 px.",
+        ),
+    ] = "auto",
     compensate_blur: Annotated[
         bool,
         typer.Option(
@@ -152,6 +160,7 @@ def track_command(
         pts = [_ints(p, "--points", 2) for p in pairs]
     roi_v = None if roi is None else _ints(roi, "--roi", 4)
     max_sigma = parse_max_sigma(max_predicted_sigma)
+    tol = parse_tolerance(tolerance)
     if chunk_frames is not None and chunk_frames < 0:
         raise InputError(f"--chunk-frames={chunk_frames}: must be >= 0 (0: no chunks), e.g. 100")
     if threads is not None and threads < 1:
@@ -233,6 +242,7 @@ def track_command(
                 chunks=chunks,
                 compensate_blur=compensate_blur,
                 max_predicted_sigma=max_sigma,
+                tolerance=tol,
             )
         except TrackInterrupted as exc:
             if exc.dataset is not None:

@@ -301,7 +301,9 @@ class Correlator:
         half = self.subset // 2
         self.half = half
 
-        rows, cols, status0 = self._points(roi, points)
+        rows, cols, status0 = self.layout(
+            self.image_shape, subset=self.subset, step=self.step, roi=roi, points=points
+        )
         self.rows = rows
         self.cols = cols
         self._grid_shape, self._grid_index = self._grid_of(rows, cols, required=bool(median_test))
@@ -383,11 +385,26 @@ class Correlator:
         self.last_timings: dict[str, float] = {}
 
     # ------------------------------------------------------------------ setup helpers
-    def _points(
-        self, roi: Sequence[int] | None, points: ArrayLike | None
+    @staticmethod
+    def layout(
+        image_shape: tuple[int, int],
+        *,
+        subset: int,
+        step: int,
+        roi: Sequence[int] | None = None,
+        points: ArrayLike | None = None,
     ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]:
-        rows_img, cols_img = self.image_shape
-        half = self.subset // 2
+        """The POIs a Correlator on an image of ``image_shape`` lays out, without
+        preparing it: ``(rows, cols, status)``, each shape (n,), ``status``
+        ``OUT_OF_BOUNDS`` for given ``points`` whose subset leaves the image, else 0.
+
+        ``subset`` (odd, px) and ``step`` (px) as validated by
+        :class:`~dicblur.dic.MatcherSettings`; ``roi`` and ``points`` as for the
+        constructor (the grid of ``step`` px inside ``roi`` or the whole image, or the
+        given centres).
+        """
+        rows_img, cols_img = (int(image_shape[0]), int(image_shape[1]))
+        half = subset // 2
         if points is not None:
             pts = np.asarray(points)
             if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] == 0:
@@ -426,12 +443,12 @@ class Correlator:
                     f"row_stop <= {rows_img} and 0 <= col_start < col_stop <= "
                     f"{cols_img}"
                 )
-        if min(r1 - r0, c1 - c0) < self.subset + 2:
+        if min(r1 - r0, c1 - c0) < subset + 2:
             raise InputError(
                 f"roi={describe(roi)}: region smaller than the subset "
-                f"({self.subset} px) plus a 1-px border; enlarge it"
+                f"({subset} px) plus a 1-px border; enlarge it"
             )
-        centres = subset_centres((r1 - r0, c1 - c0), subset=self.subset, step=self.step)
+        centres = subset_centres((r1 - r0, c1 - c0), subset=subset, step=step)
         r = centres[:, 0].astype(np.int64) + r0
         c = centres[:, 1].astype(np.int64) + c0
         return r, c, np.zeros(len(r), np.uint8)

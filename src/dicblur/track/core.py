@@ -36,9 +36,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..checks import check_positive
-from ..dic import Correlator, PointStatus, PreparedImage
+from ..dic import Correlator, MatcherSettings, PointStatus, PreparedImage
 from ..dic.initial import window_spectrum
 from ..errors import DicblurError, InputError
+from ..metrics import box_sssig, image_gradients, match_score_sigma
 from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
@@ -584,6 +585,60 @@ def _blocks(
     each(fn, (sel[a : a + size] for a in range(0, sel.size, size)), threads)
 
 
+#: ``tolerance="auto"``: the IC-GN tolerance is this share of the smallest predicted
+#: noise floor (the :data:`TOLERANCE_QUANTILE` of the points' ``sqrt(2 sigma**2 /
+#: SSSIG)``), within [:data:`TOLERANCE_MIN`, :data:`TOLERANCE_MAX`] px. The error a
+#: converged point keeps is 0.2-0.6 x the tolerance (rms against a 1e-6 px run; 0.2 on the
+#: speed recording of benchmarks/bench_track.py, 0.6 on a 3 px blur), so at most ~15 % of
+#: that floor: it adds about 1 % to the predicted sigma (in quadrature), for a quarter
+#: fewer IC-GN iterations than 1e-4 px (affine, 2.76 -> 2.09 per point).
+TOLERANCE_SHARE = 0.25
+#: Quantile of the points' noise floors that sets ``tolerance="auto"``.
+TOLERANCE_QUANTILE = 0.05
+#: Bounds of ``tolerance="auto"`` (px): never tighter than the engine's default, never
+#: looser than the 0.001 px of the IC-GN literature (Pan et al., Exp. Mech. 53, 2013).
+TOLERANCE_MIN = MatcherSettings().tolerance
+TOLERANCE_MAX = 1e-3
+
+
+def auto_tolerance(
+    reference: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    noise: NoiseEstimate | None,
+) -> float:
+    """IC-GN convergence tolerance (px) for tracking the POIs ``centres`` (n, 2) (row,
+    col) of ``reference`` at ``subset`` px under ``noise`` (None: the engine default).
+
+    The tolerance bounds the error left in each converged result, so it only needs to be
+    small against the random error the track predicts: :data:`TOLERANCE_SHARE` x the
+    :data:`TOLERANCE_QUANTILE` of the points' static noise floor, the match-score model
+    ``sqrt(2 sigma**2 / SSSIG)`` (paper eq. 2) along the better-textured of x and y at each
+    subset's noise level, within [:data:`TOLERANCE_MIN`, :data:`TOLERANCE_MAX`]. Points
+    whose subset leaves the image (1-px border) are left out.
+    """
+    if noise is None:
+        return TOLERANCE_MIN
+    h = subset // 2
+    r, c = centres[:, 0], centres[:, 1]
+    inside = (r - h >= 1) & (c - h >= 1) & (r + h < reference.shape[0] - 1)
+    inside &= c + h < reference.shape[1] - 1
+    pts = centres[inside]
+    if pts.shape[0] == 0:
+        return TOLERANCE_MIN
+    gy, gx = image_gradients(reference)
+    s_x = box_sssig(gy, gx, pts, subset=subset, angle=0.0)
+    s_y = box_sssig(gy, gx, pts, subset=subset, angle=90.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = match_score_sigma(np.maximum(s_x, s_y), 1.0)  # px per GL of noise
+    floor = unit * np.sqrt(noise.variance(subset_levels(reference, pts, subset)))
+    floor = floor[np.isfinite(floor)]
+    if floor.size == 0:
+        return TOLERANCE_MIN
+    tol = TOLERANCE_SHARE * float(np.quantile(floor, TOLERANCE_QUANTILE))
+    return float(min(max(tol, TOLERANCE_MIN), TOLERANCE_MAX))
+
+
 def track(
     recording: Recording | str,
     *,
@@ -610,6 +665,7 @@ def track(
     chunks: ChunkRunner | None = None,
     compensate_blur: bool = False,
     max_predicted_sigma: float | None = None,
+    tolerance: float | Literal["auto"] = "auto",
 ) -> Any:
     """Track a recording and predict the random error of every point in every frame.
 
@@ -667,6 +723,13 @@ def track(
         Flag ``IMPRECISE`` (not valid) the points whose predicted random error from the
         reference subset and the noise (the Correlator's test, ``noise`` or the static
         frames' noise std) exceeds this, px. None (default): no test.
+    tolerance : float or "auto"
+        IC-GN convergence tolerance, px (the error left in a converged point, as for
+        :class:`~dicblur.Correlator`). ``"auto"`` (default): a quarter of the 5th
+        percentile of the points' static noise floor ``sqrt(2 sigma**2 / SSSIG)``, within
+        [1e-4, 1e-3] px (:func:`auto_tolerance`): small against every sigma the track
+        predicts (it adds about 1 %), and up to a quarter fewer iterations than the
+        engine's default 1e-4 px. Stored in the attribute ``tolerance``.
 
     Returns
     -------
@@ -720,6 +783,34 @@ def track(
         )
     if noise is not None and (not math.isfinite(float(noise)) or float(noise) <= 0):
         raise InputError(f"noise={noise!r}: must be a noise std > 0 (GL)")
+    limit = None
+    if max_predicted_sigma is not None:
+        limit = check_positive(max_predicted_sigma, "max_predicted_sigma")
+    tol_given = None
+    if not (isinstance(tolerance, str) and tolerance == "auto"):
+        tol_given = check_positive(tolerance, "tolerance")
+    # the noise first: it sets the IC-GN tolerance ("auto") and the IMPRECISE test
+    noise_est: NoiseEstimate | None = None
+    noise_error: BaseException | None = None
+    notes: list[str] = []
+    if noise is not None:
+        noise_est = NoiseEstimate(
+            sigma=float(noise),
+            read_variance=float(noise) ** 2,
+            slope=0.0,
+            level_dependent=False,
+            source="given",
+        )
+    if st_range is not None:
+        try:
+            est = estimate_static_noise(rec, *st_range)
+            noise_est = noise_est or est
+            if noise is not None:
+                notes.append(f"static frames give {est.sigma:.3g} GL; using --noise {noise}")
+        except (DicblurError, OSError) as exc:
+            noise_error = exc
+            if noise_est is None:
+                notes.append(f"no noise estimate: {exc}")
     ref_img = rec.frame(reference)
     opts: dict[str, Any] = {
         "subset": subset,
@@ -728,15 +819,21 @@ def track(
         "min_zncc": min_zncc,
         "workers": workers,
     }
-    if max_predicted_sigma is not None:
-        limit = check_positive(max_predicted_sigma, "max_predicted_sigma")
-        if noise is not None:
-            level = float(noise)
-        else:
-            assert st_range is not None
-            level = estimate_static_noise(rec, *st_range).sigma
+    if tol_given is None:
+        cfg = MatcherSettings(subset=subset, step=step)  # validated before the layout
+        rows, cols, _ = Correlator.layout(
+            ref_img.shape, subset=cfg.subset, step=cfg.step, roi=roi, points=points
+        )
+        tol = auto_tolerance(ref_img, np.stack([rows, cols], axis=1), cfg.subset, noise_est)
+    else:
+        tol = tol_given
+    opts["tolerance"] = tol
+    if limit is not None:
+        if noise_est is None:
+            assert noise_error is not None
+            raise noise_error  # the test needs the noise: the static frames' own error
         # only the IMPRECISE test: no residual screening (max_residual=None)
-        opts.update(noise_sigma=level, max_residual=None, max_predicted_sigma=limit)
+        opts.update(noise_sigma=noise_est.sigma, max_residual=None, max_predicted_sigma=limit)
     corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
     seeds0 = seeds = seed_correlator(ref_img, corr0, opts)
     # the last frame's displacement gradients (affine: the next frame's start)
@@ -882,6 +979,8 @@ def track(
         "reference": reference,
         "min_zncc": min_zncc,
         "max_predicted_sigma": max_predicted_sigma,
+        "tolerance": tol,
+        "tolerance_source": "given" if tol_given is not None else "auto",
         "half_window": half_window,
         "median_eps": median_eps,
         "median_threshold": median_threshold,
@@ -894,25 +993,6 @@ def track(
         "tracking_time_s": elapsed,
         "correlation_time_s": t_corr,
     }
-    noise_est: NoiseEstimate | None = None
-    notes: list[str] = []
-    if noise is not None:
-        noise_est = NoiseEstimate(
-            sigma=float(noise),
-            read_variance=float(noise) ** 2,
-            slope=0.0,
-            level_dependent=False,
-            source="given",
-        )
-    if st_range is not None:
-        try:
-            est = estimate_static_noise(rec, *st_range)
-            noise_est = noise_est or est
-            if noise is not None:
-                notes.append(f"static frames give {est.sigma:.3g} GL; using --noise {noise}")
-        except (DicblurError, OSError) as exc:
-            if noise_est is None:
-                notes.append(f"no noise estimate: {exc}")
     if chunks is not None:
         settings.update({f"chunks_{k}": v for k, v in getattr(chunks, "summary", {}).items()})
     settings.update(comp_info)

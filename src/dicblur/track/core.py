@@ -1133,23 +1133,13 @@ def _assemble(
         # recording's memory (issue 17: < 1 GB for 2,000 frames of 1 Mpx)
         sig = nan_fields()
         levels = subset_levels(ref_img, centres[pin], corr.subset)
-        nv = noise.variance(levels)[None, :]
+        nv = noise.variance(levels)
 
-        # all points inside (the usual grid): plain slices, no fancy-indexed copies
-        cols: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin
+        outs = tuple(sig[k] for k in names)
 
         def predict(rows: NDArray[np.intp] | None = None) -> None:
-            def one(b: NDArray[np.intp]) -> None:  # frame blocks: bounded temporaries
-                fb: slice | NDArray[np.intp] = b
-                if b.size and b[-1] - b[0] + 1 == b.size:  # consecutive frames
-                    fb = slice(int(b[0]), int(b[-1]) + 1)
-                look = table.lookup(w[fb][:, cols], ang[fb][:, cols])  # NaN: blur unknown
-                su_n, sv_n = table.noise_std(look, nv)
-                ix = (fb, cols) if isinstance(fb, slice) else np.ix_(b, pin)
-                sig["sigma_u_noise"][ix] = su_n
-                sig["sigma_v_noise"][ix] = sv_n
-                sig["sigma_u_blur"][ix] = np.abs(look[..., 0])
-                sig["sigma_v_blur"][ix] = np.abs(look[..., 1])
+            def one(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+                table.predict_into(w, ang, nv, b, pin, outs)  # NaN: blur unknown
 
             _blocks(one, np.arange(n_f) if rows is None else rows, 128, threads)
 

@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
@@ -90,65 +91,204 @@ class BlurTable:
     ) -> NDArray[np.float64]:
         """Interpolated ``values`` at ``w`` (px) and ``angle`` (deg), both shape (frames,
         points); returns shape (frames, points, 6) (NaN where ``w`` is NaN or beyond the
-        table)."""
-        n = w.shape[1]
-        a = self.angles.size
-        wq = np.where(np.isfinite(w), w, 0.0)
-        # linear in W**2 between the nodes
-        s2 = wq**2
-        b2 = self.blur**2
-        i1 = np.clip(np.searchsorted(b2, s2, side="right"), 1, b2.size - 1)
-        i0 = i1 - 1
-        tw = np.clip((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0, 1.0)[..., None]
-        th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - self.angles[0], 180.0) / ANGLE_STEP
-        j0 = np.floor(th).astype(np.intp) % a
-        j1 = (j0 + 1) % a
-        ta = th - np.floor(th)
-        # a missing node: use the nearest computed one
-        near = self._nearest()
-        both = self.available[j0] & self.available[j1]
-        k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
-        k1 = np.where(both, j1, k0)
-        ta = np.where(both, ta, 0.0)[..., None]
-        m = self.blur.size
-        flat = self.values.reshape(-1, self.values.shape[-1])  # (a * m * n, 6)
-        p = np.arange(n)
+        table). Linear in ``W**2`` between the W nodes, then linear between the two
+        direction nodes around ``angle`` (a missing node: the nearest computed one alone),
+        :func:`_interpolate`."""
+        ww, aa = _samples(w, angle)
+        n = ww.shape[1]
+        out = np.empty((*ww.shape, 6))
+        if out.size:
+            _lookup_rows(*self._kernel_args(), ww, aa, np.arange(n), out.reshape(-1, n, 6))
+        return out
 
-        def at(j: NDArray[np.intp]) -> NDArray[np.float64]:
-            # one gather per node through flat row indices (fancy indexing of a 4-d
-            # array with three index arrays is several times slower)
-            lo = np.take(flat, (j * m + i0) * n + p, axis=0)
-            hi = np.take(flat, (j * m + i1) * n + p, axis=0)
-            # lo + tw (hi - lo) in place in the gathered copy (no temporaries)
-            np.subtract(hi, lo, out=hi)
-            np.multiply(hi, tw, out=hi)
-            np.add(hi, lo, out=hi)
-            return hi
+    def predict_into(
+        self,
+        w: NDArray[np.floating[Any]],
+        angle: NDArray[np.floating[Any]],
+        variance: NDArray[np.float64],
+        rows: NDArray[np.intp],
+        cols: NDArray[np.intp],
+        out: tuple[NDArray[np.float32], ...],
+    ) -> None:
+        """The four sigma parts of the frames ``rows`` written in place, from the
+        interpolated values (:meth:`lookup`, without its (frames, points, 6) float64
+        copy): ``out = (sigma_u_noise, sigma_v_noise, sigma_u_blur, sigma_v_blur)``, each
+        float32 of shape (frames, all points), px; table point ``q`` is column ``cols[q]``.
 
-        out = at(k0)
-        if both.any():  # a single direction node (a 1-d motion): nothing to interpolate
-            out += ta * (at(k1) - out)
-        out[~np.isfinite(w) | (w > self.blur[-1] + 1e-9)] = np.nan
-        return np.asarray(out)
+        The noise parts are ``sqrt(sigma**2 c + sigma**4 c4)`` (the complete noise term,
+        module docstring) at the noise variance ``variance[q]`` (GL**2, shape (n,)); the
+        blur parts are ``|xi_u|``, ``|xi_v|``; NaN where the blur ``w[f, cols[q]]`` (px) is
+        NaN or beyond the table. ``w``, ``angle`` (deg): shape (frames, all points). Runs
+        without the GIL (frame blocks on threads write their own rows)."""
+        ww, aa = _samples(w, angle)
+        var = np.ascontiguousarray(variance, np.float64).ravel()
+        if var.size != len(cols) or len(cols) != self.values.shape[2]:
+            raise InputError(
+                f"variance, cols: one per table point ({self.values.shape[2]}), got "
+                f"{var.size} and {len(cols)}"
+            )
+        _sigma_rows(
+            *self._kernel_args(),
+            ww,
+            aa,
+            var,
+            np.asarray(rows, np.intp),
+            np.asarray(cols, np.intp),
+            *out,
+        )
 
-    @staticmethod
-    def noise_std(
-        look: NDArray[np.float64], variance: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Noise parts ``(sigma_u, sigma_v)`` (px) of looked-up values ``look`` (..., 6) at
-        the noise variance ``variance`` (GL**2, broadcast against ``look[..., 0]``):
-        ``sqrt(sigma**2 c + sigma**4 c4)`` (the complete noise term)."""
-        v = np.asarray(variance, dtype=np.float64)
-        su = np.sqrt(v * look[..., 2] + v * v * look[..., 4])
-        sv = np.sqrt(v * look[..., 3] + v * v * look[..., 5])
-        return su, sv
+    def _kernel_args(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, NDArray[np.intp]]:
+        """The table as :func:`_interpolate` takes it."""
+        return (
+            np.ascontiguousarray(self.values, np.float64),
+            np.ascontiguousarray(self.blur, np.float64) ** 2,
+            float(self.blur[-1]),
+            float(self.angles[0]),
+            np.where(self.available, np.arange(self.angles.size), -1).astype(np.intp),
+        )
 
-    def _nearest(self) -> NDArray[np.intp]:
-        a = self.angles.size
-        idx = np.flatnonzero(self.available)
-        d = np.abs(np.arange(a)[:, None] - idx[None, :])
-        d = np.minimum(d, a - d)
-        return np.asarray(idx[np.argmin(d, axis=1)], dtype=np.intp)
+
+def _samples(
+    w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
+) -> tuple[NDArray[np.floating[Any]], NDArray[np.floating[Any]]]:
+    """``w``, ``angle`` as C-contiguous 2-d float arrays of one shape (float32 stays
+    float32: :func:`_interpolate` squares ``w`` in its own precision, as the table's
+    lookup always has)."""
+    ww = np.asarray(w)
+    aa = np.asarray(angle)
+    if ww.dtype.kind != "f":
+        ww = ww.astype(np.float64)
+    if aa.dtype.kind != "f":
+        aa = aa.astype(np.float64)
+    if ww.ndim != 2 or ww.shape != aa.shape:
+        raise InputError(
+            f"w, angle: expected two (frames, points) arrays of one shape, got {ww.shape} "
+            f"and {aa.shape}"
+        )
+    return np.ascontiguousarray(ww), np.ascontiguousarray(aa)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _interpolate(
+    values: NDArray[np.float64],
+    b2: NDArray[np.float64],
+    w_top: float,
+    phase: float,
+    node: NDArray[np.intp],
+    w: float,
+    angle: float,
+    q: int,
+    buf: NDArray[np.float64],
+) -> None:
+    """The 6 table values of point ``q`` at blur ``w`` (px) along ``angle`` (deg) into
+    ``buf``: linear in ``W**2`` between the W nodes (squares ``b2``; the mismatch shift's
+    leading order is ``k W**2``, module docstring), then linear between the direction
+    nodes ``phase + k ANGLE_STEP`` around ``angle`` when both were computed (``node[k]``
+    is ``k``, else -1), else the computed node nearest ``angle`` alone; NaN where ``w`` is
+    NaN or beyond the last node ``w_top``. The operations in the order of the earlier
+    numpy lookup (the same numbers)."""
+    nv = values.shape[3]
+    if not (np.isfinite(w) and w <= w_top + 1e-9):
+        for c in range(nv):
+            buf[c] = np.nan
+        return
+    s2 = w * w  # in w's own precision
+    m = b2.size
+    i1 = 0
+    while i1 < m and b2[i1] <= s2:  # searchsorted(b2, s2, side="right")
+        i1 += 1
+    i1 = min(max(i1, 1), m - 1)
+    i0 = i1 - 1
+    tw = min(max((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0), 1.0)
+    a = node.size
+    t = angle if np.isfinite(angle) else 0.0
+    t = np.fmod(t - phase, 180.0)  # then as np.mod: the sign of the divisor
+    if t < 0.0:
+        t += 180.0
+    th = t / ANGLE_STEP
+    fl = math.floor(th)
+    j0 = int(fl) % a
+    j1 = (j0 + 1) % a
+    ta = th - fl
+    both = node[j0] >= 0 and node[j1] >= 0
+    if not both:
+        # the computed node nearest to the nearer of the two
+        j = j0 if ta < 0.5 else j1
+        best = a
+        k0 = j
+        for k in range(a):
+            if node[k] >= 0:
+                d = abs(k - j)
+                d = min(d, a - d)
+                if d < best:
+                    best = d
+                    k0 = k
+        j0 = k0
+    for c in range(nv):
+        lo = values[j0, i0, q, c]
+        hi = values[j0, i1, q, c]
+        o = (hi - lo) * tw + lo
+        if both:
+            lo = values[j1, i0, q, c]
+            hi = values[j1, i1, q, c]
+            o = o + ta * ((hi - lo) * tw + lo - o)
+        buf[c] = o
+
+
+@nb.njit(cache=True, nogil=True)
+def _lookup_rows(
+    values: NDArray[np.float64],
+    b2: NDArray[np.float64],
+    w_top: float,
+    phase: float,
+    node: NDArray[np.intp],
+    w: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    cols: NDArray[np.intp],
+    out: NDArray[np.float64],
+) -> None:
+    """:func:`_interpolate` of every frame of ``w``, ``angle`` (frames, points) and table
+    point ``q`` (column ``cols[q]``) into ``out`` (frames, n, 6)."""
+    for f in range(w.shape[0]):
+        for q in range(cols.size):
+            _interpolate(
+                values, b2, w_top, phase, node, w[f, cols[q]], angle[f, cols[q]], q, out[f, q]
+            )
+
+
+@nb.njit(cache=True, nogil=True)
+def _sigma_rows(
+    values: NDArray[np.float64],
+    b2: NDArray[np.float64],
+    w_top: float,
+    phase: float,
+    node: NDArray[np.intp],
+    w: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    variance: NDArray[np.float64],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    su_n: NDArray[np.float32],
+    sv_n: NDArray[np.float32],
+    su_b: NDArray[np.float32],
+    sv_b: NDArray[np.float32],
+) -> None:
+    """:meth:`BlurTable.predict_into`: per frame ``rows[i]`` and table point ``q``, the
+    interpolated values (:func:`_interpolate`) into the noise parts
+    ``sqrt(v c + v**2 c4)`` and the blur parts ``|xi|`` (float32)."""
+    buf = np.empty(values.shape[3])
+    for i in range(rows.size):
+        f = rows[i]
+        for q in range(cols.size):
+            p = cols[q]
+            _interpolate(values, b2, w_top, phase, node, w[f, p], angle[f, p], q, buf)
+            v = variance[q]
+            su_n[f, p] = np.sqrt(v * buf[2] + v * v * buf[4])
+            sv_n[f, p] = np.sqrt(v * buf[3] + v * v * buf[5])
+            su_b[f, p] = abs(buf[0])
+            sv_b[f, p] = abs(buf[1])
 
 
 # samples per block of :func:`direction_nodes` (a few MB of temporaries per block)

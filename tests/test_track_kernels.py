@@ -116,3 +116,122 @@ def test_predict_into_equals_the_numpy_sigma_parts(available):
         untouched = np.ones(o.shape, bool)
         untouched[np.ix_(rows, cols)] = False
         assert np.all(o[untouched] == -1.0)
+
+
+def _ref_bias(values, available, phase, kappa3, axis):
+    """The coefficients linear between the two direction nodes around the axis (the
+    nearest computed node when one is missing), times kappa3 (NaN where not finite)."""
+    a = values.shape[0]
+    n = axis.shape[1]
+    th = np.mod(np.where(np.isfinite(axis), axis, 0.0) - phase, 180.0) / ANGLE_STEP
+    j0 = np.floor(th).astype(np.intp) % a
+    j1 = (j0 + 1) % a
+    ta = th - np.floor(th)
+    idx = np.flatnonzero(available)
+    d = np.abs(np.arange(a)[:, None] - idx[None, :])
+    near = idx[np.argmin(np.minimum(d, a - d), axis=1)]
+    both = available[j0] & available[j1]
+    k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
+    k1 = np.where(both, j1, k0)
+    ta = np.where(both, ta, 0.0)[..., None]
+    p = np.arange(n)
+    q = (1 - ta) * values[k0, p] + ta * values[k1, p]
+    return q * np.where(np.isfinite(kappa3), kappa3, np.nan)[..., None]
+
+
+@pytest.mark.parametrize("available", AVAILABLE)
+def test_skew_bias_equals_the_numpy_interpolation(available):
+    from dicblur.track.uncertainty import SkewTable
+
+    rng = np.random.default_rng(7)
+    n_all, cols = 8, np.array([0, 2, 3, 4, 5, 7])
+    values = rng.normal(size=(12, cols.size, 2))
+    values[~available] = np.nan
+    table = SkewTable(angles=2.5 + ANGLE_STEP * np.arange(12), available=available, values=values)
+    k3 = rng.normal(size=(25, n_all))
+    axis = rng.uniform(-10.0, 190.0, size=(25, n_all))
+    axis[0, :3] = [2.5, 182.5, 17.5]  # on nodes
+    k3[rng.random(k3.shape) < 0.1] = np.nan
+    k3[1, 0] = np.inf
+    axis[rng.random(k3.shape) < 0.1] = np.nan
+    rows = np.arange(3, 25)
+    out = np.full((25, n_all, 2), -1.0, np.float32)
+    table.bias_into(k3, axis, rows, cols, out)
+    ref = _ref_bias(values, available, 2.5, k3[:, cols], axis[:, cols])
+    np.testing.assert_array_equal(out[np.ix_(rows, cols)], ref[rows].astype(np.float32))
+    assert np.all(out[:3] == -1.0) and np.all(out[:, [1, 6]] == -1.0)
+
+
+def _track(rng, n_f=60, n_p=7):
+    t = np.arange(n_f)[:, None] / 40.0
+    u = 3 * np.sin(2 * np.pi * t + rng.uniform(0, 6, n_p)) + rng.normal(0, 0.01, (n_f, n_p))
+    v = 2 * np.cos(2 * np.pi * 1.3 * t + rng.uniform(0, 6, n_p)) + 0.5 * t
+    u[rng.random(u.shape) < 0.03] = np.nan
+    v[5, 2] = np.inf
+    valid = rng.random(u.shape) > 0.03
+    return u, v, valid
+
+
+def _stencils(n_f, width):
+    return np.array([min(max(k - width // 2, 0), n_f - width) for k in range(n_f)])
+
+
+@pytest.mark.parametrize("half_window", [1, 2, 3])
+def test_exposure_motion_equals_the_banded_matrix_product(half_window):
+    from dicblur.track.kinematics import blur_weights, exposure_motion
+
+    rng = np.random.default_rng(half_window)
+    u, v, valid = _track(rng)
+    kw = dict(fps=40.0, exposure=0.02, half_window=half_window, valid=valid)
+    wu, wv = exposure_motion(u, v, **kw, threads=2, block=7)
+    m = blur_weights(u.shape[0], 0.8, half_window=half_window)
+    width = 2 * half_window + 1
+    st = _stencils(u.shape[0], width)
+    idx = st[:, None] + np.arange(width)
+    for got, x in ((wu, u), (wv, v)):
+        xm = np.where(valid, x, np.nan)
+        both = np.isfinite(np.where(valid, u, np.nan)) & np.isfinite(np.where(valid, v, np.nan))
+        complete = both[idx].all(axis=1)
+        ref = np.where(complete, m @ np.where(np.isfinite(xm), xm, 0.0), np.nan)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(ref))
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
+    # float32 outputs: the float64 values rounded
+    w32 = exposure_motion(u, v, **kw, dtype=np.float32)
+    np.testing.assert_array_equal(w32[0], wu.astype(np.float32))
+
+
+def _ref_moments(wts, um, vm):
+    """Positions at the Gauss nodes, centred; principal axis; third moment along it."""
+    from dicblur.track.kinematics import _WEIGHTS
+
+    xs = np.einsum("fgk,fkn->fgn", wts, um)
+    ys = np.einsum("fgk,fkn->fgn", wts, vm)
+    gw = 0.5 * _WEIGHTS
+    xs -= np.einsum("g,fgn->fn", gw, xs)[:, None]
+    ys -= np.einsum("g,fgn->fn", gw, ys)[:, None]
+    cxx, cyy, cxy = (np.einsum("g,fgn->fn", gw, a * b) for a, b in ((xs, xs), (ys, ys), (xs, ys)))
+    th = 0.5 * np.arctan2(2 * cxy, cxx - cyy)
+    s = xs * np.cos(th)[:, None] + ys * np.sin(th)[:, None]
+    return np.einsum("g,fgn->fn", gw, s**3), np.mod(np.degrees(th), 180.0)
+
+
+def test_exposure_skew_equals_the_numpy_moments():
+    from dicblur.track.kinematics import _node_weights, exposure_skew
+
+    rng = np.random.default_rng(11)
+    u, v, valid = _track(rng, n_f=50, n_p=300)  # more points than one block of the kernel
+    k3, axis = exposure_skew(u, v, fps=40.0, exposure=0.02, valid=valid, threads=2, block=9)
+    starts, wts = _node_weights(u.shape[0], 0.8, 2)
+    idx = starts[:, None] + np.arange(wts.shape[2])
+    um, vm = np.where(valid, u, np.nan)[idx], np.where(valid, v, np.nan)[idx]  # (F, 5, n)
+    with np.errstate(invalid="ignore"):  # inf - inf in a stencil: NaN, as the kernel's
+        ref_k3, ref_axis = _ref_moments(wts, um, vm)
+    missing = ~np.isfinite(ref_k3)
+    assert missing.any() and (~missing).any()
+    np.testing.assert_array_equal(np.isnan(k3), missing)
+    np.testing.assert_array_equal(np.isnan(axis), missing)
+    # the sums in another order: the float32 values agree to their last digit or so
+    scale = np.nanmax(np.abs(ref_k3))
+    np.testing.assert_allclose(k3, ref_k3, rtol=1e-6, atol=1e-6 * scale)
+    d = np.abs(axis - ref_axis)
+    np.testing.assert_array_less(np.nan_to_num(np.minimum(d, 180 - d)), 1e-4)

@@ -1266,21 +1266,19 @@ def _assemble(
         pin = np.flatnonzero(inside)
         k3, axis = _by_runs(exposure_skew, runs, n_f, u, v, good, **kin)
         at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
-        k3, axis = k3[:, at], axis[:, at]
         skew = build_skew_table(
             ref_img,
             centres[pin],
             subset=corr.subset,
             shape=corr.shape,
-            axis=axis,
-            kappa3=k3,
+            axis=axis[:, at],
+            kappa3=k3[:, at],
             threads=threads,
         )
         skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
 
         def one_bias(b: NDArray[np.intp]) -> None:
-            r = slice(b[0], b[-1] + 1)
-            skew_bias[r, at] = skew.bias(k3[r], axis[r])
+            skew.bias_into(k3, axis, b, pin, skew_bias)
 
         _blocks(one_bias, np.arange(n_f), 128, threads)
         del k3, axis

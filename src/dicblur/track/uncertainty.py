@@ -171,6 +171,45 @@ def _samples(
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
+def _direction_pair(
+    angle: float, phase: float, node: NDArray[np.intp]
+) -> tuple[int, int, float, bool]:
+    """The direction nodes ``phase + k ANGLE_STEP`` (deg) around ``angle`` (deg; NaN: 0)
+    and the fraction of the way from the first to the second: ``(j0, j1, t, True)`` when
+    both were computed (``node[k]`` is ``k``, else -1), else ``(k, k, 0, False)`` with
+    ``k`` the computed node nearest to the nearer of the two (the first of two at one
+    distance around the circle)."""
+    a = node.size
+    t = (angle if np.isfinite(angle) else 0.0) - phase
+    # np.mod(t, 180): fmod, then the sign of the divisor; without the (slow) fmod call
+    # over the usual range, where the subtraction is exact (Sterbenz) and the same value
+    if 180.0 <= t < 360.0:
+        t -= 180.0
+    elif not 0.0 <= t < 180.0:
+        t = np.fmod(t, 180.0)
+        if t < 0.0:
+            t += 180.0
+    th = t / ANGLE_STEP
+    fl = math.floor(th)
+    j0 = int(fl) % a
+    j1 = (j0 + 1) % a
+    ta = th - fl
+    if node[j0] >= 0 and node[j1] >= 0:
+        return j0, j1, ta, True
+    j = j0 if ta < 0.5 else j1
+    best = a
+    k0 = j
+    for k in range(a):
+        if node[k] >= 0:
+            d = abs(k - j)
+            d = min(d, a - d)
+            if d < best:
+                best = d
+                k0 = k
+    return k0, k0, 0.0, False
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
 def _interpolate(
     values: NDArray[np.float64],
     b2: NDArray[np.float64],
@@ -202,30 +241,7 @@ def _interpolate(
     i1 = min(max(i1, 1), m - 1)
     i0 = i1 - 1
     tw = min(max((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0), 1.0)
-    a = node.size
-    t = angle if np.isfinite(angle) else 0.0
-    t = np.fmod(t - phase, 180.0)  # then as np.mod: the sign of the divisor
-    if t < 0.0:
-        t += 180.0
-    th = t / ANGLE_STEP
-    fl = math.floor(th)
-    j0 = int(fl) % a
-    j1 = (j0 + 1) % a
-    ta = th - fl
-    both = node[j0] >= 0 and node[j1] >= 0
-    if not both:
-        # the computed node nearest to the nearer of the two
-        j = j0 if ta < 0.5 else j1
-        best = a
-        k0 = j
-        for k in range(a):
-            if node[k] >= 0:
-                d = abs(k - j)
-                d = min(d, a - d)
-                if d < best:
-                    best = d
-                    k0 = k
-        j0 = k0
+    j0, j1, ta, both = _direction_pair(angle, phase, node)
     for c in range(nv):
         lo = values[j0, i0, q, c]
         hi = values[j0, i1, q, c]
@@ -487,6 +503,12 @@ def build_blur_table(
     return BlurTable(blur=nodes, angles=angles, available=need, values=values)
 
 
+# subsets per pass of the response: (64, 441, 6) float64 steepest-descent images (1.4 MB)
+# stay in the cache (256: 8-12 % more CPU on the benchmark's 2,401 affine subsets); each
+# subset's numbers do not depend on it
+_CHUNK = 64
+
+
 def _response(
     reference: NDArray[np.float64],
     nodes: NDArray[np.float64],
@@ -508,6 +530,7 @@ def _response(
         shape=shape,  # type: ignore[arg-type]
         max_shift=1.0,
         complete=complete,
+        chunk=_CHUNK,
     )
     out = np.empty((nodes.size, len(centres), 6))
     out[..., 0:2] = shift
@@ -641,37 +664,6 @@ def subset_levels(
     return np.where(np.isfinite(lv), lv, reference.mean())
 
 
-def _angle_interp(
-    values: NDArray[np.float64],
-    available: NDArray[np.bool_],
-    angle: NDArray[np.floating[Any]],
-    phase: float = 0.0,
-) -> NDArray[np.float64]:
-    """``values`` (a, n, c) on the direction nodes ``phase + k ANGLE_STEP``, linearly
-    interpolated at ``angle`` (frames, n) deg; a missing node is replaced by the nearest
-    computed one."""
-    a = values.shape[0]
-    n = angle.shape[1]
-    th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - phase, 180.0) / ANGLE_STEP
-    j0 = np.floor(th).astype(np.intp) % a
-    j1 = (j0 + 1) % a
-    ta = th - np.floor(th)
-    idx = np.flatnonzero(available)
-    d = np.abs(np.arange(a)[:, None] - idx[None, :])
-    near = idx[np.argmin(np.minimum(d, a - d), axis=1)]
-    both = available[j0] & available[j1]
-    k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
-    k1 = np.where(both, j1, k0)
-    ta = np.where(both, ta, 0.0)[..., None]
-    # one gather per node through flat row indices (as BlurTable.lookup: indexing the
-    # 3-d array with two index arrays is several times slower)
-    flat = values.reshape(a * n, -1)
-    p = np.arange(n)
-    v0 = np.take(flat, k0 * n + p, axis=0)
-    v1 = np.take(flat, k1 * n + p, axis=0)
-    return np.asarray((1 - ta) * v0 + ta * v1)
-
-
 @dataclass(frozen=True)
 class SkewTable:
     """Per-point shift per unit third moment of the blur kernel on direction nodes.
@@ -684,13 +676,58 @@ class SkewTable:
     available: NDArray[np.bool_]
     values: NDArray[np.float64]
 
-    def bias(
-        self, kappa3: NDArray[np.floating[Any]], axis: NDArray[np.floating[Any]]
-    ) -> NDArray[np.float64]:
-        """Predicted shift ``(u, v)`` (frames, points, 2), px, of kernels with third
-        moment ``kappa3`` (px**3) along ``axis`` (deg)."""
-        q = _angle_interp(self.values, self.available, axis, float(self.angles[0]))
-        return np.asarray(q * np.where(np.isfinite(kappa3), kappa3, np.nan)[..., None])
+    def bias_into(
+        self,
+        kappa3: NDArray[np.floating[Any]],
+        axis: NDArray[np.floating[Any]],
+        rows: NDArray[np.intp],
+        cols: NDArray[np.intp],
+        out: NDArray[np.float32],
+    ) -> None:
+        """Predicted shift ``(u, v)`` (px) of kernels with third moment ``kappa3``
+        (px**3) along ``axis`` (deg), both shape (frames, all points), written into
+        ``out`` (frames, all points, 2) float32 at the frames ``rows``; table point ``q``
+        is column ``cols[q]``. The coefficients are linear between the two direction nodes
+        around ``axis`` (the nearest computed node alone when one is missing); NaN where
+        ``kappa3`` is not finite. Runs without the GIL (frame blocks on threads)."""
+        k3, ax = _samples(kappa3, axis)
+        if len(cols) != self.values.shape[1]:
+            raise InputError(f"cols: one per table point ({self.values.shape[1]}), got {len(cols)}")
+        node = np.where(self.available, np.arange(self.angles.size), -1).astype(np.intp)
+        _bias_rows(
+            np.ascontiguousarray(self.values, np.float64),
+            float(self.angles[0]),
+            node,
+            k3,
+            ax,
+            np.asarray(rows, np.intp),
+            np.asarray(cols, np.intp),
+            out,
+        )
+
+
+@nb.njit(cache=True, nogil=True)
+def _bias_rows(
+    values: NDArray[np.float64],
+    phase: float,
+    node: NDArray[np.intp],
+    kappa3: NDArray[np.floating[Any]],
+    axis: NDArray[np.floating[Any]],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    out: NDArray[np.float32],
+) -> None:
+    """:meth:`SkewTable.bias_into`: ``((1 - t) c_j0 + t c_j1) kappa3`` per frame
+    ``rows[i]`` and table point ``q`` (:func:`_direction_pair`)."""
+    for i in range(rows.size):
+        f = rows[i]
+        for q in range(cols.size):
+            p = cols[q]
+            j0, j1, ta, _ = _direction_pair(axis[f, p], phase, node)
+            k = kappa3[f, p]
+            k = k if np.isfinite(k) else np.nan
+            for c in range(2):
+                out[f, p, c] = ((1 - ta) * values[j0, q, c] + ta * values[j1, q, c]) * k
 
 
 def build_skew_table(

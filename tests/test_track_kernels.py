@@ -235,3 +235,54 @@ def test_exposure_skew_equals_the_numpy_moments():
     np.testing.assert_allclose(k3, ref_k3, rtol=1e-6, atol=1e-6 * scale)
     d = np.abs(axis - ref_axis)
     np.testing.assert_array_less(np.nan_to_num(np.minimum(d, 180 - d)), 1e-4)
+
+
+def _ref_direction_nodes(blur, angle, min_blur, tolerance):
+    """Nodes every ANGLE_STEP with one on the blur-weighted dominant direction of the
+    samples with blur >= min_blur (all finite ones when none is); the nearest node of each
+    such direction when the blur across it is <= tolerance, else the two around it."""
+    a = round(180.0 / ANGLE_STEP)
+    w, t = np.ravel(blur).astype(float), np.ravel(angle).astype(float)
+    fin = np.isfinite(w) & np.isfinite(t)
+    big = fin & (w >= min_blur)
+    use = big if big.any() else fin
+    r2 = np.deg2rad(2.0 * t[use])
+    c, s = np.sum((w[use] + 1e-12) * np.cos(r2)), np.sum((w[use] + 1e-12) * np.sin(r2))
+    dom = (np.degrees(np.arctan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
+    phase = dom % ANGLE_STEP
+    angles = phase + np.arange(a) * ANGLE_STEP
+    need = np.zeros(a, bool)
+    if not big.any():
+        need[round((dom - phase) / ANGLE_STEP) % a] = True
+        return angles, need
+    th = np.mod(t[big] - phase, 180.0) / ANGLE_STEP
+    near = np.rint(th)
+    one = w[big] * np.abs(np.sin(np.deg2rad((th - near) * ANGLE_STEP))) <= tolerance
+    need[near[one].astype(int) % a] = True
+    lo = np.floor(th[~one]).astype(int) % a
+    need[lo] = True
+    need[(lo + 1) % a] = True
+    return angles, need
+
+
+@pytest.mark.parametrize("case", ["spread", "one axis", "none big", "empty"])
+def test_direction_nodes_equal_the_numpy_selection(case):
+    from dicblur.track.uncertainty import direction_nodes
+
+    rng = np.random.default_rng(13)
+    w = rng.uniform(0.0, 4.0, (70, 40)).astype(np.float32)
+    t = rng.uniform(-30.0, 200.0, (70, 40)).astype(np.float32)
+    if case == "one axis":  # a 1-d motion: within the tolerance of one node
+        t = np.full(t.shape, 21.3, np.float32) + rng.normal(0, 1e-4, t.shape).astype(np.float32)
+    if case == "none big":
+        w *= 0.1
+    if case == "empty":
+        w[:] = np.nan
+    w[rng.random(w.shape) < 0.05] = np.nan
+    t[rng.random(w.shape) < 0.05] = np.nan
+    for threads in (1, 2):
+        got = direction_nodes(w, t, min_blur=0.5, threads=threads)
+        ref = _ref_direction_nodes(w, t, 0.5, 0.05)
+        # the sums in another order: the dominant direction to rounding
+        np.testing.assert_allclose(got[0], ref[0], rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(got[1], ref[1])

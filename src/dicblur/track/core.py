@@ -1112,6 +1112,7 @@ def _assemble(
     sig: dict[str, NDArray[np.float32]] = {}
     importing: threading.Thread | None = None
     blur_dom = np.full(n_f, np.nan)
+    levels: NDArray[np.float64] | None = None  # of the subsets inside, once known
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
@@ -1232,7 +1233,7 @@ def _assemble(
     adv_out: dict[str, Any] = {}
 
     def run_advice() -> None:
-        assert noise is not None
+        assert noise is not None and levels is not None
         t_adv = time.perf_counter()
         try:
             adv_out["advice"] = advise_exposure(
@@ -1243,7 +1244,7 @@ def _assemble(
                 exposure=t_exp,
                 fps=fps,
                 noise=noise,
-                level=float(np.median(subset_levels(ref_img, centres[inside], corr.subset))),
+                level=float(np.median(levels)),
                 subset=corr.subset,
                 shape=corr.shape,
                 bit_depth=rec.bit_depth,

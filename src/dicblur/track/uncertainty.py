@@ -327,68 +327,130 @@ def direction_nodes(
     it; the node of the dominant direction when no sample has ``blur >= min_blur``.
     ``threads``: threads sharing the blocks of samples (the same result on any number)."""
     a = round(180.0 / ANGLE_STEP)
-    # in blocks of the flattened samples: a long recording has millions (frames x points)
-    # and whole-array float64 temporaries cost hundreds of MB (issue 17's memory target)
-    w_all = np.asarray(blur).ravel()
-    t_all = np.asarray(angle).ravel()
-    starts = range(0, w_all.size, _SAMPLE_BLOCK)
+    # one compiled pass per block of the flattened samples (a long recording has millions,
+    # frames x points: no float64 temporaries), blocks on the threads, their sums added in
+    # block order: the same result on any number of threads
+    w_all = np.ravel(blur)
+    t_all = np.ravel(angle)
+    if w_all.dtype.kind != "f":
+        w_all = w_all.astype(np.float64)
+    if t_all.dtype.kind != "f":
+        t_all = t_all.astype(np.float64)
+    starts = list(range(0, w_all.size, _SAMPLE_BLOCK))
+    sums = np.zeros((len(starts), 5))
 
-    def block(i: int, which: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        w = w_all[i : i + _SAMPLE_BLOCK].astype(np.float64)
-        t = t_all[i : i + _SAMPLE_BLOCK].astype(np.float64)
-        keep = np.isfinite(w) & np.isfinite(t)
-        if which == "big":
-            keep &= w >= min_blur
-        return w[keep], t[keep]
+    def scan(k: int) -> None:
+        i = starts[k]
+        _direction_sums(
+            w_all[i : i + _SAMPLE_BLOCK], t_all[i : i + _SAMPLE_BLOCK], min_blur, sums[k]
+        )
 
-    has_big = any(block(i, "big")[0].size for i in starts)
-    use = "big" if has_big else "finite"
-    sums: dict[int, tuple[float, float]] = {}
-
-    def dominant(i: int) -> None:
-        ww, tt = block(i, use)
-        if ww.size:
-            r2 = np.deg2rad(2.0 * tt)
-            wt = ww + 1e-12
-            sums[i] = (float(np.dot(wt, np.cos(r2))), float(np.dot(wt, np.sin(r2))))
-
-    each(dominant, starts, threads)
+    each(scan, range(len(starts)), threads)
+    has_big = bool(sums[:, 0].sum() > 0)
     c = s = 0.0
-    for i in starts:  # summed in block order: the same sums on any number of threads
-        if i in sums:
-            c += sums[i][0]
-            s += sums[i][1]
+    for k in range(len(starts)):  # in block order
+        c += sums[k, 1 if has_big else 3]
+        s += sums[k, 2 if has_big else 4]
     dom = (math.degrees(math.atan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
     phase = dom % ANGLE_STEP
     angles = phase + np.arange(a, dtype=np.float64) * ANGLE_STEP
     need = np.zeros(a, bool)
     if has_big:
-        found: list[NDArray[np.bool_]] = []
+        hits = np.zeros((len(starts), a), bool)
 
-        def needed(i: int) -> None:
-            ww, tt = block(i, "big")
-            th = np.mod(tt - phase, 180.0) / ANGLE_STEP
-            near = np.rint(th)
-            y = np.deg2rad((th - near) * ANGLE_STEP)  # within 7.5 deg
-            x = np.abs(y)
-            # |x| - |x|**3 / 6 <= |sin x| <= |x|: the sine only where the bounds (with a
-            # margin for rounding) leave the test open, so the same flags as with it
-            lo = ww * (x - x * x * x / 6.0)
-            one = ww * x <= tolerance * (1.0 - 1e-9)
-            open_ = ~one & (lo < tolerance * (1.0 + 1e-9))
-            one[open_] = ww[open_] * np.abs(np.sin(y[open_])) <= tolerance
-            hit = np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
-            lo_n = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
-            hit[lo_n] = True
-            hit[(lo_n + 1) % a] = True
-            found.append(hit)
+        def needed(k: int) -> None:
+            i = starts[k]
+            _direction_hits(
+                w_all[i : i + _SAMPLE_BLOCK],
+                t_all[i : i + _SAMPLE_BLOCK],
+                min_blur,
+                phase,
+                tolerance,
+                hits[k],
+            )
 
-        each(needed, starts, threads)
-        for hit in found:
-            need |= hit
+        each(needed, range(len(starts)), threads)
+        need = np.asarray(hits.any(axis=0))
     else:
         need[round((dom - phase) / ANGLE_STEP) % a] = True
     return angles, need
+
+
+@nb.njit(cache=True, nogil=True)
+def _direction_sums(
+    w: NDArray[np.floating[Any]],
+    t: NDArray[np.floating[Any]],
+    min_blur: float,
+    out: NDArray[np.float64],
+) -> None:
+    """:func:`direction_nodes`' pass 1 over samples ``w``, ``t`` (deg): ``out`` = (count
+    with ``w >= min_blur``, their ``sum (w + 1e-12) cos 2t``, ``... sin 2t``, the same two
+    sums over all finite samples); NaN in either: left out."""
+    n_big = 0.0
+    cb = sb = cf = sf = 0.0
+    for i in range(w.size):
+        wi = np.float64(w[i])
+        ti = np.float64(t[i])
+        if not (np.isfinite(wi) and np.isfinite(ti)):
+            continue
+        r2 = (2.0 * ti) * (np.pi / 180.0)
+        wt = wi + 1e-12  # a direction of zero blur still counts when nothing moves
+        cw = wt * np.cos(r2)
+        sw = wt * np.sin(r2)
+        cf += cw
+        sf += sw
+        if wi >= min_blur:
+            n_big += 1.0
+            cb += cw
+            sb += sw
+    out[0] = n_big
+    out[1] = cb
+    out[2] = sb
+    out[3] = cf
+    out[4] = sf
+
+
+@nb.njit(cache=True, nogil=True)
+def _direction_hits(
+    w: NDArray[np.floating[Any]],
+    t: NDArray[np.floating[Any]],
+    min_blur: float,
+    phase: float,
+    tolerance: float,
+    hit: NDArray[np.bool_],
+) -> None:
+    """:func:`direction_nodes`' pass 2: the direction nodes ``phase + k ANGLE_STEP`` that
+    the samples with ``w >= min_blur`` need (``hit[k]`` set): the nearest node alone when
+    the blur across it, ``w |sin(t - node)|``, is at most ``tolerance``, else the two
+    around ``t``."""
+    a = hit.size
+    for i in range(w.size):
+        wi = np.float64(w[i])
+        ti = np.float64(t[i])
+        if not (np.isfinite(wi) and np.isfinite(ti) and wi >= min_blur):
+            continue
+        x = ti - phase  # np.mod(x, 180): fmod, then the sign of the divisor
+        if 180.0 <= x < 360.0:
+            x -= 180.0
+        elif not 0.0 <= x < 180.0:
+            x = np.fmod(x, 180.0)
+            if x < 0.0:
+                x += 180.0
+        th = x / ANGLE_STEP
+        near = np.rint(th)
+        y = ((th - near) * ANGLE_STEP) * (np.pi / 180.0)  # within 7.5 deg
+        ay = abs(y)
+        # |y| - |y|**3 / 6 <= |sin y| <= |y|: the sine only where the bounds (with a
+        # margin for rounding) leave the test open
+        one = wi * ay <= tolerance * (1.0 - 1e-9)
+        if not one and wi * (ay - ay * ay * ay / 6.0) < tolerance * (1.0 + 1e-9):
+            one = wi * abs(np.sin(y)) <= tolerance
+        if one:
+            hit[int(near) % a] = True
+        else:
+            lo = int(np.floor(th)) % a
+            hit[lo] = True
+            hit[(lo + 1) % a] = True
 
 
 def table_nodes(
@@ -466,8 +528,8 @@ def build_blur_table(
         only the missing ones computed (the second pass of :func:`~dicblur.track.track`,
         whose blur may reach a little further).
     threads : int
-        Threads computing the nodes at the same time (each W node on its own: the same
-        values on any number of threads).
+        Threads sharing the chunks of subsets of each node (each subset computed alone:
+        the same values on any number of threads).
     """
     nodes, angles, need, have = reused_nodes(
         blur, angle, min_blur=min_blur, have=have, threads=threads
@@ -476,26 +538,19 @@ def build_blur_table(
     values = np.full((a, nodes.size, len(centres), 6), np.nan)
     # W = 0 (no blur, no direction) is the same for every direction: computed once
     zero = None if have is None else have.values[np.flatnonzero(have.available)[0], :1]
-    jobs: list[tuple[int, NDArray[np.intp]]] = []  # (direction node, W nodes)
     for j in np.flatnonzero(need):
         start = 0
         if have is not None and have.available[j]:
             start = have.blur.size
             values[j, :start] = have.values[j]
         todo = np.arange(start, nodes.size)
-        if todo.size and todo[0] == 0 and (zero is not None or jobs):
+        if todo.size and todo[0] == 0 and (zero is not None or j != np.flatnonzero(need)[0]):
             todo = todo[1:]  # copied from the first direction's W = 0 below
-        # W nodes split over the threads (each computed alone: the same values)
-        jobs += [(int(j), t) for t in np.array_split(todo, max(1, min(threads, todo.size)))]
-
-    def run(job: tuple[int, NDArray[np.intp]]) -> None:
-        j, todo = job
         if todo.size:
+            # the subsets' chunks on the threads (each computed alone: the same values)
             values[j, todo] = _response(
-                reference, nodes[todo], centres, subset, shape, angles[j], complete
+                reference, nodes[todo], centres, subset, shape, angles[j], complete, threads
             )
-
-    each(run, jobs, threads)
     if zero is None:
         zero = values[np.flatnonzero(need)[0], :1]
     for j in np.flatnonzero(need):
@@ -517,9 +572,11 @@ def _response(
     shape: str,
     angle: float,
     complete: bool,
+    threads: int = 1,
 ) -> NDArray[np.float64]:
     """``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)`` of every point at the blur lengths
-    ``nodes`` along ``angle`` (deg), shape (m, n, 6)."""
+    ``nodes`` along ``angle`` (deg), shape (m, n, 6), the chunks of subsets on
+    ``threads`` threads."""
     t = math.radians(angle)
     shift, cov, cov4 = subset_blur_response(
         reference,
@@ -531,6 +588,7 @@ def _response(
         max_shift=1.0,
         complete=complete,
         chunk=_CHUNK,
+        threads=threads,
     )
     out = np.empty((nodes.size, len(centres), 6))
     out[..., 0:2] = shift

@@ -1129,6 +1129,7 @@ def subset_skew_coefficients(
     derivative: Derivative = "bspline3",
     boundary: Boundary = "reflect",
     chunk: int = 256,
+    threads: int = 1,
 ) -> NDArray[np.float64]:
     """Per-subset shift per unit third moment of the blur kernel, ``(u, v)`` px / px**3.
 
@@ -1139,7 +1140,8 @@ def subset_skew_coefficients(
     linearisation as the ``W**2 / 24`` term of :func:`subset_blur_coefficients`, which is
     ``kappa_2 / 2`` of a box). By parts ``sum f_d f_ddd = -sum f_dd**2``: the shift has
     the same sign in every subset, a common offset of the field. Returns the factor of
-    ``kappa_3``, shape (n, 2) (NaN: no gradient).
+    ``kappa_3``, shape (n, 2) (NaN: no gradient). ``threads``: threads sharing the
+    chunks of ``chunk`` subsets (the same numbers).
     """
     _check_shape(shape)
     _check_derivative(derivative)
@@ -1163,11 +1165,14 @@ def subset_skew_coefficients(
     win = _Windows(subset, fx, fy, fddd, image)
     out = np.full((len(centres), 2), np.nan)
     iv = 1 if shape == "translation" else 3
-    for start in range(0, len(centres), chunk):
+
+    def one(start: int) -> None:
         cc = centres[start : start + chunk]
         gx, gy, e3, f = win.take(cc)
         jp = _project(win.jacobian(gx, gy, shape), _normalise(f)[0])
         sol = _solve(_gram(jp, jp), _tdot(jp, e3)) / 6.0
         out[start : start + len(cc), 0] = sol[:, 0]
         out[start : start + len(cc), 1] = sol[:, iv]
+
+    _on_threads(one, range(0, len(centres), chunk), threads)
     return out

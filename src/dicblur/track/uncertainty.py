@@ -801,8 +801,8 @@ def build_skew_table(
 ) -> SkewTable:
     """Compute the skew coefficients at the direction nodes of the axes whose
     ``|kappa3|`` exceeds ``min_fraction`` of the largest (:func:`direction_nodes`, weights
-    ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across; on
-    ``threads`` threads)."""
+    ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across); the
+    nodes and the chunks of subsets on ``threads`` threads."""
     from ..models.sensitivity import subset_skew_coefficients
 
     ok = np.isfinite(kappa3) & np.isfinite(axis)
@@ -821,5 +821,7 @@ def build_skew_table(
             subset,
             motion=(math.sin(t), math.cos(t)),
             shape=shape,  # type: ignore[arg-type]
+            chunk=_CHUNK,
+            threads=threads,
         )
     return SkewTable(angles=angles, available=need, values=values)

@@ -267,42 +267,6 @@ def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9) -> NDArr
     return np.asarray(d[n // 2 - lag : n // 2 + lag + 1])
 
 
-def _gradient_noise_fields(
-    r0: NDArray[np.float64],
-    subset: int,
-    shape: str,
-    ex: NDArray[np.float64],
-    ey: NDArray[np.float64],
-    kernel: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``D_k^T (S_k r0)`` of every steepest-descent column ``k``: the linear functional of
-    the reference noise ``n`` by which the noisy gradients move ``J_f^T r0``
-    (``delta J_f[:, k] = S_k D n``, ``D`` the spline derivative along x or y, ``S_k`` the
-    weight 1, dx or dy of the shape function). ``D^T`` spreads each field by the kernel's
-    half-length ``L`` along its axis (the gradients at the subset's pixels depend on noise
-    just outside it).
-
-    Returns the x-type fields, shape (m, S, S + 2L, kx), and the y-type fields, shape
-    (m, S + 2L, S, ky), in the column order of :meth:`_Windows.jacobian`.
-    """
-    m = len(r0)
-    size = subset
-    lag = len(kernel) // 2
-    r = r0.reshape(m, size, size)
-    if shape == "translation":
-        weights = [np.ones_like(ex)]
-    else:
-        weights = [np.ones_like(ex), ex, ey]
-    w3 = np.stack([(wt * np.ones((1, size * size))).reshape(size, size) for wt in weights])
-    # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
-    idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
-    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)], 0.0)
-    v = r[:, None, :, :] * w3[None]  # (m, k, S, S)
-    qx = np.matmul(v, tmat.T)  # along columns: (m, k, S, S + 2L)
-    qy = np.matmul(tmat, v)  # along rows: (m, k, S + 2L, S)
-    return np.moveaxis(qx, 1, -1), np.moveaxis(qy, 1, -1)
-
-
 def _reference_noise_middle(
     pf: NDArray[np.float64],
     ratio: NDArray[np.float64],
@@ -318,23 +282,47 @@ def _reference_noise_middle(
     """``M^T M`` of the reference noise's response ``A^-1 M^T n``, per unit noise variance:
     ``M = ratio P_f J_f + sigma_g Q`` with ``Q = [D_k^T (S_k r0)]`` (docs/models.md s. 4,
     the complete noise term). Shape (m, k, k). ``pf_gram``: ``(P_f J_f)^T (P_f J_f)``
-    computed before (it does not depend on the blur)."""
+    computed before (it does not depend on the blur).
+
+    ``Q[:, k] = D_k^T (S_k r0)`` is the linear functional of the reference noise ``n`` by
+    which the noisy gradients move ``J_f^T r0`` (``delta J_f[:, k] = S_k D n``, ``D`` the
+    spline derivative along x or y with impulse response ``kernel``, ``S_k`` the weight
+    1, dx or dy of the shape function; the columns in the order of
+    :meth:`_Windows.jacobian`). ``D^T`` spreads each field by the kernel's half-length
+    ``L`` along its axis (the gradients at the subset's pixels depend on noise just
+    outside it): with ``T`` (S + 2L, S) the spreading matrix, ``Q_k^T Q_l`` of two fields
+    spread along one axis is ``v_k^T (T^T T) v_l`` row by row (or column by column),
+    ``v_k = S_k r0`` (S, S), so the spread fields are never formed; on the subset's own
+    pixels (where x- and y-spread fields and ``P_f J_f`` meet them) ``Q`` is
+    ``T[L:L+S]`` applied to ``v_k``.
+    """
     m, npx, k = pf.shape
+    size = subset
     lag = len(kernel) // 2
-    qx, qy = _gradient_noise_fields(r0, subset, shape, ex, ey, kernel)
-    kx = qx.shape[-1]
-    sub_x = qx[:, :, lag : lag + subset, :].reshape(m, npx, kx)
-    sub_y = qy[:, lag : lag + subset, :, :].reshape(m, npx, k - kx)
-    q_sub = np.concatenate([sub_x, sub_y], axis=2)  # Q on the subset's own pixels
+    if shape == "translation":
+        weights = [np.ones_like(ex)]
+    else:
+        weights = [np.ones_like(ex), ex, ey]
+    kx = len(weights)  # x-type columns; as many y-type
+    w3 = np.stack([(wt * np.ones((1, npx))).reshape(size, size) for wt in weights])
+    # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
+    idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
+    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)], 0.0)
+    tt = tmat.T @ tmat  # (S, S): the spread fields' inner products
+    tsub = tmat[lag : lag + size]  # (S, S): the spread fields on the subset's pixels
+    v = r0.reshape(m, 1, size, size) * w3[None]  # (m, kx, S, S): S_k r0
+    vt = v.reshape(m, kx, npx).transpose(0, 2, 1)  # (m, P, kx)
     qq = np.empty((m, k, k))
-    fx = qx.reshape(m, -1, kx)
-    fy = qy.reshape(m, -1, k - kx)
-    qq[:, :kx, :kx] = _gram(fx, fx)
-    qq[:, kx:, kx:] = _gram(fy, fy)
-    xy = _gram(sub_x, sub_y)  # x- and y-spread fields overlap on the subset only
-    qq[:, :kx, kx:] = xy
+    qq[:, :kx, :kx] = np.matmul(np.matmul(v, tt).reshape(m, kx, npx), vt)  # along rows
+    qq[:, kx:, kx:] = np.matmul(np.matmul(tt, v).reshape(m, kx, npx), vt)  # along columns
+    q_sub = np.concatenate(
+        [np.matmul(v, tsub.T).reshape(m, kx, npx), np.matmul(tsub, v).reshape(m, kx, npx)],
+        axis=1,
+    )  # (m, k, P): Q on the subset's own pixels
+    xy = np.matmul(q_sub[:, :kx], q_sub[:, kx:].transpose(0, 2, 1))
+    qq[:, :kx, kx:] = xy  # x- and y-spread fields overlap on the subset only
     qq[:, kx:, :kx] = np.transpose(xy, (0, 2, 1))
-    cross = _gram(pf, q_sub)
+    cross = np.matmul(np.swapaxes(pf, 1, 2), q_sub.transpose(0, 2, 1))
     r = ratio[:, None, None]
     s = sg[:, None, None]
     gpf = _gram(pf, pf) if pf_gram is None else pf_gram

@@ -1265,7 +1265,12 @@ def _assemble(
     bias: NDArray[np.float32] | None = None
     if noise is not None and inside.any() and runs:
         pin = np.flatnonzero(inside)
-        k3, axis = _by_runs(exposure_skew, runs, n_f, u, v, good, **kin)
+        # beside the advice's thread: one core each (the advice, about as long as the
+        # skew, no longer waits for a core after the skew's threads are done)
+        skew_threads = threads if side is None else max(1, threads - 1)
+        k3, axis = _by_runs(
+            exposure_skew, runs, n_f, u, v, good, **{**kin, "threads": skew_threads}
+        )
         at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
         skew = build_skew_table(
             ref_img,
@@ -1274,14 +1279,14 @@ def _assemble(
             shape=corr.shape,
             axis=axis[:, at],
             kappa3=k3[:, at],
-            threads=threads,
+            threads=skew_threads,
         )
         skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
 
         def one_bias(b: NDArray[np.intp]) -> None:
             skew.bias_into(k3, axis, b, pin, skew_bias)
 
-        _blocks(one_bias, np.arange(n_f), 128, threads)
+        _blocks(one_bias, np.arange(n_f), 128, skew_threads)
         del k3, axis
     if bias is None:
         bias = np.full((n_f, n_p, 2), np.nan, np.float32)

@@ -1029,8 +1029,12 @@ def subset_blur_response(
         gg: NDArray[np.float64],
     ) -> None:
         """The shift and covariances of the subsets ``rows`` at ``W = w[j]``."""
-        gh, sg = _normalise(gg)
-        pg = _project(jf, gh)
+        if w[j] == 0:  # g is f: its normalised subsets and projection are f's
+            gh, sg, pg, pg_gram = fh, sf, pf, pf_gram
+        else:
+            gh, sg = _normalise(gg)
+            pg = _project(jf, gh)
+            pg_gram = _gram(pg, pg)
         # J_f^T P_g J_g = (P_g J_f)^T J_g (P_g a symmetric projection: one _project less)
         cross = _gram(pg, jg)
         sol = None
@@ -1055,7 +1059,7 @@ def subset_blur_response(
             )
         else:
             mid_ref = ratio2[:, None, None] * pf_gram
-        mid = mid_ref + _gram(pg, pg)
+        mid = mid_ref + pg_gram
         at = np.transpose(cross, (0, 2, 1))
         z = np.stack(
             _solve_each(at, [np.broadcast_to(e[c], (len(gg), k)).copy() for c in range(2)]),

@@ -976,6 +976,25 @@ def _by_runs(
     return a, b
 
 
+def _polar(wu: NDArray[Any], wv: NDArray[Any], threads: int) -> tuple[NDArray[Any], NDArray[Any]]:
+    """Blur length ``W`` (px) and direction (deg in [0, 180), from +x towards +y: a
+    centred box blur is the same both ways) of the blur vectors ``(wu, wv)`` (frames,
+    points; the dtype of theirs), in blocks of frames on ``threads`` threads (numpy's
+    loops release the GIL)."""
+    w = np.empty(wu.shape, np.result_type(wu, wv))
+    ang = np.empty_like(w)
+
+    def one(b: NDArray[np.intp]) -> None:
+        r = slice(int(b[0]), int(b[-1]) + 1)
+        np.hypot(wu[r], wv[r], out=w[r])
+        a = np.degrees(np.arctan2(wv[r], wu[r]))
+        np.mod(a, 180.0, out=ang[r])
+
+    if wu.size:
+        _blocks(one, np.arange(wu.shape[0]), 128, threads)
+    return w, ang
+
+
 def _prefetch_xarray() -> threading.Thread | None:
     """Import xarray and what its first Dataset imports (pandas, dask's arrays: about
     0.8 CPU-s in a fresh process) on a side thread while the post-processing runs, off
@@ -1075,8 +1094,7 @@ def _assemble(
         )
     good = conv & ~outlier & ~low_zncc
     wu, wv = motion(good)
-    w = np.hypot(wu, wv)
-    ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
+    w, ang = _polar(wu, wv, threads)
     # static range: check for motion (it inflates the pairwise-difference noise)
     if st_range is not None:
         sel = (frames >= st_range[0]) & (frames < st_range[1])
@@ -1146,13 +1164,20 @@ def _assemble(
 
         predict()
         if gshape is not None:
-            s_max = np.fmax(
-                np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"]),
-                np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"]),
-            )
+            s_max = np.empty((n_f, n_p), np.float32)
+
+            def largest(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+                r = slice(int(b[0]), int(b[-1]) + 1)
+                np.fmax(
+                    np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r]),
+                    np.hypot(sig["sigma_v_noise"][r], sig["sigma_v_blur"][r]),
+                    out=s_max[r],
+                )
+                s_max[r][~good[r]] = np.nan
+
+            _blocks(largest, np.arange(n_f), 128, threads)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                s_max[~good] = np.nan  # in place: s_max is a temporary
                 eps_k = 2.0 * _nanmedian_last(s_max, overwrite=True)
             del s_max
             eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
@@ -1176,8 +1201,7 @@ def _assemble(
                 good = conv & ~outlier & ~low_zncc
                 wu, wv = motion(good)
                 w_old, ang_old = w, ang
-                w = np.hypot(wu, wv)
-                ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
+                w, ang = _polar(wu, wv, threads)
                 w_in = np.where(good[:, pin], w[:, pin], np.nan)
                 if np.any(w_in > table.blur[-1]):
                     # the new blur reaches past the table's last node: add the nodes
@@ -1217,16 +1241,29 @@ def _assemble(
             for c in ("u", "v"):
                 carry = np.hypot(sig[f"sigma_{c}_noise"][j], sig[f"sigma_{c}_blur"][j])
                 sig[f"sigma_{c}_noise"][i] = np.hypot(sig[f"sigma_{c}_noise"][i], carry)
-    sigma_u = np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"])
-    sigma_v = np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"])
+    sigma_u = np.empty((n_f, n_p), np.float32)
+    sigma_v = np.empty((n_f, n_p), np.float32)
+    valid = np.empty((n_f, n_p), bool)
+    cnt = np.zeros(n_f, np.intp)
+    n_dom = np.zeros(n_f, np.intp)
     outlier |= low_zncc
-    valid = good & np.isfinite(sigma_u) & np.isfinite(sigma_v) & np.isfinite(w)
+
+    def totals(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+        r = slice(int(b[0]), int(b[-1]) + 1)
+        np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r], out=sigma_u[r])
+        np.hypot(sig["sigma_v_noise"][r], sig["sigma_v_blur"][r], out=sigma_v[r])
+        valid[r] = good[r] & np.isfinite(sigma_u[r]) & np.isfinite(sigma_v[r]) & np.isfinite(w[r])
+        with np.errstate(invalid="ignore"):
+            dom = np.hypot(sig["sigma_u_blur"][r], sig["sigma_v_blur"][r]) > np.hypot(
+                sig["sigma_u_noise"][r], sig["sigma_v_noise"][r]
+            )
+        cnt[r] = valid[r].sum(axis=1)
+        n_dom[r] = (dom & valid[r]).sum(axis=1)
+
+    if n_f:
+        _blocks(totals, np.arange(n_f), 128, threads)
     with np.errstate(invalid="ignore"):
-        dom = np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"]) > np.hypot(
-            sig["sigma_u_noise"], sig["sigma_v_noise"]
-        )
-        cnt = valid.sum(axis=1)
-        blur_dom = np.where(cnt > 0, (dom & valid).sum(axis=1) / np.maximum(cnt, 1), np.nan)
+        blur_dom = np.where(cnt > 0, n_dom / np.maximum(cnt, 1), np.nan)
     # the exposure advice needs only the final blur and valid points: on threads > 1 it
     # runs on a side thread beside the skew table and the bias (both mostly serial)
     want_advice = bool(advice and noise is not None and valid.any())

@@ -1134,13 +1134,15 @@ def _assemble(
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
+        # all points inside (the usual grid): plain slices, no fancy-indexed copies
+        cols: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin
         table = blur_table(
             ref_img,
             centres[pin],
             subset=corr.subset,
             shape=corr.shape,
-            blur=np.where(good[:, pin], w[:, pin], np.nan),
-            angle=ang[:, pin],
+            blur=np.where(good[:, cols], w[:, cols], np.nan),
+            angle=ang[:, cols],
             threads=threads,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
@@ -1202,7 +1204,7 @@ def _assemble(
                 wu, wv = motion(good)
                 w_old, ang_old = w, ang
                 w, ang = _polar(wu, wv, threads)
-                w_in = np.where(good[:, pin], w[:, pin], np.nan)
+                w_in = np.where(good[:, cols], w[:, cols], np.nan)
                 if np.any(w_in > table.blur[-1]):
                     # the new blur reaches past the table's last node: add the nodes
                     # (the computed ones are kept) and predict every frame
@@ -1212,7 +1214,7 @@ def _assemble(
                         subset=corr.subset,
                         shape=corr.shape,
                         blur=w_in,
-                        angle=ang[:, pin],
+                        angle=ang[:, cols],
                         have=table,
                         threads=threads,
                     )

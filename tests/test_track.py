@@ -484,10 +484,16 @@ def test_track_noise_term_is_the_static_predictions_complete_term(shape):
         img, pts, subset=21, shape=shape, blur=np.array([[6.0, 6.0]]), angle=np.array([[0, 90.0]])
     )
     for angle, motion, comp in ((0.0, (0.0, 1.0), 0), (90.0, (1.0, 0.0), 1)):
-        look = table.lookup(
-            np.repeat(ws[:, None], len(pts), axis=1), np.full((ws.size, len(pts)), angle)
+        out = tuple(np.empty((ws.size, len(pts)), np.float32) for _ in range(4))
+        table.predict_into(
+            np.repeat(ws[:, None], len(pts), axis=1),
+            np.full((ws.size, len(pts)), angle),
+            np.full(len(pts), sigma**2),
+            np.arange(ws.size),
+            np.arange(len(pts)),
+            out,
         )
-        su, sv = table.noise_std(look, np.full(len(pts), sigma**2))
+        su, sv = (o.astype(np.float64) for o in out[:2])
         track_var = np.mean((su, sv)[comp] ** 2, axis=1)
         pr = predict_from_pattern(
             img, ws, noise_sigma=sigma, points=pts, subset=21, shape=shape, motion=motion

@@ -45,6 +45,7 @@ from .sensitivity import (
     Derivative,
     Shape,
     box_blurred,
+    image_spectrum,
     shifts_and_variance,
     unit_direction,
 )
@@ -72,7 +73,8 @@ class PatternPrediction:
         interpolation bias (mean square over the offsets).
     sssig : ndarray, shape (m,)
         Mean subset SSSIG of the blurred image along the motion ((GL/px)**2, central
-        differences, as :func:`dicblur.sssig` and the campaigns compute it).
+        differences, as :func:`dicblur.sssig` and the campaigns compute it); NaN when
+        not asked for (``predict_from_pattern(..., sssig=False)``).
     valid_fraction : ndarray, shape (m,)
         Fraction of the subsets in the statistics (the rest break down: no texture left
         along the motion).
@@ -200,6 +202,7 @@ def _terms(
     max_shift: float,
     subpixel: float | str | None = None,
     min_contraction: float = 0.0,
+    sssig: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Per W: mean noise variance (shape (3, m): the reference and the current image's
     shares per GL**2, their interaction per GL**4), mismatch variance, SSSIG, valid
@@ -251,12 +254,18 @@ def _terms(
         mis_var = np.nanvar(np.where(ok, xis, np.nan), axis=2).mean(axis=0)
     dy, dx = unit_direction(motion)
     angle = math.degrees(math.atan2(dy, dx))
-    # SSSIG along the motion as dicblur.sssig and the campaigns compute it
+    held = ok & ((lams >= min_contraction).all(axis=0) if min_contraction > 0 else True)
+    frac = held.sum(axis=1) / xis.shape[2]
+    if not sssig:
+        return mean_var, mis_var, np.full(len(w), np.nan), frac
+    # SSSIG along the motion as dicblur.sssig and the campaigns compute it (one forward
+    # FFT of the image for all the blur lengths)
+    spec = image_spectrum(img, boundary) if np.any(w != 0) else None
     s = np.array(
         [
             float(
                 directional_sssig(
-                    img if wl == 0 else box_blurred(img, boundary, dy, dx, float(wl)),
+                    img if wl == 0 else box_blurred(img, boundary, dy, dx, float(wl), spec),
                     pts,
                     subset=subset,
                     angle=angle,
@@ -265,8 +274,7 @@ def _terms(
             for wl in w
         ]
     )
-    held = ok & ((lams >= min_contraction).all(axis=0) if min_contraction > 0 else True)
-    return mean_var, mis_var, s, held.sum(axis=1) / xis.shape[2]
+    return mean_var, mis_var, s, frac
 
 
 def predict_from_pattern(
@@ -285,6 +293,7 @@ def predict_from_pattern(
     subpixel: float | str | None = None,
     min_contraction: float = 0.1,
     settings: MatcherSettings | None = None,
+    sssig: bool = True,
 ) -> PatternPrediction:
     """Predict the DIC random error u_e(W) of a pattern from its static image alone.
 
@@ -327,6 +336,9 @@ def predict_from_pattern(
         The matcher's settings in one record (as the Correlator and the campaigns take
         them): its ``subset`` and ``step`` (unless given here), ``shape`` and
         ``interpolation`` (for ``derivative``) are used.
+    sssig : bool
+        Compute the SSSIG of the blurred image (default); ``False``: leave it NaN (a
+        caller that needs only the error terms: one blurred image less per W).
 
     Returns
     -------
@@ -354,7 +366,18 @@ def predict_from_pattern(
     lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
     w = as_blur(blur, "blur", increasing=False)
     mean_var, mis_var, s, frac = _terms(
-        img, w, pts, subset, motion, shape, derivative, boundary, max_shift, subpixel, lam_min
+        img,
+        w,
+        pts,
+        subset,
+        motion,
+        shape,
+        derivative,
+        boundary,
+        max_shift,
+        subpixel,
+        lam_min,
+        sssig=sssig,
     )
     broken = frac < BREAKDOWN_FRACTION
     breakdown = float(w[broken].min()) if broken.any() else None

@@ -41,8 +41,10 @@ ZNSSD projection it agrees within 0.5 % as W -> 0 (BENCHMARKS.md, models section
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Literal
 
 import numpy as np
@@ -60,6 +62,7 @@ from ..errors import InputError
 __all__ = [
     "box_blurred",
     "directional_derivatives",
+    "image_spectrum",
     "shifts_and_variance",
     "spectral_derivatives",
     "spline_gradients",
@@ -105,13 +108,20 @@ def _extend(image: NDArray[np.float64], boundary: Boundary) -> NDArray[np.float6
 
 
 def spectral_derivatives(
-    image: NDArray[np.float64], boundary: Boundary, dy: float, dx: float, blur: float | None = None
+    image: NDArray[np.float64],
+    boundary: Boundary,
+    dy: float,
+    dx: float,
+    blur: float | None = None,
+    spectrum: tuple[Any, tuple[int, int]] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Spectral ``(f_y, f_x, f_dd)``; with ``blur`` the centred box blur along ``(dy, dx)``
     of length ``blur`` px replaces ``f_dd`` (transfer ``sinc(blur * k.d)``, real: no shift).
+    ``spectrum``: ``_spectrum(image, boundary)`` computed before (the same numbers; one
+    forward FFT for the several blur lengths of a table).
     """
     rows, cols = image.shape
-    spec, shp = _spectrum(image, boundary)
+    spec, shp = _spectrum(image, boundary) if spectrum is None else spectrum
     fy_ = np.fft.fftfreq(shp[0])[:, None]
     fx_ = np.fft.rfftfreq(shp[1])[None, :]
     if blur is not None:
@@ -153,11 +163,23 @@ def _second(
 
 
 def box_blurred(
-    image: NDArray[np.float64], boundary: Boundary, dy: float, dx: float, blur: float
+    image: NDArray[np.float64],
+    boundary: Boundary,
+    dy: float,
+    dx: float,
+    blur: float,
+    spectrum: tuple[Any, tuple[int, int]] | None = None,
 ) -> NDArray[np.float64]:
     """``image`` blurred by the centred box of length ``blur`` px along the unit ``(dy, dx)``
-    (exact spectral blur, :func:`spectral_derivatives`), shape (rows, cols)."""
-    return spectral_derivatives(image, boundary, dy, dx, blur=blur)[0]
+    (exact spectral blur, :func:`spectral_derivatives`, whose ``spectrum`` it passes on),
+    shape (rows, cols)."""
+    return spectral_derivatives(image, boundary, dy, dx, blur=blur, spectrum=spectrum)[0]
+
+
+def image_spectrum(image: NDArray[np.float64], boundary: Boundary) -> tuple[Any, tuple[int, int]]:
+    """The spectrum :func:`box_blurred` takes to blur ``image`` by several lengths with one
+    forward FFT: ``rfft2`` of the image extended as ``boundary`` asks, and its shape."""
+    return _spectrum(image, boundary)
 
 
 def spline_gradients(
@@ -245,42 +267,6 @@ def _derivative_kernel(derivative: str, subset: int, tol: float = 1e-9) -> NDArr
     return np.asarray(d[n // 2 - lag : n // 2 + lag + 1])
 
 
-def _gradient_noise_fields(
-    r0: NDArray[np.float64],
-    subset: int,
-    shape: str,
-    ex: NDArray[np.float64],
-    ey: NDArray[np.float64],
-    kernel: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``D_k^T (S_k r0)`` of every steepest-descent column ``k``: the linear functional of
-    the reference noise ``n`` by which the noisy gradients move ``J_f^T r0``
-    (``delta J_f[:, k] = S_k D n``, ``D`` the spline derivative along x or y, ``S_k`` the
-    weight 1, dx or dy of the shape function). ``D^T`` spreads each field by the kernel's
-    half-length ``L`` along its axis (the gradients at the subset's pixels depend on noise
-    just outside it).
-
-    Returns the x-type fields, shape (m, S, S + 2L, kx), and the y-type fields, shape
-    (m, S + 2L, S, ky), in the column order of :meth:`_Windows.jacobian`.
-    """
-    m = len(r0)
-    size = subset
-    lag = len(kernel) // 2
-    r = r0.reshape(m, size, size)
-    if shape == "translation":
-        weights = [np.ones_like(ex)]
-    else:
-        weights = [np.ones_like(ex), ex, ey]
-    w3 = np.stack([(wt * np.ones((1, size * size))).reshape(size, size) for wt in weights])
-    # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
-    idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
-    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)], 0.0)
-    v = r[:, None, :, :] * w3[None]  # (m, k, S, S)
-    qx = np.matmul(v, tmat.T)  # along columns: (m, k, S, S + 2L)
-    qy = np.matmul(tmat, v)  # along rows: (m, k, S + 2L, S)
-    return np.moveaxis(qx, 1, -1), np.moveaxis(qy, 1, -1)
-
-
 def _reference_noise_middle(
     pf: NDArray[np.float64],
     ratio: NDArray[np.float64],
@@ -291,29 +277,69 @@ def _reference_noise_middle(
     ex: NDArray[np.float64],
     ey: NDArray[np.float64],
     kernel: NDArray[np.float64],
+    pf_gram: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """``M^T M`` of the reference noise's response ``A^-1 M^T n``, per unit noise variance:
     ``M = ratio P_f J_f + sigma_g Q`` with ``Q = [D_k^T (S_k r0)]`` (docs/models.md s. 4,
-    the complete noise term). Shape (m, k, k)."""
+    the complete noise term). Shape (m, k, k). ``pf_gram``: ``(P_f J_f)^T (P_f J_f)``
+    computed before (it does not depend on the blur).
+
+    ``Q[:, k] = D_k^T (S_k r0)`` is the linear functional of the reference noise ``n`` by
+    which the noisy gradients move ``J_f^T r0`` (``delta J_f[:, k] = S_k D n``, ``D`` the
+    spline derivative along x or y with impulse response ``kernel``, ``S_k`` the weight
+    1, dx or dy of the shape function; the columns in the order of
+    :meth:`_Windows.jacobian`). ``D^T`` spreads each field by the kernel's half-length
+    ``L`` along its axis (the gradients at the subset's pixels depend on noise just
+    outside it): with ``T`` (S + 2L, S) the spreading matrix, ``Q_k^T Q_l`` of two fields
+    spread along one axis is ``v_k^T (T^T T) v_l`` row by row (or column by column),
+    ``v_k = S_k r0`` (S, S), so the spread fields are never formed; on the subset's own
+    pixels (where x- and y-spread fields and ``P_f J_f`` meet them) ``Q`` is
+    ``T[L:L+S]`` applied to ``v_k``.
+    """
     m, npx, k = pf.shape
+    size = subset
     lag = len(kernel) // 2
-    qx, qy = _gradient_noise_fields(r0, subset, shape, ex, ey, kernel)
-    kx = qx.shape[-1]
-    sub_x = qx[:, :, lag : lag + subset, :].reshape(m, npx, kx)
-    sub_y = qy[:, lag : lag + subset, :, :].reshape(m, npx, k - kx)
-    q_sub = np.concatenate([sub_x, sub_y], axis=2)  # Q on the subset's own pixels
+    if shape == "translation":
+        weights = [np.ones_like(ex)]
+    else:
+        weights = [np.ones_like(ex), ex, ey]
+    kx = len(weights)  # x-type columns; as many y-type
+    w3 = np.stack([(wt * np.ones((1, npx))).reshape(size, size) for wt in weights])
+    # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
+    idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
+    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)], 0.0)
+    tt = tmat.T @ tmat  # (S, S): the spread fields' inner products
+    tsub = tmat[lag : lag + size]  # (S, S): the spread fields on the subset's pixels
+    v = r0.reshape(m, 1, size, size) * w3[None]  # (m, kx, S, S): S_k r0
+    vt = v.reshape(m, kx, npx).transpose(0, 2, 1)  # (m, P, kx)
     qq = np.empty((m, k, k))
-    fx = qx.reshape(m, -1, kx)
-    fy = qy.reshape(m, -1, k - kx)
-    qq[:, :kx, :kx] = _gram(fx, fx)
-    qq[:, kx:, kx:] = _gram(fy, fy)
-    xy = _gram(sub_x, sub_y)  # x- and y-spread fields overlap on the subset only
-    qq[:, :kx, kx:] = xy
+    qq[:, :kx, :kx] = np.matmul(np.matmul(v, tt).reshape(m, kx, npx), vt)  # along rows
+    qq[:, kx:, kx:] = np.matmul(np.matmul(tt, v).reshape(m, kx, npx), vt)  # along columns
+    q_sub = np.concatenate(
+        [np.matmul(v, tsub.T).reshape(m, kx, npx), np.matmul(tsub, v).reshape(m, kx, npx)],
+        axis=1,
+    )  # (m, k, P): Q on the subset's own pixels
+    xy = np.matmul(q_sub[:, :kx], q_sub[:, kx:].transpose(0, 2, 1))
+    qq[:, :kx, kx:] = xy  # x- and y-spread fields overlap on the subset only
     qq[:, kx:, :kx] = np.transpose(xy, (0, 2, 1))
-    cross = _gram(pf, q_sub)
+    cross = np.matmul(np.swapaxes(pf, 1, 2), q_sub.transpose(0, 2, 1))
     r = ratio[:, None, None]
     s = sg[:, None, None]
-    return r * r * _gram(pf, pf) + r * s * (cross + np.transpose(cross, (0, 2, 1))) + s * s * qq
+    gpf = _gram(pf, pf) if pf_gram is None else pf_gram
+    return r * r * gpf + r * s * (cross + np.transpose(cross, (0, 2, 1))) + s * s * qq
+
+
+def _on_threads(fn: Callable[[Any], Any], items: Iterable[Any], threads: int) -> None:
+    """``fn(item)`` for every item on ``threads`` threads (each writes its own part of the
+    outputs); the first exception raised is re-raised."""
+    items = list(items)
+    if threads <= 1 or len(items) <= 1:
+        for it in items:
+            fn(it)
+        return
+    with ThreadPoolExecutor(max_workers=min(threads, len(items))) as pool:
+        for _ in pool.map(fn, items):
+            pass
 
 
 def _check_derivative(derivative: str) -> None:
@@ -452,12 +478,24 @@ def _tdot(a: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]
 
 def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Batched ``a^-1 b``; NaN rows where ``a`` is singular (no gradient in the subset)."""
-    ok: NDArray[np.bool_] = np.asarray(np.isfinite(a).all(axis=(1, 2)) & np.isfinite(b).all(axis=1))
-    ok[ok] = np.linalg.cond(a[ok]) < 1e12
-    sol = np.full(b.shape, np.nan)
-    if ok.any():
-        sol[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
-    return sol
+    return _solve_each(a, [b])[0]
+
+
+def _solve_each(a: NDArray[np.float64], bs: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    """:func:`_solve` of one batch of matrices ``a`` for each right-hand side of ``bs``
+    (each (m, k)): the condition numbers (an SVD per matrix) computed once, each system
+    solved as :func:`_solve` solves it (the same numbers)."""
+    fin = np.isfinite(a).all(axis=(1, 2))
+    sing = np.ones(len(a), dtype=bool)  # singular or not finite
+    sing[fin] = ~(np.linalg.cond(a[fin]) < 1e12)
+    out = []
+    for b in bs:
+        ok = ~sing & np.isfinite(b).all(axis=1)
+        sol = np.full(b.shape, np.nan)
+        if ok.any():
+            sol[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
+        out.append(sol)
+    return out
 
 
 def _along(
@@ -791,27 +829,52 @@ def _blurred_subsets(
     blurred target is moved by it and seen through the matcher's B-spline interpolant
     (:func:`_interpolated_at`)."""
     dy, dx = unit_direction(motion)
-    fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    if derivative in ("bspline3", "bspline5"):  # the spline's gradients (f_dd not needed)
+        _extend(image[:1, :1], boundary)  # raises the boundary error
+        fy, fx = spline_gradients(image, derivative)
+    else:
+        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    spec = None  # the reference's spectrum, one forward FFT for all the blur lengths
     for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
-        if offset is not None:
-            g = image if wl == 0 else box_blurred(image, boundary, dy, dx, float(wl))
-            g, ggy, ggx = _interpolated_at(
-                g, boundary, offset * dy, offset * dx, 3 if derivative == "bspline3" else 5
-            )
-        elif wl == 0:
-            g, ggy, ggx = image, fy, fx
-        else:
-            g = box_blurred(image, boundary, dy, dx, float(wl))
-            if derivative in ("bspline3", "bspline5"):  # no spectral pass needed
-                ggy, ggx = spline_gradients(g, derivative)
-            else:
-                ggy, ggx, _ = directional_derivatives(
-                    g, motion, derivative=derivative, boundary=boundary
-                )
+        if wl != 0 and spec is None:
+            spec = image_spectrum(image, boundary)
+        g, ggy, ggx = _blurred_images(
+            image, float(wl), (dy, dx), (fy, fx), derivative, boundary, spec, offset
+        )
         win = _Windows(subset, fx, fy, ggx, ggy, image, g)
         for start in range(0, len(centres), chunk):
             ax, ay, bx, by, f, gg = win.take(centres[start : start + chunk])
             yield j, start, win.jacobian(ax, ay, shape), win.jacobian(bx, by, shape), f, gg
+
+
+def _blurred_images(
+    image: NDArray[np.float64],
+    blur: float,
+    direction: tuple[float, float],
+    grads: tuple[NDArray[np.float64], NDArray[np.float64]],
+    derivative: Derivative,
+    boundary: Boundary,
+    spec: tuple[Any, tuple[int, int]] | None,
+    offset: float | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``(g, g_y, g_x)``: ``image`` blurred by the centred box of length ``blur`` px along
+    the unit ``direction`` (dy, dx) and its matcher gradients (:func:`_blurred_subsets`;
+    ``grads`` = ``(f_y, f_x)`` of the sharp image, ``spec`` its spectrum
+    (:func:`image_spectrum`, needed when ``blur`` > 0))."""
+    dy, dx = direction
+    if offset is not None:
+        g = image if blur == 0 else box_blurred(image, boundary, dy, dx, blur, spec)
+        return _interpolated_at(
+            g, boundary, offset * dy, offset * dx, 3 if derivative == "bspline3" else 5
+        )
+    if blur == 0:
+        return image, grads[0], grads[1]
+    g = box_blurred(image, boundary, dy, dx, blur, spec)
+    if derivative in ("bspline3", "bspline5"):  # no spectral pass needed
+        ggy, ggx = spline_gradients(g, derivative)
+    else:
+        ggy, ggx, _ = directional_derivatives(g, (dy, dx), derivative=derivative, boundary=boundary)
+    return g, ggy, ggx
 
 
 def subset_noise_variance(
@@ -881,6 +944,7 @@ def subset_blur_response(
     max_shift: float = 1.0,
     chunk: int = 256,
     complete: bool = True,
+    threads: int = 1,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Blur-mismatch shift vector and noise covariance of each subset, along x and y.
 
@@ -906,6 +970,9 @@ def subset_blur_response(
         ``sigma**4`` interaction of the two noises), as ``predict_from_pattern``;
         ``False``: the first-order response to the reference's intensities only (the
         earlier formula, for comparisons).
+    threads : int
+        Threads sharing the chunks of ``chunk`` subsets (numpy and BLAS release the GIL;
+        each subset's numbers do not depend on it).
 
     Returns
     -------
@@ -949,13 +1016,25 @@ def subset_blur_response(
         kx = wts.shape[1]
         gmat[:kx, :kx] = r00 * (wts.T @ wts)
         gmat[kx:, kx:] = r00 * (wts.T @ wts)
-    for j, start, jf, jg, f, gg in _blurred_subsets(
-        image, w, centres, subset, (dy, dx), shape, derivative, boundary, chunk
-    ):
-        rows = slice(start, start + len(f))
-        fh, sf = _normalise(f)
-        gh, sg = _normalise(gg)
-        pf, pg = _project(jf, fh), _project(jf, gh)
+
+    def _response_chunk(
+        j: int,
+        rows: slice,
+        jf: NDArray[np.float64],
+        jg: NDArray[np.float64],
+        fh: NDArray[np.float64],
+        sf: NDArray[np.float64],
+        pf: NDArray[np.float64],
+        pf_gram: NDArray[np.float64],
+        gg: NDArray[np.float64],
+    ) -> None:
+        """The shift and covariances of the subsets ``rows`` at ``W = w[j]``."""
+        if w[j] == 0:  # g is f: its normalised subsets and projection are f's
+            gh, sg, pg, pg_gram = fh, sf, pf, pf_gram
+        else:
+            gh, sg = _normalise(gg)
+            pg = _project(jf, gh)
+            pg_gram = _gram(pg, pg)
         # J_f^T P_g J_g = (P_g J_f)^T J_g (P_g a symmetric projection: one _project less)
         cross = _gram(pg, jg)
         sol = None
@@ -976,18 +1055,59 @@ def subset_blur_response(
             jp -= gh * np.einsum("np,np->n", gh, jp)[:, None]
             r0 = fh - gh - jp / sg_ok[:, None]
             mid_ref = _reference_noise_middle(
-                pf, np.sqrt(ratio2), sg, r0, subset, shape, win.ex, win.ey, kernel
+                pf, np.sqrt(ratio2), sg, r0, subset, shape, win.ex, win.ey, kernel, pf_gram
             )
         else:
-            mid_ref = ratio2[:, None, None] * _gram(pf, pf)
-        mid = mid_ref + _gram(pg, pg)
+            mid_ref = ratio2[:, None, None] * pf_gram
+        mid = mid_ref + pg_gram
         at = np.transpose(cross, (0, 2, 1))
         z = np.stack(
-            [_solve(at, np.broadcast_to(e[c], (len(f), k)).copy()) for c in range(2)], axis=1
-        )  # (m, 2, k): A^T z_c = e_c
+            _solve_each(at, [np.broadcast_to(e[c], (len(gg), k)).copy() for c in range(2)]),
+            axis=1,
+        )  # (m, 2, k): A^T z_c = e_c (one condition number per subset for both)
         cov[j, rows] = np.einsum("nci,nij,ndj->ncd", z, mid, z)
         if kernel is not None:
             cov4[j, rows] = np.einsum("nci,ij,ndj->ncd", z, gmat, z)
+
+    if derivative in ("bspline3", "bspline5"):  # the spline's gradients (f_dd not needed)
+        _extend(image[:1, :1], boundary)  # raises the boundary error
+        grads = spline_gradients(image, derivative)
+    else:
+        fy_, fx_, _ = directional_derivatives(
+            image, (dy, dx), derivative=derivative, boundary=boundary
+        )
+        grads = (fy_, fx_)
+    spec = image_spectrum(image, boundary) if np.any(w != 0) else None
+    sharp = _Windows(subset, grads[1], grads[0], image)
+    # W nodes in groups whose blurred images (3 per node) fit in about 64 MB: each chunk
+    # of subsets then runs through a group's nodes with its sharp-image terms (J_f, the
+    # normalised f, P_f J_f and its Gram matrix: none depends on W) computed once
+    per_group = max(1, (64 << 20) // (3 * image.nbytes))
+
+    def prepare(j: int, out: dict[int, _Windows]) -> None:
+        g, ggy, ggx = _blurred_images(
+            image, float(w[j]), (dy, dx), grads, derivative, boundary, spec
+        )
+        out[j] = _Windows(subset, ggx, ggy, g)
+
+    def one(start: int, wins: dict[int, _Windows]) -> None:
+        cc = centres[start : start + chunk]
+        rows = slice(start, start + len(cc))
+        ax, ay, f = sharp.take(cc)
+        jf = sharp.jacobian(ax, ay, shape)
+        fh, sf = _normalise(f)
+        pf = _project(jf, fh)
+        pf_gram = _gram(pf, pf)
+        for j, win_j in wins.items():
+            bx, by, gg = win_j.take(cc)
+            _response_chunk(j, rows, jf, win_j.jacobian(bx, by, shape), fh, sf, pf, pf_gram, gg)
+
+    for g0 in range(0, len(w), per_group):
+        wins: dict[int, _Windows] = {}
+        group = range(g0, min(g0 + per_group, len(w)))
+        _on_threads(functools.partial(prepare, out=wins), group, threads)
+        wins = {j: wins[j] for j in group}  # in the order of the nodes
+        _on_threads(functools.partial(one, wins=wins), range(0, n, chunk), threads)
     return shift, cov, cov4
 
 
@@ -1001,6 +1121,7 @@ def subset_skew_coefficients(
     derivative: Derivative = "bspline3",
     boundary: Boundary = "reflect",
     chunk: int = 256,
+    threads: int = 1,
 ) -> NDArray[np.float64]:
     """Per-subset shift per unit third moment of the blur kernel, ``(u, v)`` px / px**3.
 
@@ -1011,7 +1132,8 @@ def subset_skew_coefficients(
     linearisation as the ``W**2 / 24`` term of :func:`subset_blur_coefficients`, which is
     ``kappa_2 / 2`` of a box). By parts ``sum f_d f_ddd = -sum f_dd**2``: the shift has
     the same sign in every subset, a common offset of the field. Returns the factor of
-    ``kappa_3``, shape (n, 2) (NaN: no gradient).
+    ``kappa_3``, shape (n, 2) (NaN: no gradient). ``threads``: threads sharing the
+    chunks of ``chunk`` subsets (the same numbers).
     """
     _check_shape(shape)
     _check_derivative(derivative)
@@ -1035,11 +1157,14 @@ def subset_skew_coefficients(
     win = _Windows(subset, fx, fy, fddd, image)
     out = np.full((len(centres), 2), np.nan)
     iv = 1 if shape == "translation" else 3
-    for start in range(0, len(centres), chunk):
+
+    def one(start: int) -> None:
         cc = centres[start : start + chunk]
         gx, gy, e3, f = win.take(cc)
         jp = _project(win.jacobian(gx, gy, shape), _normalise(f)[0])
         sol = _solve(_gram(jp, jp), _tdot(jp, e3)) / 6.0
         out[start : start + len(cc), 0] = sol[:, 0]
         out[start : start + len(cc), 1] = sol[:, iv]
+
+    _on_threads(one, range(0, len(centres), chunk), threads)
     return out

@@ -98,6 +98,7 @@ def static_error_curve(
         points=points,
         motion=motion,
         shape=shape,  # type: ignore[arg-type]
+        sssig=False,  # not used here
     )
     assert pred.u_noise_reference is not None and pred.u_noise_current is not None
     assert pred.u_noise_interaction is not None

@@ -1056,6 +1056,25 @@ def _by_runs(
     return a, b
 
 
+def _polar(wu: NDArray[Any], wv: NDArray[Any], threads: int) -> tuple[NDArray[Any], NDArray[Any]]:
+    """Blur length ``W`` (px) and direction (deg in [0, 180), from +x towards +y: a
+    centred box blur is the same both ways) of the blur vectors ``(wu, wv)`` (frames,
+    points; the dtype of theirs), in blocks of frames on ``threads`` threads (numpy's
+    loops release the GIL)."""
+    w = np.empty(wu.shape, np.result_type(wu, wv))
+    ang = np.empty_like(w)
+
+    def one(b: NDArray[np.intp]) -> None:
+        r = slice(int(b[0]), int(b[-1]) + 1)
+        np.hypot(wu[r], wv[r], out=w[r])
+        a = np.degrees(np.arctan2(wv[r], wu[r]))
+        np.mod(a, 180.0, out=ang[r])
+
+    if wu.size:
+        _blocks(one, np.arange(wu.shape[0]), 128, threads)
+    return w, ang
+
+
 def _prefetch_xarray() -> threading.Thread | None:
     """Import xarray and what its first Dataset imports (pandas, dask's arrays: about
     0.8 CPU-s in a fresh process) on a side thread while the post-processing runs, off
@@ -1155,8 +1174,7 @@ def _assemble(
         )
     good = conv & ~outlier & ~low_zncc
     wu, wv = motion(good)
-    w = np.hypot(wu, wv)
-    ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
+    w, ang = _polar(wu, wv, threads)
     # static range: check for motion (it inflates the pairwise-difference noise)
     if st_range is not None:
         sel = (frames >= st_range[0]) & (frames < st_range[1])
@@ -1192,16 +1210,19 @@ def _assemble(
     sig: dict[str, NDArray[np.float32]] = {}
     importing: threading.Thread | None = None
     blur_dom = np.full(n_f, np.nan)
+    levels: NDArray[np.float64] | None = None  # of the subsets inside, once known
     t0 = time.perf_counter()
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
+        # all points inside (the usual grid): plain slices, no fancy-indexed copies
+        cols: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin
         table = blur_table(
             ref_img,
             centres[pin],
             subset=corr.subset,
             shape=corr.shape,
-            blur=np.where(good[:, pin], w[:, pin], np.nan),
-            angle=ang[:, pin],
+            blur=np.where(good[:, cols], w[:, cols], np.nan),
+            angle=ang[:, cols],
             threads=threads,
         )
         settings["blur_table_time_s"] = time.perf_counter() - t0
@@ -1213,35 +1234,32 @@ def _assemble(
         # recording's memory (issue 17: < 1 GB for 2,000 frames of 1 Mpx)
         sig = nan_fields()
         levels = subset_levels(ref_img, centres[pin], corr.subset)
-        nv = noise.variance(levels)[None, :]
+        nv = noise.variance(levels)
 
-        # all points inside (the usual grid): plain slices, no fancy-indexed copies
-        cols: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin
+        outs = tuple(sig[k] for k in names)
 
         def predict(rows: NDArray[np.intp] | None = None) -> None:
-            def one(b: NDArray[np.intp]) -> None:  # frame blocks: bounded temporaries
-                fb: slice | NDArray[np.intp] = b
-                if b.size and b[-1] - b[0] + 1 == b.size:  # consecutive frames
-                    fb = slice(int(b[0]), int(b[-1]) + 1)
-                look = table.lookup(w[fb][:, cols], ang[fb][:, cols])  # NaN: blur unknown
-                su_n, sv_n = table.noise_std(look, nv)
-                ix = (fb, cols) if isinstance(fb, slice) else np.ix_(b, pin)
-                sig["sigma_u_noise"][ix] = su_n
-                sig["sigma_v_noise"][ix] = sv_n
-                sig["sigma_u_blur"][ix] = np.abs(look[..., 0])
-                sig["sigma_v_blur"][ix] = np.abs(look[..., 1])
+            def one(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+                table.predict_into(w, ang, nv, b, pin, outs)  # NaN: blur unknown
 
             _blocks(one, np.arange(n_f) if rows is None else rows, 128, threads)
 
         predict()
         if gshape is not None:
-            s_max = np.fmax(
-                np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"]),
-                np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"]),
-            )
+            s_max = np.empty((n_f, n_p), np.float32)
+
+            def largest(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+                r = slice(int(b[0]), int(b[-1]) + 1)
+                np.fmax(
+                    np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r]),
+                    np.hypot(sig["sigma_v_noise"][r], sig["sigma_v_blur"][r]),
+                    out=s_max[r],
+                )
+                s_max[r][~good[r]] = np.nan
+
+            _blocks(largest, np.arange(n_f), 128, threads)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                s_max[~good] = np.nan  # in place: s_max is a temporary
                 eps_k = 2.0 * _nanmedian_last(s_max, overwrite=True)
             del s_max
             eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
@@ -1265,9 +1283,8 @@ def _assemble(
                 good = conv & ~outlier & ~low_zncc
                 wu, wv = motion(good)
                 w_old, ang_old = w, ang
-                w = np.hypot(wu, wv)
-                ang = np.mod(np.degrees(np.arctan2(wv, wu)), 180.0)
-                w_in = np.where(good[:, pin], w[:, pin], np.nan)
+                w, ang = _polar(wu, wv, threads)
+                w_in = np.where(good[:, cols], w[:, cols], np.nan)
                 if np.any(w_in > table.blur[-1]):
                     # the new blur reaches past the table's last node: add the nodes
                     # (the computed ones are kept) and predict every frame
@@ -1277,7 +1294,7 @@ def _assemble(
                         subset=corr.subset,
                         shape=corr.shape,
                         blur=w_in,
-                        angle=ang[:, pin],
+                        angle=ang[:, cols],
                         have=table,
                         threads=threads,
                     )
@@ -1306,23 +1323,36 @@ def _assemble(
             for c in ("u", "v"):
                 carry = np.hypot(sig[f"sigma_{c}_noise"][j], sig[f"sigma_{c}_blur"][j])
                 sig[f"sigma_{c}_noise"][i] = np.hypot(sig[f"sigma_{c}_noise"][i], carry)
-    sigma_u = np.hypot(sig["sigma_u_noise"], sig["sigma_u_blur"])
-    sigma_v = np.hypot(sig["sigma_v_noise"], sig["sigma_v_blur"])
+    sigma_u = np.empty((n_f, n_p), np.float32)
+    sigma_v = np.empty((n_f, n_p), np.float32)
+    valid = np.empty((n_f, n_p), bool)
+    cnt = np.zeros(n_f, np.intp)
+    n_dom = np.zeros(n_f, np.intp)
     outlier |= low_zncc
-    valid = good & np.isfinite(sigma_u) & np.isfinite(sigma_v) & np.isfinite(w)
+
+    def totals(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+        r = slice(int(b[0]), int(b[-1]) + 1)
+        np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r], out=sigma_u[r])
+        np.hypot(sig["sigma_v_noise"][r], sig["sigma_v_blur"][r], out=sigma_v[r])
+        valid[r] = good[r] & np.isfinite(sigma_u[r]) & np.isfinite(sigma_v[r]) & np.isfinite(w[r])
+        with np.errstate(invalid="ignore"):
+            dom = np.hypot(sig["sigma_u_blur"][r], sig["sigma_v_blur"][r]) > np.hypot(
+                sig["sigma_u_noise"][r], sig["sigma_v_noise"][r]
+            )
+        cnt[r] = valid[r].sum(axis=1)
+        n_dom[r] = (dom & valid[r]).sum(axis=1)
+
+    if n_f:
+        _blocks(totals, np.arange(n_f), 128, threads)
     with np.errstate(invalid="ignore"):
-        dom = np.hypot(sig["sigma_u_blur"], sig["sigma_v_blur"]) > np.hypot(
-            sig["sigma_u_noise"], sig["sigma_v_noise"]
-        )
-        cnt = valid.sum(axis=1)
-        blur_dom = np.where(cnt > 0, (dom & valid).sum(axis=1) / np.maximum(cnt, 1), np.nan)
+        blur_dom = np.where(cnt > 0, n_dom / np.maximum(cnt, 1), np.nan)
     # the exposure advice needs only the final blur and valid points: on threads > 1 it
     # runs on a side thread beside the skew table and the bias (both mostly serial)
     want_advice = bool(advice and noise is not None and valid.any())
     adv_out: dict[str, Any] = {}
 
     def run_advice() -> None:
-        assert noise is not None
+        assert noise is not None and levels is not None
         t_adv = time.perf_counter()
         try:
             adv_out["advice"] = advise_exposure(
@@ -1333,7 +1363,7 @@ def _assemble(
                 exposure=t_exp,
                 fps=fps,
                 noise=noise,
-                level=float(np.median(subset_levels(ref_img, centres[inside], corr.subset))),
+                level=float(np.median(levels)),
                 subset=corr.subset,
                 shape=corr.shape,
                 bit_depth=rec.bit_depth,
@@ -1354,25 +1384,28 @@ def _assemble(
     bias: NDArray[np.float32] | None = None
     if noise is not None and inside.any() and runs:
         pin = np.flatnonzero(inside)
-        k3, axis = _by_runs(exposure_skew, runs, n_f, u, v, good, **kin)
+        # beside the advice's thread: one core each (the advice, about as long as the
+        # skew, no longer waits for a core after the skew's threads are done)
+        skew_threads = threads if side is None else max(1, threads - 1)
+        k3, axis = _by_runs(
+            exposure_skew, runs, n_f, u, v, good, **{**kin, "threads": skew_threads}
+        )
         at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
-        k3, axis = k3[:, at], axis[:, at]
         skew = build_skew_table(
             ref_img,
             centres[pin],
             subset=corr.subset,
             shape=corr.shape,
-            axis=axis,
-            kappa3=k3,
-            threads=threads,
+            axis=axis[:, at],
+            kappa3=k3[:, at],
+            threads=skew_threads,
         )
         skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
 
         def one_bias(b: NDArray[np.intp]) -> None:
-            r = slice(b[0], b[-1] + 1)
-            skew_bias[r, at] = skew.bias(k3[r], axis[r])
+            skew.bias_into(k3, axis, b, pin, skew_bias)
 
-        _blocks(one_bias, np.arange(n_f), 128, threads)
+        _blocks(one_bias, np.arange(n_f), 128, skew_threads)
         del k3, axis
     if bias is None:
         bias = np.full((n_f, n_p, 2), np.nan, np.float32)

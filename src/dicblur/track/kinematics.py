@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -122,8 +123,7 @@ def exposure_motion(
     half_window : int
         Frames each side in the local fit (see :func:`blur_weights`).
     block : int
-        Points per pass (the stencils of a pass take frames x (2 h + 1) x block x 8 bytes
-        per component).
+        Frames per pass (the passes are shared by the threads).
     threads : int
         Threads running the passes (the same result on any number).
     valid : array_like of bool, shape (frames, points), optional
@@ -145,24 +145,53 @@ def exposure_motion(
             f"{uu.shape} and {vv.shape}"
         )
     starts, wts = _rise_weights(uu.shape[0], exposure * fps, half_window)
-    idx = starts[:, None] + np.arange(wts.shape[1])[None, :]  # (frames, width)
-    ok = None if valid is None else np.asarray(valid, dtype=bool)
+    ok = np.ones((0, 0), bool) if valid is None else np.ascontiguousarray(valid, dtype=bool)
     out = (np.empty(uu.shape, dtype), np.empty(vv.shape, dtype))
+    uu, vv = np.ascontiguousarray(uu), np.ascontiguousarray(vv)
 
-    def one(a: int) -> None:
-        b = slice(a, a + block)
-        ub, vb = uu[:, b], vv[:, b]
-        if ok is not None:
-            ub, vb = np.where(ok[:, b], ub, np.nan), np.where(ok[:, b], vb, np.nan)
-        su, sv = ub[idx], vb[idx]  # (frames, width, block)
-        # a gap anywhere in a frame's stencil leaves its blur unknown (filling the gap by
-        # interpolation in time under-estimates fast motion by several px)
-        complete = (np.isfinite(su) & np.isfinite(sv)).all(axis=1)
-        for o, st in zip(out, (su, sv), strict=True):
-            o[:, b] = np.where(complete, np.einsum("fw,fwn->fn", wts, np.nan_to_num(st)), np.nan)
+    def one(a: int) -> None:  # a block of frames: the threads write their own rows
+        _rise_rows(uu, vv, ok, starts, wts, a, min(a + block, uu.shape[0]), *out)
 
-    each(one, range(0, uu.shape[1], block), threads)
+    each(one, range(0, uu.shape[0], max(1, block)), threads)
     return out
+
+
+@nb.njit(cache=True, nogil=True)
+def _rise_rows(
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    ok: NDArray[np.bool_],
+    starts: NDArray[np.intp],
+    wts: NDArray[np.float64],
+    f0: int,
+    f1: int,
+    wu: NDArray[np.floating[Any]],
+    wv: NDArray[np.floating[Any]],
+) -> None:
+    """:func:`exposure_motion` of frames ``f0 .. f1 - 1``: the rise weights ``wts[f]`` of
+    each frame's stencil (from ``starts[f]``) applied to the samples, NaN where one of them
+    is missing (not finite, or not ``ok``; ``ok`` of size 0: all are)."""
+    width = wts.shape[1]
+    n = u.shape[1]
+    masked = ok.size > 0
+    for f in range(f0, f1):
+        s = starts[f]
+        for p in range(n):
+            au = 0.0
+            av = 0.0
+            complete = True
+            for k in range(width):
+                x = u[s + k, p]
+                y = v[s + k, p]
+                # a gap anywhere in a frame's stencil leaves its blur unknown (filling the
+                # gap by interpolation in time under-estimates fast motion by several px)
+                if not (np.isfinite(x) and np.isfinite(y)) or (masked and not ok[s + k, p]):
+                    complete = False
+                    break
+                au += wts[f, k] * x
+                av += wts[f, k] * y
+            wu[f, p] = au if complete else np.nan
+            wv[f, p] = av if complete else np.nan
 
 
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(12)
@@ -209,7 +238,7 @@ def exposure_skew(
     direction, also where the path folds back at a turning point) the third central
     moment ``kappa_3`` (px**3) measures how skewed the kernel is (0 at constant speed).
     ``valid`` (bool, shape of ``u``) marks the samples to use, as in
-    :func:`exposure_motion`.
+    :func:`exposure_motion`; ``block`` frames per pass (default 64) share ``threads``.
 
     Returns
     -------
@@ -225,35 +254,95 @@ def exposure_skew(
         nan = np.full(uu.shape, np.nan, np.float32)
         return nan, nan.copy()
     starts, wts = _node_weights(n_f, exposure * fps, half_window)
-    width = wts.shape[2]
-    gw = 0.5 * _WEIGHTS
-    if block is None:
-        # frames per block: about 2**19 node positions (4 MB) per temporary, a dozen of
-        # them per thread (a 2,000-frame 2,601-point recording: 16 frames, not all 2,000)
-        block = max(1, (1 << 19) // (_NODES.size * max(n_p, 1)))
-    k3 = np.full((n_f, n_p), np.nan, np.float32)
-    axis = np.full((n_f, n_p), np.nan, np.float32)
-    ok = None if valid is None else np.asarray(valid, dtype=bool)
+    gw = 0.5 * _WEIGHTS  # Gauss-Legendre weights of the mean over the window
+    step = 64 if block is None else max(1, block)
+    k3 = np.empty((n_f, n_p), np.float32)
+    axis = np.empty((n_f, n_p), np.float32)
+    ok = np.ones((0, 0), bool) if valid is None else np.ascontiguousarray(valid, dtype=bool)
+    uu, vv = np.ascontiguousarray(uu), np.ascontiguousarray(vv)
 
-    def one(a: int) -> None:
-        b = np.arange(a, min(a + block, n_f))
-        idx = starts[b][:, None] + np.arange(width)[None, :]  # (B, width)
-        ub, vb = uu[idx], vv[idx]  # (B, width, points)
-        if ok is not None:
-            m = ok[idx]
-            ub, vb = np.where(m, ub, np.nan), np.where(m, vb, np.nan)
-        # batched matrix products (BLAS) instead of einsum's loops
-        xs = np.matmul(wts[b], ub)  # (B, G, n) positions along x
-        ys = np.matmul(wts[b], vb)
-        xs -= np.matmul(gw, xs)[:, None]
-        ys -= np.matmul(gw, ys)[:, None]
-        cxx = np.matmul(gw, xs * xs)
-        cyy = np.matmul(gw, ys * ys)
-        cxy = np.matmul(gw, xs * ys)
-        th = 0.5 * np.arctan2(2 * cxy, cxx - cyy)
-        s = xs * np.cos(th)[:, None] + ys * np.sin(th)[:, None]
-        k3[b] = np.matmul(gw, s * s * s)
-        axis[b] = np.mod(np.degrees(th), 180.0)
+    def one(a: int) -> None:  # a block of frames: the threads write their own rows
+        _skew_rows(uu, vv, ok, starts, wts, gw, a, min(a + step, n_f), k3, axis)
 
-    each(one, range(0, n_f, block), threads)
+    each(one, range(0, n_f, step), threads)
     return k3, axis
+
+
+@nb.njit(cache=True, nogil=True)
+def _skew_rows(
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    ok: NDArray[np.bool_],
+    starts: NDArray[np.intp],
+    wts: NDArray[np.float64],
+    gw: NDArray[np.float64],
+    f0: int,
+    f1: int,
+    k3: NDArray[np.float32],
+    axis: NDArray[np.float32],
+) -> None:
+    """:func:`exposure_skew` of frames ``f0 .. f1 - 1``: the positions at the Gauss nodes
+    (weights ``wts[f]`` (G, width) on the stencil from ``starts[f]``), centred on their
+    mean (weights ``gw``); the principal axis of their second moments and the third
+    moment along it. NaN where a sample is missing (not finite, or not ``ok``; ``ok`` of
+    size 0: all are)."""
+    n_g, width = wts.shape[1], wts.shape[2]
+    n = u.shape[1]
+    masked = ok.size > 0
+    # (G, points) work rows of a block of points: the loops over the points are the inner
+    # ones (vector units), the block stays in the cache
+    blk = min(n, 256)
+    xs = np.empty((n_g, blk))
+    ys = np.empty((n_g, blk))
+    acc = np.empty((6, blk))  # mean x, mean y, cxx, cyy, cxy, third moment
+    for f in range(f0, f1):
+        s = starts[f]
+        for p0 in range(0, n, blk):
+            m = min(blk, n - p0)
+            acc[:] = 0.0
+            for g in range(n_g):
+                x = xs[g]
+                y = ys[g]
+                x[:] = 0.0
+                y[:] = 0.0
+                for k in range(width):
+                    wk = wts[f, g, k]
+                    uk = u[s + k, p0 : p0 + m]
+                    vk = v[s + k, p0 : p0 + m]
+                    for p in range(m):
+                        x[p] += wk * uk[p]
+                        y[p] += wk * vk[p]
+                for p in range(m):
+                    acc[0, p] += gw[g] * x[p]
+                    acc[1, p] += gw[g] * y[p]
+            for g in range(n_g):
+                x = xs[g]
+                y = ys[g]
+                for p in range(m):
+                    x[p] -= acc[0, p]
+                    y[p] -= acc[1, p]
+                    acc[2, p] += gw[g] * (x[p] * x[p])
+                    acc[3, p] += gw[g] * (y[p] * y[p])
+                    acc[4, p] += gw[g] * (x[p] * y[p])
+            for p in range(m):
+                th = 0.5 * np.arctan2(2 * acc[4, p], acc[2, p] - acc[3, p])
+                acc[0, p] = np.cos(th)
+                acc[1, p] = np.sin(th)
+                deg = np.fmod(th * (180.0 / np.pi), 180.0)  # then as np.mod: in [0, 180)
+                axis[f, p0 + p] = deg + 180.0 if deg < 0.0 else deg
+            for g in range(n_g):
+                x = xs[g]
+                y = ys[g]
+                for p in range(m):
+                    q = x[p] * acc[0, p] + y[p] * acc[1, p]
+                    acc[5, p] += gw[g] * (q * q * q)
+            for p in range(m):
+                k3[f, p0 + p] = acc[5, p]
+        for p in range(n):
+            for k in range(width):
+                if not (np.isfinite(u[s + k, p]) and np.isfinite(v[s + k, p])) or (
+                    masked and not ok[s + k, p]
+                ):
+                    k3[f, p] = np.nan
+                    axis[f, p] = np.nan
+                    break

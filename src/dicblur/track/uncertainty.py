@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
@@ -90,65 +91,220 @@ class BlurTable:
     ) -> NDArray[np.float64]:
         """Interpolated ``values`` at ``w`` (px) and ``angle`` (deg), both shape (frames,
         points); returns shape (frames, points, 6) (NaN where ``w`` is NaN or beyond the
-        table)."""
-        n = w.shape[1]
-        a = self.angles.size
-        wq = np.where(np.isfinite(w), w, 0.0)
-        # linear in W**2 between the nodes
-        s2 = wq**2
-        b2 = self.blur**2
-        i1 = np.clip(np.searchsorted(b2, s2, side="right"), 1, b2.size - 1)
-        i0 = i1 - 1
-        tw = np.clip((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0, 1.0)[..., None]
-        th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - self.angles[0], 180.0) / ANGLE_STEP
-        j0 = np.floor(th).astype(np.intp) % a
-        j1 = (j0 + 1) % a
-        ta = th - np.floor(th)
-        # a missing node: use the nearest computed one
-        near = self._nearest()
-        both = self.available[j0] & self.available[j1]
-        k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
-        k1 = np.where(both, j1, k0)
-        ta = np.where(both, ta, 0.0)[..., None]
-        m = self.blur.size
-        flat = self.values.reshape(-1, self.values.shape[-1])  # (a * m * n, 6)
-        p = np.arange(n)
+        table). Linear in ``W**2`` between the W nodes, then linear between the two
+        direction nodes around ``angle`` (a missing node: the nearest computed one alone),
+        :func:`_interpolate`."""
+        ww, aa = _samples(w, angle)
+        n = ww.shape[1]
+        out = np.empty((*ww.shape, 6))
+        if out.size:
+            _lookup_rows(*self._kernel_args(), ww, aa, np.arange(n), out.reshape(-1, n, 6))
+        return out
 
-        def at(j: NDArray[np.intp]) -> NDArray[np.float64]:
-            # one gather per node through flat row indices (fancy indexing of a 4-d
-            # array with three index arrays is several times slower)
-            lo = np.take(flat, (j * m + i0) * n + p, axis=0)
-            hi = np.take(flat, (j * m + i1) * n + p, axis=0)
-            # lo + tw (hi - lo) in place in the gathered copy (no temporaries)
-            np.subtract(hi, lo, out=hi)
-            np.multiply(hi, tw, out=hi)
-            np.add(hi, lo, out=hi)
-            return hi
+    def predict_into(
+        self,
+        w: NDArray[np.floating[Any]],
+        angle: NDArray[np.floating[Any]],
+        variance: NDArray[np.float64],
+        rows: NDArray[np.intp],
+        cols: NDArray[np.intp],
+        out: tuple[NDArray[np.float32], ...],
+    ) -> None:
+        """The four sigma parts of the frames ``rows`` written in place, from the
+        interpolated values (:meth:`lookup`, without its (frames, points, 6) float64
+        copy): ``out = (sigma_u_noise, sigma_v_noise, sigma_u_blur, sigma_v_blur)``, each
+        float32 of shape (frames, all points), px; table point ``q`` is column ``cols[q]``.
 
-        out = at(k0)
-        if both.any():  # a single direction node (a 1-d motion): nothing to interpolate
-            out += ta * (at(k1) - out)
-        out[~np.isfinite(w) | (w > self.blur[-1] + 1e-9)] = np.nan
-        return np.asarray(out)
+        The noise parts are ``sqrt(sigma**2 c + sigma**4 c4)`` (the complete noise term,
+        module docstring) at the noise variance ``variance[q]`` (GL**2, shape (n,)); the
+        blur parts are ``|xi_u|``, ``|xi_v|``; NaN where the blur ``w[f, cols[q]]`` (px) is
+        NaN or beyond the table. ``w``, ``angle`` (deg): shape (frames, all points). Runs
+        without the GIL (frame blocks on threads write their own rows)."""
+        ww, aa = _samples(w, angle)
+        var = np.ascontiguousarray(variance, np.float64).ravel()
+        if var.size != len(cols) or len(cols) != self.values.shape[2]:
+            raise InputError(
+                f"variance, cols: one per table point ({self.values.shape[2]}), got "
+                f"{var.size} and {len(cols)}"
+            )
+        _sigma_rows(
+            *self._kernel_args(),
+            ww,
+            aa,
+            var,
+            np.asarray(rows, np.intp),
+            np.asarray(cols, np.intp),
+            *out,
+        )
 
-    @staticmethod
-    def noise_std(
-        look: NDArray[np.float64], variance: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Noise parts ``(sigma_u, sigma_v)`` (px) of looked-up values ``look`` (..., 6) at
-        the noise variance ``variance`` (GL**2, broadcast against ``look[..., 0]``):
-        ``sqrt(sigma**2 c + sigma**4 c4)`` (the complete noise term)."""
-        v = np.asarray(variance, dtype=np.float64)
-        su = np.sqrt(v * look[..., 2] + v * v * look[..., 4])
-        sv = np.sqrt(v * look[..., 3] + v * v * look[..., 5])
-        return su, sv
+    def _kernel_args(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, NDArray[np.intp]]:
+        """The table as :func:`_interpolate` takes it."""
+        return (
+            np.ascontiguousarray(self.values, np.float64),
+            np.ascontiguousarray(self.blur, np.float64) ** 2,
+            float(self.blur[-1]),
+            float(self.angles[0]),
+            np.where(self.available, np.arange(self.angles.size), -1).astype(np.intp),
+        )
 
-    def _nearest(self) -> NDArray[np.intp]:
-        a = self.angles.size
-        idx = np.flatnonzero(self.available)
-        d = np.abs(np.arange(a)[:, None] - idx[None, :])
-        d = np.minimum(d, a - d)
-        return np.asarray(idx[np.argmin(d, axis=1)], dtype=np.intp)
+
+def _samples(
+    w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
+) -> tuple[NDArray[np.floating[Any]], NDArray[np.floating[Any]]]:
+    """``w``, ``angle`` as C-contiguous 2-d float arrays of one shape (float32 stays
+    float32: :func:`_interpolate` squares ``w`` in its own precision, as the table's
+    lookup always has)."""
+    ww = np.asarray(w)
+    aa = np.asarray(angle)
+    if ww.dtype.kind != "f":
+        ww = ww.astype(np.float64)
+    if aa.dtype.kind != "f":
+        aa = aa.astype(np.float64)
+    if ww.ndim != 2 or ww.shape != aa.shape:
+        raise InputError(
+            f"w, angle: expected two (frames, points) arrays of one shape, got {ww.shape} "
+            f"and {aa.shape}"
+        )
+    return np.ascontiguousarray(ww), np.ascontiguousarray(aa)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _direction_pair(
+    angle: float, phase: float, node: NDArray[np.intp]
+) -> tuple[int, int, float, bool]:
+    """The direction nodes ``phase + k ANGLE_STEP`` (deg) around ``angle`` (deg; NaN: 0)
+    and the fraction of the way from the first to the second: ``(j0, j1, t, True)`` when
+    both were computed (``node[k]`` is ``k``, else -1), else ``(k, k, 0, False)`` with
+    ``k`` the computed node nearest to the nearer of the two (the first of two at one
+    distance around the circle)."""
+    a = node.size
+    t = (angle if np.isfinite(angle) else 0.0) - phase
+    # np.mod(t, 180): fmod, then the sign of the divisor; without the (slow) fmod call
+    # over the usual range, where the subtraction is exact (Sterbenz) and the same value
+    if 180.0 <= t < 360.0:
+        t -= 180.0
+    elif not 0.0 <= t < 180.0:
+        t = np.fmod(t, 180.0)
+        if t < 0.0:
+            t += 180.0
+    th = t / ANGLE_STEP
+    fl = math.floor(th)
+    j0 = int(fl) % a
+    j1 = (j0 + 1) % a
+    ta = th - fl
+    if node[j0] >= 0 and node[j1] >= 0:
+        return j0, j1, ta, True
+    j = j0 if ta < 0.5 else j1
+    best = a
+    k0 = j
+    for k in range(a):
+        if node[k] >= 0:
+            d = abs(k - j)
+            d = min(d, a - d)
+            if d < best:
+                best = d
+                k0 = k
+    return k0, k0, 0.0, False
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _interpolate(
+    values: NDArray[np.float64],
+    b2: NDArray[np.float64],
+    w_top: float,
+    phase: float,
+    node: NDArray[np.intp],
+    w: float,
+    angle: float,
+    q: int,
+    buf: NDArray[np.float64],
+) -> None:
+    """The 6 table values of point ``q`` at blur ``w`` (px) along ``angle`` (deg) into
+    ``buf``: linear in ``W**2`` between the W nodes (squares ``b2``; the mismatch shift's
+    leading order is ``k W**2``, module docstring), then linear between the direction
+    nodes ``phase + k ANGLE_STEP`` around ``angle`` when both were computed (``node[k]``
+    is ``k``, else -1), else the computed node nearest ``angle`` alone; NaN where ``w`` is
+    NaN or beyond the last node ``w_top``. The operations in the order of the earlier
+    numpy lookup (the same numbers)."""
+    nv = values.shape[3]
+    if not (np.isfinite(w) and w <= w_top + 1e-9):
+        for c in range(nv):
+            buf[c] = np.nan
+        return
+    s2 = w * w  # in w's own precision
+    m = b2.size
+    i1 = 0
+    while i1 < m and b2[i1] <= s2:  # searchsorted(b2, s2, side="right")
+        i1 += 1
+    i1 = min(max(i1, 1), m - 1)
+    i0 = i1 - 1
+    tw = min(max((s2 - b2[i0]) / (b2[i1] - b2[i0]), 0.0), 1.0)
+    j0, j1, ta, both = _direction_pair(angle, phase, node)
+    for c in range(nv):
+        lo = values[j0, i0, q, c]
+        hi = values[j0, i1, q, c]
+        o = (hi - lo) * tw + lo
+        if both:
+            lo = values[j1, i0, q, c]
+            hi = values[j1, i1, q, c]
+            o = o + ta * ((hi - lo) * tw + lo - o)
+        buf[c] = o
+
+
+@nb.njit(cache=True, nogil=True)
+def _lookup_rows(
+    values: NDArray[np.float64],
+    b2: NDArray[np.float64],
+    w_top: float,
+    phase: float,
+    node: NDArray[np.intp],
+    w: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    cols: NDArray[np.intp],
+    out: NDArray[np.float64],
+) -> None:
+    """:func:`_interpolate` of every frame of ``w``, ``angle`` (frames, points) and table
+    point ``q`` (column ``cols[q]``) into ``out`` (frames, n, 6)."""
+    for f in range(w.shape[0]):
+        for q in range(cols.size):
+            _interpolate(
+                values, b2, w_top, phase, node, w[f, cols[q]], angle[f, cols[q]], q, out[f, q]
+            )
+
+
+@nb.njit(cache=True, nogil=True)
+def _sigma_rows(
+    values: NDArray[np.float64],
+    b2: NDArray[np.float64],
+    w_top: float,
+    phase: float,
+    node: NDArray[np.intp],
+    w: NDArray[np.floating[Any]],
+    angle: NDArray[np.floating[Any]],
+    variance: NDArray[np.float64],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    su_n: NDArray[np.float32],
+    sv_n: NDArray[np.float32],
+    su_b: NDArray[np.float32],
+    sv_b: NDArray[np.float32],
+) -> None:
+    """:meth:`BlurTable.predict_into`: per frame ``rows[i]`` and table point ``q``, the
+    interpolated values (:func:`_interpolate`) into the noise parts
+    ``sqrt(v c + v**2 c4)`` and the blur parts ``|xi|`` (float32)."""
+    buf = np.empty(values.shape[3])
+    for i in range(rows.size):
+        f = rows[i]
+        for q in range(cols.size):
+            p = cols[q]
+            _interpolate(values, b2, w_top, phase, node, w[f, p], angle[f, p], q, buf)
+            v = variance[q]
+            su_n[f, p] = np.sqrt(v * buf[2] + v * v * buf[4])
+            sv_n[f, p] = np.sqrt(v * buf[3] + v * v * buf[5])
+            su_b[f, p] = abs(buf[0])
+            sv_b[f, p] = abs(buf[1])
 
 
 # samples per block of :func:`direction_nodes` (a few MB of temporaries per block)
@@ -171,68 +327,130 @@ def direction_nodes(
     it; the node of the dominant direction when no sample has ``blur >= min_blur``.
     ``threads``: threads sharing the blocks of samples (the same result on any number)."""
     a = round(180.0 / ANGLE_STEP)
-    # in blocks of the flattened samples: a long recording has millions (frames x points)
-    # and whole-array float64 temporaries cost hundreds of MB (issue 17's memory target)
-    w_all = np.asarray(blur).ravel()
-    t_all = np.asarray(angle).ravel()
-    starts = range(0, w_all.size, _SAMPLE_BLOCK)
+    # one compiled pass per block of the flattened samples (a long recording has millions,
+    # frames x points: no float64 temporaries), blocks on the threads, their sums added in
+    # block order: the same result on any number of threads
+    w_all = np.ravel(blur)
+    t_all = np.ravel(angle)
+    if w_all.dtype.kind != "f":
+        w_all = w_all.astype(np.float64)
+    if t_all.dtype.kind != "f":
+        t_all = t_all.astype(np.float64)
+    starts = list(range(0, w_all.size, _SAMPLE_BLOCK))
+    sums = np.zeros((len(starts), 5))
 
-    def block(i: int, which: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        w = w_all[i : i + _SAMPLE_BLOCK].astype(np.float64)
-        t = t_all[i : i + _SAMPLE_BLOCK].astype(np.float64)
-        keep = np.isfinite(w) & np.isfinite(t)
-        if which == "big":
-            keep &= w >= min_blur
-        return w[keep], t[keep]
+    def scan(k: int) -> None:
+        i = starts[k]
+        _direction_sums(
+            w_all[i : i + _SAMPLE_BLOCK], t_all[i : i + _SAMPLE_BLOCK], min_blur, sums[k]
+        )
 
-    has_big = any(block(i, "big")[0].size for i in starts)
-    use = "big" if has_big else "finite"
-    sums: dict[int, tuple[float, float]] = {}
-
-    def dominant(i: int) -> None:
-        ww, tt = block(i, use)
-        if ww.size:
-            r2 = np.deg2rad(2.0 * tt)
-            wt = ww + 1e-12
-            sums[i] = (float(np.dot(wt, np.cos(r2))), float(np.dot(wt, np.sin(r2))))
-
-    each(dominant, starts, threads)
+    each(scan, range(len(starts)), threads)
+    has_big = bool(sums[:, 0].sum() > 0)
     c = s = 0.0
-    for i in starts:  # summed in block order: the same sums on any number of threads
-        if i in sums:
-            c += sums[i][0]
-            s += sums[i][1]
+    for k in range(len(starts)):  # in block order
+        c += sums[k, 1 if has_big else 3]
+        s += sums[k, 2 if has_big else 4]
     dom = (math.degrees(math.atan2(s, c)) / 2.0) % 180.0 if (c or s) else 0.0
     phase = dom % ANGLE_STEP
     angles = phase + np.arange(a, dtype=np.float64) * ANGLE_STEP
     need = np.zeros(a, bool)
     if has_big:
-        found: list[NDArray[np.bool_]] = []
+        hits = np.zeros((len(starts), a), bool)
 
-        def needed(i: int) -> None:
-            ww, tt = block(i, "big")
-            th = np.mod(tt - phase, 180.0) / ANGLE_STEP
-            near = np.rint(th)
-            y = np.deg2rad((th - near) * ANGLE_STEP)  # within 7.5 deg
-            x = np.abs(y)
-            # |x| - |x|**3 / 6 <= |sin x| <= |x|: the sine only where the bounds (with a
-            # margin for rounding) leave the test open, so the same flags as with it
-            lo = ww * (x - x * x * x / 6.0)
-            one = ww * x <= tolerance * (1.0 - 1e-9)
-            open_ = ~one & (lo < tolerance * (1.0 + 1e-9))
-            one[open_] = ww[open_] * np.abs(np.sin(y[open_])) <= tolerance
-            hit = np.bincount(near[one].astype(np.intp) % a, minlength=a) > 0
-            lo_n = np.flatnonzero(np.bincount(np.floor(th[~one]).astype(np.intp) % a, minlength=a))
-            hit[lo_n] = True
-            hit[(lo_n + 1) % a] = True
-            found.append(hit)
+        def needed(k: int) -> None:
+            i = starts[k]
+            _direction_hits(
+                w_all[i : i + _SAMPLE_BLOCK],
+                t_all[i : i + _SAMPLE_BLOCK],
+                min_blur,
+                phase,
+                tolerance,
+                hits[k],
+            )
 
-        each(needed, starts, threads)
-        for hit in found:
-            need |= hit
+        each(needed, range(len(starts)), threads)
+        need = np.asarray(hits.any(axis=0))
     else:
         need[round((dom - phase) / ANGLE_STEP) % a] = True
     return angles, need
+
+
+@nb.njit(cache=True, nogil=True)
+def _direction_sums(
+    w: NDArray[np.floating[Any]],
+    t: NDArray[np.floating[Any]],
+    min_blur: float,
+    out: NDArray[np.float64],
+) -> None:
+    """:func:`direction_nodes`' pass 1 over samples ``w``, ``t`` (deg): ``out`` = (count
+    with ``w >= min_blur``, their ``sum (w + 1e-12) cos 2t``, ``... sin 2t``, the same two
+    sums over all finite samples); NaN in either: left out."""
+    n_big = 0.0
+    cb = sb = cf = sf = 0.0
+    for i in range(w.size):
+        wi = np.float64(w[i])
+        ti = np.float64(t[i])
+        if not (np.isfinite(wi) and np.isfinite(ti)):
+            continue
+        r2 = (2.0 * ti) * (np.pi / 180.0)
+        wt = wi + 1e-12  # a direction of zero blur still counts when nothing moves
+        cw = wt * np.cos(r2)
+        sw = wt * np.sin(r2)
+        cf += cw
+        sf += sw
+        if wi >= min_blur:
+            n_big += 1.0
+            cb += cw
+            sb += sw
+    out[0] = n_big
+    out[1] = cb
+    out[2] = sb
+    out[3] = cf
+    out[4] = sf
+
+
+@nb.njit(cache=True, nogil=True)
+def _direction_hits(
+    w: NDArray[np.floating[Any]],
+    t: NDArray[np.floating[Any]],
+    min_blur: float,
+    phase: float,
+    tolerance: float,
+    hit: NDArray[np.bool_],
+) -> None:
+    """:func:`direction_nodes`' pass 2: the direction nodes ``phase + k ANGLE_STEP`` that
+    the samples with ``w >= min_blur`` need (``hit[k]`` set): the nearest node alone when
+    the blur across it, ``w |sin(t - node)|``, is at most ``tolerance``, else the two
+    around ``t``."""
+    a = hit.size
+    for i in range(w.size):
+        wi = np.float64(w[i])
+        ti = np.float64(t[i])
+        if not (np.isfinite(wi) and np.isfinite(ti) and wi >= min_blur):
+            continue
+        x = ti - phase  # np.mod(x, 180): fmod, then the sign of the divisor
+        if 180.0 <= x < 360.0:
+            x -= 180.0
+        elif not 0.0 <= x < 180.0:
+            x = np.fmod(x, 180.0)
+            if x < 0.0:
+                x += 180.0
+        th = x / ANGLE_STEP
+        near = np.rint(th)
+        y = ((th - near) * ANGLE_STEP) * (np.pi / 180.0)  # within 7.5 deg
+        ay = abs(y)
+        # |y| - |y|**3 / 6 <= |sin y| <= |y|: the sine only where the bounds (with a
+        # margin for rounding) leave the test open
+        one = wi * ay <= tolerance * (1.0 - 1e-9)
+        if not one and wi * (ay - ay * ay * ay / 6.0) < tolerance * (1.0 + 1e-9):
+            one = wi * abs(np.sin(y)) <= tolerance
+        if one:
+            hit[int(near) % a] = True
+        else:
+            lo = int(np.floor(th)) % a
+            hit[lo] = True
+            hit[(lo + 1) % a] = True
 
 
 def table_nodes(
@@ -310,8 +528,8 @@ def build_blur_table(
         only the missing ones computed (the second pass of :func:`~dicblur.track.track`,
         whose blur may reach a little further).
     threads : int
-        Threads computing the nodes at the same time (each W node on its own: the same
-        values on any number of threads).
+        Threads sharing the chunks of subsets of each node (each subset computed alone:
+        the same values on any number of threads).
     """
     nodes, angles, need, have = reused_nodes(
         blur, angle, min_blur=min_blur, have=have, threads=threads
@@ -320,31 +538,30 @@ def build_blur_table(
     values = np.full((a, nodes.size, len(centres), 6), np.nan)
     # W = 0 (no blur, no direction) is the same for every direction: computed once
     zero = None if have is None else have.values[np.flatnonzero(have.available)[0], :1]
-    jobs: list[tuple[int, NDArray[np.intp]]] = []  # (direction node, W nodes)
     for j in np.flatnonzero(need):
         start = 0
         if have is not None and have.available[j]:
             start = have.blur.size
             values[j, :start] = have.values[j]
         todo = np.arange(start, nodes.size)
-        if todo.size and todo[0] == 0 and (zero is not None or jobs):
+        if todo.size and todo[0] == 0 and (zero is not None or j != np.flatnonzero(need)[0]):
             todo = todo[1:]  # copied from the first direction's W = 0 below
-        # W nodes split over the threads (each computed alone: the same values)
-        jobs += [(int(j), t) for t in np.array_split(todo, max(1, min(threads, todo.size)))]
-
-    def run(job: tuple[int, NDArray[np.intp]]) -> None:
-        j, todo = job
         if todo.size:
+            # the subsets' chunks on the threads (each computed alone: the same values)
             values[j, todo] = _response(
-                reference, nodes[todo], centres, subset, shape, angles[j], complete
+                reference, nodes[todo], centres, subset, shape, angles[j], complete, threads
             )
-
-    each(run, jobs, threads)
     if zero is None:
         zero = values[np.flatnonzero(need)[0], :1]
     for j in np.flatnonzero(need):
         values[j, 0] = zero[0]
     return BlurTable(blur=nodes, angles=angles, available=need, values=values)
+
+
+# subsets per pass of the response: (64, 441, 6) float64 steepest-descent images (1.4 MB)
+# stay in the cache (256: 8-12 % more CPU on the benchmark's 2,401 affine subsets); each
+# subset's numbers do not depend on it
+_CHUNK = 64
 
 
 def _response(
@@ -355,9 +572,11 @@ def _response(
     shape: str,
     angle: float,
     complete: bool,
+    threads: int = 1,
 ) -> NDArray[np.float64]:
     """``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)`` of every point at the blur lengths
-    ``nodes`` along ``angle`` (deg), shape (m, n, 6)."""
+    ``nodes`` along ``angle`` (deg), shape (m, n, 6), the chunks of subsets on
+    ``threads`` threads."""
     t = math.radians(angle)
     shift, cov, cov4 = subset_blur_response(
         reference,
@@ -368,6 +587,8 @@ def _response(
         shape=shape,  # type: ignore[arg-type]
         max_shift=1.0,
         complete=complete,
+        chunk=_CHUNK,
+        threads=threads,
     )
     out = np.empty((nodes.size, len(centres), 6))
     out[..., 0:2] = shift
@@ -501,37 +722,6 @@ def subset_levels(
     return np.where(np.isfinite(lv), lv, reference.mean())
 
 
-def _angle_interp(
-    values: NDArray[np.float64],
-    available: NDArray[np.bool_],
-    angle: NDArray[np.floating[Any]],
-    phase: float = 0.0,
-) -> NDArray[np.float64]:
-    """``values`` (a, n, c) on the direction nodes ``phase + k ANGLE_STEP``, linearly
-    interpolated at ``angle`` (frames, n) deg; a missing node is replaced by the nearest
-    computed one."""
-    a = values.shape[0]
-    n = angle.shape[1]
-    th = np.mod(np.where(np.isfinite(angle), angle, 0.0) - phase, 180.0) / ANGLE_STEP
-    j0 = np.floor(th).astype(np.intp) % a
-    j1 = (j0 + 1) % a
-    ta = th - np.floor(th)
-    idx = np.flatnonzero(available)
-    d = np.abs(np.arange(a)[:, None] - idx[None, :])
-    near = idx[np.argmin(np.minimum(d, a - d), axis=1)]
-    both = available[j0] & available[j1]
-    k0 = np.where(both, j0, near[np.where(ta < 0.5, j0, j1)])
-    k1 = np.where(both, j1, k0)
-    ta = np.where(both, ta, 0.0)[..., None]
-    # one gather per node through flat row indices (as BlurTable.lookup: indexing the
-    # 3-d array with two index arrays is several times slower)
-    flat = values.reshape(a * n, -1)
-    p = np.arange(n)
-    v0 = np.take(flat, k0 * n + p, axis=0)
-    v1 = np.take(flat, k1 * n + p, axis=0)
-    return np.asarray((1 - ta) * v0 + ta * v1)
-
-
 @dataclass(frozen=True)
 class SkewTable:
     """Per-point shift per unit third moment of the blur kernel on direction nodes.
@@ -544,13 +734,58 @@ class SkewTable:
     available: NDArray[np.bool_]
     values: NDArray[np.float64]
 
-    def bias(
-        self, kappa3: NDArray[np.floating[Any]], axis: NDArray[np.floating[Any]]
-    ) -> NDArray[np.float64]:
-        """Predicted shift ``(u, v)`` (frames, points, 2), px, of kernels with third
-        moment ``kappa3`` (px**3) along ``axis`` (deg)."""
-        q = _angle_interp(self.values, self.available, axis, float(self.angles[0]))
-        return np.asarray(q * np.where(np.isfinite(kappa3), kappa3, np.nan)[..., None])
+    def bias_into(
+        self,
+        kappa3: NDArray[np.floating[Any]],
+        axis: NDArray[np.floating[Any]],
+        rows: NDArray[np.intp],
+        cols: NDArray[np.intp],
+        out: NDArray[np.float32],
+    ) -> None:
+        """Predicted shift ``(u, v)`` (px) of kernels with third moment ``kappa3``
+        (px**3) along ``axis`` (deg), both shape (frames, all points), written into
+        ``out`` (frames, all points, 2) float32 at the frames ``rows``; table point ``q``
+        is column ``cols[q]``. The coefficients are linear between the two direction nodes
+        around ``axis`` (the nearest computed node alone when one is missing); NaN where
+        ``kappa3`` is not finite. Runs without the GIL (frame blocks on threads)."""
+        k3, ax = _samples(kappa3, axis)
+        if len(cols) != self.values.shape[1]:
+            raise InputError(f"cols: one per table point ({self.values.shape[1]}), got {len(cols)}")
+        node = np.where(self.available, np.arange(self.angles.size), -1).astype(np.intp)
+        _bias_rows(
+            np.ascontiguousarray(self.values, np.float64),
+            float(self.angles[0]),
+            node,
+            k3,
+            ax,
+            np.asarray(rows, np.intp),
+            np.asarray(cols, np.intp),
+            out,
+        )
+
+
+@nb.njit(cache=True, nogil=True)
+def _bias_rows(
+    values: NDArray[np.float64],
+    phase: float,
+    node: NDArray[np.intp],
+    kappa3: NDArray[np.floating[Any]],
+    axis: NDArray[np.floating[Any]],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    out: NDArray[np.float32],
+) -> None:
+    """:meth:`SkewTable.bias_into`: ``((1 - t) c_j0 + t c_j1) kappa3`` per frame
+    ``rows[i]`` and table point ``q`` (:func:`_direction_pair`)."""
+    for i in range(rows.size):
+        f = rows[i]
+        for q in range(cols.size):
+            p = cols[q]
+            j0, j1, ta, _ = _direction_pair(axis[f, p], phase, node)
+            k = kappa3[f, p]
+            k = k if np.isfinite(k) else np.nan
+            for c in range(2):
+                out[f, p, c] = ((1 - ta) * values[j0, q, c] + ta * values[j1, q, c]) * k
 
 
 def build_skew_table(
@@ -566,8 +801,8 @@ def build_skew_table(
 ) -> SkewTable:
     """Compute the skew coefficients at the direction nodes of the axes whose
     ``|kappa3|`` exceeds ``min_fraction`` of the largest (:func:`direction_nodes`, weights
-    ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across; on
-    ``threads`` threads)."""
+    ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across); the
+    nodes and the chunks of subsets on ``threads`` threads."""
     from ..models.sensitivity import subset_skew_coefficients
 
     ok = np.isfinite(kappa3) & np.isfinite(axis)
@@ -586,5 +821,7 @@ def build_skew_table(
             subset,
             motion=(math.sin(t), math.cos(t)),
             shape=shape,  # type: ignore[arg-type]
+            chunk=_CHUNK,
+            threads=threads,
         )
     return SkewTable(angles=angles, available=need, values=values)

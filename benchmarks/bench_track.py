@@ -400,6 +400,7 @@ def speed(
         "load_start": load0,
         "load_end": os.getloadavg()[0],
         "valid_share": float(ds["valid"].values.mean()),
+        "tolerance_px": float(ds.attrs.get("tolerance", float("nan"))),
     }
     print(
         f"speed {out['size']}^2 x {n_frames} frames, {n_p} POIs ({shape}, {workers} "

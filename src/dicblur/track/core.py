@@ -43,6 +43,7 @@ from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
+from .grid import smooth_on_grid
 from .kinematics import exposure_motion, exposure_skew
 from .median import median_critical_eps
 from .threads import each
@@ -208,70 +209,6 @@ class _Tracked:
     zncc: list[NDArray[np.float64]]
     status: list[NDArray[np.uint8]]
     fallback: list[bool]
-
-
-def smooth_on_grid(
-    values: NDArray[np.float64], grid: tuple[int, int], cells: NDArray[np.intp]
-) -> NDArray[np.float64]:
-    """Each point's value of the least-squares plane through the finite ``values`` of its
-    3 x 3 neighbourhood on the POI grid.
-
-    Inside the grid this is the neighbourhood's mean (the random error of one value / 3);
-    at the edges and next to missing points the plane keeps it exact for a linear field
-    (a mean there would be off by a third of the field's change over a grid step).
-    Where the neighbours do not span a plane (fewer than three, or all on one line): their
-    mean; NaN where there is none.
-
-    Parameters
-    ----------
-    values : ndarray, shape (n, k)
-        Values of the n points (non-finite: missing).
-    grid : (int, int)
-        Rows and columns of the POI grid.
-    cells : ndarray of int, shape (n,)
-        Row-major grid cell of each point.
-
-    Returns
-    -------
-    ndarray, shape (n, k)
-    """
-    n_cells = grid[0] * grid[1]
-    k = values.shape[1]
-    ok = np.isfinite(values).all(axis=1)
-    # channel 0 the weights, 1.. the values, on the grid with a margin of one empty cell
-    a = np.zeros((1 + k, grid[0] + 2, grid[1] + 2))
-    r, c = np.divmod(cells[ok], grid[1])
-    a[0, r + 1, c + 1] = 1.0
-    a[1:, r + 1, c + 1] = values[ok].T
-    # separable 3-tap sums (R) and differences (D, the offset -1, 0, +1) along x, then y
-    rx = a[:, :, :-2] + a[:, :, 1:-1] + a[:, :, 2:]
-    dxa = a[:, :, 2:] - a[:, :, :-2]
-    s_all = rx[:, :-2] + rx[:, 1:-1] + rx[:, 2:]  # sum of weights / values
-    x_all = dxa[:, :-2] + dxa[:, 1:-1] + dxa[:, 2:]  # sum of dx * (weight / value)
-    y_all = rx[:, 2:] - rx[:, :-2]  # sum of dy * (weight / value)
-    w = a[0]
-    ex = w[:, :-2] + w[:, 2:]  # weights of the neighbours with dx = +-1
-    sxx = ex[:-2] + ex[1:-1] + ex[2:]
-    syy = s_all[0] - (rx[0, 1:-1])  # the rows dy = +-1
-    sxy = dxa[0, 2:] - dxa[0, :-2]
-    s0, sx, sy = s_all[0], x_all[0], y_all[0]
-    b0 = np.moveaxis(s_all[1:], 0, -1)
-    bx = np.moveaxis(x_all[1:], 0, -1)
-    by = np.moveaxis(y_all[1:], 0, -1)
-    # a0 of the normal equations [[s0 sx sy] [sx sxx sxy] [sy sxy syy]] a = b, by the
-    # first row of the cofactors (the matrix is symmetric)
-    c0 = sxx * syy - sxy * sxy
-    c1 = sy * sxy - sx * syy
-    c2 = sx * sxy - sxx * sy
-    det = s0 * c0 + sx * c1 + sy * c2
-    plane = (s0 >= 3) & (np.abs(det) > 1e-6)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        a0 = (c0[..., None] * b0 + c1[..., None] * bx + c2[..., None] * by) / np.where(
-            plane, det, 1.0
-        )[..., None]
-        mean = b0 / np.where(s0 > 0, s0, np.nan)[..., None]
-    out = np.where(plane[..., None], a0, mean)
-    return np.asarray(out.reshape(n_cells, k)[cells])
 
 
 def _extrapolate(

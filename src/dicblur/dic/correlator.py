@@ -382,6 +382,53 @@ class Correlator:
         #: Timings (s) of the last :meth:`correlate` call: prefilter, initial, icgn, total.
         self.last_timings: dict[str, float] = {}
 
+    def fork(self, *, workers: int | _Unset | None = _UNSET) -> Correlator:
+        """A Correlator on this one's prepared reference, with its own scratch state, for
+        another thread.
+
+        The prepared reference (B-spline gradients, per-subset Hessians, POIs, predicted
+        errors) is read-only after ``__init__`` and shared, not copied; the fork gets its
+        own coefficient buffer (``correlate`` of an unprepared image writes it), its own
+        caches and timings. So this Correlator and its forks may correlate on different
+        threads at the same time, each with exactly the results of a Correlator built
+        anew with the same arguments (tests/test_dic.py). A fork costs about 1 MB and a
+        few microseconds (a 512^2 reference with 2,401 POIs takes ~0.3 s to prepare).
+
+        Parameters
+        ----------
+        workers : int or None, optional
+            Threads of the fork's compiled kernels (default: this Correlator's).
+
+        Returns
+        -------
+        Correlator
+
+        Examples
+        --------
+        >>> import numpy as np, dicblur
+        >>> ref = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=1)
+        >>> corr = dicblur.Correlator(ref, subset=21, step=20)
+        >>> one = corr.fork(workers=1)  # e.g. one per thread of a pool
+        >>> bool(np.array_equal(one.correlate(ref).u, corr.correlate(ref).u))
+        True
+        """
+        t0 = time.perf_counter()
+        new = object.__new__(Correlator)
+        new.__dict__.update(self.__dict__)
+        if workers is not _UNSET:
+            new.workers = None if workers is None else check_integer(workers, "workers", 1)
+        # the mutable state: scratch buffer, caches (their entries are read-only and keyed
+        # by the shared index arrays, so they are carried over), timings, blur references
+        new._coef_buf = np.zeros_like(self._coef_buf)
+        new._args_cache = dict(self._args_cache)
+        new._split_cache = dict(self._split_cache)
+        new._split_ids = set(self._split_ids)
+        new._blur_cache = OrderedDict()
+        new._last_blur_length = None
+        new.last_timings = {}
+        new.prepare_time_s = time.perf_counter() - t0
+        return new
+
     # ------------------------------------------------------------------ setup helpers
     def _points(
         self, roi: Sequence[int] | None, points: ArrayLike | None

@@ -675,7 +675,8 @@ def track(
         # only the IMPRECISE test: no residual screening (max_residual=None)
         opts.update(noise_sigma=level, max_residual=None, max_predicted_sigma=limit)
     corr0 = Correlator(ref_img, roi=roi, points=points, **opts)
-    seeds0 = seeds = seed_correlator(ref_img, corr0, opts)
+    # the serial loop's seeds (the chunks make theirs: track.parallel)
+    seeds0 = seeds = None if chunks is not None else seed_correlator(ref_img, corr0, opts)
     # the last frame's displacement gradients (affine: the next frame's start)
     grads: NDArray[np.float64] | None = None
     grads0: NDArray[np.float64] | None = None

@@ -894,6 +894,30 @@ def test_smooth_on_grid_equals_the_numpy_reference_bit_for_bit(k):
         assert got.shape == (cells.size, k)
 
 
+def test_fill_with_median_equals_numpy_median_bit_for_bit():
+    # values[~ok] = np.median(values[ok], axis=0): odd and even counts (the mean of the
+    # two middle values), ties, one good row, all good, NaN in the rows being filled
+    from dicblur.track.grid import fill_with_median
+
+    rng = np.random.default_rng(7)
+    for n, k in ((1, 1), (2, 4), (3, 2), (10, 4), (2401, 4), (500, 2)):
+        for share in (0.0, 0.3, 0.97):
+            vals = rng.normal(0, 1e-3, (n, k))
+            vals[:, 0] = np.round(vals[:, 0], 4)  # ties
+            ok = rng.random(n) >= share
+            ok[rng.integers(n)] = True
+            vals[~ok & (rng.random(n) < 0.5)] = np.nan
+            want = vals.copy()
+            want[~ok] = np.median(vals[ok], axis=0)
+            got = vals.copy()
+            fill_with_median(got, ok)
+            np.testing.assert_array_equal(got, want)
+    with pytest.raises(ValueError, match="at least one"):
+        fill_with_median(np.zeros((3, 2)), np.zeros(3, bool))
+    with pytest.raises(ValueError, match="contiguous"):
+        fill_with_median(np.zeros((3, 4))[:, :2], np.ones(3, bool))
+
+
 def test_guess_extrapolates_the_smoothed_increment():
     # issue 17: the quadratic extrapolation 3 u1 - 3 u2 + u3 multiplies each point's
     # random error by 4.4; with the POI grid the increment is smoothed over 3 x 3

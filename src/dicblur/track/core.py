@@ -43,7 +43,7 @@ from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
-from .grid import smooth_on_grid
+from .grid import fill_with_median, smooth_on_grid
 from .kinematics import exposure_motion, exposure_skew
 from .median import median_critical_eps
 from .threads import each
@@ -234,11 +234,10 @@ def _extrapolate(
         if grid is not None:
             inc = smooth_on_grid(inc, *grid)
         g = us[-1] + inc
-    bad = ~np.isfinite(g).all(axis=1)
-    if bad.all():
+    good = np.asarray(np.isfinite(g).all(axis=1))
+    if not good.any():
         return None
-    if bad.any():
-        g[bad] = np.median(g[~bad], axis=0)
+    fill_with_median(g, good)
     return g
 
 
@@ -402,8 +401,8 @@ def frame_gradients(res: _FrameResult) -> NDArray[np.float64] | None:
     ok = (res.status == PointStatus.CONVERGED) & np.isfinite(res.params).all(axis=1)
     if not ok.any():
         return None
-    g = res.params[:, [1, 2, 4, 5]].copy()
-    g[~ok] = np.median(g[ok], axis=0)
+    g = res.params.take([1, 2, 4, 5], axis=1)  # a C-contiguous copy
+    fill_with_median(g, ok)
     return g
 
 
@@ -423,7 +422,8 @@ def correlate_frame(
         return _FrameResult(r.u, r.v, r.zncc, r.status, r.params), True
     res = corr.correlate(img, initial=_start(corr, guess, grads))
     # a subset that leaves the frame (the target moved it out) is no reason to restart
-    failed = ~np.isin(res.status, (PointStatus.CONVERGED, PointStatus.OUT_OF_BOUNDS)) & ok0
+    st = res.status
+    failed = (st != PointStatus.CONVERGED) & (st != PointStatus.OUT_OF_BOUNDS) & ok0
     if failed.sum() <= FALLBACK_SHARE * max(int(ok0.sum()), 1):
         return _FrameResult(res.u, res.v, res.zncc, res.status, res.params), False
     alt = corr.correlate(img)

@@ -14,7 +14,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from enum import Enum
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numba
 import numpy as np
@@ -131,6 +131,25 @@ class PreparedImage:
     image: NDArray[np.float64]
     coefficients: NDArray[np.float32]
     order: int
+
+
+class Refined(NamedTuple):
+    """IC-GN results of :meth:`Correlator.refine` (n POIs, k shape parameters).
+
+    Attributes
+    ----------
+    params : ndarray, shape (n, k)
+        As :attr:`DICResult.params` (px; affine gradients dimensionless).
+    zncc : ndarray, shape (n,)
+    iterations : ndarray of int64, shape (n,)
+    status : ndarray of uint8, shape (n,)
+        :class:`PointStatus` codes.
+    """
+
+    params: NDArray[np.float64]
+    zncc: NDArray[np.float64]
+    iterations: NDArray[np.int64]
+    status: NDArray[np.uint8]
 
 
 class Correlator:
@@ -798,6 +817,74 @@ class Correlator:
         finally:
             numba.set_num_threads(old_threads)
 
+    def _check_prepared(self, current: PreparedImage) -> None:
+        if (
+            current.image.shape != self.image_shape
+            or current.coefficients.shape != self._coef_buf.shape
+            or current.order != self.order
+        ):
+            raise InputError(
+                f"current: a PreparedImage of a {current.image.shape} image "
+                f"(interpolation order {current.order}) does not fit this Correlator "
+                f"({self.image_shape}, order {self.order}, subset {self.subset}); "
+                "prepare it with this Correlator's prefilter()"
+            )
+
+    def refine(self, current: PreparedImage, start: ArrayLike) -> Refined:
+        """IC-GN of every POI from ``start`` on a prefiltered image: the numbers of
+        ``correlate(current, initial=start)`` without building a :class:`DICResult`.
+
+        For loops over many frames (``dicblur track`` runs it twice per frame: the seed
+        points, then all points), where the result's copies and metadata cost more than
+        the few POIs' IC-GN. The statuses are screened as by :meth:`correlate`
+        (``HIGH_RESIDUAL``, ``OUTLIER``, ``IMPRECISE``).
+
+        Parameters
+        ----------
+        current : PreparedImage
+            The :meth:`prefilter` of the deformed image by a Correlator of this layout.
+        start : array_like, shape (n, 2) or, affine, (n, 6)
+            Finite initial ``(u, v)`` px per POI, or all affine parameters (as
+            :attr:`DICResult.params`).
+
+        Returns
+        -------
+        Refined
+            ``params`` (n, k), ``zncc`` (n,), ``iterations`` (n,) int64, ``status`` (n,)
+            uint8, as the :class:`DICResult` of :meth:`correlate`.
+
+        Raises
+        ------
+        InputError
+            With blur compensation (use :meth:`correlate`), a PreparedImage of another
+            layout, or a ``start`` of another shape or with non-finite values.
+        """
+        if self.blur != "none":
+            raise InputError(
+                f"refine: this Correlator has blur={self.blur!r}; use correlate() with "
+                "its blur_vector"
+            )
+        if not isinstance(current, PreparedImage):
+            raise InputError(
+                f"current={describe(current)}: expected the PreparedImage of this "
+                "Correlator's prefilter()"
+            )
+        self._check_prepared(current)
+        n, k = self.n_points, N_PARAMS[self.shape]
+        p0 = np.asarray(start, dtype=np.float64)
+        if p0.shape == (n, 2) and k != 2:
+            p0 = self._guess_to_params(p0[:, 0], p0[:, 1])
+        if p0.shape != (n, k) or not np.isfinite(p0).all():
+            raise InputError(
+                f"start={describe(p0)}: expected finite (u, v) px, shape ({n}, 2)"
+                + ("" if k == 2 else f", or the {k} affine parameters, shape ({n}, {k})")
+            )
+        coef = current.coefficients
+        with self._kernel_threads():
+            p, z, it, st = self._run_icgn(coef, p0, self._status0)
+            self._flag(coef, p, z, st)
+        return Refined(p, z, it, st)
+
     def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
         cur = as_image(current, "current", min_size=3)
         if cur.shape != self.image_shape:
@@ -846,17 +933,7 @@ class Correlator:
         """
         coef: NDArray[np.float32] | None = None
         if isinstance(current, PreparedImage):
-            if (
-                current.image.shape != self.image_shape
-                or current.coefficients.shape != self._coef_buf.shape
-                or current.order != self.order
-            ):
-                raise InputError(
-                    f"current: a PreparedImage of a {current.image.shape} image "
-                    f"(interpolation order {current.order}) does not fit this Correlator "
-                    f"({self.image_shape}, order {self.order}, subset {self.subset}); "
-                    "prepare it with this Correlator's prefilter()"
-                )
+            self._check_prepared(current)
             cur, coef = current.image, current.coefficients
         else:
             cur = self._checked(current)
@@ -942,12 +1019,7 @@ class Correlator:
         if method == "fftcc":
             self._retry(cur, coef, gu, gv, p, z, it, st)
         t4 = time.perf_counter()
-        noise_var = self._screen(coef, p, z, st)
-        if self._imprecise is not None:
-            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
-            # cause, so it gets that status too
-            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
-            st[done & self._imprecise] = PointStatus.IMPRECISE
+        noise_var = self._flag(coef, p, z, st)
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,
@@ -978,6 +1050,23 @@ class Correlator:
             else self.predicted_sigma_v.copy(),
             info=info,
         )
+
+    def _flag(
+        self,
+        coef: NDArray[np.float32],
+        p: NDArray[np.float64],
+        z: NDArray[np.float64],
+        st: NDArray[np.uint8],
+    ) -> float | None:
+        """The statuses after IC-GN, in place: :meth:`_screen`, then ``IMPRECISE``;
+        returns the screen's noise variance (or None)."""
+        noise_var = self._screen(coef, p, z, st)
+        if self._imprecise is not None:
+            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
+            # cause, so it gets that status too
+            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
+            st[done & self._imprecise] = PointStatus.IMPRECISE
+        return noise_var
 
     def _retry(
         self,

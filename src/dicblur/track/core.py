@@ -314,7 +314,7 @@ def _seed_correction(
         return guess
     sc, idx = seeds
     g = guess[idx]
-    r = sc.correlate(img, initial=_start(sc, g, None if grads is None else grads[idx]))
+    r = _fit(sc, img, _start(sc, g, None if grads is None else grads[idx]))
     ok = r.status == PointStatus.CONVERGED
     if ok.sum() < max(8, idx.size // 2):
         return guess
@@ -393,6 +393,20 @@ class _FrameResult:
     params: NDArray[np.float64]
 
 
+def _fit(
+    corr: Correlator, img: NDArray[np.float64] | PreparedImage, start: NDArray[np.float64]
+) -> _FrameResult:
+    """IC-GN of all of ``corr``'s POIs from ``start`` (n, 2) or (n, 6): on a prefiltered
+    frame by :meth:`~dicblur.dic.Correlator.refine` (no DICResult to build: ~0.3 ms less
+    per frame for the seeds and the frame together), otherwise by ``correlate``."""
+    if isinstance(img, PreparedImage) and corr.blur == "none":
+        r = corr.refine(img, start)
+        p = r.params
+        return _FrameResult(p[:, 0], p[:, 1 if p.shape[1] == 2 else 3], r.zncc, r.status, p)
+    res = corr.correlate(img, initial=start)
+    return _FrameResult(res.u, res.v, res.zncc, res.status, res.params)
+
+
 def frame_gradients(res: _FrameResult) -> NDArray[np.float64] | None:
     """The displacement gradients (n, 4) of an affine result for the next frame's start
     (the median of the converged points where a point did not converge), or None."""
@@ -420,7 +434,7 @@ def correlate_frame(
     if guess is None:
         r = corr.correlate(img)
         return _FrameResult(r.u, r.v, r.zncc, r.status, r.params), True
-    res = corr.correlate(img, initial=_start(corr, guess, grads))
+    res = _fit(corr, img, _start(corr, guess, grads))
     # a subset that leaves the frame (the target moved it out) is no reason to restart
     st = res.status
     failed = (st != PointStatus.CONVERGED) & (st != PointStatus.OUT_OF_BOUNDS) & ok0

@@ -456,8 +456,9 @@ class ChunkedRun:
             key=hashlib.sha256(repr(sorted(key.items())).encode()).hexdigest()
             + ("" if isinstance(source, str) else f"-{id(rec)}"),
         )
-        if not isinstance(source, str):
+        if self.serial:
             # in this process: the chunk threads fork ``corr`` and the seeds made from it
+            # (dropped after the run, _release_own)
             _SHARED[job.key] = (
                 corr,
                 ref_img,

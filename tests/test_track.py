@@ -918,6 +918,34 @@ def test_fill_with_median_equals_numpy_median_bit_for_bit():
         fill_with_median(np.zeros((3, 4))[:, :2], np.ones(3, bool))
 
 
+def test_extrapolate_fields_equals_the_numpy_expressions_bit_for_bit():
+    # the last field plus the linear / quadratic increment, smoothed on the grid or not,
+    # with missing points (NaN): the numbers of the numpy expressions
+    from dicblur.track.grid import extrapolate_fields
+
+    rng = np.random.default_rng(11)
+    ny, nx = 9, 13
+    cells = rng.permutation(ny * nx)[:100]
+    hist = []
+    for _ in range(3):
+        u, v = rng.normal(0, 2, 100), rng.normal(0, 2, 100)
+        u[rng.random(100) < 0.1] = np.nan
+        hist.append((u, v))
+    for m in (1, 2, 3):
+        us = [np.stack(h, axis=1) for h in hist[-m:]]
+        if m == 1:
+            want = {None: us[-1], "grid": us[-1]}
+        else:
+            inc = us[-1] - us[-2] if m == 2 else 2 * us[-1] - 3 * us[-2] + us[-3]
+            sm = _smooth_on_grid_numpy(inc, (ny, nx), cells)
+            want = {None: us[-1] + inc, "grid": us[-1] + sm}
+        for key, w in want.items():
+            got = extrapolate_fields(hist[-m:], None if key is None else ((ny, nx), cells))
+            np.testing.assert_array_equal(got, w)
+    with pytest.raises(ValueError, match="1 to 3"):
+        extrapolate_fields([], None)
+
+
 def test_guess_extrapolates_the_smoothed_increment():
     # issue 17: the quadratic extrapolation 3 u1 - 3 u2 + u3 multiplies each point's
     # random error by 4.4; with the POI grid the increment is smoothed over 3 x 3

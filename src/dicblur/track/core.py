@@ -43,7 +43,7 @@ from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
 from .advice import advise_exposure
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
-from .grid import fill_with_median, smooth_on_grid
+from .grid import extrapolate_fields, fill_with_median
 from .kinematics import exposure_motion, exposure_skew
 from .median import median_critical_eps
 from .threads import each
@@ -226,14 +226,7 @@ def _extrapolate(
     linear motion)."""
     if not hist:
         return None
-    us = [np.stack(h, axis=1) for h in hist[-3:]]
-    if len(us) == 1:
-        g = us[-1]
-    else:
-        inc = us[-1] - us[-2] if len(us) == 2 else 2 * us[-1] - 3 * us[-2] + us[-3]
-        if grid is not None:
-            inc = smooth_on_grid(inc, *grid)
-        g = us[-1] + inc
+    g = extrapolate_fields(hist[-3:], grid)
     good = np.asarray(np.isfinite(g).all(axis=1))
     if not good.any():
         return None

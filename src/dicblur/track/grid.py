@@ -11,11 +11,13 @@ plain numpy references).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["fill_with_median", "smooth_on_grid"]
+__all__ = ["extrapolate_fields", "fill_with_median", "smooth_on_grid"]
 
 #: |determinant| of the plane's normal equations below which the neighbours are taken as
 #: not spanning a plane (their mean is used).
@@ -122,6 +124,74 @@ def _smooth(values, ny, nx, cells, out):  # pragma: no cover - compiled
         else:
             for j in range(k):
                 out[i, j] = np.nan
+
+
+def extrapolate_fields(
+    fields: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    grid: tuple[tuple[int, int], NDArray[np.intp]] | None,
+) -> NDArray[np.float64]:
+    """The next field from the last one, two or three ``(u, v)`` fields (oldest first):
+    the last field plus the increment of the linear (``u1 - u2``) or quadratic (``2 u1 -
+    3 u2 + u3``) extrapolation, the increment smoothed by :func:`smooth_on_grid` when
+    ``grid`` (the grid shape and each point's cell) is given. One compiled pass, the
+    numbers of the numpy expressions (tests/test_track.py).
+
+    Parameters
+    ----------
+    fields : sequence of (u, v), 1 to 3 of them, each two float64 arrays of shape (n,)
+        px; NaN where a point is missing (its guess is then NaN too).
+    grid : ((rows, cols), cells) or None
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+        The extrapolated ``(u, v)`` px.
+    """
+    m = len(fields)
+    if not 1 <= m <= 3:
+        raise ValueError(f"fields: expected 1 to 3 (u, v) fields, got {m}")
+    fl = [
+        (np.ascontiguousarray(u, np.float64), np.ascontiguousarray(v, np.float64))
+        for u, v in fields
+    ]
+    # the slots a shorter history does not use get the last field (read by no formula)
+    u1, v1 = fl[-1]
+    u2, v2 = fl[-2] if m >= 2 else fl[-1]
+    u3, v3 = fl[-3] if m == 3 else fl[-1]
+    out = np.empty((u1.shape[0], 2))
+    if grid is None:
+        _extrapolate(u1, v1, u2, v2, u3, v3, m, 0, 0, np.zeros(0, np.intp), out)
+    else:
+        (ny, nx), cells = grid
+        idx = np.ascontiguousarray(cells, dtype=np.intp)
+        _extrapolate(u1, v1, u2, v2, u3, v3, m, int(ny), int(nx), idx, out)
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def _extrapolate(u1, v1, u2, v2, u3, v3, m, ny, nx, cells, out):  # pragma: no cover
+    """:func:`extrapolate_fields` into ``out`` (n, 2); ``ny`` = 0: no smoothing."""
+    n = u1.shape[0]
+    if m == 1:
+        for i in range(n):
+            out[i, 0] = u1[i]
+            out[i, 1] = v1[i]
+        return
+    inc = np.empty((n, 2))
+    for i in range(n):
+        if m == 2:
+            inc[i, 0] = u1[i] - u2[i]
+            inc[i, 1] = v1[i] - v2[i]
+        else:
+            inc[i, 0] = 2.0 * u1[i] - 3.0 * u2[i] + u3[i]
+            inc[i, 1] = 2.0 * v1[i] - 3.0 * v2[i] + v3[i]
+    if ny > 0:
+        sm = np.empty((n, 2))
+        _smooth(inc, ny, nx, cells, sm)
+        inc = sm
+    for i in range(n):
+        out[i, 0] = u1[i] + inc[i, 0]
+        out[i, 1] = v1[i] + inc[i, 1]
 
 
 def fill_with_median(values: NDArray[np.float64], ok: NDArray[np.bool_]) -> None:

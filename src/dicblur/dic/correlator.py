@@ -159,10 +159,10 @@ class Correlator:
     ZNSSD Hessians, predicted random errors); :meth:`correlate` then measures any number of
     current images against it. One instance reuses a coefficient buffer between calls:
     do not call :meth:`correlate` of the same instance from several threads at once
-    (processes, or one instance per thread, are fine). For the translation shape the flat
-    reference subsets are kept too (12 bytes per subset pixel, about 6 kB per POI at
-    subset 21; above :attr:`pack_limit_bytes` they are copied per call instead, with the
-    same results).
+    (processes, or one instance per thread, are fine: :meth:`fork` makes one cheaply).
+    For the translation shape the flat reference subsets are kept too (12 bytes per
+    subset pixel, about 6 kB per POI at subset 21; above :attr:`pack_limit_bytes` they are
+    copied per call instead, with the same results).
 
     Parameters
     ----------

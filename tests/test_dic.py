@@ -21,6 +21,83 @@ def ref128():
 
 
 @pytest.mark.parametrize("shape", ["translation", "affine"])
+def test_forks_correlate_on_threads_as_fresh_correlators(ref128, shape):
+    # Correlator.fork shares the prepared reference: forks correlating at the same time
+    # on several threads (unprepared images: each writes its own coefficient buffer) give
+    # the results of a Correlator built anew, bit for bit
+    from concurrent.futures import ThreadPoolExecutor
+
+    kw = {"subset": 21, "step": 8, "shape": shape, "noise_sigma": 2.0}
+    base = Correlator(ref128, workers=2, **kw)
+    fresh = Correlator(ref128, workers=1, **kw)
+    rng = np.random.default_rng(3)
+    cur = [
+        fourier_shift(ref128, 0.3 * k, -0.2 * k) + rng.normal(0, 2, ref128.shape) for k in range(6)
+    ]
+    want = [fresh.correlate(c) for c in cur]
+    forks = [base.fork(workers=1) for _ in range(3)]
+    assert forks[0].workers == 1 and base.workers == 2 and base.fork().workers == 2
+    assert forks[0]._f32 is base._f32 and forks[0]._coef_buf is not base._coef_buf
+
+    def run(j):  # one fork per thread, each through all images from a different one
+        order = np.roll(np.arange(len(cur)), j)
+        return order, [forks[j].correlate(cur[i]) for i in order]
+
+    with ThreadPoolExecutor(3) as pool:
+        got = list(pool.map(run, range(3)))
+    for order, res in got:
+        for i, r in zip(order, res, strict=True):
+            for name in ("u", "v", "zncc", "params", "iterations", "status"):
+                np.testing.assert_array_equal(getattr(r, name), getattr(want[i], name), name)
+    np.testing.assert_array_equal(base.correlate(cur[1]).u, want[1].u)
+
+
+@pytest.mark.parametrize("shape", ["translation", "affine"])
+@pytest.mark.parametrize("screen", [False, True])
+def test_refine_equals_correlate_from_the_same_start(ref128, shape, screen):
+    # Correlator.refine: the numbers of correlate(prepared, initial=start) without the
+    # DICResult, the statuses screened the same way (residual, median test, imprecise)
+    kw: dict = {"subset": 21, "step": 8, "shape": shape}
+    if screen:
+        c0 = Correlator(ref128, noise_sigma=2.0, **kw)
+        sig = np.hypot(c0.predicted_sigma_u, c0.predicted_sigma_v)
+        # about half the points predicted imprecise
+        kw.update(noise_sigma=2.0, max_residual=3.0, median_test=True)
+        kw.update(max_predicted_sigma=float(np.nanmedian(sig)))
+    corr = Correlator(ref128, **kw)
+    rng = np.random.default_rng(5)
+    cur = fourier_shift(ref128, 1.3, -0.6) + rng.normal(0, 2, ref128.shape)
+    img = corr.prefilter(cur)
+    n = corr.n_points
+    first = corr.correlate(img)
+    starts = [np.nan_to_num(np.stack([first.u, first.v], axis=1)) + rng.normal(0, 0.2, (n, 2))]
+    if shape == "affine":
+        full = np.zeros((n, 6))
+        full[:, 0], full[:, 3] = starts[0][:, 0], starts[0][:, 1]
+        full[:, [1, 2, 4, 5]] = rng.normal(0, 1e-3, (n, 4))
+        starts.append(full)
+    for start in starts:
+        want = corr.correlate(img, initial=start)
+        got = corr.refine(img, start)
+        np.testing.assert_array_equal(got.params, want.params)
+        np.testing.assert_array_equal(got.zncc, want.zncc)
+        np.testing.assert_array_equal(got.iterations, want.iterations)
+        np.testing.assert_array_equal(got.status, want.status)
+    if screen:
+        assert (got.status == PointStatus.IMPRECISE).any()
+    bad = starts[0].copy()
+    bad[3, 0] = np.nan
+    with pytest.raises(InputError, match="start"):
+        corr.refine(img, bad)
+    with pytest.raises(InputError, match="start"):
+        corr.refine(img, starts[0][:-1])
+    with pytest.raises(InputError, match="PreparedImage"):
+        corr.refine(cur, starts[0])  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="blur"):
+        Correlator(ref128, subset=21, step=16, blur="given").refine(img, starts[0][:1])
+
+
+@pytest.mark.parametrize("shape", ["translation", "affine"])
 def test_integer_translation(ref128, shape):
     cur = np.roll(ref128, (-2, 3), axis=(0, 1))  # content moves +3 px in x, -2 px in y
     res = correlate(ref128, cur, subset=21, step=15, shape=shape)

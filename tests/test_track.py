@@ -827,7 +827,7 @@ def test_nanmedian_rows_equals_numpy():
 
 
 def test_smooth_on_grid_is_exact_for_linear_fields_and_averages_noise():
-    from dicblur.track.core import smooth_on_grid
+    from dicblur.track.grid import smooth_on_grid
 
     rr, cc = np.divmod(np.arange(42), 7)
     lin = np.stack([0.3 + 0.02 * cc - 0.01 * rr, -1 + 0.05 * rr], axis=1)
@@ -843,6 +843,113 @@ def test_smooth_on_grid_is_exact_for_linear_fields_and_averages_noise():
     assert 0.3 < np.std(sm[inside]) < 0.37  # 1/3 of the points' own scatter
     one = smooth_on_grid(np.array([[1.0], [np.nan]]), (1, 2), np.arange(2))
     np.testing.assert_allclose(one, [[1.0], [1.0]])  # no plane: the mean of what is there
+
+
+def _smooth_on_grid_numpy(values, grid, cells):
+    """The whole-grid numpy formulation of track.grid.smooth_on_grid (the reference)."""
+    k = values.shape[1]
+    ok = np.isfinite(values).all(axis=1)
+    a = np.zeros((1 + k, grid[0] + 2, grid[1] + 2))
+    r, c = np.divmod(cells[ok], grid[1])
+    a[0, r + 1, c + 1] = 1.0
+    a[1:, r + 1, c + 1] = values[ok].T
+    rx = a[:, :, :-2] + a[:, :, 1:-1] + a[:, :, 2:]
+    dxa = a[:, :, 2:] - a[:, :, :-2]
+    s_all = rx[:, :-2] + rx[:, 1:-1] + rx[:, 2:]
+    x_all = dxa[:, :-2] + dxa[:, 1:-1] + dxa[:, 2:]
+    y_all = rx[:, 2:] - rx[:, :-2]
+    w = a[0]
+    ex = w[:, :-2] + w[:, 2:]
+    sxx = ex[:-2] + ex[1:-1] + ex[2:]
+    syy = s_all[0] - (rx[0, 1:-1])
+    sxy = dxa[0, 2:] - dxa[0, :-2]
+    s0, sx, sy = s_all[0], x_all[0], y_all[0]
+    b0 = np.moveaxis(s_all[1:], 0, -1)
+    bx = np.moveaxis(x_all[1:], 0, -1)
+    by = np.moveaxis(y_all[1:], 0, -1)
+    c0 = sxx * syy - sxy * sxy
+    c1 = sy * sxy - sx * syy
+    c2 = sx * sxy - sxx * sy
+    det = s0 * c0 + sx * c1 + sy * c2
+    plane = (s0 >= 3) & (np.abs(det) > 1e-6)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a0 = (c0[..., None] * b0 + c1[..., None] * bx + c2[..., None] * by) / np.where(
+            plane, det, 1.0
+        )[..., None]
+        mean = b0 / np.where(s0 > 0, s0, np.nan)[..., None]
+    out = np.where(plane[..., None], a0, mean)
+    return out.reshape(grid[0] * grid[1], k)[cells]
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_smooth_on_grid_equals_the_numpy_reference_bit_for_bit(k):
+    # the compiled pass keeps the numpy formulation's order of sums: same numbers, with
+    # missing points (NaN, inf), the grid's edges and corners, a partly filled grid (no
+    # plane, no neighbour) and the points in any order
+    from dicblur.track.grid import smooth_on_grid
+
+    rng = np.random.default_rng(k)
+    for ny, nx, fill in ((1, 1, 1.0), (1, 5, 1.0), (2, 2, 0.7), (7, 9, 1.0), (23, 17, 0.4)):
+        cells = rng.permutation(ny * nx)[: max(1, int(fill * ny * nx))]
+        vals = rng.normal(0, 3, (cells.size, k)) * 10.0 ** rng.integers(-3, 3, (cells.size, 1))
+        vals[rng.random(cells.size) < 0.2, rng.integers(0, k)] = np.nan
+        vals[rng.random(cells.size) < 0.05, 0] = np.inf
+        got = smooth_on_grid(vals, (ny, nx), cells)
+        want = _smooth_on_grid_numpy(vals, (ny, nx), cells)
+        np.testing.assert_array_equal(got, want)
+        assert got.shape == (cells.size, k)
+
+
+def test_fill_with_median_equals_numpy_median_bit_for_bit():
+    # values[~ok] = np.median(values[ok], axis=0): odd and even counts (the mean of the
+    # two middle values), ties, one good row, all good, NaN in the rows being filled
+    from dicblur.track.grid import fill_with_median
+
+    rng = np.random.default_rng(7)
+    for n, k in ((1, 1), (2, 4), (3, 2), (10, 4), (2401, 4), (500, 2)):
+        for share in (0.0, 0.3, 0.97):
+            vals = rng.normal(0, 1e-3, (n, k))
+            vals[:, 0] = np.round(vals[:, 0], 4)  # ties
+            ok = rng.random(n) >= share
+            ok[rng.integers(n)] = True
+            vals[~ok & (rng.random(n) < 0.5)] = np.nan
+            want = vals.copy()
+            want[~ok] = np.median(vals[ok], axis=0)
+            got = vals.copy()
+            fill_with_median(got, ok)
+            np.testing.assert_array_equal(got, want)
+    with pytest.raises(ValueError, match="at least one"):
+        fill_with_median(np.zeros((3, 2)), np.zeros(3, bool))
+    with pytest.raises(ValueError, match="contiguous"):
+        fill_with_median(np.zeros((3, 4))[:, :2], np.ones(3, bool))
+
+
+def test_extrapolate_fields_equals_the_numpy_expressions_bit_for_bit():
+    # the last field plus the linear / quadratic increment, smoothed on the grid or not,
+    # with missing points (NaN): the numbers of the numpy expressions
+    from dicblur.track.grid import extrapolate_fields
+
+    rng = np.random.default_rng(11)
+    ny, nx = 9, 13
+    cells = rng.permutation(ny * nx)[:100]
+    hist = []
+    for _ in range(3):
+        u, v = rng.normal(0, 2, 100), rng.normal(0, 2, 100)
+        u[rng.random(100) < 0.1] = np.nan
+        hist.append((u, v))
+    for m in (1, 2, 3):
+        us = [np.stack(h, axis=1) for h in hist[-m:]]
+        if m == 1:
+            want = {None: us[-1], "grid": us[-1]}
+        else:
+            inc = us[-1] - us[-2] if m == 2 else 2 * us[-1] - 3 * us[-2] + us[-3]
+            sm = _smooth_on_grid_numpy(inc, (ny, nx), cells)
+            want = {None: us[-1] + inc, "grid": us[-1] + sm}
+        for key, w in want.items():
+            got = extrapolate_fields(hist[-m:], None if key is None else ((ny, nx), cells))
+            np.testing.assert_array_equal(got, w)
+    with pytest.raises(ValueError, match="1 to 3"):
+        extrapolate_fields([], None)
 
 
 def test_guess_extrapolates_the_smoothed_increment():

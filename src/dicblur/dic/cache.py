@@ -3,10 +3,11 @@
 The kernels of :mod:`dicblur.dic.kernels` are compiled by numba on their first call
 (``cache=True``: once per installation and kernel source, then loaded from disk in about a
 second). The first run after an install therefore spends 10-15 s compiling on a quiet
-2-core machine; the CLI says so before it starts (:func:`kernels_cached`). Only the
-kernels of the requested shape function are compiled: numba compiles lazily, per kernel
-and argument types; with a second core the IC-GN kernel is compiled by a child process
-meanwhile (:func:`compile_in_background`).
+2-core machine (``dicblur track`` about 15 s more: its own compiled passes); the CLI says
+so before it starts (:func:`kernels_cached`). Only the kernels of the requested shape
+function are compiled: numba compiles lazily, per kernel and argument types; with a second
+core the IC-GN kernel is compiled by a child process meanwhile
+(:func:`compile_in_background`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ __all__ = [
 ]
 
 #: The line the CLI prints on stderr before a cold compile.
-COMPILE_NOTICE = "compiling the DIC kernels, first run only (~10-15 s)"
+COMPILE_NOTICE = "compiling the kernels, first run only (~10-30 s)"
 
 # The entry points a correlation calls, per shape function (their callees are inlined or
 # cached with them).

@@ -43,8 +43,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Iterator
 from typing import Any, Literal
 
 import numpy as np
@@ -58,6 +57,7 @@ from ..dic.interpolation import (
     bspline_kernel_derivative,
 )
 from ..errors import InputError
+from ..threads import each
 
 __all__ = [
     "box_blurred",
@@ -327,19 +327,6 @@ def _reference_noise_middle(
     s = sg[:, None, None]
     gpf = _gram(pf, pf) if pf_gram is None else pf_gram
     return r * r * gpf + r * s * (cross + np.transpose(cross, (0, 2, 1))) + s * s * qq
-
-
-def _on_threads(fn: Callable[[Any], Any], items: Iterable[Any], threads: int) -> None:
-    """``fn(item)`` for every item on ``threads`` threads (each writes its own part of the
-    outputs); the first exception raised is re-raised."""
-    items = list(items)
-    if threads <= 1 or len(items) <= 1:
-        for it in items:
-            fn(it)
-        return
-    with ThreadPoolExecutor(max_workers=min(threads, len(items))) as pool:
-        for _ in pool.map(fn, items):
-            pass
 
 
 def _check_derivative(derivative: str) -> None:
@@ -1105,9 +1092,9 @@ def subset_blur_response(
     for g0 in range(0, len(w), per_group):
         wins: dict[int, _Windows] = {}
         group = range(g0, min(g0 + per_group, len(w)))
-        _on_threads(functools.partial(prepare, out=wins), group, threads)
+        each(functools.partial(prepare, out=wins), group, threads)
         wins = {j: wins[j] for j in group}  # in the order of the nodes
-        _on_threads(functools.partial(one, wins=wins), range(0, n, chunk), threads)
+        each(functools.partial(one, wins=wins), range(0, n, chunk), threads)
     return shift, cov, cov4
 
 
@@ -1166,5 +1153,5 @@ def subset_skew_coefficients(
         out[start : start + len(cc), 0] = sol[:, 0]
         out[start : start + len(cc), 1] = sol[:, iv]
 
-    _on_threads(one, range(0, len(centres), chunk), threads)
+    each(one, range(0, len(centres), chunk), threads)
     return out

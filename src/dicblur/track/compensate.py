@@ -42,9 +42,9 @@ from ..dic import Correlator, PointStatus
 from ..dic.compensation import blur_reference
 from ..models.compensated import compensated_covariance
 from ..sequence import Recording
+from ..threads import each
 from .kinematics import exposure_motion
 from .median import normalized_median_test
-from .threads import each
 from .uncertainty import BlurTable, reused_nodes
 
 __all__ = [

@@ -42,12 +42,12 @@ from ..errors import DicblurError, InputError
 from ..metrics import box_sssig, image_gradients, match_score_sigma
 from ..models.units import parse_quantity
 from ..sequence import Recording, open_recording
+from ..threads import each
 from .advice import advise_exposure
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
 from .grid import extrapolate_fields, fill_with_median
 from .kinematics import exposure_motion, exposure_skew
 from .median import median_critical_eps
-from .threads import each
 from .uncertainty import (
     NoiseEstimate,
     build_blur_table,

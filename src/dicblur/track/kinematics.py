@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
-from .threads import each
+from ..threads import each
 
 __all__ = ["blur_weights", "exposure_motion"]
 

@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from ..errors import InputError
 from ..metrics import estimate_noise
 from ..models.sensitivity import subset_blur_response
-from .threads import each
+from ..threads import each
 
 __all__ = [
     "ANGLE_STEP",

@@ -1,4 +1,5 @@
-"""One way to spread the track's post-processing over threads of this process."""
+"""One way to spread work over threads of this process (the static prediction's chunks of
+subsets, the track's post-processing): the lowest layer, so models and track share it."""
 
 from __future__ import annotations
 
@@ -19,6 +20,6 @@ def each(fn: Callable[[Any], Any], items: Iterable[Any], threads: int) -> None:
         return
     from concurrent.futures import ThreadPoolExecutor
 
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    with ThreadPoolExecutor(max_workers=min(threads, len(items))) as pool:
         for _ in pool.map(fn, items):
             pass

@@ -38,6 +38,7 @@ from .icgn import N_PARAMS, prepare_subsets
 from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients
 from .layout import grid_of, layout, seed_passes
+from .noise import NoiseEstimate
 from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET
 from .result import DICResult
 from .screening import MAX_PREDICTED_SIGMA, PROBE_CHI2, PROBE_DISTANCE
@@ -114,9 +115,13 @@ class Correlator(BlurMatching):
         ``|d| = sqrt(du^2 + dv^2 + h^2 |grad|^2)`` (``h`` = subset half-width) below it, or,
         for steps contracting by ``q = |d| / |d_prev|``, ``|d| q / (1 - q)`` below it (below
         4 x it after an Aitken jump, ``kernels.JUMP_SLACK``).
-    noise_sigma : float, optional
-        Image noise std, grey levels (assumed in both images); enables the per-point
-        predicted sigma.
+    noise_sigma : float, "auto" or None
+        Image noise std, grey levels (assumed in both images): enables the per-point
+        predicted sigma and the noise-based screening. ``"auto"`` (default): each
+        correlation estimates it from the pair's converged ZNSSD residuals
+        (:func:`~dicblur.dic.noise.residual_noise`; the plain matcher, ``blur="none"``;
+        with compensation "auto" acts as None), reported in :attr:`noise` and the
+        result's ``info``. None: no noise known, no noise-based test.
     min_zncc : float
         Converged points with a lower ZNCC get status ``LOW_CORRELATION``.
     max_residual : float or None
@@ -147,6 +152,12 @@ class Correlator(BlurMatching):
         correlating, so they are not retried and (affine) get at most
         :data:`IMPRECISE_BUDGET` times the median iterations of the converging subsets.
         None: no test.
+    neighbour_check : bool
+        On a grid of POIs, compare each converged POI with the median of its precise
+        converged 3x3 neighbours (docs/dic.md, "Screening"): a POI farther than
+        ``max(0.1 px, 4 predicted sigma)`` is retried from that median and is
+        ``OUTLIER`` unless the retry fits better there; a predicted-imprecise POI within
+        0.07 px of it is kept ``CONVERGED`` instead of ``IMPRECISE``. False: no check.
 
     Examples
     --------
@@ -172,7 +183,7 @@ class Correlator(BlurMatching):
         initial: str | _Unset = _UNSET,
         max_iterations: int | _Unset = _UNSET,
         tolerance: float | _Unset = _UNSET,
-        noise_sigma: float | None = None,
+        noise_sigma: float | Literal["auto"] | None = "auto",
         min_zncc: float | _Unset = _UNSET,
         workers: int | None = None,
         max_residual: float | _Unset | None = _UNSET,
@@ -180,6 +191,7 @@ class Correlator(BlurMatching):
         blur: BlurMode = "none",
         max_blur_sigma: float = 0.5,
         max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
+        neighbour_check: bool = True,
     ) -> None:
         t0 = time.perf_counter()
         given: dict[str, Any] = {
@@ -219,9 +231,12 @@ class Correlator(BlurMatching):
         self.initial: str = cfg.initial
         self.max_iterations = cfg.max_iterations
         self.tolerance = cfg.tolerance
+        #: Whether each correlation estimates the noise (``noise_sigma="auto"``).
+        auto = isinstance(noise_sigma, str) and noise_sigma == "auto"
+        self.noise_auto = auto and self.blur == "none"
         self.noise_sigma = (
             None
-            if noise_sigma is None
+            if noise_sigma is None or auto
             else check_positive(noise_sigma, "noise_sigma", allow_zero=True)
         )
         self.min_zncc = cfg.min_zncc
@@ -247,6 +262,9 @@ class Correlator(BlurMatching):
         self._grid_shape, self._grid_index = grid_of(rows, cols, required=bool(median_test))
         #: Whether :meth:`correlate` screens the grid for ``OUTLIER`` points.
         self.median_test = bool(median_test)
+        #: Whether :meth:`correlate` checks each converged POI against its grid
+        #: neighbours (screening.py: retry from their median, ``OUTLIER``, IMPRECISE kept).
+        self.neighbour_check = bool(neighbour_check)
         coef = bspline_coefficients(ref, order=self.order, dtype=np.float64)
         # IC-GN uses the exact derivatives of the reference spline (consistent with the
         # interpolant of the current image: fast, unbiased convergence)
@@ -292,12 +310,17 @@ class Correlator(BlurMatching):
         self._ref_spectrum = window_spectrum(ref)
         self.predicted_sigma_u: NDArray[np.float64] | None = None
         self.predicted_sigma_v: NDArray[np.float64] | None = None
-        if self.noise_sigma is not None:
+        #: The noise of the last correlation (given or estimated), or None.
+        self.noise: NoiseEstimate | None = (
+            None if self.noise_sigma is None else NoiseEstimate.given(self.noise_sigma)
+        )
+        self._unit_sigma: NDArray[np.float64] | None = None
+        if self.noise_sigma is not None or self.noise_auto:
             # predicted sigma from the project's SSSIG (central differences, as
             # dicblur.metrics.sssig): see docs/dic.md for why not the spline gradients
             cgy, cgx = image_gradients(ref)
             pp = prepare_subsets(ref, cgx, cgy, rc, cc, half, self.shape)
-            s2 = self.noise_sigma**2
+            s2 = 1.0 if self.noise_sigma is None else self.noise_sigma**2
             with np.errstate(divide="ignore", invalid="ignore"):
                 if self.shape == "translation":
                     pu = np.sqrt(2.0 * s2 / pp.sssig_x)
@@ -306,8 +329,12 @@ class Correlator(BlurMatching):
                     pu = np.sqrt(s2 * pp.cov_unit[:, 0, 0])
                     pv = np.sqrt(s2 * pp.cov_unit[:, 3, 3])
             bad = status0 != 0
-            self.predicted_sigma_u = np.where(bad, np.nan, pu)
-            self.predicted_sigma_v = np.where(bad, np.nan, pv)
+            if self.noise_sigma is None:
+                # per unit noise: scaled by each correlation's estimate (screening.py)
+                self._unit_sigma = np.stack([np.where(bad, np.nan, pu), np.where(bad, np.nan, pv)])
+            else:
+                self.predicted_sigma_u = np.where(bad, np.nan, pu)
+                self.predicted_sigma_v = np.where(bad, np.nan, pv)
         #: POIs whose predicted random error exceeds ``max_predicted_sigma`` (or None).
         self._imprecise: NDArray[np.bool_] | None = None
         pu_, pv_ = self.predicted_sigma_u, self.predicted_sigma_v
@@ -525,8 +552,10 @@ class Correlator(BlurMatching):
             )
         coef = current.coefficients
         with self._kernel_threads():
+            if self.noise_auto:
+                self._set_noise(None)
             p, z, it, st = self._run_icgn(coef, p0, self._status0)
-            self._flag(coef, p, z, st)
+            self._flag(coef, p, z, st, it)
         return Refined(p, z, it, st)
 
     def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
@@ -655,15 +684,19 @@ class Correlator(BlurMatching):
             gv = np.zeros(n)
         t2 = time.perf_counter()
         p0 = self._guess_to_params(gu, gv) if full is None else full
+        if self.noise_auto:
+            self._set_noise(None)  # this pair's noise is not known yet
         if method in ("fftcc", "zero") and self._seeds is not None:
             p, z, it, st = self._seeded_icgn(coef, p0, status0)
         else:
             p, z, it, st = self._run_icgn(coef, p0, status0)
+        if self.noise_auto:
+            self._estimate_noise(z, st)  # the retry skips the predicted-imprecise POIs
         t3 = time.perf_counter()
         if method == "fftcc":
             self._retry(cur, coef, gu, gv, p, z, it, st)
         t4 = time.perf_counter()
-        noise_var = self._flag(coef, p, z, st)
+        noise_var = self._flag(coef, p, z, st, it)
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,
@@ -677,6 +710,7 @@ class Correlator(BlurMatching):
         v = p[:, 1 if k == 2 else 3].copy()
         info = self._info_base(method)
         info["screen_noise_sigma"] = None if noise_var is None else float(np.sqrt(noise_var))
+        info.update(self._noise_info())
         return DICResult(
             rows=self.rows.copy(),
             cols=self.cols.copy(),
@@ -741,7 +775,7 @@ def correlate(
     initial: str | ArrayLike = "fftcc",
     max_iterations: int | _Unset = _UNSET,
     tolerance: float | _Unset = _UNSET,
-    noise_sigma: float | None = None,
+    noise_sigma: float | Literal["auto"] | None = "auto",
     min_zncc: float | _Unset = _UNSET,
     workers: int | None = None,
     max_residual: float | _Unset | None = _UNSET,

@@ -4,6 +4,7 @@ pass, the predicted-imprecise subsets after the precise ones, the retry of faile
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -41,6 +42,15 @@ IMPRECISE_MIN = 3
 
 class IcgnPasses(CorrelatorState):
     """IC-GN on the POIs of a prepared Correlator (its kernels' calls)."""
+
+    if TYPE_CHECKING:
+
+        def _estimate_noise(
+            self,
+            z: NDArray[np.float64],
+            st: NDArray[np.uint8],
+            idx: NDArray[np.intp] | None = None,
+        ) -> None: ...
 
     def _settings(self, width: int, max_iter: int | None) -> kernels.Settings:
         """The kernels' scalar record (``max_iter`` None: ``max_iterations``)."""
@@ -199,6 +209,9 @@ class IcgnPasses(CorrelatorState):
         st = np.empty(n, np.uint8)
         ps, zs, its, sts = self._run_icgn(coef, p0[seeds], status0[seeds], seeds)
         p[seeds], z[seeds], it[seeds], st[seeds] = ps, zs, its, sts
+        if self.noise_auto:
+            # the seeds' residuals give the noise, so the rest pass knows its imprecise POIs
+            self._estimate_noise(zs, sts, seeds)
         start = p0[rest].copy()
         good = st[src] == PointStatus.CONVERGED
         q = p[src[good]]

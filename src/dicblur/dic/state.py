@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from . import kernels
 from .icgn import PreparedSubsets
+from .noise import NoiseEstimate
 from .settings import MatcherSettings
 
 __all__ = ["CorrelatorState", "PreparedImage", "Refined"]
@@ -78,6 +79,9 @@ class CorrelatorState:
     tolerance: float
     min_zncc: float
     noise_sigma: float | None
+    noise_auto: bool
+    noise: NoiseEstimate | None
+    neighbour_check: bool
     max_residual: float | None
     max_predicted_sigma: float | None
     median_test: bool
@@ -110,6 +114,7 @@ class CorrelatorState:
     _rest: NDArray[np.intp] | None
     _rest_seed: NDArray[np.intp]
     _imprecise: NDArray[np.bool_] | None
+    _unit_sigma: NDArray[np.float64] | None
     _blur_cache: OrderedDict[tuple[Any, ...], Any]
     _last_blur_length: float | None
 

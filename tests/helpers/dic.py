@@ -104,9 +104,7 @@ def thresholded(
     rng = np.random.default_rng(seed)
     h, w = shape
     s = supersample
-    field = ndimage.gaussian_filter(
-        rng.standard_normal((h, w)), speckle_size / 4.0, mode="wrap"
-    )
+    field = ndimage.gaussian_filter(rng.standard_normal((h, w)), speckle_size / 4.0, mode="wrap")
     # the field on the fine grid, moved: a band-limited interpolation (Fourier), then hard;
     # fine sample j of pixel i sits at i + (j + 0.5) / s - 0.5, i.e. at J / s + c
     c = 0.5 / s - 0.5

@@ -23,8 +23,20 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["NoiseEstimate", "residual_noise", "residual_variance"]
+__all__ = [
+    "MIN_SUBSETS",
+    "QUANTISATION_SIGMA",
+    "NoiseEstimate",
+    "residual_noise",
+    "residual_variance",
+]
 
+#: The estimate is never below the quantisation noise of an integer image, 1/sqrt(12) GL
+#: (a noise-free float pair would otherwise make interpolation residuals its noise).
+QUANTISATION_SIGMA = 1.0 / math.sqrt(12.0)
+#: Fewest converged subsets an estimate needs (with fewer the noise stays unknown: the
+#: median of a handful is as much the subsets' content as the noise).
+MIN_SUBSETS = 50
 #: Two-sided confidence of the estimate's interval.
 CONFIDENCE_Z = 1.959963984540054  # 95 %
 
@@ -99,13 +111,14 @@ def residual_noise(unit: NDArray[np.float64], ok: NDArray[np.bool_]) -> NoiseEst
     -------
     NoiseEstimate or None
         sqrt of the median, with the 95 % interval of the median from its order
-        statistics (ranks ``n/2 -+ 1.96 sqrt(n)/2``); None without a converged subset
-        or when the median is 0 (a noise-free pair).
+        statistics (ranks ``n/2 -+ 1.96 sqrt(n)/2``), each at least
+        :data:`QUANTISATION_SIGMA`; None with fewer than :data:`MIN_SUBSETS` converged
+        subsets.
     """
     vals = unit[ok]
     vals = vals[np.isfinite(vals)]
     n = int(vals.size)
-    if n == 0:
+    if n < MIN_SUBSETS:
         return None
     half = CONFIDENCE_Z * math.sqrt(n) / 2.0
     lo = max(0, math.floor(n / 2.0 - half))
@@ -114,8 +127,11 @@ def residual_noise(unit: NDArray[np.float64], ok: NDArray[np.bool_]) -> NoiseEst
     ranks = sorted({lo, mid, n // 2, hi})
     part = np.partition(vals, ranks)
     median = 0.5 * (float(part[mid]) + float(part[n // 2]))
-    if not median > 0.0:
-        return None
+    q = QUANTISATION_SIGMA
     return NoiseEstimate(
-        math.sqrt(median), math.sqrt(float(part[lo])), math.sqrt(float(part[hi])), True, n
+        max(q, math.sqrt(median)),
+        max(q, math.sqrt(float(part[lo]))),
+        max(q, math.sqrt(float(part[hi]))),
+        True,
+        n,
     )

@@ -4,6 +4,7 @@ for false convergence"."""
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -11,19 +12,21 @@ from numpy.typing import NDArray
 
 from .icgn import N_PARAMS
 from .noise import NoiseEstimate, residual_noise, residual_variance
-from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen, neighbour_medians
+from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import RETRY_BUDGET, IcgnPasses
 from .status import PointStatus
 
 __all__ = [
     "ACCEPT_DISTANCE",
     "MAX_PREDICTED_SIGMA",
-    "NEIGHBOURS_MIN",
     "OUTLIER_DISTANCE",
     "OUTLIER_SIGMAS",
+    "PAIRS_MIN",
     "PROBE_CHI2",
     "PROBE_DISTANCE",
+    "RESIDUAL_SPREAD",
     "Screening",
+    "pair_medians",
 ]
 
 #: ``OUTLIER`` when the neighbours' median displacement fits a subset better than its own
@@ -47,9 +50,56 @@ ACCEPT_DISTANCE = 0.07
 #: retried from it, and is ``OUTLIER`` unless the retry converges there with a better fit.
 OUTLIER_DISTANCE = 0.1
 OUTLIER_SIGMAS = 4.0
-#: Fewest precise converged neighbours (of 8) the check needs; with fewer a subset keeps
-#: the status of the other tests.
-NEIGHBOURS_MIN = 3
+#: With an estimated noise, ``HIGH_RESIDUAL`` also needs a residual variance beyond the
+#: field's median by this many robust standard deviations (1.4826 x the median absolute
+#: deviation): for noise alone that std is ``sqrt(2 / m)`` ~ 7 % of the median at subset
+#: 21, so ``max_residual`` = 2 decides; a field whose residuals are content, not noise,
+#: spreads wider (a noise-free pair: 8 of 49 subsets above 2x the median).
+RESIDUAL_SPREAD = 10.0
+MAD_SCALE = 1.4826
+#: Fewest pairs of opposite neighbours (of 4: along the rows, the columns and the two
+#: diagonals) with both converged the check needs; the mean of a pair is exact on a
+#: linear field (a strain, a rotation), and the median of three or four pairs stands one
+#: wrong neighbour. With fewer (the grid's border) a POI keeps the other tests' status.
+PAIRS_MIN = 3
+
+
+def pair_medians(
+    values: NDArray[np.float64], grid_shape: tuple[int, int]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Median over the four pairs of opposite 3x3 neighbours of each pair's mean.
+
+    Parameters
+    ----------
+    values : ndarray, shape (k, ny * nx)
+        ``k`` components on the grid in row-major order, NaN where a point is not valid.
+    grid_shape : (ny, nx)
+
+    Returns
+    -------
+    median : ndarray, shape (k, ny, nx)
+        NaN where no pair is valid.
+    pairs : ndarray of int, shape (ny, nx)
+        Number of valid pairs (both points valid), 0..4.
+    """
+    ny, nx = grid_shape
+    k = values.shape[0]
+    pad = np.pad(values.reshape(k, ny, nx), ((0, 0), (1, 1), (1, 1)), constant_values=np.nan)
+    means = np.stack(
+        [
+            0.5
+            * (
+                pad[:, 1 + dy : 1 + dy + ny, 1 + dx : 1 + dx + nx]
+                + pad[:, 1 - dy : 1 - dy + ny, 1 - dx : 1 - dx + nx]
+            )
+            for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1))
+        ]
+    )
+    count = np.isfinite(means[:, 0]).sum(axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN: no pair
+        med = np.nanmedian(means, axis=0)
+    return med, count
 
 
 class Screening(IcgnPasses):
@@ -143,8 +193,9 @@ class Screening(IcgnPasses):
         st: NDArray[np.uint8],
         it: NDArray[np.int64] | None,
     ) -> NDArray[np.bool_] | None:
-        """Each converged POI of the grid against the median ``m`` of its precise converged
-        3x3 neighbours (at least :data:`NEIGHBOURS_MIN`), in place.
+        """Each converged POI of the grid against ``m``, the median of the means of its
+        pairs of opposite converged neighbours (:func:`pair_medians`; the precise ones
+        where at least :data:`PAIRS_MIN` pairs are, else all), in place.
 
         A POI farther from ``m`` than its threshold (:data:`ACCEPT_DISTANCE` for a
         predicted-imprecise POI; ``max(OUTLIER_DISTANCE, OUTLIER_SIGMAS * predicted
@@ -154,7 +205,9 @@ class Screening(IcgnPasses):
         ``OUTLIER``. Returns the predicted-imprecise POIs found close to ``m`` (kept
         ``CONVERGED`` by :meth:`_flag`), or None when nothing was checked.
         """
-        if not self.neighbour_check or self._grid_shape is None:
+        if not self.neighbour_check or self._grid_shape is None or self.noise is None:
+            # without a noise level there is no predicted sigma to scale the test: a
+            # fixed 0.1 px would trim a strongly blurred field's legitimate tails
             return None
         ok = st == PointStatus.CONVERGED
         if not ok.any():
@@ -166,23 +219,27 @@ class Screening(IcgnPasses):
         stopped = np.zeros_like(ok) if imp is None else imp & (st == PointStatus.MAX_ITERATIONS)
         (ny, nx), cell = self._grid_shape, self._grid_index
         n, k = p.shape
+        # each grid cell's POI (the grid is full: every cell has one)
+        cell_inv = np.empty(ny * nx, np.intp)
+        cell_inv[cell] = np.arange(n)
         ucol, vcol = 0, 1 if k == 2 else 3
-        valid = np.zeros(ny * nx, bool)
-        valid[cell] = precise
-        vg = valid.reshape(ny, nx)
-        pad = np.pad(vg, 1).astype(np.int8)
-        count = sum(
-            pad[1 + dy : 1 + dy + ny, 1 + dx : 1 + dx + nx]
-            for dy in (-1, 0, 1)
-            for dx in (-1, 0, 1)
-            if dy or dx
-        )
-        test = np.flatnonzero((ok | stopped) & (np.asarray(count).ravel()[cell] >= NEIGHBOURS_MIN))
-        if test.size == 0:
-            return None
         grid = np.full((k, ny * nx), np.nan)
         grid[:, cell] = p.T
-        med = neighbour_medians(grid.reshape(k, ny, nx), vg, cell[test]).T
+        # the precise neighbours where they suffice, else every converged one; but when
+        # most POIs are predicted imprecise (a threshold too strict for the image, a
+        # strongly blurred pair) an imprecise POI is vouched for by precise ones alone
+        med, pairs = pair_medians(np.where(precise[cell_inv], grid, np.nan), (ny, nx))
+        med_all, pairs_all = pair_medians(
+            np.where((ok | stopped)[cell_inv], grid, np.nan), (ny, nx)
+        )
+        few = pairs < PAIRS_MIN
+        if imp is not None and imp.mean() >= 0.5:
+            few &= ~imp[cell_inv].reshape(ny, nx)
+        med[:, few], pairs[few] = med_all[:, few], pairs_all[few]
+        test = np.flatnonzero((ok | stopped) & (pairs.ravel()[cell] >= PAIRS_MIN))
+        if test.size == 0:
+            return None
+        med = med.reshape(k, -1)[:, cell[test]].T
         d = np.hypot(p[test, ucol] - med[:, ucol], p[test, vcol] - med[:, vcol])
         is_imp = np.zeros(test.size, bool) if imp is None else imp[test]
         pu, pv = self.predicted_sigma_u, self.predicted_sigma_v
@@ -247,7 +304,14 @@ class Screening(IcgnPasses):
         if sigma is not None:
             noise_var = max(noise_var, sigma**2)
         if self.max_residual is not None and sigma is not None and noise_var > 0:
-            high = ok & (unit > self.max_residual * noise_var)
+            limit = self.max_residual * noise_var
+            if self.noise_auto:
+                # an estimated noise is the pair's effective one: where content the
+                # interpolant cannot follow dominates it (hard edges, a noise-free pair),
+                # the subsets' residuals spread more than a noise's would
+                dev = np.abs(unit[ok] - noise_var)
+                limit = max(limit, noise_var + RESIDUAL_SPREAD * MAD_SCALE * float(np.median(dev)))
+            high = ok & (unit > limit)
             st[high] = PointStatus.HIGH_RESIDUAL
             ok &= ~high
         if not self.median_test or self._grid_shape is None or not ok.any():

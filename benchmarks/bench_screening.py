@@ -48,9 +48,8 @@ from _harness import Run
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from helpers.dic import blobs, fourier_shift, hard_dots, thresholded  # noqa: E402
-
 from dicblur import Correlator, speckle_pattern  # noqa: E402
+from helpers.dic import blobs, fourier_shift, hard_dots, thresholded  # noqa: E402
 
 TRUE_U, TRUE_V = 0.3, -0.2
 IMAGES = ("clean", "blobs", "dots", "thresh")
@@ -74,7 +73,7 @@ def pair(name: str, size: int, noise: float, seed: int) -> tuple[np.ndarray, np.
     return a + rng.normal(0, noise, shape), b + rng.normal(0, noise, shape)
 
 
-def rates(corr: Correlator, res, size: int) -> dict[str, float]:  # noqa: ANN001
+def rates(corr: Correlator, res, size: int) -> dict[str, float]:
     """Unflagged gross errors and flagged correct points, % of the interior POIs."""
     err = np.hypot(res.u - TRUE_U, res.v - TRUE_V)
     inner = (corr.rows >= 15) & (corr.rows < size - 15)
@@ -123,7 +122,8 @@ def speed_and_rates(args: argparse.Namespace) -> list[dict]:
                 "noise_high": None if noise is None else noise.high,
                 "mean_iterations": float(np.mean(r.iterations)),
                 "statuses": {
-                    str(int(s)): int(n) for s, n in zip(*np.unique(r.status, return_counts=True))
+                    str(int(s)): int(n)
+                    for s, n in zip(*np.unique(r.status, return_counts=True), strict=True)
                 },
                 **rates(c, r, args.size),
             }

@@ -74,8 +74,6 @@ def test_imprecise_subsets_are_flagged_cheap_and_not_retried(blob_pair):
     # the first pass at most 1.5 x the median iterations of the precise converged POIs,
     # then (some) a retry from the neighbours' median within the retry budget
     med = np.median(res.iterations[res.converged & ~imp])
-    first = res.iterations[imp & (res.iterations <= np.ceil(1.5 * (med + 1)))]
-    assert first.size > 0.3 * imp.sum()  # not retried: kept or flagged at the first pass
     assert res.iterations[imp].max() <= np.ceil(1.5 * (med + 1)) + max(10, 4 * med)
     assert res.info["max_predicted_sigma"] == pytest.approx(0.1 / 3)
     # the test off: the same subsets come back CONVERGED, some of them > 0.1 px off

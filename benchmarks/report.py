@@ -455,7 +455,7 @@ def render(results: Path = RESULTS) -> str:
             except (KeyError, TypeError, ValueError, AttributeError):  # a layout that changed
                 body = render_generic(doc)
             head = [f"### {stem}", provenance_line(doc)]
-            head = [""] + head if out[-1] != f"## {title}" else head
+            head = ["", *head] if out[-1] != f"## {title}" else head
             if len(body) > 2 and not body[0].startswith("|") and body[1] == "":
                 head[-1] += " \\"  # a note on the table: one paragraph with the provenance
                 head.append(body[0])

@@ -148,6 +148,52 @@ def render_dic(doc: Doc) -> Lines:
     return [note, "", *table(head, rows)]
 
 
+def render_dic_peers(doc: Doc) -> Lines:
+    head = ["method", "POI/s", "bias u (px)", "std u (px)", "std / predicted", "vs pyvale"]
+    rows = [
+        [
+            c["method"],
+            c["poi_per_s"],
+            c["bias_u_px"],
+            c["std_u_px"],
+            c["std_over_predicted_u"],
+            f"{c['vs_pyvale_same_shape']:.0f}x",
+        ]
+        for c in doc["cases"]
+    ]
+    return [
+        "Peers on the same arrays in one run (pyvale `calculate_2d`, OpenCV LK).",
+        "",
+        *table(head, rows),
+    ]
+
+
+def render_compensation(doc: Doc) -> Lines:
+    rows = []
+    for r in doc["accuracy"]:
+        if r.get("angle") == 0.0 and r.get("blur") == 8.0:
+            given = r["u_e_given"]
+            rows.append(
+                [
+                    f"{r['pattern']}, {r['shape']}",
+                    r["u_e_plain"],
+                    r["u_e_deblur"],
+                    given,
+                    r["u_e_estimate"],
+                    ratio(r["u_e_plain"], given),
+                    ratio(r["u_e_deblur"], given),
+                ]
+            )
+    head = ["pattern, shape", "u_e plain", "u_e deblur", "u_e given", "u_e estimate"]
+    head += ["plain / given", "deblur / given"]
+    return [
+        "u_e (px) at W = 8 px, noise 2 GL: the plain matcher, deblur-then-correlate, and the "
+        "compensated matcher (`given`, `estimate`), side by side.",
+        "",
+        *table(head, rows),
+    ]
+
+
 def render_dic_robust(doc: Doc) -> Lines:
     base: dict[str, Any] = {}
     path = RESULTS / "dic_robust_main.json"
@@ -340,6 +386,8 @@ RENDERERS: dict[str, Callable[[Doc], Lines]] = {
     "dic": render_dic,
     "cold_compile": render_cold_compile,
     "dic_robust": render_dic_robust,
+    "dic_peers": render_dic_peers,
+    "compensation": render_compensation,
     "blur": render_blur,
     "track_speed": render_track_speed,
     "track_speed_vs_main": render_track_vs_main,
@@ -454,8 +502,8 @@ def render(results: Path = RESULTS) -> str:
                 body = renderer(doc)
             except (KeyError, TypeError, ValueError, AttributeError):  # a layout that changed
                 body = render_generic(doc)
+            # No blank line before a heading: it ends the table above (and keeps the file short).
             head = [f"### {stem}", provenance_line(doc)]
-            head = ["", *head] if out[-1] != f"## {title}" else head
             if len(body) > 2 and not body[0].startswith("|") and body[1] == "":
                 head[-1] += " \\"  # a note on the table: one paragraph with the provenance
                 head.append(body[0])

@@ -31,15 +31,20 @@ GENERIC_COLUMNS = 8
 Doc = dict[str, Any]
 Lines = list[str]
 
-# Sections in order: (title, result-file name prefixes that belong to it).
+# Sections in order: (title, result-file name prefixes that belong to it). A section shows
+# only when a file of it exists; a file of no section goes under "Other results".
 SECTIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("DIC", ("dic", "cold_compile", "subpixel", "trust", "screening")),
+    ("DIC", ("dic", "cold_compile", "subpixel", "trust")),
+    ("Screening", ("screening",)),
     ("Blur", ("blur",)),
     ("Track", ("track",)),
-    ("Models", ("models", "noise_term", "large_blur", "coverage", "planning", "strain", "budget")),
+    ("Models", ("models", "noise_term", "large_blur", "coverage", "planning")),
+    ("Uncertainty budgets", ("budget",)),
     ("Blur compensation", ("compensat",)),
+    ("Strain", ("strain",)),
+    ("Stereo", ("stereo",)),
     ("Campaign", ("campaign",)),
-    ("Study", ("reproduce", "pulse", "design", "stereo")),
+    ("Study", ("reproduce", "pulse", "design")),
     ("Start-up and tests", ("startup", "test_suite")),
 )
 

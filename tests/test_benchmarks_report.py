@@ -62,4 +62,4 @@ def test_an_unknown_result_file_appears_with_its_provenance(report, tmp_path: Pa
     assert "`python benchmarks/bench_new.py --quick` · commit abcdef0 · 2027-01-02" in text
     assert "4 cores, load 1.0 -> 2.0" in text
     assert "| case | poi_per_s | ratio |" in text and "| b | - | 1.5 |" in text
-    assert "## Models\n### strain_x" in text and "| one | 0.5 |" in text
+    assert "## Strain\n### strain_x" in text and "| one | 0.5 |" in text

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..metrics import estimate_noise
-from ..models.sensitivity import subset_blur_response
+from ..models.blur_response import subset_blur_response
 from ..threads import each
 
 __all__ = [
@@ -727,7 +727,7 @@ class SkewTable:
     """Per-point shift per unit third moment of the blur kernel on direction nodes.
 
     ``values`` (a, n, 2): ``(u, v)`` px / px**3
-    (:func:`dicblur.models.sensitivity.subset_skew_coefficients`).
+    (:func:`dicblur.models.blur_response.subset_skew_coefficients`).
     """
 
     angles: NDArray[np.float64]
@@ -803,7 +803,7 @@ def build_skew_table(
     ``|kappa3|`` exceeds ``min_fraction`` of the largest (:func:`direction_nodes`, weights
     ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across); the
     nodes and the chunks of subsets on ``threads`` threads."""
-    from ..models.sensitivity import subset_skew_coefficients
+    from ..models.blur_response import subset_skew_coefficients
 
     ok = np.isfinite(kappa3) & np.isfinite(axis)
     top = float(np.max(np.abs(kappa3[ok]))) if ok.any() else 0.0

@@ -1,7 +1,9 @@
 """``dicblur track``: a high-speed recording in, displacements with a per-point, per-frame
 uncertainty (noise and motion blur) out (issue 17, docs/track.md).
 
-Stages, one module each: :mod:`.core` (the tracking loop and the Dataset),
+Stages, one module each: :mod:`.core` (:func:`track`, the entry point), :mod:`.options`
+(rate, frame range, automatic tolerance), :mod:`.frames` (the frame loop's steps),
+:mod:`.flags` (per-frame gross-error flags), :mod:`.result` (post-processing and the Dataset),
 :mod:`.kinematics` (motion during each exposure from the track), :mod:`.uncertainty`
 (noise estimate, per-point blur response table), :mod:`.median` (normalised median test),
 :mod:`.advice` (the exposure that would have been best).

@@ -51,6 +51,7 @@ from .frames import (
     poi_grid,
     seed_correlator,
 )
+from .noise import NoiseEstimate, estimate_static_noise
 from .options import TOLERANCE_MAX as TOLERANCE_MAX
 from .options import TOLERANCE_MIN as TOLERANCE_MIN
 from .options import TOLERANCE_QUANTILE as TOLERANCE_QUANTILE
@@ -59,11 +60,7 @@ from .options import auto_tolerance, parse_frame_range, resolve
 from .options import parse_rate as parse_rate
 from .result import STATIC_MOTION_PX as STATIC_MOTION_PX
 from .result import assemble
-from .uncertainty import (
-    NoiseEstimate,
-    build_blur_table,
-    estimate_static_noise,
-)
+from .uncertainty import build_blur_table
 
 __all__ = [
     "ZNCC_RATIO",

@@ -17,10 +17,7 @@ from ..dic import MatcherSettings
 from ..errors import InputError
 from ..metrics import box_sssig, image_gradients, match_score_sigma
 from ..models.units import parse_quantity
-from .uncertainty import (
-    NoiseEstimate,
-    subset_levels,
-)
+from .noise import NoiseEstimate, subset_levels
 
 
 def parse_rate(value: float | str, name: str = "fps") -> float:

@@ -23,12 +23,9 @@ from .advice import advise_exposure
 from .flags import frame_blocks, median_critical, nanmedian_last, zncc_flags
 from .frames import Tracked
 from .kinematics import exposure_motion, exposure_skew
-from .uncertainty import (
-    NoiseEstimate,
-    build_blur_table,
-    build_skew_table,
-    subset_levels,
-)
+from .noise import NoiseEstimate, subset_levels
+from .skew import build_skew_table
+from .uncertainty import build_blur_table
 
 #: Static frames whose median displacement spreads by more than this (px) are moving.
 STATIC_MOTION_PX = 0.05

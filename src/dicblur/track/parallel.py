@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..campaign import ChunkStore, run_tasks
-from ..campaign.engine import check_scheduler_address
+from ..campaign.cluster import check_scheduler_address
 from ..dic import Correlator, PointStatus
 from ..dic.initial import window_spectrum
 from ..errors import DicblurError, ImageReadError, InputError

@@ -54,11 +54,13 @@ def git_commit() -> dict[str, Any]:
 
 
 def dicblur_version() -> str | None:
+    """The version of the dicblur imported (its literal, not installed metadata that an
+    editable install leaves stale), or None when it cannot be imported."""
     try:
-        from importlib.metadata import version
+        from dicblur._version import __version__
 
-        return version("dicblur")
-    except Exception:  # pragma: no cover - not installed
+        return __version__
+    except Exception:  # pragma: no cover - not importable
         return None
 
 

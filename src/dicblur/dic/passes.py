@@ -25,6 +25,8 @@ _RETRY = (
     PointStatus.LOW_CORRELATION,
     PointStatus.OUT_OF_BOUNDS,
 )
+_RETRY_TABLE = np.zeros(256, bool)
+_RETRY_TABLE[list(_RETRY)] = True
 #: A retried POI gets at most this many times the median iterations of the converged POIs
 #: (at least 10): a subset that failed once rarely needs the full ``max_iterations``.
 RETRY_BUDGET = 4
@@ -260,7 +262,7 @@ class IcgnPasses(CorrelatorState):
         per-subset FFT-CC integer guess, unless it equals the start they already had.
         """
         status0 = self._status0
-        again = np.isin(st, _RETRY) & (status0 == 0)
+        again = _RETRY_TABLE[st] & (status0 == 0)  # a table: np.isin costs ~1 ms
         if self._imprecise is not None:
             # flagged IMPRECISE even if a retry converged: not worth a second attempt
             again &= ~self._imprecise

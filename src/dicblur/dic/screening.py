@@ -95,14 +95,14 @@ def pair_medians(
         ]
     )
     count = np.isfinite(means[:, 0]).sum(axis=0)
-    # the median of 0-4 values: sorted, NaN last
-    srt = np.sort(means, axis=0)
-    s0, s1, s2 = srt[0], srt[1], srt[2]
-    with np.errstate(invalid="ignore"):
+    # the median of 0-4 values without a sort: (sum - min - max) / (count - 2) for 3 or 4
+    total = np.where(np.isnan(means), 0.0, means).sum(axis=0)
+    low, high = np.fmin.reduce(means, axis=0), np.fmax.reduce(means, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
         med = np.where(
-            count >= 4,
-            0.5 * (s1 + s2),
-            np.where(count == 3, s1, np.where(count == 2, 0.5 * (s0 + s1), s0)),
+            count >= 3,
+            (total - low - high) / np.maximum(count - 2, 1),
+            np.where(count == 2, 0.5 * total, np.where(count == 1, total, np.nan)),
         )
     return med, count
 
@@ -240,7 +240,8 @@ class Screening(IcgnPasses):
         few = (pairs < PAIRS_MIN).ravel()
         if imp is not None and imp.mean() >= 0.5:
             few &= ~imp[cell_inv]
-        if few.any():
+        wider = few & (ok | stopped)[cell_inv] & ~use
+        if wider.any():  # only when some neighbour would be added (not on a clean field)
             use = np.where(few, (ok | stopped)[cell_inv], use)
             med, pairs = pair_medians(np.where(use, grid[:2], np.nan), (ny, nx))
         test = np.flatnonzero((ok | stopped) & (pairs.ravel()[cell] >= PAIRS_MIN))

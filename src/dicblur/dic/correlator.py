@@ -14,7 +14,6 @@ from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
-from enum import Enum
 from typing import Any, Literal
 
 import numba
@@ -43,7 +42,7 @@ from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET
 from .result import DICResult
 from .screening import MAX_PREDICTED_SIGMA, PROBE_CHI2, PROBE_DISTANCE
 from .settings import INITIAL_METHODS, SHAPES, MatcherSettings, Shape, check_integer
-from .state import PreparedImage, Refined
+from .state import UNSET, PreparedImage, Refined, Unset
 
 __all__ = [
     "IMPRECISE_BUDGET",
@@ -61,15 +60,6 @@ __all__ = [
 ]
 
 BlurMode = Literal["none", "given", "estimate"]
-
-
-class _Unset(Enum):
-    """Marks a matcher keyword of :class:`Correlator` that was not given."""
-
-    UNSET = 0
-
-
-_UNSET = _Unset.UNSET
 
 
 class Correlator(BlurMatching):
@@ -174,20 +164,20 @@ class Correlator(BlurMatching):
         reference: ArrayLike,
         *,
         settings: MatcherSettings | None = None,
-        subset: int | _Unset = _UNSET,
-        step: int | _Unset = _UNSET,
+        subset: int | Unset = UNSET,
+        step: int | Unset = UNSET,
         roi: Sequence[int] | None = None,
         points: ArrayLike | None = None,
-        shape: Shape | _Unset = _UNSET,
-        interpolation: str | _Unset = _UNSET,
-        initial: str | _Unset = _UNSET,
-        max_iterations: int | _Unset = _UNSET,
-        tolerance: float | _Unset = _UNSET,
+        shape: Shape | Unset = UNSET,
+        interpolation: str | Unset = UNSET,
+        initial: str | Unset = UNSET,
+        max_iterations: int | Unset = UNSET,
+        tolerance: float | Unset = UNSET,
         noise_sigma: float | Literal["auto"] | None = "auto",
-        min_zncc: float | _Unset = _UNSET,
+        min_zncc: float | Unset = UNSET,
         workers: int | None = None,
-        max_residual: float | _Unset | None = _UNSET,
-        median_test: bool | _Unset = _UNSET,
+        max_residual: float | Unset | None = UNSET,
+        median_test: bool | Unset = UNSET,
         blur: BlurMode = "none",
         max_blur_sigma: float = 0.5,
         max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
@@ -208,7 +198,7 @@ class Correlator(BlurMatching):
                 ("max_residual", max_residual),
                 ("median_test", median_test),
             )
-            if v is not _UNSET
+            if v is not UNSET
         }
         if settings is not None and not isinstance(settings, MatcherSettings):
             raise InputError(
@@ -348,53 +338,6 @@ class Correlator(BlurMatching):
         self.prepare_time_s = time.perf_counter() - t0
         #: Timings (s) of the last :meth:`correlate` call: prefilter, initial, icgn, total.
         self.last_timings: dict[str, float] = {}
-
-    def fork(self, *, workers: int | _Unset | None = _UNSET) -> Correlator:
-        """A Correlator on this one's prepared reference, with its own scratch state, for
-        another thread.
-
-        The prepared reference (B-spline gradients, per-subset Hessians, POIs, predicted
-        errors) is read-only after ``__init__`` and shared, not copied; the fork gets its
-        own coefficient buffer (``correlate`` of an unprepared image writes it), its own
-        caches and timings. So this Correlator and its forks may correlate on different
-        threads at the same time, each with exactly the results of a Correlator built
-        anew with the same arguments (tests/test_dic.py). A fork costs about 1 MB and a
-        few microseconds (a 512^2 reference with 2,401 POIs takes ~0.3 s to prepare).
-
-        Parameters
-        ----------
-        workers : int or None, optional
-            Threads of the fork's compiled kernels (default: this Correlator's).
-
-        Returns
-        -------
-        Correlator
-
-        Examples
-        --------
-        >>> import numpy as np, dicblur
-        >>> ref = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=1)
-        >>> corr = dicblur.Correlator(ref, subset=21, step=20)
-        >>> one = corr.fork(workers=1)  # e.g. one per thread of a pool
-        >>> bool(np.array_equal(one.correlate(ref).u, corr.correlate(ref).u))
-        True
-        """
-        t0 = time.perf_counter()
-        new = object.__new__(Correlator)
-        new.__dict__.update(self.__dict__)
-        if workers is not _UNSET:
-            new.workers = None if workers is None else check_integer(workers, "workers", 1)
-        # the mutable state: scratch buffer, caches (their entries are read-only and keyed
-        # by the shared index arrays, so they are carried over), timings, blur references
-        new._coef_buf = np.zeros_like(self._coef_buf)
-        new._args_cache = dict(self._args_cache)
-        new._split_cache = dict(self._split_cache)
-        new._split_ids = set(self._split_ids)
-        new._blur_cache = OrderedDict()
-        new._last_blur_length = None
-        new.last_timings = {}
-        new.prepare_time_s = time.perf_counter() - t0
-        return new
 
     # ------------------------------------------------------------------ setup helpers
     @staticmethod
@@ -766,20 +709,20 @@ def correlate(
     current: ArrayLike,
     *,
     settings: MatcherSettings | None = None,
-    subset: int | _Unset = _UNSET,
-    step: int | _Unset = _UNSET,
+    subset: int | Unset = UNSET,
+    step: int | Unset = UNSET,
     roi: Sequence[int] | None = None,
     points: ArrayLike | None = None,
-    shape: Shape | _Unset = _UNSET,
-    interpolation: str | _Unset = _UNSET,
+    shape: Shape | Unset = UNSET,
+    interpolation: str | Unset = UNSET,
     initial: str | ArrayLike = "fftcc",
-    max_iterations: int | _Unset = _UNSET,
-    tolerance: float | _Unset = _UNSET,
+    max_iterations: int | Unset = UNSET,
+    tolerance: float | Unset = UNSET,
     noise_sigma: float | Literal["auto"] | None = "auto",
-    min_zncc: float | _Unset = _UNSET,
+    min_zncc: float | Unset = UNSET,
     workers: int | None = None,
-    max_residual: float | _Unset | None = _UNSET,
-    median_test: bool | _Unset = _UNSET,
+    max_residual: float | Unset | None = UNSET,
+    median_test: bool | Unset = UNSET,
     max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
 ) -> DICResult:
     """One-shot subset DIC of ``current`` against ``reference`` (see :class:`Correlator`).
@@ -787,8 +730,8 @@ def correlate(
     ``initial`` is a method name (``"fftcc"``, ``"subset"``, ``"zero"``) or an array of
     initial guesses ``(u, v)`` px of shape (n, 2) or (2,).
     """
-    method = initial if isinstance(initial, str) else _UNSET
-    if settings is None and method is _UNSET:
+    method = initial if isinstance(initial, str) else UNSET
+    if settings is None and method is UNSET:
         method = "fftcc"
     c = Correlator(
         reference,

@@ -10,8 +10,10 @@ metadata, so every stage sees the same names.
 
 from __future__ import annotations
 
+import time
 from collections import OrderedDict
 from dataclasses import dataclass
+from enum import Enum
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -20,9 +22,9 @@ from numpy.typing import NDArray
 from . import kernels
 from .icgn import PreparedSubsets
 from .noise import NoiseEstimate
-from .settings import MatcherSettings
+from .settings import MatcherSettings, check_integer
 
-__all__ = ["CorrelatorState", "PreparedImage", "Refined"]
+__all__ = ["UNSET", "CorrelatorState", "PreparedImage", "Refined", "Unset"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,6 +66,15 @@ class Refined(NamedTuple):
     status: NDArray[np.uint8]
 
 
+class Unset(Enum):
+    """Marks a matcher keyword of :class:`~dicblur.dic.Correlator` that was not given."""
+
+    UNSET = 0
+
+
+UNSET = Unset.UNSET
+
+
 class CorrelatorState:
     """Attributes of a prepared Correlator (set by ``Correlator.__init__``)."""
 
@@ -94,6 +105,7 @@ class CorrelatorState:
     predicted_sigma_u: NDArray[np.float64] | None
     predicted_sigma_v: NDArray[np.float64] | None
     last_timings: dict[str, float]
+    prepare_time_s: float
     _grid_shape: tuple[int, int] | None
     _grid_index: NDArray[np.intp] | None
     _prep: PreparedSubsets
@@ -160,3 +172,50 @@ class CorrelatorState:
             ),
             "dicblur_version": __version__,
         }
+
+    def fork(self, *, workers: int | Unset | None = UNSET) -> Any:
+        """A Correlator on this one's prepared reference, with its own scratch state, for
+        another thread.
+
+        The prepared reference (B-spline gradients, per-subset Hessians, POIs, predicted
+        errors) is read-only after ``__init__`` and shared, not copied; the fork gets its
+        own coefficient buffer (``correlate`` of an unprepared image writes it), its own
+        caches and timings. So this Correlator and its forks may correlate on different
+        threads at the same time, each with exactly the results of a Correlator built
+        anew with the same arguments (tests/test_dic.py). A fork costs about 1 MB and a
+        few microseconds (a 512^2 reference with 2,401 POIs takes ~0.3 s to prepare).
+
+        Parameters
+        ----------
+        workers : int or None, optional
+            Threads of the fork's compiled kernels (default: this Correlator's).
+
+        Returns
+        -------
+        Correlator
+
+        Examples
+        --------
+        >>> import numpy as np, dicblur
+        >>> ref = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=1)
+        >>> corr = dicblur.Correlator(ref, subset=21, step=20)
+        >>> one = corr.fork(workers=1)  # e.g. one per thread of a pool
+        >>> bool(np.array_equal(one.correlate(ref).u, corr.correlate(ref).u))
+        True
+        """
+        t0 = time.perf_counter()
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        if workers is not UNSET:
+            new.workers = None if workers is None else check_integer(workers, "workers", 1)
+        # the mutable state: scratch buffer, caches (their entries are read-only and keyed
+        # by the shared index arrays, so they are carried over), timings, blur references
+        new._coef_buf = np.zeros_like(self._coef_buf)
+        new._args_cache = dict(self._args_cache)
+        new._split_cache = dict(self._split_cache)
+        new._split_ids = set(self._split_ids)
+        new._blur_cache = OrderedDict()
+        new._last_blur_length = None
+        new.last_timings = {}
+        new.prepare_time_s = time.perf_counter() - t0
+        return new

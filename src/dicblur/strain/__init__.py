@@ -14,7 +14,15 @@ import types
 from typing import Any
 
 from .covariance import gradient_factor, overlap_correlation
-from .field import StrainField, StrainStatus, grid_of, strain, strain_on_grid, vsg
+from .field import (
+    StrainField,
+    StrainStatus,
+    grid_of,
+    strain,
+    strain_on_grid,
+    vsg,
+    window_from_vsg,
+)
 from .fit import plane_weights
 
 __all__ = [
@@ -27,6 +35,7 @@ __all__ = [
     "strain",
     "strain_on_grid",
     "vsg",
+    "window_from_vsg",
 ]
 
 

@@ -16,26 +16,25 @@ docs/strain.md derives these formulas. In short, for a gradient ``d = g^T u`` of
   in quadrature over the window) (eq. 6).
 
 The strains are functions of the four gradients ``(ux, uy, vx, vy)``; their covariance is
-``J Sigma_g J^T`` with the Jacobian ``J`` of the chosen strain measure (eq. 7-8).
+``J Sigma_g J^T`` with the Jacobian ``J`` of the chosen strain measure (eq. 7-8;
+:mod:`.kernels`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .fit import GridGradients, correlate_window, plane_weights
+from .fit import plane_weights
 
 __all__ = [
-    "GradientCovariance",
-    "gradient_covariance",
+    "Kind",
+    "gradient_factor",
     "noise_kernels",
     "overlap_correlation",
-    "strain_covariance",
-    "strains",
+    "window_correlation",
 ]
 
 Kind = Literal["green-lagrange", "small"]
@@ -80,126 +79,3 @@ def gradient_factor(half: int, step: float, subset: int) -> float:
     with the overlap correlation (eq. 5): ``sqrt(g^T R g)``."""
     kxx, _, _ = noise_kernels(half, step, subset)
     return float(np.sqrt(kxx.sum()))
-
-
-@dataclass(frozen=True)
-class GradientCovariance:
-    """Noise covariance of the gradients and their deterministic blur errors.
-
-    Attributes
-    ----------
-    uxux, uyuy, uxuy, vxvx, vyvy, vxvy : ndarray, shape (..., rows, cols)
-        Noise (co)variances of ``(ux, uy)`` and of ``(vx, vy)`` (``u`` and ``v`` errors
-        taken as uncorrelated).
-    bux, buy, bvx, bvy : ndarray or None
-        Blur errors of the gradients ``g^T xi`` (signed), None without blur shifts.
-    """
-
-    uxux: NDArray[np.float64]
-    uyuy: NDArray[np.float64]
-    uxuy: NDArray[np.float64]
-    vxvx: NDArray[np.float64]
-    vyvy: NDArray[np.float64]
-    vxvy: NDArray[np.float64]
-    bux: NDArray[np.float64] | None = None
-    buy: NDArray[np.float64] | None = None
-    bvx: NDArray[np.float64] | None = None
-    bvy: NDArray[np.float64] | None = None
-
-
-def gradient_covariance(
-    grad: GridGradients,
-    var_u: NDArray[np.floating[Any]],
-    var_v: NDArray[np.floating[Any]],
-    *,
-    step: float,
-    subset: int,
-    shift_u: NDArray[np.floating[Any]] | None = None,
-    shift_v: NDArray[np.floating[Any]] | None = None,
-) -> GradientCovariance:
-    """Noise covariance (eq. 5) and blur errors (eq. 6) of the gradients of ``grad``.
-
-    ``var_u``, ``var_v``: noise variance of each point's ``u``, ``v`` (px**2), shape of
-    the grid; ``shift_u``, ``shift_v``: signed blur-mismatch shift of each point (px).
-    """
-    use = grad.half
-    shape = use.shape
-    nv = [np.full(shape, np.nan) for _ in range(6)]
-    blur = shift_u is not None and shift_v is not None
-    bl = [np.full(shape, np.nan) for _ in range(4)] if blur else []
-    ok = use > 0
-    su = np.nan_to_num(np.asarray(var_u, np.float64))
-    sv = np.nan_to_num(np.asarray(var_v, np.float64))
-    if blur:
-        xu = np.nan_to_num(np.asarray(shift_u, np.float64))
-        xv = np.nan_to_num(np.asarray(shift_v, np.float64))
-    for h in np.unique(use[ok]):
-        h = int(h)
-        sel = use == h
-        kxx, kyy, kxy = noise_kernels(h, step, subset)
-        for o, f, k in zip(
-            nv, (su, su, su, sv, sv, sv), (kxx, kyy, kxy, kxx, kyy, kxy), strict=True
-        ):
-            o[sel] = correlate_window(f, k)[sel]
-        if blur:
-            gx, gy = plane_weights(h, step)
-            for o, f, g in zip(bl, (xu, xu, xv, xv), (gx, gy, gx, gy), strict=True):
-                o[sel] = correlate_window(f, g)[sel]
-    return GradientCovariance(*nv, *(bl if blur else [None] * 4))
-
-
-def strains(
-    grad: GridGradients, kind: Kind
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """``(exx, eyy, exy)`` from the gradients: small strain ``ux, vy, (uy + vx) / 2`` or
-    Green-Lagrange ``ux + (ux**2 + vx**2) / 2``, ``vy + (uy**2 + vy**2) / 2``,
-    ``(uy + vx + ux uy + vx vy) / 2`` (eq. 7; tensor shear, not the engineering
-    ``gamma = 2 exy``)."""
-    ux, uy, vx, vy = grad.ux, grad.uy, grad.vx, grad.vy
-    if kind == "small":
-        return ux, vy, 0.5 * (uy + vx)
-    return (
-        ux + 0.5 * (ux**2 + vx**2),
-        vy + 0.5 * (uy**2 + vy**2),
-        0.5 * (uy + vx + ux * uy + vx * vy),
-    )
-
-
-def _jacobian(grad: GridGradients, kind: Kind) -> list[tuple[Any, Any, Any, Any]]:
-    """Rows ``d(exx, eyy, exy) / d(ux, uy, vx, vy)`` (eq. 8)."""
-    if kind == "small":
-        return [(1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (0.0, 0.5, 0.5, 0.0)]
-    ux, uy, vx, vy = grad.ux, grad.uy, grad.vx, grad.vy
-    return [
-        (1.0 + ux, 0.0, vx, 0.0),
-        (0.0, uy, 0.0, 1.0 + vy),
-        (0.5 * uy, 0.5 * (1.0 + ux), 0.5 * (1.0 + vy), 0.5 * vx),
-    ]
-
-
-def strain_covariance(
-    grad: GridGradients, cov: GradientCovariance, kind: Kind
-) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64] | None]]:
-    """``J Sigma_g J^T`` (eq. 8) of ``(exx, eyy, exy)``: for each pair ``"xx_xx"``,
-    ``"yy_yy"``, ``"xy_xy"``, ``"xx_yy"``, ``"xx_xy"``, ``"yy_xy"`` the noise covariance
-    and the product of the two signed blur errors (None without blur shifts)."""
-    rows = _jacobian(grad, kind)
-    names = ("xx", "yy", "xy")
-    out: dict[str, tuple[NDArray[np.float64], NDArray[np.float64] | None]] = {}
-    blur_err = None
-    if cov.bux is not None:
-        b = (cov.bux, cov.buy, cov.bvx, cov.bvy)
-        blur_err = [sum(j * x for j, x in zip(row, b, strict=True)) for row in rows]
-    for a, b_ in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
-        p, q = rows[a], rows[b_]
-        noise = (
-            p[0] * q[0] * cov.uxux
-            + p[1] * q[1] * cov.uyuy
-            + (p[0] * q[1] + p[1] * q[0]) * cov.uxuy
-            + p[2] * q[2] * cov.vxvx
-            + p[3] * q[3] * cov.vyvy
-            + (p[2] * q[3] + p[3] * q[2]) * cov.vxvy
-        )
-        bl = None if blur_err is None else np.asarray(blur_err[a] * blur_err[b_])
-        out[f"{names[a]}_{names[b_]}"] = (np.asarray(noise, np.float64), bl)
-    return out

@@ -12,10 +12,19 @@ from numpy.typing import NDArray
 from ..dic.result import DICResult
 from ..dic.status import PointStatus
 from ..errors import InputError
-from .covariance import Kind, gradient_covariance, strain_covariance, strains
-from .fit import GridGradients, grid_gradients
+from .covariance import Kind
+from .fit import choose_half
+from .kernels import N_GRAD, N_OUT, measure_pass, stacked_kernels, window_pass
 
-__all__ = ["StrainField", "StrainStatus", "grid_of", "strain", "strain_on_grid", "vsg"]
+__all__ = [
+    "StrainField",
+    "StrainStatus",
+    "grid_of",
+    "strain",
+    "strain_on_grid",
+    "vsg",
+    "window_from_vsg",
+]
 
 Method = Literal["fit", "subset"]
 
@@ -38,6 +47,36 @@ def vsg(window: int, step: float, subset: int) -> float:
     """Virtual strain gauge size, px: ``(window - 1) step + subset`` (iDICs Good Practices
     Guide, 2018)."""
     return float((window - 1) * step + subset)
+
+
+def window_from_vsg(
+    value: int | float | str, *, step: int, subset: int, name: str = "--vsg"
+) -> int:
+    """The window N (grid points) of a VSG given as grid points (``5``) or px (``"41px"``:
+    ``N = (VSG - subset) / step + 1``, which must be an odd whole number >= 3)."""
+    text = str(value).strip()
+    if text.lower().endswith("px"):
+        from ..models.units import parse_quantity
+
+        px = parse_quantity(text, "displacement", name=name)
+        n = (px - subset) / step + 1
+        if not (abs(n - round(n)) < 1e-9 and round(n) >= 3 and round(n) % 2 == 1):
+            ok = [vsg(k, step, subset) for k in (3, 5, 7, 9)]
+            raise InputError(
+                f"{name}={text!r}: a VSG of (N - 1) x step {step} px + subset {subset} px "
+                f"with N odd >= 3, e.g. {', '.join(f'{v:g}px' for v in ok)}"
+            )
+        return round(n)
+    try:
+        n = int(text)
+    except ValueError:
+        raise InputError(
+            f"{name}={text!r}: give the window in grid points (an odd number >= 3, e.g. 5) "
+            "or the VSG in px (e.g. 41px)"
+        ) from None
+    if n < 3 or n % 2 == 0:
+        raise InputError(f"{name}={text!r}: the window must be an odd number >= 3, e.g. 5")
+    return n
 
 
 @dataclass(frozen=True)
@@ -157,15 +196,14 @@ def grid_of(rows: NDArray[Any], cols: NDArray[Any]) -> tuple[tuple[int, int], in
 def _principal(
     exx: NDArray[np.float64], eyy: NDArray[np.float64], exy: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], ...]:
-    """``e1, e2, angle`` and the rows of their Jacobian with respect to (exx, eyy, exy)."""
+    """``e1, e2, angle`` and the rows of the Jacobian of ``r = (e1 - e2) / 2`` and of the
+    angle with respect to (exx, eyy, exy) (eq. 10)."""
     m = 0.5 * (exx + eyy)
     a = 0.5 * (exx - eyy)
     r = np.hypot(a, exy)
     rs = np.where(r > 0, r, np.finfo(np.float64).tiny)
     angle = 0.5 * np.arctan2(exy, a)
-    # d r / d(exx, eyy, exy) = (a / 2r, -a / 2r, exy / r)
     dr = (0.5 * a / rs, -0.5 * a / rs, exy / rs)
-    # angle = atan2(exy, a) / 2: d/d a = -exy / (2 r^2), d/d exy = a / (2 r^2)
     r2 = rs**2
     dth = (-0.25 * exy / r2, 0.25 * exy / r2, 0.5 * a / r2)
     return m + r, m - r, angle, *dr, *dth
@@ -187,6 +225,8 @@ def strain_on_grid(
     gradients: tuple[NDArray[np.floating[Any]], ...] | None = None,
     rows: NDArray[Any] | None = None,
     cols: NDArray[Any] | None = None,
+    with_principal_sigma: bool = True,
+    with_covariance: bool = True,
 ) -> StrainField:
     """Strains and their covariance of fields on a grid (the engine of :func:`strain`).
 
@@ -212,6 +252,11 @@ def strain_on_grid(
         ``sigma_u / sqrt(mean(dx**2))`` over the subset (eq. 9).
     rows, cols : ndarray, optional
         POI centres (px) to record.
+    with_principal_sigma : bool
+        Also the (linearised) sigmas of ``e1``, ``e2`` and the angle (needs
+        ``with_covariance``).
+    with_covariance : bool
+        Also the (..., n, 3, 3) covariance (False: the sigmas alone, less memory).
 
     Returns
     -------
@@ -226,78 +271,104 @@ def strain_on_grid(
             f"u, v, valid: expected arrays of one (..., rows, cols) shape, got {u.shape}, "
             f"{v.shape}, {valid.shape}"
         )
-    if not (isinstance(window, int | np.integer) and window >= 3 and window % 2 == 1):
+    if isinstance(window, bool) or not isinstance(window, int | np.integer) or window < 3:
         raise InputError(f"window={window!r}: use an odd number of grid points >= 3 (e.g. 5)")
+    if window % 2 == 0:
+        raise InputError(f"window={window!r}: the window must be odd (use {window + 1})")
     if kind not in ("green-lagrange", "small"):
         raise InputError(f"kind={kind!r}: use 'green-lagrange' or 'small'")
     if not (step > 0 and subset > 0):
         raise InputError(f"step={step!r}, subset={subset!r}: both must be > 0 px")
-    half = window // 2
+    half = int(window) // 2
     sigmas = sigma_u is not None and sigma_v is not None
+    blur = sigmas and shift_u is not None and shift_v is not None
+    shape3 = (-1, *u.shape[-2:])
+    s2u = np.zeros(u.shape) if not sigmas else np.nan_to_num(np.asarray(sigma_u, np.float64) ** 2)
+    s2v = np.zeros(u.shape) if not sigmas else np.nan_to_num(np.asarray(sigma_v, np.float64) ** 2)
+    grad = np.empty((*u.shape, N_GRAD))
     if gradients is None:
         method = "fit"
-        grad = grid_gradients(u, v, valid, half=half, step=step)
-        n_used = np.where(grad.half > 0, 2 * grad.half + 1, 0)
-        full = grad.half == half
+        use = choose_half(valid, half)
+        xu = np.nan_to_num(np.asarray(shift_u, np.float64)) if blur else np.zeros((1, 1, 1))
+        xv = np.nan_to_num(np.asarray(shift_v, np.float64)) if blur else np.zeros((1, 1, 1))
+        window_pass(
+            np.where(valid, u, 0.0).reshape(shape3),
+            np.where(valid, v, 0.0).reshape(shape3),
+            use.reshape(shape3),
+            s2u.reshape(shape3),
+            s2v.reshape(shape3),
+            xu.reshape(shape3) if blur else xu,
+            xv.reshape(shape3) if blur else xv,
+            blur,
+            *stacked_kernels(half, float(step), int(subset)),
+            grad.reshape(*shape3, N_GRAD),
+        )
+        n_used = np.where(use > 0, 2 * use + 1, 0)
+        full = use == half
     else:
+        # eq. 9: the affine subset's gradients from its own pixels, independent points
         method = "subset"
-        gs = [np.where(valid, np.asarray(g, np.float64), np.nan) for g in gradients]
-        grad = GridGradients(*gs, half=valid.astype(np.int64))
-        n_used = valid.astype(np.int64)
+        use = valid.astype(np.int64)
+        hs = subset // 2
+        mean_d2 = hs * (hs + 1) / 3.0
+        for i, g in enumerate(gradients):
+            grad[..., i] = np.asarray(g, np.float64)
+        grad[..., 4] = grad[..., 5] = s2u / mean_d2
+        grad[..., 7] = grad[..., 8] = s2v / mean_d2
+        grad[..., 6] = grad[..., 9] = 0.0
+        grad[..., 10:] = 0.0
+        grad[~valid] = np.nan
+        n_used = use
         full = valid
-    exx, eyy, exy = strains(grad, kind)
+    res = np.empty((*u.shape, N_OUT))
+    measure_pass(grad.reshape(-1, N_GRAD), kind == "green-lagrange", res.reshape(-1, N_OUT))
+    exx, eyy, exy = res[..., 0], res[..., 1], res[..., 2]
     status = np.where(full, StrainStatus.OK, StrainStatus.REDUCED_WINDOW).astype(np.uint8)
-    status[grad.half == 0] = StrainStatus.NO_WINDOW
+    status[use == 0] = StrainStatus.NO_WINDOW
     status[~valid] = StrainStatus.POINT_FAILED
     e1, e2, ang, *jac = _principal(exx, eyy, exy)
-    out_sig: dict[str, Any] = dict.fromkeys(
-        (
-            "sigma_exx",
-            "sigma_eyy",
-            "sigma_exy",
-            "sigma_e1",
-            "sigma_e2",
-            "sigma_angle",
-            "sigma_exx_noise",
-            "sigma_exx_blur",
-            "cov",
-        )
+    names = (
+        "sigma_exx",
+        "sigma_eyy",
+        "sigma_exy",
+        "sigma_e1",
+        "sigma_e2",
+        "sigma_angle",
+        "sigma_exx_noise",
+        "sigma_exx_blur",
+        "cov",
     )
-    if sigmas:
-        var_u = np.asarray(sigma_u, np.float64) ** 2
-        var_v = np.asarray(sigma_v, np.float64) ** 2
-        if method == "fit":
-            gc = gradient_covariance(
-                grad, var_u, var_v, step=step, subset=subset, shift_u=shift_u, shift_v=shift_v
-            )
-        else:
-            # eq. 9: the affine subset's gradient from its own pixels
-            h = subset // 2
-            mean_d2 = h * (h + 1) / 3.0
-            z = np.zeros_like(var_u)
-            gc = _subset_covariance(var_u / mean_d2, var_v / mean_d2, z, valid)
-        sc = strain_covariance(grad, gc, kind)
+    out_sig: dict[str, Any] = dict.fromkeys(names)
+    if sigmas and not with_covariance:
+        for i, name in enumerate(("sigma_exx", "sigma_eyy", "sigma_exy")):
+            var = res[..., 3 + i] + (res[..., 9 + i] ** 2 if blur else 0.0)
+            out_sig[name] = np.sqrt(np.clip(var, 0.0, None))
+        out_sig["sigma_exx_noise"] = np.sqrt(np.clip(res[..., 3], 0.0, None))
+        if blur:
+            out_sig["sigma_exx_blur"] = np.abs(res[..., 9])
+    if sigmas and with_covariance:
+        # eq. 8: the noise covariance plus the outer product of the signed blur errors
         cov = np.empty((*u.shape, 3, 3))
-        idx = {"xx": 0, "yy": 1, "xy": 2}
-        noise_xx = sc["xx_xx"][0]
-        blur_xx = sc["xx_xx"][1]
-        for key, (nz, bl) in sc.items():
-            a, b = (idx[p] for p in key.split("_"))
-            val = nz if bl is None else nz + bl
+        for m, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+            val = res[..., 3 + m] + (res[..., 9 + a] * res[..., 9 + b] if blur else 0.0)
             cov[..., a, b] = val
             cov[..., b, a] = val
-        cov[~(n_used > 0)] = np.nan
         out_sig["cov"] = cov
         d = np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1), 0.0, None))
-        out_sig["sigma_exx"], out_sig["sigma_eyy"], out_sig["sigma_exy"] = d[..., 0], d[..., 1], d[..., 2]
-        out_sig["sigma_exx_noise"] = np.where(n_used > 0, np.sqrt(np.clip(noise_xx, 0, None)), np.nan)
-        if blur_xx is not None:
-            out_sig["sigma_exx_blur"] = np.where(n_used > 0, np.sqrt(blur_xx), np.nan)
+        out_sig["sigma_exx"], out_sig["sigma_eyy"], out_sig["sigma_exy"] = (
+            d[..., 0],
+            d[..., 1],
+            d[..., 2],
+        )
+        out_sig["sigma_exx_noise"] = np.sqrt(np.clip(res[..., 3], 0.0, None))
+        if blur:
+            out_sig["sigma_exx_blur"] = np.abs(res[..., 9])
+    if sigmas and with_covariance and with_principal_sigma:
         dr = np.stack(jac[:3], axis=-1)
         dth = np.stack(jac[3:], axis=-1)
-        m = np.array([0.5, 0.5, 0.0])
-        for name, row in (("sigma_e1", m + dr), ("sigma_e2", m - dr), ("sigma_angle", dth)):
-            var = np.einsum("...a,...ab,...b->...", row, cov, row)
+        mid = np.array([0.5, 0.5, 0.0])
+        for name, row in (("sigma_e1", mid + dr), ("sigma_e2", mid - dr), ("sigma_angle", dth)):
+            var = np.einsum("...a,...ab,...b->...", row, out_sig["cov"], row)
             out_sig[name] = np.sqrt(np.clip(var, 0.0, None))
     ny, nx = u.shape[-2:]
     lead = u.shape[:-2]
@@ -329,20 +400,6 @@ def strain_on_grid(
         step=int(step),
         subset=int(subset),
     )
-
-
-def _subset_covariance(
-    var_gu: NDArray[np.float64],
-    var_gv: NDArray[np.float64],
-    zero: NDArray[np.float64],
-    valid: NDArray[np.bool_],
-) -> Any:
-    """Gradient covariance of the subset method: independent gradients (eq. 9)."""
-    from .covariance import GradientCovariance
-
-    vu = np.where(valid, var_gu, np.nan)
-    vv = np.where(valid, var_gv, np.nan)
-    return GradientCovariance(vu, vu, zero, vv, vv, zero)
 
 
 def strain(

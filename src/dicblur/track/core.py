@@ -619,6 +619,7 @@ def track(
     compensate_blur: bool = False,
     max_predicted_sigma: float | None = None,
     tolerance: float | Literal["auto"] = "auto",
+    strain: int | None = None,
 ) -> Any:
     """Track a recording and predict the random error of every point in every frame.
 
@@ -683,6 +684,9 @@ def track(
         [1e-4, 1e-3] px (:func:`auto_tolerance`): small against every sigma the track
         predicts (it adds about 1 %), and up to a quarter fewer iterations than the
         engine's default 1e-4 px. Stored in the attribute ``tolerance``.
+    strain : int, optional
+        Window N (odd, grid points) of the strains written beside ``u``, ``v``
+        (:func:`dicblur.strain.track.track_strain`, docs/strain.md); None: no strains.
 
     Returns
     -------
@@ -707,6 +711,10 @@ def track(
         A frame could not be read or tracking was interrupted; ``.dataset`` holds what was
         tracked.
     """
+    if strain is not None:
+        from ..strain.track import check_strain_window
+
+        check_strain_window(strain, points)
     rec = recording if isinstance(recording, Recording) else open_recording(recording)
     n_total = len(rec)
     if n_total < 2:
@@ -973,6 +981,7 @@ def track(
             build_compensated_table if comp_info["matcher"] != MATCHER_PLAIN else build_blur_table
         ),
         compensated=comp_info["matcher"] != MATCHER_PLAIN,
+        strain=strain,
     )
     if error is not None:
         what = "interrupted" if isinstance(error, KeyboardInterrupt) else f"stopped: {error}"
@@ -1069,6 +1078,7 @@ def _assemble(
     blur_table: Callable[..., Any] = build_blur_table,
     threads: int = 1,
     compensated: bool = False,
+    strain: int | None = None,
 ) -> Any:
     from .._version import __version__
 
@@ -1166,6 +1176,7 @@ def _assemble(
     blur_dom = np.full(n_f, np.nan)
     levels: NDArray[np.float64] | None = None  # of the subsets inside, once known
     t0 = time.perf_counter()
+    table: Any = None
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
         # all points inside (the usual grid): plain slices, no fancy-indexed copies
@@ -1394,6 +1405,16 @@ def _assemble(
         attrs["notes"] = " | ".join(notes)
     if importing is not None:
         importing.join()
+    strain_vars: dict[str, Any] = {}
+    if strain is not None and gshape is not None:  # docs/strain.md: strains beside u, v
+        from ..strain.track import track_strain
+
+        t_s = time.perf_counter()
+        strain_vars, strain_attrs = track_strain(
+            u, v, valid, sig["sigma_u_noise"], sig["sigma_v_noise"], table, w, ang,
+            np.flatnonzero(inside), gshape, step=corr.step, subset=corr.subset, window=strain,
+        )  # fmt: skip
+        attrs.update(strain_attrs, strain_time_s=time.perf_counter() - t_s)
     import xarray as xr
 
     fr = ("frame", "point")
@@ -1452,6 +1473,7 @@ def _assemble(
         "blur_dominated_share": ("frame", blur_dom),
         "reference_frame": ("frame", ref_of.astype(np.int32)),
         "fallback": ("frame", fb.astype(np.uint8), {"long_name": "frame needed the FFT-CC start"}),
+        **{k: (fr, a) for k, a in strain_vars.items()},
     }
     return xr.Dataset(
         data,

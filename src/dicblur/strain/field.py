@@ -201,7 +201,7 @@ def _principal(
     m = 0.5 * (exx + eyy)
     a = 0.5 * (exx - eyy)
     r = np.hypot(a, exy)
-    rs = np.where(r > 0, r, np.finfo(np.float64).tiny)
+    rs = np.where(r > 0, r, np.sqrt(np.finfo(np.float64).tiny))  # r**2 stays > 0
     angle = 0.5 * np.arctan2(exy, a)
     dr = (0.5 * a / rs, -0.5 * a / rs, exy / rs)
     r2 = rs**2

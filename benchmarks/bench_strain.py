@@ -157,6 +157,49 @@ def resolution(ref0, cur_sine, noise_free_windows):
     return rows
 
 
+def blur_factor(pattern, blurs=(2.0, 4.0), windows=(3, 5, 7)):
+    """The strain factor of the signed mismatch shifts (``rms(g^T xi) / rms(xi)``) over the
+    independent-points factor, per window, W and component: how far the shifts of
+    neighbouring subsets are from independent (eq. 12; ``strain.plan`` uses the mean)."""
+    corr = Correlator(pattern, subset=SUBSET, step=STEP, shape="affine")
+    centres = np.stack([corr.rows, corr.cols], axis=1).astype(np.intp)
+    g = corr.grid_shape
+    shift, _, _ = subset_blur_response(
+        pattern, list(blurs), centres, SUBSET, motion=(0.0, 1.0), shape="affine"
+    )
+    rows = []
+    for m, w in enumerate(blurs):
+        xu = np.nan_to_num(shift[m, :, 0]).reshape(g)
+        xv = np.nan_to_num(shift[m, :, 1]).reshape(g)
+        for n in windows:
+            s = strain_on_grid(
+                xu, xv, np.ones(g, bool), step=STEP, subset=SUBSET, window=n, kind="small"
+            )
+            ok = s.status == StrainStatus.OK
+            ind = math.sqrt(12) / (STEP * n * math.sqrt(n * n - 1))
+            rows.append(
+                {
+                    "W_px": w,
+                    "window": n,
+                    "exx_over_independent": float(
+                        np.sqrt(np.mean(s.exx[ok] ** 2)) / np.sqrt(np.mean(xu**2)) / ind
+                    ),
+                    "eyy_over_independent": float(
+                        np.sqrt(np.mean(s.eyy[ok] ** 2)) / np.sqrt(np.mean(xv**2)) / ind
+                    ),
+                    "noise_overlap_over_independent": gradient_factor(n // 2, STEP, SUBSET) / ind,
+                }
+            )
+            r = rows[-1]
+            print(
+                f"blur factor W={w:g} N={n}: exx {r['exx_over_independent']:.3f}, eyy "
+                f"{r['eyy_over_independent']:.3f} x independent (noise: "
+                f"{r['noise_overlap_over_independent']:.3f})",
+                flush=True,
+            )
+    return rows
+
+
 def speed(repeats: int) -> dict[str, float]:
     rng = np.random.default_rng(0)
     n = 49
@@ -296,6 +339,7 @@ def main() -> None:
             f"VSG {r['vsg_px']:4d} px: amplitude {r['amplitude_ratio']:.3f} "
             f"(plane fit alone {r['plane_fit_gain']:.3f})"
         )
+    bf = blur_factor(pat)
     sp = speed(30)
     print(f"strain + covariance, {sp['points']} points: {sp['median_ms']:.2f} ms (median)")
     tr = track_overhead(
@@ -330,6 +374,7 @@ def main() -> None:
             "uniform_bins": bins,
             "resolution": res_rows,
             "speed_2401": sp,
+            "blur_factor": bf,
             "track": tr,
             "gradient_factors": factors,
         }

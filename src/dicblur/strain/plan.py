@@ -52,15 +52,14 @@ def strain_sigma_curve(
     *,
     window: int,
     step: float,
+    subset: int,
     sigma: float | None = None,
     which: str | None = None,
 ) -> tuple[NDArray[np.float64], bool]:
-    """``sigma_exx`` at the blur lengths ``blur`` (px) for a window of N points (eq. 11),
-    and whether the model split noise from blur."""
-    if model.subset is None:
-        raise InputError("model: records no subset size; refit it (dicblur fit / calibrate)")
+    """``sigma_exx`` at the blur lengths ``blur`` (px) for a window of N points, grid step
+    and subset in px (eq. 11), and whether the model split noise from blur."""
     pred = model.predict(blur, sigma, model=which)
-    k_n, k_b = factors(window, step, int(model.subset))
+    k_n, k_b = factors(window, step, subset)
     if pred.u_noise is not None and pred.u_blur is not None:
         return np.hypot(k_n * pred.u_noise, k_b * pred.u_blur), True
     return k_n * np.asarray(pred.u_e), False
@@ -159,6 +158,7 @@ def plan_strain(
     target: float | str,
     vsg: int | float | str,
     step: int,
+    subset: int | None = None,
     sigma: float | None = None,
     which: str | None = None,
     windows: tuple[int, ...] = (3, 5, 7, 9, 11, 13, 15),
@@ -177,6 +177,8 @@ def plan_strain(
         Window in grid points (``5``) or the VSG in px (``"41px"``).
     step : int
         POI grid step, px.
+    subset : int, optional
+        Subset size, px, when the model records none (else it must match the model's).
     sigma : float, optional
         Noise std, GL (default the model's).
     which : str, optional
@@ -190,9 +192,16 @@ def plan_strain(
     """
     if not isinstance(model, BlurUncertaintyModel):
         raise InputError("model: expected a BlurUncertaintyModel (dicblur.fit_blur_model)")
-    if model.subset is None:
-        raise InputError("model: records no subset size; refit it (dicblur fit / calibrate)")
-    subset = int(model.subset)
+    if model.subset is None and subset is None:
+        raise InputError("subset: the model records no subset size; give it (px), e.g. 21")
+    if model.subset is not None and subset is not None and int(subset) != int(model.subset):
+        raise InputError(
+            f"subset={subset!r}: the model was fitted with subset {model.subset} px; "
+            "leave it out or use that model's subset"
+        )
+    subset = int(model.subset if model.subset is not None else subset)  # type: ignore[arg-type]
+    if subset < 5 or subset % 2 == 0:
+        raise InputError(f"subset={subset!r}: an odd subset size >= 5 px, e.g. 21")
     if not (isinstance(step, int) and step > 0):
         raise InputError(f"step={step!r}: the POI grid step must be an integer > 0 px")
     tgt = parse_quantity(target, "strain", name="target")
@@ -209,7 +218,7 @@ def plan_strain(
     assert model.domain is not None
     w_top = model.domain.breakdown_blur or 2.0 * float(max(model.domain.blur_max, 1.0))
     notes: list[str] = []
-    kw = {"step": float(step), "sigma": sigma, "which": which}
+    kw = {"step": float(step), "subset": subset, "sigma": sigma, "which": which}
     w_best, s_best = _longest(model, tgt, w_top, window=window, **kw)
     _, split = strain_sigma_curve(model, np.array([0.0]), window=window, **kw)
     if not split:

@@ -174,22 +174,22 @@ def correlate_command(
             "points_per_s": len(res) / dt if dt > 0 else None,
         }
     )
-    extra = None
+    strain_vars = None
     if window is not None:
         from ..strain import strain as strain_of
 
         sf = strain_of(res, window=window)
-        extra = sf.variables()
+        strain_vars = sf.variables()
         data.update(strain_summary(sf))
     print_mapping(
         f"correlate: {reference.name} -> {current.name} ({shape}, subset {subset})", data, _UNITS
     )
     if out is not None:
         if out.suffix.lower() == ".csv":
-            res.to_csv(out, extra=extra)
+            res.to_csv(out, extra=strain_vars)
         else:
             with atomic_path(out) as tmp:
-                ds = res.to_xarray(extra=extra)
+                ds = res.to_xarray(extra=strain_vars)
                 if window is not None:
                     ds.attrs.update(strain_window=window, strain_vsg=sf.vsg, strain_kind=sf.kind)
                 ds.to_netcdf(tmp, engine="scipy")

@@ -291,7 +291,8 @@ def strain_on_grid(
         use = choose_half(valid, half)
         xu = np.nan_to_num(np.asarray(shift_u, np.float64)) if blur else np.zeros((1, 1, 1))
         xv = np.nan_to_num(np.asarray(shift_v, np.float64)) if blur else np.zeros((1, 1, 1))
-        window_pass(
+        kern = stacked_kernels(half, float(step), int(subset))
+        window_pass(  # type: ignore[call-arg]
             np.where(valid, u, 0.0).reshape(shape3),
             np.where(valid, v, 0.0).reshape(shape3),
             use.reshape(shape3),
@@ -300,7 +301,7 @@ def strain_on_grid(
             xu.reshape(shape3) if blur else xu,
             xv.reshape(shape3) if blur else xv,
             blur,
-            *stacked_kernels(half, float(step), int(subset)),
+            *kern,
             grad.reshape(*shape3, N_GRAD),
         )
         n_used = np.where(use > 0, 2 * use + 1, 0)

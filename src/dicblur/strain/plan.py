@@ -218,7 +218,7 @@ def plan_strain(
     assert model.domain is not None
     w_top = model.domain.breakdown_blur or 2.0 * float(max(model.domain.blur_max, 1.0))
     notes: list[str] = []
-    kw = {"step": float(step), "subset": subset, "sigma": sigma, "which": which}
+    kw: dict[str, Any] = {"step": float(step), "subset": subset, "sigma": sigma, "which": which}
     w_best, s_best = _longest(model, tgt, w_top, window=window, **kw)
     _, split = strain_sigma_curve(model, np.array([0.0]), window=window, **kw)
     if not split:

@@ -135,6 +135,9 @@ def track_strain(
     if table is None:
         del out["sigma_exx_blur"]
     out_all: dict[str, NDArray[Any]] = {**out, "strain_status": status}
-    attrs = {"strain_window": int(window), "strain_vsg": vsg(window, step, subset)}
-    attrs["strain_kind"] = kind
+    attrs: dict[str, Any] = {
+        "strain_window": int(window),
+        "strain_vsg": vsg(window, step, subset),
+        "strain_kind": kind,
+    }
     return out_all, attrs

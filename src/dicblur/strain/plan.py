@@ -33,7 +33,7 @@ from .field import window_from_vsg
 __all__ = ["BLUR_GRADIENT_EXCESS", "StrainPlan", "plan_strain", "strain_sigma_curve"]
 
 #: ``k_blur / k_independent``: the blur-mismatch shifts' strain factor over that of
-#: independent points, measured 1.12-1.36 (N = 3..7, W = 2 and 4 px, both components) on
+#: independent points, measured 1.13-1.36 (N = 3..7, W = 2 and 4 px, both components) on
 #: the benchmark's 4 px speckle (benchmarks/bench_strain.py, ``blur_factor``); the
 #: middle of that range.
 BLUR_GRADIENT_EXCESS = 1.25

@@ -372,13 +372,13 @@ def strain_on_grid(
             var = np.einsum("...a,...ab,...b->...", row, out_sig["cov"], row)
             out_sig[name] = np.sqrt(np.clip(var, 0.0, None))
     ny, nx = u.shape[-2:]
-    lead = u.shape[:-2]
+    front = u.shape[:-2]
 
     def flat(a: Any) -> Any:
         if a is None:
             return None
         a = np.asarray(a)
-        return a.reshape(*lead, ny * nx, *a.shape[u.ndim :])
+        return a.reshape(*front, ny * nx, *a.shape[u.ndim :])
 
     if rows is None or cols is None:
         rr, cc = np.meshgrid(np.arange(ny) * step, np.arange(nx) * step, indexing="ij")

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
+import typer
 from rich.console import Console
 from rich.table import Table
 
@@ -34,6 +35,14 @@ MAX_SIGMA_HELP = (
     "the noise) exceeds this, px (e.g. 0.05px; none: no test). correlate: default 0.1/3 px "
     "with --noise; track: default none."
 )
+
+
+# The matcher options that ``correlate`` and ``track`` share: one definition (option name,
+# help text) for both commands; each command gives its own default.
+SubsetOption = Annotated[int, typer.Option("--subset", help="Odd subset size, px.")]
+StepOption = Annotated[int, typer.Option("--step", help="POI grid step, px.")]
+ShapeOption = Annotated[str, typer.Option("--shape", help="affine or translation.")]
+MaxSigmaOption = Annotated[str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)]
 
 
 def parse_max_sigma(text: str | None, name: str = "--max-predicted-sigma") -> float | None:

@@ -9,8 +9,11 @@ import typer
 
 from ..errors import InputError
 from ._common import (
-    MAX_SIGMA_HELP,
     VSG_HELP,
+    MaxSigmaOption,
+    ShapeOption,
+    StepOption,
+    SubsetOption,
     console,
     notice_compile,
     parse_max_sigma,
@@ -38,9 +41,9 @@ _UNITS = {
 def correlate_command(
     reference: Annotated[Path, typer.Argument(help="Reference image (TIFF, PNG, BMP).")],
     current: Annotated[Path, typer.Argument(help="Current (deformed) image, same size.")],
-    subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
-    step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
-    shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
+    subset: SubsetOption = 21,
+    step: StepOption = 10,
+    shape: ShapeOption = "affine",
     interpolation: Annotated[
         str, typer.Option("--interpolation", help="bspline3 or bspline5.")
     ] = "bspline3",
@@ -62,9 +65,7 @@ def correlate_command(
             "(eps 0.1 px, threshold 2) and a probe of the neighbours' displacement.",
         ),
     ] = False,
-    max_predicted_sigma: Annotated[
-        str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
-    ] = None,
+    max_predicted_sigma: MaxSigmaOption = None,
     blur_compensation: Annotated[
         str,
         typer.Option(

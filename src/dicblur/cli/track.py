@@ -9,8 +9,11 @@ import typer
 
 from ..errors import InputError
 from ._common import (
-    MAX_SIGMA_HELP,
     VSG_HELP,
+    MaxSigmaOption,
+    ShapeOption,
+    StepOption,
+    SubsetOption,
     console,
     parse_max_sigma,
     parse_tolerance,
@@ -52,9 +55,9 @@ def track_command(
     noise: Annotated[
         float | None, typer.Option("--noise", help="Noise std (grey levels) instead of --static.")
     ] = None,
-    subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
-    step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
-    shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
+    subset: SubsetOption = 21,
+    step: StepOption = 10,
+    shape: ShapeOption = "affine",
     points: Annotated[
         str | None,
         typer.Option("--points", help="Explicit POIs 'r1,c1;r2,c2' (px) instead of a grid."),
@@ -115,9 +118,7 @@ def track_command(
             "--update-reference: threads of the correlation kernels.",
         ),
     ] = None,
-    max_predicted_sigma: Annotated[
-        str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
-    ] = None,
+    max_predicted_sigma: MaxSigmaOption = None,
     tolerance: Annotated[
         str,
         typer.Option(

@@ -139,3 +139,25 @@ def notice_compile(shape: str = "affine") -> None:
 
     if not kernels_cached("translation" if shape == "translation" else "affine"):
         print(COMPILE_NOTICE, file=sys.stderr, flush=True)
+
+
+#: ``--vsg`` of ``correlate`` and ``track`` (one help text for both).
+VSG_HELP = (
+    "With --strain: the plane fit's window, in grid points (odd, e.g. 5) or as the virtual "
+    "strain gauge in px (e.g. 61px = (N - 1) x step + subset)."
+)
+
+
+def strain_option(
+    strain: bool, vsg: str, *, step: int, subset: int, points: Any = None
+) -> int | None:
+    """``--strain`` / ``--vsg``: the window N, or None without ``--strain``."""
+    if not strain:
+        if vsg.strip() != "5":
+            raise InputError(f"--vsg={vsg!r}: only used with --strain")
+        return None
+    from ..strain import window_from_vsg
+
+    if points is not None:
+        raise InputError("--strain: needs the POI grid; leave out --points")
+    return window_from_vsg(vsg, step=step, subset=subset, name="--vsg")

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from ..errors import InputError
 from ._common import (
+    VSG_HELP,
     MaxSigmaOption,
     ShapeOption,
     StepOption,
@@ -17,6 +18,7 @@ from ._common import (
     notice_compile,
     parse_max_sigma,
     print_mapping,
+    strain_option,
 )
 
 _UNITS = {
@@ -34,6 +36,7 @@ _UNITS = {
     "points_per_s": "POI/s",
     "blur_length_mean": "px",
     "blur_length_std": "px",
+    "strain_vsg": "px",
 }
 
 
@@ -88,6 +91,14 @@ def correlate_command(
             "--angle", help="Blur direction in degrees from +x (columns) towards +y (rows)."
         ),
     ] = 0.0,
+    strain: Annotated[
+        bool,
+        typer.Option(
+            "--strain",
+            help="Also strains (Green-Lagrange) and, with --noise, their sigmas (docs/strain.md).",
+        ),
+    ] = False,
+    vsg: Annotated[str, typer.Option("--vsg", help=VSG_HELP)] = "5",
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
     import math
@@ -115,6 +126,7 @@ def correlate_command(
         )
     if mode == "none" and blur is not None:
         raise InputError(f"--blur={blur}: only used with --blur-compensation given or estimate")
+    window = strain_option(strain, vsg, step=step, subset=subset)
     extra: dict[str, float | None] = {}
     if max_predicted_sigma is not None:
         extra["max_predicted_sigma"] = parse_max_sigma(max_predicted_sigma)
@@ -179,16 +191,40 @@ def correlate_command(
             "points_per_s": len(res) / dt if dt > 0 else None,
         }
     )
+    strain_vars = None
+    if window is not None:
+        from ..strain import strain as strain_of
+
+        sf = strain_of(res, window=window)
+        strain_vars = sf.variables()
+        data.update(strain_summary(sf))
     print_mapping(
         f"correlate: {reference.name} -> {current.name} ({shape}, subset {subset})", data, _UNITS
     )
     if out is not None:
         if out.suffix.lower() == ".csv":
-            res.to_csv(out)
+            res.to_csv(out, extra=strain_vars)
         else:
             with atomic_path(out) as tmp:
-                res.to_xarray().to_netcdf(tmp, engine="scipy")
+                ds = res.to_xarray(extra=strain_vars)
+                if window is not None:
+                    ds.attrs.update(strain_window=window, strain_vsg=sf.vsg, strain_kind=sf.kind)
+                ds.to_netcdf(tmp, engine="scipy")
         console.print(f"wrote {out}")
+
+
+def strain_summary(sf: Any) -> dict[str, Any]:
+    """Rows of the summary table for a strain field: VSG, medians over the OK points."""
+    import numpy as np
+
+    ok = sf.status == 0
+    out: dict[str, Any] = {"strain_vsg": sf.vsg, "strain_ok_fraction": float(ok.mean())}
+    names = ["exx", "eyy", "exy", "sigma_exx"]
+    for name in names:
+        val = getattr(sf, name)
+        if val is not None and ok.any():
+            out[f"median_{name}"] = float(np.median(val[ok]))
+    return out
 
 
 def register(app: typer.Typer) -> None:

@@ -9,6 +9,7 @@ import typer
 
 from ..errors import InputError
 from ._common import (
+    VSG_HELP,
     MaxSigmaOption,
     ShapeOption,
     StepOption,
@@ -17,6 +18,7 @@ from ._common import (
     parse_max_sigma,
     parse_tolerance,
     print_mapping,
+    strain_option,
 )
 
 
@@ -133,6 +135,11 @@ def track_command(
             "from the track) and predict sigma for it.",
         ),
     ] = False,
+    strain: Annotated[
+        bool,
+        typer.Option("--strain", help="Also write strains and their sigmas (docs/strain.md)."),
+    ] = False,
+    vsg: Annotated[str, typer.Option("--vsg", help=VSG_HELP)] = "5",
 ) -> None:
     """Track RECORDING and predict the random error (noise + motion blur) of every point in
     every frame; writes OUT/track.nc (or .zarr), OUT/report.html and, with --csv,
@@ -168,6 +175,7 @@ def track_command(
     roi_v = None if roi is None else _ints(roi, "--roi", 4)
     max_sigma = parse_max_sigma(max_predicted_sigma)
     tol = parse_tolerance(tolerance)
+    strain_window = strain_option(strain, vsg, step=step, subset=subset, points=pts)
     if chunk_frames is not None and chunk_frames < 0:
         raise InputError(f"--chunk-frames={chunk_frames}: must be >= 0 (0: no chunks), e.g. 100")
     if threads is not None and threads < 1:
@@ -250,6 +258,7 @@ def track_command(
                 compensate_blur=compensate_blur,
                 max_predicted_sigma=max_sigma,
                 tolerance=tol,
+                strain=strain_window,
             )
         except TrackInterrupted as exc:
             if exc.dataset is not None:

@@ -710,36 +710,27 @@ def test_blur_table_nodes_only_where_the_motion_needs_them():
     img = _pattern(96, seed=4)
     yy, xx = np.mgrid[28:69:20, 28:69:20]
     pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
-    two = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[1.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-    )
+
+    def table(w_max: float, **kw):
+        # blur w_max px at 0 deg and 1.5 px at 90 deg
+        return build_blur_table(
+            img,
+            pts,
+            subset=21,
+            shape="affine",
+            blur=np.array([[w_max, 1.5]]),
+            angle=np.array([[0, 90.0]]),
+            **kw,
+        )
+
+    two = table(1.5)
     assert two.available.sum() == 2
     j0, j1 = np.flatnonzero(two.available)
     np.testing.assert_array_equal(two.values[j0, 0], two.values[j1, 0])
-    more = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[3.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-        have=two,
-    )
+    more = table(3.5, have=two)
     assert more.blur.size == 5 and two.blur.size == 3
     np.testing.assert_array_equal(more.values[:, :3][two.available], two.values[two.available])
-    fresh = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[3.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-    )
+    fresh = table(3.5)
     np.testing.assert_allclose(more.values, fresh.values, rtol=1e-12, equal_nan=True)
     # W = 0 copied from the first direction is what the second computes itself
     from dicblur.models.sensitivity import subset_blur_response
@@ -751,15 +742,7 @@ def test_blur_table_nodes_only_where_the_motion_needs_them():
     np.testing.assert_allclose(two.values[j1, 0, :, 2], cov[0, :, 0, 0], rtol=1e-12)
     np.testing.assert_allclose(two.values[j1, 0, :, 5], cov4[0, :, 1, 1], rtol=1e-12)
     # the nodes on two threads: the same values
-    threaded = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[3.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-        threads=2,
-    )
+    threaded = table(3.5, threads=2)
     np.testing.assert_array_equal(threaded.values, fresh.values)
 
 

@@ -25,17 +25,17 @@ Run: ``.venv/bin/python benchmarks/bench_blur_sensitivity.py [--quick]``
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
-from _harness import provenance
+from _harness import Run, use_tests_dir
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
+
+use_tests_dir()
+from helpers.models import noisy_dic_scatter  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "blur_sensitivity.json"
 
@@ -111,16 +111,7 @@ def noisy_case(size: float, shape: str, sigma: float = 2.0, reps: int = 6) -> di
     measured = []
     for wl in blurs:
         cur = _centred_blur(img, float(wl), "periodic") if wl > 0 else img
-        u = []
-        for _ in range(reps):
-            res = dicblur.correlate(
-                img + rng.normal(0, sigma, img.shape),
-                cur + rng.normal(0, sigma, img.shape),
-                subset=21,
-                step=10,
-                shape=shape,
-            )
-            u.append(float(np.std(res.u[res.converged])))
+        u = noisy_dic_scatter(img, cur, sigma=sigma, reps=reps, rng=rng, shape=shape)
         measured.append(float(np.mean(u)))
     return {
         "speckle_size": size,
@@ -174,6 +165,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
+    bench = Run("blur_sensitivity")
     blurs = np.array([0.25, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 6.0, 8.0])
     sizes = (3.0, 8.0) if args.quick else (3.0, 4.0, 6.0, 8.0)
     seeds = (7,) if args.quick else (7, 11)
@@ -233,24 +225,12 @@ def main() -> None:
     print(f"\n{'case':60s} {'seconds':>8s}")
     for r in sp:
         print(f"{r['case']:60s} {r['seconds']:8.4f}")
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(
-        json.dumps(
-            {
-                "provenance": provenance(),
-                "machine": {
-                    "python": platform.python_version(),
-                    "cpus": os.cpu_count(),
-                    "load": os.getloadavg(),
-                },
-                "cases": rows,
-                "noisy": noisy,
-                "speed": sp,
-            },
-            indent=1,
-        )
-    )
-    print(f"wrote {OUT}")
+    result = {
+        "cases": rows,
+        "noisy": noisy,
+        "speed": sp,
+    }
+    print(f"wrote {bench.write(result, OUT)}")
 
 
 if __name__ == "__main__":

@@ -259,32 +259,13 @@ def test_degenerate_covariance_falls_back_to_a_seeded_bootstrap():
     s = sssig_decay(w, S0, BETA)
     eps = np.exp(np.random.default_rng(1).normal(0, 0.02, w.size))
     u = mismatch_model(w, s, sig, a=1.4, c=3e-4, floor=1e-3) * eps
-    f = fit_mismatch(
-        w,
-        s,
-        u,
-        noise_sigma=sig,
-        next_term=False,
-        floor=True,
-        cross=True,
-        noise_blur=False,
-        n_boot=100,
-    )
+    kw = dict(noise_sigma=sig, next_term=False, floor=True, cross=True, noise_blur=False)
+    f = fit_mismatch(w, s, u, n_boot=100, **kw)
     assert f["cross"] < 3e-4  # at most the size of c W at W = 1 px
     assert f.ci_method == "bootstrap"
     p = f.parameter("cross")
     assert p.low < 1e-9 and np.isfinite(p.high) and p.high > p.value
-    again = fit_mismatch(
-        w,
-        s,
-        u,
-        noise_sigma=sig,
-        next_term=False,
-        floor=True,
-        cross=True,
-        noise_blur=False,
-        n_boot=100,
-    )
+    again = fit_mismatch(w, s, u, n_boot=100, **kw)
     assert again == f
 
 

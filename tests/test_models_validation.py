@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import optimize
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
+from helpers.models import bruteforce_ssd_u_e, noisy_dic_scatter, subset_centres
 
 BLURS = np.array([1.0, 2.0, 3.0, 4.0])
 
@@ -27,31 +27,13 @@ def _c_fit(u_e: np.ndarray) -> float:
 
 @pytest.mark.slow
 def test_static_c_vs_bruteforce_ssd_up_to_w4():
-    n, sub, h = 96, 31, 15
+    n, sub = 96, 31
     img = dicblur.speckle_pattern((n, n), speckle_size=4.0, softness=0.5, seed=7)
-    spec = np.fft.fft2(img)
-    ky = np.fft.fftfreq(n)[:, None]
-    kx = np.fft.fftfreq(n)[None, :]
-    cent = np.array(
-        [[r, c] for r in range(h + 1, n - h - 1, 8) for c in range(h + 1, n - h - 1, 8)]
-    )
+    cent = subset_centres(n, sub, 8)
     pred = blur_sensitivity(
         img, subset=sub, points=cent, boundary="periodic", derivative="spectral", criterion="ssd"
     ).c
-    u_e = []
-    for wl in BLURS:
-        blurred = spec * np.sinc(wl * kx)
-        xs = []
-        for r, c in cent:
-            sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
-            ref = img[sl]
-
-            def resid(p, sl=sl, ref=ref, blurred=blurred):
-                shift = np.exp(2j * np.pi * (kx * p[0] + ky * p[1]))
-                return (np.fft.ifft2(blurred * shift).real[sl] - ref).ravel()
-
-            xs.append(optimize.least_squares(resid, [0.0, 0.0], xtol=1e-10).x[0])
-        u_e.append(np.std(xs))
+    u_e = bruteforce_ssd_u_e(img, BLURS, cent, sub)
     assert _c_fit(np.array(u_e)) == pytest.approx(pred, rel=0.15)
 
 
@@ -143,16 +125,7 @@ def test_prediction_from_the_static_pattern_vs_noisy_dic(shape):
             substeps=None,
             trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
         )
-        u_e = []
-        for _ in range(4):
-            res = dicblur.correlate(
-                img + rng.normal(0, sigma, img.shape),
-                cur + rng.normal(0, sigma, img.shape),
-                subset=21,
-                step=10,
-                shape=shape,
-            )
-            u_e.append(np.std(res.u[res.converged]))
+        u_e = noisy_dic_scatter(img, cur, sigma=sigma, reps=4, rng=rng, shape=shape)
         # measured 0.99-1.06 on such cases; 4 x 289 POIs: +-4 % sampling scatter
         assert pred.u_e[j] == pytest.approx(np.mean(u_e), rel=0.12)
 

@@ -132,3 +132,103 @@ def simulated_u_e(
     )
     run_campaign(spec, folder / f"{tag}.zarr", serial=True)
     return open_results(folder / f"{tag}.zarr")["u_e"].values.ravel()
+
+
+def noise_variance_terms(
+    image: np.ndarray,
+    blur: list[float],
+    points: np.ndarray,
+    subset: int,
+    *,
+    boundary: str = "periodic",
+    complete: bool = False,
+) -> np.ndarray:
+    """The static prediction's noise variances per GL^2 of noise for a translation subset
+    blurred along the columns (``shifts_and_variance``'s second output, bspline3, ZNSSD, no
+    shift limit): ``complete=False`` is the earlier first-order formula (reference
+    intensities only) that the complete noise term (issue 14, item 4) replaced."""
+    from dicblur.models.sensitivity import shifts_and_variance
+
+    var = shifts_and_variance(
+        image,
+        blur,
+        points,
+        subset,
+        motion=(0.0, 1.0),
+        shape="translation",
+        derivative="bspline3",
+        boundary=boundary,
+        criterion="znssd",
+        max_shift=np.inf,
+        chunk=256,
+        variance=True,
+        complete=complete,
+    )[1]
+    assert var is not None
+    return var
+
+
+def subset_centres(n: int, subset: int, step: int) -> np.ndarray:
+    """Centres (row, col) of the subsets that fit in an n x n image with a one-pixel
+    margin, every ``step`` px: shape (n_points, 2)."""
+    h = subset // 2
+    return np.array(
+        [[r, c] for r in range(h + 1, n - h - 1, step) for c in range(h + 1, n - h - 1, step)]
+    )
+
+
+def bruteforce_ssd_u_e(
+    image: np.ndarray, blurs: np.ndarray, points: np.ndarray, subset: int
+) -> list[float]:
+    """u_e (px) at each blur W independent of the DIC code: the SSD minimum of each subset
+    of ``image`` against the image blurred by a centred box of W px along the columns, with
+    exact (Fourier) blur and shift and a least-squares search; the std over ``points`` of
+    the column shift found."""
+    from scipy import optimize
+
+    h = subset // 2
+    spec = np.fft.fft2(image)
+    ky = np.fft.fftfreq(image.shape[0])[:, None]
+    kx = np.fft.fftfreq(image.shape[1])[None, :]
+    u_e = []
+    for wl in blurs:
+        blurred = spec * np.sinc(wl * kx)
+        xs = []
+        for r, c in points:
+            sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
+            ref = image[sl]
+
+            def resid(p, sl=sl, ref=ref, blurred=blurred):
+                shift = np.exp(2j * np.pi * (kx * p[0] + ky * p[1]))
+                return (np.fft.ifft2(blurred * shift).real[sl] - ref).ravel()
+
+            xs.append(optimize.least_squares(resid, [0.0, 0.0], xtol=1e-10).x[0])
+        u_e.append(float(np.std(xs)))
+    return u_e
+
+
+def noisy_dic_scatter(
+    reference: np.ndarray,
+    current: np.ndarray,
+    *,
+    sigma: float,
+    reps: int,
+    rng: np.random.Generator,
+    shape: str,
+) -> list[float]:
+    """Std over the converged points of the column displacement IC-GN measures (subset 21,
+    step 10) between ``reference`` and ``current``, each with fresh Gaussian noise of
+    ``sigma`` GL, for each of ``reps`` repetitions (px)."""
+    import dicblur
+
+    u_e = []
+    for _ in range(reps):
+        res = dicblur.correlate(
+            reference + rng.normal(0, sigma, reference.shape),
+            current + rng.normal(0, sigma, reference.shape),
+            subset=21,
+            step=10,
+            shape=shape,
+        )
+        u_e.append(float(np.std(res.u[res.converged])))
+    return u_e

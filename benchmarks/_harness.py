@@ -47,6 +47,12 @@ def load_average() -> list[float] | None:
         return None
 
 
+def load_1min() -> float:
+    """The 1 min load average, NaN where the OS has none."""
+    avg = load_average()
+    return float("nan") if avg is None else avg[0]
+
+
 def git_commit() -> dict[str, Any]:
     """The checkout's commit and whether it had uncommitted changes (None outside git)."""
 

@@ -35,22 +35,13 @@ import dicblur
 from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
 
 use_tests_dir()
+from helpers.blur import centred_blur  # noqa: E402
 from helpers.models import noisy_dic_scatter  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "blur_sensitivity.json"
 
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
-
-
-def _centred_blur(img: np.ndarray, wl: float, boundary: str) -> np.ndarray:
-    return dicblur.motion_blur(
-        img,
-        None,
-        substeps=None,
-        boundary=boundary,
-        trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1),
-    )
 
 
 def case(
@@ -70,7 +61,7 @@ def case(
     curve = cv.u_blur
     u_e, s, conv = [], [], []
     for wl in blurs:
-        cur = _centred_blur(img, float(wl), boundary)
+        cur = centred_blur(img, float(wl), boundary=boundary)
         res = dicblur.correlate(img, cur, subset=31, step=12, shape=shape)
         u_e.append(float(np.std(res.u[res.converged])))
         conv.append(float(res.converged.mean()))
@@ -110,7 +101,7 @@ def noisy_case(size: float, shape: str, sigma: float = 2.0, reps: int = 6) -> di
     rng = np.random.default_rng(1)
     measured = []
     for wl in blurs:
-        cur = _centred_blur(img, float(wl), "periodic") if wl > 0 else img
+        cur = centred_blur(img, float(wl), boundary="periodic") if wl > 0 else img
         u = noisy_dic_scatter(img, cur, sigma=sigma, reps=reps, rng=rng, shape=shape)
         measured.append(float(np.mean(u)))
     return {

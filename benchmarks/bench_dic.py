@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import load_1min as load
 from _harness import provenance, use_tests_dir
 
 import dicblur
@@ -36,13 +37,6 @@ from helpers.dic import fourier_shift  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "data" / "real" / "dicchallenge1_sample3"
 TRUE_U, TRUE_V = 0.3, -0.2
-
-
-def load() -> float:
-    try:
-        return os.getloadavg()[0]
-    except OSError:  # pragma: no cover
-        return float("nan")
 
 
 def best_time(fn, repeats: int) -> tuple[float, float]:

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 from _harness import Run, use_tests_dir
+from _harness import load_1min as load
 
 import dicblur
 from dicblur import Correlator, speckle_pattern
@@ -51,13 +52,6 @@ from helpers.dic import blobs, fourier_shift  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 IMAGES = ("clean", "blobs", "fade")
 TRUE_U, TRUE_V = 0.3, -0.2
-
-
-def load() -> float:
-    try:
-        return os.getloadavg()[0]
-    except OSError:  # pragma: no cover
-        return float("nan")
 
 
 def fade(seed: int = 11) -> np.ndarray:

@@ -42,6 +42,7 @@ import dicblur
 from dicblur.models import predict_from_pattern
 
 use_tests_dir()
+from helpers.blur import centred_blur  # noqa: E402
 from helpers.models import noise_variance_terms  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "noise_term.json"
@@ -84,13 +85,7 @@ def _patterns() -> list[tuple[str, np.ndarray, str]]:
 def _centred_blur(img: np.ndarray, wl: float, boundary: str) -> np.ndarray:
     if wl == 0:
         return img.copy()
-    return dicblur.motion_blur(
-        img,
-        None,
-        substeps=None,
-        boundary=boundary,
-        trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1),
-    )
+    return centred_blur(img, wl, boundary=boundary)
 
 
 def _se(v: np.ndarray, reps: int) -> float:

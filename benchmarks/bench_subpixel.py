@@ -120,33 +120,11 @@ def noisy(seeds: range, reps: int, sigma: float = 2.0) -> dict:
         rng = np.random.default_rng(seed)
         r0 = dicblur.correlate(img, img, **OPTS)
         pts = np.stack([r0.rows, r0.cols], axis=1)
+        kw = dict(noise_sigma=sigma, subset=31, points=pts, shape="affine", boundary="periodic")
         t0 = time.perf_counter()
-        pn += (
-            predict_from_pattern(
-                img,
-                blurs,
-                noise_sigma=sigma,
-                subset=31,
-                points=pts,
-                shape="affine",
-                boundary="periodic",
-            ).u_e
-            ** 2
-        )
+        pn += predict_from_pattern(img, blurs, **kw).u_e ** 2
         t1 = time.perf_counter()
-        pa += (
-            predict_from_pattern(
-                img,
-                blurs,
-                noise_sigma=sigma,
-                subset=31,
-                points=pts,
-                shape="affine",
-                boundary="periodic",
-                subpixel="average",
-            ).u_e
-            ** 2
-        )
+        pa += predict_from_pattern(img, blurs, subpixel="average", **kw).u_e ** 2
         t_none += t1 - t0
         t_avg += time.perf_counter() - t1
         for i, w in enumerate(blurs):

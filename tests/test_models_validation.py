@@ -16,6 +16,7 @@ import pytest
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
+from helpers.blur import centred_blur
 from helpers.models import bruteforce_ssd_u_e, noisy_dic_scatter, subset_centres
 
 BLURS = np.array([1.0, 2.0, 3.0, 4.0])
@@ -47,7 +48,6 @@ def test_static_c_vs_dic(size, shape):
     so that DIC's interpolation bias at the sub-pixel offset W/2 (a separate error term,
     docs/models.md s. 4) stays out and u_e measures the blur mismatch alone.
     """
-    motion_blur = dicblur.motion_blur
     correlate = dicblur.correlate
 
     blurs = np.arange(0.5, 4.01, 0.5)
@@ -59,12 +59,7 @@ def test_static_c_vs_dic(size, shape):
     curve = blur_mismatch_curve(img, blurs, **kw).u_blur
     u_e, s = [], []
     for wl in blurs:
-        centred = motion_blur(
-            img,
-            None,
-            substeps=None,
-            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
-        )
+        centred = centred_blur(img, wl)
         res = correlate(img, centred, subset=31, step=12, shape=shape)
         assert res.converged.all()
         u_e.append(float(np.std(res.u)))
@@ -91,13 +86,7 @@ def test_static_c_vs_dic_on_the_real_sample3(real_data):
     curve = blur_mismatch_curve(img, blurs, subset=31, points=pts).u_blur
     u_e, s = [], []
     for wl in blurs:
-        cur = dicblur.motion_blur(
-            img,
-            None,
-            substeps=None,
-            boundary="reflect",
-            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
-        )
+        cur = centred_blur(img, wl, boundary="reflect")
         res = dicblur.correlate(img, cur, subset=31, step=12, shape="translation")
         u_e.append(float(np.std(res.u[res.converged])))
         s.append(float(dicblur.sssig(cur, subset=31, points=pts).mean()))
@@ -119,12 +108,7 @@ def test_prediction_from_the_static_pattern_vs_noisy_dic(shape):
     )
     rng = np.random.default_rng(4)
     for j, wl in enumerate(blurs):
-        cur = dicblur.motion_blur(
-            img,
-            None,
-            substeps=None,
-            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
-        )
+        cur = centred_blur(img, wl)
         u_e = noisy_dic_scatter(img, cur, sigma=sigma, reps=4, rng=rng, shape=shape)
         # measured 0.99-1.06 on such cases; 4 x 289 POIs: +-4 % sampling scatter
         assert pred.u_e[j] == pytest.approx(np.mean(u_e), rel=0.12)

@@ -16,3 +16,18 @@ def smooth_fine(n: int, ss: int) -> np.ndarray:
         + 60 * np.sin(2 * np.pi * (3 * x + 2 * y) + 0.3)
         + 40 * np.cos(2 * np.pi * (5 * x - 4 * y))
     )
+
+
+def centred_blur(image: np.ndarray, w: float, *, boundary: str = "periodic") -> np.ndarray:
+    """``image`` blurred by a centred box of ``w`` px along the columns (the path from
+    -w/2 to +w/2, continuous): no sub-pixel offset of the blurred image's centre, so DIC's
+    interpolation bias at w/2 stays out of a measured u_e (docs/models.md s. 4)."""
+    from dicblur import motion_blur
+
+    return motion_blur(
+        image,
+        None,
+        substeps=None,
+        boundary=boundary,  # type: ignore[arg-type]
+        trajectory=lambda t: np.stack([0 * t, w * (t - 0.5)], 1),
+    )

@@ -22,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
+import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -167,6 +168,48 @@ class SpeckleTarget:
             radius=float(radius) if kind == "cylinder" else math.inf,
         )
 
+    @classmethod
+    def checkerboard(
+        cls,
+        *,
+        board: tuple[int, int],
+        square: float,
+        origin: ArrayLike,
+        normal: ArrayLike,
+        texel: float = 0.1,
+        levels: tuple[float, float] = (20.0, 230.0),
+    ) -> SpeckleTarget:
+        """A plane with a checkerboard of ``board`` = (cols, rows) inner corners and
+        squares of ``square`` mm, centred on ``origin`` (its inner corners at texture
+        coordinates ``((i - (cols-1)/2) square, (j - (rows-1)/2) square)``), on a white
+        margin of two squares; edges smoothed by 1.5 texels (band-limited)."""
+        from scipy.ndimage import gaussian_filter
+
+        nx, ny = board
+        side = (max(nx, ny) + 5) * square
+        px = int(round(side / texel))
+        if not 64 <= px <= 8192:
+            raise InputError(f"square={square!r}, texel={texel!r}: the tile needs 64..8192 texels")
+        c = (np.arange(px) + 0.0) * texel
+        c = np.where(c >= side / 2, c - side, c)  # texel k at coordinate k texel, wrapped
+        ss, tt = np.meshgrid(c, c, indexing="xy")
+        i = np.floor(ss / square + (nx + 1) / 2.0)
+        j = np.floor(tt / square + (ny + 1) / 2.0)
+        inside = (i >= 0) & (i <= nx) & (j >= 0) & (j <= ny)
+        black = inside & ((i + j) % 2 == 0)
+        tex = np.where(black, levels[0], levels[1]).astype(np.float64)
+        tex = gaussian_filter(tex, 1.5, mode="wrap")
+        o = np.asarray(origin, dtype=np.float64).reshape(3)
+        n = np.asarray(normal, dtype=np.float64).reshape(3)
+        n = n / np.linalg.norm(n)
+        return cls(
+            kind="plane",
+            origin=(float(o[0]), float(o[1]), float(o[2])),
+            normal=(float(n[0]), float(n[1]), float(n[2])),
+            texture=tex,
+            texel=float(texel),
+        )
+
     def frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Unit axes ``(e_s, e_t, n)`` of the texture at ``origin``: ``e_t`` along the
         rig's y projected on the surface, ``e_s = e_t x n``."""
@@ -284,6 +327,15 @@ class StereoLab:
         return np.asarray(self.trajectory(self.times(frame)).mean(axis=0))
 
     def _rays(self, side: Literal["left", "right"]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        key = (id(self), side)
+        if key not in _RAY_CACHE:
+            if len(_RAY_CACHE) > 8:
+                _RAY_CACHE.clear()
+            _RAY_CACHE[key] = self._cast(side)
+        return _RAY_CACHE[key]
+
+    def _cast(self, side: Literal["left", "right"]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Origins and directions (n, 3) of the supersampled pixel rays (left frame)."""
         cam = self.rig.left if side == "left" else self.rig.right
         s = int(self.supersample)
         rows, cols = cam.image_shape
@@ -303,7 +355,7 @@ class StereoLab:
 
         ``seed`` draws the two images' noise (independent streams of one generator);
         ``noise=False`` returns the noise-free irradiance."""
-        from scipy.ndimage import map_coordinates, spline_filter
+        from scipy.ndimage import spline_filter
 
         coef = _coefficients(self.target, spline_filter)
         times = self.times(frame)
@@ -314,14 +366,13 @@ class StereoLab:
             cam = self.rig.left if side == "left" else self.rig.right
             origins, dirs = self._rays(side)  # type: ignore[arg-type]
             acc = np.zeros(len(dirs))
+            es, et, nn = self.target.frame()
+            fr = np.stack([np.asarray(self.target.origin), es, et, nn])
             for d in disp:
                 # the surface moved by d is the surface at rest seen from origins - d
-                _, st = self.target.intersect(origins - d, dirs)
-                q = st / self.target.texel
-                vals = map_coordinates(
-                    coef, [q[:, 1], q[:, 0]], order=3, mode="grid-wrap", prefilter=False
+                _accumulate(
+                    coef, origins - d, dirs, fr, self.target.radius, self.target.texel, acc
                 )
-                acc += np.where(np.isfinite(vals), vals, 0.0)
             s = int(self.supersample)
             rows, cols = cam.image_shape
             img = (acc / len(disp)).reshape(rows, s, cols, s).mean(axis=(1, 3))
@@ -338,6 +389,77 @@ class StereoLab:
         return np.asarray(lam[:, None] * dirs)
 
 
+@nb.njit(cache=True, nogil=True)
+def _bspline3(coef: NDArray[np.float64], y: float, x: float) -> float:  # pragma: no cover
+    """The periodic cubic B-spline of coefficients ``coef`` at texel coordinates."""
+    ny, nx = coef.shape
+    fy, fx = math.floor(y), math.floor(x)
+    ty, tx = y - fy, x - fx
+    sy, sx = 1.0 - ty, 1.0 - tx
+    wy0, wy3 = sy * sy * sy / 6.0, ty * ty * ty / 6.0
+    wy1 = (4.0 - 6.0 * ty * ty + 3.0 * ty * ty * ty) / 6.0
+    wy2 = 1.0 - wy0 - wy1 - wy3
+    wx0, wx3 = sx * sx * sx / 6.0, tx * tx * tx / 6.0
+    wx1 = (4.0 - 6.0 * tx * tx + 3.0 * tx * tx * tx) / 6.0
+    wx2 = 1.0 - wx0 - wx1 - wx3
+    iy, ix = int(fy) - 1, int(fx) - 1
+    v = 0.0
+    for a in range(4):
+        r = (iy + a) % ny
+        c0, c1, c2, c3 = (ix % nx), ((ix + 1) % nx), ((ix + 2) % nx), ((ix + 3) % nx)
+        row = wx0 * coef[r, c0] + wx1 * coef[r, c1] + wx2 * coef[r, c2] + wx3 * coef[r, c3]
+        v += (wy0, wy1, wy2, wy3)[a] * row
+    return v
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def _accumulate(
+    coef: NDArray[np.float64],
+    origins: NDArray[np.float64],
+    dirs: NDArray[np.float64],
+    frame: NDArray[np.float64],
+    radius: float,
+    texel: float,
+    acc: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
+    """``acc += texture`` where each ray ``origins + lam dirs`` first meets the surface
+    (``SpeckleTarget.intersect``, the same formulas; a miss adds 0). ``frame`` rows:
+    surface origin, ``e_s``, ``e_t``, ``n``; ``radius`` inf for a plane."""
+    o0, es, et, nn = frame[0], frame[1], frame[2], frame[3]
+    for i in nb.prange(dirs.shape[0]):
+        rx, ry, rz = origins[i, 0] - o0[0], origins[i, 1] - o0[1], origins[i, 2] - o0[2]
+        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+        if math.isinf(radius):
+            den = dx * nn[0] + dy * nn[1] + dz * nn[2]
+            if den == 0.0:
+                continue
+            lam = -(rx * nn[0] + ry * nn[1] + rz * nn[2]) / den
+            px, py, pz = rx + lam * dx, ry + lam * dy, rz + lam * dz
+            s = px * es[0] + py * es[1] + pz * es[2]
+            t = px * et[0] + py * et[1] + pz * et[2]
+        else:
+            cx, cy, cz = rx + radius * nn[0], ry + radius * nn[1], rz + radius * nn[2]
+            ca = cx * et[0] + cy * et[1] + cz * et[2]
+            da_ = dx * et[0] + dy * et[1] + dz * et[2]
+            ax, ay, az = cx - ca * et[0], cy - ca * et[1], cz - ca * et[2]
+            bx, by, bz = dx - da_ * et[0], dy - da_ * et[1], dz - da_ * et[2]
+            qa = bx * bx + by * by + bz * bz
+            qb = 2.0 * (ax * bx + ay * by + az * bz)
+            qc = ax * ax + ay * ay + az * az - radius * radius
+            disc = qb * qb - 4.0 * qa * qc
+            if disc < 0.0 or qa == 0.0:
+                continue
+            lam = (-qb - math.sqrt(disc)) / (2.0 * qa)
+            px, py, pz = cx + lam * dx, cy + lam * dy, cz + lam * dz
+            ang = math.atan2(
+                px * es[0] + py * es[1] + pz * es[2], px * nn[0] + py * nn[1] + pz * nn[2]
+            )
+            s = radius * ang
+            t = px * et[0] + py * et[1] + pz * et[2]
+        acc[i] += _bspline3(coef, t / texel, s / texel)
+
+
+_RAY_CACHE: dict[tuple[int, str], tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
 _COEF_CACHE: dict[int, NDArray[np.float64]] = {}
 
 

@@ -5,6 +5,7 @@ point (noise and each camera's own blur) propagated through the triangulation.""
 from __future__ import annotations
 
 from .camera import CameraModel, StereoRig, load_rig, rotation_matrix, save_rig
+from .core import track
 from .triangulate import propagate, triangulate, triangulation_jacobian
 
 __all__ = [
@@ -14,6 +15,7 @@ __all__ = [
     "propagate",
     "rotation_matrix",
     "save_rig",
+    "track",
     "triangulate",
     "triangulation_jacobian",
 ]

@@ -21,9 +21,7 @@ def _board(text: str) -> tuple[int, int]:
     try:
         cols, rows = parse_size(text, "--board")
     except InputError:
-        raise InputError(
-            f"--board={text!r}: expected inner corners COLSxROWS, e.g. 9x6"
-        ) from None
+        raise InputError(f"--board={text!r}: expected inner corners COLSxROWS, e.g. 9x6") from None
     if min(cols, rows) < 3:
         raise InputError(f"--board={text!r}: at least 3x3 inner corners, e.g. 9x6")
     return cols, rows
@@ -130,9 +128,7 @@ def track_command(
     ] = None,
     fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
     csv: Annotated[bool, typer.Option("--csv", help="Also write stereo.csv (long).")] = False,
-    report: Annotated[
-        bool, typer.Option("--report/--no-report", help="Write report.html.")
-    ] = True,
+    report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
 ) -> None:
     """Stereo-track LEFT and RIGHT: the shape X, Y, Z, the 3-D displacement U, V, W3 of
     every point in every frame and their predicted sigma (noise and each camera's blur);
@@ -164,7 +160,10 @@ def track_command(
     out.mkdir(parents=True, exist_ok=True)
     target = out / ("stereo.nc" if fmt == "netcdf" else "stereo.zarr")
     with Progress(
-        TextColumn("stereo"), BarColumn(), MofNCompleteColumn(), TextColumn("frame pairs"),
+        TextColumn("stereo"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("frame pairs"),
         console=console,
     ) as bar:
         task = bar.add_task("stereo", total=len(rec_l))
@@ -214,8 +213,7 @@ def track_command(
             "median_sigma_U": med("sigma_U"),
             "median_sigma_V": med("sigma_V"),
             "median_sigma_W3": med("sigma_W3"),
-            "pairs_per_s": int(ds.sizes["frame"])
-            / max(float(ds.attrs["tracking_time_s"]), 1e-9),
+            "pairs_per_s": int(ds.sizes["frame"]) / max(float(ds.attrs["tracking_time_s"]), 1e-9),
         },
         {"median_sigma_U": "mm", "median_sigma_V": "mm", "median_sigma_W3": "mm"},
     )

@@ -100,7 +100,10 @@ def fig_predicted_measured(rows: list[dict[str, Any]]) -> Any:
 
 
 def write_stereo_report(
-    ds: Any, folder: Path, *, image: NDArray[np.float64] | None = None,
+    ds: Any,
+    folder: Path,
+    *,
+    image: NDArray[np.float64] | None = None,
     title: str = "dicblur stereo track",
 ) -> Path:
     """Write ``folder/report.html`` (figures also as PNG/SVG in ``folder/figures``)."""
@@ -122,8 +125,10 @@ def write_stereo_report(
         {"quantity": "baseline (mm)", "value": float(a.get("baseline_mm", np.nan))},
         {"quantity": "exposure (ms)", "value": float(a.get("exposure", np.nan)) * 1e3},
         {"quantity": "frame rate (Hz)", "value": float(a.get("fps", np.nan))},
-        {"quantity": "stereo-matched points (%)",
-         "value": 100 * float((ds["status_stereo"].values == 0).mean())},
+        {
+            "quantity": "stereo-matched points (%)",
+            "value": 100 * float((ds["status_stereo"].values == 0).mean()),
+        },
         {"quantity": "valid point-frames (%)", "value": 100 * float(valid.mean())},
         {"quantity": "median sigma_U (um)", "value": 1e3 * med("sigma_U")},
         {"quantity": "median sigma_V (um)", "value": 1e3 * med("sigma_V")},

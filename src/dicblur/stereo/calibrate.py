@@ -13,6 +13,7 @@ import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,7 +37,9 @@ def board_points(board: tuple[int, int], square: float) -> NDArray[np.float32]:
     return g
 
 
-def find_corners(image: NDArray[np.float64], board: tuple[int, int], name: str) -> NDArray[np.float32]:
+def find_corners(
+    image: NDArray[np.float64], board: tuple[int, int], name: str
+) -> NDArray[np.float32]:
     """Sub-pixel inner corners of the board in ``image``, (n, 1, 2) as OpenCV's (x, y).
 
     Raises
@@ -75,7 +78,10 @@ def pair_images(paths: Sequence[str | os.PathLike[str]]) -> list[tuple[Path, Pat
     exts = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
     if len(ps) == 2 and all(p.is_dir() for p in ps):
         sides = [
-            sorted((f for f in p.iterdir() if f.suffix.lower() in exts), key=lambda f: natural_key(f.name))
+            sorted(
+                (f for f in p.iterdir() if f.suffix.lower() in exts),
+                key=lambda f: natural_key(f.name),
+            )
             for p in ps
         ]
         if len(sides[0]) != len(sides[1]) or not sides[0]:
@@ -139,19 +145,28 @@ def calibrate_rig(
     import cv2
 
     if len(pairs) < 3:
-        raise InputError(f"IMAGES: {len(pairs)} pair(s); calibration needs at least 3 (10-20 is usual)")
+        raise InputError(
+            f"IMAGES: {len(pairs)} pair(s); calibration needs at least 3 (10-20 is usual)"
+        )
     if not square > 0:
         raise InputError(f"square={square!r}: must be > 0 mm, e.g. 5mm")
-    nms = list(names) if names is not None else [(f"left[{i}]", f"right[{i}]") for i in range(len(pairs))]
+    nms = (
+        list(names)
+        if names is not None
+        else [(f"left[{i}]", f"right[{i}]") for i in range(len(pairs))]
+    )
     obj = board_points(board, square)
     pts_l, pts_r = [], []
-    shape_l = shape_r = None
+    shape_l: tuple[int, ...] | None = None
+    shape_r: tuple[int, ...] | None = None
     for (lft, rgt), (nl, nr) in zip(pairs, nms, strict=True):
         for img, nm, side in ((lft, nl, "l"), (rgt, nr, "r")):
             shp = np.asarray(img).shape
             ref = shape_l if side == "l" else shape_r
             if ref is not None and shp != ref:
-                raise InputError(f"image {nm!r}: size {shp} differs from the camera's first image {ref}")
+                raise InputError(
+                    f"image {nm!r}: size {shp} differs from the camera's first image {ref}"
+                )
             if side == "l":
                 shape_l = shp
             else:
@@ -182,7 +197,7 @@ def calibrate_rig(
         flags=cv2.CALIB_FIX_INTRINSIC,
     )
 
-    def model(k: NDArray[np.float64], d: NDArray[np.float64], shp: tuple[int, ...]) -> CameraModel:
+    def model(k: Any, d: Any, shp: tuple[int, ...]) -> CameraModel:
         dd = np.zeros(5)
         flat = np.asarray(d, dtype=np.float64).ravel()[:5]
         dd[: flat.size] = flat
@@ -212,6 +227,8 @@ def calibrate_rig(
     )
 
 
-def load_pairs(pairs: Sequence[tuple[Path, Path]]) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+def load_pairs(
+    pairs: Sequence[tuple[Path, Path]],
+) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
     """The images of :func:`pair_images` as grey-level arrays."""
     return [(load_image(a), load_image(b)) for a, b in pairs]

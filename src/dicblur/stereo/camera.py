@@ -251,9 +251,7 @@ class StereoRig:
         t = self.translation
         tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
         e = tx @ self.rotation
-        return np.asarray(
-            np.linalg.inv(self.right.matrix).T @ e @ np.linalg.inv(self.left.matrix)
-        )
+        return np.asarray(np.linalg.inv(self.right.matrix).T @ e @ np.linalg.inv(self.left.matrix))
 
     def converge_point(self) -> NDArray[np.float64]:
         """The point nearest both optical axes (left frame, mm): a rough working distance

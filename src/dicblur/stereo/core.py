@@ -91,8 +91,11 @@ def _noise(rec: Any, static: Any, noise: float | None, name: str) -> NoiseEstima
         if not (math.isfinite(noise) and noise > 0):
             raise InputError(f"noise={noise!r}: the noise std must be > 0 GL, e.g. 2")
         return NoiseEstimate(
-            sigma=float(noise), read_variance=float(noise) ** 2, slope=0.0,
-            level_dependent=False, source="given",
+            sigma=float(noise),
+            read_variance=float(noise) ** 2,
+            slope=0.0,
+            level_dependent=False,
+            source="given",
         )
     if static is None:
         raise InputError("static, noise: give the static frames (e.g. static='0:20') or noise")
@@ -133,7 +136,8 @@ def _track_camera(
             p[better], st[better] = res.params[better], res.status[better]
         out_p[f], out_s[f] = p, st
         good = st == PointStatus.CONVERGED
-        prev = np.where(good[:, None] & np.isfinite(p).all(axis=1)[:, None], p, prev)
+        keep = good & np.isfinite(p).all(axis=1)
+        prev = np.where(keep[:, None], p, prev)
 
 
 def track(
@@ -235,8 +239,14 @@ def track(
     nz_r = _noise(rec_r, static, noise, "right")
     # (1) the shape: the left reference's POIs matched in the right reference
     corr_l = Correlator(
-        ref_l, subset=subset, step=step, shape=shape, roi=roi, noise_sigma=nz_l.sigma,
-        max_predicted_sigma=None, tolerance=1e-3,
+        ref_l,
+        subset=subset,
+        step=step,
+        shape=shape,
+        roi=roi,
+        noise_sigma=nz_l.sigma,
+        max_predicted_sigma=None,
+        tolerance=1e-3,
     )
     rows, cols = corr_l.rows.astype(np.float64), corr_l.cols.astype(np.float64)
     n = len(rows)
@@ -245,16 +255,23 @@ def track(
     rr = np.rint(match.right).astype(np.int64)
     inside = (
         np.isfinite(match.right).all(axis=1)
-        & (rr[:, 0] >= half) & (rr[:, 0] < ref_r.shape[0] - half)
-        & (rr[:, 1] >= half) & (rr[:, 1] < ref_r.shape[1] - half)
+        & (rr[:, 0] >= half)
+        & (rr[:, 0] < ref_r.shape[0] - half)
+        & (rr[:, 1] >= half)
+        & (rr[:, 1] < ref_r.shape[1] - half)
     )
     st_stereo = match.status.copy()
     st_stereo[~inside & (st_stereo == 0)] = PointStatus.OUT_OF_BOUNDS
     rr[~inside] = [half, half]
     delta = np.where(inside[:, None], match.right - rr, 0.0)  # (row, col) sub-pixel rest
     corr_r = Correlator(
-        ref_r, subset=subset, points=rr, shape=shape, noise_sigma=nz_r.sigma,
-        max_predicted_sigma=None, tolerance=1e-3,
+        ref_r,
+        subset=subset,
+        points=rr,
+        shape=shape,
+        noise_sigma=nz_r.sigma,
+        max_predicted_sigma=None,
+        tolerance=1e-3,
     )
     # (2) each camera against its own reference
     order = list(range(reference + 1, f1)) + list(range(reference - 1, f0 - 1, -1))
@@ -323,14 +340,21 @@ def track(
         ):
             ww = np.where(converged[:, use], w[:, use], np.nan)
             table = camera_table(
-                ref, cen[use], subset=subset, shape=shape, blur=ww, angle=ang[:, use],
+                ref,
+                cen[use],
+                subset=subset,
+                shape=shape,
+                blur=ww,
+                angle=ang[:, use],
                 threads=threads,
             )
             var = nz.variance(subset_levels(ref, cen[use], subset))
             c, s_noise, s_blur = camera_covariance(table, ww, ang[:, use], var)
             cov[:, use] = c
             parts[side] = (s_noise, s_blur)
-    g = triangulation_jacobian(rig, np.where(np.isfinite(xyz), xyz, match.points[None]).reshape(-1, 3))
+    g = triangulation_jacobian(
+        rig, np.where(np.isfinite(xyz), xyz, match.points[None]).reshape(-1, 3)
+    )
     cov3 = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(nf, n, 3, 3)
     # the noise part of the 3-D sigma propagated alone; the blur part is the rest
     c_n = np.full((2, nf, n, 2, 2), np.nan)

@@ -110,6 +110,32 @@ def match_reference(
     ok = np.isfinite(start).all(axis=1)
     start[~ok] = 0.0
     res = left.correlate(right_image, initial=start)
+    bad = res.status != PointStatus.CONVERGED
+    good = ~bad & np.isfinite(res.params).all(axis=1)
+    if bad.any() and good.sum() >= 12:
+        # a curved surface leaves the plane's start too far off at the edges: start the
+        # failures from a quadratic in (row, col) fitted to the converged parameters
+        def basis(r: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
+            s_ = max(float(np.ptp(rows)), float(np.ptp(cols)), 1.0)
+            x, y = (c - cols.mean()) / s_, (r - rows.mean()) / s_
+            return np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
+
+        coef, *_ = np.linalg.lstsq(basis(rows[good], cols[good]), res.params[good], rcond=None)
+        second = np.where(bad[:, None], basis(rows, cols) @ coef, res.params)
+        res2 = left.correlate(right_image, initial=second)
+        take = bad & (res2.status == PointStatus.CONVERGED)
+        if take.any():
+            from dataclasses import replace
+
+            fields = {
+                k: np.where(
+                    take if getattr(res, k).ndim == 1 else take[:, None],
+                    getattr(res2, k),
+                    getattr(res, k),
+                )
+                for k in ("u", "v", "params", "zncc", "status", "iterations")
+            }
+            res = replace(res, **fields)
     right = np.stack([rows + res.v, cols + res.u], axis=1)
     status = res.status.copy()
     pts, resid = triangulate(rig, np.stack([rows, cols], axis=1), right)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numba as nb
@@ -148,7 +148,7 @@ class SpeckleTarget:
         else:
             n = np.asarray(normal, dtype=np.float64).reshape(3)
         n = n / np.linalg.norm(n)
-        px = int(round(size / texel))
+        px = round(size / texel)
         if not 64 <= px <= 8192:
             raise InputError(f"size={size!r}, texel={texel!r}: the tile needs 64..8192 texels")
         tex = speckle_pattern(
@@ -187,7 +187,7 @@ class SpeckleTarget:
 
         nx, ny = board
         side = (max(nx, ny) + 5) * square
-        px = int(round(side / texel))
+        px = round(side / texel)
         if not 64 <= px <= 8192:
             raise InputError(f"square={square!r}, texel={texel!r}: the tile needs 64..8192 texels")
         c = (np.arange(px) + 0.0) * texel
@@ -293,7 +293,7 @@ class StereoLab:
     trajectory: Trajectory
     exposure: float
     fps: float
-    camera: Camera = Camera(read_noise=2.0, bit_depth=None)
+    camera: Camera = field(default_factory=lambda: Camera(read_noise=2.0, bit_depth=None))
     supersample: int = 2
     substeps: int | None = None
 
@@ -319,14 +319,16 @@ class StereoLab:
         x0 = self.target.point(np.zeros((1, 2)))[0]
         wl, wr = self.rig.project(x0 + ends)
         w = max(float(np.linalg.norm(wl[1] - wl[0])), float(np.linalg.norm(wr[1] - wr[0])))
-        return max(8, int(math.ceil(4 * w)) + 1) if self.exposure > 0 else 1
+        return max(8, math.ceil(4 * w) + 1) if self.exposure > 0 else 1
 
     def mean_displacement(self, frame: int) -> NDArray[np.float64]:
         """The target's translation averaged over the frame's exposure (3,) mm: what a
         blurred frame shows (its sub-exposures' mean, as rendered)."""
         return np.asarray(self.trajectory(self.times(frame)).mean(axis=0))
 
-    def _rays(self, side: Literal["left", "right"]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _rays(
+        self, side: Literal["left", "right"]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         key = (id(self), side)
         if key not in _RAY_CACHE:
             if len(_RAY_CACHE) > 8:
@@ -334,7 +336,9 @@ class StereoLab:
             _RAY_CACHE[key] = self._cast(side)
         return _RAY_CACHE[key]
 
-    def _cast(self, side: Literal["left", "right"]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _cast(
+        self, side: Literal["left", "right"]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Origins and directions (n, 3) of the supersampled pixel rays (left frame)."""
         cam = self.rig.left if side == "left" else self.rig.right
         s = int(self.supersample)
@@ -348,9 +352,9 @@ class StereoLab:
             return np.zeros((len(d), 3)), d
         return np.broadcast_to(self.rig.right_centre, d.shape).copy(), d @ self.rig.rotation
 
-    def render(self, frame: int, *, seed: SeedLike = None, noise: bool = True) -> tuple[
-        NDArray[np.float64], NDArray[np.float64]
-    ]:
+    def render(
+        self, frame: int, *, seed: SeedLike = None, noise: bool = True
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The left and the right image of ``frame`` (grey levels, (rows, cols) each).
 
         ``seed`` draws the two images' noise (independent streams of one generator);
@@ -364,13 +368,13 @@ class StereoLab:
         out = []
         for side in ("left", "right"):
             cam = self.rig.left if side == "left" else self.rig.right
-            origins, dirs = self._rays(side)  # type: ignore[arg-type]
+            origins, dirs = self._rays(side)
             acc = np.zeros(len(dirs))
             es, et, nn = self.target.frame()
             fr = np.stack([np.asarray(self.target.origin), es, et, nn])
             for d in disp:
                 # the surface moved by d is the surface at rest seen from origins - d
-                _accumulate(
+                accumulate_rays(
                     coef, origins - d, dirs, fr, self.target.radius, self.target.texel, acc
                 )
             s = int(self.supersample)
@@ -413,7 +417,7 @@ def _bspline3(coef: NDArray[np.float64], y: float, x: float) -> float:  # pragma
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def _accumulate(
+def accumulate_rays(
     coef: NDArray[np.float64],
     origins: NDArray[np.float64],
     dirs: NDArray[np.float64],
@@ -463,7 +467,9 @@ _RAY_CACHE: dict[tuple[int, str], tuple[NDArray[np.float64], NDArray[np.float64]
 _COEF_CACHE: dict[int, NDArray[np.float64]] = {}
 
 
-def _coefficients(target: SpeckleTarget, spline_filter: Callable[..., NDArray[np.float64]]) -> NDArray[np.float64]:
+def _coefficients(
+    target: SpeckleTarget, spline_filter: Callable[..., NDArray[np.float64]]
+) -> NDArray[np.float64]:
     """Cubic B-spline coefficients of the target's texture (periodic), kept per texture."""
     key = id(target.texture)
     if key not in _COEF_CACHE:

@@ -36,7 +36,9 @@ def _points(rc: ArrayLike, name: str) -> NDArray[np.float64]:
     return p
 
 
-def _dlt(rig: StereoRig, ab_l: NDArray[np.float64], ab_r: NDArray[np.float64]) -> NDArray[np.float64]:
+def _dlt(
+    rig: StereoRig, ab_l: NDArray[np.float64], ab_r: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """Linear triangulation of normalised coordinates, (n, 3); the smallest singular vector
     of the 4 x 4 system of each pair."""
     p_l = np.hstack([np.eye(3), np.zeros((3, 1))])

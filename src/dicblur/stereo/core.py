@@ -332,42 +332,30 @@ def track(
     use = inside & (match.status == 0)
     cov_l = np.full((nf, n, 2, 2), np.nan)
     cov_r = np.full((nf, n, 2, 2), np.nan)
-    parts = {}
+    xi = np.full((nf, n, 4), np.nan)  # the signed mismatch shifts, (row, col) left, right
     if use.any():
-        for side, ref, cen, w, ang, nz, cov in (
-            ("left", ref_l, cen_l, w_l, a_l, nz_l, cov_l),
-            ("right", ref_r, cen_r, w_r, a_r, nz_r, cov_r),
+        for j, ref, cen, w, ang, nz, cov in (
+            (0, ref_l, cen_l, w_l, a_l, nz_l, cov_l),
+            (1, ref_r, cen_r, w_r, a_r, nz_r, cov_r),
         ):
             ww = np.where(converged[:, use], w[:, use], np.nan)
             table = camera_table(
-                ref,
-                cen[use],
-                subset=subset,
-                shape=shape,
-                blur=ww,
-                angle=ang[:, use],
+                ref, cen[use], subset=subset, shape=shape, blur=ww, angle=ang[:, use],
                 threads=threads,
             )
             var = nz.variance(subset_levels(ref, cen[use], subset))
-            c, s_noise, s_blur = camera_covariance(table, ww, ang[:, use], var)
+            c, _, shift = camera_covariance(table, ww, ang[:, use], var)
             cov[:, use] = c
-            parts[side] = (s_noise, s_blur)
-    g = triangulation_jacobian(
-        rig, np.where(np.isfinite(xyz), xyz, match.points[None]).reshape(-1, 3)
-    )
-    cov3 = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(nf, n, 3, 3)
-    # the noise part of the 3-D sigma propagated alone; the blur part is the rest
-    c_n = np.full((2, nf, n, 2, 2), np.nan)
-    for j, side in enumerate(("left", "right")):
-        if side in parts:
-            s_noise = parts[side][0]
-            c_n[j][:, use] = 0.0
-            c_n[j][:, use, 0, 0] = s_noise[..., 0] ** 2
-            c_n[j][:, use, 1, 1] = s_noise[..., 1] ** 2
-    cov3_noise = propagate(g, c_n[0].reshape(-1, 2, 2), c_n[1].reshape(-1, 2, 2)).reshape(
+            xi[:, use, 2 * j : 2 * j + 2] = shift
+    pts = np.where(np.isfinite(xyz), xyz, match.points[None]).reshape(-1, 3)
+    g = triangulation_jacobian(rig, pts)
+    cov3_noise = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(
         nf, n, 3, 3
     )
-    cov3_blur = cov3 - cov3_noise
+    # the two cameras' mismatch shifts together: the point's deterministic blur error
+    bvec = np.einsum("nik,nk->ni", g, xi.reshape(-1, 4)).reshape(nf, n, 3)
+    cov3_blur = bvec[..., :, None] * bvec[..., None, :]
+    cov3 = cov3_noise + cov3_blur
     # the shape's sigma: the stereo match's noise in the right point
     g0 = triangulation_jacobian(rig, np.where(np.isfinite(match.points), match.points, 0.0))
     c_s = np.zeros((n, 2, 2))

@@ -6,12 +6,17 @@ IC-GN fixed point and the blur-mismatch shift of the point's reference subset at
 blur), with each camera's blur vector the 3-D motion during the exposure projected
 through that camera: ``W_cam = p_cam(X + dX/2) - p_cam(X - dX/2)``. In ``(row, col)``:
 
-    C = diag(var_v, var_u) + xi xi^T,   var = sigma^2 c + sigma^4 c4,
+    C = diag(var_v, var_u),   var = sigma^2 c + sigma^4 c4,
 
-``xi = (xi_v, xi_u)`` the mismatch shift (a deterministic error of the subset, random
-over subsets; its outer product is its share of the spread). The two cameras' errors are
-independent (separate sensors, separate subsets), and the 3-D displacement's covariance
-is ``G diag(C_L, C_R) G^T`` (:func:`dicblur.stereo.triangulate.propagate`). The stereo
+and the signed mismatch shift ``xi = (xi_v, xi_u)`` of the subset, a deterministic error
+of that subset at that blur (random over subsets). The cameras' noises are independent
+(separate sensors), so the noise part of the 3-D displacement's covariance is
+``G diag(C_L, C_R) G^T`` (:func:`dicblur.stereo.triangulate.propagate`); the two
+mismatch shifts are not: both subsets image the same texture, blurred along nearly the same
+axis at a narrow stereo angle, so they largely agree and move the point across the line of
+sight rather than along it. They are propagated together, as the point's deterministic
+error ``b = G (xi_L, xi_R)``, whose square adds to the variance: ``Cov = G diag(C_L, C_R)
+G^T + b b^T``. The stereo
 match's own error (the reference pair) cancels in the displacement to first order: it
 moves the reference and the current point alike.
 """
@@ -72,8 +77,9 @@ def camera_covariance(
     angle: NDArray[np.float64],
     variance: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Image-plane covariance (frames, points, 2, 2) px^2 in ``(row, col)`` of one camera,
-    and its noise and blur std per component (frames, points, 2) (module docstring).
+    """Image-plane noise covariance (frames, points, 2, 2) px^2 in ``(row, col)`` of one
+    camera, its noise std per component (frames, points, 2), and the signed blur-mismatch
+    shift ``xi`` (frames, points, 2) px in ``(row, col)`` (module docstring).
 
     ``variance`` is the noise variance of each point's subset, GL^2 (points,)."""
     vals = table.lookup(blur, angle)
@@ -81,11 +87,11 @@ def camera_covariance(
     var_u = s2 * vals[..., 2] + s2 * s2 * vals[..., 4]
     var_v = s2 * vals[..., 3] + s2 * s2 * vals[..., 5]
     xi = np.stack([vals[..., 1], vals[..., 0]], axis=-1)  # (row, col)
-    cov = xi[..., :, None] * xi[..., None, :]
-    cov[..., 0, 0] += var_v
-    cov[..., 1, 1] += var_u
+    cov = np.zeros((*xi.shape, 2))
+    cov[..., 0, 0] = var_v
+    cov[..., 1, 1] = var_u
     noise = np.sqrt(np.maximum(np.stack([var_v, var_u], axis=-1), 0.0))
-    return cov, noise, np.abs(xi)
+    return cov, noise, xi
 
 
 def ratio_out_of_plane(stereo_angle: float) -> float:

@@ -27,8 +27,10 @@ from .._version import __version__
 from ..dic import Correlator, PointStatus
 from ..errors import InputError
 from ..sequence import Recording, open_recording
+from ..threads import each
 from ..track.core import parse_frame_range, parse_rate
 from ..track.kinematics import exposure_motion
+from ..track.parallel import thread_safe_kernels
 from ..track.uncertainty import NoiseEstimate, estimate_static_noise, subset_levels
 from .camera import StereoRig
 from .matching import match_reference
@@ -191,7 +193,8 @@ def track(
         Pairs whose triangulation leaves an RMS reprojection error above this (px) are
         ``OUTLIER`` (a wrong match or a wrong calibration).
     threads : int
-        Threads of the uncertainty tables.
+        Threads: >= 2 runs the two cameras' correlations at the same time (where numba's
+        threading layer is thread-safe) and shares the uncertainty tables' chunks.
     progress : callable, optional
         ``progress(done, total)`` after each frame pair.
 
@@ -285,13 +288,23 @@ def track(
     p_r[reference] = 0.0
     t_track = time.perf_counter()
     done = 0
+    # the two cameras on two threads (each Correlator on single-threaded kernels, which
+    # release the GIL) where numba's threading layer allows concurrent kernel calls
+    two = threads >= 2 and thread_safe_kernels()
+    cams = [(corr_l, p_l, s_l, rec_l), (corr_r, p_r, s_r, rec_r)]
+    if two:
+        cams = [(c.fork(workers=1), pp, ss, rec) for c, pp, ss, rec in cams]
     for seg in (list(range(reference + 1, f1)), list(range(reference - 1, f0 - 1, -1))):
         prev = reference
         for a in range(0, len(seg), 25):  # blocks of pairs, so that the progress moves
             blk = seg[a : a + 25]
-            for cc, pp, ss, rec in ((corr_l, p_l, s_l, rec_l), (corr_r, p_r, s_r, rec_r)):
+
+            def one(cam: tuple[Any, ...], blk: list[int] = blk, prev: int = prev) -> None:
+                cc, pp, ss, rec = cam
                 start = np.where(np.isfinite(pp[prev]), pp[prev], 0.0)
                 _track_camera(cc, rec, blk, start, pp, ss)
+
+            each(one, cams, 2 if two else 1)
             prev = blk[-1]
             done += len(blk)
             if progress is not None:
@@ -340,7 +353,12 @@ def track(
         ):
             ww = np.where(converged[:, use], w[:, use], np.nan)
             table = camera_table(
-                ref, cen[use], subset=subset, shape=shape, blur=ww, angle=ang[:, use],
+                ref,
+                cen[use],
+                subset=subset,
+                shape=shape,
+                blur=ww,
+                angle=ang[:, use],
                 threads=threads,
             )
             var = nz.variance(subset_levels(ref, cen[use], subset))
@@ -349,9 +367,7 @@ def track(
             xi[:, use, 2 * j : 2 * j + 2] = shift
     pts = np.where(np.isfinite(xyz), xyz, match.points[None]).reshape(-1, 3)
     g = triangulation_jacobian(rig, pts)
-    cov3_noise = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(
-        nf, n, 3, 3
-    )
+    cov3_noise = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(nf, n, 3, 3)
     # the two cameras' mismatch shifts together: the point's deterministic blur error
     bvec = np.einsum("nik,nk->ni", g, xi.reshape(-1, 4)).reshape(nf, n, 3)
     cov3_blur = bvec[..., :, None] * bvec[..., None, :]

@@ -28,10 +28,10 @@ from ..dic import Correlator, PointStatus
 from ..errors import InputError
 from ..sequence import Recording, open_recording
 from ..threads import each
-from ..track.options import parse_frame_range, parse_rate
 from ..track.kinematics import exposure_motion
-from ..track.parallel import thread_safe_kernels
 from ..track.noise import NoiseEstimate, estimate_static_noise, subset_levels
+from ..track.options import parse_frame_range, parse_rate
+from ..track.parallel import thread_safe_kernels
 from .camera import StereoRig
 from .matching import match_reference
 from .triangulate import propagate, triangulate, triangulation_jacobian

@@ -296,6 +296,10 @@ class StereoLab:
     camera: Camera = field(default_factory=lambda: Camera(read_noise=2.0, bit_depth=None))
     supersample: int = 2
     substeps: int | None = None
+    _rays_cache: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    _coef: NDArray[np.float64] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.fps > 0 or not 0 <= self.exposure <= 1.0 / self.fps:
@@ -329,12 +333,11 @@ class StereoLab:
     def _rays(
         self, side: Literal["left", "right"]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        key = (id(self), side)
-        if key not in _RAY_CACHE:
-            if len(_RAY_CACHE) > 8:
-                _RAY_CACHE.clear()
-            _RAY_CACHE[key] = self._cast(side)
-        return _RAY_CACHE[key]
+        # cast once per laboratory and camera (kept on the instance: a key such as id()
+        # could be reused by a later laboratory)
+        if side not in self._rays_cache:
+            self._rays_cache[side] = self._cast(side)
+        return self._rays_cache[side]
 
     def _cast(
         self, side: Literal["left", "right"]
@@ -361,7 +364,12 @@ class StereoLab:
         ``noise=False`` returns the noise-free irradiance."""
         from scipy.ndimage import spline_filter
 
-        coef = _coefficients(self.target, spline_filter)
+        if self._coef is None:  # the texture's cubic B-spline coefficients, once
+            object.__setattr__(
+                self, "_coef", spline_filter(self.target.texture, order=3, mode="grid-wrap")
+            )
+        coef = self._coef
+        assert coef is not None
         times = self.times(frame)
         disp = self.trajectory(times)
         rng = make_rng(seed)
@@ -461,19 +469,3 @@ def accumulate_rays(
             s = radius * ang
             t = px * et[0] + py * et[1] + pz * et[2]
         acc[i] += _bspline3(coef, t / texel, s / texel)
-
-
-_RAY_CACHE: dict[tuple[int, str], tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
-_COEF_CACHE: dict[int, NDArray[np.float64]] = {}
-
-
-def _coefficients(
-    target: SpeckleTarget, spline_filter: Callable[..., NDArray[np.float64]]
-) -> NDArray[np.float64]:
-    """Cubic B-spline coefficients of the target's texture (periodic), kept per texture."""
-    key = id(target.texture)
-    if key not in _COEF_CACHE:
-        if len(_COEF_CACHE) > 4:
-            _COEF_CACHE.clear()
-        _COEF_CACHE[key] = spline_filter(target.texture, order=3, mode="grid-wrap")
-    return _COEF_CACHE[key]

@@ -34,8 +34,8 @@ Lines = list[str]
 # Sections in order: (title, result-file name prefixes that belong to it). A section shows
 # only when a file of it exists; a file of no section goes under "Other results".
 SECTIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("DIC", ("dic", "cold_compile", "subpixel", "trust")),
-    ("Screening", ("screening",)),
+    # the default path's screening (issue 26) with the engine: the page stays <= 300 lines
+    ("DIC", ("dic", "cold_compile", "subpixel", "trust", "screening")),
     ("Blur", ("blur",)),
     ("Track", ("track",)),
     ("Models", ("models", "noise_term", "large_blur", "coverage", "planning")),
@@ -227,6 +227,25 @@ def render_dic_robust(doc: Doc) -> Lines:
         "",
         *table([*head, "iterations"], rows),
     ]
+
+
+def render_screening(doc: Doc) -> Lines:
+    """One line: the default path's rates on the hostile images, speeds against clean."""
+    cases = [c for c in doc["cases"] if c["image"] != "clean"]
+    gross = max(c["unflagged_gross_pct"] for c in cases)
+    flagged = max(c["flagged_correct_pct"] for c in cases)
+    speed = {
+        shape: [c["cpu_ratio_to_clean"] for c in cases if c["shape"] == shape]
+        for shape in ("affine", "translation")
+    }
+    # a header-only table (two lines): the page stays within MAX_LINES
+    cells = [
+        f"blobs, dots, thresholded, {doc['size']}^2, {fmt(doc['noise'])} GL, defaults",
+        f"unflagged gross <= {fmt(gross)} %",
+        f"correct flagged <= {fmt(flagged)} %",
+        *(f"{k} POI/CPU-s vs clean {fmt(min(v))}-{fmt(max(v))}" for k, v in speed.items()),
+    ]
+    return ["| " + " | ".join(cells) + " |", "|" + "---|" * len(cells)]
 
 
 def render_cold_compile(doc: Doc) -> Lines:
@@ -422,6 +441,7 @@ RENDERERS: dict[str, Callable[[Doc], Lines]] = {
     "dic": render_dic,
     "cold_compile": render_cold_compile,
     "dic_robust": render_dic_robust,
+    "screening": render_screening,
     "dic_peers": render_dic_peers,
     "compensation": render_compensation,
     "blur": render_blur,

@@ -532,7 +532,17 @@ CASES += [
     ),
     Case(
         "correlate-max-predicted-sigma-no-noise",
-        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--max-predicted-sigma", "0.05px"),
+        (
+            "correlate",
+            "{d}/good.tif",
+            "{d}/good2.tif",
+            "--blur-compensation",
+            "given",
+            "--blur",
+            "2",
+            "--max-predicted-sigma",
+            "0.05px",
+        ),
         must=("--max-predicted-sigma", "--noise"),
     ),
     Case(

@@ -102,6 +102,26 @@ def match_reference(
     image, from :func:`plane_start`; the Correlator retries failures from its converged
     neighbours (docs/dic.md). Pairs off the epipolar geometry by more than
     ``max_epipolar`` px (RMS reprojection error of the triangulation) are ``OUTLIER``."""
+    # the disparity field of a curved target is not locally linear (a 40 mm cylinder at
+    # step 12 px: second differences of ~0.4 px), so the engine's neighbour check (exact on
+    # linear fields, docs/dic.md) would call its points outliers: off for the stereo pair,
+    # whose gross errors the epipolar test below catches
+    check = left.neighbour_check
+    left.neighbour_check = False
+    try:
+        return _match(rig, left, right_image, depth=depth, max_epipolar=max_epipolar)
+    finally:
+        left.neighbour_check = check
+
+
+def _match(
+    rig: StereoRig,
+    left: Correlator,
+    right_image: NDArray[np.float64],
+    *,
+    depth: float | None,
+    max_epipolar: float,
+) -> StereoMatch:
     rows = left.rows.astype(np.float64)
     cols = left.cols.astype(np.float64)
     start = plane_start(rig, rows, cols, depth=depth)

@@ -191,7 +191,8 @@ def track(
         stereo match (default: where the optical axes cross).
     max_epipolar : float
         Pairs whose triangulation leaves an RMS reprojection error above this (px) are
-        ``OUTLIER`` (a wrong match or a wrong calibration).
+        ``OUTLIER`` (a wrong match or a wrong calibration), in the reference pair and in
+        every frame pair (the gross-error test of the stereo track).
     threads : int
         Threads: >= 2 runs the two cameras' correlations at the same time (where numba's
         threading layer is thread-safe) and shares the uncertainty tables' chunks.
@@ -249,6 +250,9 @@ def track(
         roi=roi,
         noise_sigma=nz_l.sigma,
         max_predicted_sigma=None,
+        # gross errors: the epipolar test of every pair (below) instead of the engine's
+        # neighbour check, exact on linear fields only (docs/stereo.md)
+        neighbour_check=False,
         tolerance=1e-3,
     )
     rows, cols = corr_l.rows.astype(np.float64), corr_l.cols.astype(np.float64)
@@ -274,6 +278,9 @@ def track(
         shape=shape,
         noise_sigma=nz_r.sigma,
         max_predicted_sigma=None,
+        # gross errors: the epipolar test of every pair (below) instead of the engine's
+        # neighbour check, exact on linear fields only (docs/stereo.md)
+        neighbour_check=False,
         tolerance=1e-3,
     )
     # (2) each camera against its own reference
@@ -327,6 +334,10 @@ def track(
     resid = resid.reshape(nf, n)
     disp = xyz - match.points[None]
     status = _combine(st_stereo[None, :], s_l, s_r)
+    # a pair whose two points no longer meet one 3-D point is a gross error of either camera
+    with np.errstate(invalid="ignore"):
+        off = (status == 0) & ~(resid <= max_epipolar)
+    status[off] = PointStatus.OUTLIER
     converged = status == 0
     # (4) blur of each camera from the 3-D track, and the propagated covariance
     t_pred = time.perf_counter()

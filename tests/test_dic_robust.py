@@ -341,18 +341,10 @@ def test_track_max_predicted_sigma(tmp_path):
     import xarray as xr
 
     import dicblur
-    from dicblur.track.synthetic import VibratingTarget
+    from helpers.track import track_pattern, vibrating_target
 
-    p = dicblur.speckle_pattern((96, 96), speckle_size=4, density=0.5, softness=0.5, seed=1)
-    tgt = VibratingTarget(
-        30 + 180 * (p - p.min()) / (p.max() - p.min()),
-        fps=2000.0,
-        exposure=0.4e-3,
-        amplitude=2.0,
-        frequency=200.0,
-        static=4,
-        seed=3,
-    )
+    p = track_pattern(96, seed=1)
+    tgt = vibrating_target(p, exposure=0.4e-3, amplitude=2.0, static=4, seed=3, angle=0.0)
     folder = tmp_path / "frames"
     folder.mkdir()
     for k in range(6):

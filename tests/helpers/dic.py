@@ -1,4 +1,5 @@
-"""Shared synthetic data for the DIC tests (independent of the engine)."""
+"""Shared synthetic data for the DIC tests (independent of the engine); the DIC benchmarks
+import it too (``benchmarks/_harness.use_tests_dir``)."""
 
 from __future__ import annotations
 
@@ -38,10 +39,12 @@ def blobs(
     sigma: tuple[float, float] = (2.0, 3.0),
     amplitude: tuple[float, float] = (50, 300),
     background: float = 10.0,
+    clip: tuple[float, float] = (10.0, 245.0),
     seed: int = 3,
 ) -> np.ndarray:
-    """Sparse Gaussian blobs clipped to [10, 245] GL (the hostile image of issue 15, as
-    ``benchmarks/bench_dic_robust.py``): saturated plateaus and flat gaps."""
+    """Sparse Gaussian blobs at uniform random centres, clipped to ``clip`` GL (the hostile
+    image of issue 15, also measured by ``benchmarks/bench_dic_robust.py``): saturated
+    plateaus and flat gaps."""
     rng = np.random.default_rng(seed)
     h, w = shape
     n = int(density * h * w)
@@ -55,7 +58,7 @@ def blobs(
         yy = np.arange(y0, y1)[:, None] - y
         xx = np.arange(x0, x1)[None, :] - x
         img[y0:y1, x0:x1] += a * np.exp(-(yy**2 + xx**2) / (2 * s * s))
-    return np.clip(img, 10.0, 245.0)
+    return np.clip(img, *clip)
 
 
 def hard_dots(

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 OUT = ROOT / "BENCHMARKS.md"
 MAX_LINES = 300
-GENERIC_ROWS = 3  # rows of a generic table (the JSON holds the rest)
+GENERIC_ROWS = 2  # rows of a generic table (the JSON holds the rest)
 GENERIC_COLUMNS = 8
 
 Doc = dict[str, Any]

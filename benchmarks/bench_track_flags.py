@@ -43,7 +43,9 @@ def main() -> None:
     print(f"| injected, all | {r['n_injected']} | {r['caught']:.1f} | | |")
     for kind in ("foreign", "occlusion", "jump"):
         print(f"| injected, {kind} | {r[f'n_{kind}']} | {r[f'caught_{kind}']:.1f} | | |")
-    run.write({"size": n, "n_frames": n_frames, "exposure_s": 4e-4, **r})
+    # the criteria first (the generic table of benchmarks.report shows two rows)
+    head = {"clean_flagged_pct": r.pop("clean_flagged"), "injected_caught_pct": r.pop("caught")}
+    run.write({**head, "size": n, "n_frames": n_frames, "exposure_s": 4e-4, **r})
 
 
 if __name__ == "__main__":

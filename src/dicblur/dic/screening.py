@@ -24,6 +24,7 @@ __all__ = [
     "PROBE_CHI2",
     "PROBE_DISTANCE",
     "RESIDUAL_SPREAD",
+    "RETRY_REACH",
     "Screening",
     "pair_medians",
 ]
@@ -38,6 +39,10 @@ PROBE_DISTANCE = 0.05
 #: magnitude ``hypot(predicted_sigma_u, predicted_sigma_v)``) exceeds it is ``IMPRECISE``;
 #: at 0.1/3 px an error beyond 0.1 px is a 3-sigma event.
 MAX_PREDICTED_SIGMA = 0.1 / 3
+#: Neighbour check: a retry from the neighbours' median stops (``DIVERGED``) when its u or
+#: v moves farther than this many times the largest acceptance threshold of the retried
+#: POIs from its start (it could only be taken back within the threshold).
+RETRY_REACH = 2.0
 #: Neighbour check: a predicted-imprecise subset whose (u, v) lies within this distance
 #: (px) of the median of its precise converged 3x3 neighbours is kept ``CONVERGED``: its
 #: error is then below ~0.1 px whatever its predicted sigma (on the three hostile images of
@@ -268,7 +273,18 @@ class Screening(IcgnPasses):
             # near the field most converge within it, 2.0 % of the blob image's correct
             # affine points left flagged against 6.6 % at the reduced limit again)
             cap = min(self.max_iterations, max(10, RETRY_BUDGET * med_it))
-            p2, z2, it2, st2 = self._run_icgn(coef, start, self._status0[idx], idx, cap)
+            # a retry is taken only within its threshold of the start: one whose (u, v)
+            # wanders beyond twice the largest is stopped (DIVERGED) instead of spending
+            # its budget off the fast stencil path (blob image, affine: 6.4 -> 3.4 ms CPU,
+            # the same 132 correct points recovered; issue 26)
+            p2, z2, it2, st2 = self._run_icgn(
+                coef,
+                start,
+                self._status0[idx],
+                idx,
+                cap,
+                RETRY_REACH * float(thr[where].max()),
+            )
             d2 = np.hypot(p2[:, ucol] - start[:, ucol], p2[:, vcol] - start[:, vcol])
             better = (z2 >= z[idx]) | again[where]  # a stopped POI had no optimum
             take = (st2 == PointStatus.CONVERGED) & better & (d2 <= thr[where])

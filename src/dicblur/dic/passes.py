@@ -59,11 +59,15 @@ class IcgnPasses(CorrelatorState):
         ) -> None: ...
 
     def _settings(
-        self, width: int, max_iter: int | None, max_step: float | None = None
+        self,
+        width: int,
+        max_iter: int | None,
+        max_step: float | None = None,
+        tol: float | None = None,
     ) -> kernels.Settings:
         """The kernels' scalar record (``max_iter`` None: ``max_iterations``; ``max_step``
         None: the subset size, px, the farthest (u, v) may move from its start before the
-        POI is ``DIVERGED``)."""
+        POI is ``DIVERGED``; ``tol`` None: ``tolerance``, px)."""
         return kernels.settings(
             self.image_shape[0],
             self.image_shape[1],
@@ -71,7 +75,7 @@ class IcgnPasses(CorrelatorState):
             self.half,
             width,
             self.max_iterations if max_iter is None else max_iter,
-            self.tolerance,
+            self.tolerance if tol is None else tol,
             self.min_zncc,
             float(self.subset) if max_step is None else max_step,
         )
@@ -86,6 +90,7 @@ class IcgnPasses(CorrelatorState):
         source: NDArray[np.intp],
         max_iter: int | None = None,
         max_step: float | None = None,
+        tol: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
         """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
         ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
@@ -100,7 +105,7 @@ class IcgnPasses(CorrelatorState):
                 self._images,
                 self._subsets,
                 self._packed,
-                self._settings(self._w, max_iter, max_step),
+                self._settings(self._w, max_iter, max_step, tol),
                 p0,
                 status_in,
                 kernels.Passes(first, second, source),
@@ -119,7 +124,10 @@ class IcgnPasses(CorrelatorState):
         idx: NDArray[np.intp] | None = None,
         max_iter: int | None = None,
         max_step: float | None = None,
+        tol: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+        """IC-GN of the POIs ``idx`` (None: all) from ``p0``; ``max_iter``, ``max_step``,
+        ``tol`` as :meth:`_settings` (None: the Correlator's)."""
         if self.shape == "translation":
             full = np.zeros((self.n_points, 2))
             st_full = np.zeros(self.n_points, np.uint8)
@@ -127,7 +135,7 @@ class IcgnPasses(CorrelatorState):
             full[sel] = p0
             st_full[sel] = status_in
             out = self._translation(
-                coef, full, st_full, sel, self._none, self._none, max_iter, max_step
+                coef, full, st_full, sel, self._none, self._none, max_iter, max_step, tol
             )
             return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
         if max_iter is None and self._imprecise is not None:
@@ -156,7 +164,7 @@ class IcgnPasses(CorrelatorState):
             coef,
             self._images,
             subsets,
-            self._settings(self._tw, max_iter, max_step),
+            self._settings(self._tw, max_iter, max_step, tol),
             np.ascontiguousarray(p0),
             np.ascontiguousarray(status_in),
             out,

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from .icgn import N_PARAMS
 from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
-from .passes import RETRY_BUDGET, IcgnPasses
+from .passes import IMPRECISE_TOLERANCE, RETRY_BUDGET, IcgnPasses
 from .status import PointStatus
 
 __all__ = [
@@ -44,9 +44,6 @@ MAX_PREDICTED_SIGMA = 0.1 / 3
 #: v moves farther than this many times the largest acceptance threshold of the retried
 #: POIs from its start (it could only be taken back within the threshold).
 RETRY_REACH = 2.0
-#: Neighbour check: the retried predicted-imprecise POIs converge to this fraction of
-#: ``max_predicted_sigma`` (px) instead of the Correlator's ``tolerance``.
-IMPRECISE_TOLERANCE = 0.1
 #: Neighbour check: a predicted-imprecise subset whose (u, v) lies within this distance
 #: (px) of the median of its precise converged 3x3 neighbours is kept ``CONVERGED``: its
 #: error is then below ~0.1 px whatever its predicted sigma (on the three hostile images of
@@ -307,11 +304,9 @@ class Screening(IcgnPasses):
         A retry is taken only within its threshold of the start, so one whose u or v moves
         farther than :data:`RETRY_REACH` times the largest threshold is stopped
         (``DIVERGED``) instead of spending its budget off the fast stencil path; the
-        predicted-imprecise POIs converge to :data:`IMPRECISE_TOLERANCE` times
-        ``max_predicted_sigma`` (an error left 10 % of their random error's lower bound,
-        under 0.5 % of it in quadrature). On the blob image of
-        ``benchmarks/bench_screening.py`` (affine) the check's IC-GN takes 1.5 instead of
-        6.4 ms of CPU and recovers 112 correct points instead of 109 (issue 26).
+        predicted-imprecise POIs converge to :data:`.passes.IMPRECISE_TOLERANCE` times
+        ``max_predicted_sigma``. On the blob image of ``benchmarks/bench_screening.py``
+        (affine) the check's IC-GN took 1.5 instead of 6.4 ms of CPU (issue 26).
         """
         groups = [np.flatnonzero(~is_imp), np.flatnonzero(is_imp)]
         n, k = start.shape
@@ -320,9 +315,7 @@ class Screening(IcgnPasses):
         for imp, loc in zip((False, True), groups, strict=True):
             if loc.size == 0:
                 continue
-            tol = None
-            if imp and self.max_predicted_sigma is not None:
-                tol = max(self.tolerance, IMPRECISE_TOLERANCE * self.max_predicted_sigma)
+            tol = self._imprecise_tol() if imp else None
             reach = RETRY_REACH * float(thr[loc].max())
             r = self._run_icgn(coef, start[loc], self._status0[idx[loc]], idx[loc], cap, reach, tol)
             p2[loc], z2[loc], it2[loc], st2[loc] = r

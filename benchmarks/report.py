@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 OUT = ROOT / "BENCHMARKS.md"
 MAX_LINES = 300
-GENERIC_ROWS = 3  # rows of a generic table (the JSON holds the rest)
+GENERIC_ROWS = 2  # rows of a generic table (the JSON holds the rest)
 GENERIC_COLUMNS = 8
 
 Doc = dict[str, Any]
@@ -437,6 +437,25 @@ def render_strain(doc: Doc) -> Lines:
     ]
 
 
+def render_stereo(doc: Doc) -> Lines:
+    """One header-only table (two lines): predicted/measured 3-D sigma over the W bins,
+    the shape, and the speed (docs/stereo.md has the full tables)."""
+    bins = [b for c in doc["cases"] for b in c["bins"]]
+    r = [b["ratio"] for b in bins]
+    hi_w = [b["ratio"] for b in bins if b["W_lo"] >= 4]
+    angles = sorted({c["stereo_angle"] for c in doc["cases"]})
+    sp = doc["speed"]
+    cells = [
+        f"plane, {'/'.join(fmt(a) for a in angles)} deg, in/out-of-plane, peak W ~6 px",
+        f"sigma_U/V/W3 pred/meas {fmt(min(r))}-{fmt(max(r))}, "
+        f"{sum(0.8 <= x <= 1.2 for x in r)}/{len(r)} bins within 20 %",
+        f"W >= 4 px: {fmt(min(hi_w))}-{fmt(max(hi_w))}" if hi_w else "W >= 4 px: -",
+        f"{sp['size']}^2, {fmt(sp['points'])} POIs: {fmt(sp['pairs_per_s_tracking'])} pairs/s "
+        f"(end to end {fmt(sp['pairs_per_s_end_to_end'])})",
+    ]
+    return ["| " + " | ".join(cells) + " |", "|" + "---|" * len(cells)]
+
+
 RENDERERS: dict[str, Callable[[Doc], Lines]] = {
     "dic": render_dic,
     "cold_compile": render_cold_compile,
@@ -453,6 +472,7 @@ RENDERERS: dict[str, Callable[[Doc], Lines]] = {
     "startup": render_startup,
     "test_suite": render_test_suite,
     "strain": render_strain,
+    "stereo": render_stereo,
 }
 #: Files that are inputs of another file's table, not tables of their own.
 PARTS = {"cold_compile_before", "dic_robust_main"}

@@ -20,7 +20,6 @@ from .status import PointStatus
 __all__ = [
     "IMPRECISE_BUDGET",
     "IMPRECISE_MIN",
-    "IMPRECISE_TOLERANCE",
     "RETRY_BUDGET",
     "SERIAL_BELOW",
     "IcgnPasses",
@@ -47,13 +46,6 @@ RETRY_BUDGET = 4
 #: iterations went to these 11 % of its POIs).
 IMPRECISE_BUDGET = 1.0
 IMPRECISE_MIN = 3
-#: The predicted-imprecise POIs converge to this fraction of ``max_predicted_sigma`` (px)
-#: instead of the Correlator's ``tolerance``: their random error is at least
-#: ``max_predicted_sigma``. On 54 such POIs of a 256^2 blob image (affine, from the truth)
-#: it moves the result by at most 0.044 (90 %: 0.013) of the POI's predicted sigma
-#: against the default tolerance, 0.1 % of it in quadrature, in 296 instead of 387
-#: iterations (0.1 of it: at most 0.28 sigma, tests/test_dic_speed.py; issue 26).
-IMPRECISE_TOLERANCE = 0.03
 #: A translation kernel call on fewer POIs runs on this thread alone: waking numba's
 #: OpenMP workers costs more than they give on a few subsets (a retry, the neighbour
 #: check), and on a loaded machine a woken worker waits for a core (issue 26).
@@ -207,13 +199,6 @@ class IcgnPasses(CorrelatorState):
                 self._split_ids.update((id(out[1]), id(out[3])))
         return out
 
-    def _imprecise_tol(self) -> float | None:
-        """Convergence tolerance (px) of the predicted-imprecise POIs (None: the
-        Correlator's): :data:`IMPRECISE_TOLERANCE` times ``max_predicted_sigma``."""
-        if self.max_predicted_sigma is None:
-            return None
-        return max(self.tolerance, IMPRECISE_TOLERANCE * self.max_predicted_sigma)
-
     def _run_split(
         self,
         coef: NDArray[np.float32],
@@ -239,9 +224,7 @@ class IcgnPasses(CorrelatorState):
             if conv.size:
                 budget = math.ceil(IMPRECISE_BUDGET * float(np.median(conv)))
                 cap = min(cap, max(IMPRECISE_MIN, budget))
-        r = self._run_icgn(
-            coef, p0[loc_i], status_in[loc_i], pts_i, cap, None, self._imprecise_tol()
-        )
+        r = self._run_icgn(coef, p0[loc_i], status_in[loc_i], pts_i, cap)
         out_p[loc_i], out_z[loc_i], out_i[loc_i], out_s[loc_i] = r
         return out_p, out_z, out_i, out_s
 

@@ -1,9 +1,10 @@
 """Shared harness of the benchmark scripts: provenance of a run and where it is written.
 
 Every result file records the same block (:func:`provenance`): the git commit (and whether
-the tree had uncommitted changes), the dicblur version, the machine, the thread settings and
-the load average at the start and the end of the run (these machines are shared: a number
-without its load is not comparable). Use::
+the tree had uncommitted changes), the dicblur version, the machine (CPU model and count),
+the thread settings and the load average at the start and the end of the run (a number
+without its load is not comparable). ``python -m benchmarks.report`` turns the result
+files into BENCHMARKS.md. Use::
 
     from _harness import Run
 
@@ -53,18 +54,32 @@ def git_commit() -> dict[str, Any]:
 
 
 def dicblur_version() -> str | None:
+    """The version of the dicblur imported (its literal, not installed metadata that an
+    editable install leaves stale), or None when it cannot be imported."""
     try:
-        from importlib.metadata import version
+        from dicblur._version import __version__
 
-        return version("dicblur")
-    except Exception:  # pragma: no cover - not installed
+        return __version__
+    except Exception:  # pragma: no cover - not importable
         return None
 
 
+def cpu_model() -> str | None:
+    """The CPU's model name (Linux ``/proc/cpuinfo``), or None where it cannot be read."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return None
+
+
 def machine() -> dict[str, Any]:
-    """Platform, CPU count, Python and the thread settings that change timings."""
+    """Platform, CPU model and count, Python and the thread settings that change timings."""
     return {
         "platform": platform.platform(),
+        "cpu": cpu_model(),
         "processor": platform.processor() or platform.machine(),
         "cpus": os.cpu_count(),
         "python": platform.python_version(),

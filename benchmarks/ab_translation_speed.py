@@ -1,4 +1,4 @@
-"""A/B of IC-GN speed between two source trees, alternated in one session.
+"""A/B of IC-GN speed between two source trees, alternated in one run.
 
 Usage::
 

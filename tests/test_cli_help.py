@@ -62,7 +62,7 @@ def test_every_output_option_is_dash_o_and_double_dash_out():
 
 
 def test_abandoned_coroutine_warning_after_an_interrupt_is_not_shown(capsys):
-    """Seen in CI (session 6): a SIGINT during a campaign's cluster start-up left zarr's
+    """Seen in CI: a SIGINT during a campaign's cluster start-up left zarr's
     coroutines unawaited, and their RuntimeWarnings followed the one "interrupted" line."""
     from dicblur.cli import _show_warning
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from importlib.metadata import version
 
 import pytest
 
@@ -75,13 +74,14 @@ def test_cli_version_and_help_import_only_the_cli(argv):
     }
 
 
-def test_version_is_the_installed_metadata(capsys):
+def test_version_is_the_package_literal_and_the_cli_prints_it(capsys):
     import dicblur
+    from dicblur._version import __version__
     from dicblur.cli import main
 
-    assert dicblur.__version__ == version("dicblur")
+    assert dicblur.__version__ == __version__
     assert main(["--version"]) == 0
-    assert capsys.readouterr().out.strip() == f"dicblur {version('dicblur')}"
+    assert capsys.readouterr().out.strip() == f"dicblur {__version__}"
 
 
 def test_every_public_name_resolves_and_is_listed_by_dir():

@@ -732,7 +732,10 @@ def test_model_from_pattern_follows_the_prediction_and_plans():
 def test_interpolated_noise_covariance_matches_simulation():
     # white noise through the engine's own B-spline interpolant at a fractional offset:
     # the covariance the sub-pixel noise term uses (docs/models.md s. 4)
-    from dicblur.models.sensitivity import _interpolated_at, _interpolated_noise_covariance
+    from dicblur.models.derivatives import _interpolated_at
+    from dicblur.models.derivatives import (
+        interpolated_noise_covariance as _interpolated_noise_covariance,
+    )
 
     rng = np.random.default_rng(5)
     noise = rng.standard_normal((64, 4096))

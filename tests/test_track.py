@@ -568,7 +568,7 @@ def test_median_test_of_all_frames_equals_the_per_frame_test():
 def test_rigid_shift_is_sub_pixel():
     # the guesses' rigid part: within 0.15 px (the integer phase correlation: up to 0.5)
     from dicblur.dic.initial import window_spectrum
-    from dicblur.track.core import _rigid_shift
+    from dicblur.track.frames import _rigid_shift
 
     img = _pattern(160, seed=7)
     ky = np.fft.fftfreq(160)[:, None]
@@ -811,7 +811,7 @@ def test_nanmedian_rows_equals_numpy():
     # and dtype (small and long rows, ties, all-NaN rows, float32 and float64)
     import warnings
 
-    from dicblur.track.core import _nanmedian_last
+    from dicblur.track.flags import nanmedian_last as _nanmedian_last
 
     rng = np.random.default_rng(5)
     for f, p, dt in ((7, 5, np.float32), (40, 700, np.float64), (650, 9, np.float32)):

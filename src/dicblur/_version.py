@@ -1,6 +1,8 @@
-"""The package version, read once from the installed metadata (pyproject.toml is its one
-source). Bottom layer: imports nothing from dicblur, so any module may import it without
-pulling the package's subpackages (``from .. import __version__`` did, and made a cycle).
+"""The package version: its one source (pyproject.toml reads it from here, the CHANGELOG's
+latest release heading names it, and every model file records it). A literal rather than
+the installed metadata, so a source tree on ``PYTHONPATH`` reports its own version. Bottom
+layer: imports nothing from dicblur, so any module may import it without pulling the
+package's subpackages (``from .. import __version__`` did, and made a cycle).
 """
 
 from __future__ import annotations
@@ -9,10 +11,8 @@ from importlib.metadata import PackageNotFoundError, version
 
 __all__ = ["DEPENDENCIES", "__version__", "package_versions"]
 
-try:
-    __version__: str = version("dicblur")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree, not installed
-    __version__ = "0+unknown"
+# A plain assignment: setuptools reads it statically (pyproject.toml [tool.setuptools.dynamic]).
+__version__ = "0.2.0"
 
 #: The packages whose versions change dicblur's numbers or files (recorded in provenance).
 DEPENDENCIES = ("numpy", "scipy", "numba", "xarray", "zarr", "dask", "distributed", "matplotlib")

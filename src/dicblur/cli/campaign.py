@@ -98,7 +98,7 @@ def run_command(
 ) -> int:
     """Run (or resume) the campaign SPEC and store its results in OUT."""
     from ..campaign import campaign_status, load_spec, run_campaign
-    from ..campaign.engine import check_scheduler_address
+    from ..campaign.cluster import check_scheduler_address
     from ..io import check_output
 
     # every check before the spec's patterns are built: the store folder may be created,

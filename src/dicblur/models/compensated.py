@@ -35,8 +35,8 @@ from ..dic.compensation import blur_reference
 from ..dic.icgn import raw_jacobian
 from ..errors import InputError
 from ..metrics import directional_sssig, image_gradients, subset_centres
+from .derivatives import spline_gradients, unit_direction
 from .pattern import NOISE_FACTORS, PatternPrediction, fit_prediction, model_blur
-from .sensitivity import spline_gradients, unit_direction
 
 if TYPE_CHECKING:
     from .model import BlurUncertaintyModel

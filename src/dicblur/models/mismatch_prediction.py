@@ -24,15 +24,9 @@ from numpy.typing import ArrayLike, NDArray
 from ..checks import as_blur, as_image, check_odd_subset, check_positive, check_subpixel
 from ..errors import InputError
 from ..metrics import resolve_points
-from .sensitivity import (
-    Boundary,
-    Criterion,
-    Derivative,
-    Shape,
-    subset_blur_coefficients,
-    subset_blur_shifts,
-    unit_direction,
-)
+from .derivatives import Boundary, Derivative, unit_direction
+from .sensitivity import subset_blur_coefficients, subset_blur_shifts
+from .subset_algebra import Criterion, Shape
 
 __all__ = [
     "BlurMismatchCurve",

@@ -37,18 +37,12 @@ from numpy.typing import ArrayLike, NDArray
 from ..checks import as_blur, check_positive, check_subpixel
 from ..errors import InputError
 from ..metrics import directional_sssig
+from .derivatives import Boundary, Derivative, box_blurred, image_spectrum, unit_direction
 from .mismatch_prediction import subset_inputs
 from .model import BlurUncertaintyModel
 from .scaled import StaticTerms
-from .sensitivity import (
-    Boundary,
-    Derivative,
-    Shape,
-    box_blurred,
-    image_spectrum,
-    shifts_and_variance,
-    unit_direction,
-)
+from .sensitivity import shifts_and_variance
+from .subset_algebra import Shape
 
 if TYPE_CHECKING:
     from ..dic.settings import MatcherSettings

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..models import PoissonGaussianCamera, predict_compensated, predict_from_pattern
-from .uncertainty import NoiseEstimate
+from .noise import NoiseEstimate
 
 __all__ = ["MAX_BLUR", "ExposureAdvice", "advise_exposure", "static_error_curve"]
 

@@ -35,13 +35,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..campaign import ChunkStore, run_tasks
-from ..campaign.engine import check_scheduler_address
+from ..campaign.cluster import check_scheduler_address
 from ..dic import Correlator, PointStatus
 from ..dic.initial import window_spectrum
 from ..errors import DicblurError, ImageReadError, InputError
 from ..sequence import Recording, open_recording
 from .compensate import pass_frames
-from .core import correlate_frame, frame_gradients, frame_guess, poi_grid, seed_correlator
+from .frames import correlate_frame, frame_gradients, frame_guess, poi_grid, seed_correlator
 
 __all__ = [
     "HISTORY",
@@ -154,7 +154,7 @@ class TrackJob:
 # thread: ChunkedRun(threads=N) runs chunks on N threads of this process), keyed by
 # "job key@thread id"
 _PREPARED: dict[str, tuple[Recording, Correlator, NDArray[np.float64], Any]] = {}
-# ... and the seed POIs of its Correlator (track.core.seed_correlator)
+# ... and the seed POIs of its Correlator (track.frames.seed_correlator)
 _SEEDS: dict[str, Any] = {}
 # in-process runs (ChunkedRun with neither workers nor scheduler): the caller's prepared
 # Correlator, reference, its spectrum and seeds by job key, which each chunk thread forks
@@ -414,7 +414,7 @@ class ChunkedRun:
         correlator: dict[str, Any],
         progress: Callable[[int, int], None] | None,
     ) -> dict[str, Any]:
-        """Track the frames of ``order`` (see :class:`~dicblur.track.core.ChunkRunner`).
+        """Track the frames of ``order`` (see :class:`~dicblur.track.frames.ChunkRunner`).
 
         ``corr`` is the Correlator of ``correlator`` on the ``reference`` frame (any
         ``workers``); in this process the chunk threads fork it (:meth:`Correlator.fork`)."""

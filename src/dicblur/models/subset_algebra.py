@@ -1,0 +1,256 @@
+"""The subset windows and their least-squares algebra under :mod:`dicblur.models.sensitivity`
+(derivation there and in docs/models.md): the steepest-descent images of a shape function
+per subset, the ZNSSD normalisation and projection, Gram matrices and their solves, the
+blurred subsets, and the reference-noise terms of the matcher's gradients.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InputError
+from .derivatives import (
+    Boundary,
+    Derivative,
+    blurred_images,
+    directional_derivatives,
+    extend,
+    image_spectrum,
+    spline_gradients,
+    unit_direction,
+)
+
+Shape = Literal["translation", "affine"]
+Criterion = Literal["znssd", "ssd"]
+
+
+def reference_noise_middle(
+    pf: NDArray[np.float64],
+    ratio: NDArray[np.float64],
+    sg: NDArray[np.float64],
+    r0: NDArray[np.float64],
+    subset: int,
+    shape: str,
+    ex: NDArray[np.float64],
+    ey: NDArray[np.float64],
+    kernel: NDArray[np.float64],
+    pf_gram: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """``M^T M`` of the reference noise's response ``A^-1 M^T n``, per unit noise variance:
+    ``M = ratio P_f J_f + sigma_g Q`` with ``Q = [D_k^T (S_k r0)]`` (docs/models.md s. 4,
+    the complete noise term). Shape (m, k, k). ``pf_gram``: ``(P_f J_f)^T (P_f J_f)``
+    computed before (it does not depend on the blur).
+
+    ``Q[:, k] = D_k^T (S_k r0)`` is the linear functional of the reference noise ``n`` by
+    which the noisy gradients move ``J_f^T r0`` (``delta J_f[:, k] = S_k D n``, ``D`` the
+    spline derivative along x or y with impulse response ``kernel``, ``S_k`` the weight
+    1, dx or dy of the shape function; the columns in the order of
+    :meth:`Windows.jacobian`). ``D^T`` spreads each field by the kernel's half-length
+    ``L`` along its axis (the gradients at the subset's pixels depend on noise just
+    outside it): with ``T`` (S + 2L, S) the spreading matrix, ``Q_k^T Q_l`` of two fields
+    spread along one axis is ``v_k^T (T^T T) v_l`` row by row (or column by column),
+    ``v_k = S_k r0`` (S, S), so the spread fields are never formed; on the subset's own
+    pixels (where x- and y-spread fields and ``P_f J_f`` meet them) ``Q`` is
+    ``T[L:L+S]`` applied to ``v_k``.
+    """
+    m, npx, k = pf.shape
+    size = subset
+    lag = len(kernel) // 2
+    if shape == "translation":
+        weights = [np.ones_like(ex)]
+    else:
+        weights = [np.ones_like(ex), ex, ey]
+    kx = len(weights)  # x-type columns; as many y-type
+    w3 = np.stack([(wt * np.ones((1, npx))).reshape(size, size) for wt in weights])
+    # T[a, i] = d[i - (a - L)]: (D^T v)[a] = sum_i d[i - a] v[i] over the extended axis
+    idx = np.arange(size)[None, :] - (np.arange(size + 2 * lag)[:, None] - lag) + lag
+    tmat = np.where((idx >= 0) & (idx < len(kernel)), kernel[np.clip(idx, 0, len(kernel) - 1)], 0.0)
+    tt = tmat.T @ tmat  # (S, S): the spread fields' inner products
+    tsub = tmat[lag : lag + size]  # (S, S): the spread fields on the subset's pixels
+    v = r0.reshape(m, 1, size, size) * w3[None]  # (m, kx, S, S): S_k r0
+    vt = v.reshape(m, kx, npx).transpose(0, 2, 1)  # (m, P, kx)
+    qq = np.empty((m, k, k))
+    qq[:, :kx, :kx] = np.matmul(np.matmul(v, tt).reshape(m, kx, npx), vt)  # along rows
+    qq[:, kx:, kx:] = np.matmul(np.matmul(tt, v).reshape(m, kx, npx), vt)  # along columns
+    q_sub = np.concatenate(
+        [np.matmul(v, tsub.T).reshape(m, kx, npx), np.matmul(tsub, v).reshape(m, kx, npx)],
+        axis=1,
+    )  # (m, k, P): Q on the subset's own pixels
+    xy = np.matmul(q_sub[:, :kx], q_sub[:, kx:].transpose(0, 2, 1))
+    qq[:, :kx, kx:] = xy  # x- and y-spread fields overlap on the subset only
+    qq[:, kx:, :kx] = np.transpose(xy, (0, 2, 1))
+    cross = np.matmul(np.swapaxes(pf, 1, 2), q_sub.transpose(0, 2, 1))
+    r = ratio[:, None, None]
+    s = sg[:, None, None]
+    gpf = gram(pf, pf) if pf_gram is None else pf_gram
+    return r * r * gpf + r * s * (cross + np.transpose(cross, (0, 2, 1))) + s * s * qq
+
+
+def check_shape(shape: str) -> None:
+    if shape not in ("translation", "affine"):
+        raise InputError(f"shape={shape!r}: unknown shape function; use 'translation' or 'affine'")
+
+
+def check_criterion(criterion: str) -> None:
+    if criterion not in ("znssd", "ssd"):
+        raise InputError(
+            f"criterion={criterion!r}: unknown matching criterion; use 'znssd' (the DIC "
+            "engine's, default) or 'ssd'"
+        )
+
+
+class Windows:
+    """Subset windows of several images, gathered a chunk of centres at a time."""
+
+    def __init__(self, subset: int, *images: NDArray[np.float64]) -> None:
+        self.h = subset // 2
+        self.views = [np.lib.stride_tricks.sliding_window_view(a, (subset, subset)) for a in images]
+        off = np.arange(-self.h, self.h + 1, dtype=np.float64)
+        oy, ox = np.meshgrid(off, off, indexing="ij")
+        self.ex, self.ey = ox.ravel()[None, :], oy.ravel()[None, :]
+
+    def take(self, cc: NDArray[np.intp]) -> list[NDArray[np.float64]]:
+        r0, c0 = cc[:, 0] - self.h, cc[:, 1] - self.h
+        return [v[r0, c0].reshape(len(cc), -1) for v in self.views]
+
+    def jacobian(
+        self, gx: NDArray[np.float64], gy: NDArray[np.float64], shape: str
+    ) -> NDArray[np.float64]:
+        """Steepest-descent images, shape (m, pixels, 2 | 6)."""
+        if shape == "translation":
+            return np.stack([gx, gy], axis=2)
+        ex, ey = self.ex, self.ey
+        # the products written into their columns (no temporaries to stack)
+        out = np.empty((*gx.shape, 6))
+        for c, (g, e) in enumerate(
+            ((gx, None), (gx, ex), (gx, ey), (gy, None), (gy, ex), (gy, ey))
+        ):
+            if e is None:
+                out[:, :, c] = g
+            else:
+                np.multiply(g, e, out=out[:, :, c])
+        return out
+
+
+def normalise(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Rows with mean removed and unit norm, and their norms (m, pixels), (m,)."""
+    z = a - a.mean(axis=1, keepdims=True)
+    n = np.sqrt(np.einsum("np,np->n", z, z))
+    return z / np.where(n > 0, n, 1.0)[:, None], n
+
+
+def project(jac: NDArray[np.float64], hat: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``P jac``: remove from each column the constant and the component along ``hat``
+    (zero-mean, unit-norm rows): the ZNSSD offset and scale nuisance parameters."""
+    z = jac - jac.mean(axis=1, keepdims=True)
+    z -= hat[:, :, None] * np.matmul(hat[:, None, :], z)  # in place: one temporary fewer
+    return z
+
+
+def gram(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Batched ``a^T b`` over the pixels: (m, P, i), (m, P, j) -> (m, i, j) (BLAS)."""
+    return np.asarray(np.matmul(np.swapaxes(a, 1, 2), b))
+
+
+def tdot(a: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Batched ``a^T v``: (m, P, i), (m, P) -> (m, i)."""
+    return np.asarray(np.matmul(np.swapaxes(a, 1, 2), v[:, :, None])[:, :, 0])
+
+
+def solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Batched ``a^-1 b``; NaN rows where ``a`` is singular (no gradient in the subset)."""
+    return solve_each(a, [b])[0]
+
+
+def solve_each(a: NDArray[np.float64], bs: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    """:func:`solve` of one batch of matrices ``a`` for each right-hand side of ``bs``
+    (each (m, k)): the condition numbers (an SVD per matrix) computed once, each system
+    solved as :func:`solve` solves it (the same numbers)."""
+    fin = np.isfinite(a).all(axis=(1, 2))
+    sing = np.ones(len(a), dtype=bool)  # singular or not finite
+    sing[fin] = ~(np.linalg.cond(a[fin]) < 1e12)
+    out = []
+    for b in bs:
+        ok = ~sing & np.isfinite(b).all(axis=1)
+        sol = np.full(b.shape, np.nan)
+        if ok.any():
+            sol[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
+        out.append(sol)
+    return out
+
+
+def along_motion(
+    sol: NDArray[np.float64], shape: str, dy: float, dx: float, max_shift: float = np.inf
+) -> NDArray[np.float64]:
+    u = sol[:, 0]
+    v = sol[:, 1] if shape == "translation" else sol[:, 3]
+    return np.where(np.hypot(u, v) <= max_shift, dx * u + dy * v, np.nan)
+
+
+def contraction(
+    jf: NDArray[np.float64],
+    fh: NDArray[np.float64],
+    sf: NDArray[np.float64],
+    cross: NDArray[np.float64],
+    sg: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Smallest real part of the eigenvalues of ``K = (sigma_f / sigma_g) H^-1 A`` per subset,
+    ``H = J_f^T P_f J_f`` (the IC-GN Hessian of ZNSSD) and ``A = J_f^T P_g J_g`` (the
+    fixed point's Jacobian). IC-GN against the blurred image moves by ``I - K`` per step
+    near its fixed point: ``K = I`` for a warped copy; blur lowers it, and as it nears 0
+    the fixed point degenerates (the noise response grows as ``1 / lambda``, IC-GN stalls)
+    and beyond 0 it repels (the blur has reversed the subset's gradients along the motion:
+    the sinc's negative lobe). ``nan`` where undefined."""
+    pf = project(jf, fh)
+    hess = gram(pf, pf)
+    ok = np.isfinite(hess).all(axis=(1, 2)) & np.isfinite(cross).all(axis=(1, 2)) & (sg > 0)
+    ok[ok] = np.linalg.cond(hess[ok]) < 1e12
+    lam = np.full(len(jf), np.nan)
+    if ok.any():
+        k = np.linalg.solve(hess[ok], cross[ok]) * (sf[ok] / sg[ok])[:, None, None]
+        lam[ok] = np.linalg.eigvals(k).real.min(axis=1)
+    return lam
+
+
+def blurred_subsets(
+    image: NDArray[np.float64],
+    blur: NDArray[np.float64],
+    centres: NDArray[np.intp],
+    subset: int,
+    motion: tuple[float, float],
+    shape: str,
+    derivative: Derivative,
+    boundary: Boundary,
+    chunk: int,
+    offset: float | None = None,
+) -> Iterator[
+    tuple[
+        int, int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+    ]
+]:
+    """``(j, start, J_f, J_g, f, g)`` for every blur length and chunk of subsets: the
+    steepest-descent images of the sharp and of the centred-box-blurred image, and their
+    subset intensities (W = 0: ``g = f``). With ``offset`` (px along the motion) the
+    blurred target is moved by it and seen through the matcher's B-spline interpolant
+    (:func:`_interpolated_at`)."""
+    dy, dx = unit_direction(motion)
+    if derivative in ("bspline3", "bspline5"):  # the spline's gradients (f_dd not needed)
+        extend(image[:1, :1], boundary)  # raises the boundary error
+        fy, fx = spline_gradients(image, derivative)
+    else:
+        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    spec = None  # the reference's spectrum, one forward FFT for all the blur lengths
+    for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
+        if wl != 0 and spec is None:
+            spec = image_spectrum(image, boundary)
+        g, ggy, ggx = blurred_images(
+            image, float(wl), (dy, dx), (fy, fx), derivative, boundary, spec, offset
+        )
+        win = Windows(subset, fx, fy, ggx, ggy, image, g)
+        for start in range(0, len(centres), chunk):
+            ax, ay, bx, by, f, gg = win.take(centres[start : start + chunk])
+            yield j, start, win.jacobian(ax, ay, shape), win.jacobian(bx, by, shape), f, gg

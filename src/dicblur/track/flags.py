@@ -1,0 +1,97 @@
+"""Per-frame gross-error flags of :func:`dicblur.track.track`: a ZNCC far below the point's
+usual (:func:`zncc_flags`), the normalised median test's critical values per frame, and
+the blocks of frames the post-processing runs on its threads.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..threads import each
+from .median import median_critical_eps
+
+#: A converged point whose ``1 - ZNCC`` exceeds this multiple of its usual value (its
+#: frame's median, scaled by the point's own median ratio over the recording) is flagged.
+ZNCC_RATIO = 4.0
+
+
+def nanmedian_last(x: NDArray[Any], *, overwrite: bool = False) -> NDArray[Any]:
+    """``np.nanmedian(x, axis=-1)``, the same numbers and dtype (NaN where a row has no
+    value, without the warning): one vectorised sort of the rows (NaN sorts last) instead
+    of a partition per row (thousands of Python-level calls on a (frames, points) array).
+    ``overwrite``: sort ``x`` itself (a temporary of the caller: no sorted copy).
+    """
+    n = x.shape[-1] - np.count_nonzero(np.isnan(x), axis=-1)
+    if overwrite:
+        x.sort(axis=-1)
+        s = x
+    else:
+        s = np.sort(x, axis=-1)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
+    hi = np.take_along_axis(s, (n // 2)[..., None], axis=-1)[..., 0] if s.shape[-1] else lo
+    with np.errstate(invalid="ignore", over="ignore"):
+        # np.median: the middle value, or the mean of the two middle ones in x's dtype
+        mid = np.where(n % 2 == 1, lo, (lo + hi) / 2)
+    return np.where(n > 0, mid, np.nan).astype(x.dtype, copy=False)
+
+
+def zncc_flags(
+    zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *, ratio: float = ZNCC_RATIO
+) -> NDArray[np.bool_]:
+    """Converged points whose match is much worse than usual (frames, points).
+
+    ``q = 1 - ZNCC`` grows with the noise and the blur of a frame and with how little
+    texture a subset has; dividing by the frame's median ``q`` removes the first, by the
+    point's median of that ratio over the recording the second. A foreign texture in the
+    subset (debris, glare, a false convergence) leaves the ratio far above 1.
+    """
+    q = np.where(converged, 1.0 - zncc, np.nan)
+    with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med_f = nanmedian_last(q)[:, None]
+        rel = np.where(med_f > 0, q / med_f, np.nan)
+        med_p = nanmedian_last(rel.T)[None, :]
+        score = rel / med_p
+    return np.asarray(converged & np.isfinite(score) & (score > ratio))
+
+
+def median_critical(
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    ok: NDArray[np.bool_],
+    gshape: tuple[int, int] | None,
+    threshold: float,
+    frames: NDArray[np.intp] | None = None,
+    out: NDArray[np.float32] | None = None,
+    threads: int = 1,
+) -> NDArray[np.float32]:
+    """:func:`.median.median_critical_eps` of the points ``ok`` (the others missing) of
+    ``frames`` (default all), written into ``out`` (frames, points); ``-inf`` everywhere
+    without a grid. The normalised median test at ``eps`` per frame is ``out > eps``."""
+    n_f = u.shape[0]
+    if out is None:
+        out = np.full(u.shape, -np.inf, np.float32)
+    if gshape is None:
+        return out
+    sel = np.arange(n_f) if frames is None else np.asarray(frames)
+
+    def one(b: NDArray[np.intp]) -> None:
+        # the mask goes into the compiled pass (no masked float64 copies)
+        out[b] = median_critical_eps(u[b], v[b], gshape, threshold=threshold, valid=ok[b])
+
+    frame_blocks(one, sel, 128, threads)
+    return out
+
+
+def frame_blocks(
+    fn: Callable[[NDArray[np.intp]], None], sel: NDArray[np.intp], size: int, threads: int
+) -> None:
+    """``fn(block)`` for the consecutive blocks of ``size`` of the frame indices ``sel``,
+    on ``threads`` threads (numpy releases the GIL in its array loops; each block writes
+    its own frames, so the result is the same on any number of threads)."""
+    each(fn, (sel[a : a + size] for a in range(0, sel.size, size)), threads)

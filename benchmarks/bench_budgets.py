@@ -148,6 +148,8 @@ def bench_calibrate(repeats: int, tmp: Path, image: str, cli: bool) -> list[dict
     t2 = time.perf_counter()
     phases = {**res.timings, "figures": t1 - t0, "planner": t2 - t1}
     rows += _phase_rows("dicblur calibrate", phases, {})
+    global _CALIBRATION
+    _CALIBRATION = res
     rows.append(
         {
             "command": "dicblur calibrate",
@@ -159,12 +161,71 @@ def bench_calibrate(repeats: int, tmp: Path, image: str, cli: bool) -> list[dict
     return rows
 
 
+_CALIBRATION: Any = None
+
+
+def bench_predictions(image: str, reps: int) -> list[dict[str, Any]]:
+    """Calibrated at 2 GL (the calibrate run above), predicted at W = 1, 3, 5 px and 1, 2,
+    4 GL, against a direct simulation of the same image (fresh noise, ``reps``
+    repetitions; u_e as the rms over them), with the static kind's noise scale fixed at 1
+    (the default at one level) and fitted (the earlier rule) side by side."""
+    import tempfile as _tf
+
+    from dicblur.campaign.calibrate import calibration_spec
+    from dicblur.campaign.engine import run_campaign
+    from dicblur.campaign.store import open_results
+    from dicblur.models.scaled import StaticTerms, fit_static_scales, static_variance
+
+    res = _CALIBRATION
+    m = res.model
+    blur, levels = [1.0, 3.0, 5.0], [1.0, 2.0, 4.0]
+    spec = calibration_spec(image, noise=levels, blur=blur, repetitions=reps, seed=7)
+    with _tf.TemporaryDirectory() as d:
+        run_campaign(spec, Path(d) / "direct.zarr", serial=True)
+        ds = open_results(Path(d) / "direct.zarr").isel(pattern=0, angle=0, subset=0)
+        u = ds["u_e"].transpose("noise", "blur", "rep").values
+    direct = np.sqrt(np.mean(u**2, axis=2))
+    ex = m.static.extra
+    terms = StaticTerms(
+        blur=tuple(ex["table_blur"]),
+        noise=tuple(ex["table_noise"]),
+        noise2=tuple(ex["table_noise2"]),
+        mismatch=tuple(ex["table_mismatch"]),
+        valid_fraction=tuple(ex["table_valid_fraction"]),
+        breakdown_blur=ex["table_breakdown_blur"],
+    )
+    w, sig, ue = (np.asarray(m.data[k], dtype=np.float64) for k in ("blur", "noise", "u_e"))
+    rows = []
+    for rule in ("auto", "fit"):
+        f = fit_static_scales(terms, w, sig, ue, noise_scale=rule)
+        for i, s in enumerate(levels):
+            nv, bv = static_variance(f.extra, blur, s, f["k_noise"], f["k_blur"])
+            for j, wj in enumerate(blur):
+                pred = float(np.sqrt(nv[j] + bv[j]))
+                rows.append(
+                    {
+                        "k_noise rule": "fixed at 1 (default)" if rule == "auto" else "fitted",
+                        "k_noise": round(f["k_noise"], 4),
+                        "k_blur": round(f["k_blur"], 4),
+                        "noise_GL": s,
+                        "blur_px": wj,
+                        "predicted_px": round(pred, 6),
+                        "direct_px": round(float(direct[i, j]), 6),
+                        "ratio": round(pred / float(direct[i, j]), 4),
+                    }
+                )
+    return rows
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=2, help="end-to-end runs per command")
     parser.add_argument("--image", default=None, help="calibration image (default: see above)")
     parser.add_argument("--skip-cli", action="store_true", help="phases only, no end-to-end runs")
     parser.add_argument("--only", choices=("pulse", "calibrate"), default=None)
+    parser.add_argument(
+        "--reps", type=int, default=4, help="repetitions of the direct simulation (0 skips)"
+    )
     args = parser.parse_args()
     run = Run("budgets")
     with tempfile.TemporaryDirectory() as d:
@@ -176,10 +237,13 @@ def main() -> int:
         for kind in ("fourier", "bspline"):
             simulate(PAPER_TRAIN, widths=[1.0], trials=4, interpolation=kind)
         rows: list[dict[str, Any]] = []
+        preds: list[dict[str, Any]] = []
         if args.only in (None, "pulse"):
             rows += bench_pulse(args.repeats, tmp, not args.skip_cli)
         if args.only in (None, "calibrate"):
             rows += bench_calibrate(args.repeats, tmp, image, not args.skip_cli)
+            if args.reps > 0:
+                preds = bench_predictions(image, args.reps)
     print(f"{'command':20s} {'phase':45s} {'wall s':>8s} {'cpu s':>8s}")
     for r in rows:
         cpu = "" if r["cpu_s"] is None else f"{r['cpu_s']:8.2f}"
@@ -195,7 +259,15 @@ def main() -> int:
     }
     for c, s in summary.items():
         print(f"{c}: best end-to-end {s['wall_min_s']:.2f} s (budget {BUDGET_S:g} s)")
-    path = run.write({"image": what, "cases": rows, "summary": summary})
+    if preds:
+        print("\ncalibrated at 2 GL, predicted against a direct simulation (static kind)")
+        print(f"{'k_noise':22s} {'noise GL':>8s} {'W px':>5s} {'pred px':>9s} {'direct':>9s} ratio")
+        for p in preds:
+            print(
+                f"{p['k_noise rule']:22s} {p['noise_GL']:8g} {p['blur_px']:5g} "
+                f"{p['predicted_px']:9.5f} {p['direct_px']:9.5f} {p['ratio']:.3f}"
+            )
+    path = run.write({"image": what, "cases": rows, "summary": summary, "predictions": preds})
     print(f"wrote {path}")
     return 0
 

@@ -387,6 +387,37 @@ def render_test_suite(doc: Doc) -> Lines:
     ]
 
 
+def render_strain(doc: Doc) -> Lines:
+    bins: dict[float, dict[str, Any]] = {}
+    for b in doc["uniform_bins"]:
+        bins.setdefault(b["W_px"], {})[b["field"]] = b["ratio_predicted_to_measured"]
+    parts = {
+        c["W_px"]: (c["predicted_noise_part"], c["predicted_blur_part"])
+        for c in doc["cases"]
+        if c["field"] == "uniform" and c["noise_gl"] == 2.0
+    }
+    rows = [
+        [w, v.get("uniform"), v.get("sine"), *(1e6 * x for x in parts.get(w, (None, None)))]
+        for w, v in bins.items()
+    ]
+    n_mean = sum(bool(c["mean_within"]) for c in doc["cases"])
+    res = ", ".join(
+        f"{r['vsg_px']} px {fmt(r['amplitude_ratio'])}" for r in doc.get("resolution", [])
+    )
+    sp, tr = doc.get("speed_2401", {}), doc.get("track", {})
+    return [
+        "Predicted sigma_exx over the measured scatter of the exx error (quadratic means over "
+        "the noise levels 1-4 GL), VSG 61 px; the two parts at 2 GL in microstrain.",
+        "",
+        *table(["W px", "uniform 1e-3", "sinusoid", "noise part", "blur part"], rows),
+        "",
+        f"Mean error below sigma / sqrt(points) in {n_mean} of {len(doc['cases'])} cases. "
+        f"Sinusoid amplitude recovered by VSG: {res}. Strain + covariance of "
+        f"{sp.get('points', '-')} points {fmt(sp.get('median_ms'))} ms; track with strains "
+        f"{fmt(tr.get('ratio'))}x the time without.",
+    ]
+
+
 RENDERERS: dict[str, Callable[[Doc], Lines]] = {
     "dic": render_dic,
     "cold_compile": render_cold_compile,
@@ -401,6 +432,7 @@ RENDERERS: dict[str, Callable[[Doc], Lines]] = {
     "pulse": render_pulse,
     "startup": render_startup,
     "test_suite": render_test_suite,
+    "strain": render_strain,
 }
 #: Files that are inputs of another file's table, not tables of their own.
 PARTS = {"cold_compile_before", "dic_robust_main"}

@@ -89,6 +89,7 @@ _SUBMODULES: dict[str, tuple[str, ...]] = {
     "patterns": ("PatternSettings", "gaussian_mask", "paper_pattern4", "speckle_pattern"),
     "pulse": ("PulseTrain",),
     "pulse.study": ("PulseStudy", "run_pulse_study"),
+    "strain": ("StrainField", "StrainStatus", "strain"),
     "track": ("track",),
 }
 _LAZY: dict[str, str] = {name: mod for mod, names in _SUBMODULES.items() for name in names}
@@ -184,6 +185,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from .patterns import PatternSettings, gaussian_mask, paper_pattern4, speckle_pattern
     from .pulse import PulseTrain
     from .pulse.study import PulseStudy, run_pulse_study
+    from .strain import StrainField, StrainStatus, strain
 
 
 def __getattr__(name: str) -> Any:
@@ -228,6 +230,8 @@ __all__ = [
     "PulseTrain",
     "SineMotion",
     "StoreError",
+    "StrainField",
+    "StrainStatus",
     "__version__",
     "add_gaussian_noise",
     "blur_length",
@@ -269,6 +273,7 @@ __all__ = [
     "speckle_pattern",
     "speckle_size",
     "sssig",
+    "strain",
     "subset_centres",
     "track",
     "trajectory_positions",

@@ -16,9 +16,11 @@ from .errors import DicblurError, InputError
 
 __all__ = [
     "as_blur",
+    "as_float_array",
     "as_image",
     "as_positive",
     "as_vector",
+    "as_whole",
     "bad_value",
     "check_choice",
     "check_finite_number",
@@ -252,15 +254,21 @@ def check_shape2d(shape: Any, name: str = "shape", *, min_size: int = 2) -> tupl
     return rows, cols
 
 
+def as_float_array(value: Any, name: str, *, expected: str) -> NDArray[np.float64]:
+    """``value`` as a float64 array of any shape; the shape and the values are the caller's
+    to check. Raises ``InputError("{name}={value}: {expected}")`` when it holds no numbers."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name}={describe(value)}: {expected}") from exc
+
+
 # -- measurement vectors of the model fits ----------------------------------------------
 
 
 def as_vector(x: ArrayLike, name: str, n: int | None = None) -> NDArray[np.float64]:
     """``x`` as a 1-D float64 array of finite values (``n`` of them when given)."""
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{name}={describe(x)}: expected a 1-D array of numbers") from exc
+    a = as_float_array(x, name, expected="expected a 1-D array of numbers")
     if a.ndim == 0:
         a = a[None]
     if a.ndim != 1:
@@ -314,6 +322,14 @@ def as_positive(x: ArrayLike, name: str, n: int) -> NDArray[np.float64]:
             f"{name} must be > 0"
         )
     return a
+
+
+def as_whole(value: float, why: str) -> int:
+    """``value`` as the integer it equals to within 1e-9; else ``InputError(why)`` (``why``
+    names the parameters whose product or ratio ``value`` is, their values and the fix)."""
+    if abs(value - round(value)) > 1e-9:
+        raise InputError(why)
+    return round(value)
 
 
 def check_subpixel(subpixel: object) -> float:

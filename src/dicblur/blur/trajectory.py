@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..checks import check_choice, check_finite_number, describe
+from ..checks import as_float_array, check_choice, check_finite_number, describe
 from ..errors import InputError
 
 __all__ = [
@@ -100,12 +100,7 @@ Trajectory = str | SineMotion | AcceleratedMotion | PathFunction | ArrayLike
 
 def check_motion(motion: Any) -> NDArray[np.float64]:
     """A motion vector ``(dy, dx)`` px as a finite float64 array of shape (2,)."""
-    try:
-        arr = np.asarray(motion, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(
-            f"motion={describe(motion)}: expected (dy, dx) in px, e.g. (0.0, 3.5)"
-        ) from exc
+    arr = as_float_array(motion, "motion", expected="expected (dy, dx) in px, e.g. (0.0, 3.5)")
     if arr.shape != (2,):
         raise InputError(f"motion={describe(motion)}: expected (dy, dx) in px, e.g. (0.0, 3.5)")
     if not np.isfinite(arr).all():
@@ -131,13 +126,11 @@ def check_substeps(substeps: Any) -> int | None:
 
 
 def _check_path_array(path: Any) -> NDArray[np.float64]:
-    try:
-        arr = np.asarray(path, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(
-            f"trajectory={describe(path)}: a sampled path must be an array of shape "
-            "(K + 1, 2) with rows (dy, dx) px"
-        ) from exc
+    arr = as_float_array(
+        path,
+        "trajectory",
+        expected="a sampled path must be an array of shape (K + 1, 2) with rows (dy, dx) px",
+    )
     if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 1:
         raise InputError(
             f"trajectory={describe(arr)}: a sampled path must have shape (K + 1, 2) "

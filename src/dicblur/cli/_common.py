@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
+import typer
 from rich.console import Console
 from rich.table import Table
 
@@ -34,6 +35,14 @@ MAX_SIGMA_HELP = (
     "the noise) exceeds this, px (e.g. 0.05px; none: no test). correlate: default 0.1/3 px "
     "with --noise; track: default none."
 )
+
+
+# The matcher options that ``correlate`` and ``track`` share: one definition (option name,
+# help text) for both commands; each command gives its own default.
+SubsetOption = Annotated[int, typer.Option("--subset", help="Odd subset size, px.")]
+StepOption = Annotated[int, typer.Option("--step", help="POI grid step, px.")]
+ShapeOption = Annotated[str, typer.Option("--shape", help="affine or translation.")]
+MaxSigmaOption = Annotated[str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)]
 
 
 def parse_max_sigma(text: str | None, name: str = "--max-predicted-sigma") -> float | None:
@@ -130,3 +139,25 @@ def notice_compile(shape: str = "affine") -> None:
 
     if not kernels_cached("translation" if shape == "translation" else "affine"):
         print(COMPILE_NOTICE, file=sys.stderr, flush=True)
+
+
+#: ``--vsg`` of ``correlate`` and ``track`` (one help text for both).
+VSG_HELP = (
+    "With --strain: the plane fit's window, in grid points (odd, e.g. 5) or as the virtual "
+    "strain gauge in px (e.g. 61px = (N - 1) x step + subset)."
+)
+
+
+def strain_option(
+    strain: bool, vsg: str, *, step: int, subset: int, points: Any = None
+) -> int | None:
+    """``--strain`` / ``--vsg``: the window N, or None without ``--strain``."""
+    if not strain:
+        if vsg.strip() != "5":
+            raise InputError(f"--vsg={vsg!r}: only used with --strain")
+        return None
+    from ..strain import window_from_vsg
+
+    if points is not None:
+        raise InputError("--strain: needs the POI grid; leave out --points")
+    return window_from_vsg(vsg, step=step, subset=subset, name="--vsg")

@@ -3,12 +3,23 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from ..errors import InputError
-from ._common import MAX_SIGMA_HELP, console, notice_compile, parse_max_sigma, print_mapping
+from ._common import (
+    VSG_HELP,
+    MaxSigmaOption,
+    ShapeOption,
+    StepOption,
+    SubsetOption,
+    console,
+    notice_compile,
+    parse_max_sigma,
+    print_mapping,
+    strain_option,
+)
 
 _UNITS = {
     "mean_u": "px",
@@ -23,15 +34,16 @@ _UNITS = {
     "points_per_s": "POI/s",
     "blur_length_mean": "px",
     "blur_length_std": "px",
+    "strain_vsg": "px",
 }
 
 
 def correlate_command(
     reference: Annotated[Path, typer.Argument(help="Reference image (TIFF, PNG, BMP).")],
     current: Annotated[Path, typer.Argument(help="Current (deformed) image, same size.")],
-    subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
-    step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
-    shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
+    subset: SubsetOption = 21,
+    step: StepOption = 10,
+    shape: ShapeOption = "affine",
     interpolation: Annotated[
         str, typer.Option("--interpolation", help="bspline3 or bspline5.")
     ] = "bspline3",
@@ -53,9 +65,7 @@ def correlate_command(
             "(eps 0.1 px, threshold 2) and a probe of the neighbours' displacement.",
         ),
     ] = False,
-    max_predicted_sigma: Annotated[
-        str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
-    ] = None,
+    max_predicted_sigma: MaxSigmaOption = None,
     blur_compensation: Annotated[
         str,
         typer.Option(
@@ -75,6 +85,14 @@ def correlate_command(
             "--angle", help="Blur direction in degrees from +x (columns) towards +y (rows)."
         ),
     ] = 0.0,
+    strain: Annotated[
+        bool,
+        typer.Option(
+            "--strain",
+            help="Also strains (Green-Lagrange) and, with --noise, their sigmas (docs/strain.md).",
+        ),
+    ] = False,
+    vsg: Annotated[str, typer.Option("--vsg", help=VSG_HELP)] = "5",
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
     import math
@@ -102,6 +120,7 @@ def correlate_command(
         )
     if mode == "none" and blur is not None:
         raise InputError(f"--blur={blur}: only used with --blur-compensation given or estimate")
+    window = strain_option(strain, vsg, step=step, subset=subset)
     extra: dict[str, float | None] = {}
     if max_predicted_sigma is not None:
         extra["max_predicted_sigma"] = parse_max_sigma(max_predicted_sigma)
@@ -156,16 +175,40 @@ def correlate_command(
             "points_per_s": len(res) / dt if dt > 0 else None,
         }
     )
+    strain_vars = None
+    if window is not None:
+        from ..strain import strain as strain_of
+
+        sf = strain_of(res, window=window)
+        strain_vars = sf.variables()
+        data.update(strain_summary(sf))
     print_mapping(
         f"correlate: {reference.name} -> {current.name} ({shape}, subset {subset})", data, _UNITS
     )
     if out is not None:
         if out.suffix.lower() == ".csv":
-            res.to_csv(out)
+            res.to_csv(out, extra=strain_vars)
         else:
             with atomic_path(out) as tmp:
-                res.to_xarray().to_netcdf(tmp, engine="scipy")
+                ds = res.to_xarray(extra=strain_vars)
+                if window is not None:
+                    ds.attrs.update(strain_window=window, strain_vsg=sf.vsg, strain_kind=sf.kind)
+                ds.to_netcdf(tmp, engine="scipy")
         console.print(f"wrote {out}")
+
+
+def strain_summary(sf: Any) -> dict[str, Any]:
+    """Rows of the summary table for a strain field: VSG, medians over the OK points."""
+    import numpy as np
+
+    ok = sf.status == 0
+    out: dict[str, Any] = {"strain_vsg": sf.vsg, "strain_ok_fraction": float(ok.mean())}
+    names = ["exx", "eyy", "exy", "sigma_exx"]
+    for name in names:
+        val = getattr(sf, name)
+        if val is not None and ok.any():
+            out[f"median_{name}"] = float(np.median(val[ok]))
+    return out
 
 
 def register(app: typer.Typer) -> None:

@@ -426,8 +426,21 @@ def plan_command(
         help="A second model of the same calibration with another matcher mode (e.g. "
         "calibrate --compensation given): plan both and state the gain of compensation.",
     ),
+    vsg: str | None = typer.Option(
+        None,
+        "--vsg",
+        help="With a strain --target (e.g. 100microstrain): the strain window, in grid "
+        "points (5) or px (41px = (N - 1) x step + subset); default 5.",
+    ),
+    step: int = typer.Option(10, "--step", help="POI grid step of the strain plan, px."),
+    subset: int | None = typer.Option(
+        None, "--subset", help="Subset of the strain plan, px (when the model records none)."
+    ),
 ) -> None:
     """Plan the exposure: longest under --target, or the optimum with a camera.
+
+    A strain target (--target 100microstrain, with --vsg and --step) plans the longest
+    exposure whose predicted sigma_exx meets it, and --plot shows the VSG trade-off.
 
     With --html (alone, or with the other options as starting values), writes a planner
     page that computes the same answers in the browser as the controls change. With
@@ -447,6 +460,17 @@ def plan_command(
         check_output(plot, "--plot")
     if html_out is not None:
         check_output(html_out, "--html")
+    from .strain_plan import is_strain_target, run_strain_plan
+
+    if vsg is not None or is_strain_target(target):
+        cam = {"--full-well": full_well, "--read-noise": read_noise, "--flux": flux}
+        run_strain_plan(
+            model_path, velocity=velocity, scale=scale, target=target, vsg=vsg, step=step,
+            subset=subset, noise=noise, which=which, plot=plot, as_json=as_json,
+            unsupported={**cam, "--html": html_out, "--compare": compare,
+                         "--reference": reference, "--noise-level": noise_level},
+        )  # fmt: skip
+        return
     if (velocity is None or scale is None) and html_out is None:
         raise InputError(
             "--velocity, --scale: give both (e.g. --velocity 120mm/s --scale "

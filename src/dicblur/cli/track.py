@@ -8,7 +8,18 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import InputError
-from ._common import MAX_SIGMA_HELP, console, parse_max_sigma, parse_tolerance, print_mapping
+from ._common import (
+    VSG_HELP,
+    MaxSigmaOption,
+    ShapeOption,
+    StepOption,
+    SubsetOption,
+    console,
+    parse_max_sigma,
+    parse_tolerance,
+    print_mapping,
+    strain_option,
+)
 
 
 def _ints(text: str, name: str, count: int | None = None) -> list[int]:
@@ -44,9 +55,9 @@ def track_command(
     noise: Annotated[
         float | None, typer.Option("--noise", help="Noise std (grey levels) instead of --static.")
     ] = None,
-    subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
-    step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
-    shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
+    subset: SubsetOption = 21,
+    step: StepOption = 10,
+    shape: ShapeOption = "affine",
     points: Annotated[
         str | None,
         typer.Option("--points", help="Explicit POIs 'r1,c1;r2,c2' (px) instead of a grid."),
@@ -107,9 +118,7 @@ def track_command(
             "--update-reference: threads of the correlation kernels.",
         ),
     ] = None,
-    max_predicted_sigma: Annotated[
-        str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)
-    ] = None,
+    max_predicted_sigma: MaxSigmaOption = None,
     tolerance: Annotated[
         str,
         typer.Option(
@@ -126,6 +135,11 @@ def track_command(
             "from the track) and predict sigma for it.",
         ),
     ] = False,
+    strain: Annotated[
+        bool,
+        typer.Option("--strain", help="Also write strains and their sigmas (docs/strain.md)."),
+    ] = False,
+    vsg: Annotated[str, typer.Option("--vsg", help=VSG_HELP)] = "5",
 ) -> None:
     """Track RECORDING and predict the random error (noise + motion blur) of every point in
     every frame; writes OUT/track.nc (or .zarr), OUT/report.html and, with --csv,
@@ -161,6 +175,7 @@ def track_command(
     roi_v = None if roi is None else _ints(roi, "--roi", 4)
     max_sigma = parse_max_sigma(max_predicted_sigma)
     tol = parse_tolerance(tolerance)
+    strain_window = strain_option(strain, vsg, step=step, subset=subset, points=pts)
     if chunk_frames is not None and chunk_frames < 0:
         raise InputError(f"--chunk-frames={chunk_frames}: must be >= 0 (0: no chunks), e.g. 100")
     if threads is not None and threads < 1:
@@ -243,6 +258,7 @@ def track_command(
                 compensate_blur=compensate_blur,
                 max_predicted_sigma=max_sigma,
                 tolerance=tol,
+                strain=strain_window,
             )
         except TrackInterrupted as exc:
             if exc.dataset is not None:

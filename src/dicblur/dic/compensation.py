@@ -36,7 +36,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy import fft as sfft
 
-from ..checks import as_image, check_positive, describe
+from ..checks import as_float_array, as_image, check_positive, describe
 from ..errors import InputError
 from .icgn import N_PARAMS, raw_jacobian
 
@@ -65,13 +65,9 @@ def check_blur_vector(
     more (the blurred subset would average content from outside the subset's
     neighbourhood the matcher can trust: use a larger subset).
     """
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(
-            f"{name}={describe(value)}: expected (dy, dx) in px, e.g. "
-            "(0.0, 3.5), or an (n_points, 2) array"
-        ) from exc
+    arr = as_float_array(
+        value, name, expected="expected (dy, dx) in px, e.g. (0.0, 3.5), or an (n_points, 2) array"
+    )
     if arr.shape != (2,) and arr.shape != (n_points, 2):
         raise InputError(
             f"{name}={describe(arr)}: expected (dy, dx) in px (shape (2,)) or "

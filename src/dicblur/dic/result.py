@@ -146,12 +146,13 @@ class DICResult:
             self.params.shape[1], tuple(f"p{i}" for i in range(self.params.shape[1]))
         )
 
-    def to_xarray(self) -> Any:
+    def to_xarray(self, *, extra: Mapping[str, NDArray[Any]] | None = None) -> Any:
         """The result as an :class:`xarray.Dataset` over dimension ``point``.
 
         Variables ``u``, ``v``, ``params`` (point, param), ``zncc``, ``iterations``,
-        ``status`` (+ ``predicted_sigma_u/v``); coordinates ``row``, ``col``; attributes
-        hold ``info`` and the status legend. Write with ``.to_netcdf(path)``.
+        ``status`` (+ ``predicted_sigma_u/v``, and the (n,) arrays of ``extra`` by name,
+        e.g. strains); coordinates ``row``, ``col``; attributes hold ``info`` and the
+        status legend. Write with ``.to_netcdf(path)``.
         """
         import xarray as xr
 
@@ -175,6 +176,8 @@ class DICResult:
             data["blur_sigma"] = ("point", self.blur_sigma, {"units": "px"})
         if self.blur_identified is not None:
             data["blur_identified"] = ("point", self.blur_identified.astype(np.uint8))
+        for name, values in (extra or {}).items():
+            data[name] = ("point", np.asarray(values))
         attrs = {
             k: (v if isinstance(v, int | float | str) else str(v))
             for k, v in self.info.items()
@@ -190,9 +193,10 @@ class DICResult:
             attrs=attrs,
         )
 
-    def to_csv(self, path: str | Path) -> None:
+    def to_csv(self, path: str | Path, *, extra: Mapping[str, NDArray[Any]] | None = None) -> None:
         """Write one row per POI (header: row, col, u, v, zncc, iterations, status,
-        status_name, parameters, predicted sigmas) to ``path``."""
+        status_name, parameters, predicted sigmas, then the (n,) arrays of ``extra`` by
+        name, e.g. strains) to ``path``."""
         path = Path(path)
         names = self._param_names()
         header = ["row", "col", "u", "v", "zncc", "iterations", "status", "status_name"]
@@ -203,6 +207,8 @@ class DICResult:
         blur = self.blur_length is not None and self.blur_sigma is not None
         if blur:
             header += ["blur_length", "blur_sigma", "blur_identified"]
+        more = {k: np.asarray(a) for k, a in (extra or {}).items()}
+        header += list(more)
         try:
             with atomic_open(path, "w", newline="") as fh:
                 w = csv.writer(fh)
@@ -234,6 +240,10 @@ class DICResult:
                             repr(float(self.blur_sigma[i])),
                             int(ident),
                         ]
+                    row += [
+                        int(a[i]) if a.dtype.kind in "iub" else repr(float(a[i]))
+                        for a in more.values()
+                    ]
                     w.writerow(row)
         except OSError as exc:
             raise StoreError(f"path={str(path)!r}: cannot write the CSV ({exc})") from exc

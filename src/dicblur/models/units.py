@@ -1,9 +1,10 @@
 """A tiny unit parser for the planning inputs (no external unit library).
 
 Base units: length mm, time s, velocity mm/s, image scale mm/px, blur px, displacement px
-(px only: no scale). A quantity is a
+(px only: no scale), strain (dimensionless; ``microstrain``, ``ustrain``, ``µstrain`` are
+1e-6, ``%`` 1e-2). A quantity is a
 float in the base unit or a string ``"<number><unit>"`` such as ``"120mm/s"``, ``"0.12 m/s"``,
-``"1ms"``, ``"0.05mm/px"``, ``"20px/mm"``, ``"0.01px"``, ``"800px/s"``.
+``"1ms"``, ``"0.05mm/px"``, ``"20px/mm"``, ``"0.01px"``, ``"800px/s"``, ``"100microstrain"``.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ from ..errors import InputError
 
 __all__ = ["Kind", "parse_quantity"]
 
-Kind = Literal["length", "time", "velocity", "scale", "blur", "displacement"]
+Kind = Literal["length", "time", "velocity", "scale", "blur", "displacement", "strain"]
 
 _LENGTH = {"m": 1e3, "cm": 10.0, "mm": 1.0, "um": 1e-3, "µm": 1e-3, "μm": 1e-3, "nm": 1e-6}
+_STRAIN = {"microstrain": 1e-6, "ustrain": 1e-6, "µstrain": 1e-6, "μstrain": 1e-6, "%": 1e-2}
 _TIME = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "ns": 1e-9, "min": 60.0}
 _NUM = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*$")
 _EXAMPLES = {
@@ -29,6 +31,7 @@ _EXAMPLES = {
     "scale": "'0.05mm/px' or '20px/mm'",
     "blur": "'0.01px' or '2um' (with a scale)",
     "displacement": "'0.033px'",
+    "strain": "'100microstrain', '100ustrain' or '1e-4'",
 }
 _BASE = {
     "length": "mm",
@@ -37,6 +40,7 @@ _BASE = {
     "scale": "mm/px",
     "blur": "px",
     "displacement": "px",
+    "strain": "strain (dimensionless)",
 }
 
 
@@ -56,7 +60,7 @@ def parse_quantity(
     ----------
     value : float or str
         A number (already in the base unit) or ``"<number><unit>"``.
-    kind : {"length", "time", "velocity", "scale", "blur", "displacement"}
+    kind : {"length", "time", "velocity", "scale", "blur", "displacement", "strain"}
     name : str
         Parameter name for error messages.
     scale : float, optional
@@ -66,7 +70,8 @@ def parse_quantity(
     Returns
     -------
     float
-        Finite value in the base unit (signs are kept; callers check the range).
+        Finite value in the base unit (signs are kept; callers check the range). A strain
+        is dimensionless (``"100microstrain"`` -> 1e-4).
     """
     if kind not in _BASE:
         raise InputError(f"kind={kind!r}: choose one of {sorted(_BASE)}")
@@ -91,6 +96,8 @@ def parse_quantity(
     num, _, den = unit.partition("/")
     if kind == "displacement" and unit == "px":
         return x
+    if kind == "strain" and unit.lower() in _STRAIN:
+        return x * _STRAIN[unit.lower()]
     if kind in ("length", "blur") and not den:
         if num == "px":
             if kind == "blur":

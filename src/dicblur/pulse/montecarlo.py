@@ -49,7 +49,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from ..checks import check_choice, check_finite_number, check_positive, describe
+from ..checks import as_whole, check_choice, check_finite_number, check_positive, describe
 from ..errors import InputError
 from ..patterns import SeedLike
 from .correlation import (
@@ -580,13 +580,11 @@ def simulate(
     check_choice(shifted, "shifted", ("blurred", "reference"))
     w_ref = check_positive(w_ref, "w_ref")
     outlier_threshold = check_positive(outlier_threshold, "outlier_threshold")
-    length_f = train.du * n_periods
-    if abs(length_f - round(length_f)) > 1e-9:
-        raise InputError(
-            f"du={train.du!r}, n_periods={n_periods}: the signal must hold a whole number of "
-            "pixels (du * n_periods integer) to be periodic"
-        )
-    length = round(length_f)
+    length = as_whole(
+        train.du * n_periods,
+        f"du={train.du!r}, n_periods={n_periods}: the signal must hold a whole number of "
+        "pixels (du * n_periods integer) to be periodic",
+    )
     if isinstance(seed, np.random.Generator):
         raise InputError(
             "seed=Generator: pass an int or SeedSequence (one child stream per width keeps "

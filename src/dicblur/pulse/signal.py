@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..checks import check_finite_number, check_positive, describe
+from ..checks import as_whole, check_finite_number, check_positive, describe
 from ..errors import InputError
 
 __all__ = [
@@ -324,13 +324,11 @@ def numeric_metrics(
     if not isinstance(supersample, int | np.integer) or supersample < 1:
         raise InputError(f"supersample={describe(supersample)}: expected an int >= 1")
     h = 1.0 / supersample
-    n = train.du * supersample
-    if abs(n - round(n)) > 1e-9:
-        raise InputError(
-            f"supersample={supersample}: du * supersample = {n:g} must be an integer; "
-            "choose supersample so that the period is a whole number of cells"
-        )
-    n = round(n)
+    n = as_whole(
+        train.du * supersample,
+        f"supersample={supersample}: du * supersample = {train.du * supersample:g} must be an "
+        "integer; choose supersample so that the period is a whole number of cells",
+    )
     out = np.empty((5, wa.size))
     for i, wi in enumerate(wa):
         # Nodes at x_j = x0 + w/2 + j h: the window [x_j - w/2, x_j + w/2] starts at a cell

@@ -40,6 +40,14 @@ def _layout(fig: Any, *, rows: int = 1, twin: bool = False) -> None:
     )
 
 
+def _panel(ax: Any, title: str, xlabel: str, ylabel: str, *, legend: float) -> None:
+    """Title, axis labels and legend (font size ``legend``) of one pattern's panel."""
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=legend)
+
+
 def _grid(n: int) -> tuple[Any, Any]:
     cols = 2 if n > 1 else 1
     rows = (n + cols - 1) // cols
@@ -68,10 +76,7 @@ def fig_sssig_pan(data: Mapping[str, Mapping[str, np.ndarray]], subset: int) -> 
         ax.semilogy(
             d["blur"], subset**2 * d["mig"] ** 2, "-", color=_COLORS[0], label=r"Pan: $N^2\,MIG^2$"
         )
-        ax.set_title(label, fontsize=10)
-        ax.set_xlabel("blur W (px)")
-        ax.set_ylabel(r"SSSIG$_x$ (GL$^2$/px$^2$)")
-        ax.legend(fontsize=8)
+        _panel(ax, label, "blur W (px)", r"SSSIG$_x$ (GL$^2$/px$^2$)", legend=8)
     _layout(fig, rows=len(axes) // 2)
     return fig
 
@@ -98,10 +103,7 @@ def fig_ue_blur(data: Mapping[str, Mapping[str, np.ndarray]]) -> Any:
         ax.plot(
             d["blur"], d["match_score"], ":", color=_COLORS[3], label="static match score, eq. 2"
         )
-        ax.set_title(label, fontsize=10)
-        ax.set_xlabel("blur W (px)")
-        ax.set_ylabel(r"$u_e$ (px)")
-        ax.legend(fontsize=7)
+        _panel(ax, label, "blur W (px)", r"$u_e$ (px)", legend=7)
     _layout(fig, rows=len(axes) // 2)
     return fig
 
@@ -121,10 +123,7 @@ def fig_loglog(data: Mapping[str, Mapping[str, Any]]) -> Any:
             lw=2,
             label=rf"eq. 17: $\alpha$={d['alpha']:.2f}, fit W $\leq$ {d['w_max']:.1f}",
         )
-        ax.set_title(label, fontsize=10)
-        ax.set_xlabel("SSSIG (GL$^2$/px$^2$)")
-        ax.set_ylabel(r"$u_e$ (px)")
-        ax.legend(fontsize=8)
+        _panel(ax, label, "SSSIG (GL$^2$/px$^2$)", r"$u_e$ (px)", legend=8)
         _readable_log_ticks(ax)
     _layout(fig, rows=len(axes) // 2)
     return fig
@@ -178,10 +177,7 @@ def fig_sssig_decay(data: Mapping[str, Mapping[str, Any]]) -> Any:
             color=_COLORS[2],
             label=rf"eq. 18: $\beta$={d['beta']:.3g}, $R^2$={d['r2']:.3f}",
         )
-        ax.set_title(label, fontsize=10)
-        ax.set_xlabel("blur W (px)")
-        ax.set_ylabel("SSSIG (GL$^2$/px$^2$)")
-        ax.legend(fontsize=8)
+        _panel(ax, label, "blur W (px)", "SSSIG (GL$^2$/px$^2$)", legend=8)
     _layout(fig, rows=len(axes) // 2)
     return fig
 

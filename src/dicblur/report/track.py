@@ -266,4 +266,8 @@ def write_track_report(
     )
     rep.section("Statuses")
     rep.figure(fig_status(ds), "statuses", "points per DIC status and outliers per frame")
+    if "sigma_exx" in ds:  # a track with strains (docs/strain.md)
+        from .strain import add_strain_section
+
+        add_strain_section(rep, ds)
     return rep.write()

@@ -120,6 +120,7 @@ def track(
     compensate_blur: bool = False,
     max_predicted_sigma: float | None = None,
     tolerance: float | Literal["auto"] = "auto",
+    strain: int | None = None,
 ) -> Any:
     """Track a recording and predict the random error of every point in every frame.
 
@@ -184,6 +185,9 @@ def track(
         [1e-4, 1e-3] px (:func:`auto_tolerance`): small against every sigma the track
         predicts (it adds about 1 %), and up to a quarter fewer iterations than the
         engine's default 1e-4 px. Stored in the attribute ``tolerance``.
+    strain : int, optional
+        Window N (odd, grid points) of the strains written beside ``u``, ``v``
+        (:func:`dicblur.strain.track.track_strain`, docs/strain.md); None: no strains.
 
     Returns
     -------
@@ -208,6 +212,10 @@ def track(
         A frame could not be read or tracking was interrupted; ``.dataset`` holds what was
         tracked.
     """
+    if strain is not None:
+        from ..strain.track import check_strain_window
+
+        check_strain_window(strain, points)
     rec = recording if isinstance(recording, Recording) else open_recording(recording)
     n_total = len(rec)
     if n_total < 2:
@@ -474,6 +482,7 @@ def track(
             build_compensated_table if comp_info["matcher"] != MATCHER_PLAIN else build_blur_table
         ),
         compensated=comp_info["matcher"] != MATCHER_PLAIN,
+        strain=strain,
     )
     if error is not None:
         what = "interrupted" if isinstance(error, KeyboardInterrupt) else f"stopped: {error}"

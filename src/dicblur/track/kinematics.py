@@ -42,6 +42,31 @@ def _window_average_row(tau: NDArray[np.float64], a: float, degree: int) -> NDAr
     return np.asarray((hi - lo) / ((p + 1) * 2 * a))
 
 
+def _stencil_weights(
+    n_frames: int, width: int, rows: NDArray[np.float64], a: float
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Per frame: stencil start and ``rows @ A^-1``, shape (n_frames, *rows.shape).
+
+    ``A`` holds the window averages of ``t**p`` (p = 0..width-1) at the stencil's frames
+    (exact interpolation of the window averages: c = A^-1 u); ``rows`` maps the
+    polynomial coefficients to the wanted quantity (the rise, or the positions at nodes).
+    """
+    degree = width - 1
+    starts = np.empty(n_frames, np.intp)
+    wts = np.empty((n_frames, *rows.shape))
+    # the weights depend on the frame only through its place in the stencil (start - k):
+    # one inverse per place (the same numbers as one per frame), not one per frame
+    done: dict[int, NDArray[np.float64]] = {}
+    for k in range(n_frames):
+        start = min(max(k - width // 2, 0), n_frames - width)
+        starts[k] = start
+        if start - k not in done:
+            tau = np.arange(start, start + width, dtype=np.float64) - k
+            done[start - k] = rows @ np.linalg.inv(_window_average_row(tau, a, degree))
+        wts[k] = done[start - k]
+    return starts, wts
+
+
 def _rise_weights(
     n_frames: int, duty: float, half_window: int
 ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
@@ -55,20 +80,7 @@ def _rise_weights(
     a = 0.5 * duty
     # rise over the window of the polynomial sum c_p t**p: sum c_p (a**p - (-a)**p)
     rise = np.array([a**p - (-a) ** p for p in range(degree + 1)])
-    starts = np.empty(n_frames, np.intp)
-    wts = np.empty((n_frames, width))
-    # the weights depend on the frame only through its place in the stencil (start - k):
-    # one inverse per place (the same numbers as one per frame), not one per frame
-    done: dict[int, NDArray[np.float64]] = {}
-    for k in range(n_frames):
-        start = min(max(k - width // 2, 0), n_frames - width)
-        starts[k] = start
-        if start - k not in done:
-            tau = np.arange(start, start + width, dtype=np.float64) - k
-            # exact interpolation of the window averages: c = A^-1 u
-            done[start - k] = rise @ np.linalg.inv(_window_average_row(tau, a, degree))
-        wts[k] = done[start - k]
-    return starts, wts
+    return _stencil_weights(n_frames, width, rise, a)
 
 
 def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray[np.float64]:
@@ -207,17 +219,7 @@ def _node_weights(
     a = 0.5 * duty
     tau = a * _NODES
     nodes = tau[:, None] ** np.arange(degree + 1)[None, :]
-    starts = np.empty(n_frames, np.intp)
-    wts = np.empty((n_frames, _NODES.size, width))
-    done: dict[int, NDArray[np.float64]] = {}  # one inverse per place in the stencil
-    for k in range(n_frames):
-        start = min(max(k - width // 2, 0), n_frames - width)
-        starts[k] = start
-        if start - k not in done:
-            t = np.arange(start, start + width, dtype=np.float64) - k
-            done[start - k] = nodes @ np.linalg.inv(_window_average_row(t, a, degree))
-        wts[k] = done[start - k]
-    return starts, wts
+    return _stencil_weights(n_frames, width, nodes, a)
 
 
 def exposure_skew(

@@ -125,6 +125,7 @@ def assemble(
     blur_table: Callable[..., Any] = build_blur_table,
     threads: int = 1,
     compensated: bool = False,
+    strain: int | None = None,
 ) -> Any:
     from .._version import __version__
 
@@ -222,6 +223,7 @@ def assemble(
     blur_dom = np.full(n_f, np.nan)
     levels: NDArray[np.float64] | None = None  # of the subsets inside, once known
     t0 = time.perf_counter()
+    table: Any = None
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
         # all points inside (the usual grid): plain slices, no fancy-indexed copies
@@ -450,6 +452,16 @@ def assemble(
         attrs["notes"] = " | ".join(notes)
     if importing is not None:
         importing.join()
+    strain_vars: dict[str, Any] = {}
+    if strain is not None and gshape is not None:  # docs/strain.md: strains beside u, v
+        from ..strain.track import track_strain
+
+        t_s = time.perf_counter()
+        strain_vars, strain_attrs = track_strain(
+            u, v, valid, sig["sigma_u_noise"], sig["sigma_v_noise"], table, w, ang,
+            np.flatnonzero(inside), gshape, step=corr.step, subset=corr.subset, window=strain,
+        )  # fmt: skip
+        attrs.update(strain_attrs, strain_time_s=time.perf_counter() - t_s)
     import xarray as xr
 
     fr = ("frame", "point")
@@ -508,6 +520,7 @@ def assemble(
         "blur_dominated_share": ("frame", blur_dom),
         "reference_frame": ("frame", ref_of.astype(np.int32)),
         "fallback": ("frame", fb.astype(np.uint8), {"long_name": "frame needed the FFT-CC start"}),
+        **{k: (fr, a) for k, a in strain_vars.items()},
     }
     return xr.Dataset(
         data,

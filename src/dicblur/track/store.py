@@ -13,7 +13,23 @@ import numpy as np
 
 from ..errors import StoreError
 
-__all__ = ["CSV_COLUMNS", "save_track", "write_track_csv"]
+__all__ = ["CSV_COLUMNS", "STRAIN_CSV_COLUMNS", "save_track", "write_track_csv"]
+
+#: The strain columns of a track with strains (docs/strain.md), after :data:`CSV_COLUMNS`.
+STRAIN_CSV_COLUMNS = (
+    "exx",
+    "eyy",
+    "exy",
+    "e1",
+    "e2",
+    "principal_angle",
+    "sigma_exx",
+    "sigma_eyy",
+    "sigma_exy",
+    "sigma_exx_noise",
+    "sigma_exx_blur",
+    "strain_status",
+)
 
 CSV_COLUMNS = (
     "frame",
@@ -82,20 +98,19 @@ def write_track_csv(ds: Any, path: str | os.PathLike[str]) -> Path:
         "row": np.tile(ds["row"].values, n_f),
         "col": np.tile(ds["col"].values, n_f),
     }
-    for c in CSV_COLUMNS[5:]:
+    # with strains (docs/strain.md) their columns follow
+    columns = [*CSV_COLUMNS, *(k for k in STRAIN_CSV_COLUMNS if k in ds)]
+    for c in columns[5:]:
         cols[c] = ds[c].values.ravel()
     tmp = p.with_name(f".{p.name}.tmp")
     try:
         with tmp.open("w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(CSV_COLUMNS)
-            ints = {"frame", "point", "row", "col", "status", "outlier", "valid"}
+            w.writerow(columns)
+            ints = {"frame", "point", "row", "col", "status", "outlier", "valid", "strain_status"}
             for i in range(n_f * n_p):
                 w.writerow(
-                    [
-                        int(cols[c][i]) if c in ints else f"{float(cols[c][i]):.6g}"
-                        for c in CSV_COLUMNS
-                    ]
+                    [int(cols[c][i]) if c in ints else f"{float(cols[c][i]):.6g}" for c in columns]
                 )
         os.replace(tmp, p)
     except OSError as exc:

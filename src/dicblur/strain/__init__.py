@@ -1,0 +1,49 @@
+"""Strain fields and their uncertainty under motion blur (issue 28; docs/strain.md).
+
+``dicblur.strain(result, window=5, kind="green-lagrange")`` turns a displacement field on
+a POI grid into strains (a local least-squares plane over N x N points, the virtual strain
+gauge, or the affine subsets' own gradients) with their covariance: the noise errors of
+neighbouring points correlated through the pixels their subsets share, the blur-mismatch
+error carried as the deterministic error it is.
+"""
+
+from __future__ import annotations
+
+import sys
+import types
+from typing import Any
+
+from .covariance import gradient_factor, overlap_correlation
+from .field import (
+    StrainField,
+    StrainStatus,
+    grid_of,
+    strain,
+    strain_on_grid,
+    vsg,
+    window_from_vsg,
+)
+from .fit import plane_weights
+
+__all__ = [
+    "StrainField",
+    "StrainStatus",
+    "gradient_factor",
+    "grid_of",
+    "overlap_correlation",
+    "plane_weights",
+    "strain",
+    "strain_on_grid",
+    "vsg",
+    "window_from_vsg",
+]
+
+
+class _CallableModule(types.ModuleType):
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return strain(*args, **kwargs)
+
+
+# ``dicblur.strain(...)`` works whether the name resolves to the function or to this
+# package (the pattern of ``dicblur.track``)
+sys.modules[__name__].__class__ = _CallableModule

@@ -13,6 +13,8 @@ files into BENCHMARKS.md. Use::
     run.write({"cases": rows})      # benchmarks/results/dic.json with a "provenance" block
 
 Scripts run as ``python benchmarks/bench_x.py``, so this module is imported by its bare name.
+A benchmark that measures what a test checks imports the test's computation from
+``tests/helpers`` (one function for both) after :func:`use_tests_dir`.
 """
 
 from __future__ import annotations
@@ -28,6 +30,14 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
+TESTS = ROOT / "tests"
+
+
+def use_tests_dir() -> None:
+    """Put the repository's ``tests/`` on ``sys.path`` (as pytest does), so that a script
+    imports the synthetic data and computations the tests share (``helpers.models``, ...)."""
+    if str(TESTS) not in sys.path:
+        sys.path.insert(0, str(TESTS))
 
 
 def load_average() -> list[float] | None:
@@ -36,6 +46,12 @@ def load_average() -> list[float] | None:
         return [round(v, 2) for v in os.getloadavg()]
     except OSError:  # pragma: no cover - Windows
         return None
+
+
+def load_1min() -> float:
+    """The 1 min load average, NaN where the OS has none."""
+    avg = load_average()
+    return float("nan") if avg is None else avg[0]
 
 
 def git_commit() -> dict[str, Any]:

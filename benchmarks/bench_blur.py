@@ -20,10 +20,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _harness import provenance
+from _harness import provenance, use_tests_dir
 
 import dicblur
 from dicblur import motion_blur, render_blurred, speckle_pattern
+
+use_tests_dir()
+from helpers.blur import smooth_fine  # noqa: E402
 
 MOTION = (1.7, 4.3)  # diagonal, sub-pixel, W = 4.62 px
 SUBSTEPS = 100
@@ -79,22 +82,12 @@ def speed(sizes: list[int], repeats: int) -> list[dict]:
     return rows
 
 
-def _smooth_fine(n: int, ss: int) -> np.ndarray:
-    c = (np.arange(n * ss) + 0.5) / ss / n
-    y, x = np.meshgrid(c, c, indexing="ij")
-    return (
-        128
-        + 60 * np.sin(2 * np.pi * (3 * x + 2 * y) + 0.3)
-        + 40 * np.cos(2 * np.pi * (5 * x - 4 * y))
-    )
-
-
 def rendering(n: int = 64) -> list[dict]:
     rows = []
     for ss in (2, 4, 8, 16):
         for kind in ("band-limited", "hard-edged speckle"):
             if kind == "band-limited":
-                fine = _smooth_fine(n, ss)
+                fine = smooth_fine(n, ss)
             else:
                 fine = speckle_pattern((n * ss, n * ss), speckle_size=3 * ss, seed=1)
             camera = fine.reshape(n, ss, n, ss).mean(axis=(1, 3))

@@ -25,32 +25,23 @@ Run: ``.venv/bin/python benchmarks/bench_blur_sensitivity.py [--quick]``
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
-from _harness import provenance
+from _harness import Run, use_tests_dir
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
+
+use_tests_dir()
+from helpers.blur import centred_blur  # noqa: E402
+from helpers.models import noisy_dic_scatter  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "blur_sensitivity.json"
 
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
-
-
-def _centred_blur(img: np.ndarray, wl: float, boundary: str) -> np.ndarray:
-    return dicblur.motion_blur(
-        img,
-        None,
-        substeps=None,
-        boundary=boundary,
-        trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1),
-    )
 
 
 def case(
@@ -70,7 +61,7 @@ def case(
     curve = cv.u_blur
     u_e, s, conv = [], [], []
     for wl in blurs:
-        cur = _centred_blur(img, float(wl), boundary)
+        cur = centred_blur(img, float(wl), boundary=boundary)
         res = dicblur.correlate(img, cur, subset=31, step=12, shape=shape)
         u_e.append(float(np.std(res.u[res.converged])))
         conv.append(float(res.converged.mean()))
@@ -110,17 +101,8 @@ def noisy_case(size: float, shape: str, sigma: float = 2.0, reps: int = 6) -> di
     rng = np.random.default_rng(1)
     measured = []
     for wl in blurs:
-        cur = _centred_blur(img, float(wl), "periodic") if wl > 0 else img
-        u = []
-        for _ in range(reps):
-            res = dicblur.correlate(
-                img + rng.normal(0, sigma, img.shape),
-                cur + rng.normal(0, sigma, img.shape),
-                subset=21,
-                step=10,
-                shape=shape,
-            )
-            u.append(float(np.std(res.u[res.converged])))
+        cur = centred_blur(img, float(wl), boundary="periodic") if wl > 0 else img
+        u = noisy_dic_scatter(img, cur, sigma=sigma, reps=reps, rng=rng, shape=shape)
         measured.append(float(np.mean(u)))
     return {
         "speckle_size": size,
@@ -174,6 +156,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
+    bench = Run("blur_sensitivity")
     blurs = np.array([0.25, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 6.0, 8.0])
     sizes = (3.0, 8.0) if args.quick else (3.0, 4.0, 6.0, 8.0)
     seeds = (7,) if args.quick else (7, 11)
@@ -233,24 +216,12 @@ def main() -> None:
     print(f"\n{'case':60s} {'seconds':>8s}")
     for r in sp:
         print(f"{r['case']:60s} {r['seconds']:8.4f}")
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(
-        json.dumps(
-            {
-                "provenance": provenance(),
-                "machine": {
-                    "python": platform.python_version(),
-                    "cpus": os.cpu_count(),
-                    "load": os.getloadavg(),
-                },
-                "cases": rows,
-                "noisy": noisy,
-                "speed": sp,
-            },
-            indent=1,
-        )
-    )
-    print(f"wrote {OUT}")
+    result = {
+        "cases": rows,
+        "noisy": noisy,
+        "speed": sp,
+    }
+    print(f"wrote {bench.write(result, OUT)}")
 
 
 if __name__ == "__main__":

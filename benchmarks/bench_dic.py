@@ -25,27 +25,18 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _harness import provenance
+from _harness import load_1min as load
+from _harness import provenance, use_tests_dir
 
 import dicblur
 from dicblur import Correlator, correlate, estimate_noise, load_image, speckle_pattern
 
+use_tests_dir()
+from helpers.dic import fourier_shift  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "data" / "real" / "dicchallenge1_sample3"
 TRUE_U, TRUE_V = 0.3, -0.2
-
-
-def fourier_shift(image: np.ndarray, dy: float, dx: float) -> np.ndarray:
-    ky = np.fft.fftfreq(image.shape[0])[:, None]
-    kx = np.fft.fftfreq(image.shape[1])[None, :]
-    return np.fft.ifft2(np.fft.fft2(image) * np.exp(-2j * np.pi * (ky * dy + kx * dx))).real
-
-
-def load() -> float:
-    try:
-        return os.getloadavg()[0]
-    except OSError:  # pragma: no cover
-        return float("nan")
 
 
 def best_time(fn, repeats: int) -> tuple[float, float]:

@@ -40,54 +40,18 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _harness import Run
+from _harness import Run, use_tests_dir
+from _harness import load_1min as load
 
 import dicblur
 from dicblur import Correlator, speckle_pattern
 
+use_tests_dir()
+from helpers.dic import blobs, fourier_shift  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 IMAGES = ("clean", "blobs", "fade")
 TRUE_U, TRUE_V = 0.3, -0.2
-
-
-def fourier_shift(image: np.ndarray, dy: float, dx: float) -> np.ndarray:
-    ky = np.fft.fftfreq(image.shape[0])[:, None]
-    kx = np.fft.fftfreq(image.shape[1])[None, :]
-    return np.fft.ifft2(np.fft.fft2(image) * np.exp(-2j * np.pi * (ky * dy + kx * dx))).real
-
-
-def blobs(
-    shape: tuple[int, int],
-    *,
-    density: float = 0.008,
-    sigma: tuple[float, float] = (2.0, 3.0),
-    amplitude: tuple[float, float] = (50, 300),
-    background: float = 10.0,
-    clip: tuple[float, float] = (10.0, 245.0),
-    seed: int = 3,
-) -> np.ndarray:
-    """Sum of isotropic Gaussian blobs at uniform random centres, clipped (GL)."""
-    rng = np.random.default_rng(seed)
-    h, w = shape
-    n = int(density * h * w)
-    ys, xs = rng.uniform(0, h, n), rng.uniform(0, w, n)
-    ss, aa = rng.uniform(*sigma, n), rng.uniform(*amplitude, n)
-    img = np.full(shape, float(background))
-    for y, x, s, a in zip(ys, xs, ss, aa, strict=True):
-        r = int(np.ceil(4 * s))
-        y0, y1 = max(0, int(y) - r), min(h, int(y) + r + 1)
-        x0, x1 = max(0, int(x) - r), min(w, int(x) + r + 1)
-        yy = np.arange(y0, y1)[:, None] - y
-        xx = np.arange(x0, x1)[None, :] - x
-        img[y0:y1, x0:x1] += a * np.exp(-(yy**2 + xx**2) / (2 * s * s))
-    return np.clip(img, *clip)
-
-
-def load() -> float:
-    try:
-        return os.getloadavg()[0]
-    except OSError:  # pragma: no cover
-        return float("nan")
 
 
 def fade(seed: int = 11) -> np.ndarray:

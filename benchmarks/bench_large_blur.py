@@ -35,14 +35,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import subprocess
 import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
+from _harness import Run
 from scipy import optimize
 
 import dicblur
@@ -110,6 +109,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--reproduce", type=Path, default=Path("/tmp/dicblur_reproduce_quick"))
     args = ap.parse_args()
+    bench = Run("large_blur")
     folder: Path = args.reproduce
     if not (folder / "campaign" / "study.zarr").exists():
         subprocess.run(
@@ -261,30 +261,11 @@ def main() -> None:
             f"{cell(row['static_kind']['mismatch_same_fit_test'])}",
             flush=True,
         )
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-        ).stdout.strip()
-    except OSError:
-        commit = ""
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(
-        json.dumps(
-            {
-                "commit": commit,
-                "version": dicblur.__version__,
-                "machine": {
-                    "python": platform.python_version(),
-                    "cpus": os.cpu_count(),
-                    "load": os.getloadavg(),
-                },
-                "reproduce": str(folder),
-                "rows": rows,
-            },
-            indent=1,
-        )
-    )
-    print(f"wrote {OUT}")
+    result = {
+        "reproduce": str(folder),
+        "rows": rows,
+    }
+    print(f"wrote {bench.write(result, OUT)}")
 
 
 if __name__ == "__main__":

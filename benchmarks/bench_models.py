@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _harness import provenance
+from _harness import provenance, use_tests_dir
 
 import dicblur
 from dicblur.models import (
@@ -40,6 +40,9 @@ from dicblur.models import (
     plan_exposure,
     sssig_decay,
 )
+
+use_tests_dir()
+from helpers.models import bruteforce_ssd_u_e, subset_centres  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "models.json"
 
@@ -110,20 +113,14 @@ def _fit_c(blurs: np.ndarray, u_e: np.ndarray) -> tuple[float, float]:
 
 
 def part_c(quick: bool) -> list[dict]:
-    from scipy import optimize
 
-    n, sub, h = 128, 31, 15
+    n, sub = 128, 31
     sizes = (3.0, 6.0) if quick else (3.0, 4.0, 6.0, 8.0)
     blurs = np.arange(0.5, 4.01, 0.5) if not quick else np.array([1.0, 2.0, 3.0, 4.0])
     rows = []
     for size in sizes:
         img = dicblur.speckle_pattern((n, n), speckle_size=size, softness=0.5, seed=7)
-        spec = np.fft.fft2(img)
-        ky = np.fft.fftfreq(n)[:, None]
-        kx = np.fft.fftfreq(n)[None, :]
-        cent = np.array(
-            [[r, c] for r in range(h + 1, n - h - 1, 10) for c in range(h + 1, n - h - 1, 10)]
-        )
+        cent = subset_centres(n, sub, 10)
         # exact interpolation in the brute force: true gradients, SSD on the static side
         pred = blur_sensitivity(
             img,
@@ -133,20 +130,7 @@ def part_c(quick: bool) -> list[dict]:
             derivative="spectral",
             criterion="ssd",
         ).c
-        u_e = []
-        for wl in blurs:
-            blurred = spec * np.sinc(wl * kx)
-            xs = []
-            for r, c in cent:
-                sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
-                ref = img[sl]
-
-                def resid(p, sl=sl, ref=ref, blurred=blurred, kx=kx, ky=ky):
-                    shift = np.exp(2j * np.pi * (kx * p[0] + ky * p[1]))
-                    return (np.fft.ifft2(blurred * shift).real[sl] - ref).ravel()
-
-                xs.append(optimize.least_squares(resid, [0.0, 0.0], xtol=1e-10).x[0])
-            u_e.append(float(np.std(xs)))
+        u_e = bruteforce_ssd_u_e(img, blurs, cent, sub)
         c_pure, c_lead = _fit_c(blurs, np.array(u_e))
         rows.append(
             {

@@ -32,17 +32,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
-import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
+from _harness import Run, use_tests_dir
 
 import dicblur
 from dicblur.models import predict_from_pattern
-from dicblur.models.sensitivity import shifts_and_variance
+
+use_tests_dir()
+from helpers.blur import centred_blur  # noqa: E402
+from helpers.models import noise_variance_terms  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "noise_term.json"
 # /work/shared/data/real next to the checkout (main or a worktree under /work/wt)
@@ -84,13 +85,7 @@ def _patterns() -> list[tuple[str, np.ndarray, str]]:
 def _centred_blur(img: np.ndarray, wl: float, boundary: str) -> np.ndarray:
     if wl == 0:
         return img.copy()
-    return dicblur.motion_blur(
-        img,
-        None,
-        substeps=None,
-        boundary=boundary,
-        trajectory=lambda t: np.stack([0 * t, wl * (t - 0.5)], 1),
-    )
+    return centred_blur(img, wl, boundary=boundary)
 
 
 def _se(v: np.ndarray, reps: int) -> float:
@@ -156,22 +151,7 @@ def predict(img: np.ndarray, boundary: str, row: dict) -> dict:
     )
     assert pr.u_noise_reference is not None and pr.u_noise_current is not None
     assert pr.u_noise_interaction is not None
-    old = shifts_and_variance(
-        img,
-        [w],
-        pts,
-        SUBSET,
-        motion=(0.0, 1.0),
-        shape="translation",
-        derivative="bspline3",
-        boundary=boundary,
-        criterion="znssd",
-        max_shift=np.inf,
-        chunk=256,
-        variance=True,
-        complete=False,
-    )[1]
-    assert old is not None
+    old = noise_variance_terms(img, [w], pts, SUBSET, boundary=boundary)
     return {
         "pred_reference": float(pr.u_noise_reference[0] ** 2),
         "pred_current": float(pr.u_noise_current[0] ** 2),
@@ -190,6 +170,7 @@ def main() -> None:
         help="reuse the Monte Carlo of an earlier run, recompute the predictions",
     )
     args = ap.parse_args()
+    bench = Run("noise_term")
     prior = None
     if args.predict_only:
         prior = json.loads(Path(args.predict_only).read_text())
@@ -262,31 +243,12 @@ def main() -> None:
     print(
         "largest |predicted / measured - 1|: " + ", ".join(f"{k} {v:.3f}" for k, v in worst.items())
     )
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-        ).stdout.strip()
-    except OSError:
-        commit = ""
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(
-        json.dumps(
-            {
-                "commit": commit,
-                "version": dicblur.__version__,
-                "machine": {
-                    "python": platform.python_version(),
-                    "cpus": os.cpu_count(),
-                    "load": os.getloadavg(),
-                },
-                "quick": args.quick,
-                "worst": worst,
-                "rows": rows,
-            },
-            indent=1,
-        )
-    )
-    print(f"wrote {OUT}")
+    result = {
+        "quick": args.quick,
+        "worst": worst,
+        "rows": rows,
+    }
+    print(f"wrote {bench.write(result, OUT)}")
 
 
 if __name__ == "__main__":

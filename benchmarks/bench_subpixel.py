@@ -22,14 +22,11 @@ Run: ``.venv/bin/python benchmarks/bench_subpixel.py [--quick]``
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
-from _harness import provenance
+from _harness import Run
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, predict_from_pattern
@@ -123,33 +120,11 @@ def noisy(seeds: range, reps: int, sigma: float = 2.0) -> dict:
         rng = np.random.default_rng(seed)
         r0 = dicblur.correlate(img, img, **OPTS)
         pts = np.stack([r0.rows, r0.cols], axis=1)
+        kw = dict(noise_sigma=sigma, subset=31, points=pts, shape="affine", boundary="periodic")
         t0 = time.perf_counter()
-        pn += (
-            predict_from_pattern(
-                img,
-                blurs,
-                noise_sigma=sigma,
-                subset=31,
-                points=pts,
-                shape="affine",
-                boundary="periodic",
-            ).u_e
-            ** 2
-        )
+        pn += predict_from_pattern(img, blurs, **kw).u_e ** 2
         t1 = time.perf_counter()
-        pa += (
-            predict_from_pattern(
-                img,
-                blurs,
-                noise_sigma=sigma,
-                subset=31,
-                points=pts,
-                shape="affine",
-                boundary="periodic",
-                subpixel="average",
-            ).u_e
-            ** 2
-        )
+        pa += predict_from_pattern(img, blurs, subpixel="average", **kw).u_e ** 2
         t_none += t1 - t0
         t_avg += time.perf_counter() - t1
         for i, w in enumerate(blurs):
@@ -181,6 +156,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
+    bench = Run("subpixel")
     nf = noise_free(
         range(300, 302 if args.quick else 306),
         [0.0, 0.5, 1.0, 1.5, 2.0],
@@ -224,24 +200,12 @@ def main() -> None:
         f"seconds per prediction (6 W): aligned {nz['seconds_per_prediction']['aligned']:.2f}, "
         f"average {nz['seconds_per_prediction']['average']:.2f}"
     )
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(
-        json.dumps(
-            {
-                "provenance": provenance(),
-                "machine": {
-                    "python": platform.python_version(),
-                    "cpus": os.cpu_count(),
-                    "load": os.getloadavg(),
-                },
-                "quick": args.quick,
-                "noise_free": nf,
-                "noisy": nz,
-            },
-            indent=1,
-        )
-    )
-    print(f"wrote {OUT}")
+    result = {
+        "quick": args.quick,
+        "noise_free": nf,
+        "noisy": nz,
+    }
+    print(f"wrote {bench.write(result, OUT)}")
 
 
 if __name__ == "__main__":

@@ -51,10 +51,14 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from _harness import use_tests_dir
 
 import dicblur
 from dicblur.sequence import Recording, open_recording
 from dicblur.track.synthetic import VibratingTarget
+
+use_tests_dir()
+from helpers.track import track_pattern, vibrating_target  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "track.json"
 
@@ -72,18 +76,13 @@ def _commit() -> str:
         return "unknown"
 
 
-def _pattern(n: int, seed: int = 1) -> np.ndarray:
-    p = dicblur.speckle_pattern((n, n), speckle_size=4, density=0.5, softness=0.5, seed=seed)
-    return 30 + 180 * (p - p.min()) / (p.max() - p.min())
-
-
 def _with_debris(
     tgt: VibratingTarget, n_frames: int, share: float, seed: int
 ) -> tuple[Recording, set[int]]:
     rng = np.random.default_rng(seed)
     moving = np.arange(tgt.static, n_frames)
     hit = set(rng.choice(moving, max(1, round(share * moving.size)), replace=False).tolist())
-    foreign = _pattern(tgt.pattern.shape[0], seed=seed + 100)
+    foreign = track_pattern(tgt.pattern.shape[0], seed=seed + 100)
     n = tgt.pattern.shape[0]
     spots = {k: rng.integers(30, n - 54, size=(2, 2)) for k in hit}
 
@@ -108,7 +107,7 @@ def _with_debris(
 
 
 def accuracy(n: int, n_frames: int, exposures: list[float], shape: str) -> dict:
-    pat = _pattern(n)
+    pat = track_pattern(n)
     pooled: dict[str, list[np.ndarray]] = {
         k: [] for k in ("w", "du", "dv", "eu", "ev", "su", "sv", "bu", "bv")
     }
@@ -124,16 +123,7 @@ def accuracy(n: int, n_frames: int, exposures: list[float], shape: str) -> dict:
     }
     runs = []
     for i, t in enumerate(exposures):
-        tgt = VibratingTarget(
-            pat,
-            fps=2000.0,
-            exposure=t,
-            amplitude=10.0,
-            frequency=200.0,
-            angle=20.0,
-            static=10,
-            seed=10 + i,
-        )
+        tgt = vibrating_target(pat, exposure=t, amplitude=10.0, static=10, seed=10 + i)
         rec, _ = _with_debris(tgt, n_frames, 0.03, seed=i)
         t0 = time.perf_counter()
         ds = dicblur.track(rec, static="0:10", subset=21, step=10, shape=shape)  # type: ignore[arg-type]
@@ -252,15 +242,7 @@ def accuracy(n: int, n_frames: int, exposures: list[float], shape: str) -> dict:
 def _write_mraw(path: Path, n: int, n_frames: int, exposure: float) -> Path:
     """A periodic recording as 8-bit .mraw: the 10 blurred phases of one cycle rendered
     once, camera noise drawn per frame."""
-    tgt = VibratingTarget(
-        _pattern(n),
-        fps=2000.0,
-        exposure=exposure,
-        amplitude=10.0,
-        frequency=200.0,
-        angle=20.0,
-        static=10,
-    )
+    tgt = vibrating_target(track_pattern(n), exposure=exposure, amplitude=10.0, static=10)
     from dicblur.blur import motion_blur
 
     dy, dx = math.sin(math.radians(20.0)), math.cos(math.radians(20.0))

@@ -22,20 +22,19 @@ from pathlib import Path
 
 import numpy as np
 import tifffile
-from _harness import Run
+from _harness import Run, use_tests_dir
 
 import dicblur
 from dicblur.track.parallel import ChunkedRun
 from dicblur.track.synthetic import VibratingTarget
 
+use_tests_dir()
+from helpers.track import track_pattern, vibrating_target  # noqa: E402
+
 
 def target(n: int) -> VibratingTarget:
-    p = dicblur.speckle_pattern((n, n), speckle_size=4, density=0.5, softness=0.5, seed=5)
-    p = 30 + 180 * (p - p.min()) / (p.max() - p.min())
-    return VibratingTarget(
-        p, fps=2000.0, exposure=0.45e-3, amplitude=10.0, frequency=200.0, angle=20.0,
-        static=10, seed=21,
-    )  # fmt: skip
+    p = track_pattern(n, seed=5)
+    return vibrating_target(p, exposure=0.45e-3, amplitude=10.0, static=10, seed=21)
 
 
 def groups(tgt: VibratingTarget, ds) -> list[dict]:

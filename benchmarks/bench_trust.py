@@ -25,20 +25,19 @@ import argparse
 import contextlib
 import io
 import json
-import os
-import platform
 import shutil
-import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
+from _harness import Run, use_tests_dir
 
-import dicblur
-from dicblur.campaign import open_results, run_campaign
-from dicblur.campaign.calibrate import calibration_spec
 from dicblur.cli import main as cli
 from dicblur.models import BlurUncertaintyModel, PoissonGaussianCamera
+
+use_tests_dir()
+from helpers.cli import CAMERA_PLAN, calibrate_args  # noqa: E402
+from helpers.models import simulated_u_e  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "trust.json"
 CAMERA = {"full_well": 20000.0, "read_noise": 5.0, "flux": 4e6}
@@ -57,17 +56,7 @@ def _direct(
     work: Path, tag: str, *, noise: float, blur: float, size: int, reps: int
 ) -> tuple[float, float]:
     """RMS u_e over repetitions and its standard error, same pattern (seed 1)."""
-    spec = calibration_spec(
-        "paper4",
-        noise=noise,
-        subset=21,
-        size=(size, size),
-        blur=[float(blur)],
-        repetitions=reps,
-        seed=1,
-    )
-    run_campaign(spec, work / f"{tag}.zarr", serial=True)
-    u = open_results(work / f"{tag}.zarr")["u_e"].values.ravel()
+    u = simulated_u_e(work, tag, noise=noise, blur=blur, size=size, reps=reps)
     rms = float(np.sqrt(np.mean(u**2)))
     return rms, float(np.std(u, ddof=1) / np.sqrt(u.size)) if u.size > 1 else float("nan")
 
@@ -76,24 +65,7 @@ def run(size: int, reps: int, work: Path) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     t0 = time.perf_counter()
-    code = cli(
-        [
-            "calibrate",
-            "paper4",
-            "--size",
-            f"{size}x{size}",
-            "--noise",
-            "2",
-            "--subset",
-            "21",
-            "--blur",
-            "0:8:0.5",
-            "-o",
-            str(work / "cal"),
-            "--serial",
-            "-q",
-        ]
-    )
+    code = cli(calibrate_args(work / "cal", blur="0:8:0.5", size=size))
     if code != 0:
         raise SystemExit(f"calibrate exited with {code}")
     t_cal = time.perf_counter() - t0
@@ -117,23 +89,7 @@ def run(size: int, reps: int, work: Path) -> dict:
                 "ratio": pred / meas,
             }
         )
-    plan = _cli_json(
-        [
-            "plan",
-            model_path,
-            "--velocity",
-            "120mm/s",
-            "--scale",
-            "0.05mm/px",
-            "--full-well",
-            "20000",
-            "--read-noise",
-            "5",
-            "--flux",
-            "4e6",
-            "--json",
-        ]
-    )
+    plan = _cli_json(["plan", model_path, *CAMERA_PLAN, "--json"])
     cam = PoissonGaussianCamera(**CAMERA)
     sigma = float(cam.noise_gl(plan["exposure"], m.mean_level))
     meas, se = _direct(work, "plan", noise=sigma, blur=plan["blur"], size=size, reps=reps)
@@ -172,6 +128,7 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--out-dir", type=Path, default=Path("/tmp/bench_trust"))
     args = ap.parse_args()
+    bench = Run("trust")
     res = run(args.size, args.reps, args.out_dir)
     print(f"calibrate {args.size}^2: {res['calibrate_s']:.0f} s, default {res['default']}")
     print(f"{'case':58s} {'predicted':>10s} {'simulated':>10s} {'ratio':>7s} mismatch ratio")
@@ -182,27 +139,7 @@ def main() -> None:
             + ("" if mm is None else f" {mm / r['simulated']:7.3f}")
         )
     print(f"power law at noise 4 refused: {res['power_law_refused']} ({res['power_law_message']})")
-    commit = subprocess.run(
-        ["git", "rev-parse", "HEAD"],
-        capture_output=True,
-        text=True,
-        cwd=Path(__file__).parent,
-        check=False,
-    ).stdout.strip()
-    doc = {
-        "results": res,
-        "commit": commit,
-        "version": dicblur.__version__,
-        "machine": {
-            "python": platform.python_version(),
-            "cpus": os.cpu_count(),
-            "load": os.getloadavg(),
-            "platform": platform.platform(),
-        },
-    }
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(doc, indent=1))
-    print(f"wrote {OUT}")
+    print(f"wrote {bench.write({'results': res}, OUT)}")
 
 
 if __name__ == "__main__":

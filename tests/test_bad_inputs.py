@@ -16,6 +16,7 @@ import pytest
 
 from bad_inputs import build_corpus
 from dicblur.cli import main
+from helpers.cli import CAMERA_PLAN, TARGET_PLAN
 
 
 @dataclass(frozen=True)
@@ -105,22 +106,7 @@ for key in ("constant", "bomb-tif"):
     CASES.append(
         Case(
             f"plan-reference-{key}",
-            (
-                "plan",
-                "{d}/model.json",
-                "--velocity",
-                "120mm/s",
-                "--scale",
-                "0.05mm/px",
-                "--full-well",
-                "20000",
-                "--read-noise",
-                "5",
-                "--flux",
-                "4e6",
-                "--reference",
-                path,
-            ),
+            ("plan", "{d}/model.json", *CAMERA_PLAN, "--reference", path),
             must=(text,),
         )
     )
@@ -161,20 +147,7 @@ for key, path in BAD_MODELS.items():
         ),
         Case(
             f"plan-model-{key}",
-            (
-                "plan",
-                path,
-                "--velocity",
-                "120mm/s",
-                "--scale",
-                "0.05mm/px",
-                "--target",
-                "0.01px",
-                "--noise",
-                "2",
-                "--plot",
-                "{o}/plan.png",
-            ),
+            ("plan", path, *TARGET_PLAN, "--plot", "{o}/plan.png"),
             must=("model",),
         ),
     ]
@@ -239,130 +212,57 @@ for key, path in {
         Case(f"export-{key}", ("campaign", "export", path, "--csv", "{o}/x.csv")),
     ]
 
+
+def _output_cases(
+    name: str, argv: tuple[str, ...], missing: str, directory: str = ""
+) -> list[Case]:
+    """``argv`` (``{out}`` where the output goes) writing into a missing folder, and, when
+    ``directory`` is given, onto a directory of that name: refused before any computation."""
+
+    def fill(out: str) -> tuple[str, ...]:
+        return tuple(out if a == "{out}" else a for a in argv)
+
+    cases = [Case(f"out-{name}-missing-dir", fill(missing), must=("does not exist",))]
+    if directory:
+        cases.append(
+            Case(
+                f"out-{name}-directory",
+                fill("{o}/" + directory),
+                must=("directory",),
+                dirs=(directory,),
+            )
+        )
+    return cases
+
+
 # outputs: a missing folder or a directory is refused before any computation
-CASES += [
-    Case(
-        "out-generate-missing-dir",
-        ("pattern", "generate", "{o}/missing/x.tif", "--size", "64"),
-        must=("does not exist",),
-    ),
-    Case(
-        "out-generate-directory",
-        ("pattern", "generate", "{o}/adir.tif", "--size", "64"),
-        must=("directory",),
-        dirs=("adir.tif",),
-    ),
+PREDICT_PATTERN = ("pattern", "predict", "{d}/good.tif", "--noise", "2", "--subset", "21")
+GOOD_PAIR = ("{d}/good.tif", "{d}/good2.tif")
+for name, argv, missing, directory in (
+    ("generate", ("pattern", "generate", "{out}", "--size", "64"), "x.tif", "adir.tif"),
+    ("blur", ("blur", "{d}/good.tif", "{out}", "--length", "2"), "x.tif", "adir.tif"),
+    ("correlate", ("correlate", *GOOD_PAIR, "--subset", "21", "-o", "{out}"), "f.nc", "adir.csv"),
+    ("fit", ("fit", "{d}/results.csv", "-o", "{out}"), "m.json", "adir.json"),
+    ("pattern-predict", (*PREDICT_PATTERN, "-o", "{out}"), "m.json", ""),
+    ("plan-plot", ("plan", "{d}/model.json", *TARGET_PLAN, "--plot", "{out}"), "p.png", "adir.png"),
+    ("export", ("campaign", "export", "{s}", "--csv", "{out}"), "x.csv", "adir.csv"),
+):
+    CASES += _output_cases(name, argv, "{o}/missing/" + missing, directory)
+CASES.append(
     Case(
         "out-generate-extension",
         ("pattern", "generate", "{o}/x.jpg", "--size", "64"),
         must=(".jpg",),
-    ),
-    Case(
-        "out-blur-missing-dir",
-        ("blur", "{d}/good.tif", "{o}/missing/x.tif", "--length", "2"),
-        must=("does not exist",),
-    ),
-    Case(
-        "out-blur-directory",
-        ("blur", "{d}/good.tif", "{o}/adir.tif", "--length", "2"),
-        must=("directory",),
-        dirs=("adir.tif",),
-    ),
-    Case(
-        "out-correlate-missing-dir",
-        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "-o", "{o}/missing/f.nc"),
-        must=("does not exist",),
-    ),
-    Case(
-        "out-correlate-directory",
-        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "-o", "{o}/adir.csv"),
-        must=("directory",),
-        dirs=("adir.csv",),
-    ),
-    Case(
-        "out-fit-missing-dir",
-        ("fit", "{d}/results.csv", "-o", "{o}/missing/m.json"),
-        must=("does not exist",),
-    ),
-    Case(
-        "out-fit-directory",
-        ("fit", "{d}/results.csv", "-o", "{o}/adir.json"),
-        must=("directory",),
-        dirs=("adir.json",),
-    ),
-    Case(
-        "out-pattern-predict-missing-dir",
-        (
-            "pattern",
-            "predict",
-            "{d}/good.tif",
-            "--noise",
-            "2",
-            "--subset",
-            "21",
-            "-o",
-            "{o}/missing/m.json",
-        ),
-        must=("does not exist",),
-    ),
-    Case(
-        "out-plan-plot-missing-dir",
-        (
-            "plan",
-            "{d}/model.json",
-            "--velocity",
-            "120mm/s",
-            "--scale",
-            "0.05mm/px",
-            "--target",
-            "0.01px",
-            "--noise",
-            "2",
-            "--plot",
-            "{o}/missing/p.png",
-        ),
-        must=("does not exist",),
-    ),
-    Case(
-        "out-plan-plot-directory",
-        (
-            "plan",
-            "{d}/model.json",
-            "--velocity",
-            "120mm/s",
-            "--scale",
-            "0.05mm/px",
-            "--target",
-            "0.01px",
-            "--noise",
-            "2",
-            "--plot",
-            "{o}/adir.png",
-        ),
-        must=("directory",),
-        dirs=("adir.png",),
-    ),
-    Case(
-        "out-export-missing-dir",
-        ("campaign", "export", "{s}", "--csv", "{o}/missing/x.csv"),
-        must=("does not exist",),
-    ),
-    Case(
-        "out-export-directory",
-        ("campaign", "export", "{s}", "--csv", "{o}/adir.csv"),
-        must=("directory",),
-        dirs=("adir.csv",),
-    ),
+    )
+)
+RUN = ("campaign", "run", "{d}/spec.toml", "-o")
+CASES += [
     Case(
         "out-campaign-run-missing-dir",
-        ("campaign", "run", "{d}/spec.toml", "-o", "{o}/missing/r.zarr", "--serial", "-q"),
+        (*RUN, "{o}/missing/r.zarr", "--serial", "-q"),
         must=("does not exist",),
     ),
-    Case(
-        "out-campaign-run-a-file",
-        ("campaign", "run", "{d}/spec.toml", "-o", "{d}/good.tif", "--serial", "-q"),
-        must=("not a",),
-    ),
+    Case("out-campaign-run-a-file", (*RUN, "{d}/good.tif", "--serial", "-q"), must=("not a",)),
     Case(
         "out-pulse-missing-parent",
         ("pulse", "-o", "{o}/missing/deeper", "--trials", "10"),
@@ -391,81 +291,57 @@ CASES += [
 ]
 
 # option values: refused, and the message names the option as typed
+BLUR = ("blur", "{d}/good.tif", "{o}/x.tif", "--length")
+GENERATE = ("pattern", "generate", "{o}/x.tif", "--size")
+METRICS = ("pattern", "metrics", "{d}/good.tif")
+CORRELATE = ("correlate", *GOOD_PAIR)
+TRACK = ("track", "{d}/good*.tif", "-o", "{o}/t", "--noise", "2")
+SIGMA = "--max-predicted-sigma"
 CASES += [
-    Case(
-        "blur-negative-length",
-        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "-1"),
-        must=("--length",),
-    ),
+    Case("blur-negative-length", (*BLUR, "-1"), must=("--length",)),
     Case(
         "blur-start-speed",
-        (
-            "blur",
-            "{d}/good.tif",
-            "{o}/x.tif",
-            "--length",
-            "2",
-            "--trajectory",
-            "acceleration",
-            "--start-speed",
-            "-3",
-        ),
+        (*BLUR, "2", "--trajectory", "acceleration", "--start-speed", "-3"),
         must=("--start-speed", "0..2"),
     ),
     Case(
         "blur-substeps-0",
-        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2", "--substeps", "0"),
+        (*BLUR, "2", "--substeps", "0"),
         must=("--substeps", "--continuous"),
         must_not=("None",),
     ),
     Case(
         "blur-negative-noise",
-        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2", "--noise", "-1"),
+        (*BLUR, "2", "--noise", "-1"),
         must=("--noise",),
         must_not=("sigma=", "np.float64"),
     ),
-    Case(
-        "blur-bit-depth",
-        ("blur", "{d}/good.tif", "{o}/x.tif", "--length", "2", "--bit-depth", "12"),
-        must=("--bit-depth",),
-    ),
-    Case(
-        "generate-huge-size",
-        ("pattern", "generate", "{o}/x.tif", "--size", "100000x100000"),
-        must=("--max-pixels",),
-    ),
-    Case(
-        "generate-negative-seed",
-        ("pattern", "generate", "{o}/x.tif", "--size", "64", "--seed", "-1"),
-        must=("--seed",),
-    ),
+    Case("blur-bit-depth", (*BLUR, "2", "--bit-depth", "12"), must=("--bit-depth",)),
+    Case("generate-huge-size", (*GENERATE, "100000x100000"), must=("--max-pixels",)),
+    Case("generate-negative-seed", (*GENERATE, "64", "--seed", "-1"), must=("--seed",)),
     Case(
         "generate-bit-depth",
-        ("pattern", "generate", "{o}/x.tif", "--size", "64", "--bit-depth", "12"),
+        (*GENERATE, "64", "--bit-depth", "12"),
         must=("--bit-depth",),
         must_not=("bit_depth=",),
     ),
     Case(
         "generate-speckle-size",
-        ("pattern", "generate", "{o}/x.tif", "--size", "64", "--speckle-size", "-2"),
+        (*GENERATE, "64", "--speckle-size", "-2"),
         must=("--speckle-size",),
     ),
     Case(
         "generate-supersample",
-        ("pattern", "generate", "{o}/x.tif", "--size", "4000", "--supersample", "8"),
+        (*GENERATE, "4000", "--supersample", "8"),
         must=("--max-pixels",),
     ),
     Case(
         "metrics-negative-noise",
-        ("pattern", "metrics", "{d}/good.tif", "--subset", "21", "--noise", "-2"),
+        (*METRICS, "--subset", "21", "--noise", "-2"),
         must=("--noise",),
         must_not=("noise_sigma=",),
     ),
-    Case(
-        "metrics-even-subset",
-        ("pattern", "metrics", "{d}/good.tif", "--subset", "20"),
-        must=("--subset",),
-    ),
+    Case("metrics-even-subset", (*METRICS, "--subset", "20"), must=("--subset",)),
     Case(
         "predict-negative-blur",
         ("predict", "{d}/model.json", "--blur", "-1", "--noise", "2"),
@@ -480,95 +356,31 @@ CASES += [
     ),
     Case(
         "plan-velocity-text",
-        (
-            "plan",
-            "{d}/model.json",
-            "--velocity",
-            "fast",
-            "--scale",
-            "0.05mm/px",
-            "--target",
-            "0.01px",
-            "--noise",
-            "2",
-        ),
+        ("plan", "{d}/model.json", "--velocity", "fast", *TARGET_PLAN[2:]),  # not 120mm/s
         must=("--velocity",),
     ),
-    Case(
-        "correlate-even-subset",
-        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "20"),
-        must=("--subset",),
-    ),
-    Case(
-        "correlate-step-0",
-        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--subset", "21", "--step", "0"),
-        must=("--step",),
-    ),
+    Case("correlate-even-subset", (*CORRELATE, "--subset", "20"), must=("--subset",)),
+    Case("correlate-step-0", (*CORRELATE, "--subset", "21", "--step", "0"), must=("--step",)),
     Case(
         "correlate-max-predicted-sigma-negative",
-        (
-            "correlate",
-            "{d}/good.tif",
-            "{d}/good2.tif",
-            "--noise",
-            "2",
-            "--max-predicted-sigma",
-            "-0.05px",
-        ),
-        must=("--max-predicted-sigma", "none"),
+        (*CORRELATE, "--noise", "2", SIGMA, "-0.05px"),
+        must=(SIGMA, "none"),
     ),
     Case(
         "correlate-max-predicted-sigma-unit",
-        (
-            "correlate",
-            "{d}/good.tif",
-            "{d}/good2.tif",
-            "--noise",
-            "2",
-            "--max-predicted-sigma",
-            "1ms",
-        ),
-        must=("--max-predicted-sigma", "px"),
+        (*CORRELATE, "--noise", "2", SIGMA, "1ms"),
+        must=(SIGMA, "px"),
     ),
     Case(
         "correlate-max-predicted-sigma-no-noise",
-        ("correlate", "{d}/good.tif", "{d}/good2.tif", "--max-predicted-sigma", "0.05px"),
-        must=("--max-predicted-sigma", "--noise"),
+        (*CORRELATE, "--blur-compensation", "given", "--blur", "2", SIGMA, "0.05px"),
+        must=(SIGMA, "--noise"),
     ),
-    Case(
-        "track-max-predicted-sigma",
-        (
-            "track",
-            "{d}/good*.tif",
-            "-o",
-            "{o}/t",
-            "--noise",
-            "2",
-            "--max-predicted-sigma",
-            "0",
-        ),
-        must=("--max-predicted-sigma",),
-    ),
-    Case(
-        "track-tolerance-zero",
-        ("track", "{d}/good*.tif", "-o", "{o}/t", "--noise", "2", "--tolerance", "0"),
-        must=("--tolerance", "auto"),
-    ),
-    Case(
-        "track-tolerance-unit",
-        ("track", "{d}/good*.tif", "-o", "{o}/t", "--noise", "2", "--tolerance", "1ms"),
-        must=("--tolerance", "px"),
-    ),
-    Case(
-        "pattern-predict-subpixel",
-        ("pattern", "predict", "{d}/good.tif", "--noise", "2", "--subset", "21", "--subpixel", "7"),
-        must=("--subpixel",),
-    ),
-    Case(
-        "max-pixels-bad",
-        ("--max-pixels", "0", "pattern", "metrics", "{d}/good.tif"),
-        must=("--max-pixels",),
-    ),
+    Case("track-max-predicted-sigma", (*TRACK, SIGMA, "0"), must=(SIGMA,)),
+    Case("track-tolerance-zero", (*TRACK, "--tolerance", "0"), must=("--tolerance", "auto")),
+    Case("track-tolerance-unit", (*TRACK, "--tolerance", "1ms"), must=("--tolerance", "px")),
+    Case("pattern-predict-subpixel", (*PREDICT_PATTERN, "--subpixel", "7"), must=("--subpixel",)),
+    Case("max-pixels-bad", ("--max-pixels", "0", *METRICS), must=("--max-pixels",)),
 ]
 
 

@@ -27,6 +27,7 @@ from dicblur import (
     valid_region,
 )
 from dicblur.cli import main
+from helpers.blur import smooth_fine
 
 
 @pytest.fixture(scope="module")
@@ -283,21 +284,11 @@ def test_valid_region_negative_motion() -> None:
 
 
 # ------------------------------------------------------------------ rendering
-def _smooth_fine(n: int, ss: int) -> np.ndarray:
-    c = (np.arange(n * ss) + 0.5) / ss / n
-    y, x = np.meshgrid(c, c, indexing="ij")
-    return (
-        128
-        + 60 * np.sin(2 * np.pi * (3 * x + 2 * y) + 0.3)
-        + 40 * np.cos(2 * np.pi * (5 * x - 4 * y))
-    )
-
-
 def test_render_converges_to_fourier_for_smooth_pattern() -> None:
     n, motion = 32, (1.3, 2.7)
     errors = []
     for ss in (2, 4, 8, 16):
-        fine = _smooth_fine(n, ss)
+        fine = smooth_fine(n, ss)
         camera = fine.reshape(n, ss, n, ss).mean(axis=(1, 3))
         rendered = render_blurred(fine, motion, supersample=ss)
         errors.append(np.abs(rendered - motion_blur(camera, motion, substeps=None)).max())

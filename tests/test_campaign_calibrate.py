@@ -12,6 +12,7 @@ from dicblur.campaign import open_results
 from dicblur.campaign.calibrate import calibrate, calibration_spec
 from dicblur.cli import main
 from dicblur.errors import InputError
+from helpers.cli import calibrate_args
 
 REAL = (
     Path(__file__).resolve().parents[1].parent
@@ -39,24 +40,7 @@ def test_calibration_spec_is_the_papers_sweep(tmp_path):
 @pytest.mark.slow
 def test_calibrate_generated_pattern(tmp_path, capsys):
     out = tmp_path / "calib"
-    code = main(
-        [
-            "calibrate",
-            "paper4",
-            "--size",
-            "128x128",
-            "--noise",
-            "2",
-            "--subset",
-            "21",
-            "--blur",
-            "0:6:0.5",
-            "-o",
-            str(out),
-            "--serial",
-            "-q",
-        ]
-    )
+    code = main(calibrate_args(out))
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "R^2 of the SSSIG fit" in text

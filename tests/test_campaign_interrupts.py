@@ -22,39 +22,18 @@ import numpy as np
 import pytest
 
 from dicblur.campaign import VARIABLES, campaign_status, open_results, run_campaign
-from helpers.campaign import kill_spec, shift_task
+from helpers.campaign import kill_spec, shift_task, small_spec_dict, spec_toml
 
 HERE = Path(__file__).resolve().parent
 
 COMPARED = [v for v in VARIABLES if v != "time_s"]
 
-SPEC = """
-[campaign]
-name = "sig"
-seed = 7
-repetitions = 2
-
-[[pattern]]
-name = "a"
-generator = "speckle"
-shape = [64, 64]
-speckle_size = 4.0
-seed = 1
-
-[blur]
-lengths = { start = 0.0, stop = 2.3, step = 0.1 }
-
-[noise]
-model = "per-exposure"
-levels = [1.0, 2.0]
-
-[dic]
-subsets = [15]
-step = 8
-
-[run]
-blur_chunk = 2
-"""
+# a one-pattern campaign of 96 tasks (1 pattern x 2 noise x 2 reps x 24 W), as TOML
+_SPEC = small_spec_dict(
+    campaign__name="sig", blur__lengths={"start": 0.0, "stop": 2.3, "step": 0.1}
+)
+_SPEC["pattern"] = _SPEC["pattern"][:1]
+SPEC = spec_toml(_SPEC)
 
 
 def assert_same_results(a, b):

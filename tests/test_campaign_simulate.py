@@ -91,7 +91,11 @@ def test_per_subframe_noise_is_the_papers(sinusoid_file):
     assert out["noise_effective"][0] == pytest.approx(400.0 / math.sqrt(101.0))
 
 
-def small_real_spec(**blur: object) -> dicblur.CampaignSpec:
+def _one_pattern_spec(
+    *, speckle_size: float, softness: float, blur: dict, noise: float, **sections: object
+) -> dicblur.CampaignSpec:
+    """Two repetitions of one 64x64 speckle pattern (seed 3) at one noise level, subset 21
+    every 10 px, sweeping ``blur``; ``sections`` added as they are."""
     return parse_spec(
         {
             "campaign": {"seed": 5, "repetitions": 2},
@@ -100,16 +104,26 @@ def small_real_spec(**blur: object) -> dicblur.CampaignSpec:
                     "name": "p",
                     "generator": "speckle",
                     "shape": [64, 64],
-                    "speckle_size": 4.0,
-                    "softness": 0.7,
+                    "speckle_size": speckle_size,
+                    "softness": softness,
                     "seed": 3,
                 }
             ],
-            "blur": {"lengths": [0.0, 1.5, 3.0], "angles": [0.0, 30.0], **blur},
-            "noise": {"model": "per-exposure", "levels": [2.0]},
+            "blur": blur,
+            "noise": {"model": "per-exposure", "levels": [noise]},
             "dic": {"subsets": [21], "step": 10},
-            "run": {"blur_chunk": 2},
+            **sections,
         }
+    )
+
+
+def small_real_spec(**blur: object) -> dicblur.CampaignSpec:
+    return _one_pattern_spec(
+        speckle_size=4.0,
+        softness=0.7,
+        blur={"lengths": [0.0, 1.5, 3.0], "angles": [0.0, 30.0], **blur},
+        noise=2.0,
+        run={"blur_chunk": 2},
     )
 
 
@@ -176,29 +190,12 @@ def test_blurred_image_metrics_equal_the_metrics_module(sinusoid_file):
 
 
 def _smooth_spec(method: str) -> dicblur.CampaignSpec:
-    return parse_spec(
-        {
-            "campaign": {"seed": 5, "repetitions": 2},
-            "pattern": [
-                {
-                    "name": "p",
-                    "generator": "speckle",
-                    "shape": [64, 64],
-                    "speckle_size": 8.0,
-                    "softness": 2.0,
-                    "seed": 3,
-                }
-            ],
-            "blur": {
-                "lengths": [0.0, 2.0, 4.0],
-                "angles": [0.0, 30.0],
-                "method": method,
-                "supersample": 4,
-                "substeps": 64,
-            },
-            "noise": {"model": "per-exposure", "levels": [1.0]},
-            "dic": {"subsets": [21], "step": 10},
-        }
+    blur = {"lengths": [0.0, 2.0, 4.0], "angles": [0.0, 30.0], "method": method}
+    return _one_pattern_spec(
+        speckle_size=8.0,
+        softness=2.0,
+        blur={**blur, "supersample": 4, "substeps": 64},
+        noise=1.0,
     )
 
 

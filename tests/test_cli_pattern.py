@@ -132,29 +132,17 @@ PREDICT = ["pattern", "predict"]
 NOISE_SUBSET = ["--noise", "2", "--subset", "21"]
 
 
+def _blurs(*w: str) -> list[str]:
+    """``--blur`` once for each value."""
+    return [a for v in w for a in ("--blur", v)]
+
+
 def test_predict_from_the_static_image(tmp_path, capsys):
     import dicblur
 
     out, img = _saved_pattern(tmp_path, 128, 2)
-    assert (
-        main(
-            [
-                *PREDICT,
-                str(out),
-                *NOISE_SUBSET,
-                "--blur",
-                "0",
-                "--blur",
-                "2",
-                "--angle",
-                "90",
-                "--json",
-                "-o",
-                str(tmp_path / "m.json"),
-            ]
-        )
-        == 0
-    )
+    args = [*PREDICT, str(out), *NOISE_SUBSET, *_blurs("0", "2"), "--angle", "90", "--json"]
+    assert main([*args, "-o", str(tmp_path / "m.json")]) == 0
     data = json.loads(capsys.readouterr().out.split("\nwrote")[0])
     want = dicblur.predict_from_pattern(
         img, [0.0, 2.0], noise_sigma=2.0, subset=21, motion=(1.0, 0.0)
@@ -170,23 +158,8 @@ def test_predict_with_the_subpixel_position(tmp_path, capsys):
     import dicblur
 
     out, img = _saved_pattern(tmp_path, 96, 4)
-    assert (
-        main(
-            [
-                *PREDICT,
-                str(out),
-                *NOISE_SUBSET,
-                "--blur",
-                "0",
-                "--blur",
-                "1",
-                "--subpixel",
-                "0.5",
-                "--json",
-            ]
-        )
-        == 0
-    )
+    args = [*PREDICT, str(out), *NOISE_SUBSET, *_blurs("0", "1"), "--subpixel", "0.5", "--json"]
+    assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
     want = dicblur.predict_from_pattern(img, [0.0, 1.0], noise_sigma=2.0, subset=21, subpixel=0.5)
     np.testing.assert_allclose(data["u_blur"], want.u_blur, rtol=1e-6)
@@ -203,7 +176,7 @@ def test_predict_says_where_dic_breaks_down(tmp_path, capsys):
     )
     out = tmp_path / "fine.tif"
     save_image(out, img)
-    blur = [a for w in ("0", "4", "8", "10") for a in ("--blur", w)]
+    blur = _blurs("0", "4", "8", "10")
     assert main([*PREDICT, str(out), *NOISE_SUBSET, *blur]) == 0
     text = capsys.readouterr().out
     assert "DIC breaks down from W = " in text

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,20 +96,17 @@ def test_cold_kernel_cache_is_detected_without_compiling(tmp_path):
     assert out == ["False", "False"]
 
 
+def _correlate_itself(image: Path) -> list[str]:
+    """``dicblur correlate`` of an image with itself: a few translation subsets."""
+    return ["correlate", str(image), str(image), "--shape", "translation", "--step", "30"]
+
+
 def test_correlate_says_when_it_compiles(tmp_path, capsys, monkeypatch):
     from dicblur.dic import cache
 
     ref = pattern(64, seed=3)
     save_image(tmp_path / "a.tif", ref, bit_depth=16)
-    args = [
-        "correlate",
-        str(tmp_path / "a.tif"),
-        str(tmp_path / "a.tif"),
-        "--shape",
-        "translation",
-        "--step",
-        "30",
-    ]
+    args = _correlate_itself(tmp_path / "a.tif")
     asked = []
     monkeypatch.setattr(cache, "kernels_cached", lambda shape: asked.append(shape) or False)
     assert main(args) == 0
@@ -131,18 +129,7 @@ def test_first_correlate_after_install_prints_one_line_then_none(tmp_path):
     ref = pattern(64, seed=3)
     save_image(tmp_path / "a.tif", ref, bit_depth=16)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
-    cmd = [
-        sys.executable,
-        "-m",
-        "dicblur",
-        "correlate",
-        str(tmp_path / "a.tif"),
-        str(tmp_path / "a.tif"),
-        "--shape",
-        "translation",
-        "--step",
-        "30",
-    ]
+    cmd = [sys.executable, "-m", "dicblur", *_correlate_itself(tmp_path / "a.tif")]
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
     assert first.returncode == 0, first.stderr
     assert first.stderr.count(COMPILE_NOTICE) == 1

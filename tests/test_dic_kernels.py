@@ -175,7 +175,9 @@ def test_icgn_converges_against_a_strongly_blurred_image():
     # (88 iterations on average at W = 10 px before the Aitken step gain); with it nearly
     # every subset converges in a few tens of iterations at most.
     ref, cur = _blurred_pair()
-    res = Correlator(ref, subset=31, step=8, shape="translation").correlate(cur)
+    # no noise-based screening: the pair's effective noise (the blur mismatch, 62 GL here)
+    # would predict every subset IMPRECISE; this test is about the iterations
+    res = Correlator(ref, subset=31, step=8, shape="translation", noise_sigma=None).correlate(cur)
     assert res.converged.mean() >= 0.95
     assert float(np.mean(res.iterations[res.converged])) < 25
     # noise-free: the mean displacement is the blur's mean position W/2, up to the

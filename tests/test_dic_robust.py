@@ -65,12 +65,16 @@ def test_imprecise_subsets_are_flagged_cheap_and_not_retried(blob_pair):
     pred = np.hypot(res.predicted_sigma_u, res.predicted_sigma_v)
     imp = pred > 0.1 / 3
     assert 0.03 < imp.mean() < 0.2
-    done = np.isin(res.status, (PointStatus.CONVERGED, PointStatus.MAX_ITERATIONS))
-    assert not np.any(done & imp)
     assert np.all((res.status == PointStatus.IMPRECISE) <= imp)
-    # at most 1.5 x the median iterations of the precise converged POIs of a pass
-    med = np.median(res.iterations[res.converged])
-    assert res.iterations[imp].max() <= np.ceil(1.5 * (med + 1))
+    # kept CONVERGED only within 0.07 px of their precise neighbours (the neighbour check):
+    # then not a gross error, whatever their predicted sigma
+    kept = res.converged & imp
+    err = np.hypot(res.u - 0.3, res.v + 0.2)
+    assert kept.sum() > 0.3 * imp.sum() and np.all(err[kept] < 0.1)
+    # the first pass at most 1.5 x the median iterations of the precise converged POIs,
+    # then (some) a retry from the neighbours' median within the retry budget
+    med = np.median(res.iterations[res.converged & ~imp])
+    assert res.iterations[imp].max() <= np.ceil(1.5 * (med + 1)) + max(10, 4 * med)
     assert res.info["max_predicted_sigma"] == pytest.approx(0.1 / 3)
     # the test off: the same subsets come back CONVERGED, some of them > 0.1 px off
     off = Correlator(ref, **kw, max_predicted_sigma=None).correlate(cur)
@@ -85,8 +89,8 @@ def test_imprecise_subsets_are_flagged_cheap_and_not_retried(blob_pair):
         < np.count_nonzero(loose.status == PointStatus.IMPRECISE)
         < np.count_nonzero(res.status == PointStatus.IMPRECISE)
     )
-    plain = Correlator(ref, subset=21, step=10, shape="affine").correlate(cur)
-    assert not np.any(plain.status == PointStatus.IMPRECISE)
+    plain = Correlator(ref, subset=21, step=10, shape="affine", noise_sigma=None).correlate(cur)
+    assert not np.any(plain.status == PointStatus.IMPRECISE)  # no noise level: no test
     with pytest.raises(InputError, match="max_predicted_sigma"):
         Correlator(ref, **kw, max_predicted_sigma=-0.1)
 
@@ -137,9 +141,14 @@ def test_high_residual_flags_a_local_change():
     far = np.hypot(res.rows - 96, res.cols - 96) > 30
     assert np.all(res.status[near] == PointStatus.HIGH_RESIDUAL)
     assert np.all(res.status[far] == PointStatus.CONVERGED)
-    # no noise level given: no residual test
-    res0 = Correlator(ref, subset=21, step=8, shape="translation").correlate(cur)
+    # no noise level (None): no residual test
+    res0 = Correlator(ref, subset=21, step=8, shape="translation", noise_sigma=None).correlate(cur)
     assert not np.any(res0.status == PointStatus.HIGH_RESIDUAL)
+    # the default estimates it from the pair: the same subsets flagged
+    res1 = Correlator(ref, subset=21, step=8, shape="translation").correlate(cur)
+    assert res1.info["noise_estimated"] == 1
+    assert res1.info["noise_sigma"] == pytest.approx(2.0, rel=0.1)
+    assert np.all(res1.status[near] == PointStatus.HIGH_RESIDUAL)
 
 
 @pytest.mark.parametrize("shape", ["translation", "affine"])
@@ -318,8 +327,13 @@ def test_cli_max_predicted_sigma(tmp_path, capsys):
     assert set(runs[None]) == {"converged"}  # the default 0.1/3 px flags nothing here
     assert set(runs["0.001px"]) == {"imprecise"} and runs["0.001"] == runs["0.001px"]
     assert runs["none"] == runs["OFF"] == runs[None]
-    # a threshold needs the noise level
-    code = main([*base[:-2], "--max-predicted-sigma", "0.05px"])
+    # without --noise the noise is estimated from the pair (and printed) ...
+    code = main([*base[:-2], "--step", "8", "--max-predicted-sigma", "0.05px"])
+    printed = capsys.readouterr().out
+    assert code == 0 and "noise_sigma" in printed and "estimated" in printed
+    # ... but not with blur compensation: a threshold then needs the noise level
+    comp = ["--blur-compensation", "given", "--blur", "2", "--max-predicted-sigma", "0.05px"]
+    code = main([*base[:-2], *comp])
     assert code == 2 and "--noise" in capsys.readouterr().err
 
 
@@ -327,18 +341,10 @@ def test_track_max_predicted_sigma(tmp_path):
     import xarray as xr
 
     import dicblur
-    from dicblur.track.synthetic import VibratingTarget
+    from helpers.track import track_pattern, vibrating_target
 
-    p = dicblur.speckle_pattern((96, 96), speckle_size=4, density=0.5, softness=0.5, seed=1)
-    tgt = VibratingTarget(
-        30 + 180 * (p - p.min()) / (p.max() - p.min()),
-        fps=2000.0,
-        exposure=0.4e-3,
-        amplitude=2.0,
-        frequency=200.0,
-        static=4,
-        seed=3,
-    )
+    p = track_pattern(96, seed=1)
+    tgt = vibrating_target(p, exposure=0.4e-3, amplitude=2.0, static=4, seed=3, angle=0.0)
     folder = tmp_path / "frames"
     folder.mkdir()
     for k in range(6):

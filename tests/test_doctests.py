@@ -13,6 +13,7 @@ MODULES = [
     "dicblur.patterns",
     "dicblur.metrics",
     "dicblur.dic.correlator",
+    "dicblur.dic.state",
     "dicblur.dic.settings",
 ]
 

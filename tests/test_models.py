@@ -392,6 +392,16 @@ def _znssd_resid(g, ref):
     return a - b
 
 
+# four 15 px subsets of a 48 px periodic image, with exact (spectral) derivatives: the static
+# predictions checked against a band-limited brute force
+EXACT = {
+    "subset": 15,
+    "points": np.array([[12, 12], [12, 34], [34, 20], [30, 34]]),
+    "boundary": "periodic",
+    "derivative": "spectral",
+}
+
+
 @pytest.mark.parametrize(
     ("shape", "motion", "criterion"),
     [
@@ -414,18 +424,8 @@ def test_static_c_matches_brute_force_minimum(shape, motion, criterion):
     kx = np.fft.fftfreq(n)[None, :]
     # exact centred box blur of length W along d: sinc of the projected frequency
     spec_b = np.fft.fft2(img) * np.sinc(wlen * (d[0] * ky + d[1] * kx))
-    sub, h = 15, 7
-    centres = np.array([[12, 12], [12, 34], [34, 20], [30, 34]])
-    bs = blur_sensitivity(
-        img,
-        subset=sub,
-        points=centres,
-        motion=motion,
-        shape=shape,
-        boundary="periodic",
-        derivative="spectral",
-        criterion=criterion,
-    )
+    h, centres = EXACT["subset"] // 2, EXACT["points"]
+    bs = blur_sensitivity(img, motion=motion, shape=shape, criterion=criterion, **EXACT)
     oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
     oy, ox = oy.ravel(), ox.ravel()
     for i, (r, c) in enumerate(centres):
@@ -469,18 +469,8 @@ def test_mismatch_curve_matches_the_icgn_fixed_point_at_finite_blur(shape, motio
     spec_b = spec * np.sinc(wlen * (d[0] * ky + d[1] * kx))
     fx = np.fft.ifft2(spec * 2j * np.pi * kx).real
     fy = np.fft.ifft2(spec * 2j * np.pi * ky).real
-    sub, h = 15, 7
-    centres = np.array([[12, 12], [12, 34], [34, 20], [30, 34]])
-    curve = blur_mismatch_curve(
-        img,
-        [wlen],
-        subset=sub,
-        points=centres,
-        motion=motion,
-        shape=shape,
-        boundary="periodic",
-        derivative="spectral",
-    )
+    h, centres = EXACT["subset"] // 2, EXACT["points"]
+    curve = blur_mismatch_curve(img, [wlen], motion=motion, shape=shape, **EXACT)
     oy, ox = np.meshgrid(np.arange(-h, h + 1.0), np.arange(-h, h + 1.0), indexing="ij")
     oy, ox = oy.ravel(), ox.ravel()
     for i, (r, c) in enumerate(centres):

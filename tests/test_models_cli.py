@@ -10,6 +10,7 @@ import pytest
 
 from dicblur.cli import main
 from dicblur.models import BlurUncertaintyModel, mismatch_model, sssig_decay
+from helpers.cli import CAMERA, TARGET_PLAN
 
 
 @pytest.fixture
@@ -68,47 +69,12 @@ def test_fit_predict_plan(results_csv, tmp_path, capsys):
     got = json.loads(capsys.readouterr().out)
     assert got["predictions"][0]["blur_px"] == pytest.approx(2.4)
 
-    assert (
-        main(
-            [
-                "plan",
-                str(model_path),
-                "--velocity",
-                "120mm/s",
-                "--scale",
-                "0.05mm/px",
-                "--target",
-                "0.01px",
-                "--noise",
-                "2",
-            ]
-        )
-        == 0
-    )
+    assert main(["plan", str(model_path), *TARGET_PLAN]) == 0
     assert "rule of thumb" in capsys.readouterr().out
     fig = tmp_path / "plan.png"
-    assert (
-        main(
-            [
-                "plan",
-                str(model_path),
-                "--velocity",
-                "120mm/s",
-                "--scale",
-                "20px/mm",
-                "--full-well",
-                "20000",
-                "--read-noise",
-                "5",
-                "--flux",
-                "4e6",
-                "--plot",
-                str(fig),
-                "--json",
-            ]
-        )
-        == 0
-    )
+    # the scale as its inverse, 20 px/mm = 0.05 mm/px
+    motion = ["--velocity", "120mm/s", "--scale", "20px/mm"]
+    assert main(["plan", str(model_path), *motion, *CAMERA, "--plot", str(fig), "--json"]) == 0
     text = capsys.readouterr().out
     plan = json.loads(text[: text.rindex("}") + 1])
     assert plan["optimal"] and plan["exposure"] > 0

@@ -14,9 +14,7 @@ from dicblur.errors import InputError
 from dicblur.models import (
     BlurUncertaintyModel,
     PoissonGaussianCamera,
-    StaticTerms,
     fit_blur_model,
-    fit_static_scales,
     plan_exposure,
     predict_from_pattern,
     sssig_decay,
@@ -24,36 +22,23 @@ from dicblur.models import (
     with_static_model,
 )
 from dicblur.patterns import paper_pattern4
-
-S0, BETA = 2.4e6, 0.03
-
-
-def _terms(breakdown=None, top=8.0):
-    w = np.round(np.arange(0.0, top + 1e-9, 0.25), 10)
-    s = sssig_decay(w, S0, BETA)
-    off = (w / 2) % 1.0
-    return StaticTerms(
-        blur=tuple(w),
-        noise=tuple(1.6 / s),
-        noise2=tuple(2e-10 * (1 + 0.1 * w**2) * S0 / s**2),
-        mismatch=tuple((9e-4 * w**2) ** 2 + (1e-3 * np.sin(np.pi * off)) ** 2),
-        valid_fraction=tuple(np.where(w >= (breakdown or np.inf), 0.5, 1.0)),
-        breakdown_blur=breakdown,
-    )
-
-
-def _truth(terms, w, sig, kn=0.95, kb=1.05):
-    x = np.array(terms.blur)
-    n1, n2, b2 = (np.interp(w, x, np.array(v)) for v in (terms.noise, terms.noise2, terms.mismatch))
-    return np.sqrt(kn**2 * (sig**2 * n1 + sig**4 * n2) + kb**2 * b2)
+from helpers.cli import CAMERA_PLAN, calibrate_args
+from helpers.models import (
+    BETA,
+    S0,
+    interval_coverage,
+    simulated_u_e,
+    static_table,
+    static_truth,
+    two_noise_sweep,
+)
 
 
 def _model(breakdown=6.5, seed=1, scatter=0.02):
-    terms = _terms(breakdown)
+    terms = static_table(breakdown)
     rng = np.random.default_rng(seed)
-    w0 = np.arange(0.0, 6.01, 0.5)
-    w, sig = np.tile(w0, 2), np.repeat([2.0, 8.0], w0.size)
-    u = _truth(terms, w, sig) * np.exp(rng.normal(0.0, scatter, w.size))
+    w, sig = two_noise_sweep()
+    u = static_truth(terms, w, sig) * np.exp(rng.normal(0.0, scatter, w.size))
     base = fit_blur_model(
         w,
         sssig_decay(w, S0, BETA),
@@ -80,7 +65,7 @@ def test_static_kind_predicts_the_scaled_table():
     p = m.predict(w, 4.0)
     assert p.model == "static"
     nodes = np.isin(w, terms.blur)
-    np.testing.assert_allclose(p.u_e[nodes], _truth(terms, w[nodes], 4.0), rtol=1e-9)
+    np.testing.assert_allclose(p.u_e[nodes], static_truth(terms, w[nodes], 4.0), rtol=1e-9)
     x = np.array(terms.blur)
     n1, n2, b2 = (
         np.maximum(CubicSpline(x, np.array(v), bc_type="natural")(w), 0.0)
@@ -200,18 +185,7 @@ def test_static_terms_are_the_static_prediction_at_the_campaign_offset():
 
 
 def _coverage(n):
-    terms = _terms()
-    w0 = np.arange(0.0, 6.01, 0.5)
-    w, sig = np.tile(w0, 2), np.repeat([2.0, 8.0], w0.size)
-    hits = {"k_noise": 0, "k_blur": 0}
-    for seed in range(n):
-        rng = np.random.default_rng(30_000 + seed)
-        u = _truth(terms, w, sig) * np.exp(rng.normal(0.0, 0.05, w.size))
-        fit = fit_static_scales(terms, w, sig, u)
-        for name, value in (("k_noise", 0.95), ("k_blur", 1.05)):
-            p = fit.parameter(name)
-            hits[name] += int(p.low <= value <= p.high)
-    return {k: v / n for k, v in hits.items()}
+    return interval_coverage("static", n, first_seed=30_000)["coverage"]
 
 
 def test_interval_coverage_fast():
@@ -226,20 +200,7 @@ def test_interval_coverage_nominal():
 
 
 def _direct_u_e(tmp_path, tag, *, noise, blur, size, reps):
-    from dicblur.campaign import open_results, run_campaign
-    from dicblur.campaign.calibrate import calibration_spec
-
-    spec = calibration_spec(
-        "paper4",
-        noise=noise,
-        subset=21,
-        size=(size, size),
-        blur=[float(blur)],
-        repetitions=reps,
-        seed=1,
-    )
-    run_campaign(spec, tmp_path / f"{tag}.zarr", serial=True)
-    u = open_results(tmp_path / f"{tag}.zarr")["u_e"].values.ravel()
+    u = simulated_u_e(tmp_path, tag, noise=noise, blur=blur, size=size, reps=reps)
     return float(np.sqrt(np.mean(u**2)))
 
 
@@ -249,8 +210,7 @@ def test_calibrate_then_predict_beyond_the_sweep_matches_a_direct_simulation(tmp
     # W = 0..4 px predicts W = 6 / 7 px at 4 GL 28 % / 43 % low; the static kind, its
     # table continued to 8 px from the image, within 1 %.
     cal = tmp_path / "cal"
-    args = ["calibrate", "paper4", "--size", "128x128", "--noise", "2", "--subset", "21"]
-    assert main([*args, "--blur", "0:4:0.5", "-o", str(cal), "--serial", "-q"]) == 0
+    assert main(calibrate_args(cal, blur="0:4:0.5")) == 0
     assert "default model" in capsys.readouterr().out
     model = cal / "model.json"
     m = BlurUncertaintyModel.from_json(str(model))
@@ -267,9 +227,7 @@ def test_calibrate_then_predict_beyond_the_sweep_matches_a_direct_simulation(tmp
         )
         assert row["u_e_px"] == pytest.approx(meas, rel=0.10), (row, meas)
     # a camera plan runs on it too
-    cam = ["--full-well", "20000", "--read-noise", "5", "--flux", "4e6"]
-    plan_args = ["plan", str(model), "--velocity", "120mm/s", "--scale", "0.05mm/px", *cam]
-    assert main([*plan_args, "--json"]) == 0
+    assert main(["plan", str(model), *CAMERA_PLAN, "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["model"] == "static"
 
 
@@ -305,7 +263,7 @@ def test_one_level_calibration_keeps_the_noise_scale_across_noise_levels():
     4 GL predictions came out low. Here the same growth (1 + 0.05 W) on a generated
     pattern: calibrated at 2 GL, the prediction at 4 GL is within 3 % at W = 1 and 3 px
     (the free k_noise: 4.8 % low at W = 1 px), and within 10 % at 1, 2, 4 GL."""
-    from dicblur.models.scaled import static_variance
+    from dicblur.models.scaled import fit_static_scales, static_variance
 
     img = paper_pattern4((96, 96), seed=2, speckle_size=2.5)
     t = static_terms(img, np.arange(0.25, 6.01, 0.25), subset=21, step=10, boundary="periodic")

@@ -17,28 +17,12 @@ from dicblur.models import (
     fit_blur_model,
     fit_mismatch,
     fit_power_law,
-    fit_sssig_decay,
     mismatch_model,
     plan_exposure,
     sssig_decay,
 )
-
-S0, BETA = 2.4e6, 0.03
-
-# the camera plan the tests run: 120 mm/s at 0.05 mm/px, 20000 e- full well, 5 e- read
-# noise, 4e6 e-/s
-_CAMERA_PLAN = [
-    "--velocity",
-    "120mm/s",
-    "--scale",
-    "0.05mm/px",
-    "--full-well",
-    "20000",
-    "--read-noise",
-    "5",
-    "--flux",
-    "4e6",
-]
+from helpers.cli import CAMERA_PLAN, calibrate_args
+from helpers.models import BETA, S0, interval_coverage, simulated_u_e, two_noise_sweep
 
 
 def _power_law_winning_data(seed: int = 11):
@@ -103,7 +87,7 @@ def test_cli_predict_and_plan_default_to_the_mismatch_model(tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert "mismatch" in err and len(err.strip().splitlines()) == 1
-    assert main(["plan", str(model), *_CAMERA_PLAN, "--json"]) == 0
+    assert main(["plan", str(model), *CAMERA_PLAN, "--json"]) == 0
     plan = json.loads(capsys.readouterr().out)
     assert plan["model"] == "mismatch"
     assert plan["rule_of_thumb_u_e"] < 1.0  # was "rule of thumb gives u_e 3.14e+03 px"
@@ -246,7 +230,7 @@ def test_cli_plan_uses_the_reference_mean_level(tmp_path, capsys):
     rng = np.random.default_rng(0)
     save_image(ref, np.clip(80 + 40 * rng.standard_normal((64, 64)), 0, 255), bit_depth=8)
     capsys.readouterr()
-    args = ["plan", str(model), *_CAMERA_PLAN]
+    args = ["plan", str(model), *CAMERA_PLAN]
     assert main(args) == 0
     assert "assumed 127.5 GL" in capsys.readouterr().out  # truly unknown: said so
     assert main([*args, "--reference", str(ref)]) == 0
@@ -271,82 +255,26 @@ def test_power_law_parameters_have_plain_units_and_usable_intervals():
 def test_degenerate_covariance_falls_back_to_a_seeded_bootstrap():
     # a cross term forced on data without one sits on its bound: the Gaussian covariance
     # is singular there; the interval comes from a bootstrap and is reproducible
-    w1 = np.arange(0.0, 6.01, 0.5)
-    w, sig = np.tile(w1, 2), np.repeat([2.0, 8.0], w1.size)
+    w, sig = two_noise_sweep()
     s = sssig_decay(w, S0, BETA)
     eps = np.exp(np.random.default_rng(1).normal(0, 0.02, w.size))
     u = mismatch_model(w, s, sig, a=1.4, c=3e-4, floor=1e-3) * eps
-    f = fit_mismatch(
-        w,
-        s,
-        u,
-        noise_sigma=sig,
-        next_term=False,
-        floor=True,
-        cross=True,
-        noise_blur=False,
-        n_boot=100,
-    )
+    kw = dict(noise_sigma=sig, next_term=False, floor=True, cross=True, noise_blur=False)
+    f = fit_mismatch(w, s, u, n_boot=100, **kw)
     assert f["cross"] < 3e-4  # at most the size of c W at W = 1 px
     assert f.ci_method == "bootstrap"
     p = f.parameter("cross")
     assert p.low < 1e-9 and np.isfinite(p.high) and p.high > p.value
-    again = fit_mismatch(
-        w,
-        s,
-        u,
-        noise_sigma=sig,
-        next_term=False,
-        floor=True,
-        cross=True,
-        noise_blur=False,
-        n_boot=100,
-    )
+    again = fit_mismatch(w, s, u, n_boot=100, **kw)
     assert again == f
-
-
-def _coverage_case(which: str, seed: int):
-    """Synthetic data with known parameters for each model (docs/models.md s. 5)."""
-    rng = np.random.default_rng(10_000 + seed)
-    if which == "power_law":
-        w = np.arange(0.0, 3.01, 0.25)
-        s = sssig_decay(w, S0, BETA) * np.exp(rng.normal(0, 0.01, w.size))
-        truth = {"u_ref": 2e-3, "alpha": 2.7}
-        u = 2e-3 * (s / S0) ** -2.7 * np.exp(rng.normal(0, 0.05, w.size))
-        return truth, fit_power_law(s, u, blur=w, sssig_ref=S0)
-    if which == "decay":
-        w = np.arange(0.0, 8.01, 0.5)
-        s = sssig_decay(w, S0, BETA) + rng.normal(0, 0.02 * S0, w.size)
-        return {"sssig0": S0, "beta": BETA}, fit_sssig_decay(w, s)
-    if which == "mismatch":
-        w = np.arange(0.0, 6.01, 0.5)
-        s = sssig_decay(w, S0, BETA)
-        truth = {"a": 2.0, "c": 3e-4}
-        u = mismatch_model(w, s, 2.0, **truth) * np.exp(rng.normal(0, 0.05, w.size))
-        return truth, fit_mismatch(
-            w, s, u, noise_sigma=2.0, next_term=False, floor=False, noise_blur=False, cross=False
-        )
-    w1 = np.arange(0.0, 6.01, 0.5)
-    w, sig = np.tile(w1, 2), np.repeat([2.0, 8.0], w1.size)
-    s = sssig_decay(w, S0, BETA)
-    truth = {"a": 1.4, "floor": 1e-3, "cross": 1e-3, "c": 3e-4}
-    u = mismatch_model(w, s, sig, **truth) * np.exp(rng.normal(0, 0.05, w.size))
-    return truth, fit_mismatch(
-        w, s, u, noise_sigma=sig, next_term=False, floor=True, noise_blur=False, cross=True
-    )
 
 
 MODELS = ("power_law", "decay", "mismatch", "mismatch_cross")
 
 
 def _coverage(which: str, n: int) -> dict[str, float]:
-    hits: dict[str, int] = {}
-    for seed in range(n):
-        truth, fit = _coverage_case(which, seed)
-        for name, value in truth.items():
-            p = fit.parameter(name)
-            hits[name] = hits.get(name, 0) + int(p.low <= value <= p.high)
-    return {k: v / n for k, v in hits.items()}
+    """Synthetic data with known parameters for each model (docs/models.md s. 5)."""
+    return interval_coverage(which, n, first_seed=10_000)["coverage"]
 
 
 @pytest.mark.parametrize("which", MODELS)
@@ -395,20 +323,7 @@ def test_one_home_for_the_mismatch_formula():
 # ------------------------------------------------------------------ "done when": end to end
 def _direct_u_e(tmp_path, tag: str, *, noise: float, blur: float, size: int, reps: int):
     """u_e measured by simulation (campaign, same pattern as the calibration: seed 1)."""
-    from dicblur.campaign import open_results, run_campaign
-    from dicblur.campaign.calibrate import calibration_spec
-
-    spec = calibration_spec(
-        "paper4",
-        noise=noise,
-        subset=21,
-        size=(size, size),
-        blur=[float(blur)],
-        repetitions=reps,
-        seed=1,
-    )
-    run_campaign(spec, tmp_path / f"{tag}.zarr", serial=True)
-    u = open_results(tmp_path / f"{tag}.zarr")["u_e"].values.ravel()
+    u = simulated_u_e(tmp_path, tag, noise=noise, blur=blur, size=size, reps=reps)
     return float(np.sqrt(np.mean(u**2)))
 
 
@@ -416,34 +331,14 @@ def _direct_u_e(tmp_path, tag: str, *, noise: float, blur: float, size: int, rep
 def test_calibrate_then_predict_and_plan_match_a_direct_simulation(tmp_path, capsys):
     # about 20-30 s: a 128^2 calibration (13 blur levels) and two 8-repetition simulations
     cal = tmp_path / "cal"
-    assert (
-        main(
-            [
-                "calibrate",
-                "paper4",
-                "--size",
-                "128x128",
-                "--noise",
-                "2",
-                "--subset",
-                "21",
-                "--blur",
-                "0:6:0.5",
-                "-o",
-                str(cal),
-                "--serial",
-                "-q",
-            ]
-        )
-        == 0
-    )
+    assert main(calibrate_args(cal)) == 0
     model = cal / "model.json"
     capsys.readouterr()
     assert main(["predict", str(model), "--blur", "3", "--noise", "4", "--json"]) == 0
     pred = json.loads(capsys.readouterr().out)["predictions"][0]["u_e_px"]
     meas = _direct_u_e(tmp_path, "n4", noise=4.0, blur=3.0, size=128, reps=8)
     assert pred == pytest.approx(meas, rel=0.10), (pred, meas)
-    assert main(["plan", str(model), *_CAMERA_PLAN, "--json"]) == 0
+    assert main(["plan", str(model), *CAMERA_PLAN, "--json"]) == 0
     plan = json.loads(capsys.readouterr().out)
     m = BlurUncertaintyModel.from_json(str(model))
     cam = PoissonGaussianCamera(full_well=2e4, read_noise=5.0, flux=4e6)

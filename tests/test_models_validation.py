@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import optimize
 
 import dicblur
 from dicblur.models import blur_mismatch_curve, blur_sensitivity, fit_mismatch
+from helpers.blur import centred_blur
+from helpers.models import bruteforce_ssd_u_e, noisy_dic_scatter, subset_centres
 
 BLURS = np.array([1.0, 2.0, 3.0, 4.0])
 
@@ -27,31 +28,13 @@ def _c_fit(u_e: np.ndarray) -> float:
 
 @pytest.mark.slow
 def test_static_c_vs_bruteforce_ssd_up_to_w4():
-    n, sub, h = 96, 31, 15
+    n, sub = 96, 31
     img = dicblur.speckle_pattern((n, n), speckle_size=4.0, softness=0.5, seed=7)
-    spec = np.fft.fft2(img)
-    ky = np.fft.fftfreq(n)[:, None]
-    kx = np.fft.fftfreq(n)[None, :]
-    cent = np.array(
-        [[r, c] for r in range(h + 1, n - h - 1, 8) for c in range(h + 1, n - h - 1, 8)]
-    )
+    cent = subset_centres(n, sub, 8)
     pred = blur_sensitivity(
         img, subset=sub, points=cent, boundary="periodic", derivative="spectral", criterion="ssd"
     ).c
-    u_e = []
-    for wl in BLURS:
-        blurred = spec * np.sinc(wl * kx)
-        xs = []
-        for r, c in cent:
-            sl = (slice(r - h, r + h + 1), slice(c - h, c + h + 1))
-            ref = img[sl]
-
-            def resid(p, sl=sl, ref=ref, blurred=blurred):
-                shift = np.exp(2j * np.pi * (kx * p[0] + ky * p[1]))
-                return (np.fft.ifft2(blurred * shift).real[sl] - ref).ravel()
-
-            xs.append(optimize.least_squares(resid, [0.0, 0.0], xtol=1e-10).x[0])
-        u_e.append(np.std(xs))
+    u_e = bruteforce_ssd_u_e(img, BLURS, cent, sub)
     assert _c_fit(np.array(u_e)) == pytest.approx(pred, rel=0.15)
 
 
@@ -65,7 +48,6 @@ def test_static_c_vs_dic(size, shape):
     so that DIC's interpolation bias at the sub-pixel offset W/2 (a separate error term,
     docs/models.md s. 4) stays out and u_e measures the blur mismatch alone.
     """
-    motion_blur = dicblur.motion_blur
     correlate = dicblur.correlate
 
     blurs = np.arange(0.5, 4.01, 0.5)
@@ -77,12 +59,7 @@ def test_static_c_vs_dic(size, shape):
     curve = blur_mismatch_curve(img, blurs, **kw).u_blur
     u_e, s = [], []
     for wl in blurs:
-        centred = motion_blur(
-            img,
-            None,
-            substeps=None,
-            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
-        )
+        centred = centred_blur(img, wl)
         res = correlate(img, centred, subset=31, step=12, shape=shape)
         assert res.converged.all()
         u_e.append(float(np.std(res.u)))
@@ -109,13 +86,7 @@ def test_static_c_vs_dic_on_the_real_sample3(real_data):
     curve = blur_mismatch_curve(img, blurs, subset=31, points=pts).u_blur
     u_e, s = [], []
     for wl in blurs:
-        cur = dicblur.motion_blur(
-            img,
-            None,
-            substeps=None,
-            boundary="reflect",
-            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
-        )
+        cur = centred_blur(img, wl, boundary="reflect")
         res = dicblur.correlate(img, cur, subset=31, step=12, shape="translation")
         u_e.append(float(np.std(res.u[res.converged])))
         s.append(float(dicblur.sssig(cur, subset=31, points=pts).mean()))
@@ -137,22 +108,8 @@ def test_prediction_from_the_static_pattern_vs_noisy_dic(shape):
     )
     rng = np.random.default_rng(4)
     for j, wl in enumerate(blurs):
-        cur = dicblur.motion_blur(
-            img,
-            None,
-            substeps=None,
-            trajectory=lambda t, wl=wl: np.stack([0 * t, wl * (t - 0.5)], 1),
-        )
-        u_e = []
-        for _ in range(4):
-            res = dicblur.correlate(
-                img + rng.normal(0, sigma, img.shape),
-                cur + rng.normal(0, sigma, img.shape),
-                subset=21,
-                step=10,
-                shape=shape,
-            )
-            u_e.append(np.std(res.u[res.converged]))
+        cur = centred_blur(img, wl)
+        u_e = noisy_dic_scatter(img, cur, sigma=sigma, reps=4, rng=rng, shape=shape)
         # measured 0.99-1.06 on such cases; 4 x 289 POIs: +-4 % sampling scatter
         assert pred.u_e[j] == pytest.approx(np.mean(u_e), rel=0.12)
 

@@ -15,7 +15,7 @@ import dicblur
 from dicblur.models import fit_mismatch, mismatch_model, predict_from_pattern
 from dicblur.models.decay import sssig_decay
 from dicblur.models.mismatch import noise_growth
-from dicblur.models.sensitivity import shifts_and_variance
+from helpers.models import noise_variance_terms
 
 SUB = 31
 
@@ -56,22 +56,7 @@ def test_reference_and_current_shares_match_a_monte_carlo_of_the_engine():
     assert 0 < pr.u_noise_interaction[0] ** 2 < 0.02 * pr.u_noise[0] ** 2
     assert pr.u_noise_reference[0] ** 2 == pytest.approx(mc_ref, rel=0.15)
     assert pr.u_noise_current[0] ** 2 == pytest.approx(mc_cur, rel=0.15)
-    old = shifts_and_variance(
-        img,
-        [wl],
-        pts,
-        SUB,
-        motion=(0.0, 1.0),
-        shape="translation",
-        derivative="bspline3",
-        boundary="periodic",
-        criterion="znssd",
-        max_shift=np.inf,
-        chunk=256,
-        variance=True,
-        complete=False,
-    )[1]
-    assert old is not None
+    old = noise_variance_terms(img, [wl], pts, SUB)
     assert sigma**2 * np.mean(old[0, 0]) > 1.5 * mc_ref  # what the fix corrects
 
 
@@ -80,19 +65,8 @@ def test_no_mismatch_no_extra_term():
     # the match-score bound's halves, sigma^2 (J^T P J)^-1 each
     img = dicblur.speckle_pattern((96, 96), speckle_size=4.0, seed=1)
     pts = np.array([[48, 48], [40, 56]])
-    kw = dict(
-        motion=(0.0, 1.0),
-        shape="translation",
-        derivative="bspline3",
-        boundary="periodic",
-        criterion="znssd",
-        max_shift=np.inf,
-        chunk=256,
-        variance=True,
-    )
-    new = shifts_and_variance(img, [0.0], pts, 21, complete=True, **kw)[1]
-    old = shifts_and_variance(img, [0.0], pts, 21, complete=False, **kw)[1]
-    assert new is not None and old is not None
+    new = noise_variance_terms(img, [0.0], pts, 21, complete=True)
+    old = noise_variance_terms(img, [0.0], pts, 21, complete=False)
     np.testing.assert_allclose(new[:2], old[:2], rtol=1e-12)
     np.testing.assert_allclose(new[0], new[1], rtol=1e-10)
     assert np.all(old[2] == 0) and np.all(new[2] > 0)  # the sigma**4 interaction

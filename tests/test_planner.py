@@ -144,6 +144,29 @@ document.body.appendChild(pre);
 """
 
 
+def _plan_case(g: np.random.Generator, model: int, kind: str, *, camera: bool) -> dict:
+    """A plan case at random velocity and target, with a fixed random noise or a random
+    camera (drawn from ``g`` in that order)."""
+    case = {
+        "op": "plan",
+        "model": model,
+        "kind": kind,
+        "velocity": float(g.uniform(20, 400)),
+        "scale": 0.05,
+        "target": float(g.uniform(0.004, 0.03)),
+        "sigma": None if camera else float(g.uniform(1, 6)),
+        "camera": None,
+    }
+    if camera:
+        case["camera"] = {
+            "full_well": float(g.uniform(1e4, 4e4)),
+            "read_noise": float(g.uniform(1, 10)),
+            "flux": float(10 ** g.uniform(6, 7.5)),
+            "peak_to_mean": 2.0,
+        }
+    return case
+
+
 def _cases(models):
     rng = np.random.default_rng(7)
     cases = []
@@ -165,18 +188,7 @@ def _cases(models):
             }
         )
     for _ in range(30):
-        cases.append(
-            {
-                "op": "plan",
-                "model": int(rng.choice([0, 2])),
-                "kind": "mismatch",
-                "velocity": float(rng.uniform(20, 400)),
-                "scale": 0.05,
-                "target": float(rng.uniform(0.004, 0.03)),
-                "sigma": float(rng.uniform(1, 6)),
-                "camera": None,
-            }
-        )
+        cases.append(_plan_case(rng, int(rng.choice([0, 2])), "mismatch", camera=False))
     # the static kind (model 3, default static): predictions inside, between and beyond
     # the table's grid points and past the breakdown, fixed-noise and camera plans
     srng = np.random.default_rng(8)
@@ -192,54 +204,13 @@ def _cases(models):
             }
         )
     for _ in range(30):
-        cases.append(
-            {
-                "op": "plan",
-                "model": 3,
-                "kind": str(srng.choice(["static", "static", "mismatch"])),
-                "velocity": float(srng.uniform(20, 400)),
-                "scale": 0.05,
-                "target": float(srng.uniform(0.004, 0.03)),
-                "sigma": float(srng.uniform(1, 6)),
-                "camera": None,
-            }
-        )
+        kind = str(srng.choice(["static", "static", "mismatch"]))
+        cases.append(_plan_case(srng, 3, kind, camera=False))
     for _ in range(30):
-        cases.append(
-            {
-                "op": "plan",
-                "model": 3,
-                "kind": "static",
-                "velocity": float(srng.uniform(20, 400)),
-                "scale": 0.05,
-                "target": float(srng.uniform(0.004, 0.03)),
-                "sigma": None,
-                "camera": {
-                    "full_well": float(srng.uniform(1e4, 4e4)),
-                    "read_noise": float(srng.uniform(1, 10)),
-                    "flux": float(10 ** srng.uniform(6, 7.5)),
-                    "peak_to_mean": 2.0,
-                },
-            }
-        )
+        cases.append(_plan_case(srng, 3, "static", camera=True))
     for _ in range(40):
-        cases.append(
-            {
-                "op": "plan",
-                "model": int(rng.choice([0, 2])),
-                "kind": str(rng.choice(["mismatch", "power_law"])),
-                "velocity": float(rng.uniform(20, 400)),
-                "scale": 0.05,
-                "target": float(rng.uniform(0.004, 0.03)),
-                "sigma": None,
-                "camera": {
-                    "full_well": float(rng.uniform(1e4, 4e4)),
-                    "read_noise": float(rng.uniform(1, 10)),
-                    "flux": float(10 ** rng.uniform(6, 7.5)),
-                    "peak_to_mean": 2.0,
-                },
-            }
-        )
+        mi = int(rng.choice([0, 2]))
+        cases.append(_plan_case(rng, mi, str(rng.choice(["mismatch", "power_law"])), camera=True))
     return cases
 
 

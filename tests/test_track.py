@@ -18,7 +18,7 @@ from dicblur.track import (
     normalized_median_test,
     parse_rate,
 )
-from dicblur.track.synthetic import VibratingTarget
+from helpers.track import track_pattern, vibrating_target
 
 # shared/ sits beside the repository (conftest.REAL_DATA); a worktree sits one level lower
 _HERE = Path(__file__).resolve()
@@ -35,24 +35,10 @@ REAL = next(
 )
 
 
-def _pattern(n=112, seed=1):
-    p = dicblur.speckle_pattern((n, n), speckle_size=4, density=0.5, softness=0.5, seed=seed)
-    return 30 + 180 * (p - p.min()) / (p.max() - p.min())
-
-
 @pytest.fixture(scope="module")
 def tiny():
     """A 112^2 target, 4 static frames then a 200 Hz, 6 px vibration at 2000 fps (W <= 3 px)."""
-    tgt = VibratingTarget(
-        _pattern(),
-        fps=2000.0,
-        exposure=0.4e-3,
-        amplitude=6.0,
-        frequency=200.0,
-        angle=20.0,
-        static=4,
-        seed=3,
-    )
+    tgt = vibrating_target(track_pattern(), exposure=0.4e-3, amplitude=6.0, static=4, seed=3)
     rec = tgt.recording(24)
     ds = dicblur.track(rec, static="0:4", subset=21, step=12, shape="translation")
     return tgt, ds
@@ -192,7 +178,7 @@ def _plain(frames, fps=None, exposure=None):
 
 def test_missing_exposure_and_too_long():
     rng = np.random.default_rng(0)
-    img = _pattern(64)
+    img = track_pattern(64)
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(4)]
     with pytest.raises(InputError, match="--exposure"):
         dicblur.track(_plain(frames), fps=1000, noise=1.0, step=16)
@@ -204,7 +190,7 @@ def test_missing_exposure_and_too_long():
 
 def test_metadata_disagreement_warns():
     rng = np.random.default_rng(1)
-    img = _pattern(64)
+    img = track_pattern(64)
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(4)]
     with pytest.warns(UserWarning, match="metadata says"):
         ds = dicblur.track(
@@ -219,7 +205,7 @@ def test_metadata_disagreement_warns():
 
 def test_static_range_with_motion_warns():
     rng = np.random.default_rng(2)
-    img = _pattern(80)
+    img = track_pattern(80)
     frames = [np.roll(img, k // 2, axis=1) + rng.normal(0, 1, img.shape) for k in range(6)]
     with pytest.warns(UserWarning, match="the scene moves"):
         dicblur.track(_plain(frames, fps=1000, exposure=1e-4), static="0:6", step=16, advice=False)
@@ -227,7 +213,7 @@ def test_static_range_with_motion_warns():
 
 def test_bad_frame_keeps_what_was_tracked():
     rng = np.random.default_rng(3)
-    img = _pattern(80)
+    img = track_pattern(80)
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(6)]
     frames[4] = frames[4][:-2]
     with pytest.raises(TrackInterrupted, match="after 4 of 6 frames") as info:
@@ -287,7 +273,7 @@ def test_cli_track_partial_on_bad_frame(tmp_path, capsys):
     from dicblur.cli import main
 
     rng = np.random.default_rng(4)
-    img = _pattern(80)
+    img = track_pattern(80)
     folder = tmp_path / "frames"
     folder.mkdir()
     for k in range(5):
@@ -350,16 +336,8 @@ def test_predicted_sigma_matches_scatter_over_w():
     quadratic mean of the predicted sigma is within 15 % of the scatter over points."""
     w_all, d_all, s_all = [], [], []
     for i, t in enumerate((0.15e-3, 0.45e-3)):
-        tgt = VibratingTarget(
-            _pattern(192, seed=5),
-            fps=2000.0,
-            exposure=t,
-            amplitude=8.0,
-            frequency=200.0,
-            angle=20.0,
-            static=8,
-            seed=20 + i,
-        )
+        pat = track_pattern(192, seed=5)
+        tgt = vibrating_target(pat, exposure=t, amplitude=8.0, static=8, seed=20 + i)
         ds = dicblur.track(tgt.recording(38), static="0:8", subset=21, step=10, advice=False)
         tu, _tv, bu, bv = tgt.truth(ds["frame"].values)
         valid = ds["valid"].values.astype(bool)
@@ -386,7 +364,7 @@ def test_reference_update_follows_a_large_rotation():
     with displacements of the rotation's size."""
     from scipy import ndimage
 
-    img = _pattern(128, seed=7)
+    img = track_pattern(128, seed=7)
     rng = np.random.default_rng(5)
     angles = np.arange(10) * 4.0
     frames = [
@@ -429,7 +407,7 @@ def test_kernel_skew_from_track_and_its_bias():
     np.testing.assert_allclose(k3[3:-3, 0], k3_true[3:-3], atol=0.03 * np.abs(k3_true).max())
     assert np.allclose(axis[3:-3], 0.0) or np.allclose(axis[3:-3], 180.0)
 
-    img = _pattern(160, seed=9)
+    img = track_pattern(160, seed=9)
     s_max = 2.5  # accelerating from rest over 2.5 px
 
     def path(tau):
@@ -476,7 +454,7 @@ def test_track_noise_term_is_the_static_predictions_complete_term(shape):
     from dicblur.models import predict_from_pattern
     from dicblur.track import build_blur_table
 
-    img = _pattern(96, seed=4)
+    img = track_pattern(96, seed=4)
     yy, xx = np.mgrid[28:69:10, 28:69:10]
     pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
     sigma, ws = 2.0, np.array([0.0, 2.0, 4.0, 6.0])
@@ -570,7 +548,7 @@ def test_rigid_shift_is_sub_pixel():
     from dicblur.dic.initial import window_spectrum
     from dicblur.track.frames import _rigid_shift
 
-    img = _pattern(160, seed=7)
+    img = track_pattern(160, seed=7)
     ky = np.fft.fftfreq(160)[:, None]
     kx = np.fft.fftfreq(160)[None, :]
     for du, dv in ((0.4, -0.3), (3.5, 1.25), (-7.7, 0.0)):
@@ -585,7 +563,7 @@ def test_affine_start_from_all_parameters():
     # same result, fewer iterations on a deformed subset; a wrong shape is an InputError
     from scipy.ndimage import affine_transform
 
-    img = _pattern(128, seed=5)
+    img = track_pattern(128, seed=5)
     m = np.array([[1.0 / 1.02, 0.0], [0.01, 1.0 / 1.015]])  # output -> input (row, col)
     cur = affine_transform(img, m, offset=-(m - np.eye(2)) @ np.array([64.0, 64.0]), order=3)
     corr = dicblur.Correlator(img, subset=21, step=16, shape="affine")
@@ -612,7 +590,7 @@ def test_advice_is_the_static_predictions_point_value_without_a_fit(shape, monke
     from dicblur.track.advice import advise_exposure
     from dicblur.track.uncertainty import NoiseEstimate
 
-    img = _pattern(128, seed=6)
+    img = track_pattern(128, seed=6)
     yy, xx = np.mgrid[20:109:8, 20:109:8]
     pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
     rng = np.random.default_rng(1)
@@ -663,7 +641,7 @@ def test_compensated_advice_follows_the_compensated_prediction():
     from dicblur.track.advice import advise_exposure
     from dicblur.track.uncertainty import NoiseEstimate
 
-    img = _pattern(128, seed=6)
+    img = track_pattern(128, seed=6)
     yy, xx = np.mgrid[20:109:8, 20:109:8]
     pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
     speed = np.full(400, 20000.0)  # px/s: W = 4 px at 0.2 ms
@@ -707,39 +685,30 @@ def test_blur_table_nodes_only_where_the_motion_needs_them():
     # deg: nodes at 5, 20, ..., 170; 0 and 10 deg lie between 170 | 5 and 5 | 20)
     _, angles2, need2 = table_nodes(np.full((1, 3), 3.0), np.array([[0.0, 5.0, 10.0]]))
     np.testing.assert_allclose(np.sort(angles2[need2]), [5.0, 20.0, 170.0])
-    img = _pattern(96, seed=4)
+    img = track_pattern(96, seed=4)
     yy, xx = np.mgrid[28:69:20, 28:69:20]
     pts = np.stack([yy.ravel(), xx.ravel()], axis=1)
-    two = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[1.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-    )
+
+    def table(w_max: float, **kw):
+        # blur w_max px at 0 deg and 1.5 px at 90 deg
+        return build_blur_table(
+            img,
+            pts,
+            subset=21,
+            shape="affine",
+            blur=np.array([[w_max, 1.5]]),
+            angle=np.array([[0, 90.0]]),
+            **kw,
+        )
+
+    two = table(1.5)
     assert two.available.sum() == 2
     j0, j1 = np.flatnonzero(two.available)
     np.testing.assert_array_equal(two.values[j0, 0], two.values[j1, 0])
-    more = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[3.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-        have=two,
-    )
+    more = table(3.5, have=two)
     assert more.blur.size == 5 and two.blur.size == 3
     np.testing.assert_array_equal(more.values[:, :3][two.available], two.values[two.available])
-    fresh = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[3.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-    )
+    fresh = table(3.5)
     np.testing.assert_allclose(more.values, fresh.values, rtol=1e-12, equal_nan=True)
     # W = 0 copied from the first direction is what the second computes itself
     from dicblur.models.sensitivity import subset_blur_response
@@ -751,15 +720,7 @@ def test_blur_table_nodes_only_where_the_motion_needs_them():
     np.testing.assert_allclose(two.values[j1, 0, :, 2], cov[0, :, 0, 0], rtol=1e-12)
     np.testing.assert_allclose(two.values[j1, 0, :, 5], cov4[0, :, 1, 1], rtol=1e-12)
     # the nodes on two threads: the same values
-    threaded = build_blur_table(
-        img,
-        pts,
-        subset=21,
-        shape="affine",
-        blur=np.array([[3.5, 1.5]]),
-        angle=np.array([[0, 90.0]]),
-        threads=2,
-    )
+    threaded = table(3.5, threads=2)
     np.testing.assert_array_equal(threaded.values, fresh.values)
 
 
@@ -1008,7 +969,7 @@ def test_auto_tolerance_is_half_the_low_noise_floor_within_bounds():
     from dicblur.track.core import TOLERANCE_MAX, TOLERANCE_MIN, auto_tolerance
     from dicblur.track.uncertainty import NoiseEstimate
 
-    img = _pattern(96, seed=4)
+    img = track_pattern(96, seed=4)
     pts = dicblur.subset_centres(img.shape, subset=21, step=8)
     best = np.maximum(
         dicblur.sssig(img, subset=21, points=pts, direction="x"),
@@ -1060,7 +1021,7 @@ def test_seed_stride_grows_on_large_grids_keeping_enough_seeds():
     none below 16 seeds."""
     from dicblur.track.core import seed_correlator
 
-    img = _pattern(250, seed=7)
+    img = track_pattern(250, seed=7)
     opts = {"subset": 11, "shape": "translation"}
     for step, every in ((5, 32), (8, 16)):
         corr = dicblur.Correlator(img, step=step, **opts)

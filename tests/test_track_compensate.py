@@ -11,18 +11,14 @@ from dicblur.track.compensate import (
     build_compensated_table,
     group_vectors,
 )
-from dicblur.track.synthetic import VibratingTarget
 from dicblur.track.uncertainty import build_blur_table
+from helpers.track import track_pattern, vibrating_target
 
 
 def _target(n=128, seed=5):
-    p = dicblur.speckle_pattern((n, n), speckle_size=4, density=0.5, softness=0.5, seed=seed)
-    p = 30 + 180 * (p - p.min()) / (p.max() - p.min())
     # peak W = A 2 pi f T = 5.7 px
-    return VibratingTarget(
-        p, fps=2000.0, exposure=0.45e-3, amplitude=10.0, frequency=200.0, angle=20.0, static=6,
-        seed=21,
-    )  # fmt: skip
+    p = track_pattern(n, seed=seed)
+    return vibrating_target(p, exposure=0.45e-3, amplitude=10.0, static=6, seed=21)
 
 
 def _groups(tgt, ds, edges):

@@ -12,7 +12,7 @@ from dicblur.campaign import ChunkStore
 from dicblur.errors import InputError, StoreError
 from dicblur.track import TrackInterrupted
 from dicblur.track.parallel import HISTORY, ChunkedRun, plan_chunks
-from dicblur.track.synthetic import VibratingTarget
+from helpers.track import track_pattern, vibrating_target
 
 # the variables set by the correlation (the rest derive from them)
 RAW = ("u", "v", "zncc", "status", "fallback")
@@ -20,11 +20,8 @@ KW = {"static": "0:4", "subset": 21, "step": 12, "shape": "translation", "advice
 
 
 def _target():
-    p = dicblur.speckle_pattern((96, 96), speckle_size=4, density=0.5, softness=0.5, seed=2)
-    p = 30 + 180 * (p - p.min()) / (p.max() - p.min())
-    return VibratingTarget(
-        p, fps=2000.0, exposure=0.4e-3, amplitude=5.0, frequency=200.0, angle=20.0, static=4, seed=4
-    )
+    p = track_pattern(96, seed=2)
+    return vibrating_target(p, exposure=0.4e-3, amplitude=5.0, static=4, seed=4)
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,7 @@ estimate ``sum(f_x d) / sum(f_x^2)``; it lets the engine tests run without the D
 
 from __future__ import annotations
 
+import json
 import math
 import time
 
@@ -103,6 +104,30 @@ def small_spec_dict(**over: object) -> dict:
         sec, key = k.split("__")
         d[sec][key] = v
     return d
+
+
+def spec_toml(d: dict) -> str:
+    """The TOML text of a spec dict as ``small_spec_dict`` builds it: a table per section,
+    an array of tables for a list of tables, inline tables, lists, strings and numbers."""
+
+    def value(v: object) -> str:
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+
+    lines: list[str] = []
+    for section, body in d.items():
+        for table in body if isinstance(body, list) else [body]:
+            lines.append(f"[[{section}]]" if isinstance(body, list) else f"[{section}]")
+            lines += [f"{k} = {value(v)}" for k, v in table.items()]
+            lines.append("")
+    return "\n".join(lines)
 
 
 def kill_spec() -> CampaignSpec:

@@ -185,6 +185,8 @@ def simulate_batch(
             points=pts,
             workers=1,
             blur=blur,  # type: ignore[arg-type]
+            # u_e is the scatter of every converged point: no noise-based screening
+            noise_sigma=None,
         )
 
     noisy_ref = _noisy(reference, spec, batch.noise, ref_seed)

@@ -37,6 +37,7 @@ PIPELINE: dict[str, str] = {
     "predict": "Predict u_e at blur lengths, or from velocity, exposure, scale.",
     "plan": "Plan the exposure for a target u_e (optionally with a camera, or a page).",
     "track": "Track a high-speed recording: u, v and their sigma per point and frame.",
+    "stereo": "Stereo DIC: calibrate a rig; 3-D shape, displacement and their sigma.",
     "pulse": "The paper's 1-D pulse study (Section V): Table II, Fig. 4-6.",
     "design": "Find the speckle pattern with the lowest u_e at your blur.",
     "reproduce": "Reproduce the paper: figures, tables, claims in one HTML report.",
@@ -45,6 +46,8 @@ _SUBCOMMANDS: dict[tuple[str, str], str] = {
     ("pattern", "generate"): "Write a random speckle pattern (plus its settings JSON).",
     ("pattern", "metrics"): "SSSIG, MIG, speckle size, contrast, static predictions.",
     ("pattern", "predict"): "Predict u_e(W) from the static image alone (no simulation).",
+    ("stereo", "calibrate"): "Calibrate a stereo rig from checkerboard image pairs (OpenCV).",
+    ("stereo", "track"): "Two recordings in: X, Y, Z, U, V, W3 and their sigma per point.",
 }
 
 
@@ -177,6 +180,9 @@ _reproduce.register(app)
 from . import track as _track  # noqa: E402
 
 _track.register(app)
+from . import stereo as _stereo  # noqa: E402
+
+_stereo.register(app)
 
 
 _ABANDONED = re.compile(r"^coroutine '[^']*' was never awaited$")

@@ -32,8 +32,8 @@ def parse_size(text: str, name: str = "--size") -> tuple[int, int]:
 #: ``--max-predicted-sigma`` of ``correlate`` and ``track`` (one help text for both).
 MAX_SIGMA_HELP = (
     "Flag IMPRECISE the points whose predicted random error (from the reference subset and "
-    "the noise) exceeds this, px (e.g. 0.05px; none: no test). correlate: default 0.1/3 px "
-    "with --noise; track: default none."
+    "the noise) exceeds this, px (e.g. 0.05px; none: no test). correlate: default 0.1/3 px, "
+    "the noise given or estimated; track: default none."
 )
 
 

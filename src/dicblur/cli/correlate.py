@@ -27,6 +27,8 @@ _UNITS = {
     "mean_v": "px",
     "std_v": "px",
     "predicted_sigma_u": "px",
+    "noise_sigma": "GL",
+    "noise_sigma_95%": "GL",
     "predicted_sigma_v": "px",
     "prepare_s": "s",
     "compile_s": "s",
@@ -49,7 +51,11 @@ def correlate_command(
     ] = "bspline3",
     noise: Annotated[
         float | None,
-        typer.Option("--noise", help="Noise std (grey levels) for the predicted sigma."),
+        typer.Option(
+            "--noise",
+            help="Noise std (grey levels) for the predicted sigma and the screening "
+            "(default: estimated from the pair's residuals; given with --blur-compensation).",
+        ),
     ] = None,
     workers: Annotated[
         int | None, typer.Option("--workers", help="Threads (default: all).")
@@ -124,10 +130,11 @@ def correlate_command(
     extra: dict[str, float | None] = {}
     if max_predicted_sigma is not None:
         extra["max_predicted_sigma"] = parse_max_sigma(max_predicted_sigma)
-        if noise is None and extra["max_predicted_sigma"] is not None:
+        if noise is None and mode != "none" and extra["max_predicted_sigma"] is not None:
             raise InputError(
-                f"--max-predicted-sigma={max_predicted_sigma!r}: needs --noise (grey levels): "
-                "the predicted random error comes from the noise level"
+                f"--max-predicted-sigma={max_predicted_sigma!r}: needs --noise (grey levels) "
+                "with --blur-compensation: the predicted random error comes from the noise "
+                "level (estimated only without compensation)"
             )
     vector = None
     if blur is not None and (mode == "given" or blur > 0):
@@ -141,7 +148,7 @@ def correlate_command(
         step=step,
         shape=shape,  # type: ignore[arg-type]
         interpolation=interpolation,
-        noise_sigma=noise,
+        noise_sigma="auto" if noise is None else noise,
         workers=workers,
         median_test=median_test,
         blur=mode,  # type: ignore[arg-type]
@@ -167,6 +174,15 @@ def correlate_command(
             float(np.std(res.blur_length[ident], ddof=1)) if ident.sum() > 1 else None
         )
         data["blur_identified_fraction"] = float(ident.mean())
+    nz = corr.noise
+    if nz is None and noise is None and mode == "none":
+        data["noise_source"] = "unknown (too few converged subsets to estimate: give --noise)"
+    if nz is not None:
+        # the noise the predictions and the screening used: given, or estimated (interval)
+        data["noise_sigma"] = nz.sigma
+        data["noise_source"] = "estimated (pair residuals)" if nz.estimated else "given"
+        if nz.estimated:
+            data["noise_sigma_95%"] = f"{nz.low:.3g}-{nz.high:.3g}"
     data.update(
         {
             "prepare_s": corr.prepare_time_s,

@@ -2,19 +2,19 @@
 
 Pipeline per current image (one module per stage): B-spline prefilter
 (:mod:`.interpolation`), integer initial guess (:mod:`.initial`), IC-GN refinement with the
-ZNSSD criterion (:mod:`.icgn`, compiled in :mod:`.kernels`), result (:mod:`.result`).
+ZNSSD criterion (:mod:`.icgn`, compiled in :mod:`.kernels`; its passes in :mod:`.passes`),
+screening (:mod:`.screening`), result (:mod:`.result`); blur compensation in
+:mod:`.blur_matching`. The prepared state the stages share: :mod:`.state`.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
-from enum import Enum
-from typing import Any, Literal, NamedTuple
+from dataclasses import replace
+from typing import Any, Literal
 
 import numba
 import numpy as np
@@ -29,130 +29,40 @@ from ..checks import (
     describe,
 )
 from ..errors import InputError
-from ..metrics import image_gradients, subset_centres
+from ..metrics import image_gradients
 from . import cache, kernels
-from .compensation import (
-    BLUR_MODES,
-    blur_reference,
-    check_blur_vector,
-    noise_gain_slope,
-    prepare_blur_step,
-)
+from .blur_matching import BlurMatching
+from .compensation import BLUR_MODES, check_blur_vector
 from .icgn import N_PARAMS, prepare_subsets
 from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients
-from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen, neighbour_medians
+from .layout import grid_of, layout, seed_passes
+from .noise import NoiseEstimate
+from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET
 from .result import DICResult
+from .screening import MAX_PREDICTED_SIGMA, PROBE_CHI2, PROBE_DISTANCE
 from .settings import INITIAL_METHODS, SHAPES, MatcherSettings, Shape, check_integer
-from .status import PointStatus
+from .state import UNSET, PreparedImage, Refined, Unset
 
-__all__ = ["INITIAL_METHODS", "SHAPES", "Correlator", "PreparedImage", "correlate"]
+__all__ = [
+    "IMPRECISE_BUDGET",
+    "IMPRECISE_MIN",
+    "INITIAL_METHODS",
+    "MAX_PREDICTED_SIGMA",
+    "PROBE_CHI2",
+    "PROBE_DISTANCE",
+    "RETRY_BUDGET",
+    "SHAPES",
+    "Correlator",
+    "PreparedImage",
+    "Refined",
+    "correlate",
+]
 
 BlurMode = Literal["none", "given", "estimate"]
 
 
-class _Unset(Enum):
-    """Marks a matcher keyword of :class:`Correlator` that was not given."""
-
-    UNSET = 0
-
-
-_UNSET = _Unset.UNSET
-
-_RETRY = (
-    PointStatus.MAX_ITERATIONS,
-    PointStatus.DIVERGED,
-    PointStatus.LOW_CORRELATION,
-    PointStatus.OUT_OF_BOUNDS,
-)
-#: A retried POI gets at most this many times the median iterations of the converged POIs
-#: (at least 10): a subset that failed once rarely needs the full ``max_iterations``.
-RETRY_BUDGET = 4
-#: ``OUTLIER`` when the neighbours' median displacement fits a subset better than its own
-#: result by more than this chi-square gain (``Df^2 (zncc_nb - zncc) / sigma^2``; 0 or less
-#: at a true optimum): IC-GN stopped at a false optimum.
-PROBE_CHI2 = 10.0
-#: Only POIs farther than this (px) from their neighbours' median are probed.
-PROBE_DISTANCE = 0.05
-#: Default ``max_predicted_sigma`` (px): a subset whose predicted random error (the
-#: magnitude ``hypot(predicted_sigma_u, predicted_sigma_v)``) exceeds it is ``IMPRECISE``;
-#: at 0.1/3 px an error beyond 0.1 px is a 3-sigma event.
-MAX_PREDICTED_SIGMA = 0.1 / 3
-#: Subsets predicted ``IMPRECISE`` are flagged whatever their outcome, so they get no
-#: retry and (affine) an iteration limit of this many times the median iterations of the
-#: precise POIs that converged in the same pass (at least :data:`IMPRECISE_MIN`, at most
-#: ``max_iterations``). Their estimate is kept for inspection only: on the blob image of
-#: ``benchmarks/bench_dic_robust.py`` three iterations leave it a median 0.003 px from
-#: where six did, and no farther from the truth (0.1 px off: 68 against 78 of 255). 1.0 and
-#: 3 since issue 15's third pass (1.5 and 4 before, when 15 % of the blob image's affine
-#: iterations went to these 11 % of its POIs).
-IMPRECISE_BUDGET = 1.0
-IMPRECISE_MIN = 3
-
-
-#: Most blurred references kept per Correlator (each holds a prepared reference; fewer
-#: for large images, see Correlator._blurred).
-_BLUR_CACHE_SIZE = 12
-#: Grid (px) of the blur lengths W0 the estimation blurs the reference to; the per-subset
-#: joint step estimates the remainder (|lam| <= 1/8 px at convergence).
-_BLUR_GRID = 0.25
-#: Convergence of the blur length in the joint step, px (its random error is 0.01-0.1 px).
-_BLUR_TOLERANCE = 1e-3
-#: Most POIs the estimation's image-level search of W0 uses.
-_BLUR_SAMPLE = 64
-
-
-@dataclass(frozen=True)
-class _BlurredReference:
-    """A plain Correlator on the blurred reference, and (estimation) the joint-step data."""
-
-    corr: Correlator
-    index: NDArray[np.intp] | None
-    vector: NDArray[np.float64]
-    step: Any = None
-    images: tuple[NDArray[np.float64], ...] = ()
-
-
-@dataclass(frozen=True, eq=False)
-class PreparedImage:
-    """A deformed image with its B-spline coefficients (:meth:`Correlator.prefilter`).
-
-    Attributes
-    ----------
-    image : ndarray, shape (rows, cols)
-        The image, float64 grey levels.
-    coefficients : ndarray of float32, shape (rows + 2 PAD, cols + 2 PAD + margin)
-        Its prefiltered coefficients in the Correlator's padded layout (read only by
-        the kernels).
-    order : int
-        B-spline degree (3 or 5).
-    """
-
-    image: NDArray[np.float64]
-    coefficients: NDArray[np.float32]
-    order: int
-
-
-class Refined(NamedTuple):
-    """IC-GN results of :meth:`Correlator.refine` (n POIs, k shape parameters).
-
-    Attributes
-    ----------
-    params : ndarray, shape (n, k)
-        As :attr:`DICResult.params` (px; affine gradients dimensionless).
-    zncc : ndarray, shape (n,)
-    iterations : ndarray of int64, shape (n,)
-    status : ndarray of uint8, shape (n,)
-        :class:`PointStatus` codes.
-    """
-
-    params: NDArray[np.float64]
-    zncc: NDArray[np.float64]
-    iterations: NDArray[np.int64]
-    status: NDArray[np.uint8]
-
-
-class Correlator:
+class Correlator(BlurMatching):
     """Subset DIC against one prepared reference image.
 
     The reference is prepared once (B-spline coefficients and gradients, per-subset
@@ -195,9 +105,13 @@ class Correlator:
         ``|d| = sqrt(du^2 + dv^2 + h^2 |grad|^2)`` (``h`` = subset half-width) below it, or,
         for steps contracting by ``q = |d| / |d_prev|``, ``|d| q / (1 - q)`` below it (below
         4 x it after an Aitken jump, ``kernels.JUMP_SLACK``).
-    noise_sigma : float, optional
-        Image noise std, grey levels (assumed in both images); enables the per-point
-        predicted sigma.
+    noise_sigma : float, "auto" or None
+        Image noise std, grey levels (assumed in both images): enables the per-point
+        predicted sigma and the noise-based screening. ``"auto"`` (default): each
+        correlation estimates it from the pair's converged ZNSSD residuals
+        (:func:`~dicblur.dic.noise.residual_noise`; the plain matcher, ``blur="none"``;
+        with compensation "auto" acts as None), reported in :attr:`noise` and the
+        result's ``info``. None: no noise known, no noise-based test.
     min_zncc : float
         Converged points with a lower ZNCC get status ``LOW_CORRELATION``.
     max_residual : float or None
@@ -228,6 +142,12 @@ class Correlator:
         correlating, so they are not retried and (affine) get at most
         :data:`IMPRECISE_BUDGET` times the median iterations of the converging subsets.
         None: no test.
+    neighbour_check : bool
+        On a grid of POIs, compare each converged POI with the median of its precise
+        converged 3x3 neighbours (docs/dic.md, "Screening"): a POI farther than
+        ``max(0.1 px, 4 predicted sigma)`` is retried from that median and is
+        ``OUTLIER`` unless the retry fits better there; a predicted-imprecise POI within
+        0.07 px of it is kept ``CONVERGED`` instead of ``IMPRECISE``. False: no check.
 
     Examples
     --------
@@ -244,23 +164,24 @@ class Correlator:
         reference: ArrayLike,
         *,
         settings: MatcherSettings | None = None,
-        subset: int | _Unset = _UNSET,
-        step: int | _Unset = _UNSET,
+        subset: int | Unset = UNSET,
+        step: int | Unset = UNSET,
         roi: Sequence[int] | None = None,
         points: ArrayLike | None = None,
-        shape: Shape | _Unset = _UNSET,
-        interpolation: str | _Unset = _UNSET,
-        initial: str | _Unset = _UNSET,
-        max_iterations: int | _Unset = _UNSET,
-        tolerance: float | _Unset = _UNSET,
-        noise_sigma: float | None = None,
-        min_zncc: float | _Unset = _UNSET,
+        shape: Shape | Unset = UNSET,
+        interpolation: str | Unset = UNSET,
+        initial: str | Unset = UNSET,
+        max_iterations: int | Unset = UNSET,
+        tolerance: float | Unset = UNSET,
+        noise_sigma: float | Literal["auto"] | None = "auto",
+        min_zncc: float | Unset = UNSET,
         workers: int | None = None,
-        max_residual: float | _Unset | None = _UNSET,
-        median_test: bool | _Unset = _UNSET,
+        max_residual: float | Unset | None = UNSET,
+        median_test: bool | Unset = UNSET,
         blur: BlurMode = "none",
         max_blur_sigma: float = 0.5,
         max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
+        neighbour_check: bool = True,
     ) -> None:
         t0 = time.perf_counter()
         given: dict[str, Any] = {
@@ -277,7 +198,7 @@ class Correlator:
                 ("max_residual", max_residual),
                 ("median_test", median_test),
             )
-            if v is not _UNSET
+            if v is not UNSET
         }
         if settings is not None and not isinstance(settings, MatcherSettings):
             raise InputError(
@@ -300,9 +221,12 @@ class Correlator:
         self.initial: str = cfg.initial
         self.max_iterations = cfg.max_iterations
         self.tolerance = cfg.tolerance
+        #: Whether each correlation estimates the noise (``noise_sigma="auto"``).
+        auto = isinstance(noise_sigma, str) and noise_sigma == "auto"
+        self.noise_auto = auto and self.blur == "none"
         self.noise_sigma = (
             None
-            if noise_sigma is None
+            if noise_sigma is None or auto
             else check_positive(noise_sigma, "noise_sigma", allow_zero=True)
         )
         self.min_zncc = cfg.min_zncc
@@ -325,9 +249,12 @@ class Correlator:
         )
         self.rows = rows
         self.cols = cols
-        self._grid_shape, self._grid_index = self._grid_of(rows, cols, required=bool(median_test))
+        self._grid_shape, self._grid_index = grid_of(rows, cols, required=bool(median_test))
         #: Whether :meth:`correlate` screens the grid for ``OUTLIER`` points.
         self.median_test = bool(median_test)
+        #: Whether :meth:`correlate` checks each converged POI against its grid
+        #: neighbours (screening.py: retry from their median, ``OUTLIER``, IMPRECISE kept).
+        self.neighbour_check = bool(neighbour_check)
         coef = bspline_coefficients(ref, order=self.order, dtype=np.float64)
         # IC-GN uses the exact derivatives of the reference spline (consistent with the
         # interpolant of the current image: fast, unbiased convergence)
@@ -373,12 +300,17 @@ class Correlator:
         self._ref_spectrum = window_spectrum(ref)
         self.predicted_sigma_u: NDArray[np.float64] | None = None
         self.predicted_sigma_v: NDArray[np.float64] | None = None
-        if self.noise_sigma is not None:
+        #: The noise of the last correlation (given or estimated), or None.
+        self.noise: NoiseEstimate | None = (
+            None if self.noise_sigma is None else NoiseEstimate.given(self.noise_sigma)
+        )
+        self._unit_sigma: NDArray[np.float64] | None = None
+        if self.noise_sigma is not None or self.noise_auto:
             # predicted sigma from the project's SSSIG (central differences, as
             # dicblur.metrics.sssig): see docs/dic.md for why not the spline gradients
             cgy, cgx = image_gradients(ref)
             pp = prepare_subsets(ref, cgx, cgy, rc, cc, half, self.shape)
-            s2 = self.noise_sigma**2
+            s2 = 1.0 if self.noise_sigma is None else self.noise_sigma**2
             with np.errstate(divide="ignore", invalid="ignore"):
                 if self.shape == "translation":
                     pu = np.sqrt(2.0 * s2 / pp.sssig_x)
@@ -387,8 +319,12 @@ class Correlator:
                     pu = np.sqrt(s2 * pp.cov_unit[:, 0, 0])
                     pv = np.sqrt(s2 * pp.cov_unit[:, 3, 3])
             bad = status0 != 0
-            self.predicted_sigma_u = np.where(bad, np.nan, pu)
-            self.predicted_sigma_v = np.where(bad, np.nan, pv)
+            if self.noise_sigma is None:
+                # per unit noise: scaled by each correlation's estimate (screening.py)
+                self._unit_sigma = np.stack([np.where(bad, np.nan, pu), np.where(bad, np.nan, pv)])
+            else:
+                self.predicted_sigma_u = np.where(bad, np.nan, pu)
+                self.predicted_sigma_v = np.where(bad, np.nan, pv)
         #: POIs whose predicted random error exceeds ``max_predicted_sigma`` (or None).
         self._imprecise: NDArray[np.bool_] | None = None
         pu_, pv_ = self.predicted_sigma_u, self.predicted_sigma_v
@@ -397,58 +333,11 @@ class Correlator:
                 imp = np.hypot(pu_, pv_) > self.max_predicted_sigma
             self._imprecise = imp if imp.any() else None
         # blur compensation: prepared blurred references by (blur vector, point set)
-        self._blur_cache: OrderedDict[tuple[Any, ...], _BlurredReference] = OrderedDict()
-        self._last_blur_length: float | None = None
+        self._blur_cache = OrderedDict()
+        self._last_blur_length = None
         self.prepare_time_s = time.perf_counter() - t0
         #: Timings (s) of the last :meth:`correlate` call: prefilter, initial, icgn, total.
         self.last_timings: dict[str, float] = {}
-
-    def fork(self, *, workers: int | _Unset | None = _UNSET) -> Correlator:
-        """A Correlator on this one's prepared reference, with its own scratch state, for
-        another thread.
-
-        The prepared reference (B-spline gradients, per-subset Hessians, POIs, predicted
-        errors) is read-only after ``__init__`` and shared, not copied; the fork gets its
-        own coefficient buffer (``correlate`` of an unprepared image writes it), its own
-        caches and timings. So this Correlator and its forks may correlate on different
-        threads at the same time, each with exactly the results of a Correlator built
-        anew with the same arguments (tests/test_dic.py). A fork costs about 1 MB and a
-        few microseconds (a 512^2 reference with 2,401 POIs takes ~0.3 s to prepare).
-
-        Parameters
-        ----------
-        workers : int or None, optional
-            Threads of the fork's compiled kernels (default: this Correlator's).
-
-        Returns
-        -------
-        Correlator
-
-        Examples
-        --------
-        >>> import numpy as np, dicblur
-        >>> ref = dicblur.speckle_pattern((96, 96), speckle_size=4, seed=1)
-        >>> corr = dicblur.Correlator(ref, subset=21, step=20)
-        >>> one = corr.fork(workers=1)  # e.g. one per thread of a pool
-        >>> bool(np.array_equal(one.correlate(ref).u, corr.correlate(ref).u))
-        True
-        """
-        t0 = time.perf_counter()
-        new = object.__new__(Correlator)
-        new.__dict__.update(self.__dict__)
-        if workers is not _UNSET:
-            new.workers = None if workers is None else check_integer(workers, "workers", 1)
-        # the mutable state: scratch buffer, caches (their entries are read-only and keyed
-        # by the shared index arrays, so they are carried over), timings, blur references
-        new._coef_buf = np.zeros_like(self._coef_buf)
-        new._args_cache = dict(self._args_cache)
-        new._split_cache = dict(self._split_cache)
-        new._split_ids = set(self._split_ids)
-        new._blur_cache = OrderedDict()
-        new._last_blur_length = None
-        new.last_timings = {}
-        new.prepare_time_s = time.perf_counter() - t0
-        return new
 
     # ------------------------------------------------------------------ setup helpers
     @staticmethod
@@ -469,100 +358,16 @@ class Correlator:
         constructor (the grid of ``step`` px inside ``roi`` or the whole image, or the
         given centres).
         """
-        rows_img, cols_img = (int(image_shape[0]), int(image_shape[1]))
-        half = subset // 2
-        if points is not None:
-            pts = np.asarray(points)
-            if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] == 0:
-                raise InputError(
-                    f"points={describe(pts)}: expected an (n, 2) array of "
-                    "(row, col) POI centres, n >= 1"
-                )
-            if not np.issubdtype(pts.dtype, np.integer):
-                if not np.all(np.isfinite(pts)) or not np.all(pts == np.round(pts)):
-                    raise InputError(
-                        f"points={describe(pts)}: POI centres must be integer "
-                        "pixel positions (round them first)"
-                    )
-            pts = pts.astype(np.int64)
-            r, c = pts[:, 0].copy(), pts[:, 1].copy()
-            inside = (
-                (r - half >= 0)
-                & (r + half <= rows_img - 1)
-                & (c - half >= 0)
-                & (c + half <= cols_img - 1)
-            )
-            st = np.where(inside, 0, int(PointStatus.OUT_OF_BOUNDS)).astype(np.uint8)
-            return r, c, st
-        r0, r1, c0, c1 = 0, rows_img, 0, cols_img
-        if roi is not None:
-            try:
-                r0, r1, c0, c1 = (int(x) for x in roi)
-            except (TypeError, ValueError) as exc:
-                raise InputError(
-                    f"roi={describe(roi)}: expected (row_start, row_stop, "
-                    "col_start, col_stop) in px"
-                ) from exc
-            if not (0 <= r0 < r1 <= rows_img and 0 <= c0 < c1 <= cols_img):
-                raise InputError(
-                    f"roi={describe(roi)}: must satisfy 0 <= row_start < "
-                    f"row_stop <= {rows_img} and 0 <= col_start < col_stop <= "
-                    f"{cols_img}"
-                )
-        if min(r1 - r0, c1 - c0) < subset + 2:
-            raise InputError(
-                f"roi={describe(roi)}: region smaller than the subset "
-                f"({subset} px) plus a 1-px border; enlarge it"
-            )
-        centres = subset_centres((r1 - r0, c1 - c0), subset=subset, step=step)
-        r = centres[:, 0].astype(np.int64) + r0
-        c = centres[:, 1].astype(np.int64) + c0
-        return r, c, np.zeros(len(r), np.uint8)
-
-    @staticmethod
-    def _grid_of(
-        rows: NDArray[np.int64], cols: NDArray[np.int64], *, required: bool
-    ) -> tuple[tuple[int, int] | None, NDArray[np.intp] | None]:
-        """Shape of the POI grid and each POI's row-major cell, when the POIs fill one."""
-        ur, ri = np.unique(rows, return_inverse=True)
-        uc, ci = np.unique(cols, return_inverse=True)
-        cell = ri.astype(np.intp) * len(uc) + ci.astype(np.intp)
-        if len(rows) == len(ur) * len(uc) and np.unique(cell).size == len(rows):
-            return (len(ur), len(uc)), cell
-        if required:
-            raise InputError(
-                f"median_test=True: the {len(rows)} points do not fill a "
-                f"regular grid ({len(ur)} rows x {len(uc)} columns of centres)"
-                "; use median_test=False or a full grid of points"
-            )
-        return None, None
+        return layout(image_shape, subset=subset, step=step, roi=roi, points=points)
 
     def _setup_seeds(self) -> None:
-        """Two-pass start: IC-GN first on sparse seed POIs (about 1 in 16), then every other
-        POI starts from its nearest seed's warp carried to its own centre. A start within a
-        few hundredths of a px saves about one IC-GN iteration per POI (Pan et al. 2013 use
-        the same idea along a reliability path)."""
-        n = self.n_points
-        self._seeds: NDArray[np.intp] | None = None
-        self._rest: NDArray[np.intp] | None = None
-        if n < 64:
-            return
-        from scipy.spatial import cKDTree
+        """The two-pass start's seed POIs and the rest (:func:`.layout.seed_passes`)."""
+        passes = seed_passes(self.rows, self.cols, self.step)
+        self._seeds = None if passes is None else passes[0]
+        self._rest = None if passes is None else passes[1]
+        if passes is not None:
+            self._rest_seed = passes[2]
 
-        spacing = 4 * self.step
-        key = (self.rows // spacing) * 100003 + (self.cols // spacing)
-        _, first = np.unique(key, return_index=True)
-        seeds = np.sort(first)
-        rest = np.setdiff1d(np.arange(n), seeds)
-        if seeds.size == 0 or rest.size == 0:
-            return
-        tree = cKDTree(np.stack([self.rows[seeds], self.cols[seeds]], axis=1))
-        _, near = tree.query(np.stack([self.rows[rest], self.cols[rest]], axis=1))
-        self._seeds = seeds
-        self._rest = rest
-        self._rest_seed = seeds[np.asarray(near, dtype=np.intp)]
-
-    #: Largest flat reference copy (bytes) kept for the translation kernel; above it the
     #: kernel copies each POI's subset per call instead (same results).
     pack_limit_bytes = 256 * 2**20
 
@@ -576,214 +381,6 @@ class Correlator:
             kernels.pack_reference(
                 self._images, self._subsets, self.half, self._w, self._status0, self._packed
             )
-
-    def _settings(self, width: int, max_iter: int | None) -> kernels.Settings:
-        """The kernels' scalar record (``max_iter`` None: ``max_iterations``)."""
-        return kernels.settings(
-            self.image_shape[0],
-            self.image_shape[1],
-            self.order,
-            self.half,
-            width,
-            self.max_iterations if max_iter is None else max_iter,
-            self.tolerance,
-            self.min_zncc,
-            float(self.subset),
-        )
-
-    @property
-    def n_points(self) -> int:
-        """Number of POIs."""
-        return int(self.rows.shape[0])
-
-    @property
-    def grid_shape(self) -> tuple[int, int] | None:
-        """``(rows, cols)`` of the POI grid, or None when the POIs do not fill one.
-
-        The Correlator's own grid lists its POIs in row-major order, so result arrays
-        reshape to this shape (e.g. for :func:`~dicblur.dic.normalized_median_test`); for
-        explicit ``points`` use :attr:`grid_cells`.
-        """
-        return self._grid_shape
-
-    @property
-    def grid_cells(self) -> NDArray[np.intp] | None:
-        """Row-major grid cell of each POI (n,), or None (see :attr:`grid_shape`)."""
-        return None if self._grid_index is None else self._grid_index.copy()
-
-    # ------------------------------------------------------------------ correlation
-    def _translation(
-        self,
-        coef: NDArray[np.float32],
-        p0: NDArray[np.float64],
-        status_in: NDArray[np.uint8],
-        first: NDArray[np.intp],
-        second: NDArray[np.intp],
-        source: NDArray[np.intp],
-        max_iter: int | None = None,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
-        """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
-        ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
-        out = kernels.outputs(self.n_points, 2)
-        cache.wait_for_background("translation")
-        kernels.icgn_translation(
-            coef,
-            self._images,
-            self._subsets,
-            self._packed,
-            self._settings(self._w, max_iter),
-            p0,
-            status_in,
-            kernels.Passes(first, second, source),
-            numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
-            out,
-        )
-        return out.p, out.zncc, out.iterations, out.status
-
-    def _run_icgn(
-        self,
-        coef: NDArray[np.float32],
-        p0: NDArray[np.float64],
-        status_in: NDArray[np.uint8],
-        idx: NDArray[np.intp] | None = None,
-        max_iter: int | None = None,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
-        if self.shape == "translation":
-            full = np.zeros((self.n_points, 2))
-            st_full = np.zeros(self.n_points, np.uint8)
-            sel = self._all if idx is None else idx
-            full[sel] = p0
-            st_full[sel] = status_in
-            out = self._translation(coef, full, st_full, sel, self._none, self._none, max_iter)
-            return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
-        if max_iter is None and self._imprecise is not None:
-            split = self._imprecise_split(idx)
-            if split is not None:
-                return self._run_split(coef, p0, status_in, idx, split)
-        if idx is None:
-            subsets = self._subsets
-        else:
-            key = id(idx)
-            cached = self._args_cache.get(key)
-            if cached is not None and cached[0] is idx:
-                subsets = cached[1]
-            else:
-                subsets = kernels.Subsets(*(a[idx] for a in self._subsets))  # type: ignore[arg-type]
-                if (
-                    idx is self._seeds
-                    or (self._rest is not None and idx is self._rest)
-                    or key in self._split_ids
-                ):
-                    self._args_cache[key] = (idx, subsets)
-        n = len(self.rows) if idx is None else len(idx)
-        out = kernels.outputs(n, N_PARAMS[self.shape])
-        cache.wait_for_background("affine")
-        kernels.icgn_affine(
-            coef,
-            self._images,
-            subsets,
-            self._settings(self._tw, max_iter),
-            np.ascontiguousarray(p0),
-            np.ascontiguousarray(status_in),
-            out,
-        )
-        return out.p, out.zncc, out.iterations, out.status
-
-    def _imprecise_split(
-        self, idx: NDArray[np.intp] | None
-    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]] | None:
-        """``idx`` (None: all POIs) split into the precise and the predicted-imprecise POIs:
-        (positions in idx, POIs) of each, or None when none is imprecise."""
-        assert self._imprecise is not None
-        key = id(idx)
-        hit = self._split_cache.get(key)
-        if hit is not None and hit[0] is idx:
-            return hit[1]
-        sel = self._all if idx is None else idx
-        imp = self._imprecise[sel]
-        out = None
-        if imp.any():
-            loc_p, loc_i = np.flatnonzero(~imp), np.flatnonzero(imp)
-            out = (loc_p, sel[loc_p], loc_i, sel[loc_i])
-        if idx is None or idx is self._seeds or idx is self._rest:
-            self._split_cache[key] = (idx, out)
-            if out is not None:
-                self._split_ids.update((id(out[1]), id(out[3])))
-        return out
-
-    def _run_split(
-        self,
-        coef: NDArray[np.float32],
-        p0: NDArray[np.float64],
-        status_in: NDArray[np.uint8],
-        idx: NDArray[np.intp] | None,
-        split: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
-        """Affine IC-GN, the predicted-imprecise POIs after the precise ones, within
-        IMPRECISE_BUDGET times the median iterations of the precise converged POIs."""
-        loc_p, pts_p, loc_i, pts_i = split
-        n = len(self.rows) if idx is None else len(idx)
-        k = p0.shape[1]
-        out_p = np.empty((n, k))
-        out_z = np.empty(n)
-        out_i = np.empty(n, np.int64)
-        out_s = np.empty(n, np.uint8)
-        cap = self.max_iterations
-        if loc_p.size:
-            r = self._run_icgn(coef, p0[loc_p], status_in[loc_p], pts_p, cap)
-            out_p[loc_p], out_z[loc_p], out_i[loc_p], out_s[loc_p] = r
-            conv = r[2][r[3] == PointStatus.CONVERGED]
-            if conv.size:
-                budget = math.ceil(IMPRECISE_BUDGET * float(np.median(conv)))
-                cap = min(cap, max(IMPRECISE_MIN, budget))
-        r = self._run_icgn(coef, p0[loc_i], status_in[loc_i], pts_i, cap)
-        out_p[loc_i], out_z[loc_i], out_i[loc_i], out_s[loc_i] = r
-        return out_p, out_z, out_i, out_s
-
-    def _seeded_icgn(
-        self, coef: NDArray[np.float32], p0: NDArray[np.float64], status0: NDArray[np.uint8]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
-        assert self._seeds is not None and self._rest is not None
-        seeds, rest, src = self._seeds, self._rest, self._rest_seed
-        if self.shape == "translation":
-            # both passes in one kernel call: the rest start from their seed's result
-            return self._translation(coef, p0, status0, seeds, rest, src)
-        n, k = p0.shape
-        p = np.empty((n, k))
-        z = np.empty(n)
-        it = np.empty(n, np.int64)
-        st = np.empty(n, np.uint8)
-        ps, zs, its, sts = self._run_icgn(coef, p0[seeds], status0[seeds], seeds)
-        p[seeds], z[seeds], it[seeds], st[seeds] = ps, zs, its, sts
-        start = p0[rest].copy()
-        good = st[src] == PointStatus.CONVERGED
-        q = p[src[good]]
-        dx = (self.cols[rest[good]] - self.cols[src[good]]).astype(float)
-        dy = (self.rows[rest[good]] - self.rows[src[good]]).astype(float)
-        if k == 2:
-            start[good] = q
-        elif good.any():
-            # carry the seed's translation to this POI's centre with the median gradients of
-            # all converged seeds (a single seed's gradients are too noisy to extrapolate)
-            ok_seeds = st[seeds] == PointStatus.CONVERGED
-            grad = np.median(p[seeds[ok_seeds]][:, [1, 2, 4, 5]], axis=0)
-            start[good] = q
-            start[good, 0] = q[:, 0] + grad[0] * dx + grad[1] * dy
-            start[good, 3] = q[:, 3] + grad[2] * dx + grad[3] * dy
-            start[good, 1], start[good, 2] = grad[0], grad[1]
-            start[good, 4], start[good, 5] = grad[2], grad[3]
-        pr, zr, itr, str_ = self._run_icgn(coef, start, status0[rest], rest)
-        p[rest], z[rest], it[rest], st[rest] = pr, zr, itr, str_
-        return p, z, it, st
-
-    def _guess_to_params(
-        self, u: NDArray[np.float64], v: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
-        k = N_PARAMS[self.shape]
-        p0 = np.zeros((len(u), k))
-        p0[:, 0] = u
-        p0[:, 1 if k == 2 else 3] = v
-        return p0
 
     def prefilter(self, current: ArrayLike) -> PreparedImage:
         """The checked image ``current`` with its B-spline coefficients, for several
@@ -898,8 +495,10 @@ class Correlator:
             )
         coef = current.coefficients
         with self._kernel_threads():
+            if self.noise_auto:
+                self._set_noise(None)
             p, z, it, st = self._run_icgn(coef, p0, self._status0)
-            self._flag(coef, p, z, st)
+            self._flag(coef, p, z, st, it)
         return Refined(p, z, it, st)
 
     def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
@@ -1028,15 +627,19 @@ class Correlator:
             gv = np.zeros(n)
         t2 = time.perf_counter()
         p0 = self._guess_to_params(gu, gv) if full is None else full
+        if self.noise_auto:
+            self._set_noise(None)  # this pair's noise is not known yet
         if method in ("fftcc", "zero") and self._seeds is not None:
             p, z, it, st = self._seeded_icgn(coef, p0, status0)
         else:
             p, z, it, st = self._run_icgn(coef, p0, status0)
+        if self.noise_auto:
+            self._estimate_noise(z, st)  # the retry skips the predicted-imprecise POIs
         t3 = time.perf_counter()
         if method == "fftcc":
             self._retry(cur, coef, gu, gv, p, z, it, st)
         t4 = time.perf_counter()
-        noise_var = self._flag(coef, p, z, st)
+        noise_var = self._flag(coef, p, z, st, it)
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,
@@ -1050,6 +653,7 @@ class Correlator:
         v = p[:, 1 if k == 2 else 3].copy()
         info = self._info_base(method)
         info["screen_noise_sigma"] = None if noise_var is None else float(np.sqrt(noise_var))
+        info.update(self._noise_info())
         return DICResult(
             rows=self.rows.copy(),
             cols=self.cols.copy(),
@@ -1066,512 +670,6 @@ class Correlator:
             if self.predicted_sigma_v is None
             else self.predicted_sigma_v.copy(),
             info=info,
-        )
-
-    def _flag(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-    ) -> float | None:
-        """The statuses after IC-GN, in place: :meth:`_screen`, then ``IMPRECISE``;
-        returns the screen's noise variance (or None)."""
-        noise_var = self._screen(coef, p, z, st)
-        if self._imprecise is not None:
-            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
-            # cause, so it gets that status too
-            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
-            st[done & self._imprecise] = PointStatus.IMPRECISE
-        return noise_var
-
-    def _retry(
-        self,
-        cur: NDArray[np.float64],
-        coef: NDArray[np.float32],
-        gu: NDArray[np.float64],
-        gv: NDArray[np.float64],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        it: NDArray[np.int64],
-        st: NDArray[np.uint8],
-    ) -> None:
-        """Second chance for the failed POIs, in place, within an iteration budget.
-
-        A POI with converged grid neighbours restarts from their median parameters (a
-        start near the local field, one compiled call for all); the others get the
-        per-subset FFT-CC integer guess, unless it equals the start they already had.
-        """
-        status0 = self._status0
-        again = np.isin(st, _RETRY) & (status0 == 0)
-        if self._imprecise is not None:
-            # flagged IMPRECISE even if a retry converged: not worth a second attempt
-            again &= ~self._imprecise
-        retry = np.flatnonzero(again)
-        if retry.size == 0:
-            return
-        ok = st == PointStatus.CONVERGED
-        conv = it[ok]
-        budget = (
-            self.max_iterations
-            if conv.size == 0
-            else min(self.max_iterations, max(10, RETRY_BUDGET * int(np.median(conv))))
-        )
-        k = p.shape[1]
-        start = np.full((retry.size, k), np.nan)
-        if self._grid_shape is not None and ok.any():
-            assert self._grid_index is not None
-            ny, nx = self._grid_shape
-            cell = self._grid_index
-            grid = np.full((k, ny * nx), np.nan)
-            grid[:, cell] = p.T
-            valid = np.zeros(ny * nx, bool)
-            valid[cell] = ok
-            start = neighbour_medians(grid.reshape(k, ny, nx), valid.reshape(ny, nx), cell[retry]).T
-        near = np.all(np.isfinite(start), axis=1)
-        far = retry[~near]
-        if far.size:
-            iu, iv, _ = subset_fftcc(
-                self._ref,
-                cur,
-                self.rows[far],
-                self.cols[far],
-                self.half,
-                guess_u=gu[far],
-                guess_v=gv[far],
-                workers=1,
-            )
-            # the first pass started there already: nothing new to try
-            new = (iu != np.rint(gu[far])) | (iv != np.rint(gv[far]))
-            start[~near] = self._guess_to_params(iu.astype(float), iv.astype(float))
-            near[~near] = new
-        retry, start = retry[near], start[near]
-        if retry.size == 0:
-            return
-        p2, z2, it2, st2 = self._run_icgn(coef, start, status0[retry], retry, budget)
-        better = (st2 == PointStatus.CONVERGED) | (st[retry] != PointStatus.CONVERGED)
-        idx = retry[better]
-        p[idx], z[idx], st[idx] = p2[better], z2[better], st2[better]
-        it[idx] = it[idx] + it2[better]
-
-    def _screen(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-    ) -> float | None:
-        """Flag false convergence in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
-
-        Returns the noise variance (GL^2) the tests used, or None when none ran.
-
-        Residual: at the true match, with independent noise of std sigma in both images,
-        ``1 - zncc ~ sigma^2 m / Df^2`` with ``m = npx - k - 2`` (ZNSSD ``C = 2 (1 - zncc)``,
-        the residual being the difference of the two noises after removing mean, gain and
-        the ``k`` fitted parameters). The noise variance used is the larger of
-        ``noise_sigma^2`` and the field's median of ``(1 - zncc) Df^2 / m`` (so a blurred
-        or otherwise mismatched pair, whose every subset exceeds the noise, is not flagged
-        as a whole). The interpolation of the current image slightly smooths its noise,
-        so the prediction is conservative (up to ~10 % high at half-pixel shifts).
-        """
-        ok = st == PointStatus.CONVERGED
-        residual = self.max_residual is not None and self.noise_sigma is not None
-        if not ok.any() or not (residual or self.median_test):
-            return None
-        k = p.shape[1]
-        fnorm2 = self._prep.fnorm**2
-        m = self.subset * self.subset - k - 2
-        unit = np.maximum(1.0 - z, 0.0) * fnorm2 / m
-        noise_var = float(np.median(unit[ok]))
-        if self.noise_sigma is not None:
-            noise_var = max(noise_var, self.noise_sigma**2)
-        if self.max_residual is not None and self.noise_sigma is not None and noise_var > 0:
-            high = ok & (unit > self.max_residual * noise_var)
-            st[high] = PointStatus.HIGH_RESIDUAL
-            ok &= ~high
-        if not self.median_test or self._grid_shape is None or not ok.any():
-            return noise_var
-        assert self._grid_index is not None
-        shape, cell = self._grid_shape, self._grid_index
-        ucol, vcol = 0, 1 if k == 2 else 3
-        # (k, ny, nx) with u, v first: the components the median test looks at
-        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
-        grid = np.full((k, shape[0] * shape[1]), np.nan)
-        grid[:, cell] = np.where(ok, p[:, order].T, np.nan)
-        valid = np.zeros(shape[0] * shape[1], bool)
-        valid[cell] = ok
-        # points within PROBE_DISTANCE of their neighbours' median skip the median (and the
-        # probe): the shortcut of median_screen
-        out2, med_g = median_screen(
-            grid.reshape(k, *shape),
-            valid.reshape(shape),
-            eps=MEDIAN_EPS,
-            threshold=MEDIAN_THRESHOLD,
-            within=PROBE_DISTANCE / np.sqrt(2.0),
-        )
-        out = out2.ravel()[cell]
-        st[out] = PointStatus.OUTLIER
-        ok &= ~out
-        # probe: a POI far from its neighbours' median is evaluated (one IC-GN iteration,
-        # which reports the ZNCC at its start) at the neighbours' median parameters; a
-        # clearly better fit there means IC-GN stopped at a false optimum
-        med = np.empty((len(cell), k))
-        med[:, order] = med_g.reshape(k, -1)[:, cell].T
-        dist = np.hypot(p[:, ucol] - med[:, ucol], p[:, vcol] - med[:, vcol])
-        with np.errstate(invalid="ignore"):
-            probe = np.flatnonzero(ok & (dist > PROBE_DISTANCE))
-        if probe.size and noise_var > 0:
-            _, zp, _, _ = self._run_icgn(coef, med[probe], self._status0[probe], probe, 1)
-            with np.errstate(invalid="ignore"):
-                gain = fnorm2[probe] * (zp - z[probe]) / noise_var
-            st[probe[gain > PROBE_CHI2]] = PointStatus.OUTLIER
-        return noise_var
-
-    # ------------------------------------------------------------------ blur compensation
-    def _blurred(
-        self,
-        vec: NDArray[np.float64],
-        index: NDArray[np.intp] | None,
-        *,
-        tag: str = "given",
-        step: bool = False,
-    ) -> _BlurredReference:
-        """The prepared blurred reference for ``vec`` on the POIs ``index`` (None: all)."""
-        key = (tag, float(vec[0]), float(vec[1]), None if index is None else index.tobytes(), step)
-        hit = self._blur_cache.get(key)
-        if hit is not None:
-            self._blur_cache.move_to_end(key)
-            return hit
-        blurred, dimg = blur_reference(self._ref, vec, derivative=step)
-        sel = self._all if index is None else index
-        pts = np.stack([self.rows[sel], self.cols[sel]], axis=1)
-        corr = Correlator(
-            blurred,
-            subset=self.subset,
-            step=self.step,
-            points=pts,
-            shape=self.shape,  # type: ignore[arg-type]
-            interpolation=self.interpolation,
-            initial=self.initial,
-            max_iterations=self.max_iterations,
-            tolerance=self.tolerance,
-            noise_sigma=self.noise_sigma,
-            min_zncc=self.min_zncc,
-            workers=self.workers,
-            max_predicted_sigma=self.max_predicted_sigma,
-        )
-        prep = None
-        images: tuple[NDArray[np.float64], ...] = ()
-        if step:
-            assert dimg is not None
-            coef = bspline_coefficients(blurred, order=self.order, dtype=np.float64)
-            gy, gx = bspline_gradients(coef, self.order, self.image_shape)
-            rc = np.clip(pts[:, 0], self.half, self.image_shape[0] - 1 - self.half)
-            cc = np.clip(pts[:, 1], self.half, self.image_shape[1] - 1 - self.half)
-            prep = prepare_blur_step(blurred, gx, gy, dimg, rc, cc, self.half, self.shape)
-            images = (blurred, gx, gy, dimg)
-        entry = _BlurredReference(
-            corr=corr, index=index, vector=np.array(vec, dtype=float), step=prep, images=images
-        )
-        self._blur_cache[key] = entry
-        # about 64 bytes per image pixel per entry: keep the cache under ~1 GiB
-        limit = max(2, min(_BLUR_CACHE_SIZE, 2**30 // (64 * self._ref.size)))
-        while len(self._blur_cache) > limit:
-            self._blur_cache.popitem(last=False)
-        return entry
-
-    @staticmethod
-    def _initial_for(
-        initial: ArrayLike | None, index: NDArray[np.intp], n: int
-    ) -> ArrayLike | None:
-        if initial is None:
-            return None
-        arr = np.asarray(initial, dtype=np.float64)
-        return arr[index] if arr.shape == (n, 2) else arr
-
-    def _blur_info(self, res: DICResult, **extra: Any) -> DICResult:
-        info = dict(self._info_base(res.info.get("initial", self.initial)))
-        info.update(extra)
-        return replace(res, info=info)
-
-    def _info_base(self, method: str) -> dict[str, Any]:
-        from .._version import __version__
-
-        return {
-            "subset": self.subset,
-            "step": self.step,
-            "shape": self.shape,
-            "interpolation": self.interpolation,
-            "initial": method,
-            "max_iterations": self.max_iterations,
-            "tolerance": self.tolerance,
-            "noise_sigma": self.noise_sigma,
-            "min_zncc": self.min_zncc,
-            "max_residual": self.max_residual,
-            "max_predicted_sigma": self.max_predicted_sigma,
-            "median_test": int(self.median_test),
-            "image_shape": f"{self.image_shape[0]}x{self.image_shape[1]}",
-            "grid_shape": (
-                None if self._grid_shape is None else f"{self._grid_shape[0]}x{self._grid_shape[1]}"
-            ),
-            "dicblur_version": __version__,
-        }
-
-    def _correlate_given(
-        self, cur: NDArray[np.float64], initial: ArrayLike | None, vec: NDArray[np.float64]
-    ) -> DICResult:
-        t0 = time.perf_counter()
-        n = self.n_points
-        if vec.ndim == 2 and np.all(vec == vec[:1]):
-            vec = vec[0]
-        if vec.ndim == 1:
-            if vec[0] == 0.0 and vec[1] == 0.0:
-                # zero blur: the blurred reference is the reference (bit-identical path)
-                res = self._correlate(cur, initial)
-            else:
-                entry = self._blurred(vec, None)
-                res = entry.corr._correlate(cur, initial)
-                self.last_timings = dict(entry.corr.last_timings)
-            self.last_timings["total_with_blur_s"] = time.perf_counter() - t0
-            return self._blur_info(
-                res, blur_compensation="given", blur_dy=float(vec[0]), blur_dx=float(vec[1])
-            )
-        # one vector per POI: group the POIs that share a vector
-        uniq, inverse = np.unique(vec, axis=0, return_inverse=True)
-        inverse = np.asarray(inverse).ravel()
-        k = N_PARAMS[self.shape]
-        p = np.full((n, k), np.nan)
-        z = np.full(n, np.nan)
-        it = np.zeros(n, np.int64)
-        st = np.zeros(n, np.uint8)
-        pu = np.full(n, np.nan) if self.noise_sigma is not None else None
-        pv = np.full(n, np.nan) if self.noise_sigma is not None else None
-        for g, v in enumerate(uniq):
-            idx = np.flatnonzero(inverse == g).astype(np.intp)
-            if v[0] == 0.0 and v[1] == 0.0:
-                entry = self._blurred(np.zeros(2), idx, tag="plain")
-            else:
-                entry = self._blurred(v, idx)
-            r = entry.corr._correlate(cur, self._initial_for(initial, idx, n))
-            p[idx], z[idx], it[idx], st[idx] = r.params, r.zncc, r.iterations, r.status
-            if pu is not None and pv is not None:
-                assert r.predicted_sigma_u is not None and r.predicted_sigma_v is not None
-                pu[idx], pv[idx] = r.predicted_sigma_u, r.predicted_sigma_v
-        self.last_timings = {"total_s": time.perf_counter() - t0}
-        info = self._info_base(self.initial)
-        info.update(blur_compensation="given", blur_vectors=len(uniq))
-        return DICResult(
-            rows=self.rows.copy(),
-            cols=self.cols.copy(),
-            u=p[:, 0].copy(),
-            v=p[:, 1 if k == 2 else 3].copy(),
-            params=p,
-            zncc=z,
-            iterations=it,
-            status=st,
-            predicted_sigma_u=pu,
-            predicted_sigma_v=pv,
-            info=info,
-        )
-
-    def _blur_direction(
-        self, blur_vector: ArrayLike | None, blur_angle: float | None
-    ) -> tuple[NDArray[np.float64], float | None]:
-        if blur_vector is not None:
-            vec = check_blur_vector(blur_vector, n_points=self.n_points, subset=self.subset)
-            if vec.ndim != 1:
-                raise InputError(
-                    f"blur_vector={describe(vec)}: blur='estimate' takes one "
-                    "vector (dy, dx) px: its direction and starting length"
-                )
-            length = math.hypot(float(vec[0]), float(vec[1]))
-            if length == 0.0:
-                raise InputError(
-                    "blur_vector=(0, 0): blur='estimate' needs the direction; "
-                    "give a non-zero vector or blur_angle (degrees)"
-                )
-            return vec / length, length
-        if blur_angle is None:
-            raise InputError(
-                "blur_angle=None: blur='estimate' needs the blur direction; "
-                "pass blur_angle (degrees from +x towards +y) or blur_vector"
-            )
-        try:
-            ang = float(blur_angle)
-        except (TypeError, ValueError) as exc:
-            raise InputError(f"blur_angle={describe(blur_angle)}: expected degrees") from exc
-        if not math.isfinite(ang):
-            raise InputError(f"blur_angle={blur_angle!r}: must be a finite number (degrees)")
-        rad = math.radians(ang)
-        return np.array([math.sin(rad), math.cos(rad)]), None
-
-    def _joint_step(
-        self, entry: _BlurredReference, cur_corr: Correlator, res: DICResult, max_iter: int = 10
-    ) -> tuple[
-        NDArray[np.float64],
-        NDArray[np.float64],
-        NDArray[np.float64],
-        NDArray[np.float64],
-        NDArray[np.int64],
-        NDArray[np.uint8],
-    ]:
-        """Joint (shape, blur length) Gauss-Newton from the compensated IC-GN result."""
-        from .kernels.blur import (
-            BlurImages,
-            BlurTerms,
-            blur_outputs,
-            blur_settings,
-            joint_blur_step,
-        )
-
-        sp = entry.step
-        c = cur_corr
-        n = len(res)
-        k = res.params.shape[1]
-        out = blur_outputs(n, k)
-        st_in = np.where(res.status == PointStatus.CONVERGED, 0, res.status).astype(np.uint8)
-        st_in[~sp.ok & (st_in == 0)] = int(PointStatus.LOW_TEXTURE)
-        joint_blur_step(
-            c._coef_buf,
-            BlurImages(*entry.images),
-            kernels.Subsets(c.rows, c.cols, sp.hinv, sp.jsum, sp.avec, sp.fmean, sp.fnorm),
-            BlurTerms(sp.evec, sp.dsum, sp.bval, sp.dd),
-            blur_settings(
-                self.image_shape[0],
-                self.image_shape[1],
-                self.order,
-                self.half,
-                self.shape == "affine",
-                max_iter,
-                self.tolerance,
-                _BLUR_TOLERANCE,
-            ),
-            np.ascontiguousarray(res.params),
-            st_in,
-            out,
-        )
-        out_p, out_lam, out_z, out_r, out_i, out_s = out
-        npx = self.subset**2
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sig = np.sqrt(np.maximum(out_r, 0.0) / (npx - k - 1) * sp.hinv[:, k, k])
-            if self.noise_sigma:
-                # the blurred noisy reference loses noise as W grows: remove the lean
-                # -n sigma^2 kappa'(W0) / 2 (Df^-2 hinv) of the length (noise_gain_slope)
-                length = math.hypot(float(entry.vector[0]), float(entry.vector[1]))
-                slope = noise_gain_slope(length, entry.vector / length)
-                out_lam += (
-                    sp.hinv[:, k, k]
-                    / np.where(sp.fnorm > 0, sp.fnorm, 1.0) ** 2
-                    * npx
-                    * self.noise_sigma**2
-                    * slope
-                    / 2.0
-                )
-        return out_p, out_lam, out_z, sig, out_i, out_s
-
-    def _correlate_estimate(
-        self,
-        cur: NDArray[np.float64],
-        initial: ArrayLike | None,
-        blur_vector: ArrayLike | None,
-        blur_angle: float | None,
-    ) -> DICResult:
-        """Blur length along a fixed direction, estimated with the displacement.
-
-        1. image level, on up to 64 spread POIs: compensated IC-GN at ``W0`` (a 0.25 px
-           grid), then the joint step; ``W0`` <- the grid length nearest
-           ``W0 + median(lam)`` until it stays (a coarse search over 1..11 px starts it
-           when no length is known);
-        2. every POI: compensated IC-GN at the final ``W0``, then the joint step gives the
-           per-subset blur length ``W0 + lam``, its standard error and the displacement.
-        """
-        t0 = time.perf_counter()
-        e, guess = self._blur_direction(blur_vector, blur_angle)
-        wmax = self.subset - 1.0
-        n = self.n_points
-        good = np.flatnonzero(self._status0 == 0)
-        if good.size == 0:
-            good = self._all
-        sample = (
-            good
-            if good.size <= _BLUR_SAMPLE
-            else good[np.linspace(0, good.size - 1, _BLUR_SAMPLE).round().astype(np.intp)]
-        )
-
-        def grid(w: float) -> float:
-            return float(min(max(round(w / _BLUR_GRID) * _BLUR_GRID, 0.5), wmax))
-
-        def sample_run(w0: float) -> tuple[float, float]:
-            entry = self._blurred(w0 * e, sample, tag="estimate", step=True)
-            r = entry.corr._correlate(cur, self._initial_for(initial, sample, n))
-            _, lam, z, _, _, s = self._joint_step(entry, entry.corr, r)
-            ok = (s == PointStatus.CONVERGED) & np.isfinite(lam)
-            if not ok.any():
-                return w0, -np.inf
-            return w0 + float(np.median(lam[ok])), float(np.median(z[ok]))
-
-        # warm start (the previous image's W0, no length given): skip the sample search
-        # and check W0 on the full pass instead
-        warm = guess is None and self._last_blur_length is not None
-        if guess is None:
-            guess = self._last_blur_length
-        if guess is None:
-            cands = [w for w in (1.0, 3.0, 6.0, 10.0) if w <= wmax] or [grid(wmax / 2)]
-            trials = [(sample_run(w)) for w in cands]
-            guess = max(trials, key=lambda t: t[1])[0]
-        w0 = grid(guess)
-        if not warm:
-            for _ in range(8):
-                w_new, _ = sample_run(w0)
-                # a linear step far from W0 is only a direction: at most 3 px per pass
-                w_new = w0 + max(-3.0, min(3.0, w_new - w0))
-                if grid(w_new) == w0:
-                    break
-                w0 = grid(w_new)
-        for _ in range(4):
-            entry = self._blurred(w0 * e, None, tag="estimate", step=True)
-            base = entry.corr._correlate(cur, initial)
-            p, lam, z, sig, its, st = self._joint_step(entry, entry.corr, base)
-            good_lam = (st == PointStatus.CONVERGED) & np.isfinite(lam)
-            if not warm or not good_lam.any():
-                break
-            step = max(-3.0, min(3.0, float(np.median(lam[good_lam]))))
-            if grid(w0 + step) == w0:
-                break
-            w0 = grid(w0 + step)  # the blur changed since the last image
-        self._last_blur_length = w0
-        identified = (st == PointStatus.CONVERGED) & np.isfinite(sig) & (sig <= self.max_blur_sigma)
-        # a subset that cannot tell its own blur keeps the displacement at the image's W0
-        keep = ~identified
-        p[keep] = base.params[keep]
-        z[keep] = base.zncc[keep]
-        st = np.where(keep, base.status, st).astype(np.uint8)
-        st[(st == PointStatus.CONVERGED) & ~(z >= self.min_zncc)] = int(PointStatus.LOW_CORRELATION)
-        k = p.shape[1]
-        length = np.where(np.isfinite(lam), w0 + lam, np.nan)
-        self.last_timings = {"total_s": time.perf_counter() - t0}
-        info = self._info_base(base.info.get("initial", self.initial))
-        info.update(
-            blur_compensation="estimate",
-            blur_dir_dy=float(e[0]),
-            blur_dir_dx=float(e[1]),
-            blur_w0=w0,
-        )
-        return DICResult(
-            rows=self.rows.copy(),
-            cols=self.cols.copy(),
-            u=p[:, 0].copy(),
-            v=p[:, 1 if k == 2 else 3].copy(),
-            params=p,
-            zncc=z,
-            iterations=base.iterations + its,
-            status=st,
-            predicted_sigma_u=base.predicted_sigma_u,
-            predicted_sigma_v=base.predicted_sigma_v,
-            info=info,
-            blur_length=length,
-            blur_sigma=sig,
-            blur_identified=identified,
         )
 
     def warmup(self) -> float:
@@ -1611,20 +709,20 @@ def correlate(
     current: ArrayLike,
     *,
     settings: MatcherSettings | None = None,
-    subset: int | _Unset = _UNSET,
-    step: int | _Unset = _UNSET,
+    subset: int | Unset = UNSET,
+    step: int | Unset = UNSET,
     roi: Sequence[int] | None = None,
     points: ArrayLike | None = None,
-    shape: Shape | _Unset = _UNSET,
-    interpolation: str | _Unset = _UNSET,
+    shape: Shape | Unset = UNSET,
+    interpolation: str | Unset = UNSET,
     initial: str | ArrayLike = "fftcc",
-    max_iterations: int | _Unset = _UNSET,
-    tolerance: float | _Unset = _UNSET,
-    noise_sigma: float | None = None,
-    min_zncc: float | _Unset = _UNSET,
+    max_iterations: int | Unset = UNSET,
+    tolerance: float | Unset = UNSET,
+    noise_sigma: float | Literal["auto"] | None = "auto",
+    min_zncc: float | Unset = UNSET,
     workers: int | None = None,
-    max_residual: float | _Unset | None = _UNSET,
-    median_test: bool | _Unset = _UNSET,
+    max_residual: float | Unset | None = UNSET,
+    median_test: bool | Unset = UNSET,
     max_predicted_sigma: float | None = MAX_PREDICTED_SIGMA,
 ) -> DICResult:
     """One-shot subset DIC of ``current`` against ``reference`` (see :class:`Correlator`).
@@ -1632,8 +730,8 @@ def correlate(
     ``initial`` is a method name (``"fftcc"``, ``"subset"``, ``"zero"``) or an array of
     initial guesses ``(u, v)`` px of shape (n, 2) or (2,).
     """
-    method = initial if isinstance(initial, str) else _UNSET
-    if settings is None and method is _UNSET:
+    method = initial if isinstance(initial, str) else UNSET
+    if settings is None and method is UNSET:
         method = "fftcc"
     c = Correlator(
         reference,

@@ -280,6 +280,9 @@ def track(
         "shape": shape,
         "min_zncc": min_zncc,
         "workers": workers,
+        # the track screens with its own per-frame noise model (track/uncertainty.py),
+        # not the Correlator's per-pair estimate
+        "noise_sigma": None,
     }
     if tol_given is None:
         cfg = MatcherSettings(subset=subset, step=step)  # validated before the layout

@@ -1,0 +1,264 @@
+"""Stereo DIC under motion blur on the synthetic laboratory (issue 29, docs/stereo.md).
+
+Accuracy: a speckled plane facing the rig's bisector, 400 mm from a symmetric rig of
+stereo angle 15, 30 or 45 deg (2000 px focal length, 0.2 mm/px), vibrating as
+``A (1 - cos 2 pi f t)`` either in-plane (along the rig's x, in the target plane) or
+out-of-plane (along its normal), with the peak blur in the more blurred camera near
+``--peak-w`` px; the exposure is the whole frame interval, so a frame moves about its blur.
+Each case renders its frames (supersampled ray casting, noise 2 GL) and tracks them with
+``dicblur.stereo.track``. Reported per case: the shape error against the truth (mean and
+scatter, against the predicted sigma), the 3-D displacement bias, and per bin of the
+point's largest blur (of the two cameras) the predicted sigma_U, sigma_V, sigma_W3 (RMS over
+the bin) against the measured scatter over points (rms of the error about its frame's mean;
+the frame means apart, as bias).
+
+Speed: 2 x ``--pairs`` frames of 512^2 (8 distinct renderings of a slow in-plane motion,
+played back and forth so that the motion stays continuous), subset 21, step 10 (2,401
+POIs), affine: frame pairs per second of the correlation loop and end to end.
+
+Run: ``python benchmarks/bench_stereo.py [--quick]`` (results/stereo.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import itertools
+
+from _harness import Run
+
+from dicblur.camera import Camera
+from dicblur.stereo import CameraModel, track
+from dicblur.stereo.core import ArrayRecording
+from dicblur.stereo.synthetic import SpeckleTarget, StereoLab, symmetric_rig
+
+FPS = 2000.0
+BINS = (0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.5)
+
+
+def lab_for(
+    angle: float, motion: str, size: int, peak_w: float, frames_per_cycle: int
+) -> StereoLab:
+    cam = CameraModel(
+        2000.0, 2000.0, (size - 1) / 2, (size - 1) / 2, (-0.05, 0, 0, 0, 0), (size, size)
+    )
+    rig = symmetric_rig(stereo_angle=angle, distance=400.0, camera=cam)
+    tgt = SpeckleTarget.speckled(
+        rig=rig, origin=(0.0, 0.0, 400.0), size=80.0, speckle_size=1.0, seed=11
+    )
+    es, _, n = tgt.frame()
+    axis = es if motion == "in-plane" else n
+    # blur per mm of motion in each camera, at the target's centre
+    x0 = np.asarray(tgt.origin)
+    gain = max(
+        float(np.linalg.norm(a - b))
+        for a, b in zip(rig.project(x0 + 0.5 * axis), rig.project(x0 - 0.5 * axis), strict=True)
+    )
+    f = FPS / frames_per_cycle
+    exposure = 1.0 / FPS
+    # the peak motion during one exposure of A (1 - cos): 2 A sin(pi f T) at the fastest
+    amp = peak_w / gain / (2 * math.sin(math.pi * f * exposure))
+
+    def traj(t: np.ndarray) -> np.ndarray:
+        return amp * (1 - np.cos(2 * np.pi * f * t))[:, None] * axis[None, :]
+
+    return StereoLab(
+        rig,
+        tgt,
+        traj,
+        exposure=exposure,
+        fps=FPS,
+        camera=Camera(read_noise=2.0, bit_depth=None),
+        supersample=2,
+    )
+
+
+def accuracy_case(angle: float, motion: str, *, size: int, frames: int, peak_w: float) -> dict:
+    lab = lab_for(angle, motion, size, peak_w, frames_per_cycle=frames - 1)
+    t0 = time.perf_counter()
+    pairs = [lab.render(k, seed=1000 + k) for k in range(frames)]
+    t_render = time.perf_counter() - t0
+    left = np.array([p[0] for p in pairs])
+    right = np.array([p[1] for p in pairs])
+    ds = track(
+        left,
+        right,
+        lab.rig,
+        exposure=lab.exposure,
+        fps=FPS,
+        noise=2.0,
+        subset=21,
+        step=10,
+        threads=2,
+    )
+    rc = np.stack([ds["row"].values, ds["col"].values], axis=1)
+    ok = ds["status_stereo"].values == 0
+    truth = lab.surface_point(rc, frame=0)
+    shape = np.stack([ds[c].values for c in "XYZ"], axis=1)
+    err_s = (shape - truth)[ok]
+    pred_s = np.stack([ds[f"sigma_{c}"].values for c in "XYZ"], axis=1)[ok]
+    valid = ds["valid"].values.astype(bool)
+    errs, cen, sigs, wmax = [], [], [], []
+    for k in range(1, frames):
+        d = lab.mean_displacement(k) - lab.mean_displacement(0)
+        v = valid[k]
+        e = np.stack([ds[c].values[k] for c in ("U", "V", "W3")], axis=1)[v] - d
+        s = np.stack([ds[f"sigma_{c}"].values[k] for c in ("U", "V", "W3")], axis=1)[v]
+        errs.append(e)
+        # sigma predicts the scatter over points; the frame's common error (the skewed
+        # kernel of an accelerating blur, the interpolation's bias) is reported as bias
+        cen.append(e - e.mean(axis=0))
+        sigs.append(s)
+        wmax.append(np.maximum(ds["W_left"].values[k][v], ds["W_right"].values[k][v]))
+    e, s, w = np.concatenate(errs), np.concatenate(sigs), np.concatenate(wmax)
+    ec = np.concatenate(cen)
+    bins = []
+    for lo, hi in itertools.pairwise(BINS):
+        m = (w >= lo) & (w < hi)
+        if m.sum() < 100:
+            continue
+        for j, comp in enumerate(("U", "V", "W3")):
+            pred = float(np.sqrt(np.mean(s[m, j] ** 2)))
+            meas = float(np.sqrt(np.mean(ec[m, j] ** 2)))
+            bins.append(
+                {
+                    "W_lo": lo,
+                    "W_hi": hi,
+                    "n": int(m.sum()),
+                    "component": comp,
+                    "predicted": pred,
+                    "measured": meas,
+                    "ratio": pred / meas,
+                    "bias": float(np.mean(e[m, j])),
+                    "frame_bias_rms": float(np.sqrt(np.mean((e[m, j] - ec[m, j]) ** 2))),
+                }
+            )
+    return {
+        "stereo_angle": angle,
+        "motion": motion,
+        "size": size,
+        "frames": frames,
+        "peak_W": float(np.nanmax(w)) if w.size else float("nan"),
+        "render_s": t_render,
+        "track_s": float(ds.attrs["total_time_s"]),
+        "stereo_matched": float(ok.mean()),
+        "valid_share": float(valid[1:].mean()),
+        "shape_error_mean_mm": err_s.mean(axis=0).tolist(),
+        "shape_error_std_mm": err_s.std(axis=0).tolist(),
+        "shape_sigma_pred_mm": np.sqrt(np.mean(pred_s**2, axis=0)).tolist(),
+        "displacement_bias_mm": e.mean(axis=0).tolist(),
+        "out_of_plane_over_in_plane_pred": float(
+            np.sqrt(np.mean(s[:, 2] ** 2)) / np.sqrt(np.mean(s[:, 0] ** 2))
+        ),
+        "bins": bins,
+    }
+
+
+def speed_case(pairs: int) -> dict:
+    size = 512
+    cam = CameraModel(2000.0, 2000.0, 255.5, 255.5, (-0.05, 0, 0, 0, 0), (size, size))
+    rig = symmetric_rig(stereo_angle=30.0, distance=400.0, camera=cam)
+    tgt = SpeckleTarget.speckled(
+        rig=rig, origin=(0.0, 0.0, 400.0), size=120.0, speckle_size=0.8, seed=3
+    )
+    es = tgt.frame()[0]
+
+    def traj(t: np.ndarray) -> np.ndarray:  # 0.1 mm (0.5 px) per frame along the surface
+        return (0.1 * FPS * t)[:, None] * es[None, :]
+
+    lab = StereoLab(
+        rig,
+        tgt,
+        traj,
+        exposure=0.2 / FPS,
+        fps=FPS,
+        supersample=1,
+        substeps=4,
+        camera=Camera(read_noise=2.0, bit_depth=None),
+    )
+    t0 = time.perf_counter()
+    base = [lab.render(k, seed=k) for k in range(8)]
+    t_render = time.perf_counter() - t0
+    order = [k % 14 for k in range(pairs)]
+    order = [k if k < 8 else 14 - k for k in order]  # 0..7..1 and again
+    left = ArrayRecording([base[k][0] for k in order], "left")
+    right = ArrayRecording([base[k][1] for k in order], "right")
+    ds = track(
+        left, right, rig, exposure=lab.exposure, fps=FPS, noise=2.0, subset=21, step=10, threads=2
+    )
+    a = ds.attrs
+    return {
+        "size": size,
+        "pairs": pairs,
+        "points": int(ds.sizes["point"]),
+        "render_s": t_render,
+        "tracking_time_s": float(a["tracking_time_s"]),
+        "prediction_time_s": float(a["prediction_time_s"]),
+        "total_time_s": float(a["total_time_s"]),
+        "pairs_per_s_tracking": pairs / float(a["tracking_time_s"]),
+        "pairs_per_s_end_to_end": pairs / float(a["total_time_s"]),
+        "valid_share": float(ds["valid"].values.mean()),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller images, fewer frames")
+    ap.add_argument("--peak-w", type=float, default=6.0, help="peak blur, px")
+    ap.add_argument("--pairs", type=int, default=None, help="frame pairs of the speed run")
+    args = ap.parse_args()
+    run = Run("stereo")
+    size, frames = (128, 9) if args.quick else (192, 13)
+    pairs = args.pairs or (60 if args.quick else 200)
+    cases = []
+    angles = (15.0, 45.0) if args.quick else (15.0, 30.0, 45.0)
+    for angle in angles:
+        for motion in ("in-plane", "out-of-plane"):
+            c = accuracy_case(angle, motion, size=size, frames=frames, peak_w=args.peak_w)
+            cases.append(c)
+            print(
+                f"{angle:4.0f} deg {motion:13s} peak W {c['peak_W']:.2f} px, matched "
+                f"{c['stereo_matched']:.3f}, valid {c['valid_share']:.3f}, shape std "
+                f"{np.round(c['shape_error_std_mm'], 5)} pred "
+                f"{np.round(c['shape_sigma_pred_mm'], 5)} mm, bias "
+                f"{np.round(c['displacement_bias_mm'], 5)} mm",
+                flush=True,
+            )
+            for b in c["bins"]:
+                print(
+                    f"   W {b['W_lo']:.0f}-{b['W_hi']:.1f} {b['component']:2s} n {b['n']:5d} "
+                    f"pred {b['predicted']:.5f} meas {b['measured']:.5f} "
+                    f"ratio {b['ratio']:.2f}",
+                    flush=True,
+                )
+    speed = speed_case(pairs)
+    print(
+        f"speed: {speed['pairs']} pairs of 512^2, {speed['points']} POIs: "
+        f"{speed['pairs_per_s_tracking']:.1f} pairs/s tracking, "
+        f"{speed['pairs_per_s_end_to_end']:.1f} end to end",
+        flush=True,
+    )
+    ratios = [b["ratio"] for c in cases for b in c["bins"]]
+    summary = {
+        "bins": len(ratios),
+        "ratio_min": min(ratios) if ratios else None,
+        "ratio_max": max(ratios) if ratios else None,
+        "within_20_percent": sum(0.8 <= r <= 1.2 for r in ratios),
+    }
+    print(
+        f"predicted/measured over {summary['bins']} bins: {summary['ratio_min']:.2f}-"
+        f"{summary['ratio_max']:.2f}, {summary['within_20_percent']} within 20 %"
+    )
+    out = run.write({"quick": args.quick, "cases": cases, "speed": speed, "summary": summary})
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,226 @@
+"""CLI: ``dicblur stereo calibrate`` and ``dicblur stereo track`` (issue 29, docs/stereo.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import InputError
+from ._common import console, parse_size, print_mapping
+
+stereo_app = typer.Typer(
+    help="Stereo DIC: calibrate a camera rig, track two recordings in 3-D with sigma.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+
+
+def _board(text: str) -> tuple[int, int]:
+    try:
+        cols, rows = parse_size(text, "--board")
+    except InputError:
+        raise InputError(f"--board={text!r}: expected inner corners COLSxROWS, e.g. 9x6") from None
+    if min(cols, rows) < 3:
+        raise InputError(f"--board={text!r}: at least 3x3 inner corners, e.g. 9x6")
+    return cols, rows
+
+
+@stereo_app.command("calibrate")
+def calibrate_command(
+    images: Annotated[
+        list[str],
+        typer.Argument(
+            help="Checkerboard image pairs: files named left_*/right_* (any case), or two "
+            "folders LEFT RIGHT."
+        ),
+    ],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Rig file: .json, .yml or .xml.")],
+    board: Annotated[
+        str, typer.Option("--board", help="Inner corners per row x per column, e.g. 9x6.")
+    ] = "9x6",
+    square: Annotated[
+        str, typer.Option("--square", help="Side of a square, e.g. 5mm (a bare number is mm).")
+    ] = "5mm",
+    k3: Annotated[bool, typer.Option("--k3", help="Also estimate the k3 distortion term.")] = False,
+) -> None:
+    """Calibrate a stereo rig from checkerboard image pairs (OpenCV): intrinsics and
+    distortion of each camera, then R and T; prints the RMS reprojection error."""
+    from ..models import parse_quantity
+    from ..stereo.calibrate import calibrate_rig, load_pairs, pair_images
+    from ..stereo.camera import save_rig
+
+    size = _board(board)
+    sq = parse_quantity(square, "length", name="--square")
+    if not sq > 0:
+        raise InputError(f"--square={square!r}: must be > 0, e.g. 5mm")
+    if out.suffix.lower() not in (".json", ".yml", ".yaml", ".xml"):
+        raise InputError(f"--out={str(out)!r}: use a .json, .yml, .yaml or .xml file name")
+    if not out.parent.exists():
+        raise InputError(f"--out={str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    pairs = pair_images(images)
+    rig = calibrate_rig(
+        load_pairs(pairs),
+        board=size,
+        square=sq,
+        names=[(str(a), str(b)) for a, b in pairs],
+        k3=k3,
+    )
+    save_rig(rig, out)
+    print_mapping(
+        "stereo calibrate",
+        {
+            "pairs": len(pairs),
+            "rms": rig.rms,
+            "rms_left": float(rig.info["rms_left_px"]),
+            "rms_right": float(rig.info["rms_right_px"]),
+            "baseline": rig.baseline,
+            "stereo_angle": rig.stereo_angle,
+            "fx_left": rig.left.fx,
+            "fx_right": rig.right.fx,
+        },
+        {
+            "rms": "px",
+            "rms_left": "px",
+            "rms_right": "px",
+            "baseline": "mm",
+            "stereo_angle": "deg",
+            "fx_left": "px",
+            "fx_right": "px",
+        },
+    )
+    console.print(f"wrote {out}")
+
+
+@stereo_app.command("track")
+def track_command(
+    left: Annotated[str, typer.Argument(help="Left recording (as dicblur track reads them).")],
+    right: Annotated[str, typer.Argument(help="Right recording, synchronised with the left.")],
+    rig: Annotated[Path, typer.Option("--rig", help="Rig file (.json/.yml) of the two cameras.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")],
+    exposure: Annotated[
+        str | None, typer.Option("--exposure", help="Exposure, e.g. 1ms (default: metadata).")
+    ] = None,
+    fps: Annotated[
+        str | None, typer.Option("--fps", help="Frame rate, e.g. 5kHz (default: metadata).")
+    ] = None,
+    static: Annotated[
+        str | None, typer.Option("--static", help="Static frames for the noise, e.g. 0:20.")
+    ] = None,
+    noise: Annotated[
+        float | None, typer.Option("--noise", help="Noise std (grey levels) instead of --static.")
+    ] = None,
+    subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
+    step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
+    shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
+    depth: Annotated[
+        str | None,
+        typer.Option(
+            "--depth",
+            help="Rough distance of the target from the left camera, e.g. 400mm (default: "
+            "where the optical axes cross).",
+        ),
+    ] = None,
+    reference: Annotated[int, typer.Option("--reference", help="Reference frame.")] = 0,
+    frames: Annotated[
+        str | None, typer.Option("--frames", help="Frames to track, START:STOP (default all).")
+    ] = None,
+    fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
+    csv: Annotated[bool, typer.Option("--csv", help="Also write stereo.csv (long).")] = False,
+    report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+) -> None:
+    """Stereo-track LEFT and RIGHT: the shape X, Y, Z, the 3-D displacement U, V, W3 of
+    every point in every frame and their predicted sigma (noise and each camera's blur);
+    writes OUT/stereo.nc (or .zarr), OUT/report.html and, with --csv, OUT/stereo.csv."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from ..models import parse_quantity
+    from ..sequence import open_recording
+    from ..stereo.camera import load_rig
+    from ..stereo.core import track
+    from ..stereo.store import write_stereo_csv
+    from ..track.store import save_track
+
+    if fmt not in ("netcdf", "zarr"):
+        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
+    if shape not in ("affine", "translation"):
+        raise InputError(f"--shape={shape!r}: choose affine or translation")
+    dep = None if depth is None else parse_quantity(depth, "length", name="--depth")
+    if dep is not None and not dep > 0:
+        raise InputError(f"--depth={depth!r}: must be > 0, e.g. 400mm")
+    if noise is not None and not noise > 0:
+        raise InputError(f"--noise={noise!r}: must be > 0 GL, e.g. 2")
+    if noise is None and static is None:
+        raise InputError("--static / --noise: give the static frames (--static 0:20) or --noise")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out={str(out)!r}: exists and is not a folder")
+    the_rig = load_rig(rig)
+    rec_l, rec_r = open_recording(left), open_recording(right)
+    out.mkdir(parents=True, exist_ok=True)
+    target = out / ("stereo.nc" if fmt == "netcdf" else "stereo.zarr")
+    with Progress(
+        TextColumn("stereo"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("frame pairs"),
+        console=console,
+    ) as bar:
+        task = bar.add_task("stereo", total=len(rec_l))
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        ds = track(
+            rec_l,
+            rec_r,
+            the_rig,
+            exposure=exposure,
+            fps=fps,
+            static=static,
+            noise=noise,
+            subset=subset,
+            step=step,
+            shape=shape,  # type: ignore[arg-type]
+            reference=reference,
+            frames=frames,
+            depth=dep,
+            progress=progress,
+        )
+    save_track(ds, target)
+    written = [str(target)]
+    if csv:
+        written.append(str(write_stereo_csv(ds, out / "stereo.csv")))
+    if report:
+        from ..report.stereo import write_stereo_report
+
+        written.append(str(write_stereo_report(ds, out, image=rec_l.frame(reference))))
+    import numpy as np
+
+    valid = ds["valid"].values.astype(bool)
+
+    def med(name: str) -> float:
+        v = ds[name].values[valid]
+        return float(np.median(v)) if v.size else float("nan")
+
+    print_mapping(
+        f"stereo track: {left} + {right}",
+        {
+            "frame_pairs": int(ds.sizes["frame"]),
+            "points": int(ds.sizes["point"]),
+            "stereo_matched": float((ds["status_stereo"].values == 0).mean()),
+            "valid_share": float(valid.mean()),
+            "median_sigma_U": med("sigma_U"),
+            "median_sigma_V": med("sigma_V"),
+            "median_sigma_W3": med("sigma_W3"),
+            "pairs_per_s": int(ds.sizes["frame"]) / max(float(ds.attrs["tracking_time_s"]), 1e-9),
+        },
+        {"median_sigma_U": "mm", "median_sigma_V": "mm", "median_sigma_W3": "mm"},
+    )
+    for w in written:
+        console.print(f"wrote {w}")
+
+
+def register(app: typer.Typer) -> None:
+    """Attach ``stereo`` (calibrate, track) to the root app."""
+    app.add_typer(stereo_app, name="stereo")

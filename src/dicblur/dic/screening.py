@@ -1,0 +1,365 @@
+"""Screening of a Correlator's IC-GN results: the a-posteriori tests (``HIGH_RESIDUAL``,
+``OUTLIER``) and the predicted-imprecise subsets (``IMPRECISE``); docs/dic.md, "Screening
+for false convergence"."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .icgn import N_PARAMS
+from .noise import NoiseEstimate, residual_noise, residual_variance
+from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
+from .passes import RETRY_BUDGET, IcgnPasses
+from .status import PointStatus
+
+__all__ = [
+    "ACCEPT_DISTANCE",
+    "MAX_PREDICTED_SIGMA",
+    "OUTLIER_DISTANCE",
+    "OUTLIER_SIGMAS",
+    "PAIRS_MIN",
+    "PROBE_CHI2",
+    "PROBE_DISTANCE",
+    "RESIDUAL_SPREAD",
+    "Screening",
+    "pair_medians",
+]
+
+#: ``OUTLIER`` when the neighbours' median displacement fits a subset better than its own
+#: result by more than this chi-square gain (``Df^2 (zncc_nb - zncc) / sigma^2``; 0 or less
+#: at a true optimum): IC-GN stopped at a false optimum.
+PROBE_CHI2 = 10.0
+#: Only POIs farther than this (px) from their neighbours' median are probed.
+PROBE_DISTANCE = 0.05
+#: Default ``max_predicted_sigma`` (px): a subset whose predicted random error (the
+#: magnitude ``hypot(predicted_sigma_u, predicted_sigma_v)``) exceeds it is ``IMPRECISE``;
+#: at 0.1/3 px an error beyond 0.1 px is a 3-sigma event.
+MAX_PREDICTED_SIGMA = 0.1 / 3
+#: Neighbour check: a predicted-imprecise subset whose (u, v) lies within this distance
+#: (px) of the median of its precise converged 3x3 neighbours is kept ``CONVERGED``: its
+#: error is then below ~0.1 px whatever its predicted sigma (on the three hostile images of
+#: ``benchmarks/bench_screening.py`` no gross error lies this close, while 0.03 px would
+#: reject 3-5 times as many correct points).
+ACCEPT_DISTANCE = 0.07
+#: Neighbour check: a precise converged subset farther than
+#: ``max(OUTLIER_DISTANCE, OUTLIER_SIGMAS * its predicted sigma)`` (px) from that median is
+#: retried from it, and is ``OUTLIER`` unless the retry converges there with a better fit.
+OUTLIER_DISTANCE = 0.1
+OUTLIER_SIGMAS = 4.0
+#: With an estimated noise, ``HIGH_RESIDUAL`` also needs a residual variance beyond the
+#: field's median by this many robust standard deviations (1.4826 x the median absolute
+#: deviation): for noise alone that std is ``sqrt(2 / m)`` ~ 7 % of the median at subset
+#: 21, so ``max_residual`` = 2 decides; a field whose residuals are content, not noise,
+#: spreads wider (a noise-free pair: 8 of 49 subsets above 2x the median).
+RESIDUAL_SPREAD = 10.0
+MAD_SCALE = 1.4826
+#: Fewest pairs of opposite neighbours (of 4: along the rows, the columns and the two
+#: diagonals) with both converged the check needs; the mean of a pair is exact on a
+#: linear field (a strain, a rotation), and the median of three or four pairs stands one
+#: wrong neighbour. With fewer (the grid's border) a POI keeps the other tests' status.
+PAIRS_MIN = 3
+
+
+def pair_medians(
+    values: NDArray[np.float64], grid_shape: tuple[int, int]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Median over the four pairs of opposite 3x3 neighbours of each pair's mean.
+
+    Parameters
+    ----------
+    values : ndarray, shape (k, ny * nx)
+        ``k`` components on the grid in row-major order, NaN where a point is not valid.
+    grid_shape : (ny, nx)
+
+    Returns
+    -------
+    median : ndarray, shape (k, ny, nx)
+        NaN where no pair is valid.
+    pairs : ndarray of int, shape (ny, nx)
+        Number of valid pairs (both points valid), 0..4.
+    """
+    ny, nx = grid_shape
+    k = values.shape[0]
+    pad = np.pad(values.reshape(k, ny, nx), ((0, 0), (1, 1), (1, 1)), constant_values=np.nan)
+    means = np.stack(
+        [
+            0.5
+            * (
+                pad[:, 1 + dy : 1 + dy + ny, 1 + dx : 1 + dx + nx]
+                + pad[:, 1 - dy : 1 - dy + ny, 1 - dx : 1 - dx + nx]
+            )
+            for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1))
+        ]
+    )
+    count = np.isfinite(means[:, 0]).sum(axis=0)
+    # the median of 0-4 values without a sort: (sum - min - max) / (count - 2) for 3 or 4
+    total = np.where(np.isnan(means), 0.0, means).sum(axis=0)
+    low, high = np.fmin.reduce(means, axis=0), np.fmax.reduce(means, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        med = np.where(
+            count >= 3,
+            (total - low - high) / np.maximum(count - 2, 1),
+            np.where(count == 2, 0.5 * total, np.where(count == 1, total, np.nan)),
+        )
+    return med, count
+
+
+class Screening(IcgnPasses):
+    """The statuses of a Correlator's results after IC-GN."""
+
+    # ------------------------------------------------------------------ the noise
+    def _set_noise(self, noise: NoiseEstimate | None) -> None:
+        """Use ``noise`` (an estimate; None: unknown) for the predicted sigmas and the
+        predicted-imprecise POIs of this correlation."""
+        self.noise = noise
+        if noise is None or self._unit_sigma is None:
+            self.predicted_sigma_u = self.predicted_sigma_v = None
+            imp = None
+        else:
+            self.predicted_sigma_u = self._unit_sigma[0] * noise.sigma
+            self.predicted_sigma_v = self._unit_sigma[1] * noise.sigma
+            imp = None
+            if self.max_predicted_sigma is not None:
+                with np.errstate(invalid="ignore"):
+                    mask = np.hypot(self.predicted_sigma_u, self.predicted_sigma_v) > (
+                        self.max_predicted_sigma
+                    )
+                imp = mask if mask.any() else None
+        old = self._imprecise
+        same = (old is None and imp is None) or (
+            old is not None and imp is not None and np.array_equal(old, imp)
+        )
+        if not same:
+            # the affine split into precise and imprecise POIs follows the mask
+            for key in self._split_ids:
+                self._args_cache.pop(key, None)
+            self._split_cache, self._split_ids = {}, set()
+        self._imprecise = imp
+
+    def _estimate_noise(
+        self,
+        z: NDArray[np.float64],
+        st: NDArray[np.uint8],
+        idx: NDArray[np.intp] | None = None,
+    ) -> None:
+        """The pair's noise from the converged residuals of the POIs ``idx`` (None: all;
+        ``z``, ``st`` of those POIs): :func:`.noise.residual_noise`."""
+        fnorm = self._prep.fnorm if idx is None else self._prep.fnorm[idx]
+        m = self.subset * self.subset - N_PARAMS[self.shape] - 2
+        est = residual_noise(residual_variance(z, fnorm, m), st == PointStatus.CONVERGED)
+        self._set_noise(est)
+
+    def _noise_info(self) -> dict[str, Any]:
+        """The result metadata of the noise used (``noise_sigma`` the value the tests and
+        the predicted sigmas used, GL)."""
+        nz = self.noise
+        return {
+            "noise_sigma": None if nz is None else nz.sigma,
+            "noise_estimated": int(self.noise_auto),
+            "noise_sigma_low": None if nz is None or not nz.estimated else nz.low,
+            "noise_sigma_high": None if nz is None or not nz.estimated else nz.high,
+            "noise_subsets": None if nz is None or not nz.estimated else nz.count,
+        }
+
+    # ------------------------------------------------------------------ the statuses
+    def _flag(
+        self,
+        coef: NDArray[np.float32],
+        p: NDArray[np.float64],
+        z: NDArray[np.float64],
+        st: NDArray[np.uint8],
+        it: NDArray[np.int64] | None = None,
+    ) -> float | None:
+        """The statuses after IC-GN, in place: the noise (estimated), :meth:`_screen`,
+        :meth:`_neighbour_check`, then ``IMPRECISE``; returns the screen's noise variance
+        (or None). ``it`` gets the iterations of the check's retries."""
+        if self.noise_auto:
+            self._estimate_noise(z, st)
+        noise_var = self._screen(coef, p, z, st)
+        kept = self._neighbour_check(coef, p, z, st, it)
+        if self._imprecise is not None:
+            # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
+            # cause, so it gets that status too
+            done = (st == PointStatus.CONVERGED) | (st == PointStatus.MAX_ITERATIONS)
+            flag = done & self._imprecise
+            if kept is not None:
+                flag &= ~kept
+            st[flag] = PointStatus.IMPRECISE
+        return noise_var
+
+    def _neighbour_check(
+        self,
+        coef: NDArray[np.float32],
+        p: NDArray[np.float64],
+        z: NDArray[np.float64],
+        st: NDArray[np.uint8],
+        it: NDArray[np.int64] | None,
+    ) -> NDArray[np.bool_] | None:
+        """Each converged POI of the grid against ``m``, the median of the means of its
+        pairs of opposite converged neighbours (:func:`pair_medians`; the precise ones
+        where at least :data:`PAIRS_MIN` pairs are, else all), in place.
+
+        A POI farther from ``m`` than its threshold (:data:`ACCEPT_DISTANCE` for a
+        predicted-imprecise POI; ``max(OUTLIER_DISTANCE, OUTLIER_SIGMAS * predicted
+        sigma)`` for the others) is retried from ``m`` (all shape parameters); the retry
+        replaces its result when it converges within the threshold with a better ZNCC
+        (the first result was a false optimum). A precise POI still too far is
+        ``OUTLIER``. Returns the predicted-imprecise POIs found close to ``m`` (kept
+        ``CONVERGED`` by :meth:`_flag`), or None when nothing was checked.
+        """
+        if not self.neighbour_check or self._grid_shape is None or self.noise is None:
+            # without a noise level there is no predicted sigma to scale the test: a
+            # fixed 0.1 px would trim a strongly blurred field's legitimate tails
+            return None
+        ok = st == PointStatus.CONVERGED
+        if not ok.any():
+            return None
+        assert self._grid_index is not None
+        imp = self._imprecise
+        precise = ok if imp is None else ok & ~imp
+        # predicted-imprecise POIs stopped at their reduced limit: retried from m too
+        stopped = np.zeros_like(ok) if imp is None else imp & (st == PointStatus.MAX_ITERATIONS)
+        (ny, nx), cell = self._grid_shape, self._grid_index
+        n, k = p.shape
+        # each grid cell's POI (the grid is full: every cell has one)
+        cell_inv = np.empty(ny * nx, np.intp)
+        cell_inv[cell] = np.arange(n)
+        ucol, vcol = 0, 1 if k == 2 else 3
+        # (u, v) first: the distance needs only those; all k for the retries' starts
+        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+        grid = np.full((k, ny * nx), np.nan)
+        grid[:, cell] = p[:, order].T
+        # the precise neighbours where they suffice, else every converged one; but when
+        # most POIs are predicted imprecise (a threshold too strict for the image, a
+        # strongly blurred pair) an imprecise POI is vouched for by precise ones alone
+        use = precise[cell_inv]
+        med, pairs = pair_medians(np.where(use, grid[:2], np.nan), (ny, nx))
+        few = (pairs < PAIRS_MIN).ravel()
+        if imp is not None and imp.mean() >= 0.5:
+            few &= ~imp[cell_inv]
+        wider = few & (ok | stopped)[cell_inv] & ~use
+        if wider.any():  # only when some neighbour would be added (not on a clean field)
+            use = np.where(few, (ok | stopped)[cell_inv], use)
+            med, pairs = pair_medians(np.where(use, grid[:2], np.nan), (ny, nx))
+        test = np.flatnonzero((ok | stopped) & (pairs.ravel()[cell] >= PAIRS_MIN))
+        if test.size == 0:
+            return None
+        muv = med.reshape(2, -1)[:, cell[test]]
+        d = np.hypot(p[test, ucol] - muv[0], p[test, vcol] - muv[1])
+        is_imp = np.zeros(test.size, bool) if imp is None else imp[test]
+        pu, pv = self.predicted_sigma_u, self.predicted_sigma_v
+        pm = np.zeros(test.size) if pu is None or pv is None else np.hypot(pu[test], pv[test])
+        thr = np.where(is_imp, ACCEPT_DISTANCE, np.maximum(OUTLIER_DISTANCE, OUTLIER_SIGMAS * pm))
+        again = stopped[test]
+        far = (d > thr) | again
+        if far.any():
+            where = np.flatnonzero(far)
+            idx = test[where]
+            # the retries' starts: all k parameters' medians, over the same neighbours
+            full, _ = pair_medians(np.where(use, grid, np.nan), (ny, nx))
+            start = np.empty((idx.size, k))
+            start[:, order] = full.reshape(k, -1)[:, cell[idx]].T
+            conv = it[ok] if it is not None else np.zeros(0, np.int64)
+            med_it = 2 if conv.size == 0 else int(np.median(conv))
+            # the retry budget (a subset stopped at its reduced limit, too: from a start
+            # near the field most converge within it, 2.0 % of the blob image's correct
+            # affine points left flagged against 6.6 % at the reduced limit again)
+            cap = min(self.max_iterations, max(10, RETRY_BUDGET * med_it))
+            p2, z2, it2, st2 = self._run_icgn(coef, start, self._status0[idx], idx, cap)
+            d2 = np.hypot(p2[:, ucol] - start[:, ucol], p2[:, vcol] - start[:, vcol])
+            better = (z2 >= z[idx]) | again[where]  # a stopped POI had no optimum
+            take = (st2 == PointStatus.CONVERGED) & better & (d2 <= thr[where])
+            got = idx[take]
+            p[got], z[got], st[got] = p2[take], z2[take], PointStatus.CONVERGED
+            if it is not None:
+                it[idx] += it2
+            took = take
+            far[where[took]] = False
+        st[test[far & ~is_imp]] = PointStatus.OUTLIER
+        kept = np.zeros(n, bool)
+        kept[test[~far & is_imp]] = True
+        return kept
+
+    def _screen(
+        self,
+        coef: NDArray[np.float32],
+        p: NDArray[np.float64],
+        z: NDArray[np.float64],
+        st: NDArray[np.uint8],
+    ) -> float | None:
+        """Flag false convergence in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
+
+        Returns the noise variance (GL^2) the tests used, or None when none ran.
+
+        Residual: at the true match, with independent noise of std sigma in both images,
+        ``1 - zncc ~ sigma^2 m / Df^2`` with ``m = npx - k - 2`` (ZNSSD ``C = 2 (1 - zncc)``,
+        the residual being the difference of the two noises after removing mean, gain and
+        the ``k`` fitted parameters). The noise variance used is the larger of
+        ``noise_sigma^2`` and the field's median of ``(1 - zncc) Df^2 / m`` (so a blurred
+        or otherwise mismatched pair, whose every subset exceeds the noise, is not flagged
+        as a whole). The interpolation of the current image slightly smooths its noise,
+        so the prediction is conservative (up to ~10 % high at half-pixel shifts).
+        """
+        ok = st == PointStatus.CONVERGED
+        sigma = None if self.noise is None else self.noise.sigma
+        residual = self.max_residual is not None and sigma is not None
+        if not ok.any() or not (residual or self.median_test):
+            return None
+        k = p.shape[1]
+        fnorm2 = self._prep.fnorm**2
+        m = self.subset * self.subset - k - 2
+        unit = np.maximum(1.0 - z, 0.0) * fnorm2 / m
+        noise_var = float(np.median(unit[ok]))
+        if sigma is not None:
+            noise_var = max(noise_var, sigma**2)
+        if self.max_residual is not None and sigma is not None and noise_var > 0:
+            limit = self.max_residual * noise_var
+            if self.noise_auto:
+                # an estimated noise is the pair's effective one: where content the
+                # interpolant cannot follow dominates it (hard edges, a noise-free pair),
+                # the subsets' residuals spread more than a noise's would
+                dev = np.abs(unit[ok] - noise_var)
+                limit = max(limit, noise_var + RESIDUAL_SPREAD * MAD_SCALE * float(np.median(dev)))
+            high = ok & (unit > limit)
+            st[high] = PointStatus.HIGH_RESIDUAL
+            ok &= ~high
+        if not self.median_test or self._grid_shape is None or not ok.any():
+            return noise_var
+        assert self._grid_index is not None
+        shape, cell = self._grid_shape, self._grid_index
+        ucol, vcol = 0, 1 if k == 2 else 3
+        # (k, ny, nx) with u, v first: the components the median test looks at
+        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+        grid = np.full((k, shape[0] * shape[1]), np.nan)
+        grid[:, cell] = np.where(ok, p[:, order].T, np.nan)
+        valid = np.zeros(shape[0] * shape[1], bool)
+        valid[cell] = ok
+        # points within PROBE_DISTANCE of their neighbours' median skip the median (and the
+        # probe): the shortcut of median_screen
+        out2, med_g = median_screen(
+            grid.reshape(k, *shape),
+            valid.reshape(shape),
+            eps=MEDIAN_EPS,
+            threshold=MEDIAN_THRESHOLD,
+            within=PROBE_DISTANCE / np.sqrt(2.0),
+        )
+        out = out2.ravel()[cell]
+        st[out] = PointStatus.OUTLIER
+        ok &= ~out
+        # probe: a POI far from its neighbours' median is evaluated (one IC-GN iteration,
+        # which reports the ZNCC at its start) at the neighbours' median parameters; a
+        # clearly better fit there means IC-GN stopped at a false optimum
+        med = np.empty((len(cell), k))
+        med[:, order] = med_g.reshape(k, -1)[:, cell].T
+        dist = np.hypot(p[:, ucol] - med[:, ucol], p[:, vcol] - med[:, vcol])
+        with np.errstate(invalid="ignore"):
+            probe = np.flatnonzero(ok & (dist > PROBE_DISTANCE))
+        if probe.size and noise_var > 0:
+            _, zp, _, _ = self._run_icgn(coef, med[probe], self._status0[probe], probe, 1)
+            with np.errstate(invalid="ignore"):
+                gain = fnorm2[probe] * (zp - z[probe]) / noise_var
+            st[probe[gain > PROBE_CHI2]] = PointStatus.OUTLIER
+        return noise_var

@@ -18,9 +18,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
-from .camera import StereoRig
+from .camera import UNDISTORT_ITERATIONS, StereoRig
+from .kernels import pack_camera, projection_jacobian_kernel, triangulate_kernel
 
-__all__ = ["projection_jacobian", "propagate", "triangulate", "triangulation_jacobian"]
+__all__ = [
+    "numeric_projection_jacobian",
+    "projection_jacobian",
+    "propagate", "triangulate", "triangulation_jacobian"]
 
 #: Gauss-Newton iterations of the refinement (quadratic convergence: 3 reach 1e-12 px on
 #: the tests' points).
@@ -63,9 +67,22 @@ def _project4(rig: StereoRig, x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.concatenate([pl, pr], axis=-1)
 
 
+def _packed(rig: StereoRig) -> tuple[NDArray[np.float64], ...]:
+    pose_l = np.hstack([np.eye(3), np.zeros((3, 1))])
+    pose_r = np.ascontiguousarray(np.hstack([rig.rotation, rig.translation[:, None]]))
+    return pack_camera(rig.left), pack_camera(rig.right), pose_l, pose_r
+
+
 def projection_jacobian(rig: StereoRig, x: ArrayLike) -> NDArray[np.float64]:
     """``d(r_L, c_L, r_R, c_R) / d(X, Y, Z)`` at left-frame points (n, 3) mm: (n, 4, 3)
-    px/mm (central differences, step 1e-6 of the distance: relative error ~1e-10)."""
+    px/mm (analytic, :mod:`.kernels`; NaN for a point at or behind a camera)."""
+    p = np.ascontiguousarray(np.atleast_2d(np.asarray(x, dtype=np.float64)))
+    return np.asarray(projection_jacobian_kernel(p, *_packed(rig)))
+
+
+def numeric_projection_jacobian(rig: StereoRig, x: ArrayLike) -> NDArray[np.float64]:
+    """:func:`projection_jacobian` by central differences (step 1e-6 of the distance:
+    relative error ~1e-10), the check of the analytic one."""
     p = np.atleast_2d(np.asarray(x, dtype=np.float64))
     h = 1e-6 * np.maximum(np.linalg.norm(p, axis=1), 1.0)
     jac = np.empty((len(p), 4, 3))
@@ -101,18 +118,19 @@ def triangulate(
     pl, pr = _points(left, "left"), _points(right, "right")
     if len(pl) != len(pr):
         raise InputError(f"left, right: {len(pl)} and {len(pr)} points; give one pair each")
+    if refine:
+        # compiled: the linear point of each pair and Gauss-Newton with the analytic
+        # Jacobian in one pass (the same fixed point as the numpy iteration)
+        xk, rk = triangulate_kernel(
+            np.ascontiguousarray(pl),
+            np.ascontiguousarray(pr),
+            *_packed(rig),
+            REFINE_ITERATIONS,
+            UNDISTORT_ITERATIONS,
+        )
+        return np.asarray(xk), np.asarray(rk)
     x = _dlt(rig, rig.left.normalised(pl), rig.right.normalised(pr))
     obs = np.concatenate([pl, pr], axis=1)
-    if refine:
-        for _ in range(REFINE_ITERATIONS):
-            ok = np.isfinite(x).all(axis=1)
-            if not ok.any():
-                break
-            jp = projection_jacobian(rig, x[ok])
-            r = _project4(rig, x[ok]) - obs[ok]
-            jtj = np.einsum("nki,nkj->nij", jp, jp)
-            jtr = np.einsum("nki,nk->ni", jp, r)
-            x[ok] -= np.linalg.solve(jtj, jtr[..., None])[..., 0]
     res = _project4(rig, x) - obs
     return x, np.sqrt(np.mean(res * res, axis=1))
 

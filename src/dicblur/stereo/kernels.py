@@ -189,9 +189,7 @@ def triangulate_kernel(
             continue
         p0, p1 = _project_jac(cam_l, pose_l, x, y, z, jac, 0)
         p2, p3 = _project_jac(cam_r, pose_r, x, y, z, jac, 2)
-        e = (
-            (p0 - obs[0]) ** 2 + (p1 - obs[1]) ** 2 + (p2 - obs[2]) ** 2 + (p3 - obs[3]) ** 2
-        )
+        e = (p0 - obs[0]) ** 2 + (p1 - obs[1]) ** 2 + (p2 - obs[2]) ** 2 + (p3 - obs[3]) ** 2
         out[i, 0], out[i, 1], out[i, 2] = x, y, z
         res[i] = np.sqrt(e / 4.0)
     return out, res

@@ -24,7 +24,10 @@ from .kernels import pack_camera, projection_jacobian_kernel, triangulate_kernel
 __all__ = [
     "numeric_projection_jacobian",
     "projection_jacobian",
-    "propagate", "triangulate", "triangulation_jacobian"]
+    "propagate",
+    "triangulate",
+    "triangulation_jacobian",
+]
 
 #: Gauss-Newton iterations of the refinement (quadratic convergence: 3 reach 1e-12 px on
 #: the tests' points).

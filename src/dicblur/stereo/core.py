@@ -404,7 +404,7 @@ def track(
     g = triangulation_jacobian(rig, pts)
     cov3_noise = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(nf, n, 3, 3)
     # the two cameras' mismatch shifts together: the point's deterministic blur error
-    bvec = np.einsum("nik,nk->ni", g, xi.reshape(-1, 4)).reshape(nf, n, 3)
+    bvec = (g @ xi.reshape(-1, 4, 1)).reshape(nf, n, 3)
     cov3_blur = bvec[..., :, None] * bvec[..., None, :]
     cov3 = cov3_noise + cov3_blur
     # the shape's sigma: the stereo match's noise in the right point

@@ -131,7 +131,8 @@ def stereo_sigma(
     c_l, w_l, in_l = _camera_cov(model, vl, sigma, which)
     c_r, w_r, in_r = _camera_cov(model, vr, sigma, which)
     g = triangulation_jacobian(rig, np.ascontiguousarray(pts))
-    cov = propagate(g, c_l, c_r)
+    with np.errstate(invalid="ignore"):  # no prediction (inf): NaN sigma, never planned
+        cov = propagate(g, c_l, c_r)
     f = target_frame(rig, np.asarray(point, dtype=np.float64))
     cov_t = np.einsum("ij,njk,lk->nil", f, cov, f)
     sig = np.sqrt(np.maximum(np.diagonal(cov_t, axis1=1, axis2=2), 0.0))
@@ -391,10 +392,12 @@ def plan_stereo_exposure(
                 blur_right=float(wra[0]),
             )
         )
-    best = max(
-        opts, key=lambda o: (o.exposure, -float(_score(np.array(o.sigma_at_plan), component)))
+    best = (
+        max(opts, key=lambda o: (o.exposure, -float(_score(np.array(o.sigma_at_plan), component))))
+        if opts
+        else None
     )
-    if opts:
+    if best is not None:
         notes.append(
             f"of the symmetric rigs at {distance:.4g} mm, {best.stereo_angle:g} deg allows the "
             f"longest exposure ({best.exposure * 1e3:.4g} ms against {t_plan * 1e3:.4g} ms)"
@@ -418,7 +421,7 @@ def plan_stereo_exposure(
         limited_by_breakdown=limited,
         inside_domain=inside,
         angles=tuple(opts),
-        best_angle=best.stereo_angle if opts else float("nan"),
+        best_angle=best.stereo_angle if best is not None else float("nan"),
         curve_exposure=t_c,
         curve_sigma=curve,
         notes=tuple(notes),

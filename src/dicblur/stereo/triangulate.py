@@ -159,7 +159,11 @@ def propagate(
         Covariance of ``(row, col)`` of each image point, px^2 (independent cameras).
     """
     g = np.asarray(jacobian, dtype=np.float64)
-    c = np.zeros((g.shape[0], 4, 4))
-    c[:, :2, :2] = np.asarray(cov_left, dtype=np.float64)
-    c[:, 2:, 2:] = np.asarray(cov_right, dtype=np.float64)
-    return np.asarray(np.einsum("nik,nkl,njl->nij", g, c, g))
+    gl, gr = g[:, :, :2], g[:, :, 2:]
+    # the block-diagonal image covariance: G_L C_L G_L^T + G_R C_R G_R^T (stacked matmuls,
+    # ~10x the three-operand einsum on a frame pair's points)
+    cl = np.asarray(cov_left, dtype=np.float64)
+    cr = np.asarray(cov_right, dtype=np.float64)
+    out = gl @ cl @ np.transpose(gl, (0, 2, 1))
+    out += gr @ cr @ np.transpose(gr, (0, 2, 1))
+    return np.asarray(out)

@@ -168,7 +168,7 @@ def track_command(
     if threads is None:
         import numba
 
-        threads = int(numba.config.NUMBA_NUM_THREADS)
+        threads = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     the_rig = load_rig(rig)
     rec_l, rec_r = open_recording(left), open_recording(right)
     out.mkdir(parents=True, exist_ok=True)

@@ -139,7 +139,7 @@ def _track_camera(
     grads = None
     if corr.shape == "affine" and history:
         last = history[-1]
-        ok = np.isfinite(last).all(axis=1)
+        ok = np.asarray(np.isfinite(last).all(axis=1))
         if ok.any():
             grads = last.take([1, 2, 4, 5], axis=1)
             fill_with_median(grads, ok)
@@ -147,7 +147,7 @@ def _track_camera(
         img = corr.prefilter(rec.frame(f))
         guess = extrapolate_fields(hist, grid) if hist else None
         if guess is not None:
-            good = np.isfinite(guess).all(axis=1)
+            good = np.asarray(np.isfinite(guess).all(axis=1))
             if good.any():
                 fill_with_median(guess, good)
             else:

@@ -70,7 +70,9 @@ def _project4(rig: StereoRig, x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.concatenate([pl, pr], axis=-1)
 
 
-def _packed(rig: StereoRig) -> tuple[NDArray[np.float64], ...]:
+def _packed(
+    rig: StereoRig,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     pose_l = np.hstack([np.eye(3), np.zeros((3, 1))])
     pose_r = np.ascontiguousarray(np.hstack([rig.rotation, rig.translation[:, None]]))
     return pack_camera(rig.left), pack_camera(rig.right), pose_l, pose_r
@@ -124,10 +126,14 @@ def triangulate(
     if refine:
         # compiled: the linear point of each pair and Gauss-Newton with the analytic
         # Jacobian in one pass (the same fixed point as the numpy iteration)
+        cl, cr, pose_l, pose_r = _packed(rig)
         xk, rk = triangulate_kernel(
             np.ascontiguousarray(pl),
             np.ascontiguousarray(pr),
-            *_packed(rig),
+            cl,
+            cr,
+            pose_l,
+            pose_r,
             REFINE_ITERATIONS,
             UNDISTORT_ITERATIONS,
         )

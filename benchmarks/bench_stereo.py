@@ -345,12 +345,30 @@ def main() -> None:
     ap.add_argument("--baseline", default=None, help="src folder of a version to compare")
     ap.add_argument("--repeat", type=int, default=2, help="alternated speed runs per version")
     ap.add_argument("--folder", default="/tmp/dicblur_bench_stereo", help="frames cache")
+    ap.add_argument(
+        "--report",
+        default=None,
+        help="folder of an HTML page with the predicted-vs-measured figure of the accuracy part",
+    )
+    ap.add_argument(
+        "--from-json",
+        default=None,
+        help="with --report: draw it from an existing result (results/stereo.json), no run",
+    )
     ap.add_argument("--speed-child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--fields", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     pairs = args.pairs or (60 if args.quick else 500)
     if args.speed_child:
         _child(args.speed_child, pairs, args.fields)
+        return
+    if args.from_json:
+        if not args.report:
+            ap.error("--from-json needs --report DIR")
+        from dicblur.report.stereo import write_validation_report
+
+        doc = json.loads(Path(args.from_json).read_text())
+        print(f"wrote {write_validation_report(doc, Path(args.report))}")
         return
     run = Run("stereo" if args.part == "all" else f"stereo_{args.part}")
     size, frames = (128, 9) if args.quick else (192, 13)
@@ -392,8 +410,15 @@ def main() -> None:
             f"predicted/measured over {summary['bins']} bins: {summary['ratio_min']:.2f}-"
             f"{summary['ratio_max']:.2f}, {summary['within_20_percent']} within 20 %"
         )
-    out = run.write({"quick": args.quick, "cases": cases, "speed": speed, "summary": summary})
+    doc = {"quick": args.quick, "cases": cases, "summary": summary}
+    if speed is not None:
+        doc["speed"] = speed
+    out = run.write(doc)
     print(f"wrote {out}")
+    if args.report and cases:
+        from dicblur.report.stereo import write_validation_report
+
+        print(f"wrote {write_validation_report(doc, Path(args.report))}")
 
 
 if __name__ == "__main__":

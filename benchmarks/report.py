@@ -460,6 +460,7 @@ def render_stereo(doc: Doc) -> Lines:
 def render_stereo_speed(doc: Doc) -> Lines:
     """Two lines: the stereo track's speed (end to end, the loop, per CPU s) and, when a
     baseline ran alongside, the ratios to it and the largest difference of the fields."""
+    doc = doc.get("speed") or doc
     cells = [
         f"{doc['size']}^2 x {doc['pairs']} pairs, {fmt(doc['points'])} POIs",
         f"{fmt(doc['pairs_per_s_end_to_end'])} pairs/s end to end, "

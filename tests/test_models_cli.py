@@ -246,3 +246,30 @@ def test_plan_shot_noise_at_reference_level(results_csv, tmp_path, capsys):
     # fixed noise has no shot noise to place; both options at once are ambiguous
     assert main([*base, "--target", "0.01px", "--noise", "2", "--noise-level", "100"]) != 0
     assert main([*base, *cam_args, "--reference", str(ref), "--noise-level", "100"]) != 0
+
+
+def test_plan_html_from_a_model_of_several_noise_levels(results_csv, tmp_path, capsys):
+    """Issue 26 item 6: a model fitted on two noise levels (noise_sigma None) writes the
+    planner page with velocity and scale given and no --noise (exit 0, was 2): the page
+    chooses the noise, and the text plan says which noise it used; without --html the plan
+    still asks for it."""
+    model_path = tmp_path / "model.json"
+    assert main(["fit", str(results_csv), "-o", str(model_path)]) == 0
+    model = BlurUncertaintyModel.from_json(str(model_path))
+    assert model.noise_sigma is None and model.noise_levels == (1.0, 2.0)
+    capsys.readouterr()
+    page = tmp_path / "planner.html"
+    args = ["plan", str(model_path), "--velocity", "100mm/s", "--scale", "0.05mm/px"]
+    args += ["--target", "0.01px"]
+    assert main([*args, "--html", str(page)]) == 0
+    cap = capsys.readouterr()
+    assert page.stat().st_size > 1000 and "longest exposure" in cap.out
+    assert "--noise 1 " in cap.err and "calibrated at 1, 2 GL" in cap.err
+    # the same plan as asked with --noise 1, and --noise sets the page's start value
+    assert main([*args, "--noise", "1"]) == 0
+    assert capsys.readouterr().out == cap.out.replace(f"wrote {page}\n", "")
+    assert main([*args, "--noise", "2", "--html", str(page)]) == 0
+    assert 'id="sigma" min="0" step="any" value="2"' in page.read_text()
+    assert "note:" not in capsys.readouterr().err
+    assert main(args) == 2
+    assert "--noise" in capsys.readouterr().err

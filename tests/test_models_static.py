@@ -21,6 +21,7 @@ from dicblur.models import (
     static_terms,
     with_static_model,
 )
+from dicblur.patterns import paper_pattern4
 from helpers.cli import CAMERA_PLAN, calibrate_args
 from helpers.models import (
     BETA,
@@ -77,8 +78,11 @@ def test_static_kind_predicts_the_scaled_table():
     assert p.extrapolated and any("validity domain" in n for n in p.notes)
     # another noise outside the fitted 2..8 GL is flagged, not refused
     assert m.predict([1.0], 12.0).extrapolated
-    # the held-out comparison scores the static kind on the same split
-    assert m.comparison["rms_log_error"]["static"] < 1e-6
+    # the held-out comparison scores the static kind on the same split: trained on one
+    # noise level, k_noise stays at 1 (not the generating 0.95), so the held-out 8 GL points
+    # are off by about the 5 % of that scale
+    err = m.comparison["rms_log_error"]["static"]
+    assert 0.02 < err < 0.06
 
 
 def test_a_camera_plan_optimum_does_not_stick_to_the_grid_points():
@@ -248,4 +252,48 @@ def test_calibrate_tabulates_a_fine_sweep_on_a_coarser_grid(tmp_path):
     assert m.static.n_points == 20 and 0.7 < m.static["k_noise"] < 1.4
     # the sweep's own W between grid points: the spline, close to the measured u_e
     err = np.exp(np.abs(m.static.residuals)) - 1
-    assert err.max() < 0.25, err
+    assert err.max() < 0.3, err  # one repetition of few subsets, k_noise at 1
+
+
+def test_one_level_calibration_keeps_the_noise_scale_across_noise_levels():
+    """Issue 26 item 5. Measured on a real printed pattern (Sample 13, 384^2 crop): the
+    static noise term holds within 2-6 % at 1-4 GL, but the noise-free error exceeds the
+    static mismatch term by a factor growing with W (1.055, 1.10, 1.17, 1.26 at W = 1, 2, 3,
+    5 px). Fitted at one noise level, a free k_noise absorbed that shape (0.935) and the
+    4 GL predictions came out low. Here the same growth (1 + 0.05 W) on a generated
+    pattern: calibrated at 2 GL, the prediction at 4 GL is within 3 % at W = 1 and 3 px
+    (the free k_noise: 4.8 % low at W = 1 px), and within 10 % at 1, 2, 4 GL."""
+    from dicblur.models.scaled import fit_static_scales, static_variance
+
+    img = paper_pattern4((96, 96), seed=2, speckle_size=2.5)
+    t = static_terms(img, np.arange(0.25, 6.01, 0.25), subset=21, step=10, boundary="periodic")
+    x = np.array(t.blur)
+    n1, n2, b2 = map(np.array, (t.noise, t.noise2, t.mismatch))
+
+    def truth(w, s):
+        i = np.searchsorted(x, w)
+        return np.sqrt(s * s * n1[i] + s**4 * n2[i] + (1 + 0.05 * w) ** 2 * b2[i])
+
+    w = x[(x > 0) & (x < 6)]
+    f = fit_static_scales(t, w, np.full(w.size, 2.0), truth(w, 2.0))
+    assert f["k_noise"] == 1.0 and f.fixed == {"k_noise": 1.0} and f.ci_method == "covariance"
+    assert f.low[0] == f.high[0] == 1.0 and f.low[1] < f["k_blur"] < f.high[1]
+    wq = np.array([1.0, 3.0, 5.0])
+    for s in (1.0, 2.0, 4.0):
+        nv, bv = static_variance(f.extra, wq, s, f["k_noise"], f["k_blur"])
+        ratio = np.sqrt(nv + bv) / truth(wq, s)
+        assert np.all(np.abs(ratio - 1) < 0.10), (s, ratio)
+        if s == 4.0:
+            assert np.all(np.abs(ratio[:2] - 1) < 0.03), ratio
+    # two noise levels: both scales fitted (they are separable there)
+    both = fit_static_scales(
+        t,
+        np.tile(w, 2),
+        np.repeat([1.0, 4.0], w.size),
+        np.concatenate([truth(w, 1.0), truth(w, 4.0)]),
+    )
+    assert not both.fixed and both["k_noise"] != 1.0
+    # the earlier rule on request
+    assert fit_static_scales(t, w, np.full(w.size, 2.0), truth(w, 2.0), noise_scale="fit")[
+        "k_noise"
+    ] == pytest.approx(0.934, abs=0.01)

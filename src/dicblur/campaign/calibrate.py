@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +51,11 @@ class CalibrationResult:
     figures : tuple of pathlib.Path
         Figures written for this calibration (empty from :func:`calibrate`, which does not
         draw; the CLI adds the three of ``calibration_figures``).
+    timings : dict of str to float
+        Wall time of each phase, s: ``campaign`` (the DIC sweep), ``export`` (the CSV and
+        reading the store back), ``static_terms`` (the static prediction's table),
+        ``fit`` (the model fits) and ``write`` (``model.json``);
+        ``benchmarks/bench_budgets.py`` prints them.
 
     An interrupted campaign (Ctrl-C) raises no error: :func:`calibrate` returns ``None``
     and rerunning it resumes the store.
@@ -63,6 +69,7 @@ class CalibrationResult:
     spec: CampaignSpec
     curves: Any = None
     figures: tuple[Path, ...] = ()
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 def calibration_spec(
@@ -207,6 +214,8 @@ def _static_terms(
             extend_to=min(2.0 * w_max, w_max + TABLE_EXTENSION),
             shape=shape,  # type: ignore[arg-type]
             boundary=spec.boundary,  # type: ignore[arg-type]
+            # the table's offsets on the machine's cores (the sweep's workers are done)
+            threads=os.cpu_count() or 1,
         )
     except (InputError, FitError) as exc:
         warnings.warn(
@@ -278,11 +287,21 @@ def calibrate(
     out = Path(out_dir)
     out.mkdir(exist_ok=True)
     results = out / "results.zarr"
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = now - clock
+        clock = now
+
     summary = run_campaign(
         spec, results, scheduler=scheduler, workers=workers, serial=serial, progress=progress
     )
     if not summary.complete:
         return None  # interrupted (Ctrl-C): the store keeps the finished batches
+    lap("campaign")
     csv_path = out / "results.csv"
     export_csv(results, csv_path)
     ds = open_results(results).isel(pattern=0, angle=0, subset=0)
@@ -298,6 +317,7 @@ def calibrate(
     )
     hashes = json.loads(ds.attrs["input_hashes"])
     image_px = make_pattern(spec, spec.patterns[0])
+    lap("export")
     # the static kind tabulates the plain matcher's static prediction (noise + mismatch);
     # a compensated sweep has no mismatch term to scale, so it keeps the fitted default
     terms = (
@@ -305,6 +325,7 @@ def calibrate(
         if spec.compensation == "none"
         else None
     )
+    lap("static_terms")
     model = fit_blur_model(
         w,
         flat(mean["sssig"]),
@@ -345,8 +366,10 @@ def calibrate(
         # the default: the static prediction with its two fitted scales, held to 0.15 rms
         # log error up to the breakdown W where the closed form is not (BENCHMARKS.md)
         model = with_static_model(model, terms)
+    lap("fit")
     model_path = out / "model.json"
     model.to_json(str(model_path))
+    lap("write")
     return CalibrationResult(
         model=model,
         model_path=model_path,
@@ -355,4 +378,5 @@ def calibrate(
         sssig_r2=float(model.decay.r2),
         spec=spec,
         curves=mean.assign_coords(noise_effective_level=("noise", eff[:: mean.sizes["blur"]])),
+        timings=timings,
     )

@@ -489,8 +489,9 @@ def plan_command(
                 "given) and one without"
             )
         check_same_calibration(model, other, names=("MODEL", "--compare"))
+    noise_note = None
     if html_out is not None:
-        from ..report.planner import PlannerDefaults, write_planner
+        from ..report.planner import PlannerDefaults, starting_noise, write_planner
 
         defaults = PlannerDefaults(
             velocity=velocity or "120mm/s",
@@ -507,6 +508,15 @@ def plan_command(
         typer.echo(f"wrote {html_out}")
         if velocity is None or scale is None:
             return
+        if noise is None and model.noise_sigma is None and model.noise_levels:
+            # the page chooses the noise; the text plan takes the page's starting value
+            # (used only without a camera) and says which
+            noise = starting_noise(model)
+            levels = ", ".join(f"{v:g}" for v in model.noise_levels)
+            noise_note = (
+                f"note: the text plan at --noise {noise:g} (GL; the page's starting value, "
+                f"the model was calibrated at {levels} GL); give --noise to plan at another"
+            )
     if reference is not None and noise_level is not None:
         raise InputError(
             "--reference, --noise-level: give one (the image's level is computed from it)"
@@ -544,12 +554,14 @@ def plan_command(
             "--read-noise, --flux); with fixed noise give --noise"
         )
     assert velocity is not None and scale is not None
+    if noise_note is not None and camera is None:
+        typer.echo(noise_note, err=True)
     kwargs: dict[str, Any] = {
         "velocity": velocity,
         "scale": scale,
         "target": target,
         "camera": camera,
-        "sigma": noise,
+        "sigma": noise if camera is None or noise_note is None else None,
         "which": which,
         "noise_level": noise_level,
         "mean_level": mean_level,

@@ -24,6 +24,7 @@ and 6 px speckles with noise 2 GL, noisy IC-GN lands within 5 % of it for W = 0.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import warnings
@@ -37,9 +38,11 @@ from numpy.typing import ArrayLike, NDArray
 from ..checks import as_blur, check_positive, check_subpixel
 from ..errors import InputError
 from ..metrics import directional_sssig
+from ..threads import each
 from .derivatives import Boundary, Derivative, box_blurred, image_spectrum, unit_direction
 from .mismatch_prediction import subset_inputs
 from .model import BlurUncertaintyModel
+from .reference_terms import ReferenceTerms
 from .scaled import StaticTerms
 from .sensitivity import shifts_and_variance
 from .subset_algebra import Shape
@@ -197,15 +200,18 @@ def _terms(
     subpixel: float | str | None = None,
     min_contraction: float = 0.0,
     sssig: bool = True,
+    reference: ReferenceTerms | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Per W: mean noise variance (shape (3, m): the reference and the current image's
     shares per GL**2, their interaction per GL**4), mismatch variance, SSSIG, valid
     fraction (subsets with a shift <= ``max_shift`` and an IC-GN contraction >=
     ``min_contraction``; averaged over the sub-pixel offsets of ``subpixel``). The terms
     leave out only the degenerate subsets (contraction < ``DEGENERATE``); ``nan`` where
-    fewer than two subsets remain."""
+    fewer than two subsets remain. ``reference``: the reference's terms kept across the
+    offsets and calls (a new one per call by default; the same numbers either way)."""
     kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative, boundary=boundary)
     offs = _offsets(subpixel)
+    ref = ReferenceTerms() if reference is None else reference
     lams = np.empty((len(offs), len(w), len(pts)))
     # degenerate fixed points (contraction below DEGENERATE) are left out, as DIC's
     # non-converged points; the breakdown counts those below min_contraction
@@ -222,6 +228,7 @@ def _terms(
             offset=o,
             min_contraction=min(DEGENERATE, min_contraction),
             contraction_out=lams[i],
+            reference=ref,
             **kw,
         )
         for i, o in enumerate(offs)
@@ -505,6 +512,7 @@ def static_terms(
     max_shift: float = 1.0,
     min_contraction: float = MIN_CONTRACTION,
     extend_to: float | None = None,
+    threads: int = 1,
 ) -> StaticTerms:
     """The static prediction's terms on a W grid, for the ``static`` model kind.
 
@@ -526,6 +534,9 @@ def static_terms(
         As for :func:`predict_from_pattern`.
     extend_to : float, optional
         Largest W (px) of the grid's extension (none by default).
+    threads : int
+        Threads sharing the grid's sub-pixel offsets (numpy releases the GIL; the same
+        table on any number).
 
     Returns
     -------
@@ -543,35 +554,45 @@ def static_terms(
         w = np.concatenate([w, np.round(more, 10)])
     offs = np.round((w / 2.0) % 1.0, 12) % 1.0
     n1, n2, b2, frac = (np.full(w.size, np.nan) for _ in range(4))
+    # the reference's terms once for every W and offset (bit-identical, a third less work)
+    ref = ReferenceTerms()
+
     # in chunks of increasing W: nothing is computed beyond the first breakdown's chunk
+    # (8 W: every offset W/2 mod 1 of a 0.25 px grid once; the W beyond the breakdown are
+    # dropped below, so a shorter chunk gives the same table with less work past it)
+    def one(sel: NDArray[np.intp], first: bool) -> None:
+        try:
+            mean_var, mis_var, _, fr = _terms(
+                img,
+                w[sel],
+                pts,
+                subset,
+                motion,
+                shape,
+                "bspline3",
+                boundary,
+                max_shift,
+                float(offs[sel[0]]),
+                lam_min,
+                sssig=False,  # the table has no SSSIG: one blurred image less per W
+                reference=ref,
+            )
+        except InputError:
+            if first:
+                raise
+            frac[sel] = 0.0  # the texture is gone along the motion: broken down
+            return
+        n1[sel] = mean_var[0] + mean_var[1]
+        n2[sel] = mean_var[2]
+        b2[sel] = mis_var
+        frac[sel] = fr
+
     start = 0
     while start < w.size:
-        chunk = np.arange(start, min(start + 20, w.size))
-        for off in np.unique(offs[chunk]):
-            sel = chunk[offs[chunk] == off]
-            try:
-                mean_var, mis_var, _, fr = _terms(
-                    img,
-                    w[sel],
-                    pts,
-                    subset,
-                    motion,
-                    shape,
-                    "bspline3",
-                    boundary,
-                    max_shift,
-                    float(off),
-                    lam_min,
-                )
-            except InputError:
-                if start == 0:
-                    raise
-                frac[sel] = 0.0  # the texture is gone along the motion: broken down
-                continue
-            n1[sel] = mean_var[0] + mean_var[1]
-            n2[sel] = mean_var[2]
-            b2[sel] = mis_var
-            frac[sel] = fr
+        chunk = np.arange(start, min(start + 8, w.size))
+        # one group per offset, each writing its own W: the same table on any threads
+        groups = [chunk[offs[chunk] == off] for off in np.unique(offs[chunk])]
+        each(functools.partial(one, first=start == 0), groups, threads)
         if (frac[chunk] < BREAKDOWN_FRACTION).any():
             break
         start += chunk.size

@@ -42,6 +42,7 @@ ZNSSD projection it agrees within 0.5 % as W -> 0 (BENCHMARKS.md, models section
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,6 +63,7 @@ from .derivatives import box_blurred as box_blurred
 from .derivatives import image_spectrum as image_spectrum
 from .derivatives import spectral_derivatives as spectral_derivatives
 from .derivatives import spline_gradients as spline_gradients
+from .reference_terms import ReferenceTerms
 from .subset_algebra import (
     Criterion,
     Shape,
@@ -244,6 +246,7 @@ def shifts_and_variance(
     complete: bool = True,
     min_contraction: float = 0.0,
     contraction_out: NDArray[np.float64] | None = None,
+    reference: ReferenceTerms | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
@@ -256,7 +259,9 @@ def shifts_and_variance(
     ``complete=False`` drops the reference-gradient noise terms (the earlier, incomplete
     formula; kept for the benchmark's comparison). ``min_contraction > 0``: a subset whose
     IC-GN contraction (:func:`contraction`) falls below it has broken down (``nan``).
-    ``contraction_out``, shape (m, n): filled with the contraction of every subset."""
+    ``contraction_out``, shape (m, n): filled with the contraction of every subset.
+    ``reference``: a :class:`~dicblur.models.reference_terms.ReferenceTerms` that keeps the
+    reference's terms across blur lengths and calls (same numbers, less work)."""
     check_shape(shape)
     check_derivative(derivative)
     dy, dx = unit_direction(motion)
@@ -306,12 +311,19 @@ def shifts_and_variance(
         kx = wts.shape[1]
         gmat[:kx, :kx] = along[1] * c_axis[0][0] * gs  # x-type columns
         gmat[kx:, kx:] = along[0] * c_axis[1][0] * gs  # y-type columns
+    if reference is not None:
+        reference.bind(image, centres, subset, shape, derivative, chunk)
+    ref_terms: tuple[Any, ...] | None = None
     for j, start, jf, jg, f, gg in blurred_subsets(
         image, w, centres, subset, motion, shape, derivative, boundary, chunk, offset
     ):
         rows = slice(start, start + len(f))
         if criterion == "znssd" or variance:
-            fh, sf = normalise(f)
+            if reference is None:
+                fh, sf = normalise(f)
+            else:
+                fh, sf, *rest = reference.terms(start, jf, f)
+                ref_terms = tuple(rest)
             gh, sg = normalise(gg)
             pjg = project(jg, gh)  # P_g J_g
             cross = gram(jf, pjg)  # J_f^T P_g J_g
@@ -328,7 +340,7 @@ def shifts_and_variance(
             p0 = solve(a, b)
             shifts[j, rows] = along_motion(p0, shape, dy, dx, max_shift)
             if min_contraction > 0 or contraction_out is not None:
-                lam = contraction(jf, fh, sf, cross, sg)
+                lam = contraction(jf, fh, sf, cross, sg, ref_terms)
                 if contraction_out is not None:
                     contraction_out[j, rows] = lam
                 if min_contraction > 0:
@@ -338,7 +350,8 @@ def shifts_and_variance(
             contraction_out[j, rows] = 1.0  # the reference itself: K = I
         if var is not None:
             ratio2 = (sg / np.where(sf > 0, sf, np.nan)) ** 2
-            pf, pg = project(jf, fh), project(jf, gh)
+            pf = project(jf, fh) if ref_terms is None else ref_terms[0]
+            pg = project(jf, gh)
             if noise_cov is None:
                 pg_c = pg
             else:  # the current image's noise as the interpolant passes it: (C_y x C_x) pg
@@ -358,7 +371,16 @@ def shifts_and_variance(
                 # residual at the linearised fixed point, orthogonal to J_f
                 r0 = fh - gh - np.matmul(pjg, p0[:, :, None])[:, :, 0] / sg_ok[:, None]
                 mid_ref = reference_noise_middle(
-                    pf, np.sqrt(ratio2), sg, r0, subset, shape, win_ex, win_ey, kernel
+                    pf,
+                    np.sqrt(ratio2),
+                    sg,
+                    r0,
+                    subset,
+                    shape,
+                    win_ex,
+                    win_ey,
+                    kernel,
+                    pf_gram=None if ref_terms is None else ref_terms[1],
                 )
             else:
                 mid_ref = ratio2[:, None, None] * gram(pf, pf)

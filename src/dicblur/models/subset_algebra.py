@@ -7,7 +7,7 @@ blurred subsets, and the reference-noise terms of the matcher's gradients.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -197,6 +197,7 @@ def contraction(
     sf: NDArray[np.float64],
     cross: NDArray[np.float64],
     sg: NDArray[np.float64],
+    reference: tuple[Any, ...] | None = None,
 ) -> NDArray[np.float64]:
     """Smallest real part of the eigenvalues of ``K = (sigma_f / sigma_g) H^-1 A`` per subset,
     ``H = J_f^T P_f J_f`` (the IC-GN Hessian of ZNSSD) and ``A = J_f^T P_g J_g`` (the
@@ -205,10 +206,14 @@ def contraction(
     the fixed point degenerates (the noise response grows as ``1 / lambda``, IC-GN stalls)
     and beyond 0 it repels (the blur has reversed the subset's gradients along the motion:
     the sinc's negative lobe). ``nan`` where undefined."""
-    pf = project(jf, fh)
-    hess = gram(pf, pf)
+    if reference is None:
+        pf = project(jf, fh)
+        hess = gram(pf, pf)
+        cond = None
+    else:  # (P_f J_f, H, cond(H)) kept across blur lengths (ReferenceTerms)
+        pf, hess, cond = reference
     ok = np.isfinite(hess).all(axis=(1, 2)) & np.isfinite(cross).all(axis=(1, 2)) & (sg > 0)
-    ok[ok] = np.linalg.cond(hess[ok]) < 1e12
+    ok[ok] = (np.linalg.cond(hess[ok]) if cond is None else cond[ok]) < 1e12
     lam = np.full(len(jf), np.nan)
     if ok.any():
         k = np.linalg.solve(hess[ok], cross[ok]) * (sf[ok] / sg[ok])[:, None, None]

@@ -368,30 +368,40 @@ def _icgn_shift_estimate(
     corr = np.fft.irfft(fm * np.conj(ff), length, axis=-1)
     lags = _lag_window(length, du)
     xi = lags[np.argmax(corr[:, lags % length], axis=-1)].astype(np.float64)
-    k = np.arange(length)[None, :]
-    rows = np.arange(n)[:, None]
+    # taps -1..2 of every pixel as contiguous windows of the circularly extended
+    # coefficients: window s of row r is coef[r, (s + k) mod L], k = 0..L-1
+    windows = np.lib.stride_tricks.sliding_window_view(
+        np.concatenate([coef, coef, coef[:, :4]], axis=-1), length, axis=-1
+    )
     status = np.ones(n, dtype=np.uint8)
-    active = np.ones(n, dtype=bool)
+    # Newton on the rows still running only: a few slow trials (near w = 2 min(dp, g), where
+    # C vanishes) used to keep the whole (trials, L) arrays in the loop for 60 iterations.
+    # Each row's arithmetic is the same as on the full arrays (bit-identical estimates).
+    idx = np.arange(n)
     for _ in range(max_iter):
-        i0 = np.floor(xi)
-        t = xi - i0
+        x = xi[idx]
+        i0 = np.floor(x)
+        t = x - i0
         w, dw = _taps(t, kind)
-        val = np.zeros((n, length))
-        der = np.zeros((n, length))
+        m = idx.size
+        val = np.zeros((m, length))
+        der = np.zeros((m, length))
+        first = (i0.astype(np.intp) - 1) % length
         for j in range(4):
-            c = coef[rows, (k + i0.astype(np.intp)[:, None] + j - 1) % length]
+            c = windows[idx, first + j]
             val += w[j][:, None] * c
             der += dw[j][:, None] * c
-        f_val = np.sum(df * (val - fixed), axis=-1)
-        f_der = np.sum(df * der, axis=-1)
+        d_act = df[idx]
+        f_val = np.sum(d_act * (val - fixed[idx]), axis=-1)
+        f_der = np.sum(d_act * der, axis=-1)
         with np.errstate(divide="ignore", invalid="ignore"):
             step = np.where(f_der != 0, f_val / f_der, 0.0)
         step = np.clip(np.nan_to_num(step), -1.0, 1.0)
-        xi = np.where(active, xi - step, xi)
-        done = active & (np.abs(step) < tol)
-        status[done] = 0
-        active &= ~done
-        if not active.any():
+        xi[idx] = x - step
+        done = np.abs(step) < tol
+        status[idx[done]] = 0
+        idx = idx[~done]
+        if not idx.size:
             break
     status[np.abs(xi) > du / 2] = 2
     return xi, status

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -75,6 +75,10 @@ class PulseStudy:
         Markdown text generated from the numbers above.
     elapsed_s : float
         Wall time of the main Monte Carlo, seconds.
+    timings : dict of str to float
+        Wall time of each phase, s: ``montecarlo`` (the main one, = ``elapsed_s``),
+        ``fits``, ``dependence`` (its Monte Carlo runs), ``table_ii``, ``fig5`` and
+        ``verdict``; ``benchmarks/bench_budgets.py`` prints them.
     """
 
     dataset: xr.Dataset
@@ -88,6 +92,7 @@ class PulseStudy:
     verdict: str
     elapsed_s: float
     settings: dict[str, Any]
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------------------
@@ -376,15 +381,30 @@ def run_pulse_study(
         keep_samples=True,
     )
     elapsed = time.perf_counter() - t0
+    timings = {"montecarlo": elapsed}
+    clock = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = now - clock
+        clock = now
+
     fits = _segment_fits(ds, PAPER_TRAIN, 1.0)
     knee = find_knee(ds)
+    lap("fits")
     dep: tuple[DependenceRow, ...] = ()
     if dependence_trials is not None:
         dep = _dependence(int(min(trials, dependence_trials)), seed, sigma)
+    lap("dependence")
+    table = table_ii()
+    lap("table_ii")
+    fig5 = _fig5()
+    lap("fig5")
     study_kw = dict(
         dataset=ds,
-        table=table_ii(),
-        fig5=_fig5(),
+        table=table,
+        fig5=fig5,
         fits=fits,
         knee=knee,
         knee_predicted=2 * min(PAPER_TRAIN.dp, PAPER_TRAIN.g),
@@ -402,4 +422,6 @@ def run_pulse_study(
     )
     from .verdict import verdict_text
 
-    return PulseStudy(verdict=verdict_text(**study_kw), **study_kw)  # type: ignore[arg-type]
+    verdict = verdict_text(**study_kw)  # type: ignore[arg-type]
+    lap("verdict")
+    return PulseStudy(verdict=verdict, timings=timings, **study_kw)  # type: ignore[arg-type]

@@ -21,7 +21,13 @@ from typing import Any
 from ..errors import InputError
 from .planner_js import PLANNER_JS
 
-__all__ = ["PlannerDefaults", "planner_html", "planner_payload", "write_planner"]
+__all__ = [
+    "PlannerDefaults",
+    "planner_html",
+    "planner_payload",
+    "starting_noise",
+    "write_planner",
+]
 
 #: Size budget of a page (bytes); the test holds it.
 SIZE_BUDGET = 300_000
@@ -41,6 +47,18 @@ class PlannerDefaults:
     flux: float | None = None
     bit_depth: int = 8
     grey_level: float | None = None
+
+
+def starting_noise(model: Any, noise: float | None = None) -> float:
+    """The noise (GL) the page's noise control starts at: ``noise`` when given, else the
+    model's own noise (one calibration level), else its smallest calibration level (a
+    model fitted on several), else 2 GL. The page lets the user choose any other value;
+    ``dicblur plan --html`` prints its text plan at this noise too, and says so."""
+    if noise is not None:
+        return float(noise)
+    if model.noise_sigma is not None:
+        return float(model.noise_sigma)
+    return float(model.noise_levels[0]) if model.noise_levels else 2.0
 
 
 def _fit_payload(fit: Any) -> dict[str, Any]:
@@ -172,15 +190,7 @@ def planner_html(
         for i, m in enumerate(models)
     ]
     first = models[0]
-    noise = (
-        d.noise
-        if d.noise is not None
-        else (
-            first.noise_sigma
-            if first.noise_sigma is not None
-            else (first.noise_levels[0] if first.noise_levels else 2.0)
-        )
-    )
+    noise = starting_noise(first, d.noise)
     camera = d.full_well is not None
     by_flux = d.flux is not None or d.grey_level is None
     grey = (

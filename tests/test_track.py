@@ -184,8 +184,11 @@ def test_missing_exposure_and_too_long():
         dicblur.track(_plain(frames), fps=1000, noise=1.0, step=16)
     with pytest.raises(InputError, match="longer than the frame interval"):
         dicblur.track(_plain(frames), fps=1000, exposure="2ms", noise=1.0, step=16)
-    with pytest.raises(InputError, match="--static"):
-        dicblur.track(_plain(frames), fps=1000, exposure="0.5ms", step=16)
+    # neither --static nor --noise: estimated from the residuals, here too few subsets
+    # (9 POIs) for it, said in the notes (no sigma rather than a guess)
+    ds = dicblur.track(_plain(frames), fps=1000, exposure="0.5ms", step=16, advice=False)
+    assert "no noise estimate" in ds.attrs["notes"] and "--static" in ds.attrs["notes"]
+    assert "noise_sigma" not in ds.attrs and ds["sigma_u"].isnull().all()
 
 
 def test_metadata_disagreement_warns():

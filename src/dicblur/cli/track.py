@@ -53,7 +53,12 @@ def track_command(
         typer.Option("--static", help="Frames of the static scene for the noise, e.g. 0:20."),
     ] = None,
     noise: Annotated[
-        float | None, typer.Option("--noise", help="Noise std (grey levels) instead of --static.")
+        float | None,
+        typer.Option(
+            "--noise",
+            help="Noise std (grey levels) instead of --static (neither: estimated from the "
+            "frames' residuals).",
+        ),
     ] = None,
     subset: SubsetOption = 21,
     step: StepOption = 10,
@@ -301,6 +306,12 @@ def track_command(
             "exposure": float(a["exposure"]),
             "fps": float(a["fps"]),
             "noise_sigma": float(a.get("noise_sigma", float("nan"))),
+            "noise_source": str(a.get("noise_source", "-"))
+            + (
+                f" (95 % {a['noise_sigma_low']:.3g}-{a['noise_sigma_high']:.3g} GL)"
+                if a.get("noise_estimated")
+                else ""
+            ),
             "valid_share": float(valid.mean()),
             "outliers": int(ds["n_outliers"].values.sum()),
             "frames_per_s": int(ds.sizes["frame"]) / max(float(a["tracking_time_s"]), 1e-9),

@@ -17,7 +17,13 @@ from .outliers import neighbour_medians
 from .state import CorrelatorState
 from .status import PointStatus
 
-__all__ = ["IMPRECISE_BUDGET", "IMPRECISE_MIN", "RETRY_BUDGET", "IcgnPasses"]
+__all__ = [
+    "IMPRECISE_BUDGET",
+    "IMPRECISE_MIN",
+    "RETRY_BUDGET",
+    "SERIAL_BELOW",
+    "IcgnPasses",
+]
 
 _RETRY = (
     PointStatus.MAX_ITERATIONS,
@@ -40,6 +46,10 @@ RETRY_BUDGET = 4
 #: iterations went to these 11 % of its POIs).
 IMPRECISE_BUDGET = 1.0
 IMPRECISE_MIN = 3
+#: A translation kernel call on fewer POIs runs on this thread alone: waking numba's
+#: OpenMP workers costs more than they give on a few subsets (a retry, the neighbour
+#: check), and on a loaded machine a woken worker waits for a core (issue 26).
+SERIAL_BELOW = 128
 
 
 class IcgnPasses(CorrelatorState):
@@ -54,8 +64,16 @@ class IcgnPasses(CorrelatorState):
             idx: NDArray[np.intp] | None = None,
         ) -> None: ...
 
-    def _settings(self, width: int, max_iter: int | None) -> kernels.Settings:
-        """The kernels' scalar record (``max_iter`` None: ``max_iterations``)."""
+    def _settings(
+        self,
+        width: int,
+        max_iter: int | None,
+        max_step: float | None = None,
+        tol: float | None = None,
+    ) -> kernels.Settings:
+        """The kernels' scalar record (``max_iter`` None: ``max_iterations``; ``max_step``
+        None: the subset size, px, the farthest (u, v) may move from its start before the
+        POI is ``DIVERGED``; ``tol`` None: ``tolerance``, px)."""
         return kernels.settings(
             self.image_shape[0],
             self.image_shape[1],
@@ -63,9 +81,9 @@ class IcgnPasses(CorrelatorState):
             self.half,
             width,
             self.max_iterations if max_iter is None else max_iter,
-            self.tolerance,
+            self.tolerance if tol is None else tol,
             self.min_zncc,
-            float(self.subset),
+            float(self.subset) if max_step is None else max_step,
         )
 
     def _translation(
@@ -77,23 +95,31 @@ class IcgnPasses(CorrelatorState):
         second: NDArray[np.intp],
         source: NDArray[np.intp],
         max_iter: int | None = None,
+        max_step: float | None = None,
+        tol: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
         """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
         ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
         out = kernels.outputs(self.n_points, 2)
         cache.wait_for_background("translation")
-        kernels.icgn_translation(
-            coef,
-            self._images,
-            self._subsets,
-            self._packed,
-            self._settings(self._w, max_iter),
-            p0,
-            status_in,
-            kernels.Passes(first, second, source),
-            numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
-            out,
-        )
+        old = numba.get_num_threads()
+        if first.size + second.size < SERIAL_BELOW:
+            numba.set_num_threads(1)  # same bytes: each POI's result is its own
+        try:
+            kernels.icgn_translation(
+                coef,
+                self._images,
+                self._subsets,
+                self._packed,
+                self._settings(self._w, max_iter, max_step, tol),
+                p0,
+                status_in,
+                kernels.Passes(first, second, source),
+                numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
+                out,
+            )
+        finally:
+            numba.set_num_threads(old)
         return out.p, out.zncc, out.iterations, out.status
 
     def _run_icgn(
@@ -103,14 +129,20 @@ class IcgnPasses(CorrelatorState):
         status_in: NDArray[np.uint8],
         idx: NDArray[np.intp] | None = None,
         max_iter: int | None = None,
+        max_step: float | None = None,
+        tol: float | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+        """IC-GN of the POIs ``idx`` (None: all) from ``p0``; ``max_iter``, ``max_step``,
+        ``tol`` as :meth:`_settings` (None: the Correlator's)."""
         if self.shape == "translation":
             full = np.zeros((self.n_points, 2))
             st_full = np.zeros(self.n_points, np.uint8)
             sel = self._all if idx is None else idx
             full[sel] = p0
             st_full[sel] = status_in
-            out = self._translation(coef, full, st_full, sel, self._none, self._none, max_iter)
+            out = self._translation(
+                coef, full, st_full, sel, self._none, self._none, max_iter, max_step, tol
+            )
             return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
         if max_iter is None and self._imprecise is not None:
             split = self._imprecise_split(idx)
@@ -138,7 +170,7 @@ class IcgnPasses(CorrelatorState):
             coef,
             self._images,
             subsets,
-            self._settings(self._tw, max_iter),
+            self._settings(self._tw, max_iter, max_step, tol),
             np.ascontiguousarray(p0),
             np.ascontiguousarray(status_in),
             out,

@@ -35,6 +35,7 @@ from ..dic import Correlator, MatcherSettings, PointStatus
 from ..dic.initial import window_spectrum
 from ..errors import DicblurError, InputError
 from ..sequence import Recording, open_recording
+from .auto_noise import residual_frame_noise
 from .compensate import MATCHER_PLAIN, build_compensated_table, compensate_track
 from .flags import ZNCC_RATIO as ZNCC_RATIO
 from .flags import zncc_flags as zncc_flags
@@ -141,7 +142,9 @@ def track(
     static : str or (start, stop), optional
         Frames of the static scene (``"0:20"``, half-open) for the noise estimate.
     noise : float, optional
-        Noise std (GL) instead of ``static``.
+        Noise std (GL) instead of ``static``. Neither given: estimated from the converged
+        residuals of the frames nearest the reference (:mod:`.auto_noise`), recorded in
+        the attributes ``noise_estimated``, ``noise_sigma_low``, ``noise_sigma_high``.
     reference : int
         Reference frame (tracking runs forwards from it, then backwards).
     frames : str or (start, stop), optional
@@ -206,8 +209,7 @@ def track(
     Raises
     ------
     InputError
-        Missing exposure/fps, exposure longer than the frame interval, no noise source,
-        bad ranges.
+        Missing exposure/fps, exposure longer than the frame interval, bad ranges.
     TrackInterrupted
         A frame could not be read or tracking was interrupted; ``.dataset`` holds what was
         tracked.
@@ -238,11 +240,6 @@ def track(
     st_range = None
     if static is not None:
         st_range = parse_frame_range(static, n_total, "static")
-    elif noise is None:
-        raise InputError(
-            "noise: give the static frames (--static 0:20) or the noise std "
-            "(--noise 2, grey levels)"
-        )
     if noise is not None and (not math.isfinite(float(noise)) or float(noise) <= 0):
         raise InputError(f"noise={noise!r}: must be a noise std > 0 (GL)")
     limit = None
@@ -274,6 +271,24 @@ def track(
             if noise_est is None:
                 notes.append(f"no noise estimate: {exc}")
     ref_img = rec.frame(reference)
+    if noise_est is None and st_range is None:
+        # neither given: the residuals of the frames nearest the reference (auto_noise)
+        noise_est = residual_frame_noise(
+            rec,
+            Correlator(
+                ref_img, roi=roi, points=points, subset=subset, step=step, shape=shape,
+                min_zncc=min_zncc, workers=workers, noise_sigma=None,
+            ),
+            ref_img,
+            reference=reference,
+            frames=(f0, f1),
+        )  # fmt: skip
+        if noise_est is None:
+            noise_error = InputError(
+                "noise: too few subsets converge to estimate it from the frames; give "
+                "the static frames (--static 0:20) or the noise std (--noise 2, GL)"
+            )
+            notes.append(f"no noise estimate: {noise_error}")
     opts: dict[str, Any] = {
         "subset": subset,
         "step": step,

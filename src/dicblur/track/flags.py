@@ -5,6 +5,7 @@ the blocks of frames the post-processing runs on its threads.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -14,6 +15,41 @@ from numpy.typing import NDArray
 
 from ..threads import each
 from .median import median_critical_eps
+
+#: False-alarm rate per correct point of the normalised median test at the point's own
+#: predicted sigma (:func:`own_sigma_eps`).
+FALSE_ALARM = 1e-4
+#: ``k`` of :func:`own_sigma_eps` at false-alarm rates 1e-2, 1e-3, 1e-4 (threshold 2): the
+#: ``1 - rate / 2`` quantile of ``|x_0 - m| / 2 - r_m`` with ``x_0 .. x_8`` independent
+#: N(0, 1), ``m`` the median of the 8 neighbours and ``r_m`` the median of their
+#: ``|x_i - m|`` (seeded Monte Carlo of 1e7 draws; tests/test_track_flags.py checks it).
+_K_RATES = np.array([1e-2, 1e-3, 1e-4])
+_K_VALUES = np.array([1.044, 1.434, 1.751])
+
+
+def own_sigma_eps(
+    sigma: NDArray[np.floating[Any]] | float,
+    threshold: float,
+    *,
+    false_alarm: float = FALSE_ALARM,
+) -> NDArray[np.float64]:
+    """``eps`` (px) of the normalised median test at which a correct point whose predicted
+    random error is ``sigma`` (px, any shape) is flagged with probability ``false_alarm``.
+
+    The test flags ``|u_0 - u_m| > threshold (r_m + eps)`` on either component. For a
+    correct point among 8 neighbours of the same scatter ``s`` (independent normal
+    errors), ``|u_0 - u_m| / threshold - r_m`` in units of ``s`` has a fixed distribution;
+    its ``1 - false_alarm / 2`` quantile ``k`` (two components) gives ``eps = k s``
+    (k = 1.75 at 1e-4 and the threshold 2; tabulated, interpolated in log rate, for the
+    threshold 2; another threshold scales ``k`` by ``2 / threshold``, exact for the
+    ``|u_0 - u_m|`` part). ``s`` is the point's own sigma, so a poorly textured or
+    strongly blurred subset (a large predicted error, noise or blur-mismatch part) is
+    held to its own range, not to the frame's median point.
+    """
+    lr = math.log10(min(max(false_alarm, 1e-4), 1e-2))
+    k = float(np.interp(-lr, -np.log10(_K_RATES), _K_VALUES)) * 2.0 / threshold
+    return np.asarray(k * np.asarray(sigma, np.float64))
+
 
 #: A converged point whose ``1 - ZNCC`` exceeds this multiple of its usual value (its
 #: frame's median, scaled by the point's own median ratio over the recording) is flagged.
@@ -38,6 +74,15 @@ def nanmedian_last(x: NDArray[Any], *, overwrite: bool = False) -> NDArray[Any]:
         # np.median: the middle value, or the mean of the two middle ones in x's dtype
         mid = np.where(n % 2 == 1, lo, (lo + hi) / 2)
     return np.where(n > 0, mid, np.nan).astype(x.dtype, copy=False)
+
+
+def frame_filled(x: NDArray[np.floating[Any]], use: NDArray[np.bool_]) -> NDArray[np.floating[Any]]:
+    """``x`` (frames, points) with its NaN replaced by the frame's median of the finite
+    values at the points ``use`` (NaN where a frame has none)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med = nanmedian_last(np.where(use, x, np.nan))
+    return np.where(np.isnan(x), med[:, None].astype(x.dtype), x)
 
 
 def zncc_flags(

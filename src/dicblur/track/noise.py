@@ -32,9 +32,14 @@ class NoiseEstimate:
         The level model (GL**2 and GL).
     level_dependent : bool
     source : str
-        ``"static frames a:b"`` or ``"given"``.
+        ``"static frames a:b"``, ``"given"`` or ``"estimated from the residuals of
+        frames ..."`` (:mod:`.auto_noise`).
     pairs : int
         Frame pairs used.
+    interval : (float, float), optional
+        95 % interval of ``sigma`` (GL) when estimated from residuals.
+    subsets : int
+        Converged subsets the residual estimate pooled (0 otherwise).
     """
 
     sigma: float
@@ -43,6 +48,8 @@ class NoiseEstimate:
     level_dependent: bool
     source: str
     pairs: int = 0
+    interval: tuple[float, float] | None = None
+    subsets: int = 0
 
     def variance(self, level: NDArray[np.float64]) -> NDArray[np.float64]:
         """Noise variance (GL**2) at grey levels ``level``."""
@@ -59,7 +66,24 @@ class NoiseEstimate:
             "level_dependent": self.level_dependent,
             "source": self.source,
             "pairs": self.pairs,
+            "estimated": int(self.interval is not None),
+            **(
+                {}
+                if self.interval is None
+                else {
+                    "sigma_low": self.interval[0],
+                    "sigma_high": self.interval[1],
+                    "subsets": self.subsets,
+                }
+            ),
         }
+
+    def describe(self) -> str:
+        """One line for a summary: ``2.03 GL (estimated ..., 95 % 1.98-2.08 GL)``."""
+        if self.interval is None:
+            return f"{self.sigma:.4g} GL ({self.source})"
+        lo, hi = self.interval
+        return f"{self.sigma:.3g} GL ({self.source}, 95 % {lo:.3g}-{hi:.3g} GL)"
 
 
 def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24) -> NoiseEstimate:

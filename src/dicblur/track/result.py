@@ -20,7 +20,14 @@ from ..dic import Correlator, PointStatus
 from ..errors import DicblurError
 from ..sequence import Recording
 from .advice import advise_exposure
-from .flags import frame_blocks, median_critical, nanmedian_last, zncc_flags
+from .flags import (
+    frame_blocks,
+    frame_filled,
+    median_critical,
+    nanmedian_last,
+    own_sigma_eps,
+    zncc_flags,
+)
 from .frames import Tracked
 from .kinematics import exposure_motion, exposure_skew
 from .noise import NoiseEstimate, subset_levels
@@ -151,8 +158,9 @@ def assemble(
     gshape = _grid_shape(corr.rows, corr.cols)
     if gshape is None:
         notes.append("POIs not on a grid: no normalised median test")
-    # pass 1: the median test at its fixed eps (catches errors of tenths of a px) and the
-    # ZNCC test; pass 2, once sigma is known, at eps = 2 x the frame's median sigma
+    # pass 1: the median test at its fixed eps (keeps errors of tenths of a px out of the
+    # blur estimate) and the ZNCC test; pass 2, once sigma is known, at eps from each
+    # point's own predicted sigma (flags.own_sigma_eps), which sets the final flags
     t_med = time.perf_counter()
     # the largest eps at which the test flags each point: both passes from one median pass
     crit = median_critical(u, v, conv, gshape, threshold, threads=threads)
@@ -250,31 +258,35 @@ def assemble(
 
         outs = tuple(sig[k] for k in names)
 
-        def predict(rows: NDArray[np.intp] | None = None) -> None:
+        def predict(rows: NDArray[np.intp] | None = None, at: Any = None) -> None:
+            wa, aa = (w, ang) if at is None else at
+
             def one(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
-                table.predict_into(w, ang, nv, b, pin, outs)  # NaN: blur unknown
+                table.predict_into(wa, aa, nv, b, pin, outs)  # NaN: blur unknown
 
             frame_blocks(one, np.arange(n_f) if rows is None else rows, 128, threads)
 
-        predict()
+        # first at the frame's median blur vector where a point's own blur is unknown (a
+        # flag in its stencil): every converged point gets a sigma for the gross-error
+        # test below; those stay NaN in the result (masked after the test)
+        predict(at=_polar(frame_filled(wu, conv), frame_filled(wv, conv), threads))
         if gshape is not None:
-            s_max = np.empty((n_f, n_p), np.float32)
+            s_own = np.empty((n_f, n_p), np.float32)
 
             def largest(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
                 r = slice(int(b[0]), int(b[-1]) + 1)
                 np.fmax(
                     np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r]),
                     np.hypot(sig["sigma_v_noise"][r], sig["sigma_v_blur"][r]),
-                    out=s_max[r],
+                    out=s_own[r],
                 )
-                s_max[r][~good[r]] = np.nan
 
             frame_blocks(largest, np.arange(n_f), 128, threads)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                eps_k = 2.0 * nanmedian_last(s_max, overwrite=True)
-            del s_max
-            eps_k = np.where(np.isfinite(eps_k) & (eps_k > 0), eps_k, eps)
+            # the test at each point's own predicted sigma, at a set false-alarm rate
+            # (flags.own_sigma_eps); where no sigma is known, the fixed eps
+            eps_pt = own_sigma_eps(frame_filled(s_own, conv & ~outlier), threshold)
+            eps_pt = np.where(np.isfinite(eps_pt) & (eps_pt > 0), eps_pt, eps)
+            del s_own
             # the second pass leaves out the low-ZNCC points too: the medians change only
             # in the frames that have some
             t_med = time.perf_counter()
@@ -288,10 +300,13 @@ def assemble(
                 out=crit,
                 threads=threads,
             )
-            second = crit > eps_k[:, None]
+            # replaces the first pass (its fixed 0.1 px only kept gross errors out of the
+            # blur estimate): a point is flagged against its own predicted range
+            second = crit > eps_pt
+            del eps_pt
             settings["median_time_s"] += time.perf_counter() - t_med
-            if (second & ~outlier).any():
-                outlier |= second
+            if (second != outlier).any():
+                outlier = second
                 good = conv & ~outlier & ~low_zncc
                 wu, wv = motion(good)
                 w_old, ang_old = w, ang
@@ -324,6 +339,8 @@ def assemble(
         )
     if not sig:
         sig = nan_fields()
+    for a in sig.values():  # no sigma where the point's own blur is unknown
+        a[~np.isfinite(w)] = np.nan
     del crit
     # after a reference renewal the increments add to the renewal frame's displacement:
     # its predicted variance carries over (into the noise part: a random error)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -12,6 +13,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..status import PointStatus
+
+# The translation IC-GN's parfor runs on numba's OpenMP layer, whose GNU runtime by default
+# keeps each worker spinning ~10 ms after every parallel region: 11 ms of CPU per call on
+# 2 cores whatever the POI count (14 POIs: 12.7 ms CPU, 25 ms wall on a loaded machine;
+# passive: 0.04 ms), which also took the core from the thread doing the work. Passive
+# waiting (sleep at once, woken in tens of us) unless the user set a policy; read by
+# libgomp when numba loads its OpenMP pool, at the first parallel call (benchmarks/
+# bench_screening.py, issue 26).
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __all__ = [
     "CONVERGED",

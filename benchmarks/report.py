@@ -444,15 +444,37 @@ def render_stereo(doc: Doc) -> Lines:
     r = [b["ratio"] for b in bins]
     hi_w = [b["ratio"] for b in bins if b["W_lo"] >= 4]
     angles = sorted({c["stereo_angle"] for c in doc["cases"]})
-    sp = doc["speed"]
+    sp = doc.get("speed") or {}
     cells = [
         f"plane, {'/'.join(fmt(a) for a in angles)} deg, in/out-of-plane, peak W ~6 px",
         f"sigma_U/V/W3 pred/meas {fmt(min(r))}-{fmt(max(r))}, "
         f"{sum(0.8 <= x <= 1.2 for x in r)}/{len(r)} bins within 20 %",
         f"W >= 4 px: {fmt(min(hi_w))}-{fmt(max(hi_w))}" if hi_w else "W >= 4 px: -",
-        f"{sp['size']}^2, {fmt(sp['points'])} POIs: {fmt(sp['pairs_per_s_tracking'])} pairs/s "
-        f"(end to end {fmt(sp['pairs_per_s_end_to_end'])})",
+        f"{sp.get('size', '-')}^2, {fmt(sp.get('points'))} POIs: "
+        f"{fmt(sp.get('pairs_per_s_tracking'))} pairs/s "
+        f"(end to end {fmt(sp.get('pairs_per_s_end_to_end'))})",
     ]
+    return ["| " + " | ".join(cells) + " |", "|" + "---|" * len(cells)]
+
+
+def render_stereo_speed(doc: Doc) -> Lines:
+    """Two lines: the stereo track's speed (end to end, the loop, per CPU s) and, when a
+    baseline ran alongside, the ratios to it and the largest difference of the fields."""
+    doc = doc.get("speed") or doc
+    cells = [
+        f"{doc['size']}^2 x {doc['pairs']} pairs, {fmt(doc['points'])} POIs",
+        f"{fmt(doc['pairs_per_s_end_to_end'])} pairs/s end to end, "
+        f"{fmt(doc['pairs_per_s_tracking'])} in the loop, {fmt(doc['pairs_per_cpu_s'])} per CPU s",
+    ]
+    rat = doc.get("ratio_this_over_baseline")
+    if rat:
+        e2e = "/".join(fmt(x) for x in rat["pairs_per_s_end_to_end"])
+        loop = "/".join(fmt(x) for x in rat["pairs_per_s_tracking"])
+        diff = max(doc["max_abs_diff_mm"].values())
+        cells.append(
+            f"vs baseline (side by side): end to end x{e2e}, loop x{loop}; "
+            f"fields within {fmt(diff)} mm"
+        )
     return ["| " + " | ".join(cells) + " |", "|" + "---|" * len(cells)]
 
 
@@ -473,6 +495,7 @@ RENDERERS: dict[str, Callable[[Doc], Lines]] = {
     "test_suite": render_test_suite,
     "strain": render_strain,
     "stereo": render_stereo,
+    "stereo_speed": render_stereo_speed,
 }
 #: Files that are inputs of another file's table, not tables of their own.
 PARTS = {"cold_compile_before", "dic_robust_main"}

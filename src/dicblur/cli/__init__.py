@@ -48,6 +48,7 @@ _SUBCOMMANDS: dict[tuple[str, str], str] = {
     ("pattern", "predict"): "Predict u_e(W) from the static image alone (no simulation).",
     ("stereo", "calibrate"): "Calibrate a stereo rig from checkerboard image pairs (OpenCV).",
     ("stereo", "track"): "Two recordings in: X, Y, Z, U, V, W3 and their sigma per point.",
+    ("stereo", "plan"): "The exposure for a 3-D sigma target, and a better stereo angle.",
 }
 
 

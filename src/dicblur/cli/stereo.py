@@ -129,6 +129,14 @@ def track_command(
     fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
     csv: Annotated[bool, typer.Option("--csv", help="Also write stereo.csv (long).")] = False,
     report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+    threads: Annotated[
+        int | None,
+        typer.Option(
+            "--threads",
+            help="Threads (default: all cores, NUMBA_NUM_THREADS): >= 2 correlates the two "
+            "cameras at the same time.",
+        ),
+    ] = None,
 ) -> None:
     """Stereo-track LEFT and RIGHT: the shape X, Y, Z, the 3-D displacement U, V, W3 of
     every point in every frame and their predicted sigma (noise and each camera's blur);
@@ -155,6 +163,12 @@ def track_command(
         raise InputError("--static / --noise: give the static frames (--static 0:20) or --noise")
     if out.exists() and not out.is_dir():
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
+    if threads is not None and threads < 1:
+        raise InputError(f"--threads={threads!r}: must be >= 1, e.g. 2")
+    if threads is None:
+        import numba
+
+        threads = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     the_rig = load_rig(rig)
     rec_l, rec_r = open_recording(left), open_recording(right)
     out.mkdir(parents=True, exist_ok=True)
@@ -185,6 +199,7 @@ def track_command(
             reference=reference,
             frames=frames,
             depth=dep,
+            threads=threads,
             progress=progress,
         )
     save_track(ds, target)
@@ -221,6 +236,125 @@ def track_command(
         console.print(f"wrote {w}")
 
 
+@stereo_app.command("plan")
+def plan_command(
+    model_path: Annotated[Path, typer.Argument(help="Model file written by 'dicblur fit'.")],
+    rig: Annotated[Path, typer.Option("--rig", help="Rig file (.json/.yml) of the two cameras.")],
+    velocity: Annotated[
+        str,
+        typer.Option(
+            "--velocity",
+            help="Target velocity x,y,z in the target frame (x along the baseline, z out of "
+            "plane, along the bisector), e.g. 0,0,100mm/s.",
+        ),
+    ],
+    target: Annotated[str, typer.Option("--target", help="Largest 3-D sigma, e.g. 0.01mm.")],
+    component: Annotated[
+        str, typer.Option("--component", help="worst (all three), x, y or z.")
+    ] = "worst",
+    noise: Annotated[
+        float | None, typer.Option("--noise", help="Fixed noise std, GL (default the model's).")
+    ] = None,
+    which: Annotated[
+        str | None,
+        typer.Option("--model", help="static (calibrate's default), mismatch or power_law."),
+    ] = None,
+    depth: Annotated[
+        str | None,
+        typer.Option(
+            "--depth",
+            help="Distance of the point along the left axis, e.g. 400mm (default: where the "
+            "optical axes cross).",
+        ),
+    ] = None,
+    angles: Annotated[
+        str, typer.Option("--angles", help="Stereo angles to compare, deg, e.g. 15,30,45.")
+    ] = "10,15,20,30,45,60",
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Plan the exposure for a 3-D target: the longest whose predicted sigma (x, y, z in
+    the target frame, each camera's blur and the 2-D model's noise and blur terms
+    propagated through the triangulation) meets --target, and the stereo angle that
+    would allow a longer one (symmetric rigs at the same distance)."""
+    import json
+    import math
+
+    from ..models import BlurUncertaintyModel, parse_quantity
+    from ..stereo.camera import load_rig
+    from ..stereo.plan import plan_stereo_exposure
+
+    if component not in ("worst", "x", "y", "z"):
+        raise InputError(f"--component={component!r}: choose worst, x, y or z")
+    if noise is not None and not noise > 0:
+        raise InputError(f"--noise={noise!r}: must be > 0 GL, e.g. 2")
+    try:
+        angs = [float(a) for a in angles.split(",") if a.strip()]
+    except ValueError:
+        raise InputError(f"--angles={angles!r}: expected degrees, e.g. 15,30,45") from None
+    if not angs or not all(0 < a < 90 for a in angs):
+        raise InputError(f"--angles={angles!r}: each in (0, 90) deg, e.g. 15,30,45")
+    point = None
+    if depth is not None:
+        dep = parse_quantity(depth, "length", name="--depth")
+        if not dep > 0:
+            raise InputError(f"--depth={depth!r}: must be > 0, e.g. 400mm")
+        point = (0.0, 0.0, dep)
+    if not model_path.exists():
+        raise InputError(f"MODEL={str(model_path)!r}: no such file (write one with dicblur fit)")
+    model = BlurUncertaintyModel.from_json(str(model_path))
+    the_rig = load_rig(rig)
+    try:
+        plan = plan_stereo_exposure(
+            the_rig, model, velocity=velocity, target=target,
+            component=component,  # type: ignore[arg-type]
+            sigma=noise, which=which, point=point, angles=angs,
+        )  # fmt: skip
+    except InputError as exc:
+        # the API names its keywords: the CLI's options instead
+        msg = str(exc)
+        for key in ("velocity", "target", "point"):
+            if msg.startswith(f"{key}="):
+                msg = "--" + ("depth" if key == "point" else key) + msg[len(key) :]
+        raise InputError(msg) from None
+    if as_json:
+        typer.echo(json.dumps(plan.to_dict(), default=float))
+        return
+    um = "um"
+    ms = plan.exposure * 1e3
+    print_mapping(
+        f"stereo plan: {the_rig.stereo_angle:.3g} deg rig, {plan.distance:.4g} mm",
+        {
+            "exposure": ms if math.isfinite(ms) else "any",
+            "sigma_x": plan.sigma[0] * 1e3,
+            "sigma_y": plan.sigma[1] * 1e3,
+            "sigma_z": plan.sigma[2] * 1e3,
+            "sigma_static_z": plan.sigma_static[2] * 1e3,
+            "W_left": plan.blur_left,
+            "W_right": plan.blur_right,
+            "best_angle": plan.best_angle,
+        },
+        {
+            "exposure": "ms",
+            "sigma_x": um,
+            "sigma_y": um,
+            "sigma_z": um,
+            "sigma_static_z": um,
+            "W_left": "px",
+            "W_right": "px",
+            "best_angle": "deg",
+        },
+    )
+    for o in plan.angles:
+        console.print(
+            f"{o.stereo_angle:5.3g} deg: exposure {o.exposure * 1e3:.4g} ms "
+            f"(W {o.blur_left:.3g}/{o.blur_right:.3g} px); at the plan's exposure sigma x, y, z "
+            + ", ".join(f"{x * 1e3:.3g}" for x in o.sigma_at_plan)
+            + " um"
+        )
+    for n in plan.notes:
+        console.print(n)
+
+
 def register(app: typer.Typer) -> None:
-    """Attach ``stereo`` (calibrate, track) to the root app."""
+    """Attach ``stereo`` (calibrate, track, plan) to the root app."""
     app.add_typer(stereo_app, name="stereo")

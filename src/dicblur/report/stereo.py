@@ -11,7 +11,13 @@ from numpy.typing import NDArray
 
 from .html import HtmlReport
 
-__all__ = ["fig_predicted_measured", "fig_shape_3d", "fig_sigma_time", "write_stereo_report"]
+__all__ = [
+    "fig_predicted_measured",
+    "fig_shape_3d",
+    "fig_sigma_time",
+    "write_stereo_report",
+    "write_validation_report",
+]
 
 
 def _figure(w: float, h: float) -> Any:
@@ -152,4 +158,49 @@ def write_stereo_report(
     )
     if image is not None:
         rep.paragraph("Left reference image size: " + "x".join(str(s) for s in image.shape))
+    return rep.write()
+
+
+def write_validation_report(
+    doc: dict[str, Any], folder: Path, *, title: str = "dicblur stereo validation"
+) -> Path:
+    """``folder/report.html`` of a ``benchmarks/bench_stereo.py`` result (its JSON as a
+    dict: ``cases`` with their ``bins``): predicted against measured sigma of every W bin
+    (:func:`fig_predicted_measured`, also as PNG/SVG in ``folder/figures``) and the table
+    of the bins."""
+    rep = HtmlReport(title=title, folder=Path(folder))
+    cases = list(doc.get("cases", []))
+    rows = [
+        {**b, "stereo_angle": c["stereo_angle"], "motion": c["motion"]}
+        for c in cases
+        for b in c.get("bins", [])
+    ]
+    ratios = [r["ratio"] for r in rows]
+    rep.section("Predicted against measured 3-D sigma")
+    if ratios:
+        inside = sum(0.8 <= x <= 1.2 for x in ratios)
+        rep.paragraph(
+            f"{len(ratios)} (angle, motion, W bin, component) cells: predicted / measured "
+            f"{min(ratios):.2f}-{max(ratios):.2f}, {inside} within 20 %."
+        )
+    rep.figure(
+        fig_predicted_measured(rows),
+        "predicted_measured",
+        "predicted sigma_U, sigma_V, sigma_W3 (RMS over a W bin's points) against the measured "
+        "scatter about each frame's mean, one marker per bin; the band is +-20 %",
+    )
+    table = [
+        {
+            "angle (deg)": r["stereo_angle"],
+            "motion": r["motion"],
+            "W bin (px)": f"{r['W_lo']:g}-{r['W_hi']:g}",
+            "component": r["component"],
+            "predicted (um)": 1e3 * r["predicted"],
+            "measured (um)": 1e3 * r["measured"],
+            "ratio": r["ratio"],
+        }
+        for r in rows
+    ]
+    if table:
+        rep.table(table, left=("motion", "W bin (px)", "component"))
     return rep.write()

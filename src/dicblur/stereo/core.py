@@ -28,10 +28,12 @@ from ..dic import Correlator, PointStatus
 from ..errors import InputError
 from ..sequence import Recording, open_recording
 from ..threads import each
+from ..track.frames import correlate_frame, frame_gradients, poi_grid
+from ..track.grid import extrapolate_fields, fill_with_median
 from ..track.kinematics import exposure_motion
 from ..track.noise import NoiseEstimate, estimate_static_noise, subset_levels
 from ..track.options import parse_frame_range, parse_rate
-from ..track.parallel import thread_safe_kernels
+from ..track.parallel import HISTORY, thread_safe_kernels
 from .camera import StereoRig
 from .matching import match_reference
 from .triangulate import propagate, triangulate, triangulation_jacobian
@@ -119,27 +121,44 @@ def _track_camera(
     corr: Correlator,
     rec: Any,
     order: Sequence[int],
-    start: NDArray[np.float64],
+    history: list[NDArray[np.float64]],
     out_p: NDArray[np.float64],
     out_s: NDArray[np.uint8],
+    ok0: NDArray[np.bool_],
+    grid: tuple[tuple[int, int], NDArray[np.intp]] | None,
 ) -> None:
-    """IC-GN of the frames ``order`` (forwards from the reference), each from the previous
-    frame's parameters; a frame where more than 2 % of the points fail from there is
-    correlated again from the engine's FFT-CC start and the better result kept per point."""
-    prev = start.copy()
+    """IC-GN of the frames ``order`` (in tracking order) as ``dicblur track`` runs its
+    frames (docs/track.md): each from the extrapolation of the last (up to) three
+    converged fields ``history`` (params (n, k), NaN where a point failed; the increment
+    smoothed over the POI grid ``grid``) with the previous frame's displacement gradients;
+    a frame where more than 2 % of the correlatable points ``ok0`` fail from there is
+    correlated again from the engine's FFT-CC start and the better result kept per point
+    (:func:`~dicblur.track.frames.correlate_frame`)."""
+    iv = 1 if corr.shape == "translation" else 3
+    hist = [(h[:, 0].copy(), h[:, iv].copy()) for h in history[-HISTORY:]]
+    grads = None
+    if corr.shape == "affine" and history:
+        last = history[-1]
+        ok = np.asarray(np.isfinite(last).all(axis=1))
+        if ok.any():
+            grads = last.take([1, 2, 4, 5], axis=1)
+            fill_with_median(grads, ok)
     for f in order:
         img = corr.prefilter(rec.frame(f))
-        r = corr.refine(img, prev)
-        p, st = r.params.copy(), r.status.copy()
-        bad = st != PointStatus.CONVERGED
-        if bad.mean() > 0.02:
-            res = corr.correlate(img)
-            better = bad & (res.status == PointStatus.CONVERGED)
-            p[better], st[better] = res.params[better], res.status[better]
+        guess = extrapolate_fields(hist, grid) if hist else None
+        if guess is not None:
+            good = np.asarray(np.isfinite(guess).all(axis=1))
+            if good.any():
+                fill_with_median(guess, good)
+            else:
+                guess = None
+        res, _ = correlate_frame(corr, img, guess, ok0, grads)
+        p, st = res.params, res.status
         out_p[f], out_s[f] = p, st
-        good = st == PointStatus.CONVERGED
-        keep = good & np.isfinite(p).all(axis=1)
-        prev = np.where(keep[:, None], p, prev)
+        keep = (st == PointStatus.CONVERGED) & np.isfinite(p).all(axis=1)
+        hist.append((np.where(keep, p[:, 0], np.nan), np.where(keep, p[:, iv], np.nan)))
+        del hist[:-HISTORY]
+        grads = frame_gradients(res)
 
 
 def track(
@@ -299,20 +318,23 @@ def track(
     # release the GIL) where numba's threading layer allows concurrent kernel calls
     two = threads >= 2 and thread_safe_kernels()
     cams = [(corr_l, p_l, s_l, rec_l), (corr_r, p_r, s_r, rec_r)]
+    # the points either camera can correlate (the right ones where the stereo match holds)
+    ok0 = inside & (match.status == 0)
+    grid = poi_grid(corr_l)  # right point i images left POI i: the same neighbours
     if two:
         cams = [(c.fork(workers=1), pp, ss, rec) for c, pp, ss, rec in cams]
     for seg in (list(range(reference + 1, f1)), list(range(reference - 1, f0 - 1, -1))):
-        prev = reference
+        before = [reference]  # the frames whose fields start the block's first frame
         for a in range(0, len(seg), 25):  # blocks of pairs, so that the progress moves
             blk = seg[a : a + 25]
 
-            def one(cam: tuple[Any, ...], blk: list[int] = blk, prev: int = prev) -> None:
+            def one(cam: tuple[Any, ...], blk: list[int] = blk, before: list[int] = before) -> None:
                 cc, pp, ss, rec = cam
-                start = np.where(np.isfinite(pp[prev]), pp[prev], 0.0)
-                _track_camera(cc, rec, blk, start, pp, ss)
+                hist = [np.where((ss[f] == 0)[:, None], pp[f], np.nan) for f in before]
+                _track_camera(cc, rec, blk, hist, pp, ss, ok0, grid)
 
             each(one, cams, 2 if two else 1)
-            prev = blk[-1]
+            before = (before + blk)[-HISTORY:]
             done += len(blk)
             if progress is not None:
                 progress(done, len(order))
@@ -320,6 +342,7 @@ def track(
     sl = slice(f0, f1)
     p_l, p_r, s_l, s_r = p_l[sl], p_r[sl], s_l[sl], s_r[sl]
     # (3) triangulation of every pair
+    t_tri = time.perf_counter()
     iu, iv = 0, (1 if k == 2 else 3)
     cur_l = np.stack([rows + p_l[..., iv], cols + p_l[..., iu]], axis=-1)
     if k == 6:
@@ -339,6 +362,7 @@ def track(
         off = (status == 0) & ~(resid <= max_epipolar)
     status[off] = PointStatus.OUTLIER
     converged = status == 0
+    triangulation_time = time.perf_counter() - t_tri
     # (4) blur of each camera from the 3-D track, and the propagated covariance
     t_pred = time.perf_counter()
     mx, my = exposure_motion(
@@ -380,7 +404,7 @@ def track(
     g = triangulation_jacobian(rig, pts)
     cov3_noise = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(nf, n, 3, 3)
     # the two cameras' mismatch shifts together: the point's deterministic blur error
-    bvec = np.einsum("nik,nk->ni", g, xi.reshape(-1, 4)).reshape(nf, n, 3)
+    bvec = (g @ xi.reshape(-1, 4, 1)).reshape(nf, n, 3)
     cov3_blur = bvec[..., :, None] * bvec[..., None, :]
     cov3 = cov3_noise + cov3_blur
     # the shape's sigma: the stereo match's noise in the right point
@@ -463,7 +487,9 @@ def track(
             "baseline_mm": rig.baseline,
             "rig_rms_px": rig.rms if math.isfinite(rig.rms) else -1.0,
             "frame_of_reference": "left camera: x right, y down, z along the optical axis (mm)",
+            "setup_time_s": t_track - t_start,
             "tracking_time_s": tracking_time,
+            "triangulation_time_s": triangulation_time,
             "prediction_time_s": prediction_time,
             "total_time_s": time.perf_counter() - t_start,
             "n_frames_tracked": nf,

@@ -245,3 +245,19 @@ def test_cli_names_the_image_without_a_board(tmp_path, capsys):
     code, err = _run(["stereo", "calibrate", *files, "-o", str(tmp_path / "r.json")], capsys)
     assert code == 2 and len(err.splitlines()) == 1
     assert "left_0.png" in err and "checkerboard" in err
+
+
+def test_relative_shift_is_against_the_blurred_reference():
+    from dicblur.stereo.uncertainty import relative_shift
+
+    rng = np.random.default_rng(3)
+    xi = rng.normal(size=(5, 7, 4))
+    xi[2, 3] = np.nan  # a point whose reference shift is unknown
+    out = relative_shift(xi, 2)
+    ok = np.ones(7, bool)
+    ok[3] = False
+    # the reference frame has no mismatch against itself; the others move by its shift
+    np.testing.assert_array_equal(out[2, ok], 0.0)
+    np.testing.assert_allclose(out[:, ok], xi[:, ok] - xi[2, ok][None])
+    # unknown reference shift: the shift against the sharp subset is kept
+    np.testing.assert_array_equal(out[[0, 1, 3, 4], 3], xi[[0, 1, 3, 4], 3])

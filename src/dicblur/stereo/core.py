@@ -37,7 +37,13 @@ from ..track.parallel import HISTORY, thread_safe_kernels
 from .camera import StereoRig
 from .matching import match_reference
 from .triangulate import propagate, triangulate, triangulation_jacobian
-from .uncertainty import blur_vectors, camera_covariance, camera_table, length_angle
+from .uncertainty import (
+    blur_vectors,
+    camera_covariance,
+    camera_table,
+    length_angle,
+    relative_shift,
+)
 
 __all__ = ["ArrayRecording", "track"]
 
@@ -403,7 +409,9 @@ def track(
     pts = np.where(np.isfinite(xyz), xyz, match.points[None]).reshape(-1, 3)
     g = triangulation_jacobian(rig, pts)
     cov3_noise = propagate(g, cov_l.reshape(-1, 2, 2), cov_r.reshape(-1, 2, 2)).reshape(nf, n, 3, 3)
-    # the two cameras' mismatch shifts together: the point's deterministic blur error
+    # the two cameras' mismatch shifts together, each against its blurred reference: the
+    # point's deterministic blur error
+    xi = relative_shift(xi, reference - f0)
     bvec = (g @ xi.reshape(-1, 4, 1)).reshape(nf, n, 3)
     cov3_blur = bvec[..., :, None] * bvec[..., None, :]
     cov3 = cov3_noise + cov3_blur

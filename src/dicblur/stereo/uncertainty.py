@@ -31,7 +31,13 @@ from numpy.typing import NDArray
 from ..track.uncertainty import BlurTable, build_blur_table
 from .camera import StereoRig
 
-__all__ = ["blur_vectors", "camera_covariance", "camera_table", "ratio_out_of_plane"]
+__all__ = [
+    "blur_vectors",
+    "camera_covariance",
+    "camera_table",
+    "ratio_out_of_plane",
+    "relative_shift",
+]
 
 
 def blur_vectors(
@@ -92,6 +98,21 @@ def camera_covariance(
     cov[..., 1, 1] = var_u
     noise = np.sqrt(np.maximum(np.stack([var_v, var_u], axis=-1), 0.0))
     return cov, noise, xi
+
+
+def relative_shift(xi: NDArray[np.float64], reference: int) -> NDArray[np.float64]:
+    """The mismatch shift of each frame against a reference that is itself blurred,
+    (frames, points, k) px: ``xi - xi[reference]``.
+
+    The table's ``xi`` is the shift of a subset blurred by a frame's kernel against the
+    sharp subset. To first order in the blur the shift is linear in the kernel's second
+    moment (``W^2 d d^T / 12``, the reason the table interpolates linearly in ``W^2``), so
+    a current frame against a reference blurred by its own exposure's motion (a frame 0
+    opening at rest still moves during its exposure) is shifted by the difference of the
+    two: a frame blurred as the reference is has no mismatch. A point whose reference shift
+    is unknown (NaN) keeps its shift against the sharp subset."""
+    ref = np.nan_to_num(xi[reference], nan=0.0)
+    return np.asarray(xi - ref[None])
 
 
 def ratio_out_of_plane(stereo_angle: float) -> float:

@@ -207,7 +207,8 @@ function snap() {
           message: document.getElementById("message").textContent,
           rows: document.getElementById("tradeoff-body").rows.length,
           hidden: document.getElementById("tradeoff").hidden,
-          curve: !!document.getElementById("curve")};
+          curve: !!document.getElementById("curve"),
+          ue: document.getElementById("out-ue").textContent};
 }
 window.addEventListener("load", function () {
   var strain = snap();
@@ -236,5 +237,6 @@ def test_page_starts_at_the_strain_target_and_shows_the_tradeoff(models):
     assert strain["sentence"].startswith("At 120 mm/s, expose at most")
     assert f"{py.exposure * 1e6:.3g} \u00b5s" in strain["sentence"], (py.exposure, strain)
     assert "at VSG 61 px" in strain["sentence"]
+    assert " px; sigma_exx " in strain["ue"]  # at the chosen exposure (1 ms)
     # back to a displacement target: the px plan, the trade-off hidden
     assert px["hidden"] and px["sentence"].endswith("for 0.01 px.")

@@ -85,6 +85,7 @@ def run_strain_plan(
                 "give --noise to plan at another",
                 err=True,
             )
+    assert velocity is not None and scale is not None  # checked above, or the page alone
     try:
         plan = plan_strain(
             model,

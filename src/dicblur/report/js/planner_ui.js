@@ -210,7 +210,18 @@ function updateStrain(m, q) {
             target: parseStrain($("strain-target").value, "strain target"),
             window: windowFromVsg($("vsg").value, step, sub, "VSG")};
   var p = planStrain(m, sq);
-  var us = function (x) { return fmt(x * 1e6, 3) + " µstrain"; };
+  var us = function (x) { return fmt(x * 1e6, 3) + " \u00b5strain"; };
+  // at the chosen exposure: W, u_e and sigma_exx (eq. 11), the validity domain
+  var wNow = q.velocity / q.scale * q.exposure, now = predict(m, [wNow], q.sigma, q.kind);
+  var sNow = strainSigma(m, [wNow], {sigma: q.sigma, kind: q.kind, step: step, subset: sub},
+                         sq.window)[0][0];
+  $("out-blur").textContent = fmt(wNow, 3) + " px";
+  $("out-ue").textContent = fmt(now.u_e[0], 3) + " px; sigma_exx " + us(sNow);
+  $("out-parts").textContent = now.u_noise.length ? "noise " + fmt(now.u_noise[0], 3) +
+    " px, blur mismatch " + fmt(now.u_blur[0], 3) + " px" : "(the power law does not separate the terms)";
+  $("out-noise").textContent = fmt(q.sigma, 3) + " GL";
+  $("out-domain").textContent = now.broken[0] ? "beyond the W where DIC breaks down: no prediction" :
+    now.inside[0] ? "inside the calibrated range" : "OUTSIDE the calibrated range: extrapolated";
   $("out-strain").textContent = us(p.sigma_exx) + " at W = " + fmt(p.blur, 3) + " px (VSG " +
     fmt(p.vsg, 4) + " px, " + p.window + " x " + p.window + " points)";
   $("out-max").textContent = fmtTime(p.exposure);

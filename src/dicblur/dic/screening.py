@@ -47,8 +47,8 @@ RETRY_REACH = 2.0
 #: A predicted-imprecise subset started from its precise neighbours' field
 #: (``Screening._run_deferred``) is checked against that start when it has three pairs of
 #: precise converged neighbours or is at most this many 3x3 steps from such cells (farther
-#: in: the neighbour check's own median). 0 flags 2.3 % of the blob image's correct
-#: affine points, 1 flags 1.2 %, none of them gross errors (issue 26).
+#: in: the neighbour check's own median). On the blob image (affine) 0 flagged 2.3 % of
+#: the correct points, 1 flags 1.5 %, 2 no fewer; no gross error left (issue 26).
 ANCHOR_ROUNDS = 1
 #: Neighbour check: a predicted-imprecise subset whose (u, v) lies within this distance
 #: (px) of the median of its precise converged 3x3 neighbours is kept ``CONVERGED``: its
@@ -258,8 +258,8 @@ class Screening(IcgnPasses):
 
         Instead of a reduced pass from the seed start (on the blob image of
         ``benchmarks/bench_screening.py``, affine: 3 of 223 converged) and the check's
-        retry (~6 iterations each): 7 % fewer iterations, and fewer correct points
-        flagged (1.9 -> 1.2 %) with no gross error left (issue 26).
+        retry (~6 iterations each): 5 % fewer iterations, and fewer correct points
+        flagged (1.9 -> 1.5 %) with no gross error left (issue 26).
         """
         pts, self._deferred = self._deferred, None
         self._from_nb = self._nb_start = None

@@ -67,11 +67,16 @@ def _cli_run(tmp_path: Path, phase: str, *, group: bool) -> tuple[int, str, Path
     spec.write_text(SPEC)
     out = tmp_path / "r.zarr"
     env = dict(os.environ, NUMBA_NUM_THREADS="1")
+    # The CLI as a terminal starts it, SIGINT at its default: a runner started in the
+    # background by a non-interactive shell has SIGINT ignored, and its children inherit
+    # that (an ignored signal survives exec), so Ctrl-C would be lost before the CLI's
+    # own handler is set.
     proc = subprocess.Popen(
         [
             sys.executable,
-            "-m",
-            "dicblur",
+            "-c",
+            "import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler);"
+            " sys.argv[0] = 'dicblur'; runpy.run_module('dicblur', run_name='__main__')",
             "campaign",
             "run",
             str(spec),

@@ -467,7 +467,7 @@ def plan_command(
         run_strain_plan(
             model_path, velocity=velocity, scale=scale, target=target, vsg=vsg, step=step,
             subset=subset, noise=noise, which=which, plot=plot, as_json=as_json,
-            unsupported={**cam, "--html": html_out, "--compare": compare,
+            html_out=html_out, unsupported={**cam, "--compare": compare,
                          "--reference": reference, "--noise-level": noise_level},
         )  # fmt: skip
         return

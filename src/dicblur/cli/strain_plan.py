@@ -36,8 +36,10 @@ def run_strain_plan(
     plot: Path | None,
     as_json: bool,
     unsupported: dict[str, Any],
+    html_out: Path | None = None,
 ) -> None:
-    """Plan the exposure for a strain target and print it (``--plot``: the trade-off)."""
+    """Plan the exposure for a strain target and print it (``--plot``: the trade-off;
+    ``--html``: the planner page, starting at this strain target)."""
     given = [k for k, v in unsupported.items() if v not in (None, False)]
     if given:
         raise InputError(
@@ -49,7 +51,7 @@ def run_strain_plan(
             f"--vsg={vsg!r}: plans for a strain target; give --target with a strain unit, "
             "e.g. --target 100microstrain"
         )
-    if velocity is None or scale is None:
+    if (velocity is None or scale is None) and html_out is None:
         raise InputError(
             "--velocity, --scale: give both (e.g. --velocity 120mm/s --scale 0.05mm/px)"
         )
@@ -57,6 +59,33 @@ def run_strain_plan(
     from ..strain.plan import plan_strain
 
     model = BlurUncertaintyModel.from_json(str(model_path))
+    if html_out is not None:
+        from ..report.planner import PlannerDefaults, starting_noise, write_planner
+        from ..strain.field import vsg as vsg_of
+        from ..strain.field import window_from_vsg
+
+        sub = model.subset if model.subset is not None else subset
+        vsg_px = vsg or "5"
+        if sub is not None and not str(vsg_px).strip().lower().endswith("px"):
+            # the page takes the VSG in px: N points -> (N - 1) step + subset
+            n = window_from_vsg(vsg_px, step=step, subset=int(sub), name="--vsg")
+            vsg_px = f"{vsg_of(n, step, int(sub)):g}px"
+        defaults = PlannerDefaults(
+            velocity=velocity or "120mm/s", scale=scale or "0.05mm/px", noise=noise,
+            strain_target=target, vsg=vsg_px, step=step, subset=subset,
+        )  # fmt: skip
+        write_planner([model], html_out, defaults=defaults)
+        typer.echo(f"wrote {html_out}")
+        if velocity is None or scale is None:
+            return
+        if noise is None and model.noise_sigma is None and model.noise_levels:
+            noise = starting_noise(model)
+            typer.echo(
+                f"note: the text plan at --noise {noise:g} (GL; the page's starting value); "
+                "give --noise to plan at another",
+                err=True,
+            )
+    assert velocity is not None and scale is not None  # checked above, or the page alone
     try:
         plan = plan_strain(
             model,

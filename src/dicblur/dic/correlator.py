@@ -497,7 +497,12 @@ class Correlator(BlurMatching):
         with self._kernel_threads():
             if self.noise_auto:
                 self._set_noise(None)
-            p, z, it, st = self._run_icgn(coef, p0, self._status0)
+            self._defer_imprecise, self._deferred = self.shape != "translation", None
+            try:
+                p, z, it, st = self._run_icgn(coef, p0, self._status0)
+            finally:
+                self._defer_imprecise = False
+            self._run_deferred(coef, p, z, it, st)  # as correlate
             self._flag(coef, p, z, st, it)
         return Refined(p, z, it, st)
 
@@ -629,12 +634,17 @@ class Correlator(BlurMatching):
         p0 = self._guess_to_params(gu, gv) if full is None else full
         if self.noise_auto:
             self._set_noise(None)  # this pair's noise is not known yet
-        if method in ("fftcc", "zero") and self._seeds is not None:
-            p, z, it, st = self._seeded_icgn(coef, p0, status0)
-        else:
-            p, z, it, st = self._run_icgn(coef, p0, status0)
+        self._defer_imprecise, self._deferred = self.shape != "translation", None
+        try:
+            if method in ("fftcc", "zero") and self._seeds is not None:
+                p, z, it, st = self._seeded_icgn(coef, p0, status0)
+            else:
+                p, z, it, st = self._run_icgn(coef, p0, status0)
+        finally:
+            self._defer_imprecise = False
         if self.noise_auto:
             self._estimate_noise(z, st)  # the retry skips the predicted-imprecise POIs
+        self._run_deferred(coef, p, z, it, st)
         t3 = time.perf_counter()
         if method == "fftcc":
             self._retry(cur, coef, gu, gv, p, z, it, st)

@@ -55,6 +55,12 @@ SERIAL_BELOW = 128
 class IcgnPasses(CorrelatorState):
     """IC-GN on the POIs of a prepared Correlator (its kernels' calls)."""
 
+    #: Whether the main pass leaves its predicted-imprecise POIs to
+    #: ``Screening._run_deferred`` (set by ``correlate`` for the grid's main pass).
+    _defer_imprecise = False
+    #: The POIs the main pass left (None: none).
+    _deferred: NDArray[np.intp] | None = None
+
     if TYPE_CHECKING:
 
         def _estimate_noise(
@@ -217,6 +223,7 @@ class IcgnPasses(CorrelatorState):
         out_i = np.empty(n, np.int64)
         out_s = np.empty(n, np.uint8)
         cap = self.max_iterations
+        defer = self._defer_imprecise and (idx is None or idx is self._rest)
         if loc_p.size:
             r = self._run_icgn(coef, p0[loc_p], status_in[loc_p], pts_p, cap)
             out_p[loc_p], out_z[loc_p], out_i[loc_p], out_s[loc_p] = r
@@ -224,6 +231,13 @@ class IcgnPasses(CorrelatorState):
             if conv.size:
                 budget = math.ceil(IMPRECISE_BUDGET * float(np.median(conv)))
                 cap = min(cap, max(IMPRECISE_MIN, budget))
+        if defer:
+            # run after the whole grid's precise POIs, from their neighbours' parameters
+            # (Screening._run_deferred): a start near the field, no reduced pass + retry
+            out_p[loc_i], out_z[loc_i], out_i[loc_i] = p0[loc_i], 0.0, 0
+            out_s[loc_i] = PointStatus.MAX_ITERATIONS
+            self._deferred = pts_i
+            return out_p, out_z, out_i, out_s
         r = self._run_icgn(coef, p0[loc_i], status_in[loc_i], pts_i, cap)
         out_p[loc_i], out_z[loc_i], out_i[loc_i], out_s[loc_i] = r
         return out_p, out_z, out_i, out_s

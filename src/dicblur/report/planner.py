@@ -20,6 +20,7 @@ from typing import Any
 
 from ..errors import InputError
 from .planner_js import PLANNER_JS
+from .planner_strain import strain_fieldset, strain_results
 
 __all__ = [
     "PlannerDefaults",
@@ -47,6 +48,11 @@ class PlannerDefaults:
     flux: float | None = None
     bit_depth: int = 8
     grey_level: float | None = None
+    #: a strain target (``"100microstrain"``): the page starts planning for it
+    strain_target: str | None = None
+    vsg: str = "41px"
+    step: int = 10
+    subset: int | None = None
 
 
 def starting_noise(model: Any, noise: float | None = None) -> float:
@@ -234,6 +240,14 @@ def planner_html(
 <input type="text" id="exposure" value="{val(d.exposure)}">
 <label for="target">target uncertainty (px or um; empty: none)</label>
 <input type="text" id="target" value="{val(d.target)}"></fieldset>
+{
+        strain_fieldset(
+            strain_target=d.strain_target,
+            vsg=d.vsg,
+            step=d.step,
+            subset=d.subset if d.subset is not None else first.subset,
+        )
+    }
 <fieldset><legend>Noise</legend>
 <input type="radio" name="noise" id="noise-gl" {"" if camera else "checked"}>
 <label class="inline" for="noise-gl">grey levels</label>
@@ -269,6 +283,7 @@ def planner_html(
 <tr><th>optimum exposure (camera)</th><td id="out-opt"></td></tr>
 <tr id="row-gain" hidden><th>gain of compensation at the optimum</th><td id="out-gain"></td></tr>
 </table>
+{strain_results()}
 <svg id="plot" viewBox="0 0 760 380" role="img"
  aria-label="predicted u_e against exposure"></svg>
 <p class="legend"><span><i class="sw" style="background:#2a6f97"></i>predicted u_e</span>

@@ -5,7 +5,8 @@ package data under ``report/js/`` (joined in this order, one function scope open
 first and closed in the last, so a part is not a script on its own): ``planner_units.js``
 (the CLI's unit parsers), ``planner_model.js`` (the model), ``planner_solvers.js`` (the
 root finding and minimisation), ``planner_format.js`` (formatting, validity domain,
-matcher modes), ``planner_ui.js`` (the page). The model functions mirror
+matcher modes), ``planner_strain.js`` (the strain target, :func:`dicblur.strain.plan.plan_strain`),
+``planner_ui.js`` (the page). The model functions mirror
 :meth:`dicblur.BlurUncertaintyModel.predict` (``_log_u``, ``_mismatch_terms``, the static
 kind's table interpolation of :mod:`dicblur.models.scaled`, the delta-method interval) and
 :func:`dicblur.plan_exposure` line by line; the equality test (``tests/test_planner.py``)
@@ -24,6 +25,7 @@ PLANNER_JS_PARTS = (
     "planner_model.js",
     "planner_solvers.js",
     "planner_format.js",
+    "planner_strain.js",
     "planner_ui.js",
 )
 

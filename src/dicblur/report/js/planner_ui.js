@@ -98,7 +98,7 @@ function drawPlot(m, q, plan, plan2) {
   });
   svg.appendChild(svgEl("text", {x: (L + W - R) / 2, y: H - 8, "text-anchor": "middle"}, "exposure"));
   svg.appendChild(svgEl("text", {x: 14, y: (T + H - B) / 2, "text-anchor": "middle",
-                                 transform: "rotate(-90 14 " + (T + H - B) / 2 + ")"}, "u_e (px)"));
+                                 transform: "rotate(-90 14 " + (T + H - B) / 2 + ")"}, plan.ylabel || "u_e (px)"));
   var d = "";
   for (var j = 0; j < ts.length; j++) d += (j ? "L" : "M") + X(ts[j]).toFixed(1) + " " + Y(us[j]).toFixed(1);
   svg.appendChild(svgEl("path", {d: d, "class": "curve", id: "curve"}));
@@ -129,6 +129,10 @@ function update() {
   msg.textContent = "";
   try {
     var mq = readInputs(), m = mq[0], q = mq[1];
+    var strainMode = $("target-unit").value === "strain";
+    $("strain-out").hidden = !strainMode;
+    $("tradeoff").hidden = !strainMode;
+    if (strainMode) { updateStrain(m, q); document.body.setAttribute("data-ready", "true"); return; }
     var wNow = q.velocity / q.scale * q.exposure;
     var sigNow = q.camera ? null : q.sigma;
     var plan = planExposure(m, q);
@@ -192,6 +196,52 @@ function update() {
   }
 }
 
+// the strain target (planner_strain.js): fixed noise only, as `dicblur plan --target
+// 100microstrain`; the plot is sigma_exx against the exposure, the table the VSG trade-off
+function updateStrain(m, q) {
+  if (q.camera) throw new UnitError("strain target: fixed noise only (grey levels), as dicblur plan");
+  var step = parseInt($("strain-step").value, 10);
+  if (!(step > 0)) throw new UnitError("POI grid step: give an integer > 0 px, e.g. 10");
+  var sub = m.subset != null ? m.subset : parseInt($("strain-subset").value, 10);
+  if (m.subset != null) $("strain-subset").value = String(m.subset);
+  if (!(sub > 0)) throw new UnitError("subset: the model records no subset size; give it (px), e.g. 21");
+  var sq = {velocity: q.velocity, scale: q.scale, sigma: q.sigma, kind: q.kind, step: step,
+            subset: m.subset != null ? null : sub,
+            target: parseStrain($("strain-target").value, "strain target"),
+            window: windowFromVsg($("vsg").value, step, sub, "VSG")};
+  var p = planStrain(m, sq);
+  var us = function (x) { return fmt(x * 1e6, 3) + " \u00b5strain"; };
+  // at the chosen exposure: W, u_e and sigma_exx (eq. 11), the validity domain
+  var wNow = q.velocity / q.scale * q.exposure, now = predict(m, [wNow], q.sigma, q.kind);
+  var sNow = strainSigma(m, [wNow], {sigma: q.sigma, kind: q.kind, step: step, subset: sub},
+                         sq.window)[0][0];
+  $("out-blur").textContent = fmt(wNow, 3) + " px";
+  $("out-ue").textContent = fmt(now.u_e[0], 3) + " px; sigma_exx " + us(sNow);
+  $("out-parts").textContent = now.u_noise.length ? "noise " + fmt(now.u_noise[0], 3) +
+    " px, blur mismatch " + fmt(now.u_blur[0], 3) + " px" : "(the power law does not separate the terms)";
+  $("out-noise").textContent = fmt(q.sigma, 3) + " GL";
+  $("out-domain").textContent = now.broken[0] ? "beyond the W where DIC breaks down: no prediction" :
+    now.inside[0] ? "inside the calibrated range" : "OUTSIDE the calibrated range: extrapolated";
+  $("out-strain").textContent = us(p.sigma_exx) + " at W = " + fmt(p.blur, 3) + " px (VSG " +
+    fmt(p.vsg, 4) + " px, " + p.window + " x " + p.window + " points)";
+  $("out-max").textContent = fmtTime(p.exposure);
+  $("out-opt").textContent = "not offered for a strain target (fixed noise only)";
+  var body = $("tradeoff-body");
+  while (body.firstChild) body.removeChild(body.firstChild);
+  p.tradeoff_vsg.forEach(function (v, i) {
+    var tr = document.createElement("tr");
+    [fmt(v, 4) + (v === p.vsg ? " (chosen)" : ""), isFinite(p.tradeoff_exposure[i]) ?
+      fmtTime(p.tradeoff_exposure[i]) : "target not met", us(p.tradeoff_sigma[i])]
+      .forEach(function (t) { var td = document.createElement("td"); td.textContent = t; tr.appendChild(td); });
+    body.appendChild(tr);
+  });
+  $("sentence").textContent = "At " + fmtSpeed(q.velocity) + ", expose at most " +
+    fmtTime(p.exposure) + " for " + us(p.target) + " at VSG " + fmt(p.vsg, 4) + " px." +
+    (p.notes.length ? " (" + p.notes.join("; ") + ".)" : "");
+  p.ylabel = "sigma_exx";
+  drawPlot(m, {exposure: q.exposure, sigma: q.sigma}, p, null);
+}
+
 function toggle() {
   var cam = $("noise-camera").checked;
   $("gl-box").hidden = cam;
@@ -199,6 +249,7 @@ function toggle() {
   var flux = $("light-flux").checked;
   $("flux-box").hidden = !flux;
   $("grey-box").hidden = flux;
+  $("strain-box").hidden = $("target-unit").value !== "strain";
 }
 
 // the models of the selected one's calibration with another matcher mode

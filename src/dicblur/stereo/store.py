@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import csv
 import os
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ..errors import StoreError
+from ..track.store import write_long_csv
 
 __all__ = ["STEREO_CSV_COLUMNS", "write_stereo_csv"]
 
@@ -36,31 +33,4 @@ STEREO_CSV_COLUMNS = (
 
 def write_stereo_csv(ds: Any, path: str | os.PathLike[str]) -> Path:
     """``frame, time, point, row, col`` and :data:`STEREO_CSV_COLUMNS`, long format."""
-    p = Path(path)
-    n_f, n_p = ds.sizes["frame"], ds.sizes["point"]
-    cols: dict[str, Any] = {
-        "frame": np.repeat(ds["frame"].values, n_p),
-        "time": np.repeat(ds["time"].values, n_p),
-        "point": np.tile(np.arange(n_p), n_f),
-        "row": np.tile(ds["row"].values, n_f),
-        "col": np.tile(ds["col"].values, n_f),
-    }
-    for c in STEREO_CSV_COLUMNS:
-        v = ds[c].values
-        cols[c] = np.tile(v, n_f) if v.ndim == 1 else v.ravel()
-    names = ("frame", "time", "point", "row", "col", *STEREO_CSV_COLUMNS)
-    ints = {"frame", "point", "row", "col", "status", "valid"}
-    tmp = p.with_name(f".{p.name}.tmp")
-    try:
-        with tmp.open("w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(names)
-            for i in range(n_f * n_p):
-                w.writerow(
-                    [int(cols[c][i]) if c in ints else f"{float(cols[c][i]):.7g}" for c in names]
-                )
-        os.replace(tmp, p)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise StoreError(f"path={str(p)!r}: cannot write the CSV ({exc})") from exc
-    return p
+    return write_long_csv(ds, path, STEREO_CSV_COLUMNS, integers={"status", "valid"}, digits=7)

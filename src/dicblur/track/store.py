@@ -6,6 +6,7 @@ import csv
 import os
 import shutil
 import tempfile
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,13 @@ import numpy as np
 
 from ..errors import StoreError
 
-__all__ = ["CSV_COLUMNS", "STRAIN_CSV_COLUMNS", "save_track", "write_track_csv"]
+__all__ = [
+    "CSV_COLUMNS",
+    "STRAIN_CSV_COLUMNS",
+    "save_track",
+    "write_long_csv",
+    "write_track_csv",
+]
 
 #: The strain columns of a track with strains (docs/strain.md), after :data:`CSV_COLUMNS`.
 STRAIN_CSV_COLUMNS = (
@@ -89,6 +96,27 @@ def save_track(ds: Any, path: str | os.PathLike[str]) -> Path:
 
 def write_track_csv(ds: Any, path: str | os.PathLike[str]) -> Path:
     """One row per point per frame (columns :data:`CSV_COLUMNS`), written atomically."""
+    # with strains (docs/strain.md) their columns follow
+    columns = [*CSV_COLUMNS[5:], *(k for k in STRAIN_CSV_COLUMNS if k in ds)]
+    ints = {"status", "outlier", "valid", "strain_status"}
+    return write_long_csv(ds, path, columns, integers=ints, digits=6)
+
+
+def write_long_csv(
+    ds: Any,
+    path: str | os.PathLike[str],
+    columns: Sequence[str],
+    *,
+    integers: Collection[str] = (),
+    digits: int = 6,
+) -> Path:
+    """``frame, time, point, row, col`` and ``columns`` of the Dataset ``ds``, one row per
+    point per frame (long format), written atomically.
+
+    A variable of dims ``(frame, point)`` gives its value; one of dims ``(point,)`` repeats
+    in every frame. ``integers`` are written as whole numbers (``frame``, ``point``,
+    ``row``, ``col`` always), the rest with ``digits`` significant digits.
+    """
     p = Path(path)
     n_f, n_p = ds.sizes["frame"], ds.sizes["point"]
     cols: dict[str, Any] = {
@@ -98,19 +126,22 @@ def write_track_csv(ds: Any, path: str | os.PathLike[str]) -> Path:
         "row": np.tile(ds["row"].values, n_f),
         "col": np.tile(ds["col"].values, n_f),
     }
-    # with strains (docs/strain.md) their columns follow
-    columns = [*CSV_COLUMNS, *(k for k in STRAIN_CSV_COLUMNS if k in ds)]
-    for c in columns[5:]:
-        cols[c] = ds[c].values.ravel()
+    for c in columns:
+        v = ds[c].values
+        cols[c] = np.tile(v, n_f) if v.ndim == 1 else v.ravel()
+    names = ("frame", "time", "point", "row", "col", *columns)
+    ints = {"frame", "point", "row", "col", *integers}
     tmp = p.with_name(f".{p.name}.tmp")
     try:
         with tmp.open("w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(columns)
-            ints = {"frame", "point", "row", "col", "status", "outlier", "valid", "strain_status"}
+            w.writerow(names)
             for i in range(n_f * n_p):
                 w.writerow(
-                    [int(cols[c][i]) if c in ints else f"{float(cols[c][i]):.6g}" for c in columns]
+                    [
+                        int(cols[c][i]) if c in ints else f"{float(cols[c][i]):.{digits}g}"
+                        for c in names
+                    ]
                 )
         os.replace(tmp, p)
     except OSError as exc:

@@ -110,6 +110,23 @@ def _solve3(m: NDArray[np.float64], v: NDArray[np.float64], out: NDArray[np.floa
     return True
 
 
+@nb.njit(inline="always", cache=True)
+def _normal_equations(
+    a: NDArray[np.float64], b: NDArray[np.float64], m: NDArray[np.float64], v: NDArray[np.float64]
+) -> None:
+    """``m = a^T a`` (3, 3) and ``v = a^T b`` (3,) of a (4, 3) system, in place: the linear
+    point's and each Gauss-Newton step's least squares."""
+    for j in range(3):
+        v[j] = 0.0
+        for k in range(3):
+            s = 0.0
+            for q in range(4):
+                s += a[q, j] * a[q, k]
+            m[j, k] = s
+        for q in range(4):
+            v[j] += a[q, j] * b[q]
+
+
 @nb.njit(cache=True, nogil=True)
 def triangulate_kernel(
     left: NDArray[np.float64],
@@ -129,6 +146,7 @@ def triangulate_kernel(
     res = np.full(n, np.nan)
     a4 = np.empty((4, 3))
     b4 = np.empty(4)
+    r4 = np.empty(4)
     jac = np.empty((4, 3))
     m = np.empty((3, 3))
     v = np.empty(3)
@@ -152,15 +170,7 @@ def triangulate_kernel(
                 for j in range(3):
                     a4[row, j] = coef * pose[2, j] - pose[r_i, j]
                 b4[row] = pose[r_i, 3] - coef * pose[2, 3]
-        for j in range(3):
-            v[j] = 0.0
-            for k in range(3):
-                s = 0.0
-                for r_i in range(4):
-                    s += a4[r_i, j] * a4[r_i, k]
-                m[j, k] = s
-            for r_i in range(4):
-                v[j] += a4[r_i, j] * b4[r_i]
+        _normal_equations(a4, b4, m, v)
         if not _solve3(m, v, step):
             continue
         x, y, z = step[0], step[1], step[2]
@@ -169,16 +179,8 @@ def triangulate_kernel(
         for _ in range(iterations):
             p0, p1 = _project_jac(cam_l, pose_l, x, y, z, jac, 0)
             p2, p3 = _project_jac(cam_r, pose_r, x, y, z, jac, 2)
-            r = (p0 - obs[0], p1 - obs[1], p2 - obs[2], p3 - obs[3])
-            for j in range(3):
-                v[j] = 0.0
-                for k in range(3):
-                    s = 0.0
-                    for q in range(4):
-                        s += jac[q, j] * jac[q, k]
-                    m[j, k] = s
-                for q in range(4):
-                    v[j] += jac[q, j] * r[q]
+            r4[0], r4[1], r4[2], r4[3] = p0 - obs[0], p1 - obs[1], p2 - obs[2], p3 - obs[3]
+            _normal_equations(jac, r4, m, v)
             if not _solve3(m, v, step):
                 good = False
                 break

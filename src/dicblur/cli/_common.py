@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Annotated, Any, Literal
 
 import typer
@@ -161,3 +163,45 @@ def strain_option(
     if points is not None:
         raise InputError("--strain: needs the POI grid; leave out --points")
     return window_from_vsg(vsg, step=step, subset=subset, name="--vsg")
+
+
+@contextmanager
+def progress_bar(
+    label: str, *, unit: str = "tasks", enabled: bool = True
+) -> Iterator[Callable[[int, int], None]]:
+    """A rich progress bar with ETA (``campaign``, ``calibrate``, ``track``, ``stereo
+    track``); yields the ``progress(done, total)`` callback. The bar starts at the first
+    call's ``done``: a resumed run's ETA counts only this run's work."""
+    if not enabled:
+        yield lambda done, total: None
+        return
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    bar = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn(unit),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=False,
+    )
+    ids: dict[str, Any] = {}
+
+    def update(done: int, total: int) -> None:
+        if "t" not in ids:
+            ids["t"] = bar.add_task(label, total=total, completed=done)
+        else:
+            bar.update(ids["t"], completed=done, total=total)
+
+    with bar:
+        yield update

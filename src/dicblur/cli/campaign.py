@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import typer
 
 from ..errors import InputError
-from ._common import console, notice_on_start, parse_size, print_json, print_mapping
+from ._common import (
+    console,
+    notice_on_start,
+    parse_size,
+    print_json,
+    print_mapping,
+    progress_bar,
+)
 
 if TYPE_CHECKING:  # the campaign stage is imported inside the commands (fast --help)
     from ..campaign.engine import RunSummary
@@ -18,45 +23,6 @@ if TYPE_CHECKING:  # the campaign stage is imported inside the commands (fast --
 campaign_app = typer.Typer(
     help="Run blur campaigns (Dask), inspect and export their results.", no_args_is_help=True
 )
-
-
-@contextmanager
-def _progress_bar(label: str, enabled: bool = True) -> Iterator[Callable[[int, int], None]]:
-    """A rich progress bar with ETA; yields the ``progress(done, total)`` callback."""
-    if not enabled:
-        yield lambda done, total: None
-        return
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    bar = Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("tasks"),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-    )
-    ids: dict[str, int] = {}
-
-    def update(done: int, total: int) -> None:
-        if "t" not in ids:
-            # ETA counts only this run's tasks: start the bar at the resumed count.
-            ids["t"] = bar.add_task(label, total=total, completed=done)
-        else:
-            bar.update(ids["t"], completed=done)  # type: ignore[arg-type]
-
-    with bar:
-        yield update
 
 
 def _print_summary(s: RunSummary) -> None:
@@ -108,7 +74,7 @@ def run_command(
         check_scheduler_address(scheduler)
     s = load_spec(spec)
     try:
-        with _progress_bar(f"campaign {s.name}", not quiet) as progress:
+        with progress_bar(f"campaign {s.name}", enabled=not quiet) as progress:
             # a cluster's workers compile in their own processes: the notice only serial
             summary = run_campaign(
                 s,
@@ -241,7 +207,7 @@ def calibrate_command(
         raise InputError(
             f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. 0.1:10:0.1"
         ) from exc
-    with _progress_bar("calibrate", not quiet) as progress:
+    with progress_bar("calibrate", enabled=not quiet) as progress:
         progress = notice_on_start(progress, shape, serial)
         res = calibrate(
             image,

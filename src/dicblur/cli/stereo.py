@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
-from ._common import console, parse_size, print_mapping
+from ._common import console, parse_size, print_mapping, progress_bar
 
 stereo_app = typer.Typer(
     help="Stereo DIC: calibrate a camera rig, track two recordings in 3-D with sigma.",
@@ -141,7 +141,6 @@ def track_command(
     """Stereo-track LEFT and RIGHT: the shape X, Y, Z, the 3-D displacement U, V, W3 of
     every point in every frame and their predicted sigma (noise and each camera's blur);
     writes OUT/stereo.nc (or .zarr), OUT/report.html and, with --csv, OUT/stereo.csv."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from ..models import parse_quantity
     from ..sequence import open_recording
@@ -173,18 +172,7 @@ def track_command(
     rec_l, rec_r = open_recording(left), open_recording(right)
     out.mkdir(parents=True, exist_ok=True)
     target = out / ("stereo.nc" if fmt == "netcdf" else "stereo.zarr")
-    with Progress(
-        TextColumn("stereo"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("frame pairs"),
-        console=console,
-    ) as bar:
-        task = bar.add_task("stereo", total=len(rec_l))
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
+    with progress_bar("stereo", unit="frame pairs") as progress:
         ds = track(
             rec_l,
             rec_r,

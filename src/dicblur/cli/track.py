@@ -18,6 +18,7 @@ from ._common import (
     parse_max_sigma,
     parse_tolerance,
     print_mapping,
+    progress_bar,
     strain_option,
 )
 
@@ -154,15 +155,6 @@ def track_command(
     again continues from the finished chunks. By default, on a machine with several cores,
     the frames run in chunks of 100 on --threads threads of this process (not stored:
     --chunk-frames N stores them; --chunk-frames 0 tracks frame after frame)."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
     from ..sequence import open_recording
     from ..track import TrackInterrupted, track
     from ..track.store import save_track, write_track_csv
@@ -226,22 +218,7 @@ def track_command(
             chunk_frames=100 if chunk_frames is None else chunk_frames,
             threads=threads if threads and workers is None and scheduler is None else 1,
         )
-    with Progress(
-        TextColumn("tracking"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("frames"),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-    ) as bar:
-        task = bar.add_task("track", total=len(rec))
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
+    with progress_bar("tracking", unit="frames") as progress:
         try:
             ds = track(
                 rec,

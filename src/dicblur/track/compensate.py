@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -54,6 +55,7 @@ __all__ = [
     "MAX_GROUPS",
     "QUANTUM",
     "UNIFORM_PX",
+    "PassStart",
     "blur_vectors",
     "build_compensated_table",
     "compensated_pass",
@@ -143,32 +145,49 @@ def group_vectors(
         q *= 2.0
 
 
-def compensated_pass(
-    rec: Recording,
-    frames: NDArray[np.int64],
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    blur_u: NDArray[np.float64],
-    blur_v: NDArray[np.float64],
-    status: NDArray[np.uint8],
-    *,
-    reference: int,
-    correlator: dict[str, Any],
-    progress: Callable[[int, int], None] | None = None,
-) -> dict[str, Any]:
-    """Correlate ``frames`` again with the blur-compensated matcher.
+@dataclass(frozen=True)
+class PassStart:
+    """The previous pass's track of some frames, where a compensated pass starts.
 
-    Parameters
+    Attributes
     ----------
-    rec : Recording
     frames : ndarray of int, shape (f,)
     u, v : ndarray, shape (f, n_points)
-        Displacements of the previous pass (px): the initial guesses.
+        Displacements (px): the initial guesses.
     blur_u, blur_v : ndarray, shape (f, n_points)
         Motion during each exposure (px, NaN unknown).
     status : ndarray of uint8, shape (f, n_points)
         The previous pass's statuses: a point whose subset left the frame there
         (``OUT_OF_BOUNDS``) keeps that result.
+    """
+
+    frames: NDArray[np.int64]
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    blur_u: NDArray[np.float64]
+    blur_v: NDArray[np.float64]
+    status: NDArray[np.uint8]
+
+    def rows(self, start: int, stop: int) -> PassStart:
+        """The frames ``start .. stop - 1`` (positions, not frame numbers)."""
+        return PassStart(*(getattr(self, f.name)[start:stop] for f in fields(self)))
+
+
+def compensated_pass(
+    rec: Recording,
+    start: PassStart,
+    *,
+    reference: int,
+    correlator: dict[str, Any],
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
+    """Correlate the frames of ``start`` again with the blur-compensated matcher.
+
+    Parameters
+    ----------
+    rec : Recording
+    start : PassStart
+        The previous pass's track (initial guesses, blur vectors, statuses).
     reference : int
     correlator : dict
         Keyword arguments of :class:`~dicblur.Correlator` (as the first pass's).
@@ -182,23 +201,19 @@ def compensated_pass(
         ``max_groups`` (most distinct vectors in a frame).
     """
     corr = Correlator(rec.frame(reference), blur="given", **correlator)
-    return pass_frames(rec, corr, frames, u, v, blur_u, blur_v, status, progress=progress)
+    return pass_frames(rec, corr, start, progress=progress)
 
 
 def pass_frames(
     rec: Recording,
     corr: Correlator,
-    frames: NDArray[np.int64],
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    blur_u: NDArray[np.float64],
-    blur_v: NDArray[np.float64],
-    status: NDArray[np.uint8],
+    start: PassStart,
     *,
     progress: Callable[[int, int], None] | None,
 ) -> dict[str, Any]:
     """:func:`compensated_pass` with a prepared ``Correlator(blur="given")`` (the task of
     a chunk)."""
+    u, v, status = start.u, start.v, start.status
     f, n = u.shape
     out: dict[str, Any] = {
         "u": np.empty((f, n)),
@@ -208,13 +223,15 @@ def pass_frames(
         "n_zeroed": 0,
         "max_groups": 0,
     }
-    for i, k in enumerate(frames):
+    for i, k in enumerate(start.frames):
         g = np.stack([u[i], v[i]], axis=1)
         bad = ~np.isfinite(g).all(axis=1)
         if bad.any() and not bad.all():
             g[bad] = np.median(g[~bad], axis=0)
         guess = None if bad.all() else g
-        vec, n_zero = group_vectors(np.stack([blur_v[i], blur_u[i]], axis=1), subset=corr.subset)
+        vec, n_zero = group_vectors(
+            np.stack([start.blur_v[i], start.blur_u[i]], axis=1), subset=corr.subset
+        )
         res = corr.correlate(rec.frame(int(k)), initial=guess, blur_vector=vec)
         # a subset that left the frame stays out (from the median guess it could
         # converge on the wrapped texture of a periodic target)
@@ -312,17 +329,15 @@ def compensate_track(
         frames, u, v, st, fps=fps, exposure=exposure, half_window=half_window,
         grid_shape=grid_shape,
     )  # fmt: skip
+    run_pass = compensated_pass if runner is None else runner.compensate
     while True:
-        if runner is not None:
-            res = runner.compensate(
-                rec, frames, u, v, wu, wv, st, reference=reference, correlator=correlator,
-                progress=progress,
-            )  # fmt: skip
-        else:
-            res = compensated_pass(
-                rec, frames, u, v, wu, wv, st, reference=reference, correlator=correlator,
-                progress=progress,
-            )  # fmt: skip
+        res = run_pass(
+            rec,
+            PassStart(frames, u, v, wu, wv, st),
+            reference=reference,
+            correlator=correlator,
+            progress=progress,
+        )
         u, v, zn, st = res["u"], res["v"], res["zncc"], res["status"]
         n_zero, groups = int(res["n_zeroed"]), max(groups, int(res["max_groups"]))
         done += 1

@@ -40,7 +40,7 @@ from ..dic import Correlator, PointStatus
 from ..dic.initial import window_spectrum
 from ..errors import DicblurError, ImageReadError, InputError
 from ..sequence import Recording, open_recording
-from .compensate import pass_frames
+from .compensate import PassStart, pass_frames
 from .frames import correlate_frame, frame_gradients, frame_guess, poi_grid, seed_correlator
 
 __all__ = [
@@ -83,15 +83,15 @@ class Chunk:
 @dataclass(frozen=True)
 class CompensationChunk:
     """Frames of one task of the compensated pass, with their guesses and blur vectors
-    (the previous pass's ``u``, ``v``, ``blur_u``, ``blur_v``, ``status``, (m, n_points))."""
+    (the previous pass's track of them, ``start``)."""
 
     index: int
-    frames: tuple[int, ...]
-    u: NDArray[np.float64]
-    v: NDArray[np.float64]
-    blur_u: NDArray[np.float64]
-    blur_v: NDArray[np.float64]
-    status: NDArray[np.uint8]
+    start: PassStart
+
+    @property
+    def frames(self) -> NDArray[np.int64]:
+        """The chunk's frames."""
+        return self.start.frames
 
 
 def plan_chunks(order: Sequence[int], reference: int, chunk_frames: int) -> list[Chunk]:
@@ -316,10 +316,7 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
 def compensate_chunk(job: TrackJob, chunk: CompensationChunk) -> dict[str, Any]:
     """One chunk of the compensated pass (the task a worker runs)."""
     rec, corr, _, _ = _prepared(job)
-    res = pass_frames(
-        rec, corr, np.asarray(chunk.frames, np.int64), chunk.u, chunk.v, chunk.blur_u,
-        chunk.blur_v, chunk.status, progress=None,
-    )  # fmt: skip
+    res = pass_frames(rec, corr, chunk.start, progress=None)
     res["n_zeroed"] = np.int64(res["n_zeroed"])
     res["max_groups"] = np.int64(res["max_groups"])
     return res
@@ -575,12 +572,7 @@ class ChunkedRun:
     def compensate(
         self,
         rec: Recording,
-        frames: NDArray[np.int64],
-        u: NDArray[np.float64],
-        v: NDArray[np.float64],
-        blur_u: NDArray[np.float64],
-        blur_v: NDArray[np.float64],
-        status: NDArray[np.uint8],
+        start: PassStart,
         *,
         reference: int,
         correlator: dict[str, Any],
@@ -596,16 +588,9 @@ class ChunkedRun:
         """
         self._passes += 1
         n = self.chunk_frames
+        frames = start.frames
         chunks = [
-            CompensationChunk(
-                index=j,
-                frames=tuple(int(k) for k in frames[a : a + n]),
-                u=u[a : a + n],
-                v=v[a : a + n],
-                blur_u=blur_u[a : a + n],
-                blur_v=blur_v[a : a + n],
-                status=status[a : a + n],
-            )
+            CompensationChunk(index=j, start=start.rows(a, a + n))
             for j, a in enumerate(range(0, len(frames), n))
         ]
         opts = dict(correlator)
@@ -615,7 +600,10 @@ class ChunkedRun:
             os.path.abspath(rec.source) if rec.kind in _FILE_KINDS and not self.serial else rec
         )
         inputs = zlib.crc32(
-            b"".join(_crc(a).to_bytes(4, "little") for a in (u, v, blur_u, blur_v, status))
+            b"".join(
+                _crc(a).to_bytes(4, "little")
+                for a in (start.u, start.v, start.blur_u, start.blur_v, start.status)
+            )
         )
         key = {
             "job": "dicblur track compensated pass",

@@ -43,6 +43,19 @@ def samples(
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
+def _mod180(t: float) -> float:
+    """``np.mod(t, 180)`` (deg): fmod, then the sign of the divisor; without the (slow)
+    fmod call over the usual range, where the subtraction is exact (Sterbenz) and the
+    same value."""
+    if 180.0 <= t < 360.0:
+        return t - 180.0
+    if 0.0 <= t < 180.0:
+        return t
+    t = np.fmod(t, 180.0)
+    return t + 180.0 if t < 0.0 else t
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
 def direction_pair(
     angle: float, phase: float, node: NDArray[np.intp]
 ) -> tuple[int, int, float, bool]:
@@ -52,16 +65,7 @@ def direction_pair(
     ``k`` the computed node nearest to the nearer of the two (the first of two at one
     distance around the circle)."""
     a = node.size
-    t = (angle if np.isfinite(angle) else 0.0) - phase
-    # np.mod(t, 180): fmod, then the sign of the divisor; without the (slow) fmod call
-    # over the usual range, where the subtraction is exact (Sterbenz) and the same value
-    if 180.0 <= t < 360.0:
-        t -= 180.0
-    elif not 0.0 <= t < 180.0:
-        t = np.fmod(t, 180.0)
-        if t < 0.0:
-            t += 180.0
-    th = t / ANGLE_STEP
+    th = _mod180((angle if np.isfinite(angle) else 0.0) - phase) / ANGLE_STEP
     fl = math.floor(th)
     j0 = int(fl) % a
     j1 = (j0 + 1) % a
@@ -81,13 +85,22 @@ def direction_pair(
     return k0, k0, 0.0, False
 
 
+#: A :class:`~dicblur.track.uncertainty.BlurTable` as the compiled lookup takes it:
+#: ``(values, b2, w_top, phase, node)``, the values (a, m, n, 6), the squares of the W
+#: nodes (m,), the last W node (px), the first direction node (deg) and
+#: :func:`node_index` of the computed direction nodes.
+KernelTable = tuple[NDArray[np.float64], NDArray[np.float64], float, float, NDArray[np.intp]]
+
+
+def node_index(available: NDArray[np.bool_]) -> NDArray[np.intp]:
+    """``node[k]``: ``k`` where direction node ``k`` was computed, else -1 (as
+    :func:`direction_pair` takes them)."""
+    return np.where(available, np.arange(available.size), -1).astype(np.intp)
+
+
 @nb.njit(cache=True, nogil=True, inline="always")
 def _interpolate(
-    values: NDArray[np.float64],
-    b2: NDArray[np.float64],
-    w_top: float,
-    phase: float,
-    node: NDArray[np.intp],
+    table: KernelTable,
     w: float,
     angle: float,
     q: int,
@@ -100,6 +113,7 @@ def _interpolate(
     is ``k``, else -1), else the computed node nearest ``angle`` alone; NaN where ``w`` is
     NaN or beyond the last node ``w_top``. The operations in the order of the earlier
     numpy lookup (the same numbers)."""
+    values, b2, w_top, phase, node = table
     nv = values.shape[3]
     if not (np.isfinite(w) and w <= w_top + 1e-9):
         for c in range(nv):
@@ -127,11 +141,7 @@ def _interpolate(
 
 @nb.njit(cache=True, nogil=True)
 def lookup_rows(
-    values: NDArray[np.float64],
-    b2: NDArray[np.float64],
-    w_top: float,
-    phase: float,
-    node: NDArray[np.intp],
+    table: KernelTable,
     w: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
     cols: NDArray[np.intp],
@@ -141,37 +151,29 @@ def lookup_rows(
     point ``q`` (column ``cols[q]``) into ``out`` (frames, n, 6)."""
     for f in range(w.shape[0]):
         for q in range(cols.size):
-            _interpolate(
-                values, b2, w_top, phase, node, w[f, cols[q]], angle[f, cols[q]], q, out[f, q]
-            )
+            _interpolate(table, w[f, cols[q]], angle[f, cols[q]], q, out[f, q])
 
 
 @nb.njit(cache=True, nogil=True)
 def sigma_rows(
-    values: NDArray[np.float64],
-    b2: NDArray[np.float64],
-    w_top: float,
-    phase: float,
-    node: NDArray[np.intp],
+    table: KernelTable,
     w: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
     variance: NDArray[np.float64],
     rows: NDArray[np.intp],
     cols: NDArray[np.intp],
-    su_n: NDArray[np.float32],
-    sv_n: NDArray[np.float32],
-    su_b: NDArray[np.float32],
-    sv_b: NDArray[np.float32],
+    out: tuple[NDArray[np.float32], ...],
 ) -> None:
     """:meth:`BlurTable.predict_into`: per frame ``rows[i]`` and table point ``q``, the
-    interpolated values (:func:`_interpolate`) into the noise parts
-    ``sqrt(v c + v**2 c4)`` and the blur parts ``|xi|`` (float32)."""
-    buf = np.empty(values.shape[3])
+    interpolated values (:func:`_interpolate`) into ``out = (su_n, sv_n, su_b, sv_b)``
+    (float32): the noise parts ``sqrt(v c + v**2 c4)`` and the blur parts ``|xi|``."""
+    su_n, sv_n, su_b, sv_b = out
+    buf = np.empty(table[0].shape[3])
     for i in range(rows.size):
         f = rows[i]
         for q in range(cols.size):
             p = cols[q]
-            _interpolate(values, b2, w_top, phase, node, w[f, p], angle[f, p], q, buf)
+            _interpolate(table, w[f, p], angle[f, p], q, buf)
             v = variance[q]
             su_n[f, p] = np.sqrt(v * buf[2] + v * v * buf[4])
             sv_n[f, p] = np.sqrt(v * buf[3] + v * v * buf[5])
@@ -301,14 +303,7 @@ def _direction_hits(
         ti = np.float64(t[i])
         if not (np.isfinite(wi) and np.isfinite(ti) and wi >= min_blur):
             continue
-        x = ti - phase  # np.mod(x, 180): fmod, then the sign of the divisor
-        if 180.0 <= x < 360.0:
-            x -= 180.0
-        elif not 0.0 <= x < 180.0:
-            x = np.fmod(x, 180.0)
-            if x < 0.0:
-                x += 180.0
-        th = x / ANGLE_STEP
+        th = _mod180(ti - phase) / ANGLE_STEP
         near = np.rint(th)
         y = ((th - near) * ANGLE_STEP) * (np.pi / 180.0)  # within 7.5 deg
         ay = abs(y)

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
-from .directions import RESPONSE_CHUNK, direction_nodes, direction_pair, samples
+from .directions import RESPONSE_CHUNK, direction_nodes, direction_pair, node_index, samples
 
 
 @dataclass(frozen=True)
@@ -46,11 +46,10 @@ class SkewTable:
         k3, ax = samples(kappa3, axis)
         if len(cols) != self.values.shape[1]:
             raise InputError(f"cols: one per table point ({self.values.shape[1]}), got {len(cols)}")
-        node = np.where(self.available, np.arange(self.angles.size), -1).astype(np.intp)
         _bias_rows(
             np.ascontiguousarray(self.values, np.float64),
             float(self.angles[0]),
-            node,
+            node_index(self.available),
             k3,
             ax,
             np.asarray(rows, np.intp),

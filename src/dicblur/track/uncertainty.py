@@ -39,7 +39,15 @@ from ..models.blur_response import subset_blur_response
 from .directions import ANGLE_STEP as ANGLE_STEP
 from .directions import ANGLE_TOLERANCE_PX as ANGLE_TOLERANCE_PX
 from .directions import BLUR_STEP as BLUR_STEP
-from .directions import RESPONSE_CHUNK, lookup_rows, samples, sigma_rows, table_nodes
+from .directions import (
+    RESPONSE_CHUNK,
+    KernelTable,
+    lookup_rows,
+    node_index,
+    samples,
+    sigma_rows,
+    table_nodes,
+)
 from .directions import direction_nodes as direction_nodes
 from .noise import NoiseEstimate as NoiseEstimate
 from .noise import estimate_static_noise as estimate_static_noise
@@ -99,7 +107,7 @@ class BlurTable:
         n = ww.shape[1]
         out = np.empty((*ww.shape, 6))
         if out.size:
-            lookup_rows(*self._kernel_args(), ww, aa, np.arange(n), out.reshape(-1, n, 6))
+            lookup_rows(self._kernel_table(), ww, aa, np.arange(n), out.reshape(-1, n, 6))
         return out
 
     def predict_into(
@@ -129,25 +137,23 @@ class BlurTable:
                 f"{var.size} and {len(cols)}"
             )
         sigma_rows(
-            *self._kernel_args(),
+            self._kernel_table(),
             ww,
             aa,
             var,
             np.asarray(rows, np.intp),
             np.asarray(cols, np.intp),
-            *out,
+            tuple(out),
         )
 
-    def _kernel_args(
-        self,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, NDArray[np.intp]]:
-        """The table as :func:`_interpolate` takes it."""
+    def _kernel_table(self) -> KernelTable:
+        """The table as the compiled lookup takes it (:data:`.directions.KernelTable`)."""
         return (
             np.ascontiguousarray(self.values, np.float64),
             np.ascontiguousarray(self.blur, np.float64) ** 2,
             float(self.blur[-1]),
             float(self.angles[0]),
-            np.where(self.available, np.arange(self.angles.size), -1).astype(np.intp),
+            node_index(self.available),
         )
 
 

@@ -56,6 +56,19 @@ def smooth_on_grid(
     return out
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _taps(a, y, x):  # pragma: no cover - compiled
+    """The 3-tap sums ``(a[x-1] + a[x]) + a[x+1]`` of the rows ``y - 1, y, y + 1`` of
+    ``a`` and their differences ``a[x+1] - a[x-1]``: six floats."""
+    r0 = a[y - 1, x - 1] + a[y - 1, x] + a[y - 1, x + 1]
+    r1 = a[y, x - 1] + a[y, x] + a[y, x + 1]
+    r2 = a[y + 1, x - 1] + a[y + 1, x] + a[y + 1, x + 1]
+    d0 = a[y - 1, x + 1] - a[y - 1, x - 1]
+    d1 = a[y, x + 1] - a[y, x - 1]
+    d2 = a[y + 1, x + 1] - a[y + 1, x - 1]
+    return r0, r1, r2, d0, d1, d2
+
+
 @nb.njit(cache=True, nogil=True)
 def _smooth(values, ny, nx, cells, out):  # pragma: no cover - compiled
     """:func:`smooth_on_grid` into ``out`` (n, k). No fastmath: the sums keep the order
@@ -82,15 +95,10 @@ def _smooth(values, ny, nx, cells, out):  # pragma: no cover - compiled
     for i in range(n):
         y = cells[i] // nx + 1
         x = cells[i] % nx + 1
-        # weights: 3-tap sums (rx), differences (dxa) and the dx = +-1 weights (ex) of the
-        # rows y - 1, y, y + 1
+        # weights: 3-tap sums, differences and the dx = +-1 weights of the rows y - 1, y,
+        # y + 1
         w = a[0]
-        rw0 = w[y - 1, x - 1] + w[y - 1, x] + w[y - 1, x + 1]
-        rw1 = w[y, x - 1] + w[y, x] + w[y, x + 1]
-        rw2 = w[y + 1, x - 1] + w[y + 1, x] + w[y + 1, x + 1]
-        dw0 = w[y - 1, x + 1] - w[y - 1, x - 1]
-        dw1 = w[y, x + 1] - w[y, x - 1]
-        dw2 = w[y + 1, x + 1] - w[y + 1, x - 1]
+        rw0, rw1, rw2, dw0, dw1, dw2 = _taps(w, y, x)
         s0 = rw0 + rw1 + rw2
         sx = dw0 + dw1 + dw2
         sy = rw2 - rw0
@@ -99,13 +107,7 @@ def _smooth(values, ny, nx, cells, out):  # pragma: no cover - compiled
         syy = s0 - rw1
         sxy = dw2 - dw0
         for j in range(k):
-            v = a[1 + j]
-            r0 = v[y - 1, x - 1] + v[y - 1, x] + v[y - 1, x + 1]
-            r1 = v[y, x - 1] + v[y, x] + v[y, x + 1]
-            r2 = v[y + 1, x - 1] + v[y + 1, x] + v[y + 1, x + 1]
-            d0 = v[y - 1, x + 1] - v[y - 1, x - 1]
-            d1 = v[y, x + 1] - v[y, x - 1]
-            d2 = v[y + 1, x + 1] - v[y + 1, x - 1]
+            r0, r1, r2, d0, d1, d2 = _taps(a[1 + j], y, x)
             b0[j] = r0 + r1 + r2
             bx[j] = d0 + d1 + d2
             by[j] = r2 - r0

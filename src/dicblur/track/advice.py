@@ -78,28 +78,19 @@ def static_error_curve(
     as the blurred reference loses its gradients), for ``dicblur track --compensate-blur``.
     """
     nodes = np.arange(0.0, math.ceil(max(w_max, 1.0) - 1e-9) + 1.0)
+    # the same prediction settings for either matcher
+    settings: dict[str, Any] = {
+        "noise_sigma": noise_sigma,
+        "subset": subset,
+        "points": points,
+        "motion": motion,
+        "shape": shape,
+    }
     if compensated:
-        comp = predict_compensated(
-            reference,
-            nodes,
-            noise_sigma=noise_sigma,
-            subset=subset,
-            points=points,
-            motion=motion,
-            shape=shape,
-        )
+        comp = predict_compensated(reference, nodes, **settings)
         # u_e = u_noise, linear in the noise std (u_blur = 0)
         return _curve(nodes, comp.u_noise**2 / noise_sigma**2, 0.0 * nodes, 0.0 * nodes)
-    pred = predict_from_pattern(
-        reference,
-        nodes,
-        noise_sigma=noise_sigma,
-        subset=subset,
-        points=points,
-        motion=motion,
-        shape=shape,  # type: ignore[arg-type]
-        sssig=False,  # not used here
-    )
+    pred = predict_from_pattern(reference, nodes, **settings, sssig=False)  # sssig: not used
     assert pred.u_noise_reference is not None and pred.u_noise_current is not None
     assert pred.u_noise_interaction is not None
     lin = (pred.u_noise_reference**2 + pred.u_noise_current**2) / noise_sigma**2

@@ -31,7 +31,6 @@ mismatch term, and a noise term from the *blurred* reference's gradients,
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
@@ -44,9 +43,10 @@ from ..dic.compensation import blur_reference
 from ..models.compensated import compensated_covariance
 from ..sequence import Recording
 from ..threads import each
+from .directions import direction_motion
 from .kinematics import exposure_motion
 from .median import normalized_median_test
-from .uncertainty import BlurTable, reused_nodes
+from .uncertainty import BlurTable, table_start
 
 __all__ = [
     "ITERATE_PX",
@@ -262,29 +262,22 @@ def build_compensated_table(
     """The compensated matcher's response table (as :func:`~.uncertainty.build_blur_table`,
     same nodes, ``have`` and ``threads``): mismatch shift zero, noise variance per unit
     noise variance ``A^-1 + A^-1 C A^-1`` of the blurred reference's subset at each node."""
-    nodes, angles, need, have = reused_nodes(
-        blur, angle, min_blur=min_blur, have=have, threads=threads
-    )
-    a = angles.size
+    st = table_start(blur, angle, len(centres), min_blur=min_blur, have=have, threads=threads)
+    nodes, angles, values = st.blur, st.angles, st.values
     # (xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv) as the plain table (track.uncertainty): no
     # mismatch shift; the sigma**4 interaction is left out (at 2 GL it is 0.2-0.4 % of the
-    # noise variance at W = 0, measured on the test target)
-    values = np.full((a, nodes.size, len(centres), 6), np.nan)
+    # noise variance at W = 0, measured on the test target); ``have``'s are zero too
     values[..., 0:2] = 0.0
     values[..., 4:6] = 0.0
     ref = np.asarray(reference, dtype=np.float64)
-    jobs: list[tuple[int, int]] = []  # (direction node, W node)
-    for j in np.flatnonzero(need):
-        start = 0
-        if have is not None and have.available[j]:
-            start = have.blur.size
-            values[j, :start] = have.values[j]
-        jobs += [(int(j), i) for i in range(start, nodes.size)]
+    # (direction node, W node)
+    jobs = [(j, i) for j, start in st.todo for i in range(start, nodes.size)]
 
     def run(job: tuple[int, int]) -> None:
         j, i = job
-        t, w = math.radians(angles[j]), float(nodes[i])
-        vec = (w * math.sin(t), w * math.cos(t))
+        dy, dx = direction_motion(angles[j])
+        w = float(nodes[i])
+        vec = (w * dy, w * dx)
         fw = blur_reference(ref, vec)[0] if w > 0 else ref
         fww = blur_reference(fw, vec)[0] if w > 0 else ref
         cov = compensated_covariance(fw, fww, centres, subset=subset, shape=shape)
@@ -292,7 +285,7 @@ def build_compensated_table(
         values[j, i, :, 3] = cov[:, 1, 1]
 
     each(run, jobs, threads)
-    return BlurTable(blur=nodes, angles=angles, available=need, values=values)
+    return BlurTable(blur=nodes, angles=angles, available=st.available, values=values)
 
 
 def compensate_track(

@@ -340,6 +340,13 @@ def table_nodes(
     return nodes, angles, need
 
 
+def direction_motion(angle: float) -> tuple[float, float]:
+    """The unit motion ``(dy, dx)`` along the direction ``angle`` (deg, from the x axis
+    towards +y (rows)), as the response functions take ``motion``."""
+    t = math.radians(angle)
+    return math.sin(t), math.cos(t)
+
+
 # subsets per pass of the response: (64, 441, 6) float64 steepest-descent images (1.4 MB)
 # stay in the cache (256: 8-12 % more CPU on the benchmark's 2,401 affine subsets); each
 # subset's numbers do not depend on it

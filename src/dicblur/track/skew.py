@@ -5,7 +5,6 @@ on the direction nodes of :mod:`.directions`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,7 +13,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError
-from .directions import RESPONSE_CHUNK, direction_nodes, direction_pair, node_index, samples
+from .directions import (
+    RESPONSE_CHUNK,
+    direction_motion,
+    direction_nodes,
+    direction_pair,
+    node_index,
+    samples,
+)
 
 
 @dataclass(frozen=True)
@@ -108,12 +114,11 @@ def build_skew_table(
     a = angles.size
     values = np.full((a, len(centres), 2), np.nan)
     for j in np.flatnonzero(need):
-        t = math.radians(angles[j])
         values[j] = subset_skew_coefficients(
             reference,
             centres,
             subset,
-            motion=(math.sin(t), math.cos(t)),
+            motion=direction_motion(angles[j]),
             shape=shape,  # type: ignore[arg-type]
             chunk=RESPONSE_CHUNK,
             threads=threads,

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from ..blur import motion_blur
 from ..camera import Camera
 from ..sequence import Recording
+from .directions import direction_motion
 
 __all__ = ["VibratingTarget"]
 
@@ -64,8 +65,7 @@ class VibratingTarget:
 
     @property
     def _dir(self) -> tuple[float, float]:
-        t = math.radians(self.angle)
-        return math.sin(t), math.cos(t)
+        return direction_motion(self.angle)
 
     def position(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         """Displacement along the motion direction (px) at times ``t`` (s)."""

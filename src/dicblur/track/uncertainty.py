@@ -27,7 +27,6 @@ is computed once for all directions.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,6 +41,7 @@ from .directions import BLUR_STEP as BLUR_STEP
 from .directions import (
     RESPONSE_CHUNK,
     KernelTable,
+    direction_motion,
     lookup_rows,
     node_index,
     samples,
@@ -157,23 +157,58 @@ class BlurTable:
         )
 
 
-def reused_nodes(
+@dataclass(frozen=True)
+class TableStart:
+    """Where a response table's build starts (:func:`table_start`).
+
+    Attributes
+    ----------
+    blur, angles, available
+        The nodes and the direction nodes to compute, as :class:`BlurTable`'s.
+    have : BlurTable or None
+        The earlier table whose values were kept (None: nothing kept).
+    values : ndarray, shape (a, m, n, 6)
+        NaN but for ``have``'s values.
+    todo : list of (int, int)
+        Per direction node to compute, ``(j, first W node not kept)``.
+    """
+
+    blur: NDArray[np.float64]
+    angles: NDArray[np.float64]
+    available: NDArray[np.bool_]
+    have: BlurTable | None
+    values: NDArray[np.float64]
+    todo: list[tuple[int, int]]
+
+
+def table_start(
     blur: NDArray[np.floating[Any]],
     angle: NDArray[np.floating[Any]],
+    n_points: int,
     *,
     min_blur: float,
     have: BlurTable | None,
     threads: int = 1,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], BlurTable | None]:
-    """:func:`table_nodes`, merged with the nodes of a table ``have`` built earlier for the
-    same points (kept: more W nodes and more directions at most); ``have`` comes back as
-    None when its direction nodes differ (another dominant direction: nothing to keep);
-    ``threads`` as :func:`table_nodes`."""
+) -> TableStart:
+    """:func:`table_nodes` for ``n_points`` points, merged with the nodes of a table
+    ``have`` built earlier for the same points (kept: more W nodes and more directions at
+    most; its values copied); ``have`` is not kept when its direction nodes differ
+    (another dominant direction); ``threads`` as :func:`table_nodes`."""
     nodes, angles, need = table_nodes(blur, angle, min_blur=min_blur, threads=threads)
     if have is None or not np.allclose(have.angles, angles):
-        return nodes, angles, need, None
-    nodes = have.blur if have.blur[-1] >= nodes[-1] else nodes
-    return nodes, angles, need | have.available, have
+        have = None
+    else:
+        nodes = have.blur if have.blur[-1] >= nodes[-1] else nodes
+        need = need | have.available
+    values = np.full((angles.size, nodes.size, n_points, 6), np.nan)
+    todo = []
+    for j in np.flatnonzero(need):
+        start = 0
+        if have is not None and have.available[j]:
+            start = have.blur.size
+            values[j, :start] = have.values[j]
+        todo.append((int(j), start))
+    return TableStart(nodes, angles, need, have, values, todo)
 
 
 def build_blur_table(
@@ -215,31 +250,25 @@ def build_blur_table(
         Threads sharing the chunks of subsets of each node (each subset computed alone:
         the same values on any number of threads).
     """
-    nodes, angles, need, have = reused_nodes(
-        blur, angle, min_blur=min_blur, have=have, threads=threads
-    )
-    a = angles.size
-    values = np.full((a, nodes.size, len(centres), 6), np.nan)
+    st = table_start(blur, angle, len(centres), min_blur=min_blur, have=have, threads=threads)
+    nodes, values = st.blur, st.values
+    j_first = st.todo[0][0] if st.todo else -1  # the first direction node computed
     # W = 0 (no blur, no direction) is the same for every direction: computed once
-    zero = None if have is None else have.values[np.flatnonzero(have.available)[0], :1]
-    for j in np.flatnonzero(need):
-        start = 0
-        if have is not None and have.available[j]:
-            start = have.blur.size
-            values[j, :start] = have.values[j]
+    zero = None if st.have is None else st.have.values[np.flatnonzero(st.have.available)[0], :1]
+    for j, start in st.todo:
         todo = np.arange(start, nodes.size)
-        if todo.size and todo[0] == 0 and (zero is not None or j != np.flatnonzero(need)[0]):
+        if todo.size and todo[0] == 0 and (zero is not None or j != j_first):
             todo = todo[1:]  # copied from the first direction's W = 0 below
         if todo.size:
             # the subsets' chunks on the threads (each computed alone: the same values)
             values[j, todo] = _response(
-                reference, nodes[todo], centres, subset, shape, angles[j], complete, threads
+                reference, nodes[todo], centres, subset, shape, st.angles[j], complete, threads
             )
     if zero is None:
-        zero = values[np.flatnonzero(need)[0], :1]
-    for j in np.flatnonzero(need):
+        zero = values[j_first, :1]
+    for j, _ in st.todo:
         values[j, 0] = zero[0]
-    return BlurTable(blur=nodes, angles=angles, available=need, values=values)
+    return BlurTable(blur=nodes, angles=st.angles, available=st.available, values=values)
 
 
 def _response(
@@ -255,13 +284,12 @@ def _response(
     """``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)`` of every point at the blur lengths
     ``nodes`` along ``angle`` (deg), shape (m, n, 6), the chunks of subsets on
     ``threads`` threads."""
-    t = math.radians(angle)
     shift, cov, cov4 = subset_blur_response(
         reference,
         nodes,
         centres,
         subset,
-        motion=(math.sin(t), math.cos(t)),
+        motion=direction_motion(angle),
         shape=shape,  # type: ignore[arg-type]
         max_shift=1.0,
         complete=complete,

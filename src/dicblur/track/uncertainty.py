@@ -255,51 +255,37 @@ def build_blur_table(
     j_first = st.todo[0][0] if st.todo else -1  # the first direction node computed
     # W = 0 (no blur, no direction) is the same for every direction: computed once
     zero = None if st.have is None else st.have.values[np.flatnonzero(st.have.available)[0], :1]
+
+    def response(j: int, todo: NDArray[np.intp]) -> None:
+        """``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)`` of every point at the W nodes
+        ``todo`` of direction node ``j``, the subsets' chunks on the threads (each
+        computed alone: the same values)."""
+        shift, cov, cov4 = subset_blur_response(
+            reference,
+            nodes[todo],
+            centres,
+            subset,
+            motion=direction_motion(st.angles[j]),
+            shape=shape,  # type: ignore[arg-type]
+            max_shift=1.0,
+            complete=complete,
+            chunk=RESPONSE_CHUNK,
+            threads=threads,
+        )
+        values[j, todo, :, 0:2] = shift
+        values[j, todo, :, 2] = cov[..., 0, 0]
+        values[j, todo, :, 3] = cov[..., 1, 1]
+        values[j, todo, :, 4] = cov4[..., 0, 0]
+        values[j, todo, :, 5] = cov4[..., 1, 1]
+
     for j, start in st.todo:
         todo = np.arange(start, nodes.size)
         if todo.size and todo[0] == 0 and (zero is not None or j != j_first):
             todo = todo[1:]  # copied from the first direction's W = 0 below
         if todo.size:
-            # the subsets' chunks on the threads (each computed alone: the same values)
-            values[j, todo] = _response(
-                reference, nodes[todo], centres, subset, shape, st.angles[j], complete, threads
-            )
+            response(j, todo)
     if zero is None:
         zero = values[j_first, :1]
     for j, _ in st.todo:
         values[j, 0] = zero[0]
     return BlurTable(blur=nodes, angles=st.angles, available=st.available, values=values)
-
-
-def _response(
-    reference: NDArray[np.float64],
-    nodes: NDArray[np.float64],
-    centres: NDArray[np.intp],
-    subset: int,
-    shape: str,
-    angle: float,
-    complete: bool,
-    threads: int = 1,
-) -> NDArray[np.float64]:
-    """``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)`` of every point at the blur lengths
-    ``nodes`` along ``angle`` (deg), shape (m, n, 6), the chunks of subsets on
-    ``threads`` threads."""
-    shift, cov, cov4 = subset_blur_response(
-        reference,
-        nodes,
-        centres,
-        subset,
-        motion=direction_motion(angle),
-        shape=shape,  # type: ignore[arg-type]
-        max_shift=1.0,
-        complete=complete,
-        chunk=RESPONSE_CHUNK,
-        threads=threads,
-    )
-    out = np.empty((nodes.size, len(centres), 6))
-    out[..., 0:2] = shift
-    out[..., 2] = cov[..., 0, 0]
-    out[..., 3] = cov[..., 1, 1]
-    out[..., 4] = cov4[..., 0, 0]
-    out[..., 5] = cov4[..., 1, 1]
-    return out

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -318,10 +319,10 @@ def compensate_track(
     zn = np.stack(out.zncc)[idx]
     st = np.stack(out.status)[idx]
     n_zero, groups, done, change = 0, 0, 0, float("nan")
-    wu, wv = blur_vectors(
-        frames, u, v, st, fps=fps, exposure=exposure, half_window=half_window,
-        grid_shape=grid_shape,
-    )  # fmt: skip
+    blur_of = partial(
+        blur_vectors, fps=fps, exposure=exposure, half_window=half_window, grid_shape=grid_shape
+    )  # the blur of the track of every pass
+    wu, wv = blur_of(frames, u, v, st)
     run_pass = compensated_pass if runner is None else runner.compensate
     while True:
         res = run_pass(
@@ -334,10 +335,7 @@ def compensate_track(
         u, v, zn, st = res["u"], res["v"], res["zncc"], res["status"]
         n_zero, groups = int(res["n_zeroed"]), max(groups, int(res["max_groups"]))
         done += 1
-        nu, nv = blur_vectors(
-            frames, u, v, st, fps=fps, exposure=exposure, half_window=half_window,
-            grid_shape=grid_shape,
-        )  # fmt: skip
+        nu, nv = blur_of(frames, u, v, st)
         d = np.hypot(nu - wu, nv - wv)
         change = float(np.sqrt(np.mean(d[np.isfinite(d)] ** 2))) if np.isfinite(d).any() else 0.0
         wu, wv = nu, nv

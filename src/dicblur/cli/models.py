@@ -12,6 +12,14 @@ import typer
 
 from ..errors import InputError
 from ._common import console, print_json
+from .options import (
+    FixedNoiseOption,
+    JsonOption,
+    ModelChoiceOption,
+    ModelPathArgument,
+    ScaleOption,
+    TargetSpeedOption,
+)
 
 if TYPE_CHECKING:  # numpy and the models are imported inside the commands (fast --help)
     import numpy as np
@@ -307,16 +315,14 @@ def _results_compensation(results: Path, given: str | None) -> str:
 
 
 def predict_command(
-    model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
+    model_path: ModelPathArgument,
     blur: list[float] = typer.Option([], "--blur", help="Blur length W, px (repeatable)."),
-    velocity: str | None = typer.Option(None, "--velocity", help="e.g. 120mm/s."),
+    velocity: TargetSpeedOption = None,
     exposure: str | None = typer.Option(None, "--exposure", help="e.g. 1ms."),
-    scale: str | None = typer.Option(None, "--scale", help="e.g. 0.05mm/px."),
-    noise: float | None = typer.Option(None, "--noise", help="Noise std, GL."),
-    which: str | None = typer.Option(
-        None, "--model", help="static (calibrate's default), mismatch or power_law."
-    ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    scale: ScaleOption = None,
+    noise: FixedNoiseOption = None,
+    which: ModelChoiceOption = None,
+    as_json: JsonOption = False,
 ) -> None:
     """Predict u_e at blur lengths (--blur) or from velocity x exposure / scale."""
     from ..blur import blur_length
@@ -388,9 +394,9 @@ def predict_command(
 
 
 def plan_command(
-    model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
-    velocity: str | None = typer.Option(None, "--velocity", help="Target speed, e.g. 120mm/s."),
-    scale: str | None = typer.Option(None, "--scale", help="Image scale, e.g. 0.05mm/px."),
+    model_path: ModelPathArgument,
+    velocity: TargetSpeedOption = None,
+    scale: ScaleOption = None,
     target: str | None = typer.Option(None, "--target", help="Largest u_e, e.g. 0.01px."),
     full_well: float | None = typer.Option(None, "--full-well", help="Full well, e-."),
     read_noise: float | None = typer.Option(None, "--read-noise", help="Read noise, e-."),
@@ -398,7 +404,7 @@ def plan_command(
         None, "--flux", help="e-/s at the pattern's mean grey level."
     ),
     peak_to_mean: float = typer.Option(2.0, "--peak-to-mean", help="Brightest / mean grey level."),
-    noise: float | None = typer.Option(None, "--noise", help="Fixed noise std, GL."),
+    noise: FixedNoiseOption = None,
     reference: Path | None = typer.Option(
         None,
         "--reference",
@@ -409,9 +415,7 @@ def plan_command(
         "--noise-level",
         help="Grey level (of the fitted images) at which shot noise is evaluated.",
     ),
-    which: str | None = typer.Option(
-        None, "--model", help="static (calibrate's default), mismatch or power_law."
-    ),
+    which: ModelChoiceOption = None,
     plot: Path | None = typer.Option(None, "--plot", help="Write u_e(exposure) figure."),
     html_out: Path | None = typer.Option(
         None,
@@ -419,7 +423,7 @@ def plan_command(
         help="Write an interactive planner page (one self-contained HTML "
         "file; the options given here are its starting values).",
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    as_json: JsonOption = False,
     compare: Path | None = typer.Option(
         None,
         "--compare",

@@ -9,17 +9,27 @@ import typer
 
 from ..errors import InputError
 from ._common import (
-    VSG_HELP,
-    MaxSigmaOption,
-    ShapeOption,
-    StepOption,
-    SubsetOption,
     console,
     parse_max_sigma,
     parse_tolerance,
     print_mapping,
     progress_bar,
     strain_option,
+)
+from .options import (
+    FramesOption,
+    MaxSigmaOption,
+    OutFolderOption,
+    RecordingExposureOption,
+    RecordingFpsOption,
+    ReferenceFrameOption,
+    ReportOption,
+    ShapeOption,
+    StaticFramesOption,
+    StepOption,
+    StoreFormatOption,
+    SubsetOption,
+    VsgOption,
 )
 
 
@@ -40,19 +50,10 @@ def track_command(
             help="Folder of frames, glob ('run/*.tif'), multi-page TIFF, .cine or .cih/.mraw."
         ),
     ],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")],
-    exposure: Annotated[
-        str | None,
-        typer.Option("--exposure", help="Exposure time, e.g. 1ms (default: from the metadata)."),
-    ] = None,
-    fps: Annotated[
-        str | None,
-        typer.Option("--fps", help="Frame rate, e.g. 5000 or 5kHz (default: from the metadata)."),
-    ] = None,
-    static: Annotated[
-        str | None,
-        typer.Option("--static", help="Frames of the static scene for the noise, e.g. 0:20."),
-    ] = None,
+    out: OutFolderOption,
+    exposure: RecordingExposureOption = None,
+    fps: RecordingFpsOption = None,
+    static: StaticFramesOption = None,
     noise: Annotated[
         float | None,
         typer.Option(
@@ -71,25 +72,23 @@ def track_command(
     roi: Annotated[
         str | None, typer.Option("--roi", help="Grid region ROW0,ROW1,COL0,COL1 (px, half-open).")
     ] = None,
-    reference: Annotated[int, typer.Option("--reference", help="Reference frame.")] = 0,
+    reference: ReferenceFrameOption = 0,
     update_reference: Annotated[
         bool,
         typer.Option(
             "--update-reference", help="Renew the reference when the correlation degrades."
         ),
     ] = False,
-    frames: Annotated[
-        str | None, typer.Option("--frames", help="Frames to track, START:STOP (default all).")
-    ] = None,
+    frames: FramesOption = None,
     plot: Annotated[
         str | None,
         typer.Option(
             "--plot-points", help="Point indices for the report's time series, e.g. 0,40."
         ),
     ] = None,
-    fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
+    fmt: StoreFormatOption = "netcdf",
     csv: Annotated[bool, typer.Option("--csv", help="Also write track.csv (long).")] = False,
-    report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+    report: ReportOption = True,
     workers: Annotated[
         int | None,
         typer.Option(
@@ -145,7 +144,7 @@ def track_command(
         bool,
         typer.Option("--strain", help="Also write strains and their sigmas (docs/strain.md)."),
     ] = False,
-    vsg: Annotated[str, typer.Option("--vsg", help=VSG_HELP)] = "5",
+    vsg: VsgOption = "5",
 ) -> None:
     """Track RECORDING and predict the random error (noise + motion blur) of every point in
     every frame; writes OUT/track.nc (or .zarr), OUT/report.html and, with --csv,

@@ -173,6 +173,16 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
     out: dict[str, list[float]] = {
         k: [] for k in ("blur", "sssig", "u_e", "noise", "contrast_ratio", "converged_fraction")
     }
+    # without a contrast_ratio column, the ratio of a contrast pair (reference / blurred):
+    # RMS contrast first, it tracks blur-induced contrast loss (campaign stores it)
+    contrasts = next(
+        (
+            (ref, cur)
+            for ref, cur in (("rms_contrast_ref", "rms_contrast"), ("contrast_ref", "contrast"))
+            if ref in keep and cur in keep
+        ),
+        None,
+    )
     for nz in np.unique(noise[ok]):
         for w in np.unique(blur[ok & (noise == nz)]):
             sel = ok & (noise == nz) & (blur == w)
@@ -191,25 +201,10 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
                 )
             if "contrast_ratio" in keep:
                 out["contrast_ratio"].append(float(np.mean(keep["contrast_ratio"][sel])))
-            elif "rms_contrast_ref" in keep and "rms_contrast" in keep:
-                # RMS contrast tracks blur-induced contrast loss (campaign stores it)
-                out["contrast_ratio"].append(
-                    float(
-                        np.mean(
-                            keep["rms_contrast_ref"][sel].astype(float)
-                            / keep["rms_contrast"][sel].astype(float)
-                        )
-                    )
-                )
-            elif "contrast_ref" in keep and "contrast" in keep:
-                out["contrast_ratio"].append(
-                    float(
-                        np.mean(
-                            keep["contrast_ref"][sel].astype(float)
-                            / keep["contrast"][sel].astype(float)
-                        )
-                    )
-                )
+            elif contrasts is not None:
+                ref, cur = contrasts
+                ratio = keep[ref][sel].astype(float) / keep[cur][sel].astype(float)
+                out["contrast_ratio"].append(float(np.mean(ratio)))
     res = {k: np.array(v) for k, v in out.items() if v}
     if "noise" not in cols and "noise_effective" not in cols:
         res.pop("noise")

@@ -207,54 +207,26 @@ def predict(
             raise InputError(
                 f"--subpixel={subpixel!r}: give 'average' or a fraction in [0, 1) px, e.g. 0.5"
             ) from None
-    pred = predict_from_pattern(
-        img,
-        w,
-        noise_sigma=noise,
-        subset=subset,
-        step=step,
-        motion=motion,
-        shape=shape,  # type: ignore[arg-type]
-        subpixel=sp,
-    )
+    # one matcher for the prediction, the compensated one and the model written
+    matcher: dict[str, Any] = {
+        "noise_sigma": noise,
+        "subset": subset,
+        "step": step,
+        "motion": motion,
+        "shape": shape,
+    }
+    pred = predict_from_pattern(img, w, **matcher, subpixel=sp)
+    provenance = {"image": str(image)}
     if compensation == "given":
-        _print_compensated(
-            img,
-            pred,
-            image,
-            noise=noise,
-            subset=subset,
-            step=step,
-            motion=motion,
-            shape=shape,
-            angle=angle,
-            as_json=as_json,
-        )
+        _print_compensated(img, pred, image, matcher=matcher, angle=angle, as_json=as_json)
         if out is not None:
             from ..models import model_from_compensated
 
-            model_from_compensated(
-                img,
-                noise_sigma=noise,
-                subset=subset,
-                step=step,
-                motion=motion,
-                shape=shape,
-                provenance={"image": str(image)},
-            ).to_json(str(out))
+            model_from_compensated(img, **matcher, provenance=provenance).to_json(str(out))
             console.print(f"wrote {out}: the blur-compensated matcher's model")
         return
     if out is not None:
-        model = model_from_pattern(
-            img,
-            noise_sigma=noise,
-            subset=subset,
-            step=step,
-            motion=motion,
-            shape=shape,  # type: ignore[arg-type]
-            provenance={"image": str(image)},
-            subpixel=sp,
-        )
+        model = model_from_pattern(img, **matcher, provenance=provenance, subpixel=sp)
         model.to_json(str(out))
     if as_json:
         print_json(
@@ -312,22 +284,18 @@ def _print_compensated(
     pred: Any,
     image: Path,
     *,
-    noise: float,
-    subset: int,
-    step: int | None,
-    motion: tuple[float, float],
-    shape: str,
+    matcher: dict[str, Any],
     angle: float,
     as_json: bool,
 ) -> None:
-    """Plain and blur-compensated predictions side by side (issue 18)."""
+    """Plain and blur-compensated predictions side by side (issue 18); ``matcher``: the
+    keywords (noise_sigma, subset, step, motion, shape) of the plain prediction ``pred``."""
     from rich.table import Table
 
     from ..models.compensated import predict_compensated
 
-    comp = predict_compensated(
-        img, pred.blur, noise_sigma=noise, subset=subset, step=step, motion=motion, shape=shape
-    )
+    comp = predict_compensated(img, pred.blur, **matcher)
+    noise, subset, shape = matcher["noise_sigma"], matcher["subset"], matcher["shape"]
     gain = pred.u_e / comp.u_e
     if as_json:
         print_json(

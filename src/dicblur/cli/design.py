@@ -21,6 +21,7 @@ from .options import (
     StepOption,
     SubsetOption,
 )
+from .planner_page import write_pattern_planner
 
 
 def parse_range(text: str, name: str) -> tuple[float, float]:
@@ -342,13 +343,15 @@ def design_command(
                 raise InputError(
                     f"report: {chk.image_count} images, not all decoded in {chk.browser}"
                 )
-    _write_planner_page(
+    # the exposure planner of the winner, from its static prediction
+    write_pattern_planner(
         cam,
         out,
         noise=noise,
         subset=subset,
         step=step,
         label=f"best pattern ({_in_words(best)}), subset {subset} px",
+        provenance={"pattern": "best_pattern.png", "source": "dicblur design"},
     )
     summary = result.summary()
     if export is not None:
@@ -383,29 +386,6 @@ def design_command(
         f"{result.n_campaigns} campaigns, {result.n_points} campaign points, "
         f"{result.wall_s:.1f} s; wrote {len(summary['files'])} files to {out}"
     )
-
-
-def _write_planner_page(
-    image: Any, out: Path, *, noise: float, subset: int, step: int, label: str
-) -> None:
-    """OUT/planner.html: the exposure planner for the winning pattern, from its static
-    prediction (no simulation). Everything else is already written, so a failure here is
-    one warning line, not a lost result."""
-    from ..errors import DicblurError
-    from ..models import model_from_pattern
-    from ..report.planner import write_planner
-
-    try:
-        model = model_from_pattern(
-            image,
-            noise_sigma=noise,
-            subset=subset,
-            step=max(step, subset // 2),
-            provenance={"pattern": "best_pattern.png", "source": "dicblur design"},
-        )
-        write_planner([model], out / "planner.html", labels=[label])
-    except DicblurError as exc:
-        typer.echo(f"warning: planner page not written ({exc})", err=True)
 
 
 def register(app: typer.Typer) -> None:

@@ -315,9 +315,7 @@ def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: in
 
     import numpy as np
 
-    from ..errors import DicblurError
-    from ..models import model_from_pattern
-    from ..report.planner import write_planner
+    from .planner_page import write_pattern_planner
 
     sigma = float(ds.attrs.get("noise_sigma", float("nan")))
     if not math.isfinite(sigma) or sigma <= 0:
@@ -331,21 +329,16 @@ def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: in
         ok = np.isfinite(ang) & np.isfinite(w)
         if ok.any() and float(w[ok].sum()) > 0:
             a = 0.5 * float(np.angle(np.sum(w[ok] * np.exp(2j * ang[ok]))))
-    try:
-        model = model_from_pattern(
-            np.asarray(image, dtype=float),
-            noise_sigma=sigma,
-            subset=subset,
-            step=max(step, subset // 2),
-            motion=(math.sin(a), math.cos(a)),
-            provenance={"pattern": "reference frame", "source": "dicblur track"},
-        )
-        return write_planner(
-            [model], out / "planner.html", labels=[f"this specimen, subset {subset} px"]
-        )
-    except DicblurError as exc:
-        typer.echo(f"warning: planner page not written ({exc})", err=True)
-        return None
+    return write_pattern_planner(
+        np.asarray(image, dtype=float),
+        out,
+        noise=sigma,
+        subset=subset,
+        step=step,
+        label=f"this specimen, subset {subset} px",
+        provenance={"pattern": "reference frame", "source": "dicblur track"},
+        motion=(math.sin(a), math.cos(a)),
+    )
 
 
 def register(app: typer.Typer) -> None:

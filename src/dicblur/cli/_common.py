@@ -6,6 +6,7 @@ import json
 import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any, Literal
 
 from rich.console import Console
@@ -56,6 +57,27 @@ def parse_tolerance(text: str, name: str = "--tolerance") -> float | Literal["au
     if not value > 0:
         raise InputError(f"{name}={text!r}: must be auto or > 0 px, e.g. 0.001px")
     return value
+
+
+def check_track_choices(*, fmt: str, shape: str) -> None:
+    """``--format`` and ``--shape`` of ``track`` and ``stereo track``."""
+    if fmt not in ("netcdf", "zarr"):
+        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
+    if shape not in ("affine", "translation"):
+        raise InputError(f"--shape={shape!r}: choose affine or translation")
+
+
+def track_store(out: Path, name: str, fmt: str) -> Path:
+    """The dataset a track writes: ``OUT/<name>.nc`` (``--format netcdf``) or
+    ``OUT/<name>.zarr``."""
+    return out / (f"{name}.nc" if fmt == "netcdf" else f"{name}.zarr")
+
+
+def all_threads() -> int:
+    """``--threads`` left out: numba's thread count (all cores, or NUMBA_NUM_THREADS)."""
+    import numba
+
+    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
 
 
 def fmt(value: Any) -> str:

@@ -8,7 +8,15 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
-from ._common import console, parse_size, print_mapping, progress_bar
+from ._common import (
+    all_threads,
+    check_track_choices,
+    console,
+    parse_size,
+    print_mapping,
+    progress_bar,
+    track_store,
+)
 from .options import (
     FixedNoiseOption,
     FramesOption,
@@ -159,10 +167,7 @@ def track_command(
     from ..stereo.store import write_stereo_csv
     from ..track.store import save_track
 
-    if fmt not in ("netcdf", "zarr"):
-        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
-    if shape not in ("affine", "translation"):
-        raise InputError(f"--shape={shape!r}: choose affine or translation")
+    check_track_choices(fmt=fmt, shape=shape)
     dep = None if depth is None else parse_quantity(depth, "length", name="--depth")
     if dep is not None and not dep > 0:
         raise InputError(f"--depth={depth!r}: must be > 0, e.g. 400mm")
@@ -175,13 +180,11 @@ def track_command(
     if threads is not None and threads < 1:
         raise InputError(f"--threads={threads!r}: must be >= 1, e.g. 2")
     if threads is None:
-        import numba
-
-        threads = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+        threads = all_threads()
     the_rig = load_rig(rig)
     rec_l, rec_r = open_recording(left), open_recording(right)
     out.mkdir(parents=True, exist_ok=True)
-    target = out / ("stereo.nc" if fmt == "netcdf" else "stereo.zarr")
+    target = track_store(out, "stereo", fmt)
     with progress_bar("stereo", unit="frame pairs") as progress:
         ds = track(
             rec_l,

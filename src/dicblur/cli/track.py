@@ -9,12 +9,15 @@ import typer
 
 from ..errors import InputError
 from ._common import (
+    all_threads,
+    check_track_choices,
     console,
     parse_max_sigma,
     parse_tolerance,
     print_mapping,
     progress_bar,
     strain_option,
+    track_store,
 )
 from .options import (
     FramesOption,
@@ -158,10 +161,7 @@ def track_command(
     from ..track import TrackInterrupted, track
     from ..track.store import save_track, write_track_csv
 
-    if fmt not in ("netcdf", "zarr"):
-        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
-    if shape not in ("affine", "translation"):
-        raise InputError(f"--shape={shape!r}: choose affine or translation")
+    check_track_choices(fmt=fmt, shape=shape)
     if points is not None and roi is not None:
         raise InputError("--points and --roi: give one of them")
     pts = None
@@ -184,14 +184,9 @@ def track_command(
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     rec = open_recording(recording)
-    target = out / ("track.nc" if fmt == "netcdf" else "track.zarr")
+    target = track_store(out, "track", fmt)
     chunks = None
-    if threads is not None:
-        n_threads = threads
-    else:
-        import numba
-
-        n_threads = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    n_threads = threads if threads is not None else all_threads()
     if (
         chunk_frames is None
         and workers is None

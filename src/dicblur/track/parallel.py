@@ -425,11 +425,6 @@ class ChunkedRun:
         opts = dict(correlator)
         if not self.serial or self.threads > 1:
             opts["workers"] = 1  # one single-threaded process (thread) per core
-        # a worker re-opens a file recording from its path; in this process, or without a
-        # path (a synthetic recording: lazy, no frame in it), the recording itself is used
-        source: Any = (
-            os.path.abspath(rec.source) if rec.kind in _FILE_KINDS and not self.serial else rec
-        )
         key = {
             "job": "dicblur track chunks",
             "source": os.path.abspath(rec.source) if rec.kind in _FILE_KINDS else rec.source,
@@ -443,16 +438,7 @@ class ChunkedRun:
             "chunk_frames": self.chunk_frames,
             "correlator": {k: _jsonable(v) for k, v in correlator.items() if k != "workers"},
         }
-        job = TrackJob(
-            source=source,
-            n_frames=len(rec),
-            shape=(int(rec.shape[0]), int(rec.shape[1])),
-            reference=reference,
-            correlator=opts,
-            ok0=ok0,
-            key=hashlib.sha256(repr(sorted(key.items())).encode()).hexdigest()
-            + ("" if isinstance(source, str) else f"-{id(rec)}"),
-        )
+        job = self._job(rec, key, reference=reference, correlator=opts, ok0=ok0)
         if self.serial:
             # in this process: the chunk threads fork ``corr`` and the seeds made from it
             # (dropped after the run, _release_own)
@@ -487,6 +473,32 @@ class ChunkedRun:
                 got["fallback"].append(bool(res["fallback"][j]))
         got["error"] = error
         return got
+
+    def _job(
+        self,
+        rec: Recording,
+        key: dict[str, Any],
+        *,
+        reference: int,
+        correlator: dict[str, Any],
+        ok0: NDArray[np.bool_],
+    ) -> TrackJob:
+        """The :class:`TrackJob` of ``rec`` whose store key is ``key``."""
+        # a worker re-opens a file recording from its path; in this process, or without a
+        # path (a synthetic recording: lazy, no frame in it), the recording itself is used
+        source: Any = (
+            os.path.abspath(rec.source) if rec.kind in _FILE_KINDS and not self.serial else rec
+        )
+        return TrackJob(
+            source=source,
+            n_frames=len(rec),
+            shape=(int(rec.shape[0]), int(rec.shape[1])),
+            reference=reference,
+            correlator=correlator,
+            ok0=ok0,
+            key=hashlib.sha256(repr(sorted(key.items())).encode()).hexdigest()
+            + ("" if isinstance(source, str) else f"-{id(rec)}"),
+        )
 
     def _execute(
         self,
@@ -596,9 +608,6 @@ class ChunkedRun:
         opts = dict(correlator)
         if not self.serial:
             opts["workers"] = 1
-        source: Any = (
-            os.path.abspath(rec.source) if rec.kind in _FILE_KINDS and not self.serial else rec
-        )
         inputs = zlib.crc32(
             b"".join(
                 _crc(a).to_bytes(4, "little")
@@ -617,16 +626,8 @@ class ChunkedRun:
             "chunk_frames": n,
             "correlator": {k: _jsonable(x) for k, x in correlator.items() if k != "workers"},
         }
-        job = TrackJob(
-            source=source,
-            n_frames=len(rec),
-            shape=(int(rec.shape[0]), int(rec.shape[1])),
-            reference=reference,
-            correlator={**opts, "blur": "given"},
-            ok0=np.ones(0, bool),
-            key=hashlib.sha256(repr(sorted(key.items())).encode()).hexdigest()
-            + ("" if isinstance(source, str) else f"-{id(rec)}"),
-        )
+        opts["blur"] = "given"
+        job = self._job(rec, key, reference=reference, correlator=opts, ok0=np.ones(0, bool))
         store = (
             None
             if self.store is None

@@ -156,6 +156,85 @@ def _subset_affine_cubic(
     return sg, sgg, sf
 
 
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _w4(u):  # pragma: no cover - compiled
+    """Cubic weights of taps -1..2 for an offset u in [0, 1) (:func:`_w5` at ``t < 1``)."""
+    u2 = u * u
+    u3 = u2 * u
+    v = np.float32(1.0) - u
+    w0 = v * v * v * np.float32(1.0 / 6.0)
+    w1 = np.float32(2.0 / 3.0) - u2 + np.float32(0.5) * u3
+    w2 = (np.float32(1.0) + np.float32(3.0) * (u + u2 - u3)) * np.float32(1.0 / 6.0)
+    w3 = u3 * np.float32(1.0 / 6.0)
+    return w0, w1, w2, w3
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _subset_affine_cubic4(
+    coef, p, bx, by, half, r0, c0, dxs, off, mask, f, gx, gy, q
+):  # pragma: no cover
+    """:func:`_subset_affine_cubic` of a subset whose warped pixels all lie in one pixel
+    cell past the integer base ``(bx, by)`` (offsets in [0, 1) along x and along y): the
+    4x4 taps that ``_w5`` weights non-zero, weights ``_w4``, the zero tap left out (16
+    products for the interpolant instead of 25 and no blend of two weight sets). Nearly
+    every subset of a field whose warp spans a small fraction of a pixel takes it. A
+    function of its own: inlined beside the 5x5 loop its loop spilled registers."""
+    tw = mask.shape[0]
+    size = 2 * half + 1
+    p1 = np.float32(p[1])
+    p4 = np.float32(p[4])
+    sg = 0.0
+    sgg = 0.0
+    sf = 0.0
+    cb = c0 + bx - 1 + PAD  # cubic: taps from base - 1
+    for i in range(size):
+        dy = i - half
+        rb = r0 + i + by - 1 + PAD
+        b0 = coef[rb, cb : cb + tw + 3]
+        b1 = coef[rb + 1, cb : cb + tw + 3]
+        b2 = coef[rb + 2, cb : cb + tw + 3]
+        b3 = coef[rb + 3, cb : cb + tw + 3]
+        fr = f[r0 + i, c0 : c0 + tw]
+        gxr = gx[r0 + i, c0 : c0 + tw]
+        gyr = gy[r0 + i, c0 : c0 + tw]
+        tx0 = np.float32(p[0] + p[2] * dy - bx)
+        ty0 = np.float32(p[3] + p[5] * dy - by)
+        s0 = np.float32(0.0)
+        s1 = np.float32(0.0)
+        s2 = np.float32(0.0)
+        s3 = np.float32(0.0)
+        s4 = np.float32(0.0)
+        s5 = np.float32(0.0)
+        s6 = np.float32(0.0)
+        for j in range(tw):
+            x0, x1, x2, x3 = _w4(tx0 + p1 * dxs[j])
+            y0, y1, y2, y3 = _w4(ty0 + p4 * dxs[j])
+            h0 = x0 * b0[j] + x1 * b0[j + 1] + x2 * b0[j + 2] + x3 * b0[j + 3]
+            h1 = x0 * b1[j] + x1 * b1[j + 1] + x2 * b1[j + 2] + x3 * b1[j + 3]
+            h2 = x0 * b2[j] + x1 * b2[j + 1] + x2 * b2[j + 2] + x3 * b2[j + 3]
+            h3 = x0 * b3[j] + x1 * b3[j + 1] + x2 * b3[j + 2] + x3 * b3[j + 3]
+            g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 - off) * mask[j]
+            gxg = gxr[j] * g
+            gyg = gyr[j] * g
+            s0 += g
+            s1 += g * g
+            s2 += gxg
+            s3 += gxg * dxs[j]
+            s4 += gyg
+            s5 += gyg * dxs[j]
+            s6 += fr[j] * g
+        sg += float(s0)
+        sgg += float(s1)
+        q[0] += s2
+        q[1] += s3
+        q[2] += s2 * dy
+        q[3] += s4
+        q[4] += s5
+        q[5] += s4 * dy
+        sf += float(s6)
+    return sg, sgg, sf
+
+
 @nb.njit(fastmath=FASTMATH, cache=True)
 def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
     """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
@@ -216,6 +295,11 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
         prev[m] = d[m]
     return 1.0, rho, ratio
 
+
+#: A subset takes the 4x4 stencil (:func:`_subset_affine_cubic4`) when its warped offsets
+#: past the integer base stay below this (px): a margin for the float32 rounding of the
+#: per-pixel offsets, which must stay below 1.
+CELL = 0.999
 
 #: POIs per chunk of :func:`_affine_points` (its ``chunk``: scratch arrays per chunk).
 CHUNK = 16
@@ -345,7 +429,11 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                 sf = 0.0
                 for m in range(6):
                     q[m] = 0.0
-                if rowfast and order == 3:
+                if fast and order == 3 and oxmax < bx + CELL and oymax < by + CELL:
+                    sg, sgg, sf = _subset_affine_cubic4(
+                        coef, p, bx, by, half, r0, c0, dxs, off, mask, f, gx, gy, q
+                    )
+                elif rowfast and order == 3:
                     sg, sgg, sf = _subset_affine_cubic(
                         coef, p, fast, bx, by, half, r0, c0, dxs, off, mask, f, gx, gy, q
                     )

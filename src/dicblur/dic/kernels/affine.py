@@ -20,6 +20,7 @@ from .common import (
     PAD,
     STALL_ITERATIONS,
     blocks_of,
+    centred_norm,
     compose_inverse_affine,
     example_args,
     run_blocks,
@@ -62,6 +63,36 @@ def _row_affine_fast(
         wya = wys[a]
         for j in range(tw):
             grow[j] += wya[j] * hrow[j]
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _add_pixel(s0, s1, s2, s3, s4, s5, s6, g, gxj, gyj, fj, dx):  # pragma: no cover
+    """A pixel's terms added to a row's sums of g, g^2, gx g, gx g dx, gy g, gy g dx,
+    f g (``g`` the warped current minus the reference mean, masked; ``dx`` its column
+    offset from the POI, px)."""
+    gxg = gxj * g
+    gyg = gyj * g
+    return (
+        s0 + g,
+        s1 + g * g,
+        s2 + gxg,
+        s3 + gxg * dx,
+        s4 + gyg,
+        s5 + gyg * dx,
+        s6 + fj * g,
+    )
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _add_row(q, s2, s3, s4, s5, dy):  # pragma: no cover - compiled
+    """A row's gradient sums added to the six steepest-descent sums ``q`` (row offset
+    ``dy`` from the POI, px: the du/dy, dv/dy terms)."""
+    q[0] += s2
+    q[1] += s3
+    q[2] += s2 * dy
+    q[3] += s4
+    q[4] += s5
+    q[5] += s4 * dy
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
@@ -135,24 +166,13 @@ def _subset_affine_cubic(
             h3 = x0 * b3[j] + x1 * b3[j + 1] + x2 * b3[j + 2] + x3 * b3[j + 3] + x4 * b3[j + 4]
             h4 = x0 * b4[j] + x1 * b4[j + 1] + x2 * b4[j + 2] + x3 * b4[j + 3] + x4 * b4[j + 4]
             g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 + y4 * h4 - off) * mask[j]
-            gxg = gxr[j] * g
-            gyg = gyr[j] * g
-            s0 += g
-            s1 += g * g
-            s2 += gxg
-            s3 += gxg * dxs[j]
-            s4 += gyg
-            s5 += gyg * dxs[j]
-            s6 += fr[j] * g
+            s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
+                s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
+            )
         sg += float(s0)
         sgg += float(s1)
-        q[0] += s2
-        q[1] += s3
-        q[2] += s2 * dy
-        q[3] += s4
-        q[4] += s5
-        q[5] += s4 * dy
         sf += float(s6)
+        _add_row(q, s2, s3, s4, s5, dy)
     return sg, sgg, sf
 
 
@@ -214,24 +234,13 @@ def _subset_affine_cubic4(
             h2 = x0 * b2[j] + x1 * b2[j + 1] + x2 * b2[j + 2] + x3 * b2[j + 3]
             h3 = x0 * b3[j] + x1 * b3[j + 1] + x2 * b3[j + 2] + x3 * b3[j + 3]
             g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 - off) * mask[j]
-            gxg = gxr[j] * g
-            gyg = gyr[j] * g
-            s0 += g
-            s1 += g * g
-            s2 += gxg
-            s3 += gxg * dxs[j]
-            s4 += gyg
-            s5 += gyg * dxs[j]
-            s6 += fr[j] * g
+            s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
+                s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
+            )
         sg += float(s0)
         sgg += float(s1)
-        q[0] += s2
-        q[1] += s3
-        q[2] += s2 * dy
-        q[3] += s4
-        q[4] += s5
-        q[5] += s4 * dy
         sf += float(s6)
+        _add_row(q, s2, s3, s4, s5, dy)
     return sg, sgg, sf
 
 
@@ -251,15 +260,9 @@ def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
     s6 = np.float32(0.0)
     for j in range(tw):
         g = (grow[j] - off) * mask[j]
-        gxg = gxr[j] * g
-        gyg = gyr[j] * g
-        s0 += g
-        s1 += g * g
-        s2 += gxg
-        s3 += gxg * dxs[j]
-        s4 += gyg
-        s5 += gyg * dxs[j]
-        s6 += fr[j] * g
+        s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
+            s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
+        )
     return s0, s1, s2, s3, s4, s5, s6
 
 
@@ -480,19 +483,12 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                         )
                         sg += t0s
                         sgg += t1s
-                        q[0] += t2s
-                        q[1] += t3s
-                        q[2] += t2s * dy
-                        q[3] += t4s
-                        q[4] += t5s
-                        q[5] += t4s * dy
                         sf += t6s
-                gm = sg / npx
-                dg2 = sgg - npx * gm * gm
-                if not dg2 > 1e-12 * (sgg + 1e-30):
+                        _add_row(q, t2s, t3s, t4s, t5s, dy)
+                gm, dg = centred_norm(sg, sgg, npx)
+                if dg == 0.0:
                     st = DIVERGED
                     break
-                dg = math.sqrt(dg2)
                 zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
                 for m in range(6):
                     q[m] = ((q[m] - jsum[k, m] * gm) / dg - avec[k, m] * zn) / fnorm[k]

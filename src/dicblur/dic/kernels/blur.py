@@ -25,7 +25,15 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-from .common import CONVERGED, DIVERGED, MAX_ITERATIONS, OUT_OF_BOUNDS, PAD, compose_inverse_affine
+from .common import (
+    CONVERGED,
+    DIVERGED,
+    MAX_ITERATIONS,
+    OUT_OF_BOUNDS,
+    PAD,
+    centred_norm,
+    compose_inverse_affine,
+)
 from .spline import beta5
 
 __all__ = [
@@ -328,12 +336,10 @@ def joint_blur_step(
                     q[0] += s_x
                     q[1] += s_y
                 q[k] += s_d
-            gm = sg / npx
-            dg2 = sgg - npx * gm * gm
-            if not dg2 > 1e-12 * (sgg + 1e-30):
+            gm, dg = centred_norm(sg, sgg, npx)
+            if dg == 0.0:
                 st = DIVERGED
                 break
-            dg = math.sqrt(dg2)
             nf2 = df * df + 2.0 * lam * df * bval[pt] + lam * lam * dd[pt]
             if not nf2 > 0.0:
                 st = DIVERGED

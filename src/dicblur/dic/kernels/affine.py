@@ -19,6 +19,7 @@ from .common import (
     OUT_OF_BOUNDS,
     PAD,
     STALL_ITERATIONS,
+    add_row,
     blocks_of,
     centred_norm,
     compose_inverse_affine,
@@ -84,18 +85,6 @@ def _add_pixel(s0, s1, s2, s3, s4, s5, s6, g, gxj, gyj, fj, dx):  # pragma: no c
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
-def _add_row(q, s2, s3, s4, s5, dy):  # pragma: no cover - compiled
-    """A row's gradient sums added to the six steepest-descent sums ``q`` (row offset
-    ``dy`` from the POI, px: the du/dy, dv/dy terms)."""
-    q[0] += s2
-    q[1] += s3
-    q[2] += s2 * dy
-    q[3] += s4
-    q[4] += s5
-    q[5] += s4 * dy
-
-
-@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
 def _w5(t):  # pragma: no cover - compiled
     """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
     sh = np.float32(1.0) if t >= np.float32(1.0) else np.float32(0.0)
@@ -150,13 +139,7 @@ def _subset_affine_cubic(
         gyr = gy[r0 + i, c0 : c0 + tw]
         tx0 = np.float32(p[0] + p[2] * dy - bx)
         ty0 = np.float32(p[3] + p[5] * dy - by)
-        s0 = np.float32(0.0)
-        s1 = np.float32(0.0)
-        s2 = np.float32(0.0)
-        s3 = np.float32(0.0)
-        s4 = np.float32(0.0)
-        s5 = np.float32(0.0)
-        s6 = np.float32(0.0)
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
         for j in range(tw):
             x0, x1, x2, x3, x4 = _w5(tx0 + p1 * dxs[j])
             y0, y1, y2, y3, y4 = _w5(ty0 + p4 * dxs[j])
@@ -172,7 +155,7 @@ def _subset_affine_cubic(
         sg += float(s0)
         sgg += float(s1)
         sf += float(s6)
-        _add_row(q, s2, s3, s4, s5, dy)
+        add_row(q, s2, s3, s4, s5, dy)
     return sg, sgg, sf
 
 
@@ -219,13 +202,7 @@ def _subset_affine_cubic4(
         gyr = gy[r0 + i, c0 : c0 + tw]
         tx0 = np.float32(p[0] + p[2] * dy - bx)
         ty0 = np.float32(p[3] + p[5] * dy - by)
-        s0 = np.float32(0.0)
-        s1 = np.float32(0.0)
-        s2 = np.float32(0.0)
-        s3 = np.float32(0.0)
-        s4 = np.float32(0.0)
-        s5 = np.float32(0.0)
-        s6 = np.float32(0.0)
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
         for j in range(tw):
             x0, x1, x2, x3 = _w4(tx0 + p1 * dxs[j])
             y0, y1, y2, y3 = _w4(ty0 + p4 * dxs[j])
@@ -240,7 +217,7 @@ def _subset_affine_cubic4(
         sg += float(s0)
         sgg += float(s1)
         sf += float(s6)
-        _add_row(q, s2, s3, s4, s5, dy)
+        add_row(q, s2, s3, s4, s5, dy)
     return sg, sgg, sf
 
 
@@ -251,13 +228,7 @@ def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
     fr = f[r, c0 : c0 + tw]
     gxr = gx[r, c0 : c0 + tw]
     gyr = gy[r, c0 : c0 + tw]
-    s0 = np.float32(0.0)
-    s1 = np.float32(0.0)
-    s2 = np.float32(0.0)
-    s3 = np.float32(0.0)
-    s4 = np.float32(0.0)
-    s5 = np.float32(0.0)
-    s6 = np.float32(0.0)
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
     for j in range(tw):
         g = (grow[j] - off) * mask[j]
         s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
@@ -484,7 +455,7 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                         sg += t0s
                         sgg += t1s
                         sf += t6s
-                        _add_row(q, t2s, t3s, t4s, t5s, dy)
+                        add_row(q, t2s, t3s, t4s, t5s, dy)
                 gm, dg = centred_norm(sg, sgg, npx)
                 if dg == 0.0:
                     st = DIVERGED

@@ -31,6 +31,7 @@ from .common import (
     MAX_ITERATIONS,
     OUT_OF_BOUNDS,
     PAD,
+    add_row,
     centred_norm,
     compose_inverse_affine,
 )
@@ -326,12 +327,7 @@ def joint_blur_step(
                 sgg += s_gg
                 sfg += s_fg
                 if affine:
-                    q[0] += s_x
-                    q[1] += s_xd
-                    q[2] += s_x * dyo
-                    q[3] += s_y
-                    q[4] += s_yd
-                    q[5] += s_y * dyo
+                    add_row(q, s_x, s_xd, s_y, s_yd, dyo)
                 else:
                     q[0] += s_x
                     q[1] += s_y

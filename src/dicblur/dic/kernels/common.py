@@ -41,6 +41,7 @@ __all__ = [
     "ReferenceImages",
     "Settings",
     "Subsets",
+    "add_row",
     "blocks_of",
     "centred_norm",
     "compose_inverse_affine",
@@ -90,6 +91,19 @@ GAIN_MIN = 0.1
 # of a campaign runs cached code: run_campaign compiles a cold cache in a subprocess first
 # (dicblur.dic.cache.compile_kernels), which keeps resumed campaigns bit-identical.
 FASTMATH = {"contract", "arcp", "nsz", "reassoc", "afn"}  # a set: numba takes no frozenset
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def add_row(q, s2, s3, s4, s5, dy):  # pragma: no cover - compiled
+    """A subset row's sums ``s2 = sum gx g``, ``s3 = sum gx g dx``, ``s4 = sum gy g``,
+    ``s5 = sum gy g dx`` added to the six affine steepest-descent sums ``q`` in place
+    (``dy``: the row's offset from the POI, px, the weight of the du/dy, dv/dy terms)."""
+    q[0] += s2
+    q[1] += s3
+    q[2] += s2 * dy
+    q[3] += s4
+    q[4] += s5
+    q[5] += s4 * dy
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)

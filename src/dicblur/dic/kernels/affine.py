@@ -1,5 +1,6 @@
 # ruff: noqa: RUF046  (int(math.floor(x)) gives numba an integer index)
-"""IC-GN kernel of the affine shape function (row slices, 5x5 stencil fast path)."""
+"""IC-GN kernel of the affine shape function (row slices, 4x4 and 5x5 stencil fast
+paths)."""
 
 from __future__ import annotations
 
@@ -291,8 +292,10 @@ def icgn_affine(
     Fast path: when the sub-pixel offsets ``x' - x`` (and ``y' - y``) of all subset pixels
     span less than one pixel, one integer base covers the subset and every sample reads
     the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
-    with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
-    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
+    with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises;
+    cubic, when the offsets past the base all stay below :data:`CELL` along both axes,
+    only the 4x4 taps that carry weight (:func:`_subset_affine_cubic4`). Otherwise each
+    pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
     :func:`icgn_translation` (``cfg.width`` = ``tw``, a multiple of 8 >= subset); ``p0``
     (n, 6), ``status_in`` (n,).
 

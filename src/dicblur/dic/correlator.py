@@ -244,7 +244,7 @@ class Correlator(BlurMatching):
         half = self.subset // 2
         self.half = half
 
-        rows, cols, status0 = self.layout(
+        rows, cols, status0 = layout(
             self.image_shape, subset=self.subset, step=self.step, roi=roi, points=points
         )
         self.rows = rows
@@ -340,25 +340,9 @@ class Correlator(BlurMatching):
         self.last_timings: dict[str, float] = {}
 
     # ------------------------------------------------------------------ setup helpers
-    @staticmethod
-    def layout(
-        image_shape: tuple[int, int],
-        *,
-        subset: int,
-        step: int,
-        roi: Sequence[int] | None = None,
-        points: ArrayLike | None = None,
-    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]:
-        """The POIs a Correlator on an image of ``image_shape`` lays out, without
-        preparing it: ``(rows, cols, status)``, each shape (n,), ``status``
-        ``OUT_OF_BOUNDS`` for given ``points`` whose subset leaves the image, else 0.
-
-        ``subset`` (odd, px) and ``step`` (px) as validated by
-        :class:`~dicblur.dic.MatcherSettings`; ``roi`` and ``points`` as for the
-        constructor (the grid of ``step`` px inside ``roi`` or the whole image, or the
-        given centres).
-        """
-        return layout(image_shape, subset=subset, step=step, roi=roi, points=points)
+    #: :func:`.layout.layout` (the POIs a Correlator lays out, without preparing it), as
+    #: ``Correlator.layout(image_shape, subset=..., step=...)``.
+    layout = staticmethod(layout)
 
     def _setup_seeds(self) -> None:
         """The two-pass start's seed POIs and the rest (:func:`.layout.seed_passes`)."""

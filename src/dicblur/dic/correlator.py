@@ -483,12 +483,12 @@ class Correlator(BlurMatching):
                 self._set_noise(None)
             self._defer_imprecise, self._deferred = self.shape != "translation", None
             try:
-                p, z, it, st = self._run_icgn(coef, p0, self._status0)
+                res = self._run_icgn(coef, p0, self._status0)
             finally:
                 self._defer_imprecise = False
-            self._run_deferred(coef, p, z, it, st)  # as correlate
-            self._flag(coef, p, z, st, it)
-        return Refined(p, z, it, st)
+            self._run_deferred(coef, res)  # as correlate
+            self._flag(coef, res)
+        return Refined(*res)
 
     def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
         cur = as_image(current, "current", min_size=3)
@@ -621,19 +621,19 @@ class Correlator(BlurMatching):
         self._defer_imprecise, self._deferred = self.shape != "translation", None
         try:
             if method in ("fftcc", "zero") and self._seeds is not None:
-                p, z, it, st = self._seeded_icgn(coef, p0, status0)
+                res = self._seeded_icgn(coef, p0, status0)
             else:
-                p, z, it, st = self._run_icgn(coef, p0, status0)
+                res = self._run_icgn(coef, p0, status0)
         finally:
             self._defer_imprecise = False
         if self.noise_auto:
-            self._estimate_noise(z, st)  # the retry skips the predicted-imprecise POIs
-        self._run_deferred(coef, p, z, it, st)
+            self._estimate_noise(res.zncc, res.status)  # the retry skips the imprecise POIs
+        self._run_deferred(coef, res)
         t3 = time.perf_counter()
         if method == "fftcc":
-            self._retry(cur, coef, gu, gv, p, z, it, st)
+            self._retry(cur, coef, gu, gv, res)
         t4 = time.perf_counter()
-        noise_var = self._flag(coef, p, z, st, it)
+        noise_var = self._flag(coef, res)
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,
@@ -642,28 +642,14 @@ class Correlator(BlurMatching):
             "screen_s": t5 - t4,
             "total_s": t5 - t0,
         }
-        k = p.shape[1]
-        u = p[:, 0].copy()
-        v = p[:, 1 if k == 2 else 3].copy()
         info = self._info_base(method)
         info["screen_noise_sigma"] = None if noise_var is None else float(np.sqrt(noise_var))
         info.update(self._noise_info())
-        return DICResult(
-            rows=self.rows.copy(),
-            cols=self.cols.copy(),
-            u=u,
-            v=v,
-            params=p,
-            zncc=z,
-            iterations=it,
-            status=st,
-            predicted_sigma_u=None
-            if self.predicted_sigma_u is None
-            else self.predicted_sigma_u.copy(),
-            predicted_sigma_v=None
-            if self.predicted_sigma_v is None
-            else self.predicted_sigma_v.copy(),
+        pu, pv = self.predicted_sigma_u, self.predicted_sigma_v
+        return self._result(
+            res,
             info=info,
+            predicted_sigma=(None if pu is None else pu.copy(), None if pv is None else pv.copy()),
         )
 
     def warmup(self) -> float:

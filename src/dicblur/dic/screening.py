@@ -10,10 +10,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from . import kernels
 from .icgn import N_PARAMS
 from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
-from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET, IcgnPasses
+from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET, IcgnPasses, scatter
 from .status import PointStatus
 
 __all__ = [
@@ -235,15 +236,8 @@ class Screening(IcgnPasses):
         }
 
     # ------------------------------------------------------------------ the statuses
-    def _run_deferred(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        it: NDArray[np.int64],
-        st: NDArray[np.uint8],
-    ) -> None:
-        """IC-GN of the predicted-imprecise POIs the main pass left, in place.
+    def _run_deferred(self, coef: NDArray[np.float32], res: kernels.Outputs) -> None:
+        """IC-GN of the predicted-imprecise POIs the main pass left, in ``res`` in place.
 
         Each starts from the precise converged POIs' field: :func:`pair_medians` of its
         precise neighbours' six parameters where it has :data:`PAIRS_MIN` pairs of them
@@ -265,6 +259,7 @@ class Screening(IcgnPasses):
         self._from_nb = self._nb_start = None
         if pts is None or pts.size == 0:
             return
+        p, z, it, st = res
         n, k = p.shape
         ok = st == PointStatus.CONVERGED
         # the noise estimated since may have changed the mask: the precise POIs by today's
@@ -291,8 +286,8 @@ class Screening(IcgnPasses):
             r = self._run_icgn(
                 coef, start[near], self._status0[sel], sel, cap, RETRY_REACH * ACCEPT_DISTANCE
             )
-            p[sel], z[sel], it[sel], st[sel] = r
-            gone = np.flatnonzero(r[3] == PointStatus.DIVERGED)
+            scatter(res, sel, r)
+            gone = np.flatnonzero(r.status == PointStatus.DIVERGED)
             if gone.size:
                 # beyond the reach: an estimate for inspection (IMPRECISE) from the same
                 # start within the reduced limit, not the reach's NaN
@@ -308,24 +303,17 @@ class Screening(IcgnPasses):
             self._nb_start[anchored] = start[near & exact][:, [0, 3]]
         if not near.all():
             rest = pts[~near]
-            r = self._run_icgn(coef, p[rest], self._status0[rest], rest, reduced)
-            p[rest], z[rest], it[rest], st[rest] = r
+            scatter(res, rest, self._run_icgn(coef, p[rest], self._status0[rest], rest, reduced))
 
-    def _flag(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-        it: NDArray[np.int64] | None = None,
-    ) -> float | None:
-        """The statuses after IC-GN, in place: the noise (estimated), :meth:`_screen`,
-        :meth:`_neighbour_check`, then ``IMPRECISE``; returns the screen's noise variance
-        (or None). ``it`` gets the iterations of the check's retries."""
+    def _flag(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
+        """The statuses of ``res`` after IC-GN, in place: the noise (estimated),
+        :meth:`_screen`, :meth:`_neighbour_check`, then ``IMPRECISE``; returns the screen's
+        noise variance (or None). The iterations get those of the check's retries."""
+        st = res.status
         if self.noise_auto:
-            self._estimate_noise(z, st)
-        noise_var = self._screen(coef, p, z, st)
-        kept = self._neighbour_check(coef, p, z, st, it)
+            self._estimate_noise(res.zncc, st)
+        noise_var = self._screen(coef, res)
+        kept = self._neighbour_check(coef, res)
         if self._imprecise is not None:
             # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
             # cause, so it gets that status too
@@ -337,12 +325,7 @@ class Screening(IcgnPasses):
         return noise_var
 
     def _neighbour_check(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-        it: NDArray[np.int64] | None,
+        self, coef: NDArray[np.float32], res: kernels.Outputs
     ) -> NDArray[np.bool_] | None:
         """Each converged POI of the grid against ``m``, the median of the means of its
         pairs of opposite converged neighbours (:func:`pair_medians`; the precise ones
@@ -362,6 +345,7 @@ class Screening(IcgnPasses):
             # without a noise level there is no predicted sigma to scale the test: a
             # fixed 0.1 px would trim a strongly blurred field's legitimate tails
             return None
+        p, z, it, st = res
         ok = st == PointStatus.CONVERGED
         if not ok.any():
             return None
@@ -429,7 +413,7 @@ class Screening(IcgnPasses):
             full, _ = pair_medians(np.where(use, grid, np.nan), (ny, nx), cells=cell[idx])
             start = np.empty((idx.size, k))
             start[:, order] = full.T
-            conv = it[ok] if it is not None else np.zeros(0, np.int64)
+            conv = it[ok]
             med_it = 2 if conv.size == 0 else int(np.median(conv))
             # the retry budget (a subset stopped at its reduced limit, too: from a start
             # near the field most converge within it, 2.0 % of the blob image's correct
@@ -441,8 +425,7 @@ class Screening(IcgnPasses):
             take = (st2 == PointStatus.CONVERGED) & better & (d2 <= thr[where])
             got = idx[take]
             p[got], z[got], st[got] = p2[take], z2[take], PointStatus.CONVERGED
-            if it is not None:
-                it[idx] += it2
+            it[idx] += it2
             took = take
             far[where[took]] = False
         st[test[far & ~is_imp]] = PointStatus.OUTLIER
@@ -458,7 +441,7 @@ class Screening(IcgnPasses):
         cap: int,
         thr: NDArray[np.float64],
         is_imp: NDArray[np.bool_],
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+    ) -> kernels.Outputs:
         """The neighbour check's IC-GN of the POIs ``idx`` from ``start`` within ``cap``
         iterations (``thr`` their acceptance distances, px; ``is_imp`` predicted imprecise).
 
@@ -471,25 +454,17 @@ class Screening(IcgnPasses):
         (issue 26).
         """
         groups = [np.flatnonzero(~is_imp), np.flatnonzero(is_imp)]
-        n, k = start.shape
-        p2, z2 = np.empty((n, k)), np.empty(n)
-        it2, st2 = np.empty(n, np.int64), np.empty(n, np.uint8)
+        out = kernels.outputs(*start.shape)
         for loc in groups:
             if loc.size == 0:
                 continue
             reach = RETRY_REACH * float(thr[loc].max())
             r = self._run_icgn(coef, start[loc], self._status0[idx[loc]], idx[loc], cap, reach)
-            p2[loc], z2[loc], it2[loc], st2[loc] = r
-        return p2, z2, it2, st2
+            scatter(out, loc, r)
+        return out
 
-    def _screen(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-    ) -> float | None:
-        """Flag false convergence in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
+    def _screen(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
+        """Flag false convergence in ``res`` in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
 
         Returns the noise variance (GL^2) the tests used, or None when none ran.
 
@@ -502,6 +477,7 @@ class Screening(IcgnPasses):
         as a whole). The interpolation of the current image slightly smooths its noise,
         so the prediction is conservative (up to ~10 % high at half-pixel shifts).
         """
+        p, z, _, st = res
         ok = st == PointStatus.CONVERGED
         sigma = None if self.noise is None else self.noise.sigma
         residual = self.max_residual is not None and sigma is not None

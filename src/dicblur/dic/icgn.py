@@ -27,6 +27,7 @@ match-score form ``sqrt(2 sigma^2 / SSSIG)`` per axis (Lavatelli & Zappa eq. 2).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -36,7 +37,16 @@ from .interpolation import interpolate_reference
 from .kernels import GAIN_MIN, JUMP_SLACK, STALL_ITERATIONS
 from .status import PointStatus
 
-__all__ = ["PreparedSubsets", "compose_affine", "icgn_reference", "prepare_subsets", "raw_jacobian"]
+__all__ = [
+    "CentredSubsets",
+    "PreparedSubsets",
+    "centre_subsets",
+    "compose_affine",
+    "icgn_reference",
+    "prepare_subsets",
+    "raw_jacobian",
+    "regular",
+]
 
 #: Number of shape parameters per shape function.
 N_PARAMS = {"translation": 2, "affine": 6}
@@ -90,6 +100,40 @@ def raw_jacobian(
     return np.stack([gx, gx * dx, gx * dy, gy, gy * dx, gy * dy], axis=-1)
 
 
+class CentredSubsets(NamedTuple):
+    """Reference subsets (n, npx) and their raw steepest-descent images ``J`` (n, npx, k)
+    centred for ZNSSD (module docstring): ``fmean`` (n,) the subset's mean and ``fnorm``
+    (n,) ``Df = ||f_c||``, GL; ``safe`` (n,) ``Df``, 1 where it is 0; ``fh`` (n, npx)
+    ``f_c / safe``; ``jsum`` (n, k) ``sum J``; ``jc`` (n, npx, k) the column-centred ``J``."""
+
+    fmean: NDArray[np.float64]
+    fnorm: NDArray[np.float64]
+    safe: NDArray[np.float64]
+    fh: NDArray[np.float64]
+    jsum: NDArray[np.float64]
+    jc: NDArray[np.float64]
+
+
+def centre_subsets(fp: NDArray[np.float64], jac: NDArray[np.float64]) -> CentredSubsets:
+    """The subsets ``fp`` (n, npx) and their ``jac`` (n, npx, k) centred for ZNSSD."""
+    npx = fp.shape[1]
+    fmean = fp.mean(axis=1)
+    fc = fp - fmean[:, None]
+    fnorm = np.sqrt(np.einsum("ij,ij->i", fc, fc))
+    safe = np.where(fnorm > 0, fnorm, 1.0)
+    jsum = jac.sum(axis=1)
+    jc = jac - jsum[:, None, :] / npx
+    return CentredSubsets(fmean, fnorm, safe, fc / safe[:, None], jsum, jc)
+
+
+def regular(big: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which symmetric Gauss-Newton matrices ``big`` (n, k, k) are regular: the smallest
+    eigenvalue above 1e-10 of the largest (else the subset's texture cannot fix all the
+    parameters)."""
+    eig = np.linalg.eigvalsh(big)
+    return np.asarray(eig[:, 0] > 1e-10 * np.maximum(eig[:, -1], 1e-300))
+
+
 def prepare_subsets(
     f: NDArray[np.float64],
     gx: NDArray[np.float64],
@@ -117,14 +161,7 @@ def prepare_subsets(
     gyp = _patches(gy, rows, cols, half)
     n, npx = fp.shape
     k = N_PARAMS[shape]
-    jac = raw_jacobian(gxp, gyp, half, shape)  # (n, npx, k)
-    fmean = fp.mean(axis=1)
-    fc = fp - fmean[:, None]
-    fnorm = np.sqrt(np.einsum("ij,ij->i", fc, fc))
-    jsum = jac.sum(axis=1)
-    jc = jac - jsum[:, None, :] / npx
-    safe = np.where(fnorm > 0, fnorm, 1.0)
-    fh = fc / safe[:, None]
+    fmean, fnorm, safe, fh, jsum, jc = centre_subsets(fp, raw_jacobian(gxp, gyp, half, shape))
     # batched BLAS products (einsum's loops were 80 % of a one-off correlate call)
     jct = jc.transpose(0, 2, 1)
     avec = np.matmul(jct, fh[:, :, None])[:, :, 0]
@@ -133,8 +170,7 @@ def prepare_subsets(
     status = np.zeros(n, dtype=np.uint8)
     scale = np.maximum(np.abs(fp).max(axis=1), 1.0)
     flat = fnorm <= 1e-6 * scale * np.sqrt(npx)
-    eig = np.linalg.eigvalsh(big)
-    bad = flat | ~(eig[:, 0] > 1e-10 * np.maximum(eig[:, -1], 1e-300))
+    bad = flat | ~regular(big)
     status[bad] = PointStatus.LOW_TEXTURE
     big_safe = np.where(bad[:, None, None], np.eye(k)[None], big)
     big_inv = np.linalg.inv(big_safe)

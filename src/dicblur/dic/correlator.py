@@ -658,28 +658,18 @@ class Correlator(BlurMatching):
         t0 = time.perf_counter()
         rng = np.random.default_rng(0)
         img = rng.normal(128.0, 30.0, (self.subset + 12, self.subset + 12))
-        c = Correlator(
-            img,
-            subset=self.subset,
-            step=self.step,
-            shape=self.shape,  # type: ignore[arg-type]
-            interpolation=self.interpolation,
+        s = self.settings  # its geometry and interpolation; the other settings' defaults
+        cfg = MatcherSettings(
+            subset=s.subset,
+            step=s.step,
+            shape=s.shape,
+            interpolation=s.interpolation,
             initial="zero",
-            workers=self.workers,
-            median_test=self.median_test,
         )
+        c = Correlator(img, settings=cfg, workers=self.workers, median_test=self.median_test)
         c.correlate(img)
         if self.blur == "estimate":  # the joint (shape, length) step's kernel too
-            e = Correlator(
-                img,
-                subset=self.subset,
-                step=self.step,
-                shape=self.shape,  # type: ignore[arg-type]
-                interpolation=self.interpolation,
-                initial="zero",
-                workers=self.workers,
-                blur="estimate",
-            )
+            e = Correlator(img, settings=cfg, workers=self.workers, blur="estimate")
             e.correlate(img, blur_vector=(0.0, 1.0))
         return time.perf_counter() - t0
 

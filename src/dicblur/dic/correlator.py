@@ -33,7 +33,7 @@ from ..metrics import image_gradients
 from . import cache, kernels
 from .blur_matching import BlurMatching
 from .compensation import BLUR_MODES, check_blur_vector
-from .icgn import N_PARAMS, prepare_subsets
+from .icgn import N_PARAMS, prepare_subsets, uv_columns
 from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients
 from .layout import grid_of, layout, seed_passes
@@ -591,7 +591,7 @@ class Correlator(BlurMatching):
             if k != 2 and guess.shape == (n, k) and np.all(np.isfinite(guess)):
                 # all shape parameters (a previous result's params): fewer iterations
                 full = np.array(guess)
-                guess = full[:, [0, 3]]
+                guess = full[:, list(uv_columns(k))]
             if guess.shape != (n, 2) or not np.all(np.isfinite(guess)):
                 raise InputError(
                     f"initial={describe(guess)}: expected finite (u, v) px, shape (2,) or ({n}, 2)"

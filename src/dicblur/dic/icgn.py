@@ -46,10 +46,17 @@ __all__ = [
     "prepare_subsets",
     "raw_jacobian",
     "regular",
+    "uv_columns",
 ]
 
 #: Number of shape parameters per shape function.
 N_PARAMS = {"translation": 2, "affine": 6}
+
+
+def uv_columns(k: int) -> tuple[int, int]:
+    """The columns of ``u`` and ``v`` among ``k`` shape parameters: translation ``(u, v)``,
+    affine ``(u, ux, uy, v, vx, vy)``."""
+    return 0, 1 if k == 2 else 3
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import cache, kernels
-from .icgn import N_PARAMS
+from .icgn import N_PARAMS, uv_columns
 from .initial import subset_fftcc
 from .outliers import neighbour_medians
 from .state import CorrelatorState
@@ -285,9 +285,10 @@ class IcgnPasses(CorrelatorState):
         self, u: NDArray[np.float64], v: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         k = N_PARAMS[self.shape]
+        ucol, vcol = uv_columns(k)
         p0 = np.zeros((len(u), k))
-        p0[:, 0] = u
-        p0[:, 1 if k == 2 else 3] = v
+        p0[:, ucol] = u
+        p0[:, vcol] = v
         return p0
 
     def _retry(

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kernels
-from .icgn import N_PARAMS
+from .icgn import N_PARAMS, uv_columns
 from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET, IcgnPasses, scatter
@@ -135,6 +135,13 @@ def pair_medians(
             np.where(count == 2, 0.5 * total, np.where(count == 1, total, np.nan)),
         )
     return med, count
+
+
+def _uv_first(k: int) -> tuple[int, int, list[int]]:
+    """The u and v columns of ``k`` shape parameters and an order of all ``k`` with those
+    two first (the neighbour tests look at u and v; the retries start from all)."""
+    ucol, vcol = uv_columns(k)
+    return ucol, vcol, [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
 
 
 def grow_start(
@@ -293,14 +300,14 @@ class Screening(IcgnPasses):
                 # start within the reduced limit, not the reach's NaN
                 g = sel[gone]
                 r2 = self._run_icgn(coef, start[near][gone], self._status0[g], g, reduced)
-                p[g], z[g], st[g] = r2[0], r2[1], r2[3]
-                it[g] += r2[2]
+                p[g], z[g], st[g] = r2.p, r2.zncc, r2.status
+                it[g] += r2.iterations
             # the check's retry would start these from the same medians: not again
             self._from_nb = np.zeros(n, bool)
             self._from_nb[sel] = True
             self._nb_start = np.full((n, 2), np.nan)
             anchored = pts[near & exact]
-            self._nb_start[anchored] = start[near & exact][:, [0, 3]]
+            self._nb_start[anchored] = start[near & exact][:, list(uv_columns(k))]
         if not near.all():
             rest = pts[~near]
             scatter(res, rest, self._run_icgn(coef, p[rest], self._status0[rest], rest, reduced))
@@ -363,9 +370,8 @@ class Screening(IcgnPasses):
         # each grid cell's POI (the grid is full: every cell has one)
         cell_inv = np.empty(ny * nx, np.intp)
         cell_inv[cell] = np.arange(n)
-        ucol, vcol = 0, 1 if k == 2 else 3
         # (u, v) first: the distance needs only those; all k for the retries' starts
-        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+        ucol, vcol, order = _uv_first(k)
         grid = np.full((k, ny * nx), np.nan)
         grid[:, cell] = p[:, order].T
         # the precise neighbours where they suffice, else every converged one; but when
@@ -505,9 +511,8 @@ class Screening(IcgnPasses):
             return noise_var
         assert self._grid_index is not None
         shape, cell = self._grid_shape, self._grid_index
-        ucol, vcol = 0, 1 if k == 2 else 3
         # (k, ny, nx) with u, v first: the components the median test looks at
-        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+        ucol, vcol, order = _uv_first(k)
         grid = np.full((k, shape[0] * shape[1]), np.nan)
         grid[:, cell] = np.where(ok, p[:, order].T, np.nan)
         valid = np.zeros(shape[0] * shape[1], bool)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kernels
-from .icgn import PreparedSubsets
+from .icgn import PreparedSubsets, uv_columns
 from .noise import NoiseEstimate
 from .result import DICResult
 from .settings import MatcherSettings, check_integer
@@ -185,13 +185,13 @@ class CorrelatorState:
         """The :class:`DICResult` of all POIs from their IC-GN results ``res`` (``u``, ``v``
         the translation columns of its parameters; ``blur``: ``blur="estimate"``'s
         ``blur_length``, ``blur_sigma``, ``blur_identified``)."""
-        k = res.p.shape[1]
+        ucol, vcol = uv_columns(res.p.shape[1])
         length, sigma, identified = (None, None, None) if blur is None else blur
         return DICResult(
             rows=self.rows.copy(),
             cols=self.cols.copy(),
-            u=res.p[:, 0].copy(),
-            v=res.p[:, 1 if k == 2 else 3].copy(),
+            u=res.p[:, ucol].copy(),
+            v=res.p[:, vcol].copy(),
             params=res.p,
             zncc=res.zncc,
             iterations=res.iterations,

@@ -38,7 +38,14 @@ from scipy import fft as sfft
 
 from ..checks import as_float_array, as_image, check_positive, describe
 from ..errors import InputError
-from .icgn import N_PARAMS, centre_subsets, raw_jacobian, regular
+from .icgn import (
+    N_PARAMS,
+    centre_subsets,
+    gauss_newton_matrix,
+    raw_jacobian,
+    regular,
+    scaled_inverse,
+)
 
 __all__ = [
     "BLUR_MODES",
@@ -327,15 +334,10 @@ def prepare_blur_step(
         dsum = dp.sum(axis=1)
         dc = dp - dsum[:, None] / npx
         aug = np.concatenate([jc, dc[:, :, None]], axis=2)  # (m, npx, k+1)
-        augt = aug.transpose(0, 2, 1)
-        avec_full = np.matmul(augt, fh[:, :, None])[:, :, 0]  # (a, b)
-        gram = np.matmul(augt, aug)
         # Df^2 H = [J_c D_c]^T [J_c D_c] - (a, b)(a, b)^T (normalised-model Gauss-Newton)
-        big = gram - avec_full[:, :, None] * avec_full[:, None, :]
+        avec_full, gram, big = gauss_newton_matrix(aug, fh)
         good = (fnorm > 0) & regular(big)
-        big_safe = np.where(good[:, None, None], big, np.eye(k + 1)[None])
-        hinv = np.linalg.inv(big_safe) * (safe**2)[:, None, None]
-        hinv[~good] = 0.0
+        hinv, _ = scaled_inverse(big, ~good, safe)
         sl = slice(s, s + len(r))
         out["hinv"][sl] = hinv
         out["fmean"][sl] = fmean

@@ -42,10 +42,12 @@ __all__ = [
     "PreparedSubsets",
     "centre_subsets",
     "compose_affine",
+    "gauss_newton_matrix",
     "icgn_reference",
     "prepare_subsets",
     "raw_jacobian",
     "regular",
+    "scaled_inverse",
     "uv_columns",
 ]
 
@@ -141,6 +143,32 @@ def regular(big: NDArray[np.float64]) -> NDArray[np.bool_]:
     return np.asarray(eig[:, 0] > 1e-10 * np.maximum(eig[:, -1], 1e-300))
 
 
+def gauss_newton_matrix(
+    jc: NDArray[np.float64], fh: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The exact ZNSSD Gauss-Newton matrix (module docstring) of the centred
+    steepest-descent images ``jc`` (n, npx, k) and the normalised subsets ``fh`` (n, npx):
+    ``a = J_c^T fh`` (n, k), the Gram matrix ``J_c^T J_c`` and ``Df^2 H = J_c^T J_c - a a^T``
+    (n, k, k), GL^2."""
+    # batched BLAS products (einsum's loops were 80 % of a one-off correlate call)
+    jct = jc.transpose(0, 2, 1)
+    avec = np.matmul(jct, fh[:, :, None])[:, :, 0]
+    gram = np.matmul(jct, jc)
+    return avec, gram, gram - avec[:, :, None] * avec[:, None, :]
+
+
+def scaled_inverse(
+    big: NDArray[np.float64], bad: NDArray[np.bool_], safe: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``hinv = H^-1 = Df^2 (Df^2 H)^-1`` (0 where ``bad``) and ``(Df^2 H)^-1`` (the
+    identity where ``bad``), each (n, k, k), from ``big = Df^2 H`` (n, k, k) and ``safe``
+    (n,) ``Df`` (:class:`CentredSubsets`)."""
+    big_inv = np.linalg.inv(np.where(bad[:, None, None], np.eye(big.shape[1])[None], big))
+    hinv = big_inv * (safe**2)[:, None, None]
+    hinv[bad] = 0.0
+    return hinv, big_inv
+
+
 def prepare_subsets(
     f: NDArray[np.float64],
     gx: NDArray[np.float64],
@@ -167,23 +195,15 @@ def prepare_subsets(
     gxp = _patches(gx, rows, cols, half)
     gyp = _patches(gy, rows, cols, half)
     n, npx = fp.shape
-    k = N_PARAMS[shape]
     fmean, fnorm, safe, fh, jsum, jc = centre_subsets(fp, raw_jacobian(gxp, gyp, half, shape))
-    # batched BLAS products (einsum's loops were 80 % of a one-off correlate call)
-    jct = jc.transpose(0, 2, 1)
-    avec = np.matmul(jct, fh[:, :, None])[:, :, 0]
-    # Df^2 H = J_c^T J_c - a a^T  (exact ZNSSD Gauss-Newton matrix, GL^2 units)
-    big = np.matmul(jct, jc) - avec[:, :, None] * avec[:, None, :]
+    avec, _, big = gauss_newton_matrix(jc, fh)
     status = np.zeros(n, dtype=np.uint8)
     scale = np.maximum(np.abs(fp).max(axis=1), 1.0)
     flat = fnorm <= 1e-6 * scale * np.sqrt(npx)
     bad = flat | ~regular(big)
     status[bad] = PointStatus.LOW_TEXTURE
-    big_safe = np.where(bad[:, None, None], np.eye(k)[None], big)
-    big_inv = np.linalg.inv(big_safe)
-    hinv = big_inv * (safe**2)[:, None, None]
+    hinv, big_inv = scaled_inverse(big, bad, safe)
     cov_unit = 2.0 * big_inv
-    hinv[bad] = 0.0
     cov_unit[bad] = np.nan
     return PreparedSubsets(
         hinv=np.ascontiguousarray(hinv),

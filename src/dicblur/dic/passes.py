@@ -98,6 +98,18 @@ class IcgnPasses(CorrelatorState):
             float(self.subset) if max_step is None else max_step,
         )
 
+    def _retry_limit(self, median_iterations: int) -> int:
+        """A retried POI's iteration limit: :data:`RETRY_BUDGET` times the median
+        iterations of the converged POIs, at least 10, at most ``max_iterations``."""
+        return min(self.max_iterations, max(10, RETRY_BUDGET * median_iterations))
+
+    def _imprecise_limit(self, median_iterations: float) -> int:
+        """A predicted-imprecise POI's iteration limit: :data:`IMPRECISE_BUDGET` times the
+        median iterations of the precise converged POIs, at least :data:`IMPRECISE_MIN`,
+        at most ``max_iterations``."""
+        budget = math.ceil(IMPRECISE_BUDGET * median_iterations)
+        return min(self.max_iterations, max(IMPRECISE_MIN, budget))
+
     def _translation(
         self,
         coef: NDArray[np.float32],
@@ -233,8 +245,7 @@ class IcgnPasses(CorrelatorState):
             scatter(out, loc_p, r)
             conv = r.iterations[r.status == PointStatus.CONVERGED]
             if conv.size:
-                budget = math.ceil(IMPRECISE_BUDGET * float(np.median(conv)))
-                cap = min(cap, max(IMPRECISE_MIN, budget))
+                cap = self._imprecise_limit(float(np.median(conv)))
         if defer:
             # run after the whole grid's precise POIs, from their neighbours' parameters
             # (Screening._run_deferred): a start near the field, no reduced pass + retry
@@ -316,11 +327,7 @@ class IcgnPasses(CorrelatorState):
             return
         ok = st == PointStatus.CONVERGED
         conv = it[ok]
-        budget = (
-            self.max_iterations
-            if conv.size == 0
-            else min(self.max_iterations, max(10, RETRY_BUDGET * int(np.median(conv))))
-        )
+        budget = self.max_iterations if conv.size == 0 else self._retry_limit(int(np.median(conv)))
         k = p.shape[1]
         start = np.full((retry.size, k), np.nan)
         if self._grid_shape is not None and ok.any():

@@ -4,7 +4,6 @@ for false convergence"."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -14,7 +13,7 @@ from . import kernels
 from .icgn import N_PARAMS, uv_columns
 from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
-from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET, IcgnPasses, scatter
+from .passes import IcgnPasses, scatter
 from .status import PointStatus
 
 __all__ = [
@@ -135,6 +134,11 @@ def pair_medians(
             np.where(count == 2, 0.5 * total, np.where(count == 1, total, np.nan)),
         )
     return med, count
+
+
+def _median_iterations(conv: NDArray[np.int64]) -> int:
+    """The median of the converged POIs' iterations ``conv`` (2 when there are none)."""
+    return 2 if conv.size == 0 else int(np.median(conv))
 
 
 def _uv_first(k: int) -> tuple[int, int, list[int]]:
@@ -271,10 +275,9 @@ class Screening(IcgnPasses):
         ok = st == PointStatus.CONVERGED
         # the noise estimated since may have changed the mask: the precise POIs by today's
         precise = ok if self._imprecise is None else ok & ~self._imprecise
-        conv = it[ok]
-        med_it = 2 if conv.size == 0 else int(np.median(conv))
-        cap = min(self.max_iterations, max(10, RETRY_BUDGET * med_it))
-        reduced = min(self.max_iterations, max(IMPRECISE_MIN, math.ceil(IMPRECISE_BUDGET * med_it)))
+        med_it = _median_iterations(it[ok])
+        cap = self._retry_limit(med_it)
+        reduced = self._imprecise_limit(med_it)
         start = np.full((pts.size, k), np.nan)
         exact = np.zeros(pts.size, bool)
         if self._grid_shape is not None and self._grid_index is not None and precise.any():
@@ -419,12 +422,10 @@ class Screening(IcgnPasses):
             full, _ = pair_medians(np.where(use, grid, np.nan), (ny, nx), cells=cell[idx])
             start = np.empty((idx.size, k))
             start[:, order] = full.T
-            conv = it[ok]
-            med_it = 2 if conv.size == 0 else int(np.median(conv))
             # the retry budget (a subset stopped at its reduced limit, too: from a start
             # near the field most converge within it, 2.0 % of the blob image's correct
             # affine points left flagged against 6.6 % at the reduced limit again)
-            cap = min(self.max_iterations, max(10, RETRY_BUDGET * med_it))
+            cap = self._retry_limit(_median_iterations(it[ok]))
             p2, z2, it2, st2 = self._check_retry(coef, start, idx, cap, thr[where], is_imp[where])
             d2 = np.hypot(p2[:, ucol] - start[:, ucol], p2[:, vcol] - start[:, vcol])
             better = (z2 >= z[idx]) | again[where]  # a stopped POI had no optimum

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from ..timing import lap_timer
 from .spec import CampaignSpec, parse_spec
 
 __all__ = ["CalibrationResult", "calibrate", "calibration_spec"]
@@ -288,14 +288,7 @@ def calibrate(
     out.mkdir(exist_ok=True)
     results = out / "results.zarr"
     timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def lap(name: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[name] = now - clock
-        clock = now
-
+    lap = lap_timer(timings)
     summary = run_campaign(
         spec, results, scheduler=scheduler, workers=workers, serial=serial, progress=progress
     )

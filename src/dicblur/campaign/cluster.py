@@ -11,6 +11,7 @@ import re
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any
 
 from ..errors import InputError
@@ -162,13 +163,24 @@ def _wait_all(futures: list[Any], interrupt: Interrupt) -> None:
         return
 
 
+@dataclass(frozen=True)
+class TaskMap:
+    """Independent tasks and where their results go, however they run (Dask, threads):
+    ``func(*args(item, shared))`` for each of ``items``, each result handed to
+    ``finish(item, result)`` in this process, in completion order. ``shared`` maps names
+    to the large objects every task needs (on Dask each travels to every worker once and
+    ``args`` receives the workers' copies)."""
+
+    func: Callable[..., Any]
+    items: list[Any]
+    args: Callable[[Any, Mapping[str, Any]], tuple[Any, ...]]
+    finish: Callable[[Any, Any], None]
+    shared: Mapping[str, Any]
+
+
 def map_dask(
-    func: Callable[..., Any],
-    items: list[Any],
-    args: Callable[[Any, Mapping[str, Any]], tuple[Any, ...]],
-    finish: Callable[[Any, Any], None],
+    tasks: TaskMap,
     *,
-    shared: Mapping[str, Any],
     priority: Callable[[Any], int] | None,
     key: Callable[[Any], str],
     warm_up: Callable[[], Any] | None,
@@ -247,15 +259,15 @@ def map_dask(
             # Each shared object travels to every worker once, not once per task.
             remote = {
                 name: client.scatter(obj, broadcast=True, hash=False)
-                for name, obj in shared.items()
+                for name, obj in tasks.shared.items()
             }
             interrupt.check()
             started[0] = time.perf_counter()
             by_key: dict[Any, Any] = {}
-            for i, it in enumerate(items):
+            for i, it in enumerate(tasks.items):
                 fut = client.submit(
-                    func,
-                    *args(it, remote),
+                    tasks.func,
+                    *tasks.args(it, remote),
                     pure=False,
                     priority=0 if priority is None else priority(it),
                     key=f"{key(it)}-{i}-{os.urandom(4).hex()}",
@@ -269,7 +281,7 @@ def map_dask(
                 if not batch:
                     time.sleep(0.02)  # a signal sets the flag; sleep resumes (PEP 475)
                 for fut in batch:
-                    finish(by_key[fut.key], fut.result())
+                    tasks.finish(by_key[fut.key], fut.result())
         except KeyboardInterrupt:
             interrupted = True
         finally:

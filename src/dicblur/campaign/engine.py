@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .cluster import Interrupt, check_scheduler_address, map_dask
+from .cluster import Interrupt, TaskMap, check_scheduler_address, map_dask
 from .lock import StoreLock
 from .mapping import TasksSummary as TasksSummary
 from .mapping import run_tasks as run_tasks
@@ -340,11 +340,13 @@ def _run_dask(
     # Larger blur costs more DIC iterations: start the batches of large W first
     # (longest-first scheduling shortens the idle tail of the last workers).
     return map_dask(
-        _timed_task,
-        pending,
-        lambda b, remote: (fn, remote[b.pattern], b, spec),
-        finish,
-        shared=images,
+        TaskMap(
+            func=_timed_task,
+            items=pending,
+            args=lambda b, remote: (fn, remote[b.pattern], b, spec),
+            finish=finish,
+            shared=images,
+        ),
         priority=lambda b: int(b.loc[5]),
         key=lambda b: f"dicblur-batch-{b.index}",
         warm_up=getattr(fn, "warm_up", None),

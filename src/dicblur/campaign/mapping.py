@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .cluster import check_scheduler_address, map_dask
+from .cluster import TaskMap, check_scheduler_address, map_dask
 
 
 @dataclass(frozen=True)
@@ -111,8 +111,9 @@ def run_tasks(
         finish(item, result)
         count[0] += 1
 
+    tasks = TaskMap(func=func, items=list(items), args=call_args, finish=done, shared=share)
     if (serial or not items) and threads > 1 and len(items) > 1:
-        interrupted = _map_threads(func, list(items), call_args, done, share, threads)
+        interrupted = _map_threads(tasks, threads)
         return TasksSummary(count[0], interrupted, 1, "threads", time.perf_counter() - t0)
     if serial or not items:
         interrupted = False
@@ -123,11 +124,7 @@ def run_tasks(
             interrupted = True
         return TasksSummary(count[0], interrupted, 1, "serial", time.perf_counter() - t0)
     n_workers, where, interrupted = map_dask(
-        func,
-        list(items),
-        call_args,
-        done,
-        shared=share,
+        tasks,
         priority=priority,
         key=lambda it: f"dicblur-{name}",
         warm_up=warm_up,
@@ -139,22 +136,16 @@ def run_tasks(
     return TasksSummary(count[0], interrupted, n_workers, where, time.perf_counter() - t0)
 
 
-def _map_threads(
-    func: Callable[..., Any],
-    items: list[Any],
-    args: Callable[[Any, Mapping[str, Any]], tuple[Any, ...]],
-    finish: Callable[[Any, Any], None],
-    shared: Mapping[str, Any],
-    threads: int,
-) -> bool:
+def _map_threads(tasks: TaskMap, threads: int) -> bool:
     """:func:`run_tasks` on ``threads`` threads of this process; returns whether Ctrl-C
     stopped it (the pending tasks are cancelled, the running ones finish first). A task's
     exception, or one raised by ``finish``, is re-raised once the tasks running beside it
     have finished and been passed to ``finish``."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
+    items, finish = tasks.items, tasks.finish
     pool = ThreadPoolExecutor(max_workers=int(threads), thread_name_prefix="dicblur-task")
-    futures = {pool.submit(func, *args(it, shared)): it for it in items}
+    futures = {pool.submit(tasks.func, *tasks.args(it, tasks.shared)): it for it in items}
     pending = set(futures)
     error: BaseException | None = None
     interrupted = False

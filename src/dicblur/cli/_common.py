@@ -6,9 +6,9 @@ import json
 import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Annotated, Any, Literal
+from pathlib import Path
+from typing import Any, Literal
 
-import typer
 from rich.console import Console
 from rich.table import Table
 
@@ -29,22 +29,6 @@ def parse_size(text: str, name: str = "--size") -> tuple[int, int]:
     if len(values) != 2 or min(values) < 2:
         raise InputError(f"{name}={text!r}: expected ROWSxCOLS with both >= 2, e.g. 512x512")
     return values[0], values[1]
-
-
-#: ``--max-predicted-sigma`` of ``correlate`` and ``track`` (one help text for both).
-MAX_SIGMA_HELP = (
-    "Flag IMPRECISE the points whose predicted random error (from the reference subset and "
-    "the noise) exceeds this, px (e.g. 0.05px; none: no test). correlate: default 0.1/3 px, "
-    "the noise given or estimated; track: default none."
-)
-
-
-# The matcher options that ``correlate`` and ``track`` share: one definition (option name,
-# help text) for both commands; each command gives its own default.
-SubsetOption = Annotated[int, typer.Option("--subset", help="Odd subset size, px.")]
-StepOption = Annotated[int, typer.Option("--step", help="POI grid step, px.")]
-ShapeOption = Annotated[str, typer.Option("--shape", help="affine or translation.")]
-MaxSigmaOption = Annotated[str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)]
 
 
 def parse_max_sigma(text: str | None, name: str = "--max-predicted-sigma") -> float | None:
@@ -75,6 +59,27 @@ def parse_tolerance(text: str, name: str = "--tolerance") -> float | Literal["au
     return value
 
 
+def check_track_choices(*, fmt: str, shape: str) -> None:
+    """``--format`` and ``--shape`` of ``track`` and ``stereo track``."""
+    if fmt not in ("netcdf", "zarr"):
+        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
+    if shape not in ("affine", "translation"):
+        raise InputError(f"--shape={shape!r}: choose affine or translation")
+
+
+def track_store(out: Path, name: str, fmt: str) -> Path:
+    """The dataset a track writes: ``OUT/<name>.nc`` (``--format netcdf``) or
+    ``OUT/<name>.zarr``."""
+    return out / (f"{name}.nc" if fmt == "netcdf" else f"{name}.zarr")
+
+
+def all_threads() -> int:
+    """``--threads`` left out: numba's thread count (all cores, or NUMBA_NUM_THREADS)."""
+    import numba
+
+    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+
+
 def fmt(value: Any) -> str:
     """Readable number formatting for tables."""
     if value is None:
@@ -102,19 +107,21 @@ def print_mapping(title: str, data: dict[str, Any], units: dict[str, str] | None
     console.print(table)
 
 
+def json_safe(value: Any) -> Any:
+    """JSON-safe copy of ``value``: NaN and inf become None (null; strict JSON readers
+    reject NaN), tuples become lists, dicts and lists are copied through."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: json_safe(x) for k, x in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(x) for x in value]
+    return value
+
+
 def print_json(data: Any) -> None:
     """Print JSON (NaN and inf as null) for scripts."""
-
-    def clean(v: Any) -> Any:
-        if isinstance(v, float) and not math.isfinite(v):
-            return None
-        if isinstance(v, dict):
-            return {k: clean(x) for k, x in v.items()}
-        if isinstance(v, list | tuple):
-            return [clean(x) for x in v]
-        return v
-
-    print(json.dumps(clean(data), indent=2))
+    print(json.dumps(json_safe(data), indent=2))
 
 
 def notice_on_start(progress: Any, shape: str, enabled: bool) -> Any:
@@ -141,13 +148,6 @@ def notice_compile(shape: str = "affine") -> None:
 
     if not kernels_cached("translation" if shape == "translation" else "affine"):
         print(COMPILE_NOTICE, file=sys.stderr, flush=True)
-
-
-#: ``--vsg`` of ``correlate`` and ``track`` (one help text for both).
-VSG_HELP = (
-    "With --strain: the plane fit's window, in grid points (odd, e.g. 5) or as the virtual "
-    "strain gauge in px (e.g. 61px = (N - 1) x step + subset)."
-)
 
 
 def strain_option(

@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
+from .options import AngleOption, BitDepthOption, ImageSeedOption
 
 
 def blur_command(
@@ -21,10 +22,7 @@ def blur_command(
             "--length", help="Path length W in px (linear, acceleration) or amplitude (sine)."
         ),
     ],
-    angle: Annotated[
-        float,
-        typer.Option("--angle", help="Direction in degrees from +x (columns) towards +y (rows)."),
-    ] = 0.0,
+    angle: AngleOption = 0.0,
     trajectory: Annotated[
         str, typer.Option("--trajectory", help="linear, sine or acceleration.")
     ] = "linear",
@@ -65,12 +63,8 @@ def blur_command(
         float,
         typer.Option("--exposure-scale", help="Exposure relative to nominal (scales the signal)."),
     ] = 1.0,
-    bit_depth: Annotated[
-        int, typer.Option("--bit-depth", help="8 or 16: quantisation and file.")
-    ] = 8,
-    seed: Annotated[
-        int | None, typer.Option("--seed", help="Random seed (same seed, same image).")
-    ] = None,
+    bit_depth: BitDepthOption = 8,
+    seed: ImageSeedOption = None,
 ) -> None:
     """Blur IMAGE along a path of LENGTH px and write OUT (plus OUT.json settings)."""
     from ..blur import AcceleratedMotion, SineMotion, motion_blur

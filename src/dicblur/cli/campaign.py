@@ -16,6 +16,18 @@ from ._common import (
     print_mapping,
     progress_bar,
 )
+from .options import (
+    AngleOption,
+    JsonOption,
+    QuietOption,
+    ResultsStoreArgument,
+    SchedulerOption,
+    SerialOption,
+    ShapeOption,
+    StepOption,
+    SubsetOption,
+    WorkersOption,
+)
 
 if TYPE_CHECKING:  # the campaign stage is imported inside the commands (fast --help)
     from ..campaign.engine import RunSummary
@@ -51,16 +63,10 @@ def _print_summary(s: RunSummary) -> None:
 def run_command(
     spec: Path = typer.Argument(..., help="Campaign spec (TOML)."),
     out: Path = typer.Option(..., "-o", "--out", "--output", help="Results store (Zarr folder)."),
-    scheduler: str | None = typer.Option(
-        None,
-        "--scheduler",
-        help="Existing Dask scheduler, tcp://HOST:PORT (default: a local cluster).",
-    ),
-    workers: int | None = typer.Option(
-        None, "--workers", help="Worker processes of the local cluster (default: all cores)."
-    ),
-    serial: bool = typer.Option(False, "--serial", help="Run in this process, no Dask."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    scheduler: SchedulerOption = None,
+    workers: WorkersOption = None,
+    serial: SerialOption = False,
+    quiet: QuietOption = False,
 ) -> int:
     """Run (or resume) the campaign SPEC and store its results in OUT."""
     from ..campaign import campaign_status, load_spec, run_campaign
@@ -106,8 +112,8 @@ def _interrupted(n_done: int, n_tasks: int) -> int:
 
 @campaign_app.command("status")
 def status_command(
-    results: Path = typer.Argument(..., help="Results store (Zarr folder)."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    results: ResultsStoreArgument,
+    as_json: JsonOption = False,
 ) -> None:
     """Progress and provenance of a campaign store."""
     from ..campaign import campaign_status
@@ -139,7 +145,7 @@ def status_command(
 
 @campaign_app.command("export")
 def export_command(
-    results: Path = typer.Argument(..., help="Results store (Zarr folder)."),
+    results: ResultsStoreArgument,
     csv: Path = typer.Option(..., "--csv", help="Output CSV, one row per finished task."),
 ) -> None:
     """Export the finished tasks of a store as a flat CSV."""
@@ -163,24 +169,24 @@ def calibrate_command(
         "several levels: the model then separates its floor and cross term and a camera "
         "plan between the levels stays inside its validity domain.",
     ),
-    subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
-    angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
-    step: int = typer.Option(10, "--step", help="POI grid step, px."),
+    subset: SubsetOption = 31,
+    angle: AngleOption = 0.0,
+    step: StepOption = 10,
     noise_model: str = typer.Option(
         "per-exposure",
         "--noise-model",
         help="per-exposure, per-subframe (the paper's) or poisson-gaussian.",
     ),
-    shape: str = typer.Option("translation", "--shape", help="DIC shape function."),
+    shape: ShapeOption = "translation",
     seed: int = typer.Option(1, "--seed", help="Base seed (and generator seed)."),
     blur: str = typer.Option(
         "0.1:10:0.1", "--blur", help="W grid START:STOP:STEP in px (the paper's by default)."
     ),
     size: str = typer.Option("512x512", "--size", help="ROWSxCOLS of a generated pattern."),
-    scheduler: str | None = typer.Option(None, "--scheduler", help="tcp://HOST:PORT."),
-    workers: int | None = typer.Option(None, "--workers", help="Local worker processes."),
-    serial: bool = typer.Option(False, "--serial", help="Run in this process, no Dask."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    scheduler: SchedulerOption = None,
+    workers: WorkersOption = None,
+    serial: SerialOption = False,
+    quiet: QuietOption = False,
     compensation: str = typer.Option(
         "none",
         "--compensation",

@@ -8,17 +8,14 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import InputError
-from ._common import (
-    VSG_HELP,
+from ._common import console, notice_compile, parse_max_sigma, print_mapping, strain_option
+from .options import (
+    AngleOption,
     MaxSigmaOption,
     ShapeOption,
     StepOption,
     SubsetOption,
-    console,
-    notice_compile,
-    parse_max_sigma,
-    print_mapping,
-    strain_option,
+    VsgOption,
 )
 
 _UNITS = {
@@ -85,12 +82,7 @@ def correlate_command(
             "--blur", help="Blur length W during the exposure, px (given; estimate: start)."
         ),
     ] = None,
-    angle: Annotated[
-        float,
-        typer.Option(
-            "--angle", help="Blur direction in degrees from +x (columns) towards +y (rows)."
-        ),
-    ] = 0.0,
+    angle: AngleOption = 0.0,
     strain: Annotated[
         bool,
         typer.Option(
@@ -98,7 +90,7 @@ def correlate_command(
             help="Also strains (Green-Lagrange) and, with --noise, their sigmas (docs/strain.md).",
         ),
     ] = False,
-    vsg: Annotated[str, typer.Option("--vsg", help=VSG_HELP)] = "5",
+    vsg: VsgOption = "5",
 ) -> None:
     """Measure the displacement field of CURRENT against REFERENCE and print a summary."""
     import math

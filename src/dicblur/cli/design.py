@@ -12,7 +12,16 @@ from typing import Any
 import typer
 
 from ..errors import InputError
-from ._common import console, fmt, print_json
+from ._common import console, fmt, json_safe, print_json
+from .options import (
+    BaseSeedOption,
+    CheckBrowserOption,
+    OutFolderOption,
+    ShapeOption,
+    StepOption,
+    SubsetOption,
+)
+from .planner_page import write_pattern_planner
 
 
 def parse_range(text: str, name: str) -> tuple[float, float]:
@@ -65,17 +74,6 @@ def _distribution(text: str) -> tuple[list[float], list[float]]:
     return blurs, weights
 
 
-def _clean(v: object) -> object:
-    """JSON-safe copy: NaN and inf become null (strict JSON readers reject NaN)."""
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_clean(x) for x in v]
-    return v
-
-
 def _in_words(c: Any) -> str:
     """A candidate in words, e.g. "speckle 2.8 px, density 0.50, edge softness 0.95 px"."""
     return (
@@ -97,7 +95,7 @@ def _written_since(folder: Path, before: dict[Path, int]) -> list[str]:
 
 def design_command(
     ctx: typer.Context,
-    out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
+    out: OutFolderOption,
     blur: float | None = typer.Option(None, "--blur", help="Design blur length W, px."),
     blur_range: str | None = typer.Option(
         None, "--blur-range", help="LO..HI px: minimise the mean u_e over it."
@@ -131,9 +129,9 @@ def design_command(
         "number is mm/px; enables the print export).",
     ),
     noise: float = typer.Option(2.0, "--noise", help="Camera noise std, grey levels."),
-    subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
-    step: int = typer.Option(10, "--step", help="POI grid step, px."),
-    shape: str = typer.Option("translation", "--shape", help="translation or affine."),
+    subset: SubsetOption = 31,
+    step: StepOption = 10,
+    shape: ShapeOption = "translation",
     image_size: int = typer.Option(256, "--image-size", help="Synthetic image side, px."),
     realisations: int = typer.Option(
         2, "--realisations", help="Pattern realisations per candidate."
@@ -157,13 +155,11 @@ def design_command(
     confirm: int = typer.Option(
         8, "--confirm", help="Fresh realisations of the confirmation (0: none)."
     ),
-    seed: int = typer.Option(0, "--seed", help="Base seed."),
+    seed: BaseSeedOption = 0,
     print_size: str = typer.Option("100x100", "--print-size", help="Printed HxW, mm."),
     dpi: float = typer.Option(600.0, "--dpi", help="Printer resolution, dots per inch."),
     no_report: bool = typer.Option(False, "--no-report", help="Skip the HTML page."),
-    check_browser: bool = typer.Option(
-        False, "--check-browser", help="Open the page in headless Chromium."
-    ),
+    check_browser: CheckBrowserOption = False,
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
 ) -> None:
     """Search a speckle-pattern family for the lowest u_e at your blur; export the winner.
@@ -305,7 +301,7 @@ def design_command(
         )
     doc = result.to_dict()
     doc["export"] = None if export is None else export.to_dict()
-    write_text(out / "design.json", json.dumps(_clean(doc), indent=2, allow_nan=False))
+    write_text(out / "design.json", json.dumps(json_safe(doc), indent=2, allow_nan=False))
     with atomic_open(out / "evaluations.csv", "w", newline="") as fh:
         cols = [
             "stage",
@@ -347,13 +343,15 @@ def design_command(
                 raise InputError(
                     f"report: {chk.image_count} images, not all decoded in {chk.browser}"
                 )
-    _write_planner_page(
+    # the exposure planner of the winner, from its static prediction
+    write_pattern_planner(
         cam,
         out,
         noise=noise,
         subset=subset,
         step=step,
         label=f"best pattern ({_in_words(best)}), subset {subset} px",
+        provenance={"pattern": "best_pattern.png", "source": "dicblur design"},
     )
     summary = result.summary()
     if export is not None:
@@ -388,29 +386,6 @@ def design_command(
         f"{result.n_campaigns} campaigns, {result.n_points} campaign points, "
         f"{result.wall_s:.1f} s; wrote {len(summary['files'])} files to {out}"
     )
-
-
-def _write_planner_page(
-    image: Any, out: Path, *, noise: float, subset: int, step: int, label: str
-) -> None:
-    """OUT/planner.html: the exposure planner for the winning pattern, from its static
-    prediction (no simulation). Everything else is already written, so a failure here is
-    one warning line, not a lost result."""
-    from ..errors import DicblurError
-    from ..models import model_from_pattern
-    from ..report.planner import write_planner
-
-    try:
-        model = model_from_pattern(
-            image,
-            noise_sigma=noise,
-            subset=subset,
-            step=max(step, subset // 2),
-            provenance={"pattern": "best_pattern.png", "source": "dicblur design"},
-        )
-        write_planner([model], out / "planner.html", labels=[label])
-    except DicblurError as exc:
-        typer.echo(f"warning: planner page not written ({exc})", err=True)
 
 
 def register(app: typer.Typer) -> None:

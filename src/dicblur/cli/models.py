@@ -12,6 +12,14 @@ import typer
 
 from ..errors import InputError
 from ._common import console, print_json
+from .options import (
+    FixedNoiseOption,
+    JsonOption,
+    ModelChoiceOption,
+    ModelPathArgument,
+    ScaleOption,
+    TargetSpeedOption,
+)
 
 if TYPE_CHECKING:  # numpy and the models are imported inside the commands (fast --help)
     import numpy as np
@@ -165,6 +173,16 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
     out: dict[str, list[float]] = {
         k: [] for k in ("blur", "sssig", "u_e", "noise", "contrast_ratio", "converged_fraction")
     }
+    # without a contrast_ratio column, the ratio of a contrast pair (reference / blurred):
+    # RMS contrast first, it tracks blur-induced contrast loss (campaign stores it)
+    contrasts = next(
+        (
+            (ref, cur)
+            for ref, cur in (("rms_contrast_ref", "rms_contrast"), ("contrast_ref", "contrast"))
+            if ref in keep and cur in keep
+        ),
+        None,
+    )
     for nz in np.unique(noise[ok]):
         for w in np.unique(blur[ok & (noise == nz)]):
             sel = ok & (noise == nz) & (blur == w)
@@ -183,25 +201,10 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
                 )
             if "contrast_ratio" in keep:
                 out["contrast_ratio"].append(float(np.mean(keep["contrast_ratio"][sel])))
-            elif "rms_contrast_ref" in keep and "rms_contrast" in keep:
-                # RMS contrast tracks blur-induced contrast loss (campaign stores it)
-                out["contrast_ratio"].append(
-                    float(
-                        np.mean(
-                            keep["rms_contrast_ref"][sel].astype(float)
-                            / keep["rms_contrast"][sel].astype(float)
-                        )
-                    )
-                )
-            elif "contrast_ref" in keep and "contrast" in keep:
-                out["contrast_ratio"].append(
-                    float(
-                        np.mean(
-                            keep["contrast_ref"][sel].astype(float)
-                            / keep["contrast"][sel].astype(float)
-                        )
-                    )
-                )
+            elif contrasts is not None:
+                ref, cur = contrasts
+                ratio = keep[ref][sel].astype(float) / keep[cur][sel].astype(float)
+                out["contrast_ratio"].append(float(np.mean(ratio)))
     res = {k: np.array(v) for k, v in out.items() if v}
     if "noise" not in cols and "noise_effective" not in cols:
         res.pop("noise")
@@ -307,16 +310,14 @@ def _results_compensation(results: Path, given: str | None) -> str:
 
 
 def predict_command(
-    model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
+    model_path: ModelPathArgument,
     blur: list[float] = typer.Option([], "--blur", help="Blur length W, px (repeatable)."),
-    velocity: str | None = typer.Option(None, "--velocity", help="e.g. 120mm/s."),
+    velocity: TargetSpeedOption = None,
     exposure: str | None = typer.Option(None, "--exposure", help="e.g. 1ms."),
-    scale: str | None = typer.Option(None, "--scale", help="e.g. 0.05mm/px."),
-    noise: float | None = typer.Option(None, "--noise", help="Noise std, GL."),
-    which: str | None = typer.Option(
-        None, "--model", help="static (calibrate's default), mismatch or power_law."
-    ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    scale: ScaleOption = None,
+    noise: FixedNoiseOption = None,
+    which: ModelChoiceOption = None,
+    as_json: JsonOption = False,
 ) -> None:
     """Predict u_e at blur lengths (--blur) or from velocity x exposure / scale."""
     from ..blur import blur_length
@@ -388,9 +389,9 @@ def predict_command(
 
 
 def plan_command(
-    model_path: Path = typer.Argument(..., help="Model file written by 'dicblur fit'."),
-    velocity: str | None = typer.Option(None, "--velocity", help="Target speed, e.g. 120mm/s."),
-    scale: str | None = typer.Option(None, "--scale", help="Image scale, e.g. 0.05mm/px."),
+    model_path: ModelPathArgument,
+    velocity: TargetSpeedOption = None,
+    scale: ScaleOption = None,
     target: str | None = typer.Option(None, "--target", help="Largest u_e, e.g. 0.01px."),
     full_well: float | None = typer.Option(None, "--full-well", help="Full well, e-."),
     read_noise: float | None = typer.Option(None, "--read-noise", help="Read noise, e-."),
@@ -398,7 +399,7 @@ def plan_command(
         None, "--flux", help="e-/s at the pattern's mean grey level."
     ),
     peak_to_mean: float = typer.Option(2.0, "--peak-to-mean", help="Brightest / mean grey level."),
-    noise: float | None = typer.Option(None, "--noise", help="Fixed noise std, GL."),
+    noise: FixedNoiseOption = None,
     reference: Path | None = typer.Option(
         None,
         "--reference",
@@ -409,9 +410,7 @@ def plan_command(
         "--noise-level",
         help="Grey level (of the fitted images) at which shot noise is evaluated.",
     ),
-    which: str | None = typer.Option(
-        None, "--model", help="static (calibrate's default), mismatch or power_law."
-    ),
+    which: ModelChoiceOption = None,
     plot: Path | None = typer.Option(None, "--plot", help="Write u_e(exposure) figure."),
     html_out: Path | None = typer.Option(
         None,
@@ -419,7 +418,7 @@ def plan_command(
         help="Write an interactive planner page (one self-contained HTML "
         "file; the options given here are its starting values).",
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    as_json: JsonOption = False,
     compare: Path | None = typer.Option(
         None,
         "--compare",

@@ -12,6 +12,15 @@ import typer
 
 from ..errors import InputError
 from ._common import console, parse_size, print_json, print_mapping
+from .options import (
+    AngleOption,
+    BitDepthOption,
+    ImageSeedOption,
+    JsonOption,
+    ShapeOption,
+    SubsetOption,
+    SubsetStepOption,
+)
 
 pattern_app = typer.Typer(
     help="Generate speckle patterns and measure their metrics.", no_args_is_help=True
@@ -50,8 +59,8 @@ def generate(
     preset: str = typer.Option(
         "", "--preset", help="'paper4': the paper's pattern #4 (4x4 Gaussian mask)."
     ),
-    seed: int | None = typer.Option(None, "--seed", help="Random seed (same seed, same image)."),
-    bit_depth: int = typer.Option(8, "--bit-depth", help="8 or 16."),
+    seed: ImageSeedOption = None,
+    bit_depth: BitDepthOption = 8,
 ) -> None:
     """Generate a random speckle pattern and write it to OUT (plus OUT.json settings)."""
     from ..io import check_output, save_image, write_text
@@ -105,11 +114,11 @@ def generate(
 @pattern_app.command("metrics")
 def metrics(
     image: Path = typer.Argument(..., help="Image file (TIFF, PNG, BMP, JPEG)."),
-    subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
-    step: int | None = typer.Option(None, "--step", help="Subset grid step, px."),
+    subset: SubsetOption = 31,
+    step: SubsetStepOption = None,
     noise: float | None = typer.Option(None, "--noise", help="Noise std, grey levels."),
     gradient: str = typer.Option("central", "--gradient", help="central or sobel."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    as_json: JsonOption = False,
 ) -> None:
     """Print the metrics of IMAGE: SSSIG, MIG, speckle size, contrast, static predictions."""
     from ..io import load_image
@@ -144,13 +153,13 @@ def metrics(
 def predict(
     image: Path = typer.Argument(..., help="Sharp image of the pattern (TIFF, PNG, ...)."),
     noise: float = typer.Option(..., "--noise", help="Noise std in each image, grey levels."),
-    subset: int = typer.Option(31, "--subset", help="Odd subset size, px."),
-    step: int | None = typer.Option(None, "--step", help="Subset grid step, px."),
+    subset: SubsetOption = 31,
+    step: SubsetStepOption = None,
     blur: list[float] = typer.Option(
         [], "--blur", help="Blur length W, px (repeatable; default 0..8)."
     ),
-    angle: float = typer.Option(0.0, "--angle", help="Motion direction, degrees from +x."),
-    shape: str = typer.Option("translation", "--shape", help="translation or affine."),
+    angle: AngleOption = 0.0,
+    shape: ShapeOption = "translation",
     subpixel: str | None = typer.Option(
         None,
         "--subpixel",
@@ -160,7 +169,7 @@ def predict(
     out: Path | None = typer.Option(
         None, "-o", "--out", help="Also write a model JSON for dicblur predict/plan."
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    as_json: JsonOption = False,
     compensation: str = typer.Option(
         "none",
         "--compensation",
@@ -198,54 +207,26 @@ def predict(
             raise InputError(
                 f"--subpixel={subpixel!r}: give 'average' or a fraction in [0, 1) px, e.g. 0.5"
             ) from None
-    pred = predict_from_pattern(
-        img,
-        w,
-        noise_sigma=noise,
-        subset=subset,
-        step=step,
-        motion=motion,
-        shape=shape,  # type: ignore[arg-type]
-        subpixel=sp,
-    )
+    # one matcher for the prediction, the compensated one and the model written
+    matcher: dict[str, Any] = {
+        "noise_sigma": noise,
+        "subset": subset,
+        "step": step,
+        "motion": motion,
+        "shape": shape,
+    }
+    pred = predict_from_pattern(img, w, **matcher, subpixel=sp)
+    provenance = {"image": str(image)}
     if compensation == "given":
-        _print_compensated(
-            img,
-            pred,
-            image,
-            noise=noise,
-            subset=subset,
-            step=step,
-            motion=motion,
-            shape=shape,
-            angle=angle,
-            as_json=as_json,
-        )
+        _print_compensated(img, pred, image, matcher=matcher, angle=angle, as_json=as_json)
         if out is not None:
             from ..models import model_from_compensated
 
-            model_from_compensated(
-                img,
-                noise_sigma=noise,
-                subset=subset,
-                step=step,
-                motion=motion,
-                shape=shape,
-                provenance={"image": str(image)},
-            ).to_json(str(out))
+            model_from_compensated(img, **matcher, provenance=provenance).to_json(str(out))
             console.print(f"wrote {out}: the blur-compensated matcher's model")
         return
     if out is not None:
-        model = model_from_pattern(
-            img,
-            noise_sigma=noise,
-            subset=subset,
-            step=step,
-            motion=motion,
-            shape=shape,  # type: ignore[arg-type]
-            provenance={"image": str(image)},
-            subpixel=sp,
-        )
+        model = model_from_pattern(img, **matcher, provenance=provenance, subpixel=sp)
         model.to_json(str(out))
     if as_json:
         print_json(
@@ -303,22 +284,18 @@ def _print_compensated(
     pred: Any,
     image: Path,
     *,
-    noise: float,
-    subset: int,
-    step: int | None,
-    motion: tuple[float, float],
-    shape: str,
+    matcher: dict[str, Any],
     angle: float,
     as_json: bool,
 ) -> None:
-    """Plain and blur-compensated predictions side by side (issue 18)."""
+    """Plain and blur-compensated predictions side by side (issue 18); ``matcher``: the
+    keywords (noise_sigma, subset, step, motion, shape) of the plain prediction ``pred``."""
     from rich.table import Table
 
     from ..models.compensated import predict_compensated
 
-    comp = predict_compensated(
-        img, pred.blur, noise_sigma=noise, subset=subset, step=step, motion=motion, shape=shape
-    )
+    comp = predict_compensated(img, pred.blur, **matcher)
+    noise, subset, shape = matcher["noise_sigma"], matcher["subset"], matcher["shape"]
     gain = pred.u_e / comp.u_e
     if as_json:
         print_json(
@@ -357,7 +334,7 @@ def _print_compensated(
 def noise_command(
     image_a: Path = typer.Argument(..., help="First image of a static scene."),
     image_b: Path = typer.Argument(..., help="Second image of the same scene."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    as_json: JsonOption = False,
 ) -> None:
     """Estimate the image noise std (grey levels) from two images of a static scene."""
     from ..io import load_image, read_image_header

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import InputError
+from .options import OutFolderOption
 
 
 def _table_markdown(rows: tuple[dict[str, Any], ...]) -> str:
@@ -51,7 +52,7 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 
 
 def pulse_command(
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output directory (created).")],
+    out: OutFolderOption,
     trials: Annotated[int, typer.Option("--trials", help="Noise realisations per w.")] = 10000,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same numbers).")] = 1,
     n_periods: Annotated[int, typer.Option("--n-periods", help="Periods in the signal (N).")] = 10,

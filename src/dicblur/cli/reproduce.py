@@ -9,10 +9,18 @@ from pathlib import Path
 import typer
 
 from ._common import console
+from .options import (
+    BaseSeedOption,
+    CheckBrowserOption,
+    OutFolderOption,
+    SchedulerOption,
+    SerialOption,
+    WorkersOption,
+)
 
 
 def reproduce_command(
-    out: Path = typer.Option(Path("report"), "--out", "-o", help="Output folder."),
+    out: OutFolderOption = Path("report"),
     quick: bool = typer.Option(False, "--quick", help="Coarser W grid and fewer POIs."),
     pattern1: Path | None = typer.Option(
         None, "--pattern1", help="DIC Challenge Sample 13 image (central crop)."
@@ -20,13 +28,11 @@ def reproduce_command(
     pattern2: Path | None = typer.Option(
         None, "--pattern2", help="DIC Challenge Sample 3 image (central crop)."
     ),
-    workers: int | None = typer.Option(None, "--workers", help="Local Dask workers."),
-    scheduler: str | None = typer.Option(None, "--scheduler", help="tcp://HOST:PORT"),
-    serial: bool = typer.Option(False, "--serial", help="No Dask: run in this process."),
-    seed: int = typer.Option(2017, "--seed", help="Base seed."),
-    check_browser: bool = typer.Option(
-        False, "--check-browser", help="Open report.html in headless Chromium afterwards."
-    ),
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
+    serial: SerialOption = False,
+    seed: BaseSeedOption = 2017,
+    check_browser: CheckBrowserOption = False,
 ) -> None:
     """Reproduce Lavatelli & Zappa (2017): figures, tables, claims, report.html."""
     from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedColumn

@@ -8,7 +8,33 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
-from ._common import console, parse_size, print_mapping, progress_bar
+from ._common import (
+    all_threads,
+    check_track_choices,
+    console,
+    parse_size,
+    print_mapping,
+    progress_bar,
+    track_store,
+)
+from .options import (
+    FixedNoiseOption,
+    FramesOption,
+    JsonOption,
+    ModelChoiceOption,
+    ModelPathArgument,
+    OutFolderOption,
+    RecordingExposureOption,
+    RecordingFpsOption,
+    ReferenceFrameOption,
+    ReportOption,
+    RigOption,
+    ShapeOption,
+    StaticFramesOption,
+    StepOption,
+    StoreFormatOption,
+    SubsetOption,
+)
 
 stereo_app = typer.Typer(
     help="Stereo DIC: calibrate a camera rig, track two recordings in 3-D with sigma.",
@@ -97,23 +123,17 @@ def calibrate_command(
 def track_command(
     left: Annotated[str, typer.Argument(help="Left recording (as dicblur track reads them).")],
     right: Annotated[str, typer.Argument(help="Right recording, synchronised with the left.")],
-    rig: Annotated[Path, typer.Option("--rig", help="Rig file (.json/.yml) of the two cameras.")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")],
-    exposure: Annotated[
-        str | None, typer.Option("--exposure", help="Exposure, e.g. 1ms (default: metadata).")
-    ] = None,
-    fps: Annotated[
-        str | None, typer.Option("--fps", help="Frame rate, e.g. 5kHz (default: metadata).")
-    ] = None,
-    static: Annotated[
-        str | None, typer.Option("--static", help="Static frames for the noise, e.g. 0:20.")
-    ] = None,
+    rig: RigOption,
+    out: OutFolderOption,
+    exposure: RecordingExposureOption = None,
+    fps: RecordingFpsOption = None,
+    static: StaticFramesOption = None,
     noise: Annotated[
         float | None, typer.Option("--noise", help="Noise std (grey levels) instead of --static.")
     ] = None,
-    subset: Annotated[int, typer.Option("--subset", help="Odd subset size, px.")] = 21,
-    step: Annotated[int, typer.Option("--step", help="POI grid step, px.")] = 10,
-    shape: Annotated[str, typer.Option("--shape", help="affine or translation.")] = "affine",
+    subset: SubsetOption = 21,
+    step: StepOption = 10,
+    shape: ShapeOption = "affine",
     depth: Annotated[
         str | None,
         typer.Option(
@@ -122,13 +142,11 @@ def track_command(
             "where the optical axes cross).",
         ),
     ] = None,
-    reference: Annotated[int, typer.Option("--reference", help="Reference frame.")] = 0,
-    frames: Annotated[
-        str | None, typer.Option("--frames", help="Frames to track, START:STOP (default all).")
-    ] = None,
-    fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
+    reference: ReferenceFrameOption = 0,
+    frames: FramesOption = None,
+    fmt: StoreFormatOption = "netcdf",
     csv: Annotated[bool, typer.Option("--csv", help="Also write stereo.csv (long).")] = False,
-    report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+    report: ReportOption = True,
     threads: Annotated[
         int | None,
         typer.Option(
@@ -149,10 +167,7 @@ def track_command(
     from ..stereo.store import write_stereo_csv
     from ..track.store import save_track
 
-    if fmt not in ("netcdf", "zarr"):
-        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
-    if shape not in ("affine", "translation"):
-        raise InputError(f"--shape={shape!r}: choose affine or translation")
+    check_track_choices(fmt=fmt, shape=shape)
     dep = None if depth is None else parse_quantity(depth, "length", name="--depth")
     if dep is not None and not dep > 0:
         raise InputError(f"--depth={depth!r}: must be > 0, e.g. 400mm")
@@ -165,13 +180,11 @@ def track_command(
     if threads is not None and threads < 1:
         raise InputError(f"--threads={threads!r}: must be >= 1, e.g. 2")
     if threads is None:
-        import numba
-
-        threads = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+        threads = all_threads()
     the_rig = load_rig(rig)
     rec_l, rec_r = open_recording(left), open_recording(right)
     out.mkdir(parents=True, exist_ok=True)
-    target = out / ("stereo.nc" if fmt == "netcdf" else "stereo.zarr")
+    target = track_store(out, "stereo", fmt)
     with progress_bar("stereo", unit="frame pairs") as progress:
         ds = track(
             rec_l,
@@ -226,8 +239,8 @@ def track_command(
 
 @stereo_app.command("plan")
 def plan_command(
-    model_path: Annotated[Path, typer.Argument(help="Model file written by 'dicblur fit'.")],
-    rig: Annotated[Path, typer.Option("--rig", help="Rig file (.json/.yml) of the two cameras.")],
+    model_path: ModelPathArgument,
+    rig: RigOption,
     velocity: Annotated[
         str,
         typer.Option(
@@ -240,13 +253,8 @@ def plan_command(
     component: Annotated[
         str, typer.Option("--component", help="worst (all three), x, y or z.")
     ] = "worst",
-    noise: Annotated[
-        float | None, typer.Option("--noise", help="Fixed noise std, GL (default the model's).")
-    ] = None,
-    which: Annotated[
-        str | None,
-        typer.Option("--model", help="static (calibrate's default), mismatch or power_law."),
-    ] = None,
+    noise: FixedNoiseOption = None,
+    which: ModelChoiceOption = None,
     depth: Annotated[
         str | None,
         typer.Option(
@@ -258,7 +266,7 @@ def plan_command(
     angles: Annotated[
         str, typer.Option("--angles", help="Stereo angles to compare, deg, e.g. 15,30,45.")
     ] = "10,15,20,30,45,60",
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Plan the exposure for a 3-D target: the longest whose predicted sigma (x, y, z in
     the target frame, each camera's blur and the 2-D model's noise and blur terms

@@ -9,17 +9,30 @@ import typer
 
 from ..errors import InputError
 from ._common import (
-    VSG_HELP,
-    MaxSigmaOption,
-    ShapeOption,
-    StepOption,
-    SubsetOption,
+    all_threads,
+    check_track_choices,
     console,
     parse_max_sigma,
     parse_tolerance,
     print_mapping,
     progress_bar,
     strain_option,
+    track_store,
+)
+from .options import (
+    FramesOption,
+    MaxSigmaOption,
+    OutFolderOption,
+    RecordingExposureOption,
+    RecordingFpsOption,
+    ReferenceFrameOption,
+    ReportOption,
+    ShapeOption,
+    StaticFramesOption,
+    StepOption,
+    StoreFormatOption,
+    SubsetOption,
+    VsgOption,
 )
 
 
@@ -40,19 +53,10 @@ def track_command(
             help="Folder of frames, glob ('run/*.tif'), multi-page TIFF, .cine or .cih/.mraw."
         ),
     ],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")],
-    exposure: Annotated[
-        str | None,
-        typer.Option("--exposure", help="Exposure time, e.g. 1ms (default: from the metadata)."),
-    ] = None,
-    fps: Annotated[
-        str | None,
-        typer.Option("--fps", help="Frame rate, e.g. 5000 or 5kHz (default: from the metadata)."),
-    ] = None,
-    static: Annotated[
-        str | None,
-        typer.Option("--static", help="Frames of the static scene for the noise, e.g. 0:20."),
-    ] = None,
+    out: OutFolderOption,
+    exposure: RecordingExposureOption = None,
+    fps: RecordingFpsOption = None,
+    static: StaticFramesOption = None,
     noise: Annotated[
         float | None,
         typer.Option(
@@ -71,25 +75,23 @@ def track_command(
     roi: Annotated[
         str | None, typer.Option("--roi", help="Grid region ROW0,ROW1,COL0,COL1 (px, half-open).")
     ] = None,
-    reference: Annotated[int, typer.Option("--reference", help="Reference frame.")] = 0,
+    reference: ReferenceFrameOption = 0,
     update_reference: Annotated[
         bool,
         typer.Option(
             "--update-reference", help="Renew the reference when the correlation degrades."
         ),
     ] = False,
-    frames: Annotated[
-        str | None, typer.Option("--frames", help="Frames to track, START:STOP (default all).")
-    ] = None,
+    frames: FramesOption = None,
     plot: Annotated[
         str | None,
         typer.Option(
             "--plot-points", help="Point indices for the report's time series, e.g. 0,40."
         ),
     ] = None,
-    fmt: Annotated[str, typer.Option("--format", help="netcdf or zarr.")] = "netcdf",
+    fmt: StoreFormatOption = "netcdf",
     csv: Annotated[bool, typer.Option("--csv", help="Also write track.csv (long).")] = False,
-    report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+    report: ReportOption = True,
     workers: Annotated[
         int | None,
         typer.Option(
@@ -145,7 +147,7 @@ def track_command(
         bool,
         typer.Option("--strain", help="Also write strains and their sigmas (docs/strain.md)."),
     ] = False,
-    vsg: Annotated[str, typer.Option("--vsg", help=VSG_HELP)] = "5",
+    vsg: VsgOption = "5",
 ) -> None:
     """Track RECORDING and predict the random error (noise + motion blur) of every point in
     every frame; writes OUT/track.nc (or .zarr), OUT/report.html and, with --csv,
@@ -159,10 +161,7 @@ def track_command(
     from ..track import TrackInterrupted, track
     from ..track.store import save_track, write_track_csv
 
-    if fmt not in ("netcdf", "zarr"):
-        raise InputError(f"--format={fmt!r}: choose netcdf or zarr")
-    if shape not in ("affine", "translation"):
-        raise InputError(f"--shape={shape!r}: choose affine or translation")
+    check_track_choices(fmt=fmt, shape=shape)
     if points is not None and roi is not None:
         raise InputError("--points and --roi: give one of them")
     pts = None
@@ -185,14 +184,9 @@ def track_command(
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     rec = open_recording(recording)
-    target = out / ("track.nc" if fmt == "netcdf" else "track.zarr")
+    target = track_store(out, "track", fmt)
     chunks = None
-    if threads is not None:
-        n_threads = threads
-    else:
-        import numba
-
-        n_threads = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    n_threads = threads if threads is not None else all_threads()
     if (
         chunk_frames is None
         and workers is None
@@ -316,9 +310,7 @@ def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: in
 
     import numpy as np
 
-    from ..errors import DicblurError
-    from ..models import model_from_pattern
-    from ..report.planner import write_planner
+    from .planner_page import write_pattern_planner
 
     sigma = float(ds.attrs.get("noise_sigma", float("nan")))
     if not math.isfinite(sigma) or sigma <= 0:
@@ -332,21 +324,16 @@ def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: in
         ok = np.isfinite(ang) & np.isfinite(w)
         if ok.any() and float(w[ok].sum()) > 0:
             a = 0.5 * float(np.angle(np.sum(w[ok] * np.exp(2j * ang[ok]))))
-    try:
-        model = model_from_pattern(
-            np.asarray(image, dtype=float),
-            noise_sigma=sigma,
-            subset=subset,
-            step=max(step, subset // 2),
-            motion=(math.sin(a), math.cos(a)),
-            provenance={"pattern": "reference frame", "source": "dicblur track"},
-        )
-        return write_planner(
-            [model], out / "planner.html", labels=[f"this specimen, subset {subset} px"]
-        )
-    except DicblurError as exc:
-        typer.echo(f"warning: planner page not written ({exc})", err=True)
-        return None
+    return write_pattern_planner(
+        np.asarray(image, dtype=float),
+        out,
+        noise=sigma,
+        subset=subset,
+        step=step,
+        label=f"this specimen, subset {subset} px",
+        provenance={"pattern": "reference frame", "source": "dicblur track"},
+        motion=(math.sin(a), math.cos(a)),
+    )
 
 
 def register(app: typer.Typer) -> None:

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from ..checks import describe
 from ..errors import InputError
 from ..patterns import SeedLike
+from ..timing import lap_timer
 from .correlation import chi2_regime_a, min_chi2
 from .montecarlo import PAPER_TRAIN, PAPER_WIDTHS, simulate
 from .records import DependenceRow, LogLogFit
@@ -382,14 +383,7 @@ def run_pulse_study(
     )
     elapsed = time.perf_counter() - t0
     timings = {"montecarlo": elapsed}
-    clock = time.perf_counter()
-
-    def lap(name: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[name] = now - clock
-        clock = now
-
+    lap = lap_timer(timings)
     fits = _segment_fits(ds, PAPER_TRAIN, 1.0)
     knee = find_knee(ds)
     lap("fits")

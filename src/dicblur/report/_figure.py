@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["subplots"]
+__all__ = ["figure", "figure_axes", "subplots"]
 
 
 def subplots(
@@ -20,3 +20,18 @@ def subplots(
 
     fig = Figure(figsize=figsize)
     return fig, fig.subplots(nrows, ncols, **kwargs)
+
+
+def figure(width: float, height: float) -> Any:
+    """A detached ``Figure`` of ``width`` x ``height`` inches at 100 dpi (the reports' pages:
+    the same pixels whatever the user's ``figure.dpi``)."""
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), dpi=100)
+
+
+def figure_axes(width: float, height: float, **kwargs: Any) -> tuple[Any, Any]:
+    """``(Figure, axes)``: a :func:`figure` with one axes (``kwargs`` go to
+    ``add_subplot``, e.g. ``projection="3d"``)."""
+    fig = figure(width, height)
+    return fig, fig.add_subplot(1, 1, 1, **kwargs)

@@ -27,6 +27,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -457,23 +458,20 @@ def _fit_pattern(
         "noise": "per-exposure Gaussian",
         "points": f"W with >= {MIN_CONVERGED:.0%} POIs converged",
     }
+    # the two fits of the pattern: the same subset, static constant and provenance
+    fit = partial(
+        fit_blur_model,
+        subset=s.subset,
+        c_static=c_static,
+        provenance=prov,
+        mean_level=float(p.image.mean()),
+    )
     # the automatic eq. 17 range may fall back on its minimum number of points; the
     # report states the range it used (table "eq.17 range"), so the warning, which
     # tells an API user to pass fit_range, is kept as a note instead of printed
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        paper = fit_blur_model(
-            W[v],
-            sg,
-            u,
-            noise_sigma=s.main_noise,
-            contrast_ref=cref,
-            contrast=con,
-            subset=s.subset,
-            c_static=c_static,
-            provenance=prov,
-            mean_level=float(p.image.mean()),
-        )
+        paper = fit(W[v], sg, u, noise_sigma=s.main_noise, contrast_ref=cref, contrast=con)
     range_notes = [
         str(wm.message).split(". Pass fit_range")[0]
         for wm in caught
@@ -492,17 +490,7 @@ def _fit_pattern(
             for lv in s.noise_levels
         ]
     )
-    full = fit_blur_model(
-        allw,
-        alls,
-        allu,
-        noise_sigma=alln,
-        contrast_ratio=allc,
-        subset=s.subset,
-        c_static=c_static,
-        provenance=prov,
-        mean_level=float(p.image.mean()),
-    )
+    full = fit(allw, alls, allu, noise_sigma=alln, contrast_ratio=allc)
     return paper, full, range_notes
 
 

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._figure import figure, figure_axes
 from .html import HtmlReport
 
 __all__ = [
@@ -18,12 +19,6 @@ __all__ = [
     "write_stereo_report",
     "write_validation_report",
 ]
-
-
-def _figure(w: float, h: float) -> Any:
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(w, h), dpi=100)
 
 
 def _largest_frame(ds: Any) -> int:
@@ -40,8 +35,7 @@ def fig_shape_3d(ds: Any, index: int | None = None) -> Any:
     """The reference shape (X, Y, Z, mm) as a 3-D scatter coloured by |U, V, W3| at frame
     position ``index`` (default: the largest displacement)."""
     k = _largest_frame(ds) if index is None else index
-    fig = _figure(6.8, 5.4)
-    ax = fig.add_subplot(1, 1, 1, projection="3d")
+    fig, ax = figure_axes(6.8, 5.4, projection="3d")
     x, y, z = ds["X"].values, ds["Y"].values, ds["Z"].values
     mag = np.sqrt(ds["U"].values[k] ** 2 + ds["V"].values[k] ** 2 + ds["W3"].values[k] ** 2)
     ok = ds["valid"].values[k].astype(bool) & np.isfinite(mag)
@@ -62,7 +56,7 @@ def fig_shape_3d(ds: Any, index: int | None = None) -> Any:
 def fig_sigma_time(ds: Any) -> Any:
     """Median predicted sigma_U, sigma_V, sigma_W3 of the valid points, and the median blur
     of each camera, per frame."""
-    fig = _figure(7.0, 5.0)
+    fig = figure(7.0, 5.0)
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
     t = ds["time"].values * 1e3
     valid = ds["valid"].values.astype(bool)
@@ -86,8 +80,7 @@ def fig_sigma_time(ds: Any) -> Any:
 def fig_predicted_measured(rows: list[dict[str, Any]]) -> Any:
     """Predicted against measured sigma (mm) of the benchmark's bins, one marker per
     component; rows hold ``component``, ``predicted``, ``measured``."""
-    fig = _figure(5.0, 4.6)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = figure_axes(5.0, 4.6)
     lim = [np.inf, 0.0]
     for comp, marker in (("U", "o"), ("V", "s"), ("W3", "^")):
         p = np.array([r["predicted"] for r in rows if r["component"] == comp], float)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._figure import figure, figure_axes
 from .html import HtmlReport
 
 __all__ = [
@@ -27,12 +28,6 @@ __all__ = [
     "matcher_label",
     "write_track_report",
 ]
-
-
-def _figure(w: float, h: float) -> Any:
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(w, h), dpi=100)
 
 
 def matcher_label(attrs: Any) -> str:
@@ -74,7 +69,7 @@ def auto_points(ds: Any, n: int = 3) -> list[int]:
 
 def fig_time_series(ds: Any, points: Sequence[int]) -> Any:
     """u and v against time at ``points`` with +-2 sigma bands (invalid samples hidden)."""
-    fig = _figure(10, 2.6 * len(points))
+    fig = figure(10, 2.6 * len(points))
     t = ds["time"].values * 1e3
     for i, p in enumerate(points):
         for j, (name, sname) in enumerate((("u", "sigma_u"), ("v", "sigma_v"))):
@@ -116,8 +111,7 @@ def worst_frame(ds: Any) -> int:
 def fig_sigma_map(ds: Any, image: NDArray[np.float64] | None, index: int) -> Any:
     """sigma = hypot(sigma_u, sigma_v) of every valid point at frame position ``index``
     over the reference image."""
-    fig = _figure(6.4, 5.2)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = figure_axes(6.4, 5.2)
     if image is not None:
         ax.imshow(image, cmap="gray", interpolation="nearest")
     s = np.hypot(ds["sigma_u"].values[index], ds["sigma_v"].values[index])
@@ -137,37 +131,39 @@ def fig_sigma_map(ds: Any, image: NDArray[np.float64] | None, index: int) -> Any
     return fig
 
 
+def _labelled(fig: Any, ax: Any, xlabel: str, ylabel: str, **margins: float) -> Any:
+    """``fig`` with its one axes labelled and the margins of the report's strip figures
+    (``margins``: ``subplots_adjust`` keywords that differ from them)."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    fig.subplots_adjust(**{"bottom": 0.17, "left": 0.1, "right": 0.98, "top": 0.95, **margins})
+    return fig
+
+
 def fig_w_histogram(ds: Any) -> Any:
     """Histogram of the blur length W over valid points and frames."""
-    fig = _figure(6, 3.4)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = figure_axes(6, 3.4)
     w = ds["W"].values[ds["valid"].values.astype(bool)]
     w = w[np.isfinite(w)]
     ax.hist(w, bins=min(60, max(10, int(np.sqrt(w.size)))), color="#edae49")
-    ax.set_xlabel("W, motion during the exposure (px)")
-    ax.set_ylabel("points x frames")
-    fig.subplots_adjust(bottom=0.17, left=0.14, right=0.97, top=0.95)
-    return fig
+    return _labelled(
+        fig, ax, "W, motion during the exposure (px)", "points x frames", left=0.14, right=0.97
+    )
 
 
 def fig_blur_share(ds: Any) -> Any:
     """Share of the valid points where the blur term exceeds the noise term, per frame."""
-    fig = _figure(8, 3)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = figure_axes(8, 3)
     ax.plot(ds["time"].values * 1e3, 100 * ds["blur_dominated_share"].values, color="#d1495b", lw=1)
     ax.set_ylim(-3, 103)
-    ax.set_xlabel("time (ms)")
-    ax.set_ylabel("blur-dominated points (%)")
-    fig.subplots_adjust(bottom=0.18, left=0.1, right=0.98, top=0.95)
-    return fig
+    return _labelled(fig, ax, "time (ms)", "blur-dominated points (%)", bottom=0.18)
 
 
 def fig_status(ds: Any) -> Any:
     """Points per status (and normalised-median-test outliers) over time."""
     from ..dic import PointStatus
 
-    fig = _figure(8, 3.2)
-    ax = fig.add_subplot(1, 1, 1)
+    fig, ax = figure_axes(8, 3.2)
     t = ds["time"].values * 1e3
     st = ds["status"].values
     for s in PointStatus:
@@ -176,11 +172,8 @@ def fig_status(ds: Any) -> Any:
             ax.plot(t, c, lw=1, label=s.name.lower())
     ax.plot(t, ds["n_outliers"].values, lw=1, ls="--", color="k", label="outlier (median test)")
     ax.set_yscale("symlog", linthresh=1)
-    ax.set_xlabel("time (ms)")
-    ax.set_ylabel("points")
     ax.legend(fontsize=7, ncol=3, loc="best")
-    fig.subplots_adjust(bottom=0.17, left=0.1, right=0.98, top=0.95)
-    return fig
+    return _labelled(fig, ax, "time (ms)", "points")
 
 
 def write_track_report(

@@ -1,0 +1,151 @@
+"""The options that several CLI commands share, as ``typing.Annotated`` aliases.
+
+One definition (option name, help text) per option that means the same in every command
+that takes it; each command gives its own default, e.g. ``subset: SubsetOption = 21``. An
+option whose meaning differs between commands (``--noise``, ``--workers`` of
+``correlate``, ``--csv``, ...) stays with its command.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+__all__ = [
+    "MAX_SIGMA_HELP",
+    "VSG_HELP",
+    "AngleOption",
+    "BaseSeedOption",
+    "BitDepthOption",
+    "CheckBrowserOption",
+    "FixedNoiseOption",
+    "FramesOption",
+    "ImageSeedOption",
+    "JsonOption",
+    "MaxSigmaOption",
+    "ModelChoiceOption",
+    "ModelPathArgument",
+    "OutFolderOption",
+    "QuietOption",
+    "RecordingExposureOption",
+    "RecordingFpsOption",
+    "ReferenceFrameOption",
+    "ReportOption",
+    "ResultsStoreArgument",
+    "RigOption",
+    "ScaleOption",
+    "SchedulerOption",
+    "SerialOption",
+    "ShapeOption",
+    "StaticFramesOption",
+    "StepOption",
+    "StoreFormatOption",
+    "SubsetOption",
+    "SubsetStepOption",
+    "TargetSpeedOption",
+    "VsgOption",
+    "WorkersOption",
+]
+
+# --- outputs and printing ---------------------------------------------------------------
+
+OutFolderOption = Annotated[Path, typer.Option("-o", "--out", help="Output folder.")]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON.")]
+CheckBrowserOption = Annotated[
+    bool,
+    typer.Option("--check-browser", help="Open report.html in headless Chromium afterwards."),
+]
+
+# --- images and seeds -------------------------------------------------------------------
+
+ImageSeedOption = Annotated[
+    int | None, typer.Option("--seed", help="Random seed (same seed, same image).")
+]
+BaseSeedOption = Annotated[int, typer.Option("--seed", help="Base seed.")]
+BitDepthOption = Annotated[int, typer.Option("--bit-depth", help="8 or 16: quantisation and file.")]
+AngleOption = Annotated[
+    float,
+    typer.Option(
+        "--angle", help="Motion direction in degrees from +x (columns) towards +y (rows)."
+    ),
+]
+
+# --- the matcher (subset DIC) -----------------------------------------------------------
+
+SubsetOption = Annotated[int, typer.Option("--subset", help="Odd subset size, px.")]
+StepOption = Annotated[int, typer.Option("--step", help="POI grid step, px.")]
+#: ``--step`` of the static pattern measures (default: their own grid)
+SubsetStepOption = Annotated[int | None, typer.Option("--step", help="Subset grid step, px.")]
+ShapeOption = Annotated[
+    str, typer.Option("--shape", help="DIC shape function: affine or translation.")
+]
+
+#: ``--max-predicted-sigma`` of ``correlate`` and ``track`` (one help text for both).
+MAX_SIGMA_HELP = (
+    "Flag IMPRECISE the points whose predicted random error (from the reference subset and "
+    "the noise) exceeds this, px (e.g. 0.05px; none: no test). correlate: default 0.1/3 px, "
+    "the noise given or estimated; track: default none."
+)
+MaxSigmaOption = Annotated[str | None, typer.Option("--max-predicted-sigma", help=MAX_SIGMA_HELP)]
+
+#: ``--vsg`` of ``correlate`` and ``track`` (one help text for both).
+VSG_HELP = (
+    "With --strain: the plane fit's window, in grid points (odd, e.g. 5) or as the virtual "
+    "strain gauge in px (e.g. 61px = (N - 1) x step + subset)."
+)
+VsgOption = Annotated[str, typer.Option("--vsg", help=VSG_HELP)]
+
+# --- campaigns: serial or on a Dask cluster ---------------------------------------------
+
+SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler", help="Existing Dask scheduler, tcp://HOST:PORT (default: a local cluster)."
+    ),
+]
+WorkersOption = Annotated[
+    int | None,
+    typer.Option("--workers", help="Worker processes of the local cluster (default: all cores)."),
+]
+SerialOption = Annotated[bool, typer.Option("--serial", help="Run in this process, no Dask.")]
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
+ResultsStoreArgument = Annotated[Path, typer.Argument(help="Results store (Zarr folder).")]
+
+# --- recordings (track, stereo track) ---------------------------------------------------
+
+RecordingExposureOption = Annotated[
+    str | None,
+    typer.Option("--exposure", help="Exposure time, e.g. 1ms (default: from the metadata)."),
+]
+RecordingFpsOption = Annotated[
+    str | None,
+    typer.Option("--fps", help="Frame rate, e.g. 5000 or 5kHz (default: from the metadata)."),
+]
+StaticFramesOption = Annotated[
+    str | None,
+    typer.Option("--static", help="Frames of the static scene for the noise, e.g. 0:20."),
+]
+ReferenceFrameOption = Annotated[int, typer.Option("--reference", help="Reference frame.")]
+FramesOption = Annotated[
+    str | None, typer.Option("--frames", help="Frames to track, START:STOP (default all).")
+]
+StoreFormatOption = Annotated[str, typer.Option("--format", help="netcdf or zarr.")]
+ReportOption = Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")]
+RigOption = Annotated[Path, typer.Option("--rig", help="Rig file (.json/.yml) of the two cameras.")]
+
+# --- uncertainty models (predict, plan, stereo plan) -------------------------------------
+
+ModelPathArgument = Annotated[Path, typer.Argument(help="Model file written by 'dicblur fit'.")]
+ModelChoiceOption = Annotated[
+    str | None,
+    typer.Option("--model", help="static (calibrate's default), mismatch or power_law."),
+]
+FixedNoiseOption = Annotated[
+    float | None, typer.Option("--noise", help="Fixed noise std, GL (default the model's).")
+]
+TargetSpeedOption = Annotated[
+    str | None, typer.Option("--velocity", help="Target speed, e.g. 120mm/s.")
+]
+ScaleOption = Annotated[str | None, typer.Option("--scale", help="Image scale, e.g. 0.05mm/px.")]

@@ -115,19 +115,16 @@ class IcgnPasses(CorrelatorState):
         coef: NDArray[np.float32],
         p0: NDArray[np.float64],
         status_in: NDArray[np.uint8],
-        first: NDArray[np.intp],
-        second: NDArray[np.intp],
-        source: NDArray[np.intp],
-        max_iter: int | None = None,
-        max_step: float | None = None,
-        tol: float | None = None,
+        passes: kernels.Passes,
+        settings: kernels.Settings,
     ) -> kernels.Outputs:
-        """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
-        ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
+        """Translation kernel on all POIs' arrays (n,): ``passes.first`` from ``p0``, then
+        ``passes.second`` from their ``source`` POI's result (see kernels.icgn_translation),
+        with the scalars ``settings`` (:meth:`_settings`)."""
         out = kernels.outputs(self.n_points, 2)
         cache.wait_for_background("translation")
         old = numba.get_num_threads()
-        if first.size + second.size < SERIAL_BELOW:
+        if passes.first.size + passes.second.size < SERIAL_BELOW:
             numba.set_num_threads(1)  # same bytes: each POI's result is its own
         try:
             kernels.icgn_translation(
@@ -135,10 +132,10 @@ class IcgnPasses(CorrelatorState):
                 self._images,
                 self._subsets,
                 self._packed,
-                self._settings(self._w, max_iter, max_step, tol),
+                settings,
                 p0,
                 status_in,
-                kernels.Passes(first, second, source),
+                passes,
                 numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
                 out,
             )
@@ -164,9 +161,9 @@ class IcgnPasses(CorrelatorState):
             sel = self._all if idx is None else idx
             full[sel] = p0
             st_full[sel] = status_in
-            out = self._translation(
-                coef, full, st_full, sel, self._none, self._none, max_iter, max_step, tol
-            )
+            one_pass = kernels.Passes(sel, self._none, self._none)
+            settings = self._settings(self._w, max_iter, max_step, tol)
+            out = self._translation(coef, full, st_full, one_pass, settings)
             if idx is None:
                 return out
             return kernels.Outputs(out.p[idx], out.zncc[idx], out.iterations[idx], out.status[idx])
@@ -263,7 +260,8 @@ class IcgnPasses(CorrelatorState):
         seeds, rest, src = self._seeds, self._rest, self._rest_seed
         if self.shape == "translation":
             # both passes in one kernel call: the rest start from their seed's result
-            return self._translation(coef, p0, status0, seeds, rest, src)
+            both = kernels.Passes(seeds, rest, src)
+            return self._translation(coef, p0, status0, both, self._settings(self._w, None))
         n, k = p0.shape
         out = kernels.outputs(n, k)
         p, st = out.p, out.status

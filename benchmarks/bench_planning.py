@@ -134,6 +134,7 @@ def _static_one(p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     GL**2, noise-free variance, SSSIG at W_CAL, target at an arbitrary sub-pixel position."""
     import dicblur
     from dicblur.models.pattern import _terms
+    from dicblur.models.subset_algebra import SubsetMatcher
 
     im = _pattern(7 + p)
     ref = dicblur.correlate(im, im, **OPTS)  # only for the POI grid
@@ -143,10 +144,7 @@ def _static_one(p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         W_CAL,
         pts,
         OPTS["subset"],
-        (0.0, 1.0),
-        OPTS["shape"],
-        "bspline3",
-        "periodic",
+        SubsetMatcher((0.0, 1.0), OPTS["shape"], "bspline3", "periodic"),
         1.0,
         "average",
     )

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,21 +24,27 @@ def _axis_factors(freqs: NDArray[np.float64], shifts: NDArray[np.float64], nyq: 
     return e
 
 
-def _grid(shape: tuple[int, int]) -> tuple[NDArray, NDArray, int | None, int | None]:
+class _Grid(NamedTuple):
+    """The ``rfft2`` frequency grid of an image: row and column frequencies (cycles/px)
+    and the index of each axis's Nyquist bin (``None`` for an odd-sized axis)."""
+
+    fy: NDArray
+    fx: NDArray
+    ny: int | None
+    nx: int | None
+
+
+def _grid(shape: tuple[int, int]) -> _Grid:
     n, m = shape
     fy = np.fft.fftfreq(n)
     fx = np.fft.rfftfreq(m)
     ny = n // 2 if n % 2 == 0 else None
     nx = fx.size - 1 if m % 2 == 0 else None
-    return fy, fx, ny, nx
+    return _Grid(fy, fx, ny, nx)
 
 
 def _nyquist_lines(
-    h: Callable[[NDArray, NDArray], NDArray],
-    fy: NDArray[np.float64],
-    fx: NDArray[np.float64],
-    ny: int | None,
-    nx: int | None,
+    h: Callable[[NDArray, NDArray], NDArray], grid: _Grid
 ) -> tuple[NDArray | None, NDArray | None]:
     """Nyquist row and column of the transfer function, split evenly over +-1/2.
 
@@ -47,6 +53,7 @@ def _nyquist_lines(
     exponentials (the average commutes with the split). The corner (both axes at Nyquist)
     averages the four sign combinations and is stored in both lines.
     """
+    fy, fx, ny, nx = grid
     half = np.array([[0.5]])
     row = col = None
     if ny is not None:
@@ -62,20 +69,14 @@ def _nyquist_lines(
     return row, col
 
 
-def _symmetrise(
-    h: Callable[[NDArray, NDArray], NDArray],
-    fy: NDArray[np.float64],
-    fx: NDArray[np.float64],
-    ny: int | None,
-    nx: int | None,
-) -> NDArray[np.complex128]:
+def _symmetrise(h: Callable[[NDArray, NDArray], NDArray], grid: _Grid) -> NDArray[np.complex128]:
     """Evaluate h(fy, fx) on the rfft2 grid with the symmetric Nyquist convention."""
-    H = np.asarray(h(fy[:, None], fx[None, :]), dtype=np.complex128)
-    row, col = _nyquist_lines(h, fy, fx, ny, nx)
+    H = np.asarray(h(grid.fy[:, None], grid.fx[None, :]), dtype=np.complex128)
+    row, col = _nyquist_lines(h, grid)
     if row is not None:
-        H[ny, :] = row
+        H[grid.ny, :] = row
     if col is not None:
-        H[:, nx] = col
+        H[:, grid.nx] = col
     return H
 
 
@@ -113,7 +114,7 @@ def blur_transfer(
     ndarray of complex128, shape (rows, cols // 2 + 1)
     """
     rows, cols = (int(s) for s in shape)
-    fy, fx, ny, nx = _grid((rows, cols))
+    grid = _grid((rows, cols))
     kind, _, vec = classify(trajectory, motion)
     k = check_substeps(substeps)
     if kind == "linear":
@@ -131,12 +132,12 @@ def blur_transfer(
             def h(gy: NDArray, gx: NDArray) -> NDArray:
                 return _dirichlet(2.0 * math.pi * (gy * dy + gx * dx) / kk, kk)
 
-        return _symmetrise(h, fy, fx, ny, nx)
+        return _symmetrise(h, grid)
     pos, w = trajectory_positions(motion, substeps=substeps, trajectory=trajectory)
     # H = sum_k w_k a_k(f_y) b_k(f_x): a weighted sum of outer products, i.e. one complex
     # matrix product (rows x n) @ (n x cols/2+1), with per-axis Nyquist factors cos(pi p).
-    a = _axis_factors(fy, pos[:, 0], ny) * w[:, None]
-    b = _axis_factors(fx, pos[:, 1], nx)
+    a = _axis_factors(grid.fy, pos[:, 0], grid.ny) * w[:, None]
+    b = _axis_factors(grid.fx, pos[:, 1], grid.nx)
     return a.T @ b
 
 
@@ -177,7 +178,8 @@ def _linear_product(
         return None
     from .kernels import apply_linear_dirichlet
 
-    fy, fx, ny, nx = _grid(shape)
+    grid = _grid(shape)
+    fy, fx, ny, nx = grid
     dy, dx = float(vec[0]), float(vec[1])
     out = np.empty_like(spectrum)
     apply_linear_dirichlet(spectrum, math.pi * fy * dy / k, math.pi * fx * dx / k, k, out)
@@ -185,7 +187,7 @@ def _linear_product(
     def h(gy: NDArray, gx: NDArray) -> NDArray:
         return _dirichlet(2.0 * math.pi * (gy * dy + gx * dx) / k, k)
 
-    row, col = _nyquist_lines(h, fy, fx, ny, nx)
+    row, col = _nyquist_lines(h, grid)
     if row is not None:
         out[ny, :] = spectrum[ny, :] * row
     if col is not None:

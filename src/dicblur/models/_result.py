@@ -154,13 +154,36 @@ def t_quantile(confidence: float, dof: int) -> float:
     return float(stats.t.ppf(0.5 + confidence / 2.0, max(dof, 1)))
 
 
-def check_ci(ci: str, confidence: float, n_boot: int) -> None:
-    if ci not in ("covariance", "bootstrap"):
-        raise InputError(f"ci={ci!r}: choose 'covariance' or 'bootstrap'")
-    if not (isinstance(confidence, float | int) and 0.0 < float(confidence) < 1.0):
-        raise InputError(f"confidence={confidence!r}: must be in (0, 1), e.g. 0.95")
-    if ci == "bootstrap" and (not isinstance(n_boot, int) or n_boot < 20):
-        raise InputError(f"n_boot={n_boot!r}: use an integer >= 20 (e.g. 500)")
+@dataclass(frozen=True)
+class CIOptions:
+    """How a fit's confidence intervals are made: the ``confidence, ci, n_boot, seed``
+    keywords every public fit takes (module docstring), checked on construction and passed
+    down to :func:`make_result` as one record.
+
+    Attributes
+    ----------
+    confidence : float
+        Interval level, in (0, 1).
+    ci : {"covariance", "bootstrap"}
+        Interval method.
+    n_boot : int
+        Bootstrap resamples (>= 20 with ``ci="bootstrap"``).
+    seed : int, numpy Generator or None
+        Seed of the bootstrap (a Generator is used as is, not copied).
+    """
+
+    confidence: float = 0.95
+    ci: str = "covariance"
+    n_boot: int = 500
+    seed: int | np.random.Generator | None = None
+
+    def __post_init__(self) -> None:
+        if self.ci not in ("covariance", "bootstrap"):
+            raise InputError(f"ci={self.ci!r}: choose 'covariance' or 'bootstrap'")
+        if not (isinstance(self.confidence, float | int) and 0.0 < float(self.confidence) < 1.0):
+            raise InputError(f"confidence={self.confidence!r}: must be in (0, 1), e.g. 0.95")
+        if self.ci == "bootstrap" and (not isinstance(self.n_boot, int) or self.n_boot < 20):
+            raise InputError(f"n_boot={self.n_boot!r}: use an integer >= 20 (e.g. 500)")
 
 
 def make_result(
@@ -172,10 +195,7 @@ def make_result(
     data_space: NDArray[np.float64],
     blur: NDArray[np.float64],
     fixed: dict[str, float],
-    confidence: float,
-    ci: str,
-    n_boot: int,
-    seed: int | np.random.Generator | None,
+    ci_options: CIOptions,
     extra: dict[str, Any] | None = None,
     log_params: tuple[str, ...] = (),
     nonneg: tuple[str, ...] = (),
@@ -191,6 +211,8 @@ def make_result(
     from a seeded bootstrap (``ci_method = "bootstrap"``). ``intervals=False`` skips
     the intervals (zero covariance, ``ci_method = "none"``): for model selection.
     """
+    confidence, ci, n_boot = ci_options.confidence, ci_options.ci, ci_options.n_boot
+    seed = ci_options.seed
     p = len(names)
     dof = n - p
     if dof < 1:

@@ -20,10 +20,9 @@ from .derivatives import (
     check_derivative,
     crop,
     derivative_kernel,
-    directional_derivatives,
     extend,
     image_spectrum,
-    spline_gradients,
+    matcher_gradients,
     unit_direction,
 )
 from .subset_algebra import (
@@ -178,14 +177,7 @@ def subset_blur_response(
         if kernel is not None:
             cov4[j, rows] = np.einsum("nci,ij,ndj->ncd", z, gmat, z)
 
-    if derivative in ("bspline3", "bspline5"):  # the spline's gradients (f_dd not needed)
-        extend(image[:1, :1], boundary)  # raises the boundary error
-        grads = spline_gradients(image, derivative)
-    else:
-        fy_, fx_, _ = directional_derivatives(
-            image, (dy, dx), derivative=derivative, boundary=boundary
-        )
-        grads = (fy_, fx_)
+    grads = matcher_gradients(image, (dy, dx), derivative, boundary)
     spec = image_spectrum(image, boundary) if np.any(w != 0) else None
     sharp = Windows(subset, grads[1], grads[0], image)
     # W nodes in groups whose blurred images (3 per node) fit in about 64 MB: each chunk
@@ -259,10 +251,7 @@ def subset_skew_coefficients(
     del k
     fddd = crop(np.fft.irfft2(spec, s=shp), rows, cols)
     del spec
-    if derivative in ("bspline3", "bspline5"):
-        fy, fx = spline_gradients(image, derivative)
-    else:
-        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    fy, fx = matcher_gradients(image, motion, derivative, boundary)
     win = Windows(subset, fx, fy, fddd, image)
     out = np.full((len(centres), 2), np.nan)
     iv = 1 if shape == "translation" else 3

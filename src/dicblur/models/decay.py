@@ -18,7 +18,7 @@ from scipy import optimize
 
 from ..checks import as_blur, as_positive
 from ..errors import FitError
-from ._result import FitResult, check_ci, make_result
+from ._result import CIOptions, FitResult, make_result
 
 __all__ = [
     "combined_model",
@@ -86,7 +86,7 @@ def fit_sssig_decay(
     """
     w = as_blur(blur, "blur", increasing=False)
     s = as_positive(sssig, "sssig", len(w))
-    check_ci(ci, confidence, n_boot)
+    ci_options = CIOptions(confidence, ci, n_boot, seed)
 
     def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
         wi, si = w[idx], s[idx]
@@ -122,8 +122,5 @@ def fit_sssig_decay(
         data_space=s,
         blur=w,
         fixed={},
-        confidence=confidence,
-        ci=ci,
-        n_boot=n_boot,
-        seed=seed,
+        ci_options=ci_options,
     )

@@ -275,6 +275,22 @@ def directional_derivatives(
     return fy, fx, dx * dx * fxx + 2 * dx * dy * fxy + dy * dy * fyy
 
 
+def matcher_gradients(
+    image: NDArray[np.float64],
+    motion: tuple[float, float],
+    derivative: Derivative,
+    boundary: Boundary,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(f_y, f_x)``: the gradients the matcher uses, its B-spline's (no spectral pass:
+    ``f_dd`` is not needed) or those of :func:`directional_derivatives` (``motion`` as
+    there). Raises the boundary error for an unknown ``boundary`` either way."""
+    if derivative in ("bspline3", "bspline5"):
+        extend(image[:1, :1], boundary)  # raises the boundary error
+        return spline_gradients(image, derivative)
+    fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    return fy, fx
+
+
 def blurred_images(
     image: NDArray[np.float64],
     blur: float,
@@ -298,8 +314,5 @@ def blurred_images(
     if blur == 0:
         return image, grads[0], grads[1]
     g = box_blurred(image, boundary, dy, dx, blur, spec)
-    if derivative in ("bspline3", "bspline5"):  # no spectral pass needed
-        ggy, ggx = spline_gradients(g, derivative)
-    else:
-        ggy, ggx, _ = directional_derivatives(g, (dy, dx), derivative=derivative, boundary=boundary)
+    ggy, ggx = matcher_gradients(g, (dy, dx), derivative, boundary)
     return g, ggy, ggx

@@ -238,9 +238,9 @@ def fit_blur_model(
         ) / as_positive(contrast, "contrast", n)
     # eq. 18 on the mean SSSIG per blur level (noise levels pooled)
     s_mean = np.array([s[w == lv].mean() for lv in levels_w])
-    decay = fit_sssig_decay(
-        levels_w, s_mean, confidence=confidence, ci=ci, n_boot=n_boot, seed=seed
-    )
+    # the interval keywords of the three fits (the one seed or Generator passed on to each)
+    ci_kw: dict[str, Any] = dict(confidence=confidence, ci=ci, n_boot=n_boot, seed=seed)
+    decay = fit_sssig_decay(levels_w, s_mean, **ci_kw)
     if fit_range is not None:
         try:
             lo, hi = (float(fit_range[0]), float(fit_range[1]))
@@ -270,10 +270,7 @@ def fit_blur_model(
         noise_sigma=None if sig is None else sig[in_range],
         blur=w[in_range],
         sssig_ref=decay["sssig0"],
-        confidence=confidence,
-        ci=ci,
-        n_boot=n_boot,
-        seed=seed,
+        **ci_kw,
     )
     try:
         mm = fit_mismatch(
@@ -285,10 +282,7 @@ def fit_blur_model(
             floor=floor,  # type: ignore[arg-type]
             noise_blur=noise_blur,  # type: ignore[arg-type]
             cross=cross,  # type: ignore[arg-type]
-            confidence=confidence,
-            ci=ci,
-            n_boot=n_boot,
-            seed=seed,
+            **ci_kw,
         )
     except FitError as exc:
         warnings.warn(

@@ -48,7 +48,7 @@ from scipy import optimize
 
 from ..checks import as_blur, as_positive, as_vector
 from ..errors import FitError, InputError
-from ._result import FitResult, check_ci, make_result
+from ._result import CIOptions, FitResult, make_result
 
 __all__ = ["fit_mismatch", "mismatch_model", "mismatch_terms", "noise_growth"]
 
@@ -215,7 +215,7 @@ def fit_mismatch(
     s = as_positive(sssig, "sssig", w.size)
     u = as_positive(u_e, "u_e", w.size)
     as_blur(w, "blur", increasing=False)
-    check_ci(ci, confidence, n_boot)
+    ci_options = CIOptions(confidence, ci, n_boot, seed)
     sig: NDArray[np.float64] | None = None
     if noise_sigma is not None:
         sig = as_positive(
@@ -273,18 +273,7 @@ def fit_mismatch(
                     if w.size - len(names) < (2 if auto else 1):
                         continue
                     results.append(
-                        _fit_one(
-                            w,
-                            s,
-                            u,
-                            sig,
-                            tuple(names),
-                            confidence,
-                            ci,
-                            n_boot,
-                            seed,
-                            intervals=False,
-                        )
+                        _fit_one(w, s, u, sig, tuple(names), ci_options, intervals=False)
                     )
     if not results:
         raise FitError(
@@ -302,7 +291,7 @@ def fit_mismatch(
         if aic(r) < aic(best) - 2.0:
             best = r
     # intervals only for the chosen candidate (a degenerate one falls back to a bootstrap)
-    return _fit_one(w, s, u, sig, best.names, confidence, ci, n_boot, seed)
+    return _fit_one(w, s, u, sig, best.names, ci_options)
 
 
 def _fit_one(
@@ -311,10 +300,7 @@ def _fit_one(
     u: NDArray[np.float64],
     sig: NDArray[np.float64] | None,
     names: tuple[str, ...],
-    confidence: float,
-    ci: str,
-    n_boot: int,
-    seed: int | np.random.Generator | None,
+    ci_options: CIOptions,
     *,
     intervals: bool = True,
 ) -> FitResult:
@@ -410,10 +396,7 @@ def _fit_one(
         data_space=np.log(u),
         blur=w,
         fixed=fixed,
-        confidence=confidence,
-        ci=ci,
-        n_boot=n_boot,
-        seed=seed,
+        ci_options=ci_options,
         extra=extra,
         log_params=("a", "k"),
         nonneg=("c", "floor", "noise_blur", "cross"),

@@ -45,7 +45,7 @@ from .model import BlurUncertaintyModel
 from .reference_terms import ReferenceTerms
 from .scaled import StaticTerms
 from .sensitivity import shifts_and_variance
-from .subset_algebra import Shape
+from .subset_algebra import Shape, SubsetMatcher
 
 if TYPE_CHECKING:
     from ..dic.settings import MatcherSettings
@@ -192,10 +192,7 @@ def _terms(
     w: NDArray[np.float64],
     pts: NDArray[np.intp],
     subset: int,
-    motion: tuple[float, float],
-    shape: Shape,
-    derivative: Derivative,
-    boundary: Boundary,
+    matcher: SubsetMatcher,
     max_shift: float,
     subpixel: float | str | None = None,
     min_contraction: float = 0.0,
@@ -209,7 +206,6 @@ def _terms(
     leave out only the degenerate subsets (contraction < ``DEGENERATE``); ``nan`` where
     fewer than two subsets remain. ``reference``: the reference's terms kept across the
     offsets and calls (a new one per call by default; the same numbers either way)."""
-    kw: dict[str, Any] = dict(motion=motion, shape=shape, derivative=derivative, boundary=boundary)
     offs = _offsets(subpixel)
     ref = ReferenceTerms() if reference is None else reference
     lams = np.empty((len(offs), len(w), len(pts)))
@@ -229,7 +225,7 @@ def _terms(
             min_contraction=min(DEGENERATE, min_contraction),
             contraction_out=lams[i],
             reference=ref,
-            **kw,
+            **matcher.keywords(),
         )
         for i, o in enumerate(offs)
     ]
@@ -253,7 +249,7 @@ def _terms(
             axis=1
         )
         mis_var = np.nanvar(np.where(ok, xis, np.nan), axis=2).mean(axis=0)
-    dy, dx = unit_direction(motion)
+    dy, dx = unit_direction(matcher.motion)
     angle = math.degrees(math.atan2(dy, dx))
     held = ok & ((lams >= min_contraction).all(axis=0) if min_contraction > 0 else True)
     frac = held.sum(axis=1) / xis.shape[2]
@@ -261,12 +257,12 @@ def _terms(
         return mean_var, mis_var, np.full(len(w), np.nan), frac
     # SSSIG along the motion as dicblur.sssig and the campaigns compute it (one forward
     # FFT of the image for all the blur lengths)
-    spec = image_spectrum(img, boundary) if np.any(w != 0) else None
+    spec = image_spectrum(img, matcher.boundary) if np.any(w != 0) else None
     s = np.array(
         [
             float(
                 directional_sssig(
-                    img if wl == 0 else box_blurred(img, boundary, dy, dx, float(wl), spec),
+                    img if wl == 0 else box_blurred(img, matcher.boundary, dy, dx, float(wl), spec),
                     pts,
                     subset=subset,
                     angle=angle,
@@ -366,19 +362,9 @@ def predict_from_pattern(
     max_shift = check_positive(max_shift, "max_shift")
     lam_min = check_positive(min_contraction, "min_contraction", allow_zero=True)
     w = as_blur(blur, "blur", increasing=False)
+    matcher = SubsetMatcher(motion, shape, derivative, boundary)
     mean_var, mis_var, s, frac = _terms(
-        img,
-        w,
-        pts,
-        subset,
-        motion,
-        shape,
-        derivative,
-        boundary,
-        max_shift,
-        subpixel,
-        lam_min,
-        sssig=sssig,
+        img, w, pts, subset, matcher, max_shift, subpixel, lam_min, sssig=sssig
     )
     broken = frac < BREAKDOWN_FRACTION
     breakdown = float(w[broken].min()) if broken.any() else None
@@ -452,8 +438,9 @@ def model_from_pattern(
     img, subset, pts = subset_inputs(image, subset, step, points, boundary)
     sigma = check_positive(noise_sigma, "noise_sigma")
     w = model_blur(blur)
+    matcher = SubsetMatcher(motion, shape, "bspline3", boundary)
     mean_var, mis_var, s, frac = _terms(
-        img, w, pts, subset, motion, shape, "bspline3", boundary, 1.0, subpixel, MIN_CONTRACTION
+        img, w, pts, subset, matcher, 1.0, subpixel, MIN_CONTRACTION
     )
     # below the first breakdown only (as the campaigns' rule: >= 90 % of the subsets)
     keep = frac >= BREAKDOWN_FRACTION
@@ -556,6 +543,7 @@ def static_terms(
     n1, n2, b2, frac = (np.full(w.size, np.nan) for _ in range(4))
     # the reference's terms once for every W and offset (bit-identical, a third less work)
     ref = ReferenceTerms()
+    matcher = SubsetMatcher(motion, shape, "bspline3", boundary)
 
     # in chunks of increasing W: nothing is computed beyond the first breakdown's chunk
     # (8 W: every offset W/2 mod 1 of a 0.25 px grid once; the W beyond the breakdown are
@@ -567,10 +555,7 @@ def static_terms(
                 w[sel],
                 pts,
                 subset,
-                motion,
-                shape,
-                "bspline3",
-                boundary,
+                matcher,
                 max_shift,
                 float(offs[sel[0]]),
                 lam_min,

@@ -36,7 +36,7 @@ from scipy import optimize
 from ..checks import as_image, check_positive, check_textured
 from ..errors import InputError
 from .domain import ValidityDomain, compensation_label
-from .model import BlurUncertaintyModel
+from .model import BlurUncertaintyModel, Prediction
 from .units import parse_quantity
 
 __all__ = [
@@ -341,6 +341,29 @@ def plan_exposure(
     assert dom is not None
     w_break = dom.breakdown_blur
 
+    def planned(at: Prediction, inside: bool, limited: bool, **chosen: Any) -> ExposurePlan:
+        """The plan of the ``chosen`` exposure (its own fields) with the fields both
+        planners fill alike: the request, the prediction ``at`` the chosen blur, the rule
+        of thumb's exposure, the notes and the validity domain."""
+        return ExposurePlan(
+            model=kind,
+            velocity=v,
+            scale=sc,
+            velocity_px=v_px,
+            target=tgt,
+            u_e=float(at.u_e[0]),
+            u_e_low=float(at.low[0]),
+            u_e_high=float(at.high[0]),
+            rule_of_thumb_exposure=t_rule,
+            notes=tuple(notes),
+            inside_domain=inside,
+            extrapolated=not inside,
+            limited_by_breakdown=limited,
+            domain=dom.to_dict(),
+            compensation=dom.compensation,
+            **chosen,
+        )
+
     if camera is None:
         if tgt is None:
             raise InputError(
@@ -374,32 +397,20 @@ def plan_exposure(
                 dom,
             )
         )
-        return ExposurePlan(
-            model=kind,
-            velocity=v,
-            scale=sc,
-            velocity_px=v_px,
-            target=tgt,
+        return planned(
+            at,
+            inside,
+            limited,
             exposure=t_fix,
             blur=w_max,
-            u_e=float(at.u_e[0]),
-            u_e_low=float(at.low[0]),
-            u_e_high=float(at.high[0]),
             max_exposure=t_fix,
             min_exposure=None,
             optimal=False,
             saturation_exposure=None,
-            rule_of_thumb_exposure=t_rule,
             rule_of_thumb_u_e=u_rule,
             curve_exposure=t,
             curve_blur=t * v_px,
             curve_u_e=pred.u_e,
-            notes=tuple(notes),
-            inside_domain=inside,
-            extrapolated=not inside,
-            limited_by_breakdown=limited,
-            domain=dom.to_dict(),
-            compensation=dom.compensation,
         )
 
     for attr in ("full_well", "read_noise", "flux"):
@@ -537,35 +548,23 @@ def plan_exposure(
     notes.append(
         domain_note(f"the optimum (W = {w_opt:.3g} px, noise {sig_opt:.3g} GL)", inside, dom)
     )
-    return ExposurePlan(
-        model=kind,
-        velocity=v,
-        scale=sc,
-        velocity_px=v_px,
-        target=tgt,
+    return planned(
+        at,
+        inside,
+        limited,
         exposure=t_opt,
         blur=t_opt * v_px,
-        u_e=float(at.u_e[0]),
-        u_e_low=float(at.low[0]),
-        u_e_high=float(at.high[0]),
         max_exposure=t_max,
         min_exposure=t_min,
         optimal=True,
         saturation_exposure=t_sat if math.isfinite(t_sat) else None,
-        rule_of_thumb_exposure=t_rule,
         rule_of_thumb_u_e=u_rule,
         curve_exposure=t_curve,
         curve_blur=t_curve * v_px,
         curve_u_e=u_curve,
-        notes=tuple(notes),
         camera={
             k: float(getattr(camera, k))
             for k in ("full_well", "read_noise", "flux", "peak_to_mean")
             if hasattr(camera, k)
         },
-        inside_domain=inside,
-        extrapolated=not inside,
-        limited_by_breakdown=limited,
-        domain=dom.to_dict(),
-        compensation=dom.compensation,
     )

@@ -52,7 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..checks import as_blur, as_positive, as_vector
 from ..errors import InputError
-from ._result import FitResult, check_ci, make_result
+from ._result import CIOptions, FitResult, make_result
 
 __all__ = ["edge_driven_range", "fit_power_law", "power_law"]
 
@@ -159,7 +159,7 @@ def fit_power_law(
     s = as_positive(sssig, "sssig", len(np.atleast_1d(np.asarray(sssig))))
     u = as_positive(u_e, "u_e", s.size)
     w = np.zeros(s.size) if blur is None else as_vector(blur, "blur", s.size)
-    check_ci(ci, confidence, n_boot)
+    ci_options = CIOptions(confidence, ci, n_boot, seed)
     s_ref = float(s.max()) if sssig_ref is None else float(sssig_ref)
     if not (math.isfinite(s_ref) and s_ref > 0):
         raise InputError(f"sssig_ref={sssig_ref!r}: must be a finite SSSIG > 0 ((GL/px)^2)")
@@ -208,10 +208,7 @@ def fit_power_law(
         data_space=y,
         blur=w,
         fixed={},
-        confidence=confidence,
-        ci=ci,
-        n_boot=n_boot,
-        seed=seed,
+        ci_options=ci_options,
         extra=extra,
         log_params=("u_ref", "a", "k"),
     )

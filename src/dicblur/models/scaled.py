@@ -38,7 +38,7 @@ from scipy import optimize
 
 from ..checks import as_positive, as_vector, check_positive
 from ..errors import FitError, InputError
-from ._result import FitResult, check_ci, make_result
+from ._result import CIOptions, FitResult, make_result
 
 __all__ = [
     "STATIC_PARAMETERS",
@@ -222,7 +222,7 @@ def fit_static_scales(
         ``model = "static"``, names ``("k_noise", "k_blur")`` (a fixed ``k_noise`` is also
         in ``fixed``); ``extra`` holds the table.
     """
-    check_ci(ci, confidence, n_boot)
+    ci_options = CIOptions(confidence, ci, n_boot, seed)
     w = as_vector(blur, "blur")
     n = w.size
     sig = np.asarray(noise_sigma, dtype=np.float64)
@@ -242,7 +242,7 @@ def fit_static_scales(
     else:
         k_fixed = check_positive(noise_scale, "noise_scale")
     if k_fixed is not None:
-        return _fit_blur_scale(w, sig, u, noise, b2, k_fixed, confidence, ci, n_boot, seed, extra)
+        return _fit_blur_scale(w, sig, u, noise, b2, k_fixed, ci_options, extra)
 
     def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
         nv, bv, lu = noise[idx], b2[idx], np.log(u[idx])
@@ -269,10 +269,7 @@ def fit_static_scales(
         data_space=np.log(u),
         blur=w,
         fixed={},
-        confidence=confidence,
-        ci=ci,
-        n_boot=n_boot,
-        seed=seed,
+        ci_options=ci_options,
         extra={**extra, "noise_levels": [float(v) for v in np.unique(sig)]},
         log_params=STATIC_PARAMETERS,
     )
@@ -285,10 +282,7 @@ def _fit_blur_scale(
     noise: NDArray[np.float64],
     b2: NDArray[np.float64],
     k_noise: float,
-    confidence: float,
-    ci: str,
-    n_boot: int,
-    seed: int | np.random.Generator | None,
+    ci_options: CIOptions,
     extra: dict[str, Any],
 ) -> FitResult:
     """:func:`fit_static_scales` with ``k_noise`` fixed: ``k_blur`` alone, then the result
@@ -317,10 +311,7 @@ def _fit_blur_scale(
         data_space=np.log(u),
         blur=w,
         fixed={"k_noise": k_noise},
-        confidence=confidence,
-        ci=ci,
-        n_boot=n_boot,
-        seed=seed,
+        ci_options=ci_options,
         extra={**extra, "noise_levels": [float(v) for v in np.unique(sig)]},
         log_params=("k_blur",),
     )

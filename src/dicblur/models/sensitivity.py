@@ -67,6 +67,7 @@ from .reference_terms import ReferenceTerms
 from .subset_algebra import (
     Criterion,
     Shape,
+    SubsetMatcher,
     Windows,
     along_motion,
     blurred_subsets,
@@ -314,8 +315,9 @@ def shifts_and_variance(
     if reference is not None:
         reference.bind(image, centres, subset, shape, derivative, chunk)
     ref_terms: tuple[Any, ...] | None = None
+    matcher = SubsetMatcher(motion, shape, derivative, boundary)
     for j, start, jf, jg, f, gg in blurred_subsets(
-        image, w, centres, subset, motion, shape, derivative, boundary, chunk, offset
+        image, w, centres, subset, matcher, chunk, offset
     ):
         rows = slice(start, start + len(f))
         if criterion == "znssd" or variance:

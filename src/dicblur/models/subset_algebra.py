@@ -7,6 +7,7 @@ blurred subsets, and the reference-noise terms of the matcher's gradients.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -17,15 +18,41 @@ from .derivatives import (
     Boundary,
     Derivative,
     blurred_images,
-    directional_derivatives,
-    extend,
     image_spectrum,
-    spline_gradients,
+    matcher_gradients,
     unit_direction,
 )
 
 Shape = Literal["translation", "affine"]
 Criterion = Literal["znssd", "ssd"]
+
+
+@dataclass(frozen=True)
+class SubsetMatcher:
+    """The matcher a static prediction models, as one record passed down its internal
+    layers: the ``motion, shape, derivative, boundary`` keywords of the public functions
+    (:func:`~dicblur.models.predict_from_pattern`, :func:`shifts_and_variance`), unchecked.
+
+    Attributes
+    ----------
+    motion : (dy, dx)
+        Motion direction (px; any length).
+    shape : {"translation", "affine"}
+        Shape function of the matcher.
+    derivative : {"bspline3", "bspline5", "spectral", "central"}
+        Gradient operator of the matcher.
+    boundary : {"reflect", "periodic"}
+        Image extension of the spectral operators.
+    """
+
+    motion: tuple[float, float]
+    shape: Shape
+    derivative: Derivative
+    boundary: Boundary
+
+    def keywords(self) -> dict[str, Any]:
+        """The record as the keywords of the public functions (``motion=..., ...``)."""
+        return asdict(self)
 
 
 def reference_noise_middle(
@@ -226,10 +253,7 @@ def blurred_subsets(
     blur: NDArray[np.float64],
     centres: NDArray[np.intp],
     subset: int,
-    motion: tuple[float, float],
-    shape: str,
-    derivative: Derivative,
-    boundary: Boundary,
+    matcher: SubsetMatcher,
     chunk: int,
     offset: float | None = None,
 ) -> Iterator[
@@ -242,12 +266,9 @@ def blurred_subsets(
     subset intensities (W = 0: ``g = f``). With ``offset`` (px along the motion) the
     blurred target is moved by it and seen through the matcher's B-spline interpolant
     (:func:`_interpolated_at`)."""
-    dy, dx = unit_direction(motion)
-    if derivative in ("bspline3", "bspline5"):  # the spline's gradients (f_dd not needed)
-        extend(image[:1, :1], boundary)  # raises the boundary error
-        fy, fx = spline_gradients(image, derivative)
-    else:
-        fy, fx, _ = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    derivative, boundary, shape = matcher.derivative, matcher.boundary, matcher.shape
+    dy, dx = unit_direction(matcher.motion)
+    fy, fx = matcher_gradients(image, matcher.motion, derivative, boundary)
     spec = None  # the reference's spectrum, one forward FFT for all the blur lengths
     for j, wl in enumerate(np.asarray(blur, dtype=np.float64)):
         if wl != 0 and spec is None:

@@ -85,6 +85,21 @@ def _add_pixel(s0, s1, s2, s3, s4, s5, s6, g, gxj, gyj, fj, dx):  # pragma: no c
     )
 
 
+@nb.njit(inline="always", cache=True)
+def _reference_row(f, gx, gy, r, c0, tw):  # pragma: no cover - compiled
+    """Row ``r`` of the reference and its gradients under a subset: ``tw`` px from column
+    ``c0`` (the padded width; the image arrays carry zero columns on the right)."""
+    return f[r, c0 : c0 + tw], gx[r, c0 : c0 + tw], gy[r, c0 : c0 + tw]
+
+
+@nb.njit(inline="always", cache=True)
+def _row_offsets(p, dy, bx, by):  # pragma: no cover - compiled
+    """Warped offsets (x, y) of the subset row ``dy`` at its centre column past the
+    integer base ``(bx, by)``, px, float32 (the row's pixels add ``p[1] dx``,
+    ``p[4] dx``)."""
+    return np.float32(p[0] + p[2] * dy - bx), np.float32(p[3] + p[5] * dy - by)
+
+
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
 def _w5(t):  # pragma: no cover - compiled
     """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
@@ -135,11 +150,8 @@ def _subset_affine_cubic(
         b2 = coef[rb + 2, cb : cb + tw + 4]
         b3 = coef[rb + 3, cb : cb + tw + 4]
         b4 = coef[rb + 4, cb : cb + tw + 4]
-        fr = f[r0 + i, c0 : c0 + tw]
-        gxr = gx[r0 + i, c0 : c0 + tw]
-        gyr = gy[r0 + i, c0 : c0 + tw]
-        tx0 = np.float32(p[0] + p[2] * dy - bx)
-        ty0 = np.float32(p[3] + p[5] * dy - by)
+        fr, gxr, gyr = _reference_row(f, gx, gy, r0 + i, c0, tw)
+        tx0, ty0 = _row_offsets(p, dy, bx, by)
         s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
         for j in range(tw):
             x0, x1, x2, x3, x4 = _w5(tx0 + p1 * dxs[j])
@@ -198,11 +210,8 @@ def _subset_affine_cubic4(
         b1 = coef[rb + 1, cb : cb + tw + 3]
         b2 = coef[rb + 2, cb : cb + tw + 3]
         b3 = coef[rb + 3, cb : cb + tw + 3]
-        fr = f[r0 + i, c0 : c0 + tw]
-        gxr = gx[r0 + i, c0 : c0 + tw]
-        gyr = gy[r0 + i, c0 : c0 + tw]
-        tx0 = np.float32(p[0] + p[2] * dy - bx)
-        ty0 = np.float32(p[3] + p[5] * dy - by)
+        fr, gxr, gyr = _reference_row(f, gx, gy, r0 + i, c0, tw)
+        tx0, ty0 = _row_offsets(p, dy, bx, by)
         s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
         for j in range(tw):
             x0, x1, x2, x3 = _w4(tx0 + p1 * dxs[j])
@@ -226,9 +235,7 @@ def _subset_affine_cubic4(
 def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
     """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
     tw = grow.shape[0]
-    fr = f[r, c0 : c0 + tw]
-    gxr = gx[r, c0 : c0 + tw]
-    gyr = gy[r, c0 : c0 + tw]
+    fr, gxr, gyr = _reference_row(f, gx, gy, r, c0, tw)
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
     for j in range(tw):
         g = (grow[j] - off) * mask[j]

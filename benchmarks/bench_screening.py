@@ -55,6 +55,10 @@ from helpers.dic import blobs, fourier_shift, hard_dots, thresholded  # noqa: E4
 TRUE_U, TRUE_V = 0.3, -0.2
 IMAGES = ("clean", "blobs", "dots", "thresh")
 SHAPES = ("affine", "translation")
+#: Issue 26's targets on ``blobs``: POI per second (here per CPU second) and the fraction
+#: of the ``clean`` image's rate.
+RATE_TARGET = {"affine": 250e3, "translation": 700e3}
+RATIO_TARGET = 0.8
 
 
 def pair(name: str, size: int, noise: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -135,6 +139,29 @@ def speed_and_rates(args: argparse.Namespace) -> list[dict]:
             }
             rows.append(row)
     return rows
+
+
+def speed_targets(rows: list[dict]) -> list[dict]:
+    """Issue 26's speed targets on ``blobs`` per shape: the rate per CPU second against
+    :data:`RATE_TARGET` and its ratio to ``clean`` against :data:`RATIO_TARGET` (per CPU
+    second: the wall rates of a shared machine vary with the other processes' load)."""
+    out = []
+    for r in rows:
+        if r["image"] != "blobs":
+            continue
+        target = RATE_TARGET[r["shape"]]
+        out.append(
+            {
+                "shape": r["shape"],
+                "target": target,
+                "poi_per_s": r["poi_per_s"],
+                "poi_per_cpu_s": r["poi_per_cpu_s"],
+                "ratio_to_clean": r["ratio_to_clean"],
+                "cpu_ratio_to_clean": r["cpu_ratio_to_clean"],
+                "met": r["poi_per_cpu_s"] >= target and r["cpu_ratio_to_clean"] >= RATIO_TARGET,
+            }
+        )
+    return out
 
 
 def mad_sigma(image: np.ndarray) -> float:
@@ -220,6 +247,14 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['cpu_ratio_to_clean']:6.2f} {nz:>20s} {r['unflagged_gross_pct']:7.2f} "
             f"{r['flagged_correct_pct']:9.2f} {r['flagged_pct']:6.2f}"
         )
+    targets = speed_targets(rows)
+    for t in targets:
+        print(
+            f"{t['shape']:12s} blobs {t['poi_per_cpu_s'] / 1e3:5.0f}k POI/cpu-s "
+            f"({t['poi_per_s'] / 1e3:.0f}k POI/s wall; target {t['target'] / 1e3:.0f}k), "
+            f"{t['cpu_ratio_to_clean']:.2f} of clean per cpu-s ({t['ratio_to_clean']:.2f} "
+            f"wall; target {RATIO_TARGET:.2f}): " + ("met" if t["met"] else "not met")
+        )
     table = noise_table(args) if args.noise_table else None
     out = run.write(
         {
@@ -228,6 +263,7 @@ def main(argv: list[str] | None = None) -> int:
             "workers": args.workers,
             "repeats": args.repeats,
             "cases": rows,
+            "targets": targets,
             "noise_table": table,
         },
         args.out,

@@ -169,19 +169,7 @@ class BlurMatching(Screening):
         self.last_timings = {"total_s": time.perf_counter() - t0}
         info = self._info_base(self.initial)
         info.update(blur_compensation="given", blur_vectors=len(uniq))
-        return DICResult(
-            rows=self.rows.copy(),
-            cols=self.cols.copy(),
-            u=p[:, 0].copy(),
-            v=p[:, 1 if k == 2 else 3].copy(),
-            params=p,
-            zncc=z,
-            iterations=it,
-            status=st,
-            predicted_sigma_u=pu,
-            predicted_sigma_v=pv,
-            info=info,
-        )
+        return self._result(kernels.Outputs(p, z, it, st), info=info, predicted_sigma=(pu, pv))
 
     def _blur_direction(
         self, blur_vector: ArrayLike | None, blur_angle: float | None
@@ -356,7 +344,6 @@ class BlurMatching(Screening):
         z[keep] = base.zncc[keep]
         st = np.where(keep, base.status, st).astype(np.uint8)
         st[(st == PointStatus.CONVERGED) & ~(z >= self.min_zncc)] = int(PointStatus.LOW_CORRELATION)
-        k = p.shape[1]
         length = np.where(np.isfinite(lam), w0 + lam, np.nan)
         self.last_timings = {"total_s": time.perf_counter() - t0}
         info = self._info_base(base.info.get("initial", self.initial))
@@ -366,19 +353,9 @@ class BlurMatching(Screening):
             blur_dir_dx=float(e[1]),
             blur_w0=w0,
         )
-        return DICResult(
-            rows=self.rows.copy(),
-            cols=self.cols.copy(),
-            u=p[:, 0].copy(),
-            v=p[:, 1 if k == 2 else 3].copy(),
-            params=p,
-            zncc=z,
-            iterations=base.iterations + its,
-            status=st,
-            predicted_sigma_u=base.predicted_sigma_u,
-            predicted_sigma_v=base.predicted_sigma_v,
+        return self._result(
+            kernels.Outputs(p, z, base.iterations + its, st),
             info=info,
-            blur_length=length,
-            blur_sigma=sig,
-            blur_identified=identified,
+            predicted_sigma=(base.predicted_sigma_u, base.predicted_sigma_v),
+            blur=(length, sig, identified),
         )

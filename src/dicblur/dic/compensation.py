@@ -38,7 +38,14 @@ from scipy import fft as sfft
 
 from ..checks import as_float_array, as_image, check_positive, describe
 from ..errors import InputError
-from .icgn import N_PARAMS, raw_jacobian
+from .icgn import (
+    N_PARAMS,
+    centre_subsets,
+    gauss_newton_matrix,
+    raw_jacobian,
+    regular,
+    scaled_inverse,
+)
 
 __all__ = [
     "BLUR_MODES",
@@ -323,27 +330,14 @@ def prepare_blur_step(
         fp, gxp, gyp, dp = (
             np.asarray(v[r, c], dtype=np.float64).reshape(len(r), npx) for v in views
         )
-        jac = raw_jacobian(gxp, gyp, half, shape)
-        fmean = fp.mean(axis=1)
-        fc = fp - fmean[:, None]
-        fnorm = np.sqrt(np.einsum("ij,ij->i", fc, fc))
-        safe = np.where(fnorm > 0, fnorm, 1.0)
-        fh = fc / safe[:, None]
-        jsum = jac.sum(axis=1)
-        jc = jac - jsum[:, None, :] / npx
+        fmean, fnorm, safe, fh, jsum, jc = centre_subsets(fp, raw_jacobian(gxp, gyp, half, shape))
         dsum = dp.sum(axis=1)
         dc = dp - dsum[:, None] / npx
         aug = np.concatenate([jc, dc[:, :, None]], axis=2)  # (m, npx, k+1)
-        augt = aug.transpose(0, 2, 1)
-        avec_full = np.matmul(augt, fh[:, :, None])[:, :, 0]  # (a, b)
-        gram = np.matmul(augt, aug)
         # Df^2 H = [J_c D_c]^T [J_c D_c] - (a, b)(a, b)^T (normalised-model Gauss-Newton)
-        big = gram - avec_full[:, :, None] * avec_full[:, None, :]
-        eig = np.linalg.eigvalsh(big)
-        good = (fnorm > 0) & (eig[:, 0] > 1e-10 * np.maximum(eig[:, -1], 1e-300))
-        big_safe = np.where(good[:, None, None], big, np.eye(k + 1)[None])
-        hinv = np.linalg.inv(big_safe) * (safe**2)[:, None, None]
-        hinv[~good] = 0.0
+        avec_full, gram, big = gauss_newton_matrix(aug, fh)
+        good = (fnorm > 0) & regular(big)
+        hinv, _ = scaled_inverse(big, ~good, safe)
         sl = slice(s, s + len(r))
         out["hinv"][sl] = hinv
         out["fmean"][sl] = fmean

@@ -33,7 +33,7 @@ from ..metrics import image_gradients
 from . import cache, kernels
 from .blur_matching import BlurMatching
 from .compensation import BLUR_MODES, check_blur_vector
-from .icgn import N_PARAMS, prepare_subsets
+from .icgn import N_PARAMS, prepare_subsets, uv_columns
 from .initial import global_shift, subset_fftcc, window_spectrum
 from .interpolation import PAD, bspline_coefficients, bspline_gradients
 from .layout import grid_of, layout, seed_passes
@@ -244,7 +244,7 @@ class Correlator(BlurMatching):
         half = self.subset // 2
         self.half = half
 
-        rows, cols, status0 = self.layout(
+        rows, cols, status0 = layout(
             self.image_shape, subset=self.subset, step=self.step, roi=roi, points=points
         )
         self.rows = rows
@@ -340,25 +340,9 @@ class Correlator(BlurMatching):
         self.last_timings: dict[str, float] = {}
 
     # ------------------------------------------------------------------ setup helpers
-    @staticmethod
-    def layout(
-        image_shape: tuple[int, int],
-        *,
-        subset: int,
-        step: int,
-        roi: Sequence[int] | None = None,
-        points: ArrayLike | None = None,
-    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]:
-        """The POIs a Correlator on an image of ``image_shape`` lays out, without
-        preparing it: ``(rows, cols, status)``, each shape (n,), ``status``
-        ``OUT_OF_BOUNDS`` for given ``points`` whose subset leaves the image, else 0.
-
-        ``subset`` (odd, px) and ``step`` (px) as validated by
-        :class:`~dicblur.dic.MatcherSettings`; ``roi`` and ``points`` as for the
-        constructor (the grid of ``step`` px inside ``roi`` or the whole image, or the
-        given centres).
-        """
-        return layout(image_shape, subset=subset, step=step, roi=roi, points=points)
+    #: :func:`.layout.layout` (the POIs a Correlator lays out, without preparing it), as
+    #: ``Correlator.layout(image_shape, subset=..., step=...)``.
+    layout = staticmethod(layout)
 
     def _setup_seeds(self) -> None:
         """The two-pass start's seed POIs and the rest (:func:`.layout.seed_passes`)."""
@@ -499,12 +483,12 @@ class Correlator(BlurMatching):
                 self._set_noise(None)
             self._defer_imprecise, self._deferred = self.shape != "translation", None
             try:
-                p, z, it, st = self._run_icgn(coef, p0, self._status0)
+                res = self._run_icgn(coef, p0, self._status0)
             finally:
                 self._defer_imprecise = False
-            self._run_deferred(coef, p, z, it, st)  # as correlate
-            self._flag(coef, p, z, st, it)
-        return Refined(p, z, it, st)
+            self._run_deferred(coef, res)  # as correlate
+            self._flag(coef, res)
+        return Refined(*res)
 
     def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
         cur = as_image(current, "current", min_size=3)
@@ -607,7 +591,7 @@ class Correlator(BlurMatching):
             if k != 2 and guess.shape == (n, k) and np.all(np.isfinite(guess)):
                 # all shape parameters (a previous result's params): fewer iterations
                 full = np.array(guess)
-                guess = full[:, [0, 3]]
+                guess = full[:, list(uv_columns(k))]
             if guess.shape != (n, 2) or not np.all(np.isfinite(guess)):
                 raise InputError(
                     f"initial={describe(guess)}: expected finite (u, v) px, shape (2,) or ({n}, 2)"
@@ -637,19 +621,19 @@ class Correlator(BlurMatching):
         self._defer_imprecise, self._deferred = self.shape != "translation", None
         try:
             if method in ("fftcc", "zero") and self._seeds is not None:
-                p, z, it, st = self._seeded_icgn(coef, p0, status0)
+                res = self._seeded_icgn(coef, p0, status0)
             else:
-                p, z, it, st = self._run_icgn(coef, p0, status0)
+                res = self._run_icgn(coef, p0, status0)
         finally:
             self._defer_imprecise = False
         if self.noise_auto:
-            self._estimate_noise(z, st)  # the retry skips the predicted-imprecise POIs
-        self._run_deferred(coef, p, z, it, st)
+            self._estimate_noise(res.zncc, res.status)  # the retry skips the imprecise POIs
+        self._run_deferred(coef, res)
         t3 = time.perf_counter()
         if method == "fftcc":
-            self._retry(cur, coef, gu, gv, p, z, it, st)
+            self._retry(cur, coef, gu, gv, res)
         t4 = time.perf_counter()
-        noise_var = self._flag(coef, p, z, st, it)
+        noise_var = self._flag(coef, res)
         t5 = time.perf_counter()
         self.last_timings = {
             "prefilter_s": t1 - t0,
@@ -658,28 +642,14 @@ class Correlator(BlurMatching):
             "screen_s": t5 - t4,
             "total_s": t5 - t0,
         }
-        k = p.shape[1]
-        u = p[:, 0].copy()
-        v = p[:, 1 if k == 2 else 3].copy()
         info = self._info_base(method)
         info["screen_noise_sigma"] = None if noise_var is None else float(np.sqrt(noise_var))
         info.update(self._noise_info())
-        return DICResult(
-            rows=self.rows.copy(),
-            cols=self.cols.copy(),
-            u=u,
-            v=v,
-            params=p,
-            zncc=z,
-            iterations=it,
-            status=st,
-            predicted_sigma_u=None
-            if self.predicted_sigma_u is None
-            else self.predicted_sigma_u.copy(),
-            predicted_sigma_v=None
-            if self.predicted_sigma_v is None
-            else self.predicted_sigma_v.copy(),
+        pu, pv = self.predicted_sigma_u, self.predicted_sigma_v
+        return self._result(
+            res,
             info=info,
+            predicted_sigma=(None if pu is None else pu.copy(), None if pv is None else pv.copy()),
         )
 
     def warmup(self) -> float:
@@ -688,28 +658,18 @@ class Correlator(BlurMatching):
         t0 = time.perf_counter()
         rng = np.random.default_rng(0)
         img = rng.normal(128.0, 30.0, (self.subset + 12, self.subset + 12))
-        c = Correlator(
-            img,
-            subset=self.subset,
-            step=self.step,
-            shape=self.shape,  # type: ignore[arg-type]
-            interpolation=self.interpolation,
+        s = self.settings  # its geometry and interpolation; the other settings' defaults
+        cfg = MatcherSettings(
+            subset=s.subset,
+            step=s.step,
+            shape=s.shape,
+            interpolation=s.interpolation,
             initial="zero",
-            workers=self.workers,
-            median_test=self.median_test,
         )
+        c = Correlator(img, settings=cfg, workers=self.workers, median_test=self.median_test)
         c.correlate(img)
         if self.blur == "estimate":  # the joint (shape, length) step's kernel too
-            e = Correlator(
-                img,
-                subset=self.subset,
-                step=self.step,
-                shape=self.shape,  # type: ignore[arg-type]
-                interpolation=self.interpolation,
-                initial="zero",
-                workers=self.workers,
-                blur="estimate",
-            )
+            e = Correlator(img, settings=cfg, workers=self.workers, blur="estimate")
             e.correlate(img, blur_vector=(0.0, 1.0))
         return time.perf_counter() - t0
 

@@ -27,6 +27,7 @@ match-score form ``sqrt(2 sigma^2 / SSSIG)`` per axis (Lavatelli & Zappa eq. 2).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -36,10 +37,28 @@ from .interpolation import interpolate_reference
 from .kernels import GAIN_MIN, JUMP_SLACK, STALL_ITERATIONS
 from .status import PointStatus
 
-__all__ = ["PreparedSubsets", "compose_affine", "icgn_reference", "prepare_subsets", "raw_jacobian"]
+__all__ = [
+    "CentredSubsets",
+    "PreparedSubsets",
+    "centre_subsets",
+    "compose_affine",
+    "gauss_newton_matrix",
+    "icgn_reference",
+    "prepare_subsets",
+    "raw_jacobian",
+    "regular",
+    "scaled_inverse",
+    "uv_columns",
+]
 
 #: Number of shape parameters per shape function.
 N_PARAMS = {"translation": 2, "affine": 6}
+
+
+def uv_columns(k: int) -> tuple[int, int]:
+    """The columns of ``u`` and ``v`` among ``k`` shape parameters: translation ``(u, v)``,
+    affine ``(u, ux, uy, v, vx, vy)``."""
+    return 0, 1 if k == 2 else 3
 
 
 @dataclass(frozen=True)
@@ -90,6 +109,66 @@ def raw_jacobian(
     return np.stack([gx, gx * dx, gx * dy, gy, gy * dx, gy * dy], axis=-1)
 
 
+class CentredSubsets(NamedTuple):
+    """Reference subsets (n, npx) and their raw steepest-descent images ``J`` (n, npx, k)
+    centred for ZNSSD (module docstring): ``fmean`` (n,) the subset's mean and ``fnorm``
+    (n,) ``Df = ||f_c||``, GL; ``safe`` (n,) ``Df``, 1 where it is 0; ``fh`` (n, npx)
+    ``f_c / safe``; ``jsum`` (n, k) ``sum J``; ``jc`` (n, npx, k) the column-centred ``J``."""
+
+    fmean: NDArray[np.float64]
+    fnorm: NDArray[np.float64]
+    safe: NDArray[np.float64]
+    fh: NDArray[np.float64]
+    jsum: NDArray[np.float64]
+    jc: NDArray[np.float64]
+
+
+def centre_subsets(fp: NDArray[np.float64], jac: NDArray[np.float64]) -> CentredSubsets:
+    """The subsets ``fp`` (n, npx) and their ``jac`` (n, npx, k) centred for ZNSSD."""
+    npx = fp.shape[1]
+    fmean = fp.mean(axis=1)
+    fc = fp - fmean[:, None]
+    fnorm = np.sqrt(np.einsum("ij,ij->i", fc, fc))
+    safe = np.where(fnorm > 0, fnorm, 1.0)
+    jsum = jac.sum(axis=1)
+    jc = jac - jsum[:, None, :] / npx
+    return CentredSubsets(fmean, fnorm, safe, fc / safe[:, None], jsum, jc)
+
+
+def regular(big: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which symmetric Gauss-Newton matrices ``big`` (n, k, k) are regular: the smallest
+    eigenvalue above 1e-10 of the largest (else the subset's texture cannot fix all the
+    parameters)."""
+    eig = np.linalg.eigvalsh(big)
+    return np.asarray(eig[:, 0] > 1e-10 * np.maximum(eig[:, -1], 1e-300))
+
+
+def gauss_newton_matrix(
+    jc: NDArray[np.float64], fh: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The exact ZNSSD Gauss-Newton matrix (module docstring) of the centred
+    steepest-descent images ``jc`` (n, npx, k) and the normalised subsets ``fh`` (n, npx):
+    ``a = J_c^T fh`` (n, k), the Gram matrix ``J_c^T J_c`` and ``Df^2 H = J_c^T J_c - a a^T``
+    (n, k, k), GL^2."""
+    # batched BLAS products (einsum's loops were 80 % of a one-off correlate call)
+    jct = jc.transpose(0, 2, 1)
+    avec = np.matmul(jct, fh[:, :, None])[:, :, 0]
+    gram = np.matmul(jct, jc)
+    return avec, gram, gram - avec[:, :, None] * avec[:, None, :]
+
+
+def scaled_inverse(
+    big: NDArray[np.float64], bad: NDArray[np.bool_], safe: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``hinv = H^-1 = Df^2 (Df^2 H)^-1`` (0 where ``bad``) and ``(Df^2 H)^-1`` (the
+    identity where ``bad``), each (n, k, k), from ``big = Df^2 H`` (n, k, k) and ``safe``
+    (n,) ``Df`` (:class:`CentredSubsets`)."""
+    big_inv = np.linalg.inv(np.where(bad[:, None, None], np.eye(big.shape[1])[None], big))
+    hinv = big_inv * (safe**2)[:, None, None]
+    hinv[bad] = 0.0
+    return hinv, big_inv
+
+
 def prepare_subsets(
     f: NDArray[np.float64],
     gx: NDArray[np.float64],
@@ -116,31 +195,15 @@ def prepare_subsets(
     gxp = _patches(gx, rows, cols, half)
     gyp = _patches(gy, rows, cols, half)
     n, npx = fp.shape
-    k = N_PARAMS[shape]
-    jac = raw_jacobian(gxp, gyp, half, shape)  # (n, npx, k)
-    fmean = fp.mean(axis=1)
-    fc = fp - fmean[:, None]
-    fnorm = np.sqrt(np.einsum("ij,ij->i", fc, fc))
-    jsum = jac.sum(axis=1)
-    jc = jac - jsum[:, None, :] / npx
-    safe = np.where(fnorm > 0, fnorm, 1.0)
-    fh = fc / safe[:, None]
-    # batched BLAS products (einsum's loops were 80 % of a one-off correlate call)
-    jct = jc.transpose(0, 2, 1)
-    avec = np.matmul(jct, fh[:, :, None])[:, :, 0]
-    # Df^2 H = J_c^T J_c - a a^T  (exact ZNSSD Gauss-Newton matrix, GL^2 units)
-    big = np.matmul(jct, jc) - avec[:, :, None] * avec[:, None, :]
+    fmean, fnorm, safe, fh, jsum, jc = centre_subsets(fp, raw_jacobian(gxp, gyp, half, shape))
+    avec, _, big = gauss_newton_matrix(jc, fh)
     status = np.zeros(n, dtype=np.uint8)
     scale = np.maximum(np.abs(fp).max(axis=1), 1.0)
     flat = fnorm <= 1e-6 * scale * np.sqrt(npx)
-    eig = np.linalg.eigvalsh(big)
-    bad = flat | ~(eig[:, 0] > 1e-10 * np.maximum(eig[:, -1], 1e-300))
+    bad = flat | ~regular(big)
     status[bad] = PointStatus.LOW_TEXTURE
-    big_safe = np.where(bad[:, None, None], np.eye(k)[None], big)
-    big_inv = np.linalg.inv(big_safe)
-    hinv = big_inv * (safe**2)[:, None, None]
+    hinv, big_inv = scaled_inverse(big, bad, safe)
     cov_unit = 2.0 * big_inv
-    hinv[bad] = 0.0
     cov_unit[bad] = np.nan
     return PreparedSubsets(
         hinv=np.ascontiguousarray(hinv),

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import cache, kernels
-from .icgn import N_PARAMS
+from .icgn import N_PARAMS, uv_columns
 from .initial import subset_fftcc
 from .outliers import neighbour_medians
 from .state import CorrelatorState
@@ -23,6 +23,7 @@ __all__ = [
     "RETRY_BUDGET",
     "SERIAL_BELOW",
     "IcgnPasses",
+    "scatter",
 ]
 
 _RETRY = (
@@ -50,6 +51,11 @@ IMPRECISE_MIN = 3
 #: OpenMP workers costs more than they give on a few subsets (a retry, the neighbour
 #: check), and on a loaded machine a woken worker waits for a core (issue 26).
 SERIAL_BELOW = 128
+
+
+def scatter(dst: kernels.Outputs, idx: NDArray[np.intp], src: kernels.Outputs) -> None:
+    """Write the IC-GN results ``src`` of the POIs ``idx`` into ``dst``, in place."""
+    dst.p[idx], dst.zncc[idx], dst.iterations[idx], dst.status[idx] = src
 
 
 class IcgnPasses(CorrelatorState):
@@ -92,24 +98,33 @@ class IcgnPasses(CorrelatorState):
             float(self.subset) if max_step is None else max_step,
         )
 
+    def _retry_limit(self, median_iterations: int) -> int:
+        """A retried POI's iteration limit: :data:`RETRY_BUDGET` times the median
+        iterations of the converged POIs, at least 10, at most ``max_iterations``."""
+        return min(self.max_iterations, max(10, RETRY_BUDGET * median_iterations))
+
+    def _imprecise_limit(self, median_iterations: float) -> int:
+        """A predicted-imprecise POI's iteration limit: :data:`IMPRECISE_BUDGET` times the
+        median iterations of the precise converged POIs, at least :data:`IMPRECISE_MIN`,
+        at most ``max_iterations``."""
+        budget = math.ceil(IMPRECISE_BUDGET * median_iterations)
+        return min(self.max_iterations, max(IMPRECISE_MIN, budget))
+
     def _translation(
         self,
         coef: NDArray[np.float32],
         p0: NDArray[np.float64],
         status_in: NDArray[np.uint8],
-        first: NDArray[np.intp],
-        second: NDArray[np.intp],
-        source: NDArray[np.intp],
-        max_iter: int | None = None,
-        max_step: float | None = None,
-        tol: float | None = None,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
-        """Translation kernel on all POIs' arrays (n,): ``first`` from ``p0``, then
-        ``second`` from their ``source`` POI's result (see kernels.icgn_translation)."""
+        passes: kernels.Passes,
+        settings: kernels.Settings,
+    ) -> kernels.Outputs:
+        """Translation kernel on all POIs' arrays (n,): ``passes.first`` from ``p0``, then
+        ``passes.second`` from their ``source`` POI's result (see kernels.icgn_translation),
+        with the scalars ``settings`` (:meth:`_settings`)."""
         out = kernels.outputs(self.n_points, 2)
         cache.wait_for_background("translation")
         old = numba.get_num_threads()
-        if first.size + second.size < SERIAL_BELOW:
+        if passes.first.size + passes.second.size < SERIAL_BELOW:
             numba.set_num_threads(1)  # same bytes: each POI's result is its own
         try:
             kernels.icgn_translation(
@@ -117,16 +132,16 @@ class IcgnPasses(CorrelatorState):
                 self._images,
                 self._subsets,
                 self._packed,
-                self._settings(self._w, max_iter, max_step, tol),
+                settings,
                 p0,
                 status_in,
-                kernels.Passes(first, second, source),
+                passes,
                 numba.config.NUMBA_NUM_THREADS,  # type: ignore[attr-defined]
                 out,
             )
         finally:
             numba.set_num_threads(old)
-        return out.p, out.zncc, out.iterations, out.status
+        return out
 
     def _run_icgn(
         self,
@@ -137,7 +152,7 @@ class IcgnPasses(CorrelatorState):
         max_iter: int | None = None,
         max_step: float | None = None,
         tol: float | None = None,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+    ) -> kernels.Outputs:
         """IC-GN of the POIs ``idx`` (None: all) from ``p0``; ``max_iter``, ``max_step``,
         ``tol`` as :meth:`_settings` (None: the Correlator's)."""
         if self.shape == "translation":
@@ -146,10 +161,12 @@ class IcgnPasses(CorrelatorState):
             sel = self._all if idx is None else idx
             full[sel] = p0
             st_full[sel] = status_in
-            out = self._translation(
-                coef, full, st_full, sel, self._none, self._none, max_iter, max_step, tol
-            )
-            return out if idx is None else tuple(a[idx] for a in out)  # type: ignore[return-value]
+            one_pass = kernels.Passes(sel, self._none, self._none)
+            settings = self._settings(self._w, max_iter, max_step, tol)
+            out = self._translation(coef, full, st_full, one_pass, settings)
+            if idx is None:
+                return out
+            return kernels.Outputs(out.p[idx], out.zncc[idx], out.iterations[idx], out.status[idx])
         if max_iter is None and self._imprecise is not None:
             split = self._imprecise_split(idx)
             if split is not None:
@@ -181,7 +198,7 @@ class IcgnPasses(CorrelatorState):
             np.ascontiguousarray(status_in),
             out,
         )
-        return out.p, out.zncc, out.iterations, out.status
+        return out
 
     def _imprecise_split(
         self, idx: NDArray[np.intp] | None
@@ -212,54 +229,47 @@ class IcgnPasses(CorrelatorState):
         status_in: NDArray[np.uint8],
         idx: NDArray[np.intp] | None,
         split: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+    ) -> kernels.Outputs:
         """Affine IC-GN, the predicted-imprecise POIs after the precise ones, within
         IMPRECISE_BUDGET times the median iterations of the precise converged POIs."""
         loc_p, pts_p, loc_i, pts_i = split
         n = len(self.rows) if idx is None else len(idx)
-        k = p0.shape[1]
-        out_p = np.empty((n, k))
-        out_z = np.empty(n)
-        out_i = np.empty(n, np.int64)
-        out_s = np.empty(n, np.uint8)
+        out = kernels.outputs(n, p0.shape[1])
         cap = self.max_iterations
         defer = self._defer_imprecise and (idx is None or idx is self._rest)
         if loc_p.size:
             r = self._run_icgn(coef, p0[loc_p], status_in[loc_p], pts_p, cap)
-            out_p[loc_p], out_z[loc_p], out_i[loc_p], out_s[loc_p] = r
-            conv = r[2][r[3] == PointStatus.CONVERGED]
+            scatter(out, loc_p, r)
+            conv = r.iterations[r.status == PointStatus.CONVERGED]
             if conv.size:
-                budget = math.ceil(IMPRECISE_BUDGET * float(np.median(conv)))
-                cap = min(cap, max(IMPRECISE_MIN, budget))
+                cap = self._imprecise_limit(float(np.median(conv)))
         if defer:
             # run after the whole grid's precise POIs, from their neighbours' parameters
             # (Screening._run_deferred): a start near the field, no reduced pass + retry
-            out_p[loc_i], out_z[loc_i], out_i[loc_i] = p0[loc_i], 0.0, 0
-            out_s[loc_i] = PointStatus.MAX_ITERATIONS
+            out.p[loc_i], out.zncc[loc_i], out.iterations[loc_i] = p0[loc_i], 0.0, 0
+            out.status[loc_i] = PointStatus.MAX_ITERATIONS
             self._deferred = pts_i
-            return out_p, out_z, out_i, out_s
-        r = self._run_icgn(coef, p0[loc_i], status_in[loc_i], pts_i, cap)
-        out_p[loc_i], out_z[loc_i], out_i[loc_i], out_s[loc_i] = r
-        return out_p, out_z, out_i, out_s
+            return out
+        scatter(out, loc_i, self._run_icgn(coef, p0[loc_i], status_in[loc_i], pts_i, cap))
+        return out
 
     def _seeded_icgn(
         self, coef: NDArray[np.float32], p0: NDArray[np.float64], status0: NDArray[np.uint8]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+    ) -> kernels.Outputs:
         assert self._seeds is not None and self._rest is not None
         seeds, rest, src = self._seeds, self._rest, self._rest_seed
         if self.shape == "translation":
             # both passes in one kernel call: the rest start from their seed's result
-            return self._translation(coef, p0, status0, seeds, rest, src)
+            both = kernels.Passes(seeds, rest, src)
+            return self._translation(coef, p0, status0, both, self._settings(self._w, None))
         n, k = p0.shape
-        p = np.empty((n, k))
-        z = np.empty(n)
-        it = np.empty(n, np.int64)
-        st = np.empty(n, np.uint8)
-        ps, zs, its, sts = self._run_icgn(coef, p0[seeds], status0[seeds], seeds)
-        p[seeds], z[seeds], it[seeds], st[seeds] = ps, zs, its, sts
+        out = kernels.outputs(n, k)
+        p, st = out.p, out.status
+        first = self._run_icgn(coef, p0[seeds], status0[seeds], seeds)
+        scatter(out, seeds, first)
         if self.noise_auto:
             # the seeds' residuals give the noise, so the rest pass knows its imprecise POIs
-            self._estimate_noise(zs, sts, seeds)
+            self._estimate_noise(first.zncc, first.status, seeds)
         start = p0[rest].copy()
         good = st[src] == PointStatus.CONVERGED
         q = p[src[good]]
@@ -277,17 +287,17 @@ class IcgnPasses(CorrelatorState):
             start[good, 3] = q[:, 3] + grad[2] * dx + grad[3] * dy
             start[good, 1], start[good, 2] = grad[0], grad[1]
             start[good, 4], start[good, 5] = grad[2], grad[3]
-        pr, zr, itr, str_ = self._run_icgn(coef, start, status0[rest], rest)
-        p[rest], z[rest], it[rest], st[rest] = pr, zr, itr, str_
-        return p, z, it, st
+        scatter(out, rest, self._run_icgn(coef, start, status0[rest], rest))
+        return out
 
     def _guess_to_params(
         self, u: NDArray[np.float64], v: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         k = N_PARAMS[self.shape]
+        ucol, vcol = uv_columns(k)
         p0 = np.zeros((len(u), k))
-        p0[:, 0] = u
-        p0[:, 1 if k == 2 else 3] = v
+        p0[:, ucol] = u
+        p0[:, vcol] = v
         return p0
 
     def _retry(
@@ -296,17 +306,15 @@ class IcgnPasses(CorrelatorState):
         coef: NDArray[np.float32],
         gu: NDArray[np.float64],
         gv: NDArray[np.float64],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        it: NDArray[np.int64],
-        st: NDArray[np.uint8],
+        res: kernels.Outputs,
     ) -> None:
-        """Second chance for the failed POIs, in place, within an iteration budget.
+        """Second chance for the failed POIs of ``res``, in place, within an iteration budget.
 
         A POI with converged grid neighbours restarts from their median parameters (a
         start near the local field, one compiled call for all); the others get the
         per-subset FFT-CC integer guess, unless it equals the start they already had.
         """
+        p, z, it, st = res
         status0 = self._status0
         again = _RETRY_TABLE[st] & (status0 == 0)  # a table: np.isin costs ~1 ms
         if self._imprecise is not None:
@@ -317,11 +325,7 @@ class IcgnPasses(CorrelatorState):
             return
         ok = st == PointStatus.CONVERGED
         conv = it[ok]
-        budget = (
-            self.max_iterations
-            if conv.size == 0
-            else min(self.max_iterations, max(10, RETRY_BUDGET * int(np.median(conv))))
-        )
+        budget = self.max_iterations if conv.size == 0 else self._retry_limit(int(np.median(conv)))
         k = p.shape[1]
         start = np.full((retry.size, k), np.nan)
         if self._grid_shape is not None and ok.any():

@@ -4,16 +4,16 @@ for false convergence"."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .icgn import N_PARAMS
+from . import kernels
+from .icgn import N_PARAMS, uv_columns
 from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
-from .passes import IMPRECISE_BUDGET, IMPRECISE_MIN, RETRY_BUDGET, IcgnPasses
+from .passes import IcgnPasses, scatter
 from .status import PointStatus
 
 __all__ = [
@@ -136,6 +136,18 @@ def pair_medians(
     return med, count
 
 
+def _median_iterations(conv: NDArray[np.int64]) -> int:
+    """The median of the converged POIs' iterations ``conv`` (2 when there are none)."""
+    return 2 if conv.size == 0 else int(np.median(conv))
+
+
+def _uv_first(k: int) -> tuple[int, int, list[int]]:
+    """The u and v columns of ``k`` shape parameters and an order of all ``k`` with those
+    two first (the neighbour tests look at u and v; the retries start from all)."""
+    ucol, vcol = uv_columns(k)
+    return ucol, vcol, [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+
+
 def grow_start(
     grid: NDArray[np.float64], cells: NDArray[np.intp], start: NDArray[np.float64]
 ) -> NDArray[np.int64]:
@@ -235,15 +247,8 @@ class Screening(IcgnPasses):
         }
 
     # ------------------------------------------------------------------ the statuses
-    def _run_deferred(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        it: NDArray[np.int64],
-        st: NDArray[np.uint8],
-    ) -> None:
-        """IC-GN of the predicted-imprecise POIs the main pass left, in place.
+    def _run_deferred(self, coef: NDArray[np.float32], res: kernels.Outputs) -> None:
+        """IC-GN of the predicted-imprecise POIs the main pass left, in ``res`` in place.
 
         Each starts from the precise converged POIs' field: :func:`pair_medians` of its
         precise neighbours' six parameters where it has :data:`PAIRS_MIN` pairs of them
@@ -265,14 +270,14 @@ class Screening(IcgnPasses):
         self._from_nb = self._nb_start = None
         if pts is None or pts.size == 0:
             return
+        p, z, it, st = res
         n, k = p.shape
         ok = st == PointStatus.CONVERGED
         # the noise estimated since may have changed the mask: the precise POIs by today's
         precise = ok if self._imprecise is None else ok & ~self._imprecise
-        conv = it[ok]
-        med_it = 2 if conv.size == 0 else int(np.median(conv))
-        cap = min(self.max_iterations, max(10, RETRY_BUDGET * med_it))
-        reduced = min(self.max_iterations, max(IMPRECISE_MIN, math.ceil(IMPRECISE_BUDGET * med_it)))
+        med_it = _median_iterations(it[ok])
+        cap = self._retry_limit(med_it)
+        reduced = self._imprecise_limit(med_it)
         start = np.full((pts.size, k), np.nan)
         exact = np.zeros(pts.size, bool)
         if self._grid_shape is not None and self._grid_index is not None and precise.any():
@@ -291,41 +296,34 @@ class Screening(IcgnPasses):
             r = self._run_icgn(
                 coef, start[near], self._status0[sel], sel, cap, RETRY_REACH * ACCEPT_DISTANCE
             )
-            p[sel], z[sel], it[sel], st[sel] = r
-            gone = np.flatnonzero(r[3] == PointStatus.DIVERGED)
+            scatter(res, sel, r)
+            gone = np.flatnonzero(r.status == PointStatus.DIVERGED)
             if gone.size:
                 # beyond the reach: an estimate for inspection (IMPRECISE) from the same
                 # start within the reduced limit, not the reach's NaN
                 g = sel[gone]
                 r2 = self._run_icgn(coef, start[near][gone], self._status0[g], g, reduced)
-                p[g], z[g], st[g] = r2[0], r2[1], r2[3]
-                it[g] += r2[2]
+                p[g], z[g], st[g] = r2.p, r2.zncc, r2.status
+                it[g] += r2.iterations
             # the check's retry would start these from the same medians: not again
             self._from_nb = np.zeros(n, bool)
             self._from_nb[sel] = True
             self._nb_start = np.full((n, 2), np.nan)
             anchored = pts[near & exact]
-            self._nb_start[anchored] = start[near & exact][:, [0, 3]]
+            self._nb_start[anchored] = start[near & exact][:, list(uv_columns(k))]
         if not near.all():
             rest = pts[~near]
-            r = self._run_icgn(coef, p[rest], self._status0[rest], rest, reduced)
-            p[rest], z[rest], it[rest], st[rest] = r
+            scatter(res, rest, self._run_icgn(coef, p[rest], self._status0[rest], rest, reduced))
 
-    def _flag(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-        it: NDArray[np.int64] | None = None,
-    ) -> float | None:
-        """The statuses after IC-GN, in place: the noise (estimated), :meth:`_screen`,
-        :meth:`_neighbour_check`, then ``IMPRECISE``; returns the screen's noise variance
-        (or None). ``it`` gets the iterations of the check's retries."""
+    def _flag(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
+        """The statuses of ``res`` after IC-GN, in place: the noise (estimated),
+        :meth:`_screen`, :meth:`_neighbour_check`, then ``IMPRECISE``; returns the screen's
+        noise variance (or None). The iterations get those of the check's retries."""
+        st = res.status
         if self.noise_auto:
-            self._estimate_noise(z, st)
-        noise_var = self._screen(coef, p, z, st)
-        kept = self._neighbour_check(coef, p, z, st, it)
+            self._estimate_noise(res.zncc, st)
+        noise_var = self._screen(coef, res)
+        kept = self._neighbour_check(coef, res)
         if self._imprecise is not None:
             # a predicted-imprecise subset stopped at its (reduced) limit: imprecision is the
             # cause, so it gets that status too
@@ -337,12 +335,7 @@ class Screening(IcgnPasses):
         return noise_var
 
     def _neighbour_check(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-        it: NDArray[np.int64] | None,
+        self, coef: NDArray[np.float32], res: kernels.Outputs
     ) -> NDArray[np.bool_] | None:
         """Each converged POI of the grid against ``m``, the median of the means of its
         pairs of opposite converged neighbours (:func:`pair_medians`; the precise ones
@@ -362,6 +355,7 @@ class Screening(IcgnPasses):
             # without a noise level there is no predicted sigma to scale the test: a
             # fixed 0.1 px would trim a strongly blurred field's legitimate tails
             return None
+        p, z, it, st = res
         ok = st == PointStatus.CONVERGED
         if not ok.any():
             return None
@@ -379,9 +373,8 @@ class Screening(IcgnPasses):
         # each grid cell's POI (the grid is full: every cell has one)
         cell_inv = np.empty(ny * nx, np.intp)
         cell_inv[cell] = np.arange(n)
-        ucol, vcol = 0, 1 if k == 2 else 3
         # (u, v) first: the distance needs only those; all k for the retries' starts
-        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+        ucol, vcol, order = _uv_first(k)
         grid = np.full((k, ny * nx), np.nan)
         grid[:, cell] = p[:, order].T
         # the precise neighbours where they suffice, else every converged one; but when
@@ -429,20 +422,17 @@ class Screening(IcgnPasses):
             full, _ = pair_medians(np.where(use, grid, np.nan), (ny, nx), cells=cell[idx])
             start = np.empty((idx.size, k))
             start[:, order] = full.T
-            conv = it[ok] if it is not None else np.zeros(0, np.int64)
-            med_it = 2 if conv.size == 0 else int(np.median(conv))
             # the retry budget (a subset stopped at its reduced limit, too: from a start
             # near the field most converge within it, 2.0 % of the blob image's correct
             # affine points left flagged against 6.6 % at the reduced limit again)
-            cap = min(self.max_iterations, max(10, RETRY_BUDGET * med_it))
+            cap = self._retry_limit(_median_iterations(it[ok]))
             p2, z2, it2, st2 = self._check_retry(coef, start, idx, cap, thr[where], is_imp[where])
             d2 = np.hypot(p2[:, ucol] - start[:, ucol], p2[:, vcol] - start[:, vcol])
             better = (z2 >= z[idx]) | again[where]  # a stopped POI had no optimum
             take = (st2 == PointStatus.CONVERGED) & better & (d2 <= thr[where])
             got = idx[take]
             p[got], z[got], st[got] = p2[take], z2[take], PointStatus.CONVERGED
-            if it is not None:
-                it[idx] += it2
+            it[idx] += it2
             took = take
             far[where[took]] = False
         st[test[far & ~is_imp]] = PointStatus.OUTLIER
@@ -458,7 +448,7 @@ class Screening(IcgnPasses):
         cap: int,
         thr: NDArray[np.float64],
         is_imp: NDArray[np.bool_],
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]:
+    ) -> kernels.Outputs:
         """The neighbour check's IC-GN of the POIs ``idx`` from ``start`` within ``cap``
         iterations (``thr`` their acceptance distances, px; ``is_imp`` predicted imprecise).
 
@@ -471,25 +461,17 @@ class Screening(IcgnPasses):
         (issue 26).
         """
         groups = [np.flatnonzero(~is_imp), np.flatnonzero(is_imp)]
-        n, k = start.shape
-        p2, z2 = np.empty((n, k)), np.empty(n)
-        it2, st2 = np.empty(n, np.int64), np.empty(n, np.uint8)
+        out = kernels.outputs(*start.shape)
         for loc in groups:
             if loc.size == 0:
                 continue
             reach = RETRY_REACH * float(thr[loc].max())
             r = self._run_icgn(coef, start[loc], self._status0[idx[loc]], idx[loc], cap, reach)
-            p2[loc], z2[loc], it2[loc], st2[loc] = r
-        return p2, z2, it2, st2
+            scatter(out, loc, r)
+        return out
 
-    def _screen(
-        self,
-        coef: NDArray[np.float32],
-        p: NDArray[np.float64],
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-    ) -> float | None:
-        """Flag false convergence in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
+    def _screen(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
+        """Flag false convergence in ``res`` in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
 
         Returns the noise variance (GL^2) the tests used, or None when none ran.
 
@@ -502,6 +484,7 @@ class Screening(IcgnPasses):
         as a whole). The interpolation of the current image slightly smooths its noise,
         so the prediction is conservative (up to ~10 % high at half-pixel shifts).
         """
+        p, z, _, st = res
         ok = st == PointStatus.CONVERGED
         sigma = None if self.noise is None else self.noise.sigma
         residual = self.max_residual is not None and sigma is not None
@@ -529,9 +512,8 @@ class Screening(IcgnPasses):
             return noise_var
         assert self._grid_index is not None
         shape, cell = self._grid_shape, self._grid_index
-        ucol, vcol = 0, 1 if k == 2 else 3
         # (k, ny, nx) with u, v first: the components the median test looks at
-        order = [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
+        ucol, vcol, order = _uv_first(k)
         grid = np.full((k, shape[0] * shape[1]), np.nan)
         grid[:, cell] = np.where(ok, p[:, order].T, np.nan)
         valid = np.zeros(shape[0] * shape[1], bool)

@@ -20,8 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kernels
-from .icgn import PreparedSubsets
+from .icgn import PreparedSubsets, uv_columns
 from .noise import NoiseEstimate
+from .result import DICResult
 from .settings import MatcherSettings, check_integer
 
 __all__ = ["UNSET", "CorrelatorState", "PreparedImage", "Refined", "Unset"]
@@ -172,6 +173,36 @@ class CorrelatorState:
             ),
             "dicblur_version": __version__,
         }
+
+    def _result(
+        self,
+        res: kernels.Outputs,
+        *,
+        info: dict[str, Any],
+        predicted_sigma: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
+        blur: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]] | None = None,
+    ) -> DICResult:
+        """The :class:`DICResult` of all POIs from their IC-GN results ``res`` (``u``, ``v``
+        the translation columns of its parameters; ``blur``: ``blur="estimate"``'s
+        ``blur_length``, ``blur_sigma``, ``blur_identified``)."""
+        ucol, vcol = uv_columns(res.p.shape[1])
+        length, sigma, identified = (None, None, None) if blur is None else blur
+        return DICResult(
+            rows=self.rows.copy(),
+            cols=self.cols.copy(),
+            u=res.p[:, ucol].copy(),
+            v=res.p[:, vcol].copy(),
+            params=res.p,
+            zncc=res.zncc,
+            iterations=res.iterations,
+            status=res.status,
+            predicted_sigma_u=predicted_sigma[0],
+            predicted_sigma_v=predicted_sigma[1],
+            info=info,
+            blur_length=length,
+            blur_sigma=sigma,
+            blur_identified=identified,
+        )
 
     def fork(self, *, workers: int | Unset | None = UNSET) -> Any:
         """A Correlator on this one's prepared reference, with its own scratch state, for

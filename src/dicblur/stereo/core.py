@@ -34,13 +34,13 @@ from ..track.kinematics import exposure_motion
 from ..track.noise import NoiseEstimate, estimate_static_noise, subset_levels
 from ..track.options import parse_frame_range, parse_rate
 from ..track.parallel import HISTORY, thread_safe_kernels
+from ..track.uncertainty import build_blur_table
 from .camera import StereoRig
 from .matching import match_reference
 from .triangulate import propagate, triangulate, triangulation_jacobian
 from .uncertainty import (
     blur_vectors,
     camera_covariance,
-    camera_table,
     length_angle,
     relative_shift,
 )
@@ -112,6 +112,22 @@ def _noise(rec: Any, static: Any, noise: float | None, name: str) -> NoiseEstima
     a, b = parse_frame_range(static, len(rec), name="static")
     est = estimate_static_noise(rec, a, b)
     return est
+
+
+def _camera_correlator(
+    reference: NDArray[np.float64], noise: NoiseEstimate, **where: Any
+) -> Correlator:
+    """One camera's matcher on its reference (``where``: the grid or points, subset and
+    shape). Gross errors: the epipolar test of every pair instead of the engine's neighbour
+    check, exact on linear fields only (docs/stereo.md)."""
+    return Correlator(
+        reference,
+        noise_sigma=noise.sigma,
+        max_predicted_sigma=None,
+        neighbour_check=False,
+        tolerance=1e-3,
+        **where,
+    )
 
 
 def _combine(*statuses: NDArray[np.uint8]) -> NDArray[np.uint8]:
@@ -267,19 +283,7 @@ def track(
     nz_l = _noise(rec_l, static, noise, "left")
     nz_r = _noise(rec_r, static, noise, "right")
     # (1) the shape: the left reference's POIs matched in the right reference
-    corr_l = Correlator(
-        ref_l,
-        subset=subset,
-        step=step,
-        shape=shape,
-        roi=roi,
-        noise_sigma=nz_l.sigma,
-        max_predicted_sigma=None,
-        # gross errors: the epipolar test of every pair (below) instead of the engine's
-        # neighbour check, exact on linear fields only (docs/stereo.md)
-        neighbour_check=False,
-        tolerance=1e-3,
-    )
+    corr_l = _camera_correlator(ref_l, nz_l, subset=subset, step=step, shape=shape, roi=roi)
     rows, cols = corr_l.rows.astype(np.float64), corr_l.cols.astype(np.float64)
     n = len(rows)
     match = match_reference(rig, corr_l, ref_r, depth=depth, max_epipolar=max_epipolar)
@@ -296,18 +300,7 @@ def track(
     st_stereo[~inside & (st_stereo == 0)] = PointStatus.OUT_OF_BOUNDS
     rr[~inside] = [half, half]
     delta = np.where(inside[:, None], match.right - rr, 0.0)  # (row, col) sub-pixel rest
-    corr_r = Correlator(
-        ref_r,
-        subset=subset,
-        points=rr,
-        shape=shape,
-        noise_sigma=nz_r.sigma,
-        max_predicted_sigma=None,
-        # gross errors: the epipolar test of every pair (below) instead of the engine's
-        # neighbour check, exact on linear fields only (docs/stereo.md)
-        neighbour_check=False,
-        tolerance=1e-3,
-    )
+    corr_r = _camera_correlator(ref_r, nz_r, subset=subset, points=rr, shape=shape)
     # (2) each camera against its own reference
     order = list(range(reference + 1, f1)) + list(range(reference - 1, f0 - 1, -1))
     nf = f1 - f0
@@ -393,7 +386,7 @@ def track(
             (1, ref_r, cen_r, w_r, a_r, nz_r, cov_r),
         ):
             ww = np.where(converged[:, use], w[:, use], np.nan)
-            table = camera_table(
+            table = build_blur_table(
                 ref,
                 cen[use],
                 subset=subset,

@@ -14,11 +14,23 @@ right camera's pose ``X_R = R X_L + t``; the left camera's pose is the identity.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["pack_camera", "projection_jacobian_kernel", "triangulate_kernel"]
+__all__ = ["PackedRig", "pack_camera", "projection_jacobian_kernel", "triangulate_kernel"]
+
+
+class PackedRig(NamedTuple):
+    """A rig as the kernels read it: each camera's packed parameters (9,) and pose
+    ``[R | t]`` (3, 4), C-contiguous (the left pose the identity)."""
+
+    cam_l: NDArray[np.float64]
+    cam_r: NDArray[np.float64]
+    pose_l: NDArray[np.float64]
+    pose_r: NDArray[np.float64]
 
 
 def pack_camera(cam: object) -> NDArray[np.float64]:
@@ -131,16 +143,14 @@ def _normal_equations(
 def triangulate_kernel(
     left: NDArray[np.float64],
     right: NDArray[np.float64],
-    cam_l: NDArray[np.float64],
-    cam_r: NDArray[np.float64],
-    pose_l: NDArray[np.float64],
-    pose_r: NDArray[np.float64],
+    rig: PackedRig,
     iterations: int,
     undistort_iterations: int,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Refined 3-D points (n, 3) mm and RMS reprojection residuals (n,) px of the pairs
     ``left``, ``right`` (n, 2) ``(row, col)`` px; NaN where an input is NaN or the point
-    is degenerate. ``pose_*`` are 3 x 4 ``[R | t]`` (the left one the identity)."""
+    is degenerate."""
+    cam_l, cam_r, pose_l, pose_r = rig
     n = left.shape[0]
     out = np.full((n, 3), np.nan)
     res = np.full(n, np.nan)
@@ -198,14 +208,9 @@ def triangulate_kernel(
 
 
 @nb.njit(cache=True, nogil=True)
-def projection_jacobian_kernel(
-    points: NDArray[np.float64],
-    cam_l: NDArray[np.float64],
-    cam_r: NDArray[np.float64],
-    pose_l: NDArray[np.float64],
-    pose_r: NDArray[np.float64],
-) -> NDArray[np.float64]:
+def projection_jacobian_kernel(points: NDArray[np.float64], rig: PackedRig) -> NDArray[np.float64]:
     """``d(r_L, c_L, r_R, c_R)/d(X, Y, Z)`` (n, 4, 3) px/mm at points (n, 3) mm."""
+    cam_l, cam_r, pose_l, pose_r = rig
     n = points.shape[0]
     out = np.empty((n, 4, 3))
     jac = np.empty((4, 3))

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 from .camera import UNDISTORT_ITERATIONS, StereoRig
-from .kernels import pack_camera, projection_jacobian_kernel, triangulate_kernel
+from .kernels import PackedRig, pack_camera, projection_jacobian_kernel, triangulate_kernel
 
 __all__ = [
     "numeric_projection_jacobian",
@@ -70,19 +70,17 @@ def _project4(rig: StereoRig, x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.concatenate([pl, pr], axis=-1)
 
 
-def _packed(
-    rig: StereoRig,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def _packed(rig: StereoRig) -> PackedRig:
     pose_l = np.hstack([np.eye(3), np.zeros((3, 1))])
     pose_r = np.ascontiguousarray(np.hstack([rig.rotation, rig.translation[:, None]]))
-    return pack_camera(rig.left), pack_camera(rig.right), pose_l, pose_r
+    return PackedRig(pack_camera(rig.left), pack_camera(rig.right), pose_l, pose_r)
 
 
 def projection_jacobian(rig: StereoRig, x: ArrayLike) -> NDArray[np.float64]:
     """``d(r_L, c_L, r_R, c_R) / d(X, Y, Z)`` at left-frame points (n, 3) mm: (n, 4, 3)
     px/mm (analytic, :mod:`.kernels`; NaN for a point at or behind a camera)."""
     p = np.ascontiguousarray(np.atleast_2d(np.asarray(x, dtype=np.float64)))
-    return np.asarray(projection_jacobian_kernel(p, *_packed(rig)))
+    return np.asarray(projection_jacobian_kernel(p, _packed(rig)))
 
 
 def numeric_projection_jacobian(rig: StereoRig, x: ArrayLike) -> NDArray[np.float64]:
@@ -126,14 +124,10 @@ def triangulate(
     if refine:
         # compiled: the linear point of each pair and Gauss-Newton with the analytic
         # Jacobian in one pass (the same fixed point as the numpy iteration)
-        cl, cr, pose_l, pose_r = _packed(rig)
         xk, rk = triangulate_kernel(
             np.ascontiguousarray(pl),
             np.ascontiguousarray(pr),
-            cl,
-            cr,
-            pose_l,
-            pose_r,
+            _packed(rig),
             REFINE_ITERATIONS,
             UNDISTORT_ITERATIONS,
         )

@@ -28,13 +28,12 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from ..track.uncertainty import BlurTable, build_blur_table
+from ..track.uncertainty import BlurTable
 from .camera import StereoRig
 
 __all__ = [
     "blur_vectors",
     "camera_covariance",
-    "camera_table",
     "ratio_out_of_plane",
     "relative_shift",
 ]
@@ -57,24 +56,6 @@ def length_angle(vec: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray
     w = np.hypot(vec[..., 0], vec[..., 1])
     ang = np.degrees(np.arctan2(vec[..., 0], vec[..., 1])) % 180.0
     return w, ang
-
-
-def camera_table(
-    reference: NDArray[np.float64],
-    centres: NDArray[np.intp],
-    *,
-    subset: int,
-    shape: str,
-    blur: NDArray[np.float64],
-    angle: NDArray[np.float64],
-    threads: int = 1,
-) -> BlurTable:
-    """The blur response table of one camera's reference subsets (``dicblur track``'s
-    :func:`~dicblur.track.uncertainty.build_blur_table`) for its blur lengths and
-    directions (frames, points)."""
-    return build_blur_table(
-        reference, centres, subset=subset, shape=shape, blur=blur, angle=angle, threads=threads
-    )
 
 
 def camera_covariance(

@@ -9,10 +9,7 @@ error carried as the deterministic error it is.
 
 from __future__ import annotations
 
-import sys
-import types
-from typing import Any
-
+from ..callable_module import make_callable
 from .covariance import gradient_factor, overlap_correlation
 from .field import (
     StrainField,
@@ -38,12 +35,4 @@ __all__ = [
     "window_from_vsg",
 ]
 
-
-class _CallableModule(types.ModuleType):
-    def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        return strain(*args, **kwargs)
-
-
-# ``dicblur.strain(...)`` works whether the name resolves to the function or to this
-# package (the pattern of ``dicblur.track``)
-sys.modules[__name__].__class__ = _CallableModule
+make_callable(__name__, "strain")

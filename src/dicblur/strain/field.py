@@ -14,7 +14,7 @@ from ..dic.status import PointStatus
 from ..errors import InputError
 from .covariance import Kind
 from .fit import choose_half
-from .kernels import N_GRAD, N_OUT, measure_pass, stacked_kernels, window_pass
+from .kernels import N_GRAD, N_OUT, WindowFields, measure_pass, stacked_kernels, window_pass
 
 __all__ = [
     "StrainField",
@@ -292,7 +292,7 @@ def strain_on_grid(
         xu = np.nan_to_num(np.asarray(shift_u, np.float64)) if blur else np.zeros((1, 1, 1))
         xv = np.nan_to_num(np.asarray(shift_v, np.float64)) if blur else np.zeros((1, 1, 1))
         kern = stacked_kernels(half, float(step), int(subset))
-        window_pass(  # type: ignore[call-arg]
+        fields = WindowFields(
             np.where(valid, u, 0.0).reshape(shape3),
             np.where(valid, v, 0.0).reshape(shape3),
             use.reshape(shape3),
@@ -300,10 +300,8 @@ def strain_on_grid(
             s2v.reshape(shape3),
             xu.reshape(shape3) if blur else xu,
             xv.reshape(shape3) if blur else xv,
-            blur,
-            *kern,
-            grad.reshape(*shape3, N_GRAD),
         )
+        window_pass(fields, blur, kern, grad.reshape(*shape3, N_GRAD))
         n_used = np.where(use > 0, 2 * use + 1, 0)
         full = use == half
     else:

@@ -3,13 +3,21 @@ strain measures and their Jacobian, docs/strain.md eq. 1, 5-8)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["N_GRAD", "N_OUT", "measure_pass", "stacked_kernels", "window_pass"]
+__all__ = [
+    "N_GRAD",
+    "N_OUT",
+    "WindowFields",
+    "WindowKernels",
+    "measure_pass",
+    "stacked_kernels",
+    "window_pass",
+]
 
 #: Values per point of :func:`measure_pass`: ``exx, eyy, exy``, the noise covariance
 #: ``(xx_xx, yy_yy, xy_xy, xx_yy, xx_xy, yy_xy)`` and the signed blur errors
@@ -23,33 +31,64 @@ N_OUT = 12
 N_GRAD = 14
 
 
+class WindowFields(NamedTuple):
+    """The (frames, rows, cols) fields of :func:`window_pass`."""
+
+    u: NDArray[np.float64]  # displacements, px (0 where not valid)
+    v: NDArray[np.float64]
+    use: NDArray[np.int64]  # window half-width of each point (0: no window)
+    s2u: NDArray[np.float64]  # noise variances, px**2
+    s2v: NDArray[np.float64]
+    xu: NDArray[np.float64]  # signed blur shifts, px (read when ``blur``)
+    xv: NDArray[np.float64]
+
+
+class WindowKernels(NamedTuple):
+    """The window weights of every half-width ``h`` = 1..H, each (H + 1, 2 H + 1, 2 H + 1),
+    the window centred at index ``H``: the slope weights ``gx[h]``, ``gy[h]`` (eq. 1) and
+    the noise kernels ``kxx[h]``, ``kyy[h]``, ``kxy[h]`` (eq. 5)."""
+
+    gx: NDArray[np.float64]
+    gy: NDArray[np.float64]
+    kxx: NDArray[np.float64]
+    kyy: NDArray[np.float64]
+    kxy: NDArray[np.float64]
+
+
+@nb.njit(inline="always", cache=True)
+def _add_gradient(
+    acc: NDArray[np.float64], i0: int, wx: float, wy: float, a: float, b: float
+) -> None:
+    """``acc[i0:i0 + 4] += (wx a, wy a, wx b, wy b)``: one point's share of the slopes of
+    the two fields ``a`` (u) and ``b`` (v)."""
+    acc[i0] += wx * a
+    acc[i0 + 1] += wy * a
+    acc[i0 + 2] += wx * b
+    acc[i0 + 3] += wy * b
+
+
+@nb.njit(inline="always", cache=True)
+def _add_variance(
+    acc: NDArray[np.float64], i0: int, qxx: float, qyy: float, qxy: float, s2: float
+) -> None:
+    """``acc[i0:i0 + 3] += (qxx, qyy, qxy) s2``: one point's share of the slopes' noise
+    covariance of one field of noise variance ``s2``."""
+    acc[i0] += qxx * s2
+    acc[i0 + 1] += qyy * s2
+    acc[i0 + 2] += qxy * s2
+
+
 @nb.njit(cache=True, nogil=True)
 def window_pass(
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    use: NDArray[np.int64],
-    s2u: NDArray[np.float64],
-    s2v: NDArray[np.float64],
-    xu: NDArray[np.float64],
-    xv: NDArray[np.float64],
-    blur: bool,
-    gx: NDArray[np.float64],
-    gy: NDArray[np.float64],
-    kxx: NDArray[np.float64],
-    kyy: NDArray[np.float64],
-    kxy: NDArray[np.float64],
-    out: NDArray[np.float64],
+    fields: WindowFields, blur: bool, kern: WindowKernels, out: NDArray[np.float64]
 ) -> None:
-    """Window sums of every point of the (frames, rows, cols) fields whose window
+    """Window sums of every point of the (frames, rows, cols) ``fields`` whose window
     half-width ``use`` is > 0: ``out[f, r, c, :]`` (:data:`N_GRAD` values; NaN where
-    ``use`` is 0, the blur errors 0 without ``blur``).
-
-    ``gx[h]``, ``gy[h]``: slope weights of the window of half-width ``h`` (eq. 1);
-    ``kxx[h]``, ``kyy[h]``, ``kxy[h]``: its noise kernels (eq. 5), each (H + 1, 2 H + 1,
-    2 H + 1), the window centred at index ``H``. ``s2u``, ``s2v``: noise variances, px**2;
-    ``xu``, ``xv``: signed blur shifts, px (read when ``blur``). Callers give windows
-    that lie inside the grid.
+    ``use`` is 0, the blur errors 0 without ``blur``). Callers give windows that lie
+    inside the grid.
     """
+    u, v, use, s2u, s2v, xu, xv = fields
+    gx, gy, kxx, kyy, kxy = kern
     nf, ny, nx = u.shape
     hm = (gx.shape[1] - 1) // 2
     acc = np.empty(N_GRAD)
@@ -69,30 +108,14 @@ def window_pass(
                         cc = c + k
                         wx = gx[h, hm + j, hm + k]
                         wy = gy[h, hm + j, hm + k]
-                        a = u[f, rr, cc]
-                        b = v[f, rr, cc]
-                        acc[0] += wx * a
-                        acc[1] += wy * a
-                        acc[2] += wx * b
-                        acc[3] += wy * b
+                        _add_gradient(acc, 0, wx, wy, u[f, rr, cc], v[f, rr, cc])
                         qxx = kxx[h, hm + j, hm + k]
                         qyy = kyy[h, hm + j, hm + k]
                         qxy = kxy[h, hm + j, hm + k]
-                        su = s2u[f, rr, cc]
-                        sv = s2v[f, rr, cc]
-                        acc[4] += qxx * su
-                        acc[5] += qyy * su
-                        acc[6] += qxy * su
-                        acc[7] += qxx * sv
-                        acc[8] += qyy * sv
-                        acc[9] += qxy * sv
+                        _add_variance(acc, 4, qxx, qyy, qxy, s2u[f, rr, cc])
+                        _add_variance(acc, 7, qxx, qyy, qxy, s2v[f, rr, cc])
                         if blur:
-                            a = xu[f, rr, cc]
-                            b = xv[f, rr, cc]
-                            acc[10] += wx * a
-                            acc[11] += wy * a
-                            acc[12] += wx * b
-                            acc[13] += wy * b
+                            _add_gradient(acc, 10, wx, wy, xu[f, rr, cc], xv[f, rr, cc])
                 o[:] = acc
 
 
@@ -137,9 +160,8 @@ def measure_pass(grad: NDArray[np.float64], green: bool, out: NDArray[np.float64
             o[9 + m] = p[0] * g[10] + p[1] * g[11] + p[2] * g[12] + p[3] * g[13]
 
 
-def stacked_kernels(half: int, step: float, subset: int) -> tuple[NDArray[np.float64], ...]:
-    """``gx, gy, kxx, kyy, kxy`` of every half-width 1..``half`` for :func:`strain_pass`,
-    each (half + 1, 2 half + 1, 2 half + 1)."""
+def stacked_kernels(half: int, step: float, subset: int) -> WindowKernels:
+    """The window weights of every half-width 1..``half`` for :func:`window_pass`."""
     from .covariance import noise_kernels
     from .fit import plane_weights
 
@@ -150,4 +172,4 @@ def stacked_kernels(half: int, step: float, subset: int) -> tuple[NDArray[np.flo
         vals: Any = (*plane_weights(h, step), *noise_kernels(h, step, subset))
         for arr, val in zip(out, vals, strict=True):
             arr[h, s, s] = val
-    return tuple(out)
+    return WindowKernels(*out)

@@ -15,10 +15,7 @@ so the name works whether it resolves to the function or to the package.
 
 from __future__ import annotations
 
-import sys
-import types
-from typing import Any
-
+from ..callable_module import make_callable
 from .advice import ExposureAdvice, advise_exposure
 from .core import TrackInterrupted, parse_frame_range, parse_rate, track
 from .kinematics import blur_weights, exposure_motion
@@ -43,10 +40,4 @@ __all__ = [
     "track",
 ]
 
-
-class _CallableModule(types.ModuleType):
-    def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        return track(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule
+make_callable(__name__, "track")

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import StoreError
+from ..strain.track import TRACK_STRAIN_NAMES
 
 __all__ = [
     "CSV_COLUMNS",
@@ -22,21 +23,9 @@ __all__ = [
     "write_track_csv",
 ]
 
-#: The strain columns of a track with strains (docs/strain.md), after :data:`CSV_COLUMNS`.
-STRAIN_CSV_COLUMNS = (
-    "exx",
-    "eyy",
-    "exy",
-    "e1",
-    "e2",
-    "principal_angle",
-    "sigma_exx",
-    "sigma_eyy",
-    "sigma_exy",
-    "sigma_exx_noise",
-    "sigma_exx_blur",
-    "strain_status",
-)
+#: The strain columns of a track with strains (docs/strain.md), after :data:`CSV_COLUMNS`:
+#: the strain stage's variables and their status.
+STRAIN_CSV_COLUMNS = (*TRACK_STRAIN_NAMES, "strain_status")
 
 CSV_COLUMNS = (
     "frame",

@@ -22,7 +22,7 @@ iteration copies the coefficient rows under the subset, filters them with one ho
 and one vertical 4-tap (6-tap) pass (a rigidly translated subset shares one set of tap
 weights) and reduces the five sums in one masked flat loop. Affine reads contiguous row
 slices of the coefficient image and of the reference gradients, with a common-base 5x5
-stencil fast path.
+stencil fast path, 4x4 when the whole warped subset lies in one pixel cell (cubic).
 
 Modules: :mod:`.common` (flags, status codes, records, threads, shared inlined helpers),
 :mod:`.prefilter`, :mod:`.spline`, :mod:`.translation`, :mod:`.affine`, :mod:`.blur`

@@ -1,5 +1,6 @@
 # ruff: noqa: RUF046  (int(math.floor(x)) gives numba an integer index)
-"""IC-GN kernel of the affine shape function (row slices, 5x5 stencil fast path)."""
+"""IC-GN kernel of the affine shape function (row slices, 4x4 and 5x5 stencil fast
+paths)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,9 @@ from .common import (
     OUT_OF_BOUNDS,
     PAD,
     STALL_ITERATIONS,
+    add_row,
     blocks_of,
+    centred_norm,
     compose_inverse_affine,
     example_args,
     run_blocks,
@@ -62,6 +65,39 @@ def _row_affine_fast(
         wya = wys[a]
         for j in range(tw):
             grow[j] += wya[j] * hrow[j]
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _add_pixel(s0, s1, s2, s3, s4, s5, s6, g, gxj, gyj, fj, dx):  # pragma: no cover
+    """A pixel's terms added to a row's sums of g, g^2, gx g, gx g dx, gy g, gy g dx,
+    f g (``g`` the warped current minus the reference mean, masked; ``dx`` its column
+    offset from the POI, px)."""
+    gxg = gxj * g
+    gyg = gyj * g
+    return (
+        s0 + g,
+        s1 + g * g,
+        s2 + gxg,
+        s3 + gxg * dx,
+        s4 + gyg,
+        s5 + gyg * dx,
+        s6 + fj * g,
+    )
+
+
+@nb.njit(inline="always", cache=True)
+def _reference_row(f, gx, gy, r, c0, tw):  # pragma: no cover - compiled
+    """Row ``r`` of the reference and its gradients under a subset: ``tw`` px from column
+    ``c0`` (the padded width; the image arrays carry zero columns on the right)."""
+    return f[r, c0 : c0 + tw], gx[r, c0 : c0 + tw], gy[r, c0 : c0 + tw]
+
+
+@nb.njit(inline="always", cache=True)
+def _row_offsets(p, dy, bx, by):  # pragma: no cover - compiled
+    """Warped offsets (x, y) of the subset row ``dy`` at its centre column past the
+    integer base ``(bx, by)``, px, float32 (the row's pixels add ``p[1] dx``,
+    ``p[4] dx``)."""
+    return np.float32(p[0] + p[2] * dy - bx), np.float32(p[3] + p[5] * dy - by)
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
@@ -114,18 +150,9 @@ def _subset_affine_cubic(
         b2 = coef[rb + 2, cb : cb + tw + 4]
         b3 = coef[rb + 3, cb : cb + tw + 4]
         b4 = coef[rb + 4, cb : cb + tw + 4]
-        fr = f[r0 + i, c0 : c0 + tw]
-        gxr = gx[r0 + i, c0 : c0 + tw]
-        gyr = gy[r0 + i, c0 : c0 + tw]
-        tx0 = np.float32(p[0] + p[2] * dy - bx)
-        ty0 = np.float32(p[3] + p[5] * dy - by)
-        s0 = np.float32(0.0)
-        s1 = np.float32(0.0)
-        s2 = np.float32(0.0)
-        s3 = np.float32(0.0)
-        s4 = np.float32(0.0)
-        s5 = np.float32(0.0)
-        s6 = np.float32(0.0)
+        fr, gxr, gyr = _reference_row(f, gx, gy, r0 + i, c0, tw)
+        tx0, ty0 = _row_offsets(p, dy, bx, by)
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
         for j in range(tw):
             x0, x1, x2, x3, x4 = _w5(tx0 + p1 * dxs[j])
             y0, y1, y2, y3, y4 = _w5(ty0 + p4 * dxs[j])
@@ -135,24 +162,72 @@ def _subset_affine_cubic(
             h3 = x0 * b3[j] + x1 * b3[j + 1] + x2 * b3[j + 2] + x3 * b3[j + 3] + x4 * b3[j + 4]
             h4 = x0 * b4[j] + x1 * b4[j + 1] + x2 * b4[j + 2] + x3 * b4[j + 3] + x4 * b4[j + 4]
             g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 + y4 * h4 - off) * mask[j]
-            gxg = gxr[j] * g
-            gyg = gyr[j] * g
-            s0 += g
-            s1 += g * g
-            s2 += gxg
-            s3 += gxg * dxs[j]
-            s4 += gyg
-            s5 += gyg * dxs[j]
-            s6 += fr[j] * g
+            s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
+                s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
+            )
         sg += float(s0)
         sgg += float(s1)
-        q[0] += s2
-        q[1] += s3
-        q[2] += s2 * dy
-        q[3] += s4
-        q[4] += s5
-        q[5] += s4 * dy
         sf += float(s6)
+        add_row(q, s2, s3, s4, s5, dy)
+    return sg, sgg, sf
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _w4(u):  # pragma: no cover - compiled
+    """Cubic weights of taps -1..2 for an offset u in [0, 1) (:func:`_w5` at ``t < 1``)."""
+    u2 = u * u
+    u3 = u2 * u
+    v = np.float32(1.0) - u
+    w0 = v * v * v * np.float32(1.0 / 6.0)
+    w1 = np.float32(2.0 / 3.0) - u2 + np.float32(0.5) * u3
+    w2 = (np.float32(1.0) + np.float32(3.0) * (u + u2 - u3)) * np.float32(1.0 / 6.0)
+    w3 = u3 * np.float32(1.0 / 6.0)
+    return w0, w1, w2, w3
+
+
+@nb.njit(fastmath=FASTMATH, cache=True)
+def _subset_affine_cubic4(
+    coef, p, bx, by, half, r0, c0, dxs, off, mask, f, gx, gy, q
+):  # pragma: no cover
+    """:func:`_subset_affine_cubic` of a subset whose warped pixels all lie in one pixel
+    cell past the integer base ``(bx, by)`` (offsets in [0, 1) along x and along y): the
+    4x4 taps that ``_w5`` weights non-zero, weights ``_w4``, the zero tap left out (16
+    products for the interpolant instead of 25 and no blend of two weight sets). Nearly
+    every subset of a field whose warp spans a small fraction of a pixel takes it. A
+    function of its own: inlined beside the 5x5 loop its loop spilled registers."""
+    tw = mask.shape[0]
+    size = 2 * half + 1
+    p1 = np.float32(p[1])
+    p4 = np.float32(p[4])
+    sg = 0.0
+    sgg = 0.0
+    sf = 0.0
+    cb = c0 + bx - 1 + PAD  # cubic: taps from base - 1
+    for i in range(size):
+        dy = i - half
+        rb = r0 + i + by - 1 + PAD
+        b0 = coef[rb, cb : cb + tw + 3]
+        b1 = coef[rb + 1, cb : cb + tw + 3]
+        b2 = coef[rb + 2, cb : cb + tw + 3]
+        b3 = coef[rb + 3, cb : cb + tw + 3]
+        fr, gxr, gyr = _reference_row(f, gx, gy, r0 + i, c0, tw)
+        tx0, ty0 = _row_offsets(p, dy, bx, by)
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
+        for j in range(tw):
+            x0, x1, x2, x3 = _w4(tx0 + p1 * dxs[j])
+            y0, y1, y2, y3 = _w4(ty0 + p4 * dxs[j])
+            h0 = x0 * b0[j] + x1 * b0[j + 1] + x2 * b0[j + 2] + x3 * b0[j + 3]
+            h1 = x0 * b1[j] + x1 * b1[j + 1] + x2 * b1[j + 2] + x3 * b1[j + 3]
+            h2 = x0 * b2[j] + x1 * b2[j + 1] + x2 * b2[j + 2] + x3 * b2[j + 3]
+            h3 = x0 * b3[j] + x1 * b3[j + 1] + x2 * b3[j + 2] + x3 * b3[j + 3]
+            g = (y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3 - off) * mask[j]
+            s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
+                s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
+            )
+        sg += float(s0)
+        sgg += float(s1)
+        sf += float(s6)
+        add_row(q, s2, s3, s4, s5, dy)
     return sg, sgg, sf
 
 
@@ -160,27 +235,13 @@ def _subset_affine_cubic(
 def _acc9(grow, off, mask, dxs, f, gx, gy, r, c0):  # pragma: no cover
     """Row sums of g, g^2, gx g, gx g dx, gy g, gy g dx, f g (the dy terms follow)."""
     tw = grow.shape[0]
-    fr = f[r, c0 : c0 + tw]
-    gxr = gx[r, c0 : c0 + tw]
-    gyr = gy[r, c0 : c0 + tw]
-    s0 = np.float32(0.0)
-    s1 = np.float32(0.0)
-    s2 = np.float32(0.0)
-    s3 = np.float32(0.0)
-    s4 = np.float32(0.0)
-    s5 = np.float32(0.0)
-    s6 = np.float32(0.0)
+    fr, gxr, gyr = _reference_row(f, gx, gy, r, c0, tw)
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = np.float32(0.0)
     for j in range(tw):
         g = (grow[j] - off) * mask[j]
-        gxg = gxr[j] * g
-        gyg = gyr[j] * g
-        s0 += g
-        s1 += g * g
-        s2 += gxg
-        s3 += gxg * dxs[j]
-        s4 += gyg
-        s5 += gyg * dxs[j]
-        s6 += fr[j] * g
+        s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
+            s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
+        )
     return s0, s1, s2, s3, s4, s5, s6
 
 
@@ -217,6 +278,11 @@ def _aitken_gain6(d, prev, half):  # pragma: no cover - compiled
     return 1.0, rho, ratio
 
 
+#: A subset takes the 4x4 stencil (:func:`_subset_affine_cubic4`) when its warped offsets
+#: past the integer base stay below this (px): a margin for the float32 rounding of the
+#: per-pixel offsets, which must stay below 1.
+CELL = 0.999
+
 #: POIs per chunk of :func:`_affine_points` (its ``chunk``: scratch arrays per chunk).
 CHUNK = 16
 
@@ -233,8 +299,10 @@ def icgn_affine(
     Fast path: when the sub-pixel offsets ``x' - x`` (and ``y' - y``) of all subset pixels
     span less than one pixel, one integer base covers the subset and every sample reads
     the same ``(order+2) x (order+2)`` stencil (5x5 for cubic) at contiguous memory,
-    with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises.
-    Otherwise each pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
+    with per-pixel weights ``beta(t - k)``, ``t`` in [0, 2): the row loop vectorises;
+    cubic, when the offsets past the base all stay below :data:`CELL` along both axes,
+    only the 4x4 taps that carry weight (:func:`_subset_affine_cubic4`). Otherwise each
+    pixel is sampled on its own 4x4 (6x6) taps. Layout and records as in
     :func:`icgn_translation` (``cfg.width`` = ``tw``, a multiple of 8 >= subset); ``p0``
     (n, 6), ``status_in`` (n,).
 
@@ -345,7 +413,11 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                 sf = 0.0
                 for m in range(6):
                     q[m] = 0.0
-                if rowfast and order == 3:
+                if fast and order == 3 and oxmax < bx + CELL and oymax < by + CELL:
+                    sg, sgg, sf = _subset_affine_cubic4(
+                        coef, p, bx, by, half, r0, c0, dxs, off, mask, f, gx, gy, q
+                    )
+                elif rowfast and order == 3:
                     sg, sgg, sf = _subset_affine_cubic(
                         coef, p, fast, bx, by, half, r0, c0, dxs, off, mask, f, gx, gy, q
                     )
@@ -392,19 +464,12 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                         )
                         sg += t0s
                         sgg += t1s
-                        q[0] += t2s
-                        q[1] += t3s
-                        q[2] += t2s * dy
-                        q[3] += t4s
-                        q[4] += t5s
-                        q[5] += t4s * dy
                         sf += t6s
-                gm = sg / npx
-                dg2 = sgg - npx * gm * gm
-                if not dg2 > 1e-12 * (sgg + 1e-30):
+                        add_row(q, t2s, t3s, t4s, t5s, dy)
+                gm, dg = centred_norm(sg, sgg, npx)
+                if dg == 0.0:
                     st = DIVERGED
                     break
-                dg = math.sqrt(dg2)
                 zn = (sf - fmean[k] * sg) / (fnorm[k] * dg)
                 for m in range(6):
                     q[m] = ((q[m] - jsum[k, m] * gm) / dg - avec[k, m] * zn) / fnorm[k]

@@ -25,7 +25,16 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-from .common import CONVERGED, DIVERGED, MAX_ITERATIONS, OUT_OF_BOUNDS, PAD, compose_inverse_affine
+from .common import (
+    CONVERGED,
+    DIVERGED,
+    MAX_ITERATIONS,
+    OUT_OF_BOUNDS,
+    PAD,
+    add_row,
+    centred_norm,
+    compose_inverse_affine,
+)
 from .spline import beta5
 
 __all__ = [
@@ -318,22 +327,15 @@ def joint_blur_step(
                 sgg += s_gg
                 sfg += s_fg
                 if affine:
-                    q[0] += s_x
-                    q[1] += s_xd
-                    q[2] += s_x * dyo
-                    q[3] += s_y
-                    q[4] += s_yd
-                    q[5] += s_y * dyo
+                    add_row(q, s_x, s_xd, s_y, s_yd, dyo)
                 else:
                     q[0] += s_x
                     q[1] += s_y
                 q[k] += s_d
-            gm = sg / npx
-            dg2 = sgg - npx * gm * gm
-            if not dg2 > 1e-12 * (sgg + 1e-30):
+            gm, dg = centred_norm(sg, sgg, npx)
+            if dg == 0.0:
                 st = DIVERGED
                 break
-            dg = math.sqrt(dg2)
             nf2 = df * df + 2.0 * lam * df * bval[pt] + lam * lam * dd[pt]
             if not nf2 > 0.0:
                 st = DIVERGED

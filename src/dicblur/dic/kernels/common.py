@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Callable
@@ -40,7 +41,9 @@ __all__ = [
     "ReferenceImages",
     "Settings",
     "Subsets",
+    "add_row",
     "blocks_of",
+    "centred_norm",
     "compose_inverse_affine",
     "example_args",
     "run_blocks",
@@ -88,6 +91,32 @@ GAIN_MIN = 0.1
 # of a campaign runs cached code: run_campaign compiles a cold cache in a subprocess first
 # (dicblur.dic.cache.compile_kernels), which keeps resumed campaigns bit-identical.
 FASTMATH = {"contract", "arcp", "nsz", "reassoc", "afn"}  # a set: numba takes no frozenset
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def add_row(q, s2, s3, s4, s5, dy):  # pragma: no cover - compiled
+    """A subset row's sums ``s2 = sum gx g``, ``s3 = sum gx g dx``, ``s4 = sum gy g``,
+    ``s5 = sum gy g dx`` added to the six affine steepest-descent sums ``q`` in place
+    (``dy``: the row's offset from the POI, px, the weight of the du/dy, dv/dy terms)."""
+    q[0] += s2
+    q[1] += s3
+    q[2] += s2 * dy
+    q[3] += s4
+    q[4] += s5
+    q[5] += s4 * dy
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def centred_norm(sg, sgg, npx):  # pragma: no cover - compiled
+    """Mean and centred norm ``sqrt(sum (g - gm)^2)`` of a warped subset of ``npx``
+    pixels from its sums ``sg = sum g`` and ``sgg = sum g^2`` (GL): the ZNSSD
+    normalisation of the current subset. The norm is 0 (the POI is ``DIVERGED``) when
+    the subset is flat or the difference is lost to rounding."""
+    gm = sg / npx
+    dg2 = sgg - npx * gm * gm
+    if not dg2 > 1e-12 * (sgg + 1e-30):
+        return gm, 0.0
+    return gm, math.sqrt(dg2)
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)

@@ -34,6 +34,62 @@ def _gain(poles):  # pragma: no cover - compiled
     return gain
 
 
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _pole_pass(x, j0, j1, z, gn, tol, s):  # pragma: no cover - compiled
+    """One pole ``z`` of the prefilter down the rows of ``x[:, j0:j1]`` in place (the
+    columns side by side: vectorised across them): the causal recursion, from its
+    mirror-boundary initial value (truncated at ``tol``, or exact for a short column),
+    scaled by ``gn`` (the overall gain, folded into the first pole's pass), then the
+    anticausal one. ``s``: float64 scratch of at least ``j1 - j0``."""
+    n = x.shape[0]
+    w = j1 - j0
+    horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
+    for j in range(w):
+        s[j] = 0.0
+    if horizon < n:
+        zk = 1.0
+        for k in range(horizon):
+            xr = x[k, j0:j1]
+            for j in range(w):
+                s[j] += zk * xr[j]
+            zk *= z
+    else:
+        # exact mirror-symmetric initialisation (Unser 1999; Thevenaz's coeff.c)
+        zn = z
+        iz = 1.0 / z
+        z2n = z ** (n - 1)
+        for j in range(w):
+            s[j] = x[0, j0 + j] + z2n * x[n - 1, j0 + j]
+        z2n = z2n * z2n * iz
+        for k in range(1, n - 1):
+            for j in range(w):
+                s[j] += (zn + z2n) * x[k, j0 + j]
+            zn *= z
+            z2n *= iz
+        for j in range(w):
+            s[j] /= 1.0 - zn * zn
+    # row slices: loop indices from range(w) are known non-negative, so the
+    # loops vectorise (no wraparound selects)
+    xr = x[0, j0:j1]
+    for j in range(w):
+        xr[j] = gn * s[j]
+    for r in range(1, n):
+        xp = x[r - 1, j0:j1]
+        xr = x[r, j0:j1]
+        for j in range(w):
+            xr[j] = gn * xr[j] + z * xp[j]
+    c = z / (z * z - 1.0)
+    xr = x[n - 1, j0:j1]
+    xp = x[n - 2, j0:j1]
+    for j in range(w):
+        xr[j] = c * (xr[j] + z * xp[j])
+    for r in range(n - 2, -1, -1):
+        xp = x[r + 1, j0:j1]
+        xr = x[r, j0:j1]
+        for j in range(w):
+            xr[j] = z * (xp[j] - xr[j])
+
+
 @nb.njit(fastmath=FASTMATH, cache=True, nogil=True)
 def _columns_block(x, c0, c1, poles, tol, gain):  # pragma: no cover - compiled
     """In-place B-spline prefilter of the columns ``c0:c1`` of ``x``, in blocks of
@@ -41,59 +97,13 @@ def _columns_block(x, c0, c1, poles, tol, gain):  # pragma: no cover - compiled
     (whole-sample symmetric) boundary. Releases the GIL."""
     for j0 in range(c0, c1, _COLS):
         j1 = min(c1, j0 + _COLS)
-        n = x.shape[0]
-        w = j1 - j0
-        s = np.zeros(w, dtype=np.float64)
+        s = np.empty(j1 - j0, dtype=np.float64)
         first = True
         for z in poles:
             # the overall gain is folded into the first causal pass (one sweep less)
             gn = gain if first else 1.0
             first = False
-            horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
-            for j in range(w):
-                s[j] = 0.0
-            if horizon < n:
-                zk = 1.0
-                for k in range(horizon):
-                    xr = x[k, j0:j1]
-                    for j in range(w):
-                        s[j] += zk * xr[j]
-                    zk *= z
-            else:
-                # exact mirror-symmetric initialisation (Unser 1999; Thevenaz's coeff.c)
-                zn = z
-                iz = 1.0 / z
-                z2n = z ** (n - 1)
-                for j in range(w):
-                    s[j] = x[0, j0 + j] + z2n * x[n - 1, j0 + j]
-                z2n = z2n * z2n * iz
-                for k in range(1, n - 1):
-                    for j in range(w):
-                        s[j] += (zn + z2n) * x[k, j0 + j]
-                    zn *= z
-                    z2n *= iz
-                for j in range(w):
-                    s[j] /= 1.0 - zn * zn
-            # row slices: loop indices from range(w) are known non-negative, so the
-            # loops vectorise (no wraparound selects)
-            xr = x[0, j0:j1]
-            for j in range(w):
-                xr[j] = gn * s[j]
-            for r in range(1, n):
-                xp = x[r - 1, j0:j1]
-                xr = x[r, j0:j1]
-                for j in range(w):
-                    xr[j] = gn * xr[j] + z * xp[j]
-            c = z / (z * z - 1.0)
-            xr = x[n - 1, j0:j1]
-            xp = x[n - 2, j0:j1]
-            for j in range(w):
-                xr[j] = c * (xr[j] + z * xp[j])
-            for r in range(n - 2, -1, -1):
-                xp = x[r + 1, j0:j1]
-                xr = x[r, j0:j1]
-                for j in range(w):
-                    xr[j] = z * (xp[j] - xr[j])
+            _pole_pass(x, j0, j1, z, gn, tol, s)
 
 
 @nb.njit(fastmath=FASTMATH, cache=True, nogil=True)
@@ -121,44 +131,12 @@ def _rows_block(src, dst, b0, b1, poles, tol, gain):  # pragma: no cover - compi
             for c in range(n):
                 t[c, r] = row[c]
         if n > 1:
+            s = np.empty(bh, dtype=np.float64)
             first = True
             for z in poles:
                 gn = gain if first else 1.0
                 first = False
-                horizon = int(math.ceil(math.log(tol) / math.log(abs(z))))
-                s = np.zeros(bh, dtype=np.float64)
-                if horizon < n:
-                    zk = 1.0
-                    for k in range(horizon):
-                        for r in range(bh):
-                            s[r] += zk * t[k, r]
-                        zk *= z
-                else:
-                    # exact mirror-symmetric initialisation (Unser 1999; Thevenaz's coeff.c)
-                    zn = z
-                    iz = 1.0 / z
-                    z2n = z ** (n - 1)
-                    for r in range(bh):
-                        s[r] = t[0, r] + z2n * t[n - 1, r]
-                    z2n = z2n * z2n * iz
-                    for k in range(1, n - 1):
-                        for r in range(bh):
-                            s[r] += (zn + z2n) * t[k, r]
-                        zn *= z
-                        z2n *= iz
-                    for r in range(bh):
-                        s[r] /= 1.0 - zn * zn
-                for r in range(bh):
-                    t[0, r] = gn * s[r]
-                for c in range(1, n):
-                    for r in range(bh):
-                        t[c, r] = gn * t[c, r] + z * t[c - 1, r]
-                cc = z / (z * z - 1.0)
-                for r in range(bh):
-                    t[n - 1, r] = cc * (t[n - 1, r] + z * t[n - 2, r])
-                for c in range(n - 2, -1, -1):
-                    for r in range(bh):
-                        t[c, r] = z * (t[c + 1, r] - t[c, r])
+                _pole_pass(t, 0, bh, z, gn, tol, s)
         for r in range(0, h4, 4):
             a0, a1, a2, a3 = dst[r0 + r], dst[r0 + r + 1], dst[r0 + r + 2], dst[r0 + r + 3]
             for c in range(n):

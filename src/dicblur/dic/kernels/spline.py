@@ -11,18 +11,26 @@ import numpy as np
 
 from .common import FASTMATH, PAD
 
-__all__ = ["beta", "beta3d", "beta5", "sample", "weights", "weights3", "weights_into"]
+__all__ = ["beta", "beta3d", "beta5", "cubic4", "sample", "weights", "weights3", "weights_into"]
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def cubic4(t):  # pragma: no cover - compiled
+    """Cubic B-spline weights of the taps -1..2 at the fractional offset t in [0, 1)."""
+    t2 = t * t
+    t3 = t2 * t
+    s = 1.0 - t
+    return (
+        s * s * s / 6.0,
+        2.0 / 3.0 - t2 + 0.5 * t3,
+        (1.0 + 3.0 * t + 3.0 * t2 - 3.0 * t3) / 6.0,
+        t3 / 6.0,
+    )
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
 def weights3(t, w):  # pragma: no cover - compiled
-    t2 = t * t
-    t3 = t2 * t
-    s = 1.0 - t
-    w[0] = s * s * s / 6.0
-    w[1] = 2.0 / 3.0 - t2 + 0.5 * t3
-    w[2] = (1.0 + 3.0 * t + 3.0 * t2 - 3.0 * t3) / 6.0
-    w[3] = t3 / 6.0
+    w[0], w[1], w[2], w[3] = cubic4(t)
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
@@ -92,6 +100,33 @@ def sample(coef, order, y, x):  # pragma: no cover - compiled
     iy = int(math.floor(y))
     tx = x - ix
     ty = y - iy
+    if order == 3:
+        # each axis's 4 weights once (not 4 x 4 truncated powers per sample): 3.2 -> 2.1 us
+        # per POI-iteration of the strained subsets that take this path
+        x0, x1, x2, x3 = cubic4(tx)
+        y0, y1, y2, y3 = cubic4(ty)
+        r = iy - 1 + PAD
+        c = ix - 1 + PAD
+        h0 = x0 * coef[r, c] + x1 * coef[r, c + 1] + x2 * coef[r, c + 2] + x3 * coef[r, c + 3]
+        h1 = (
+            x0 * coef[r + 1, c]
+            + x1 * coef[r + 1, c + 1]
+            + x2 * coef[r + 1, c + 2]
+            + x3 * coef[r + 1, c + 3]
+        )
+        h2 = (
+            x0 * coef[r + 2, c]
+            + x1 * coef[r + 2, c + 1]
+            + x2 * coef[r + 2, c + 2]
+            + x3 * coef[r + 2, c + 3]
+        )
+        h3 = (
+            x0 * coef[r + 3, c]
+            + x1 * coef[r + 3, c + 1]
+            + x2 * coef[r + 3, c + 2]
+            + x3 * coef[r + 3, c + 3]
+        )
+        return y0 * h0 + y1 * h1 + y2 * h2 + y3 * h3
     g = 0.0
     for a in range(taps):
         wy = beta5(ty - (a - lo)) if order == 5 else beta3d(ty - (a - lo))

@@ -21,6 +21,7 @@ from .common import (
     STALL_ITERATIONS,
     Packed,
     Passes,
+    centred_norm,
     example_args,
 )
 from .spline import weights_into
@@ -350,12 +351,10 @@ def _point_translation(
             gxp,
             gyp,
         )
-        gm = sg / npx
-        dg2 = sgg - npx * gm * gm
-        if not dg2 > 1e-12 * (sgg + 1e-30):
+        gm, dg = centred_norm(sg, sgg, npx)
+        if dg == 0.0:
             st = DIVERGED
             break
-        dg = math.sqrt(dg2)
         zn = sfc / (fnorm[k] * dg)
         q0 = ((sx - jsum[k, 0] * gm) / dg - avec[k, 0] * zn) / fnorm[k]
         q1 = ((sy - jsum[k, 1] * gm) / dg - avec[k, 1] * zn) / fnorm[k]

@@ -51,25 +51,33 @@ instead of 26-39 positionals.
 
 from __future__ import annotations
 
-from .affine import icgn_affine
-from .common import (
-    GAIN_MIN,
-    JUMP_SLACK,
-    PAD,
-    STALL_ITERATIONS,
-    Outputs,
-    Packed,
-    Passes,
-    ReferenceImages,
-    Settings,
-    Subsets,
-    compose_inverse_affine,
-    outputs,
-    settings,
-)
-from .prefilter import prefilter_padded
-from .spline import weights
-from .translation import flat_lengths, flat_width, icgn_translation, pack_reference
+from pathlib import Path
+
+from .source_key import keyed_cache
+
+# Every kernel module is imported here, inside the keyed cache: their decorators choose the
+# cache directory, and a module imported directly still runs this file first.
+with keyed_cache(Path(__file__).parent):
+    from . import blur  # noqa: F401  (the compensated matcher's kernels: keyed too)
+    from .affine import icgn_affine
+    from .common import (
+        GAIN_MIN,
+        JUMP_SLACK,
+        PAD,
+        STALL_ITERATIONS,
+        Outputs,
+        Packed,
+        Passes,
+        ReferenceImages,
+        Settings,
+        Subsets,
+        compose_inverse_affine,
+        outputs,
+        settings,
+    )
+    from .prefilter import prefilter_padded
+    from .spline import weights
+    from .translation import flat_lengths, flat_width, icgn_translation, pack_reference
 
 __all__ = [
     "GAIN_MIN",

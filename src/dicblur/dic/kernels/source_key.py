@@ -20,6 +20,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 __all__ = ["keyed_cache", "source_key"]
 
@@ -83,8 +84,9 @@ def keyed_cache(package: Path) -> Iterator[Path | None]:
     affected. Yields the directory, or None when no writable place was found (numba's
     own default then applies).
     """
-    from numba.core import config
+    from numba.core import config as numba_config
 
+    config: Any = numba_config  # its settings are set at run time, untyped
     user_dir = config.CACHE_DIR
     root = _cache_root(package, source_key(package), user_dir)
     if root is None:

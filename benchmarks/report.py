@@ -244,6 +244,12 @@ def render_screening(doc: Doc) -> Lines:
         f"unflagged gross <= {fmt(gross)} %",
         f"correct flagged <= {fmt(flagged)} %",
         *(f"{k} POI/CPU-s vs clean {fmt(min(v))}-{fmt(max(v))}" for k, v in speed.items()),
+        # issue 26's absolute targets, on the blob image
+        *(
+            f"{t['shape']} on blobs {t['poi_per_s'] / 1e3:.0f}k POI/s, "
+            f"{t['poi_per_cpu_s'] / 1e3:.0f}k per CPU-s (target {t['target'] / 1e3:.0f}k)"
+            for t in doc.get("targets", [])
+        ),
     ]
     return ["| " + " | ".join(cells) + " |", "|" + "---|" * len(cells)]
 

@@ -10,17 +10,18 @@ from dicblur.errors import InputError
 from dicblur.models import static_terms
 from dicblur.models.reference_terms import ReferenceTerms
 from dicblur.models.sensitivity import shifts_and_variance
+from dicblur.models.subset_algebra import SubsetMatcher
 from dicblur.patterns import paper_pattern4
 
 
 def _run(img, reference, offset):
     pts = np.array([[r, c] for r in range(16, 64, 12) for c in range(16, 64, 12)])
-    kw = dict(motion=(0.0, 1.0), shape="translation", derivative="bspline3")
+    matcher = SubsetMatcher((0.0, 1.0), "translation", "bspline3", "reflect")
     lam = np.empty((3, len(pts)))
     xi, var = shifts_and_variance(
-        img, [0.0, 1.5, 3.0], pts, 15, boundary="reflect", criterion="znssd", max_shift=1.0,
+        img, [0.0, 1.5, 3.0], pts, 15, matcher, criterion="znssd", max_shift=1.0,
         chunk=7, variance=True, offset=offset, min_contraction=0.02, contraction_out=lam,
-        reference=reference, **kw,
+        reference=reference,
     )  # fmt: skip
     return xi, var, lam
 

@@ -148,16 +148,14 @@ def noise_variance_terms(
     shift limit): ``complete=False`` is the earlier first-order formula (reference
     intensities only) that the complete noise term (issue 14, item 4) replaced."""
     from dicblur.models.sensitivity import shifts_and_variance
+    from dicblur.models.subset_algebra import SubsetMatcher
 
     var = shifts_and_variance(
         image,
         blur,
         points,
         subset,
-        motion=(0.0, 1.0),
-        shape="translation",
-        derivative="bspline3",
-        boundary=boundary,
+        SubsetMatcher((0.0, 1.0), "translation", "bspline3", boundary),
         criterion="znssd",
         max_shift=np.inf,
         chunk=256,

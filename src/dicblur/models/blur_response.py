@@ -68,8 +68,10 @@ def subset_blur_response(
         Sharp reference image, grey levels.
     blur : array_like, shape (m,)
         Blur lengths ``W`` (px, >= 0) of a centred box along ``motion``.
-    centres, subset, motion, shape, derivative, boundary
+    centres, subset
         As for :func:`subset_blur_coefficients`.
+    motion, shape, derivative, boundary
+        The matcher, as the fields of :class:`~dicblur.models.subset_algebra.SubsetMatcher`.
     max_shift : float
         Breakdown threshold (px) on the linearised shift vector (NaN beyond).
     complete : bool

@@ -26,7 +26,7 @@ from ..errors import InputError
 from ..metrics import resolve_points
 from .derivatives import Boundary, Derivative, unit_direction
 from .sensitivity import subset_blur_coefficients, subset_blur_shifts
-from .subset_algebra import Criterion, Shape
+from .subset_algebra import Criterion, Shape, SubsetMatcher
 
 __all__ = [
     "BlurMismatchCurve",
@@ -136,16 +136,8 @@ def blur_sensitivity(
     BlurSensitivity
     """
     img, subset, pts = subset_inputs(image, subset, step, points, boundary)
-    k = subset_blur_coefficients(
-        img,
-        pts,
-        subset,
-        motion=motion,
-        shape=shape,
-        derivative=derivative,
-        boundary=boundary,
-        criterion=criterion,
-    )
+    matcher = SubsetMatcher(motion, shape, derivative, boundary)
+    k = subset_blur_coefficients(img, pts, subset, matcher, criterion=criterion)
     good = k[np.isfinite(k)]
     if good.size < 2:
         raise InputError(
@@ -258,18 +250,9 @@ def blur_mismatch_curve(
     w = as_blur(blur, "blur", increasing=False)
     max_shift = check_positive(max_shift, "max_shift")
     offset = None if subpixel is None else check_subpixel(subpixel)
+    matcher = SubsetMatcher(motion, shape, derivative, boundary)
     xi = subset_blur_shifts(
-        img,
-        w,
-        pts,
-        subset,
-        motion=motion,
-        shape=shape,
-        derivative=derivative,
-        boundary=boundary,
-        criterion=criterion,
-        max_shift=max_shift,
-        offset=offset,
+        img, w, pts, subset, matcher, criterion=criterion, max_shift=max_shift, offset=offset
     )
     good = np.isfinite(xi)
     count = good.sum(axis=1)

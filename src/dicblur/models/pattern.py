@@ -217,6 +217,7 @@ def _terms(
             w,
             pts,
             subset,
+            matcher,
             criterion="znssd",
             max_shift=max_shift,
             chunk=256,
@@ -225,7 +226,6 @@ def _terms(
             min_contraction=min(DEGENERATE, min_contraction),
             contraction_out=lams[i],
             reference=ref,
-            **matcher.keywords(),
         )
         for i, o in enumerate(offs)
     ]

@@ -50,23 +50,21 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import InputError
 from .blur_response import subset_blur_response as subset_blur_response
 from .blur_response import subset_skew_coefficients as subset_skew_coefficients
+from .derivatives import box_blurred as box_blurred
 from .derivatives import (
-    Boundary,
-    Derivative,
     check_derivative,
     derivative_kernel,
     directional_derivatives,
     interpolated_noise_covariance,
     unit_direction,
 )
-from .derivatives import box_blurred as box_blurred
 from .derivatives import image_spectrum as image_spectrum
 from .derivatives import spectral_derivatives as spectral_derivatives
 from .derivatives import spline_gradients as spline_gradients
 from .reference_terms import ReferenceTerms
 from .subset_algebra import (
+    ENGINE_MATCHER,
     Criterion,
-    Shape,
     SubsetMatcher,
     Windows,
     along_motion,
@@ -102,11 +100,8 @@ def subset_blur_coefficients(
     image: NDArray[np.float64],
     centres: NDArray[np.intp],
     subset: int,
+    matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
-    motion: tuple[float, float] = (0.0, 1.0),
-    shape: Shape = "translation",
-    derivative: Derivative = "bspline3",
-    boundary: Boundary = "reflect",
     criterion: Criterion = "znssd",
     chunk: int = 256,
 ) -> NDArray[np.float64]:
@@ -124,10 +119,10 @@ def subset_blur_coefficients(
         Subset centres (row, col); each subset must lie inside the image.
     subset : int
         Odd subset size, px.
-    motion, derivative, boundary
-        See :func:`directional_derivatives`.
-    shape : {"translation", "affine"}
-        Shape function of the matcher.
+    matcher : SubsetMatcher
+        The matcher's motion direction and shape function, and the gradients' derivative
+        and boundary (see :func:`directional_derivatives`); default the DIC engine's
+        translation matcher, motion along x.
     criterion : {"znssd", "ssd"}
         Matching criterion: ZNSSD (the engine's; projects off the intensity offset and
         scale) or plain SSD.
@@ -137,10 +132,13 @@ def subset_blur_coefficients(
     ndarray, shape (n,)
         ``k_i``; ``nan`` where the subset has no gradient (singular normal matrix).
     """
+    shape = matcher.shape
     check_shape(shape)
     check_criterion(criterion)
-    dy, dx = unit_direction(motion)
-    fy, fx, fdd = directional_derivatives(image, motion, derivative=derivative, boundary=boundary)
+    dy, dx = unit_direction(matcher.motion)
+    fy, fx, fdd = directional_derivatives(
+        image, matcher.motion, derivative=matcher.derivative, boundary=matcher.boundary
+    )
     win = Windows(subset, fx, fy, fdd, image)
     out = np.empty(len(centres))
     for start in range(0, len(centres), chunk):
@@ -162,11 +160,8 @@ def subset_blur_shifts(
     blur: NDArray[np.float64],
     centres: NDArray[np.intp],
     subset: int,
+    matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
-    motion: tuple[float, float] = (0.0, 1.0),
-    shape: Shape = "translation",
-    derivative: Derivative = "bspline3",
-    boundary: Boundary = "reflect",
     criterion: Criterion = "znssd",
     max_shift: float = 1.0,
     chunk: int = 256,
@@ -190,7 +185,7 @@ def subset_blur_shifts(
         Sharp reference image, grey levels.
     blur : ndarray, shape (m,)
         Blur lengths ``W`` (px, >= 0).
-    centres, subset, motion, shape, derivative, boundary, criterion
+    centres, subset, matcher, criterion
         As for :func:`subset_blur_coefficients`.
     max_shift : float
         Breakdown threshold (px): a subset whose linearised shift vector is longer is
@@ -217,10 +212,7 @@ def subset_blur_shifts(
         blur,
         centres,
         subset,
-        motion=motion,
-        shape=shape,
-        derivative=derivative,
-        boundary=boundary,
+        matcher,
         criterion=criterion,
         max_shift=max_shift,
         chunk=chunk,
@@ -234,11 +226,8 @@ def shifts_and_variance(
     blur: ArrayLike,
     centres: NDArray[np.intp],
     subset: int,
+    matcher: SubsetMatcher,
     *,
-    motion: tuple[float, float],
-    shape: Shape,
-    derivative: Derivative,
-    boundary: Boundary,
     criterion: Criterion,
     max_shift: float,
     chunk: int,
@@ -263,9 +252,10 @@ def shifts_and_variance(
     ``contraction_out``, shape (m, n): filled with the contraction of every subset.
     ``reference``: a :class:`~dicblur.models.reference_terms.ReferenceTerms` that keeps the
     reference's terms across blur lengths and calls (same numbers, less work)."""
+    shape, derivative = matcher.shape, matcher.derivative
     check_shape(shape)
     check_derivative(derivative)
-    dy, dx = unit_direction(motion)
+    dy, dx = unit_direction(matcher.motion)
     w = np.asarray(blur, dtype=np.float64)
     shifts = np.zeros((len(w), len(centres)))
     var = np.full((3, len(w), len(centres)), np.nan) if variance else None
@@ -315,7 +305,6 @@ def shifts_and_variance(
     if reference is not None:
         reference.bind(image, centres, subset, shape, derivative, chunk)
     ref_terms: tuple[Any, ...] | None = None
-    matcher = SubsetMatcher(motion, shape, derivative, boundary)
     for j, start, jf, jg, f, gg in blurred_subsets(
         image, w, centres, subset, matcher, chunk, offset
     ):
@@ -400,11 +389,8 @@ def subset_noise_variance(
     blur: NDArray[np.float64],
     centres: NDArray[np.intp],
     subset: int,
+    matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
-    motion: tuple[float, float] = (0.0, 1.0),
-    shape: Shape = "translation",
-    derivative: Derivative = "bspline3",
-    boundary: Boundary = "reflect",
     chunk: int = 256,
 ) -> NDArray[np.float64]:
     """Per-subset variance of the ZNSSD IC-GN shift along ``motion`` per unit noise variance.
@@ -436,10 +422,7 @@ def subset_noise_variance(
         blur,
         centres,
         subset,
-        motion=motion,
-        shape=shape,
-        derivative=derivative,
-        boundary=boundary,
+        matcher,
         criterion="znssd",
         max_shift=np.inf,
         chunk=chunk,

@@ -7,7 +7,7 @@ blurred subsets, and the reference-noise terms of the matcher's gradients.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -31,7 +31,8 @@ Criterion = Literal["znssd", "ssd"]
 class SubsetMatcher:
     """The matcher a static prediction models, as one record passed down its internal
     layers: the ``motion, shape, derivative, boundary`` keywords of the public functions
-    (:func:`~dicblur.models.predict_from_pattern`, :func:`shifts_and_variance`), unchecked.
+    (:func:`~dicblur.models.predict_from_pattern`, :func:`~dicblur.models.blur_sensitivity`,
+    ...), with their defaults, unchecked.
 
     Attributes
     ----------
@@ -45,14 +46,13 @@ class SubsetMatcher:
         Image extension of the spectral operators.
     """
 
-    motion: tuple[float, float]
-    shape: Shape
-    derivative: Derivative
-    boundary: Boundary
+    motion: tuple[float, float] = (0.0, 1.0)
+    shape: Shape = "translation"
+    derivative: Derivative = "bspline3"
+    boundary: Boundary = "reflect"
 
-    def keywords(self) -> dict[str, Any]:
-        """The record as the keywords of the public functions (``motion=..., ...``)."""
-        return asdict(self)
+
+ENGINE_MATCHER = SubsetMatcher()  # the defaults: the DIC engine's matcher, motion along x
 
 
 def reference_noise_middle(

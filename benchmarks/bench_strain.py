@@ -29,6 +29,7 @@ from scipy import ndimage
 import dicblur
 from dicblur.dic import Correlator, PointStatus
 from dicblur.models.sensitivity import subset_blur_response
+from dicblur.models.subset_algebra import SubsetMatcher
 from dicblur.strain import StrainStatus, gradient_factor, strain_on_grid
 
 SUBSET, STEP, WINDOW = 21, 10, 5
@@ -165,7 +166,7 @@ def blur_factor(pattern, blurs=(2.0, 4.0), windows=(3, 5, 7)):
     centres = np.stack([corr.rows, corr.cols], axis=1).astype(np.intp)
     g = corr.grid_shape
     shift, _, _ = subset_blur_response(
-        pattern, list(blurs), centres, SUBSET, motion=(0.0, 1.0), shape="affine"
+        pattern, list(blurs), centres, SUBSET, SubsetMatcher(shape="affine")
     )
     rows = []
     for m, w in enumerate(blurs):
@@ -265,7 +266,7 @@ def main() -> None:
         for w in blurs:
             # the prediction from the (noise-free) reference, as dicblur track
             response = subset_blur_response(
-                pat, [w], centres, SUBSET, motion=(0.0, 1.0), shape="affine", max_shift=1.0
+                pat, [w], centres, SUBSET, SubsetMatcher(shape="affine"), max_shift=1.0
             )
             for noise in noises:
                 parts = [

@@ -397,6 +397,7 @@ def test_kernel_skew_from_track_and_its_bias():
     (kappa_3 / 6) (J^T P J)^-1 J^T P f_ddd, the same sign for every subset; kappa_3 comes
     from the fitted track."""
     from dicblur.models.sensitivity import subset_skew_coefficients
+    from dicblur.models.subset_algebra import SubsetMatcher
     from dicblur.track.kinematics import exposure_skew
 
     fps, f, a, t = 2000.0, 200.0, 10.0, 0.45e-3
@@ -423,7 +424,7 @@ def test_kernel_skew_from_track_and_its_bias():
     s = s_max * tt**2
     kappa3 = np.mean((s - s.mean()) ** 3)
     pts = np.stack([res.rows, res.cols], axis=1)
-    q = subset_skew_coefficients(img, pts, 21, motion=(0.0, 1.0), shape="affine")
+    q = subset_skew_coefficients(img, pts, 21, SubsetMatcher(shape="affine"))
     ok = res.converged & np.isfinite(q[:, 0])
     meas = np.mean(res.u[ok] - s.mean())
     pred = np.mean(kappa3 * q[ok, 0])
@@ -715,10 +716,11 @@ def test_blur_table_nodes_only_where_the_motion_needs_them():
     np.testing.assert_allclose(more.values, fresh.values, rtol=1e-12, equal_nan=True)
     # W = 0 copied from the first direction is what the second computes itself
     from dicblur.models.sensitivity import subset_blur_response
+    from dicblur.models.subset_algebra import SubsetMatcher
 
     t = np.radians(two.angles[j1])
     _, cov, cov4 = subset_blur_response(
-        img, [0.0], pts, 21, motion=(np.sin(t), np.cos(t)), shape="affine", max_shift=1.0
+        img, [0.0], pts, 21, SubsetMatcher((np.sin(t), np.cos(t)), "affine"), max_shift=1.0
     )
     np.testing.assert_allclose(two.values[j1, 0, :, 2], cov[0, :, 0, 0], rtol=1e-12)
     np.testing.assert_allclose(two.values[j1, 0, :, 5], cov4[0, :, 1, 1], rtol=1e-12)

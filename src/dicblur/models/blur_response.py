@@ -14,8 +14,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..threads import each
 from .derivatives import (
-    Boundary,
-    Derivative,
     blurred_images,
     check_derivative,
     crop,
@@ -26,7 +24,8 @@ from .derivatives import (
     unit_direction,
 )
 from .subset_algebra import (
-    Shape,
+    ENGINE_MATCHER,
+    SubsetMatcher,
     Windows,
     check_shape,
     gram,
@@ -44,11 +43,8 @@ def subset_blur_response(
     blur: ArrayLike,
     centres: NDArray[np.intp],
     subset: int,
+    matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
-    motion: tuple[float, float] = (0.0, 1.0),
-    shape: Shape = "translation",
-    derivative: Derivative = "bspline3",
-    boundary: Boundary = "reflect",
     max_shift: float = 1.0,
     chunk: int = 256,
     complete: bool = True,
@@ -68,10 +64,8 @@ def subset_blur_response(
         Sharp reference image, grey levels.
     blur : array_like, shape (m,)
         Blur lengths ``W`` (px, >= 0) of a centred box along ``motion``.
-    centres, subset
+    centres, subset, matcher
         As for :func:`subset_blur_coefficients`.
-    motion, shape, derivative, boundary
-        The matcher, as the fields of :class:`~dicblur.models.subset_algebra.SubsetMatcher`.
     max_shift : float
         Breakdown threshold (px) on the linearised shift vector (NaN beyond).
     complete : bool
@@ -98,9 +92,10 @@ def subset_blur_response(
         The interaction of the two noises per unit ``sigma**4`` (px**2 / GL**4; zeros
         with ``complete=False``): the variance is ``sigma**2 cov + sigma**4 cov4``.
     """
+    shape, derivative, boundary = matcher.shape, matcher.derivative, matcher.boundary
     check_shape(shape)
     check_derivative(derivative)
-    dy, dx = unit_direction(motion)
+    dy, dx = unit_direction(matcher.motion)
     w = np.asarray(blur, dtype=np.float64)
     n = len(centres)
     shift = np.full((len(w), n, 2), np.nan)
@@ -218,11 +213,8 @@ def subset_skew_coefficients(
     image: NDArray[np.float64],
     centres: NDArray[np.intp],
     subset: int,
+    matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
-    motion: tuple[float, float] = (0.0, 1.0),
-    shape: Shape = "translation",
-    derivative: Derivative = "bspline3",
-    boundary: Boundary = "reflect",
     chunk: int = 256,
     threads: int = 1,
 ) -> NDArray[np.float64]:
@@ -235,12 +227,14 @@ def subset_skew_coefficients(
     linearisation as the ``W**2 / 24`` term of :func:`subset_blur_coefficients`, which is
     ``kappa_2 / 2`` of a box). By parts ``sum f_d f_ddd = -sum f_dd**2``: the shift has
     the same sign in every subset, a common offset of the field. Returns the factor of
-    ``kappa_3``, shape (n, 2) (NaN: no gradient). ``threads``: threads sharing the
-    chunks of ``chunk`` subsets (the same numbers).
+    ``kappa_3``, shape (n, 2) (NaN: no gradient). ``matcher``: as for
+    :func:`subset_blur_coefficients`; ``threads``: threads sharing the chunks of ``chunk``
+    subsets (the same numbers).
     """
+    shape, derivative, boundary = matcher.shape, matcher.derivative, matcher.boundary
     check_shape(shape)
     check_derivative(derivative)
-    dy, dx = unit_direction(motion)
+    dy, dx = unit_direction(matcher.motion)
     rows, cols = image.shape
     ext = extend(image, boundary)
     shp = ext.shape
@@ -253,7 +247,7 @@ def subset_skew_coefficients(
     del k
     fddd = crop(np.fft.irfft2(spec, s=shp), rows, cols)
     del spec
-    fy, fx = matcher_gradients(image, motion, derivative, boundary)
+    fy, fx = matcher_gradients(image, matcher.motion, derivative, boundary)
     win = Windows(subset, fx, fy, fddd, image)
     out = np.full((len(centres), 2), np.nan)
     iv = 1 if shape == "translation" else 3

@@ -104,6 +104,7 @@ def build_skew_table(
     ``|kappa3|`` over the largest: the nearest node alone within 0.05 of it across); the
     nodes and the chunks of subsets on ``threads`` threads."""
     from ..models.blur_response import subset_skew_coefficients
+    from ..models.subset_algebra import SubsetMatcher
 
     ok = np.isfinite(kappa3) & np.isfinite(axis)
     top = float(np.max(np.abs(kappa3[ok]))) if ok.any() else 0.0
@@ -118,8 +119,7 @@ def build_skew_table(
             reference,
             centres,
             subset,
-            motion=direction_motion(angles[j]),
-            shape=shape,  # type: ignore[arg-type]
+            SubsetMatcher(direction_motion(angles[j]), shape),  # type: ignore[arg-type]
             chunk=RESPONSE_CHUNK,
             threads=threads,
         )

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..models.blur_response import subset_blur_response
+from ..models.subset_algebra import SubsetMatcher
 from .directions import ANGLE_STEP as ANGLE_STEP
 from .directions import ANGLE_TOLERANCE_PX as ANGLE_TOLERANCE_PX
 from .directions import BLUR_STEP as BLUR_STEP
@@ -265,8 +266,7 @@ def build_blur_table(
             nodes[todo],
             centres,
             subset,
-            motion=direction_motion(st.angles[j]),
-            shape=shape,  # type: ignore[arg-type]
+            SubsetMatcher(direction_motion(st.angles[j]), shape),  # type: ignore[arg-type]
             max_shift=1.0,
             complete=complete,
             chunk=RESPONSE_CHUNK,

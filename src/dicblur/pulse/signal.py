@@ -311,11 +311,8 @@ def numeric_metrics(
 
     Parameters
     ----------
-    train : PulseTrain
-    w : array_like
-        Box widths, px (> 0).
-    n_periods : float
-        Number of periods in the subset.
+    train, w, n_periods
+        As for :func:`closed_form_metrics`.
     supersample : int
         Cells per px (``du * supersample`` must be an integer).
     """

@@ -134,16 +134,9 @@ def bspline_coefficients(
 def bspline_gradients(
     coeffs: NDArray[np.floating], order: int, shape: tuple[int, int]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Exact derivatives ``(d/drow, d/dcol)`` of the spline at the integer pixels.
-
-    Parameters
-    ----------
-    coeffs : ndarray, shape (rows + 2*PAD, cols + 2*PAD)
-        Padded coefficients from :func:`bspline_coefficients`.
-    order : {3, 5}
-        Spline degree.
-    shape : (rows, cols)
-        Image shape.
+    """Exact derivatives ``(d/drow, d/dcol)`` of the spline at the integer pixels:
+    :func:`bspline_at_offset` at offset 0 without the values (``coeffs``, ``order``,
+    ``shape`` as there).
 
     Returns
     -------

@@ -85,6 +85,21 @@ def _add_pixel(s0, s1, s2, s3, s4, s5, s6, g, gxj, gyj, fj, dx):  # pragma: no c
     )
 
 
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _add_row_sums(q, totals, row, dy):  # pragma: no cover - compiled
+    """A subset row's float32 sums ``row`` (as :func:`_add_pixel`'s) added in float64 to
+    the subset's ``totals = (sum g, sum g^2, sum f g)``, returned, and to the six
+    steepest-descent sums ``q`` in place (:func:`~.common.add_row`; ``dy`` the row's
+    offset from the POI, px)."""
+    sg, sgg, sf = totals
+    s0, s1, s2, s3, s4, s5, s6 = row
+    sg += float(s0)
+    sgg += float(s1)
+    sf += float(s6)
+    add_row(q, s2, s3, s4, s5, dy)
+    return sg, sgg, sf
+
+
 @nb.njit(inline="always", cache=True)
 def _reference_row(f, gx, gy, r, c0, tw):  # pragma: no cover - compiled
     """Row ``r`` of the reference and its gradients under a subset: ``tw`` px from column
@@ -133,9 +148,7 @@ def _subset_affine_cubic(
     size = 2 * half + 1
     p1 = np.float32(p[1])
     p4 = np.float32(p[4])
-    sg = 0.0
-    sgg = 0.0
-    sf = 0.0
+    totals = (0.0, 0.0, 0.0)
     for i in range(size):
         dy = i - half
         if not fast:
@@ -165,11 +178,8 @@ def _subset_affine_cubic(
             s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
                 s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
             )
-        sg += float(s0)
-        sgg += float(s1)
-        sf += float(s6)
-        add_row(q, s2, s3, s4, s5, dy)
-    return sg, sgg, sf
+        totals = _add_row_sums(q, totals, (s0, s1, s2, s3, s4, s5, s6), dy)
+    return totals
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
@@ -199,9 +209,7 @@ def _subset_affine_cubic4(
     size = 2 * half + 1
     p1 = np.float32(p[1])
     p4 = np.float32(p[4])
-    sg = 0.0
-    sgg = 0.0
-    sf = 0.0
+    totals = (0.0, 0.0, 0.0)
     cb = c0 + bx - 1 + PAD  # cubic: taps from base - 1
     for i in range(size):
         dy = i - half
@@ -224,11 +232,8 @@ def _subset_affine_cubic4(
             s0, s1, s2, s3, s4, s5, s6 = _add_pixel(
                 s0, s1, s2, s3, s4, s5, s6, g, gxr[j], gyr[j], fr[j], dxs[j]
             )
-        sg += float(s0)
-        sgg += float(s1)
-        sf += float(s6)
-        add_row(q, s2, s3, s4, s5, dy)
-    return sg, sgg, sf
+        totals = _add_row_sums(q, totals, (s0, s1, s2, s3, s4, s5, s6), dy)
+    return totals
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)
@@ -459,13 +464,8 @@ def _affine_points(ch0, ch1, coef, images, subsets, cfg, p0, status_in, out):  #
                                 xx = xc + p[0] + (1.0 + p[1]) * (j - half) + p[2] * dy
                                 yy = yc + p[3] + p[4] * (j - half) + (1.0 + p[5]) * dy
                                 grow[j] = sample(coef, order, yy, xx)
-                        t0s, t1s, t2s, t3s, t4s, t5s, t6s = _acc9(
-                            grow, off, mask, dxs, f, gx, gy, r0 + i, c0
-                        )
-                        sg += t0s
-                        sgg += t1s
-                        sf += t6s
-                        add_row(q, t2s, t3s, t4s, t5s, dy)
+                        row = _acc9(grow, off, mask, dxs, f, gx, gy, r0 + i, c0)
+                        sg, sgg, sf = _add_row_sums(q, (sg, sgg, sf), row, dy)
                 gm, dg = centred_norm(sg, sgg, npx)
                 if dg == 0.0:
                     st = DIVERGED

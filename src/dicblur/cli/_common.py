@@ -17,15 +17,20 @@ from ..errors import InputError
 console = Console(highlight=False, soft_wrap=True)
 
 
+def split_sides(text: str, name: str, cast: Callable[[str], Any], expected: str) -> list[Any]:
+    """The sides of ``"AxB"`` (``"A"``: a square, A both sides) cast by ``cast``; a part
+    that does not parse is one error line ``name=text: expected <expected>``. The caller
+    checks the count (and ranges) with its own message."""
+    try:
+        values = [cast(p) for p in text.lower().split("x")]
+    except ValueError as exc:
+        raise InputError(f"{name}={text!r}: expected {expected}") from exc
+    return values * 2 if len(values) == 1 else values
+
+
 def parse_size(text: str, name: str = "--size") -> tuple[int, int]:
     """Parse ``"512x256"`` (rows x cols) or ``"512"`` into a (rows, cols) tuple."""
-    parts = text.lower().replace("*", "x").split("x")
-    try:
-        values = [int(p) for p in parts]
-    except ValueError as exc:
-        raise InputError(f"{name}={text!r}: expected ROWSxCOLS, e.g. 512x512") from exc
-    if len(values) == 1:
-        values *= 2
+    values = split_sides(text.replace("*", "x"), name, int, "ROWSxCOLS, e.g. 512x512")
     if len(values) != 2 or min(values) < 2:
         raise InputError(f"{name}={text!r}: expected ROWSxCOLS with both >= 2, e.g. 512x512")
     return values[0], values[1]

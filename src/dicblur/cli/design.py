@@ -12,7 +12,7 @@ from typing import Any
 import typer
 
 from ..errors import InputError
-from ._common import console, fmt, json_safe, print_json
+from ._common import console, fmt, json_safe, print_json, split_sides
 from .options import (
     BaseSeedOption,
     CheckBrowserOption,
@@ -47,13 +47,7 @@ def _grid(text: str) -> tuple[int, int, int]:
 
 
 def _size_mm(text: str) -> tuple[float, float]:
-    parts = text.lower().split("x")
-    try:
-        vals = [float(p) for p in parts]
-    except ValueError as exc:
-        raise InputError(f"--print-size={text!r}: expected HxW in mm, e.g. 100x100") from exc
-    if len(vals) == 1:
-        vals *= 2
+    vals = split_sides(text, "--print-size", float, "HxW in mm, e.g. 100x100")
     if len(vals) != 2:
         raise InputError(f"--print-size={text!r}: expected HxW in mm, e.g. 100x100")
     return vals[0], vals[1]

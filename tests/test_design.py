@@ -156,8 +156,9 @@ def test_measurement_is_the_campaign_engines(tmp_path):
 
     p = design_problem(blur=2.0, **SMALL)
     cand = Candidate(3.0, 0.45, 0.5)
-    m = measure_candidate(cand, p)
-    campaign.run_campaign(campaign_spec(cand, p), tmp_path / "c.zarr", serial=True)
+    spec = campaign_spec(cand, p)
+    m = measure_candidate(spec)
+    campaign.run_campaign(spec, tmp_path / "c.zarr", serial=True)
     ds = campaign.open_results(tmp_path / "c.zarr")
     for name in ("u_e", "sssig", "mig_ref"):
         stored = (

@@ -164,22 +164,15 @@ def campaign_spec(
     return parse_spec(data)
 
 
-def measure_candidate(
-    candidate: Candidate,
-    problem: DesignProblem,
-    *,
-    blurs: Any = None,
-    seeds: list[int] | None = None,
-    base_seed: int | None = None,
-) -> dict[str, NDArray[np.float64]]:
-    """Run a candidate's campaign in this process; variables of shape (realisation, W).
+def measure_candidate(spec: Any) -> dict[str, NDArray[np.float64]]:
+    """Run a candidate's campaign (its :func:`campaign_spec`) in this process; variables
+    of shape (realisation, W).
 
     Returns the campaign variables (``u_e``, ``sssig``, ``mig_ref``, ``contrast_ref``,
     ``contrast``, ``converged_fraction``, ...) plus ``images`` (realisation, rows, cols).
     """
     from ..campaign import iter_batches, make_pattern, simulate_batch
 
-    spec = campaign_spec(candidate, problem, blurs=blurs, seeds=seeds, base_seed=base_seed)
     images = {p.name: make_pattern(spec, p) for p in spec.patterns}
     rows: dict[str, list[NDArray[np.float64]]] = {}
     for batch in iter_batches(spec):
@@ -254,7 +247,7 @@ def evaluate_candidate(
     from ..models import fit_blur_model
 
     t0 = time.perf_counter()
-    m = measure_candidate(candidate, problem)
+    m = measure_candidate(campaign_spec(candidate, problem))
     w = np.asarray(problem.fit_blurs)
     u_e = np.sqrt(np.nanmean(m["u_e"] ** 2, axis=0))
     sssig = np.nanmean(m["sssig"], axis=0)

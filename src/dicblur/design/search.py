@@ -29,6 +29,7 @@ import numpy as np
 from ..errors import InputError
 from .evaluate import (
     Evaluation,
+    campaign_spec,
     evaluate_candidate,
     measure_candidate,
     pattern_seeds,
@@ -217,9 +218,10 @@ def confirm(
     u_all, obj_all = [], []
     n_points = 0
     for cand in candidates.values():
-        m = measure_candidate(
+        spec = campaign_spec(
             cand, problem, blurs=[float(v) for v in w_unique], seeds=seeds, base_seed=base
         )
+        m = measure_candidate(spec)
         u = m["u_e"][:, inverse]  # (realisation, design blur)
         n_points += int(m["u_e"].size)
         u_all.append(tuple(tuple(map(float, r)) for r in u))

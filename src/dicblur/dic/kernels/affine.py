@@ -116,10 +116,8 @@ def _row_offsets(p, dy, bx, by):  # pragma: no cover - compiled
 
 
 @nb.njit(inline="always", fastmath=FASTMATH, cache=True)
-def _w5(t):  # pragma: no cover - compiled
-    """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
-    sh = np.float32(1.0) if t >= np.float32(1.0) else np.float32(0.0)
-    u = t - sh
+def _w4(u):  # pragma: no cover - compiled
+    """Cubic weights of taps -1..2 for an offset u in [0, 1) (also :func:`_w5`'s, shifted)."""
     u2 = u * u
     u3 = u2 * u
     v = np.float32(1.0) - u
@@ -127,6 +125,14 @@ def _w5(t):  # pragma: no cover - compiled
     w1 = np.float32(2.0 / 3.0) - u2 + np.float32(0.5) * u3
     w2 = (np.float32(1.0) + np.float32(3.0) * (u + u2 - u3)) * np.float32(1.0 / 6.0)
     w3 = u3 * np.float32(1.0 / 6.0)
+    return w0, w1, w2, w3
+
+
+@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
+def _w5(t):  # pragma: no cover - compiled
+    """Cubic weights of taps -1..3 for an offset t in [0, 2) (one of the end taps is 0)."""
+    sh = np.float32(1.0) if t >= np.float32(1.0) else np.float32(0.0)
+    w0, w1, w2, w3 = _w4(t - sh)
     ns = np.float32(1.0) - sh
     return (ns * w0, ns * w1 + sh * w0, ns * w2 + sh * w1, ns * w3 + sh * w2, sh * w3)
 
@@ -180,19 +186,6 @@ def _subset_affine_cubic(
             )
         totals = _add_row_sums(q, totals, (s0, s1, s2, s3, s4, s5, s6), dy)
     return totals
-
-
-@nb.njit(inline="always", fastmath=FASTMATH, cache=True)
-def _w4(u):  # pragma: no cover - compiled
-    """Cubic weights of taps -1..2 for an offset u in [0, 1) (:func:`_w5` at ``t < 1``)."""
-    u2 = u * u
-    u3 = u2 * u
-    v = np.float32(1.0) - u
-    w0 = v * v * v * np.float32(1.0 / 6.0)
-    w1 = np.float32(2.0 / 3.0) - u2 + np.float32(0.5) * u3
-    w2 = (np.float32(1.0) + np.float32(3.0) * (u + u2 - u3)) * np.float32(1.0 / 6.0)
-    w3 = u3 * np.float32(1.0 / 6.0)
-    return w0, w1, w2, w3
 
 
 @nb.njit(fastmath=FASTMATH, cache=True)

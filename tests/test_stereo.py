@@ -178,57 +178,22 @@ def _run(args, capsys):
 
 
 @pytest.mark.parametrize(
-    ("args", "needle"),
+    ("command", "needle"),
     [
-        (["stereo", "calibrate", "a.png", "--board", "9by6", "-o", "r.json"], "--board="),
-        (["stereo", "calibrate", "a.png", "--board", "2x6", "-o", "r.json"], "--board="),
-        (["stereo", "calibrate", "a.png", "--square", "-5mm", "-o", "r.json"], "--square="),
-        (["stereo", "calibrate", "a.png", "-o", "r.txt"], "--out="),
-        (["stereo", "calibrate", "nosuch_left_1.png", "-o", "r.json"], "nosuch_left_1.png"),
-        (
-            ["stereo", "track", "L", "R", "--rig", "none.json", "--noise", "2", "-o", "o"],
-            "none.json",
-        ),
-        (["stereo", "track", "L", "R", "--rig", "r.json", "-o", "o"], "--static"),
-        (
-            [
-                "stereo",
-                "track",
-                "L",
-                "R",
-                "--rig",
-                "r.json",
-                "--noise",
-                "2",
-                "--shape",
-                "x",
-                "-o",
-                "o",
-            ],
-            "--shape=",
-        ),
-        (
-            [
-                "stereo",
-                "track",
-                "L",
-                "R",
-                "--rig",
-                "r.json",
-                "--noise",
-                "2",
-                "--depth",
-                "-1mm",
-                "-o",
-                "o",
-            ],
-            "--depth=",
-        ),
+        ("stereo calibrate a.png --board 9by6 -o r.json", "--board="),
+        ("stereo calibrate a.png --board 2x6 -o r.json", "--board="),
+        ("stereo calibrate a.png --square -5mm -o r.json", "--square="),
+        ("stereo calibrate a.png -o r.txt", "--out="),
+        ("stereo calibrate nosuch_left_1.png -o r.json", "nosuch_left_1.png"),
+        ("stereo track L R --rig none.json --noise 2 -o o", "none.json"),
+        ("stereo track L R --rig r.json -o o", "--static"),
+        ("stereo track L R --rig r.json --noise 2 --shape x -o o", "--shape="),
+        ("stereo track L R --rig r.json --noise 2 --depth -1mm -o o", "--depth="),
     ],
 )
-def test_cli_bad_inputs_exit_2_with_one_line(tmp_path, monkeypatch, capsys, args, needle):
+def test_cli_bad_inputs_exit_2_with_one_line(tmp_path, monkeypatch, capsys, command, needle):
     monkeypatch.chdir(tmp_path)
-    code, err = _run(args, capsys)
+    code, err = _run(command.split(), capsys)
     assert code == 2
     assert len(err.splitlines()) == 1 and err.startswith("error: ")
     assert needle in err

@@ -383,6 +383,82 @@ CASES += [
     Case("max-pixels-bad", ("--max-pixels", "0", *METRICS), must=("--max-pixels",)),
 ]
 
+# found by a hunt over the commands (each failed before its fix)
+CAL = ("calibrate", "{d}/good.tif", "-o", "{o}/cal", "--serial", "-q")
+DESIGN = ("design", "-o", "{o}/d")
+FIT = ("fit", "{d}/results.csv", "-o", "{o}/m.json")
+CASES += [
+    # click's usage errors: one line that names the option, the value and where the help is
+    Case(
+        "usage-not-an-integer",
+        (*GENERATE, "64", "--seed", "1e3"),
+        must=("--seed", "'1e3'", "--help"),
+    ),
+    Case("usage-unknown-option", (*BLUR, "2", "--foo", "3"), must=("--foo",)),
+    Case("usage-missing-argument", ("blur", "--length", "2"), must=("image", "--help")),
+    # numpy's "expected non-negative integer" traceback, exit 1
+    Case(
+        "pulse-negative-seed",
+        ("pulse", "-o", "{o}/p", "--trials", "10", "--seed", "-1"),
+        must=("--seed=-1",),
+    ),
+    Case("fit-negative-seed", (*FIT, "--ci", "bootstrap", "--seed", "-1"), must=("--seed=-1",)),
+    Case("fit-even-subset", (*FIT, "--subset", "4"), must=("--subset=4",)),  # was recorded
+    # blur: an unknown --noise-model and options of another trajectory were ignored
+    Case("blur-noise-model-unknown", (*BLUR, "2", "--noise-model", "foo"), must=("--noise-model",)),
+    Case(
+        "blur-noise-model-without-noise",
+        (*BLUR, "2", "--noise-model", "per-subframe"),
+        must=("--noise-model", "--noise"),
+    ),
+    Case("blur-cycles-not-sine", (*BLUR, "2", "--cycles", "3"), must=("--cycles", "sine")),
+    Case(
+        "blur-start-speed-not-acceleration",
+        (*BLUR, "2", "--start-speed", "1"),
+        must=("--start-speed", "acceleration"),
+    ),
+    Case("blur-wider-than-image", (*BLUR, "1e9"), must=("--length", "64 px")),  # 0 exit before
+    Case(
+        "blur-sine-cycles-nan",
+        (*BLUR, "2", "--trajectory", "sine", "--cycles", "nan"),
+        must=("--cycles=nan",),
+        must_not=("SineMotion",),
+    ),
+    # "motion=(nan, nan)" instead of the option
+    Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
+    # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr
+    Case(
+        "correlate-nan-image",
+        ("correlate", "{d}/nan.tif", "{d}/good.tif", "--subset", "21"),
+        must=("NaN",),
+        must_not=("--shape",),
+    ),
+    # an HTML page written under any name (.png, .json)
+    Case(
+        "plan-html-extension",
+        ("plan", "{d}/model.json", *TARGET_PLAN, "--html", "{o}/p.png"),
+        must=("--html", ".html"),
+    ),
+    # calibrate named the spec keys it builds (noise.levels=nan), not its options
+    Case("calibrate-noise-nan", (*CAL, "--noise", "nan"), must=("--noise=nan",)),
+    Case("calibrate-blur-inverted", (*CAL, "--blur", "5:1:1"), must=("--blur='5:1:1'",)),
+    Case("calibrate-blur-too-long", (*CAL, "--blur", "0:100:50"), must=("--blur:",)),
+    Case("calibrate-step-0", (*CAL, "--step", "0"), must=("--step=0",)),
+    Case("calibrate-negative-seed", (*CAL, "--seed", "-1"), must=("--seed=-1",)),
+    Case("calibrate-noise-model", (*CAL, "--noise-model", "foo"), must=("--noise-model",)),
+    # design named the API's parameters (weights=, speckle_size=, confirm_realisations=)
+    Case("design-blur-dist-negative", (*DESIGN, "--blur-dist", "1:-1"), must=("--blur-dist",)),
+    Case(
+        "design-speckle-range-inverted",
+        (*DESIGN, "--blur", "3", "--speckle-range", "5..1"),
+        must=("--speckle-range",),
+    ),
+    Case(
+        "design-confirm-negative", (*DESIGN, "--blur", "3", "--confirm", "-1"), must=("--confirm",)
+    ),
+    Case("design-negative-seed", (*DESIGN, "--blur", "3", "--seed", "-1"), must=("--seed",)),
+]
+
 
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory: pytest.TempPathFactory) -> Path:
@@ -434,3 +510,85 @@ def test_bad_input(
     for text in case.must_not:
         assert text not in line, f"{text!r} in {line!r}"
     assert _files(out) == [], f"output left behind: {_files(out)}"
+
+
+# outputs equal to an input: refused before any work, the input left intact
+SAME = {
+    "blur": ("blur", "{i}", "{i}", "--length", "2"),
+    "pattern-predict": ("pattern", "predict", "{i}", "--noise", "2", "--subset", "21", "-o", "{i}"),
+    "fit": ("fit", "{r}", "-o", "{r}"),
+    "plan-plot": ("plan", "{m}", *TARGET_PLAN, "--plot", "{m}"),
+    "plan-html-link": ("plan", "{m}", *TARGET_PLAN, "--html", "{h}"),
+}
+
+
+@pytest.mark.parametrize("key", sorted(SAME))
+def test_output_that_is_an_input_is_refused(
+    key: str, corpus: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import shutil
+
+    files = {"i": "good.tif", "r": "results.csv", "m": "model.json"}
+    paths = {k: tmp_path / name for k, name in files.items()}
+    for k, name in files.items():
+        shutil.copy(corpus / name, paths[k])
+    (tmp_path / "page.html").symlink_to(paths["m"])  # another name of the model file
+    before = {k: p.read_bytes() for k, p in paths.items()}
+    fill = {k: str(p) for k, p in paths.items()} | {"h": str(tmp_path / "page.html")}
+    capsys.readouterr()
+    rc = main([a.format(**fill) for a in SAME[key]])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert "is also an input" in err and len(err.strip().splitlines()) == 1, err
+    assert {k: p.read_bytes() for k, p in paths.items()} == before
+
+
+def test_outputs_get_the_mode_of_a_new_file(tmp_path: Path) -> None:
+    """Atomic writes went through mkstemp, which makes 0600 files: a figure or model
+    written for colleagues was unreadable to them. Now: 0666 less the umask, or the mode
+    of the file replaced."""
+    import os
+    import stat
+
+    from dicblur.io import write_text
+
+    old = os.umask(0o022)
+    try:
+        new = write_text(tmp_path / "a.json", "{}")
+        assert stat.S_IMODE(new.stat().st_mode) == 0o644
+        kept = tmp_path / "b.json"
+        kept.write_text("old")
+        kept.chmod(0o640)
+        write_text(kept, "{}")
+        assert stat.S_IMODE(kept.stat().st_mode) == 0o640
+    finally:
+        os.umask(old)
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+def test_unwritable_folder_is_refused_before_work(capsys: pytest.CaptureFixture[str]) -> None:
+    """``os.access`` says yes to root on any folder; the check now creates a probe file.
+    Before: the error came from the writer, naming its temporary file ('/proc/.x.tif.k0b3')."""
+    rc = main(["pattern", "generate", "/proc/x.tif", "--size", "64"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "'/proc/x.tif'" in err and "not writable" in err and ".tmp" not in err, err
+
+
+def test_campaign_pattern_without_seed_is_reproducible() -> None:
+    """A generated pattern without a seed of its own was drawn afresh on every run, so
+    rerunning (resuming) the same spec was refused: 'the input image changed'."""
+    import numpy as np
+
+    from dicblur.campaign import parse_spec
+    from dicblur.campaign.tasks import make_pattern
+    from helpers.campaign import small_spec_dict
+
+    d = small_spec_dict()
+    del d["pattern"][0]["seed"]
+    d["pattern"][1] = dict(d["pattern"][0], name="b")  # the same settings, another name
+    spec = parse_spec(d)
+    a, b = (make_pattern(spec, spec.patterns[0]) for _ in range(2))
+    np.testing.assert_array_equal(a, b)
+    other = make_pattern(spec, spec.patterns[1])  # another name: another draw
+    assert other.shape == a.shape and not np.array_equal(a, other)

@@ -25,6 +25,7 @@ import hashlib
 import logging
 import math
 import os
+import stat
 import tempfile
 import warnings
 from collections.abc import Iterator
@@ -117,13 +118,16 @@ def check_output(
     *,
     folder: bool = False,
     suffixes: tuple[str, ...] | None = None,
+    inputs: tuple[str | os.PathLike[str], ...] = (),
 ) -> Path:
     """Check an output path before any work is done, and return it as a ``Path``.
 
     The rule is the same for every command: the parent folder must exist (dicblur never
     creates missing parents); a file output must not be an existing folder, a folder
     output (``folder=True``, created later if absent) must not be an existing file; the
-    parent must be writable.
+    parent must accept a new file (tried, not only asked: ``os.access`` says yes to root
+    on a read-only mount); the output must not be one of ``inputs`` (the files the
+    command reads: writing over one would destroy the data before, or while, it is read).
 
     Raises
     ------
@@ -154,9 +158,38 @@ def check_output(
             )
     elif p.is_dir():
         raise InputError(f"{name}={str(p)!r}: is a directory; give a file name inside it")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"{name}={str(p)!r}: the folder {str(parent)!r} is not writable")
+    for source in inputs:
+        if _same_file(p, Path(source)):
+            raise InputError(
+                f"{name}={str(p)!r}: is also an input ({str(source)!r}); writing it would "
+                "destroy the input: give another output name"
+            )
+    if not os.access(parent, os.W_OK | os.X_OK) or not _can_create(parent):
+        raise InputError(
+            f"{name}={str(p)!r}: the folder {str(parent)!r} is not writable; choose a "
+            "folder where you can create files"
+        )
     return p
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file (a link or another spelling included)."""
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _can_create(folder: Path) -> bool:
+    """Create and delete a probe file in ``folder``: whether a new file can be written."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".dicblur-probe.", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(name)
+    return True
 
 
 def fsync_path(path: str | os.PathLike[str]) -> None:
@@ -171,6 +204,24 @@ def fsync_path(path: str | os.PathLike[str]) -> None:
 def _fsync_dir(folder: Path) -> None:
     with contextlib.suppress(OSError):  # not every file system syncs a directory
         fsync_path(folder)
+
+
+def _file_mode(target: Path) -> int:
+    """Permission bits for a file written over ``target``."""
+    with contextlib.suppress(OSError):
+        return stat.S_IMODE(target.stat().st_mode)
+    return 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    """The process umask, read without changing it when the system says it (Linux)."""
+    with contextlib.suppress(OSError, ValueError), open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)  # elsewhere: read by setting it, and put it back at once
+    os.umask(mask)
+    return mask
 
 
 @contextlib.contextmanager
@@ -193,6 +244,9 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     try:
         yield tmp
         if tmp.is_file():
+            # mkstemp makes the file 0600; the output gets the mode of a file the user
+            # creates (0666 less the umask), or keeps the mode of the file it replaces
+            os.chmod(tmp, _file_mode(target))
             with open(tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
         os.replace(tmp, target)

@@ -142,6 +142,10 @@ def make_pattern(spec: CampaignSpec, pattern: PatternSpec) -> NDArray[np.float64
     if pattern.generator is not None:
         kw = dict(pattern.settings)
         kw["shape"] = tuple(kw["shape"])
+        if kw.get("seed") is None:
+            # no seed of its own: one from the campaign's, or every run (and every resume
+            # check of the store) would draw another pattern
+            kw["seed"] = task_seed(spec.seed, "pattern", name=pattern.name)
         if spec.method == "rendered":
             # The fine grid of render_blurred: the same pattern drawn supersample x finer.
             ss = spec.supersample

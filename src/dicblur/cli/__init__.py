@@ -209,9 +209,15 @@ _ALIASES = {
     "max_pixels": "max-pixels",
     "results": "out",
     "out": "csv",
+    # design: the API's bounds and distribution under their range options
+    "speckle_size": "speckle-range",
+    "density": "density-range",
+    "softness": "softness-range",
+    "weights": "blur-dist",
+    "confirm_realisations": "confirm",
 }
 _NUMPY_REPR = re.compile(r"np\.(?:float|int|uint|complex|bool|str)[a-z_]*\d*\(([^()]*)\)")
-_PARAM = re.compile(r"(?<![\w.\-])([A-Za-z_][A-Za-z0-9_]*)=")
+_PARAM = re.compile(r"(?<![\w.\-(])(?:[A-Z][A-Za-z0-9]*\.)?([A-Za-z_][A-Za-z0-9_]*)=")
 _LEADING = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*):")
 
 
@@ -260,6 +266,32 @@ def cli_message(text: str, args: Sequence[str]) -> str:
     return text
 
 
+def _typed_value(param: Any, args: Sequence[str]) -> str | None:
+    """The value the user typed for option ``param`` (the last one given), if any."""
+    opts = tuple(getattr(param, "opts", ()) or ())
+    if getattr(param, "param_type_name", "") != "option":
+        return None
+    value = None
+    for i, tok in enumerate(args):
+        if tok in opts and i + 1 < len(args):
+            value = args[i + 1]
+        elif "=" in tok and tok.split("=", 1)[0] in opts:
+            value = tok.split("=", 1)[1]
+    return value
+
+
+def usage_line(exc: Any, args: Sequence[str]) -> str:
+    """A click usage error (unknown option, missing argument, a value of the wrong type)
+    as one line: ``error: <what>='<value>' ...; see 'dicblur blur --help'``."""
+    msg = " ".join(str(exc.format_message()).split()).rstrip(".")
+    value = _typed_value(getattr(exc, "param", None), args)
+    if value is not None:
+        msg = f"{msg} (got {value!r})"
+    ctx = getattr(exc, "ctx", None)
+    path = getattr(ctx, "command_path", None) or "dicblur"
+    return f"error: {msg}; see '{path} --help'"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI with ``argv`` (default ``sys.argv[1:]``) and return the exit code.
 
@@ -286,7 +318,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (click.ClickException, typer.TyperException) as exc:
         # Usage errors (bad option, missing argument). typer >= 0.20 vendors its own click,
         # so both exception families are caught.
-        exc.show()  # type: ignore[union-attr]
+        if type(exc).__name__ == "NoArgsIsHelpError":  # a bare group: its help
+            exc.show()  # type: ignore[union-attr]
+        else:  # one line, like every other bad input (click's own shows three)
+            print(usage_line(exc, args), file=sys.stderr)
         return int(getattr(exc, "exit_code", 2) or 2)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -71,7 +71,7 @@ def blur_command(
     from ..camera import Camera, add_gaussian_noise
     from ..io import check_output, file_sha256, load_image, save_image, write_text
 
-    check_output(out, "OUT", suffixes=(".tif", ".tiff", ".png", ".bmp"))
+    check_output(out, "OUT", suffixes=(".tif", ".tiff", ".png", ".bmp"), inputs=(image,))
     if bit_depth not in (8, 16):
         raise InputError(f"--bit-depth={bit_depth}: must be 8 or 16")
     if noise is not None and (full_well is not None or gain is not None or read_noise > 0):
@@ -91,6 +91,17 @@ def blur_command(
             f"--start-speed={start_speed:g}: must be in 0..2 (0 starts from "
             "rest, 1 is uniform speed, 2 comes to rest at the end)"
         )
+    if noise_model not in ("per-exposure", "per-subframe"):
+        raise InputError(f"--noise-model={noise_model!r}: choose per-exposure or per-subframe")
+    if noise is None and noise_model != "per-exposure":
+        raise InputError(f"--noise-model={noise_model}: only used with --noise")
+    for opt, value, default, needs in (
+        ("--cycles", cycles, 1.0, "sine"),
+        ("--phase", phase, 0.0, "sine"),
+        ("--start-speed", start_speed, 0.0, "acceleration"),
+    ):
+        if value != default and trajectory != needs:
+            raise InputError(f"{opt}={value:g}: only used with --trajectory {needs}")
     if not continuous and substeps < 1:
         raise InputError(
             f"--substeps={substeps}: K must be >= 1 sub-steps (the paper uses "
@@ -111,6 +122,15 @@ def blur_command(
         )
     k = None if continuous else substeps
     img = load_image(image)
+    # a path as long as the image wraps it onto itself (periodic) or mirrors it (reflect):
+    # no camera records that, and the blur models have no meaning there
+    if abs(motion[0]) >= img.shape[0] or abs(motion[1]) >= img.shape[1]:
+        limit = img.shape[1] if abs(motion[1]) >= img.shape[1] else img.shape[0]
+        raise InputError(
+            f"--length={length:g}: at --angle {angle:g} the path crosses the whole image "
+            f"({img.shape[0]}x{img.shape[1]} px); use a length below {limit} px or a "
+            "larger image"
+        )
     blurred = motion_blur(img, motion, substeps=k, trajectory=traj, boundary=boundary)  # type: ignore[arg-type]
     if noise is not None:
         if continuous and noise_model == "per-subframe":

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import typer
 
-from ..errors import InputError
+from ..errors import ConfigError, InputError
 from ._common import (
     console,
     notice_on_start,
@@ -213,7 +215,7 @@ def calibrate_command(
         raise InputError(
             f"--blur={blur!r}: expected START:STOP:STEP in px, e.g. 0.1:10:0.1"
         ) from exc
-    with progress_bar("calibrate", enabled=not quiet) as progress:
+    with progress_bar("calibrate", enabled=not quiet) as progress, _as_options(blur):
         progress = notice_on_start(progress, shape, serial)
         res = calibrate(
             image,
@@ -275,6 +277,41 @@ def calibrate_command(
         },
     )
     return 0
+
+
+# the campaign spec keys that calibrate fills from its options
+_SPEC_OPTIONS = {
+    "campaign.seed": "--seed",
+    "noise.levels": "--noise",
+    "noise.model": "--noise-model",
+    "blur.angles": "--angle",
+    "dic.subsets": "--subset",
+    "dic.step": "--step",
+    "dic.shape": "--shape",
+}
+
+
+@contextmanager
+def _as_options(blur: str) -> Iterator[None]:
+    """Errors of the campaign spec that calibrate builds name the option as typed
+    (``--noise=nan``), not the spec key (``noise.levels=nan``)."""
+    try:
+        yield
+    except ConfigError as exc:
+        text = str(exc)
+        if text.startswith("blur.lengths="):  # its value is the dict calibrate built
+            cut = text.find("}: ")
+            text = f"--blur={blur!r}" + text[cut + 1 :] if cut > 0 else text
+        elif text.startswith("blur.lengths"):
+            text = "--blur" + text[len("blur.lengths") :]
+        else:
+            for key, opt in _SPEC_OPTIONS.items():
+                if text.startswith(key) and text[len(key) : len(key) + 1] in ("=", ":"):
+                    text = opt + text[len(key) :]
+                    break
+        if text == str(exc):
+            raise
+        raise InputError(text) from exc
 
 
 def register(app: typer.Typer) -> None:

@@ -101,7 +101,7 @@ def correlate_command(
     from ..io import atomic_path, check_output, load_image
 
     if out is not None:
-        check_output(out, "--out", suffixes=(".nc", ".csv"))
+        check_output(out, "--out", suffixes=(".nc", ".csv"), inputs=(reference, current))
     import time
 
     mode = blur_compensation.strip().lower()

@@ -242,10 +242,14 @@ def fit_command(
     ),
 ) -> None:
     """Fit the uncertainty models to RESULTS and write the model JSON."""
+    from ..checks import check_odd_subset, check_seed
     from ..io import check_output, file_sha256
     from ..models import fit_blur_model
 
-    check_output(out, "--out")
+    check_output(out, "--out", inputs=(results,))
+    check_seed(seed, "--seed")
+    if subset is not None:
+        check_odd_subset(subset, "--subset")
     data = _aggregate(_read_table(results), select)
     rng = None
     if fit_range is not None:
@@ -455,10 +459,11 @@ def plan_command(
         plan_exposure,
     )
 
+    sources = tuple(p for p in (model_path, compare, reference) if p is not None)
     if plot is not None:
-        check_output(plot, "--plot")
+        check_output(plot, "--plot", inputs=sources)
     if html_out is not None:
-        check_output(html_out, "--html")
+        check_output(html_out, "--html", suffixes=(".html", ".htm"), inputs=sources)
     from .strain_plan import is_strain_target, run_strain_plan
 
     if vsg is not None or is_strain_target(target):

@@ -8,10 +8,13 @@ option whose meaning differs between commands (``--noise``, ``--workers`` of
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
 import typer
+
+from ..errors import InputError
 
 __all__ = [
     "MAX_SIGMA_HELP",
@@ -60,15 +63,33 @@ CheckBrowserOption = Annotated[
 
 # --- images and seeds -------------------------------------------------------------------
 
+
+def _seed(value: int | None) -> int | None:
+    """``--seed``: an integer >= 0 (numpy's seeds), refused at parse time."""
+    if value is not None and value < 0:
+        raise InputError(f"--seed={value}: seeds are integers >= 0, e.g. 1")
+    return value
+
+
+def _angle(value: float) -> float:
+    """``--angle``: a finite number of degrees (NaN would give a NaN motion vector)."""
+    if not math.isfinite(value):
+        raise InputError(f"--angle={value}: must be a finite number of degrees, e.g. 90")
+    return value
+
+
 ImageSeedOption = Annotated[
-    int | None, typer.Option("--seed", help="Random seed (same seed, same image).")
+    int | None,
+    typer.Option("--seed", help="Random seed (same seed, same image).", callback=_seed),
 ]
-BaseSeedOption = Annotated[int, typer.Option("--seed", help="Base seed.")]
+BaseSeedOption = Annotated[int, typer.Option("--seed", help="Base seed.", callback=_seed)]
 BitDepthOption = Annotated[int, typer.Option("--bit-depth", help="8 or 16: quantisation and file.")]
 AngleOption = Annotated[
     float,
     typer.Option(
-        "--angle", help="Motion direction in degrees from +x (columns) towards +y (rows)."
+        "--angle",
+        help="Motion direction in degrees from +x (columns) towards +y (rows).",
+        callback=_angle,
     ),
 ]
 

@@ -188,7 +188,7 @@ def predict(
     if shape not in ("translation", "affine"):
         raise InputError(f"--shape={shape!r}: choose 'translation' or 'affine'")
     if out is not None:
-        check_output(out, "--out")
+        check_output(out, "--out", inputs=(image,))
     if compensation not in ("none", "given"):
         raise InputError(f"--compensation={compensation!r}: choose 'none' or 'given'")
     if compensation == "given" and subpixel is not None:

@@ -65,10 +65,12 @@ def pulse_command(
     ] = True,
 ) -> None:
     """Section V of the paper: Table II, Fig. 4-6, the Monte Carlo and verdict.md in OUT."""
+    from ..checks import check_seed
     from ..io import atomic_path, check_output, write_text
     from ..pulse.study import run_pulse_study
 
     check_output(out, "--out", folder=True)
+    check_seed(seed, "--seed")
 
     if trials < 2:
         raise InputError(f"--trials={trials}: expected an int >= 2 (default 10000)")

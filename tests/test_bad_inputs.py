@@ -457,6 +457,30 @@ CASES += [
         "design-confirm-negative", (*DESIGN, "--blur", "3", "--confirm", "-1"), must=("--confirm",)
     ),
     Case("design-negative-seed", (*DESIGN, "--blur", "3", "--seed", "-1"), must=("--seed",)),
+    # matplotlib's "Format 'txt' is not supported" traceback after the plan
+    Case(
+        "plan-plot-extension",
+        ("plan", "{d}/model.json", *TARGET_PLAN, "--plot", "{o}/p.txt"),
+        must=("--plot", ".png"),
+    ),
+    # the page's starting values were not read: a page that opens on an error, exit 0
+    Case(
+        "plan-html-bad-velocity",
+        ("plan", "{d}/model.json", "--html", "{o}/p.html", "--velocity", "12GL"),
+        must=("--velocity", "GL"),
+    ),
+    Case(
+        "plan-html-bad-scale",
+        ("plan", "{d}/model.json", "--html", "{o}/p.html", "--scale", "nan"),
+        must=("--scale",),
+    ),
+    # "--noise=None: ...; give sigma (GL)": the API's name and a value nobody typed
+    Case(
+        "predict-several-noise-levels",
+        ("predict", "{d}/model.json", "--blur", "2"),
+        must=("--noise", "1.0, 2.0"),
+        must_not=("None", "sigma"),
+    ),
 ]
 
 
@@ -517,7 +541,7 @@ SAME = {
     "blur": ("blur", "{i}", "{i}", "--length", "2"),
     "pattern-predict": ("pattern", "predict", "{i}", "--noise", "2", "--subset", "21", "-o", "{i}"),
     "fit": ("fit", "{r}", "-o", "{r}"),
-    "plan-plot": ("plan", "{m}", *TARGET_PLAN, "--plot", "{m}"),
+    "plan-plot-link": ("plan", "{m}", *TARGET_PLAN, "--plot", "{p}"),
     "plan-html-link": ("plan", "{m}", *TARGET_PLAN, "--html", "{h}"),
 }
 
@@ -532,9 +556,11 @@ def test_output_that_is_an_input_is_refused(
     paths = {k: tmp_path / name for k, name in files.items()}
     for k, name in files.items():
         shutil.copy(corpus / name, paths[k])
-    (tmp_path / "page.html").symlink_to(paths["m"])  # another name of the model file
+    for name in ("page.html", "plot.png"):  # other names of the model file
+        (tmp_path / name).symlink_to(paths["m"])
     before = {k: p.read_bytes() for k, p in paths.items()}
-    fill = {k: str(p) for k, p in paths.items()} | {"h": str(tmp_path / "page.html")}
+    fill = {k: str(p) for k, p in paths.items()}
+    fill.update(h=str(tmp_path / "page.html"), p=str(tmp_path / "plot.png"))
     capsys.readouterr()
     rc = main([a.format(**fill) for a in SAME[key]])
     err = capsys.readouterr().err
@@ -592,3 +618,23 @@ def test_campaign_pattern_without_seed_is_reproducible() -> None:
     np.testing.assert_array_equal(a, b)
     other = make_pattern(spec, spec.patterns[1])  # another name: another draw
     assert other.shape == a.shape and not np.array_equal(a, other)
+
+
+def test_correlate_says_when_no_point_converged(
+    corpus: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two unrelated images: every point fails. The table showed n_converged 0 among 25
+    rows of dashes, exit 0, and nothing else; now a warning line says so and why."""
+    import numpy as np
+    import tifffile
+
+    noise = np.random.default_rng(3).integers(0, 256, (64, 64)).astype(np.uint8)
+    tifffile.imwrite(tmp_path / "other.tif", noise, photometric="minisblack")
+    rc = main(
+        ["correlate", str(corpus / "good.tif"), str(tmp_path / "other.tif"), "--subset", "21"]
+    )
+    err = capsys.readouterr().err
+    assert rc == 0
+    assert "warning: no point converged" in err and "failed" in err, err
+    rc = main(["correlate", str(corpus / "good.tif"), str(corpus / "good2.tif"), "--subset", "21"])
+    assert rc == 0 and "warning" not in capsys.readouterr().err  # a good pair: no warning

@@ -193,6 +193,8 @@ def correlate_command(
     print_mapping(
         f"correlate: {reference.name} -> {current.name} ({shape}, subset {subset})", data, _UNITS
     )
+    for note in failure_notes(data):
+        typer.echo(f"warning: {note}", err=True)
     if out is not None:
         if out.suffix.lower() == ".csv":
             res.to_csv(out, extra=strain_vars)
@@ -203,6 +205,34 @@ def correlate_command(
                     ds.attrs.update(strain_window=window, strain_vsg=sf.vsg, strain_kind=sf.kind)
                 ds.to_netcdf(tmp, engine="scipy")
         console.print(f"wrote {out}")
+
+
+def failure_notes(data: dict[str, Any]) -> list[str]:
+    """What the summary table alone would hide: no point converged, no strain computed
+    (its rows then read ``-``, which also means "not asked for")."""
+    notes = []
+    n = int(data.get("n_points") or 0)
+    if n and not data.get("n_converged"):
+        why = sorted(
+            (
+                (int(v), k[2:])
+                for k, v in data.items()
+                if k.startswith("n_") and k not in ("n_points", "n_converged") and v
+            ),
+            reverse=True,
+        )
+        causes = ", ".join(f"{c} {name.replace('_', ' ')}" for c, name in why)
+        notes.append(
+            f"no point converged ({n} of {n} failed: {causes}); the field holds no "
+            "displacement: are both images of the same scene, and is the motion smaller "
+            "than the subset?"
+        )
+    elif data.get("strain_ok_fraction") == 0.0:
+        notes.append(
+            "no strain computed at any point (each needs a full --vsg window of converged "
+            "points around it): use a smaller --step or --vsg, or more points"
+        )
+    return notes
 
 
 def strain_summary(sf: Any) -> dict[str, Any]:

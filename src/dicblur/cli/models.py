@@ -25,6 +25,8 @@ if TYPE_CHECKING:  # numpy and the models are imported inside the commands (fast
     import numpy as np
 
 _COLUMNS = ("blur", "sssig", "u_e")
+# --plot: the formats a figure is saved in (others made matplotlib raise after the plan)
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".eps", ".webp")
 _OPTIONAL = (
     "noise",
     "noise_effective",
@@ -461,7 +463,7 @@ def plan_command(
 
     sources = tuple(p for p in (model_path, compare, reference) if p is not None)
     if plot is not None:
-        check_output(plot, "--plot", inputs=sources)
+        check_output(plot, "--plot", suffixes=FIGURE_SUFFIXES, inputs=sources)
     if html_out is not None:
         check_output(html_out, "--html", suffixes=(".html", ".htm"), inputs=sources)
     from .strain_plan import is_strain_target, run_strain_plan
@@ -495,8 +497,16 @@ def plan_command(
         check_same_calibration(model, other, names=("MODEL", "--compare"))
     noise_note = None
     if html_out is not None:
+        from ..models import parse_quantity
         from ..report.planner import PlannerDefaults, starting_noise, write_planner
 
+        # the page's starting values are read in the browser: check them here, or a typo
+        # (--velocity 12GL) writes a page that opens on an error
+        mm_px = parse_quantity(scale or "0.05mm/px", "scale", name="--scale")
+        if velocity is not None:
+            parse_quantity(velocity, "velocity", name="--velocity", scale=mm_px)
+        if target is not None:
+            parse_quantity(target, "blur", name="--target", scale=mm_px)
         defaults = PlannerDefaults(
             velocity=velocity or "120mm/s",
             scale=scale or "0.05mm/px",

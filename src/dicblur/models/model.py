@@ -298,9 +298,10 @@ class BlurUncertaintyModel:
             self._check_power_law_noise(sigma)
         if sigma is None and has_noise:
             if self.noise_sigma is None:
+                levels = [float(v) for v in self.noise_levels]
                 raise InputError(
-                    "sigma=None: the model was fitted on several noise levels; give sigma "
-                    f"(GL), e.g. one of {list(self.noise_levels)}"
+                    f"sigma: the model was fitted on several noise levels ({levels} GL); "
+                    f"give the noise of your images, e.g. sigma={levels[-1]:g}"
                 )
             return float(self.noise_sigma)
         return sigma

@@ -424,6 +424,18 @@ CASES += [
         must=("--cycles=nan",),
         must_not=("SineMotion",),
     ),
+    # a 16-bit image blurred at the default 8 bits: every pixel 255, exit 0
+    Case(
+        "blur-16-bit-into-8",
+        ("blur", "{d}/scene16.tif", "{o}/x.tif", "--length", "2", "--bit-depth", "8"),
+        must=("--bit-depth=8", "saturate", "--bit-depth 16"),
+    ),
+    # a float image normalised to 0..1: quantised to 2 grey levels, exit 0
+    Case(
+        "blur-normalised-float",
+        ("blur", "{d}/unit.tif", "{o}/x.tif", "--length", "2"),
+        must=("normalised", "2 levels"),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr
@@ -638,3 +650,17 @@ def test_correlate_says_when_no_point_converged(
     assert "warning: no point converged" in err and "failed" in err, err
     rc = main(["correlate", str(corpus / "good.tif"), str(corpus / "good2.tif"), "--subset", "21"])
     assert rc == 0 and "warning" not in capsys.readouterr().err  # a good pair: no warning
+
+
+def test_blur_keeps_a_16_bit_image_16_bit(corpus: Path, tmp_path: Path) -> None:
+    """The default --bit-depth was 8 whatever the input: a 16-bit image came out all 255."""
+    import numpy as np
+    import tifffile
+
+    assert (
+        main(["blur", str(corpus / "scene16.tif"), str(tmp_path / "b.tif"), "--length", "2"]) == 0
+    )
+    out = tifffile.imread(tmp_path / "b.tif")
+    src = tifffile.imread(corpus / "scene16.tif").astype(float)
+    assert out.dtype == np.uint16
+    assert abs(out.mean() - src.mean()) < 0.01 * src.mean()  # the same grey levels, blurred

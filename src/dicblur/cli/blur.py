@@ -5,12 +5,12 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from ..errors import InputError
-from .options import AngleOption, BitDepthOption, ImageSeedOption
+from .options import AngleOption, ImageSeedOption
 
 
 def blur_command(
@@ -63,15 +63,31 @@ def blur_command(
         float,
         typer.Option("--exposure-scale", help="Exposure relative to nominal (scales the signal)."),
     ] = 1.0,
-    bit_depth: BitDepthOption = 8,
+    bit_depth: Annotated[
+        int | None,
+        typer.Option(
+            "--bit-depth",
+            help="8 or 16: quantisation and file (default: 16 for a 16-bit IMAGE, else 8).",
+        ),
+    ] = None,
     seed: ImageSeedOption = None,
 ) -> None:
     """Blur IMAGE along a path of LENGTH px and write OUT (plus OUT.json settings)."""
     from ..blur import AcceleratedMotion, SineMotion, motion_blur
     from ..camera import Camera, add_gaussian_noise
-    from ..io import check_output, file_sha256, load_image, save_image, write_text
+    from ..io import (
+        check_output,
+        file_sha256,
+        load_image,
+        read_image_header,
+        save_image,
+        write_text,
+    )
 
     check_output(out, "OUT", suffixes=(".tif", ".tiff", ".png", ".bmp"), inputs=(image,))
+    header = read_image_header(image)
+    if bit_depth is None:  # the input's: an 8-bit default quantised a 16-bit image to 255
+        bit_depth = 16 if header.dtype in ("uint16", "int16") else 8
     if bit_depth not in (8, 16):
         raise InputError(f"--bit-depth={bit_depth}: must be 8 or 16")
     if noise is not None and (full_well is not None or gain is not None or read_noise > 0):
@@ -122,6 +138,7 @@ def blur_command(
         )
     k = None if continuous else substeps
     img = load_image(image)
+    _check_levels(img, header.dtype, bit_depth, image)
     # a path as long as the image wraps it onto itself (periodic) or mirrors it (reflect):
     # no camera records that, and the blur models have no meaning there
     if abs(motion[0]) >= img.shape[0] or abs(motion[1]) >= img.shape[1]:
@@ -179,6 +196,25 @@ def blur_command(
     typer.echo(
         f"wrote {out} ({img.shape[0]}x{img.shape[1]} px, W = {length:g} px) and {sidecar.name}"
     )
+
+
+def _check_levels(img: Any, dtype: str, bit_depth: int, image: Path) -> None:
+    """The input's grey levels must fit the output's: above its top level they all clip
+    to white; a float image normalised to 0..1 rounds to 2 levels (black and 1 GL)."""
+    top = 2**bit_depth - 1
+    hi = float(img.max())
+    if hi > top:
+        fix = "use --bit-depth 16" if hi <= 65535 and bit_depth == 8 else "rescale the image"
+        raise InputError(
+            f"--bit-depth={bit_depth}: IMAGE {str(image)!r} has grey levels up to {hi:.6g} "
+            f"GL, above the output's top level {top}: the blurred image would saturate; {fix}"
+        )
+    if dtype.startswith("float") and hi <= 1.0:
+        raise InputError(
+            f"IMAGE={str(image)!r}: a float image with grey levels in 0..{hi:.3g} "
+            f"(normalised): quantised to {bit_depth} bits it keeps at most 2 levels; scale "
+            f"it to grey levels first (x {top})"
+        )
 
 
 def register(app: typer.Typer) -> None:

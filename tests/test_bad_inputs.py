@@ -664,3 +664,22 @@ def test_blur_keeps_a_16_bit_image_16_bit(corpus: Path, tmp_path: Path) -> None:
     src = tifffile.imread(corpus / "scene16.tif").astype(float)
     assert out.dtype == np.uint16
     assert abs(out.mean() - src.mean()) < 0.01 * src.mean()  # the same grey levels, blurred
+
+
+def test_spreadsheet_and_editor_files_are_read(corpus: Path, tmp_path: Path) -> None:
+    """A byte-order mark (spreadsheets' "CSV UTF-8", some editors) made fit report the
+    column blur missing, and a model or spec "invalid"; a ';'-separated CSV (comma-decimal
+    locales) had no column at all. All are read now."""
+    from dicblur.campaign import load_spec
+
+    bom = b"\xef\xbb\xbf"
+    csv_text = (corpus / "results.csv").read_bytes()
+    (tmp_path / "bom.csv").write_bytes(bom + csv_text)
+    (tmp_path / "semi.csv").write_bytes(csv_text.replace(b",", b";"))
+    (tmp_path / "bom.json").write_bytes(bom + (corpus / "model.json").read_bytes())
+    spec = (corpus / "spec.toml").read_bytes()
+    (tmp_path / "bom.toml").write_bytes(bom + spec)
+    for name in ("bom.csv", "semi.csv"):
+        assert main(["fit", str(tmp_path / name), "-o", str(tmp_path / f"{name}.json")]) == 0
+    assert main(["predict", str(tmp_path / "bom.json"), "--blur", "2", "--noise", "2"]) == 0
+    assert load_spec(tmp_path / "bom.toml").seed == load_spec(corpus / "spec.toml").seed

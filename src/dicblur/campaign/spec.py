@@ -712,7 +712,7 @@ def load_spec(path: str | os.PathLike[str]) -> CampaignSpec:
     if not p.is_file():
         raise ConfigError(f"spec={str(p)!r}: no such file; give a campaign spec .toml")
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        data = tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a BOM from a text editor
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"spec={str(p)!r}: not valid TOML ({exc})") from exc
     return parse_spec(data, base_dir=p.parent)

@@ -63,7 +63,9 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         if path.is_dir():
             raise InputError(f"RESULTS={str(path)!r}: is a directory, expected a .csv file")
         try:
-            text = path.read_bytes().decode("utf-8")
+            # utf-8-sig: spreadsheets save "CSV UTF-8" with a byte-order mark, which
+            # would otherwise stick to the first column's name ("\ufeffblur")
+            text = path.read_bytes().decode("utf-8-sig")
         except UnicodeDecodeError:
             raise InputError(
                 f"RESULTS={str(path)!r}: binary data, not a UTF-8 CSV text "
@@ -72,7 +74,11 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         if "\0" in text:
             raise InputError(f"RESULTS={str(path)!r}: binary data (NUL bytes), not a CSV text file")
         try:
-            rows = list(csv.DictReader(text.splitlines()))
+            lines = text.splitlines()
+            head = lines[0] if lines else ""
+            # a spreadsheet in a comma-decimal locale separates with ';' (or a tab)
+            sep = next((c for c in ",;\t" if c in head), ",")
+            rows = list(csv.DictReader(lines, delimiter=sep))
         except csv.Error as exc:
             raise InputError(f"RESULTS={str(path)!r}: not a readable CSV ({exc})") from exc
         if not rows:

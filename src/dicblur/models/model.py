@@ -637,7 +637,7 @@ class BlurUncertaintyModel:
                     "(or dicblur pattern predict -o)"
                 )
             try:
-                text = p.read_bytes().decode("utf-8")
+                text = p.read_bytes().decode("utf-8-sig")  # a BOM from a text editor
             except UnicodeDecodeError:
                 raise InputError(
                     f"{source}: binary data, not a JSON text file; give a model "

@@ -436,6 +436,14 @@ CASES += [
         ("blur", "{d}/unit.tif", "{o}/x.tif", "--length", "2"),
         must=("normalised", "2 levels"),
     ),
+    # "fewer than two subsets keep an intensity gradient (flat...)" for a textured image
+    # where a single 55 px subset fits
+    Case(
+        "pattern-predict-one-subset",
+        ("pattern", "predict", "{d}/good.tif", "--noise", "2", "--subset", "55"),
+        must=("--subset=55", "1 subset"),
+        must_not=("flat",),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr

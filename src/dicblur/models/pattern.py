@@ -206,6 +206,12 @@ def _terms(
     leave out only the degenerate subsets (contraction < ``DEGENERATE``); ``nan`` where
     fewer than two subsets remain. ``reference``: the reference's terms kept across the
     offsets and calls (a new one per call by default; the same numbers either way)."""
+    if len(pts) < 2:  # not a texture problem: the grid holds too few subsets
+        raise InputError(
+            f"subset={subset}: {len(pts)} subset(s) of {subset} px fit in the "
+            f"{img.shape[0]}x{img.shape[1]} px image, and the prediction averages over at "
+            "least two; use a smaller subset (or step) or a larger image"
+        )
     offs = _offsets(subpixel)
     ref = ReferenceTerms() if reference is None else reference
     lams = np.empty((len(offs), len(w), len(pts)))

@@ -691,3 +691,34 @@ def test_spreadsheet_and_editor_files_are_read(corpus: Path, tmp_path: Path) -> 
         assert main(["fit", str(tmp_path / name), "-o", str(tmp_path / f"{name}.json")]) == 0
     assert main(["predict", str(tmp_path / "bom.json"), "--blur", "2", "--noise", "2"]) == 0
     assert load_spec(tmp_path / "bom.toml").seed == load_spec(corpus / "spec.toml").seed
+
+
+def test_noise_of_the_same_file_twice_is_refused(
+    corpus: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same file given twice printed 'noise sigma = 0.0000 grey levels', exit 0."""
+    rc = main(["noise", str(corpus / "good.tif"), str(corpus / "good.tif")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "same file" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_noise_warns_of_identical_and_clipped_pairs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Identical copies (sigma 0) and an over-exposed pair (the clipped pixels hide their
+    noise: the estimate is low) printed a plain number."""
+    import numpy as np
+    import tifffile
+
+    from bad_inputs import speckle
+
+    rng = np.random.default_rng(0)
+    base = speckle()
+    a, b = (np.clip(np.rint(base + 60 + rng.normal(0, 3, base.shape)), 0, 255) for _ in "ab")
+    for name, img in (("a", a), ("b", b), ("c", a)):
+        tifffile.imwrite(tmp_path / f"{name}.tif", img.astype(np.uint8), photometric="minisblack")
+    assert main(["noise", str(tmp_path / "a.tif"), str(tmp_path / "b.tif")]) == 0
+    err = capsys.readouterr().err
+    assert "clipped" in err and "low" in err, err
+    assert main(["noise", str(tmp_path / "a.tif"), str(tmp_path / "c.tif")]) == 0
+    assert "identical" in capsys.readouterr().err

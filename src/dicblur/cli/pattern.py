@@ -354,11 +354,37 @@ def noise_command(
             f"IMAGE_A has {ha.bit_depth}-bit {ha.dtype}: their grey levels are on "
             "different scales; give two images saved at the same bit depth"
         )
+    if image_a.resolve() == image_b.resolve():
+        raise InputError(
+            f"IMAGE_B={str(image_b)!r}: the same file as IMAGE_A; give two images of the "
+            "static scene taken one after the other"
+        )
     sigma = estimate_noise(img_a, img_b)
+    for note in _noise_notes(img_a, img_b, ha):
+        typer.echo(f"warning: {note}", err=True)
     if as_json:
         print_json({"noise_sigma": sigma})
     else:
         typer.echo(f"noise sigma = {sigma:.4f} grey levels (per image)")
+
+
+def _noise_notes(img_a: Any, img_b: Any, header: Any) -> list[str]:
+    """What makes a pair's noise estimate wrong without an error: identical images, and
+    clipped pixels (black or at the top level), whose noise the pair does not show."""
+    import numpy as np
+
+    if np.array_equal(img_a, img_b):
+        return ["the two images are identical pixel for pixel: no noise between them"]
+    if not header.dtype.startswith(("uint", "int")):
+        return []
+    top = 2 ** int(header.bit_depth) - 1
+    clipped = float(np.mean((img_a <= 0) | (img_a >= top) | (img_b <= 0) | (img_b >= top)))
+    if clipped > 0.01:
+        return [
+            f"{100 * clipped:.3g} % of the pixels are clipped (0 or {top} GL): their noise "
+            "does not show, the estimate is low; lower the exposure or gain"
+        ]
+    return []
 
 
 def register(app: typer.Typer) -> None:

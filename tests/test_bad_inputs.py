@@ -444,6 +444,17 @@ CASES += [
         must=("--subset=55", "1 subset"),
         must_not=("flat",),
     ),
+    # reproduce wrote its patterns and a campaign store before the cluster refused these
+    Case(
+        "reproduce-workers-0",
+        ("reproduce", "--quick", "--out", "{o}/rep", "--workers", "0"),
+        must=("--workers=0",),
+    ),
+    Case(
+        "reproduce-scheduler",
+        ("reproduce", "--quick", "--out", "{o}/rep", "--scheduler", "foo"),
+        must=("--scheduler='foo'",),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr

@@ -120,15 +120,42 @@ VsgOption = Annotated[str, typer.Option("--vsg", help=VSG_HELP)]
 
 # --- campaigns: serial or on a Dask cluster ---------------------------------------------
 
+
+def _scheduler(value: str | None) -> str | None:
+    """``--scheduler``: its form checked at parse time (reproduce wrote its patterns and
+    its store before the cluster start refused it)."""
+    if value is not None:
+        from ..campaign.cluster import check_scheduler_address
+
+        try:
+            check_scheduler_address(value)
+        except InputError as exc:
+            raise InputError(str(exc).replace("scheduler=", "--scheduler=", 1)) from None
+    return value
+
+
+def _workers(value: int | None) -> int | None:
+    """``--workers``: >= 1 when given, checked at parse time (as ``--scheduler``)."""
+    if value is not None and value < 1:
+        raise InputError(f"--workers={value}: must be >= 1 (or omit it: all cores)")
+    return value
+
+
 SchedulerOption = Annotated[
     str | None,
     typer.Option(
-        "--scheduler", help="Existing Dask scheduler, tcp://HOST:PORT (default: a local cluster)."
+        "--scheduler",
+        help="Existing Dask scheduler, tcp://HOST:PORT (default: a local cluster).",
+        callback=_scheduler,
     ),
 ]
 WorkersOption = Annotated[
     int | None,
-    typer.Option("--workers", help="Worker processes of the local cluster (default: all cores)."),
+    typer.Option(
+        "--workers",
+        help="Worker processes of the local cluster (default: all cores).",
+        callback=_workers,
+    ),
 ]
 SerialOption = Annotated[bool, typer.Option("--serial", help="Run in this process, no Dask.")]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]

@@ -455,6 +455,12 @@ CASES += [
         ("reproduce", "--quick", "--out", "{o}/rep", "--scheduler", "foo"),
         must=("--scheduler='foo'",),
     ),
+    # "model='foo'": the name of the MODEL file argument, not of --model
+    Case(
+        "predict-model-kind",
+        ("predict", "{d}/model.json", "--blur", "2", "--noise", "2", "--model", "foo"),
+        must=("--model='foo'",),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr
@@ -733,3 +739,38 @@ def test_noise_warns_of_identical_and_clipped_pairs(
     assert "clipped" in err and "low" in err, err
     assert main(["noise", str(tmp_path / "a.tif"), str(tmp_path / "c.tif")]) == 0
     assert "identical" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("damage", "must", "must_not"),
+    [
+        # a rig from a newer dicblur was read as if it were version 1
+        ({"version": 99}, "version 99", "expected keys"),
+        # the file named twice and a wrong hint: the keys are all there, fx is bad
+        ({"left": {"fx": float("nan")}}, "fx=nan", "expected keys"),
+    ],
+)
+def test_damaged_rig_file(
+    damage: dict,
+    must: str,
+    must_not: str,
+    corpus: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    import json
+
+    from dicblur.stereo import CameraModel, save_rig
+    from dicblur.stereo.synthetic import symmetric_rig
+
+    cam = CameraModel(2000.0, 2000.0, 127.5, 127.5, image_shape=(256, 256))
+    save_rig(symmetric_rig(stereo_angle=30.0, distance=400.0, camera=cam), tmp_path / "rig.json")
+    d = json.loads((tmp_path / "rig.json").read_text())
+    for key, value in damage.items():
+        d[key] = {**d[key], **value} if isinstance(value, dict) else value
+    (tmp_path / "rig.json").write_text(json.dumps(d))
+    argv = ["stereo", "plan", str(corpus / "model.json"), "--rig", str(tmp_path / "rig.json")]
+    rc = main([*argv, "--velocity", "0,0,100mm/s", "--target", "0.01mm", "--noise", "2"])
+    err = capsys.readouterr().err
+    assert rc == 2 and len(err.strip().splitlines()) == 1, err
+    assert must in err and must_not not in err and err.count("rig.json") == 1, err

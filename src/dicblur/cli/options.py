@@ -186,9 +186,23 @@ RigOption = Annotated[Path, typer.Option("--rig", help="Rig file (.json/.yml) of
 # --- uncertainty models (predict, plan, stereo plan) -------------------------------------
 
 ModelPathArgument = Annotated[Path, typer.Argument(help="Model file written by 'dicblur fit'.")]
+
+
+def _model_choice(value: str | None) -> str | None:
+    """``--model``: the model kind (the API's message would read ``model='foo'``, the
+    name of the MODEL argument)."""
+    if value is not None and value not in ("static", "mismatch", "power_law"):
+        raise InputError(f"--model={value!r}: choose static, mismatch or power_law")
+    return value
+
+
 ModelChoiceOption = Annotated[
     str | None,
-    typer.Option("--model", help="static (calibrate's default), mismatch or power_law."),
+    typer.Option(
+        "--model",
+        help="static (calibrate's default), mismatch or power_law.",
+        callback=_model_choice,
+    ),
 ]
 FixedNoiseOption = Annotated[
     float | None, typer.Option("--noise", help="Fixed noise std, GL (default the model's).")

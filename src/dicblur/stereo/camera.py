@@ -285,6 +285,14 @@ class StereoRig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], name: str = "rig") -> StereoRig:
+        version = data.get("version", 1)
+        if data.get("format") == "dicblur-stereo-rig" and not (
+            isinstance(version, int) and version <= 1
+        ):
+            raise ConfigError(
+                f"{name}: rig file version {version!r}, this dicblur reads version 1; "
+                "update dicblur or write the rig again with dicblur stereo calibrate"
+            )
         try:
             rms = data.get("rms_px")
             return cls(
@@ -295,6 +303,8 @@ class StereoRig:
                 rms=float("nan") if rms is None else float(rms),
                 info=dict(data.get("info", {})),
             )
+        except ConfigError:
+            raise  # a camera's own message, which names the file and the key
         except (KeyError, TypeError, ValueError) as exc:
             raise ConfigError(f"{name}: {exc!s} (expected keys left, right, R, T)") from exc
 

@@ -198,6 +198,10 @@ def build_corpus(folder: Path) -> Path:
     table("text_ue.csv", ["abc"] * w.size)
     table("zero_ue.csv", [0.0] * w.size)
     table("no_ue.csv", list(u), header=("blur", "sssig", "u_x"))
+    with (folder / "zero_noise.csv").open("w", newline="") as fh:
+        wr = csv.writer(fh)
+        wr.writerow(("blur", "sssig", "u_e", "noise"))
+        wr.writerows(zip(w, s, u, [0.0] * w.size, strict=True))
     (folder / "binary.csv").write_bytes(b"blur,sssig,u_e\n\xff\xfe\x00\x81" + rng.bytes(300))
     (folder / "header_only.csv").write_text("blur,sssig,u_e\n")
     (folder / "empty.csv").write_text("")

@@ -461,6 +461,12 @@ CASES += [
         ("predict", "{d}/model.json", "--blur", "2", "--noise", "2", "--model", "foo"),
         must=("--model='foo'",),
     ),
+    # the table's noise column reported as "--noise: value 0.0 ...", an option not given
+    Case(
+        "fit-zero-noise-column",
+        ("fit", "{d}/zero_noise.csv", "-o", "{o}/m.json"),
+        must=("column noise", "line 2"),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr
@@ -774,3 +780,12 @@ def test_damaged_rig_file(
     err = capsys.readouterr().err
     assert rc == 2 and len(err.strip().splitlines()) == 1, err
     assert must in err and must_not not in err and err.count("rig.json") == 1, err
+
+
+def test_fit_summary_prints_no_none(
+    corpus: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A table without a subset column printed 'subset None px'."""
+    assert main(["fit", str(corpus / "results.csv"), "-o", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert "subset unknown" in out and "None" not in out, out

@@ -52,6 +52,25 @@ def _canonical(column: str) -> str:
     return _ALIASES.get(low, low)
 
 
+def _check_noise_column(values: Any, path: Path) -> None:
+    """The table's own noise column (the API names it noise_sigma, which the CLI would
+    show as --noise, an option the user did not give)."""
+    import numpy as np
+
+    v = np.asarray(values, dtype=object)
+    for i, x in enumerate(v):
+        try:
+            ok = math.isfinite(float(x)) and float(x) > 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise InputError(
+                f"RESULTS={str(path)!r}: column noise is {x!r} in line {i + 2}; the "
+                "noise std must be a number > 0 GL (fix the table, or drop the column and "
+                "give --noise)"
+            )
+
+
 def _read_table(path: Path) -> dict[str, np.ndarray]:
     """Columns of a flat CSV, or the flattened variables of a netCDF / zarr dataset."""
     import numpy as np
@@ -258,7 +277,10 @@ def fit_command(
     check_seed(seed, "--seed")
     if subset is not None:
         check_odd_subset(subset, "--subset")
-    data = _aggregate(_read_table(results), select)
+    table = _read_table(results)
+    if "noise" in table and results.suffix.lower() == ".csv":
+        _check_noise_column(table["noise"], results)
+    data = _aggregate(table, select)
     rng = None
     if fit_range is not None:
         lo, _, hi = fit_range.partition(":")

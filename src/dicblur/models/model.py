@@ -513,7 +513,8 @@ class BlurUncertaintyModel:
         lines = [
             f"dicblur blur-uncertainty model (dicblur {self.version}); default: {self.default}",
             f"matcher: {self.matcher}",
-            f"subset {self.subset} px; noise levels {list(self.noise_levels) or 'unknown'} GL; "
+            f"subset {'unknown' if self.subset is None else f'{self.subset} px'}; noise "
+            f"levels {list(self.noise_levels) or 'unknown'} GL; "
             f"{len(self.data['blur'])} points, W {min(self.data['blur']):g}..."
             f"{max(self.data['blur']):g} px",
             f"validity domain: {self.domain.describe() if self.domain else 'unknown'}"

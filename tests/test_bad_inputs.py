@@ -789,3 +789,16 @@ def test_fit_summary_prints_no_none(
     assert main(["fit", str(corpus / "results.csv"), "-o", str(tmp_path / "m.json")]) == 0
     out = capsys.readouterr().out
     assert "subset unknown" in out and "None" not in out, out
+
+
+def test_metrics_of_one_subset_print_no_spread(
+    corpus: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A step larger than the image leaves one subset: its SSSIG std read 0 (GL/px)^2."""
+    import json
+
+    argv = ["pattern", "metrics", str(corpus / "good.tif"), "--subset", "21", "--json"]
+    assert main([*argv, "--step", "1000"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["n_subsets"] == 1
+    assert data["sssig_x_std"] is None and data["sssig_y_std"] is None

@@ -128,6 +128,10 @@ def metrics(
     img = load_image(image)
     pm = pattern_metrics(img, subset=subset, noise_sigma=noise, step=step, gradient=gradient)  # type: ignore[arg-type]
     data = pm.to_dict()
+    if data.get("n_subsets", 2) < 2:
+        # the spread of one subset is undefined, not 0 (a large --step or subset)
+        for key in [k for k in data if k.endswith("_std")]:
+            data[key] = None
     # the model's c beside the image metrics (motion along x, translation, the same subsets)
     try:
         data["blur_sensitivity_c"] = blur_sensitivity(img, subset=subset, step=step).c

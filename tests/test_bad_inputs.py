@@ -802,3 +802,23 @@ def test_metrics_of_one_subset_print_no_spread(
     data = json.loads(capsys.readouterr().out)
     assert data["n_subsets"] == 1
     assert data["sssig_x_std"] is None and data["sssig_y_std"] is None
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("calibrate", "{d}/good.tif", "-o", "{o}", "--serial", "-q", "--subset", "10001"),
+        ("design", "-o", "{o}", "--blur", "3", "--confirm", "-1"),
+    ],
+    ids=["calibrate", "design"],
+)
+def test_refused_run_leaves_no_empty_output_folder(
+    argv: tuple[str, ...], corpus: Path, tmp_path: Path
+) -> None:
+    """These created their output folder before a bad value was refused, and left it."""
+    out = tmp_path / "out"
+    assert main([a.format(d=corpus, o=out) for a in argv]) == 2
+    assert not out.exists()
+    out.mkdir()  # a folder the user made is kept, even empty
+    assert main([a.format(d=corpus, o=out) for a in argv]) == 2
+    assert out.is_dir()

@@ -88,7 +88,7 @@ def test_design_cli_writes_everything(tmp_path, capsys):
         (["--blur", "2", "--subset", "30"], "subset"),
         (["--blur", "2", "--grid", "3x3"], "grid"),
         (["--blur-dist", "1-2"], "W:weight"),
-        (["--blur-dist", "1:0,2:0"], "weights"),
+        (["--blur-dist", "1:0,2:0"], "--blur-dist"),
         (["--amplitude", "1", "--frequency", "10"], "--amplitude"),
     ],
 )

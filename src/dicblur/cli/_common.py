@@ -2,19 +2,43 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from rich.console import Console
 from rich.table import Table
 
-from ..errors import InputError
+from ..errors import DicblurError, InputError
 
 console = Console(highlight=False, soft_wrap=True)
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def removes_new_empty_folder(param: str = "out") -> Callable[[F], F]:
+    """Decorate a command whose output ``param`` is a folder: when it fails on a bad input
+    (a :class:`~dicblur.errors.DicblurError`) after the folder was created, and the folder
+    is still empty, remove it (a refused run leaves nothing behind)."""
+
+    def deco(fn: F) -> F:
+        @functools.wraps(fn)
+        def run(*args: Any, **kwargs: Any) -> Any:
+            out = None if kwargs.get(param) is None else Path(kwargs[param])
+            fresh = out is not None and not out.exists()
+            try:
+                return fn(*args, **kwargs)
+            except DicblurError:
+                if out is not None and fresh and out.is_dir() and not any(out.iterdir()):
+                    out.rmdir()
+                raise
+
+        return run  # type: ignore[return-value]
+
+    return deco
 
 
 def split_sides(text: str, name: str, cast: Callable[[str], Any], expected: str) -> list[Any]:

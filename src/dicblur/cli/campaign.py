@@ -17,6 +17,7 @@ from ._common import (
     print_json,
     print_mapping,
     progress_bar,
+    removes_new_empty_folder,
 )
 from .options import (
     AngleOption,
@@ -159,6 +160,7 @@ def export_command(
     typer.echo(f"wrote {csv} ({n} rows)")
 
 
+@removes_new_empty_folder()
 def calibrate_command(
     image: str = typer.Argument(
         ..., help="Pattern image file, or 'paper4' / 'speckle' to generate one."

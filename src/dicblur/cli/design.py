@@ -12,7 +12,14 @@ from typing import Any
 import typer
 
 from ..errors import InputError
-from ._common import console, fmt, json_safe, print_json, split_sides
+from ._common import (
+    console,
+    fmt,
+    json_safe,
+    print_json,
+    removes_new_empty_folder,
+    split_sides,
+)
 from .options import (
     BaseSeedOption,
     CheckBrowserOption,
@@ -87,6 +94,7 @@ def _written_since(folder: Path, before: dict[Path, int]) -> list[str]:
     )
 
 
+@removes_new_empty_folder()
 def design_command(
     ctx: typer.Context,
     out: OutFolderOption,

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import InputError
+from ._common import removes_new_empty_folder
 from .options import OutFolderOption
 
 
@@ -51,6 +52,7 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
         writer.writerows(rows)
 
 
+@removes_new_empty_folder()
 def pulse_command(
     out: OutFolderOption,
     trials: Annotated[int, typer.Option("--trials", help="Noise realisations per w.")] = 10000,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import console
+from ._common import console, removes_new_empty_folder
 from .options import (
     BaseSeedOption,
     CheckBrowserOption,
@@ -19,6 +19,7 @@ from .options import (
 )
 
 
+@removes_new_empty_folder()
 def reproduce_command(
     out: OutFolderOption = Path("report"),
     quick: bool = typer.Option(False, "--quick", help="Coarser W grid and fewer POIs."),

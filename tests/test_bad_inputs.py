@@ -822,3 +822,29 @@ def test_refused_run_leaves_no_empty_output_folder(
     out.mkdir()  # a folder the user made is kept, even empty
     assert main([a.format(d=corpus, o=out) for a in argv]) == 2
     assert out.is_dir()
+
+
+def test_store_without_finished_tasks(
+    store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """export wrote a header-only CSV, 'wrote x.csv (0 rows)', exit 0; fit printed
+    xarray's six-line warning about consolidated metadata before its error."""
+    from dicblur.campaign import parse_spec, run_campaign
+    from helpers.campaign import small_spec_dict
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    d = small_spec_dict(blur__lengths=[0.0, 1.0], campaign__repetitions=1)
+    d["pattern"] = d["pattern"][:1]
+    empty = tmp_path / "r.zarr"
+    run_campaign(parse_spec(d), empty, serial=True, task=interrupted)
+    capsys.readouterr()
+    assert main(["campaign", "export", str(empty), "--csv", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "no finished task" in err and not (tmp_path / "x.csv").exists(), err
+    assert main(["fit", str(empty), "-o", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "consolidat" not in err, err
+    assert main(["fit", str(store), "-o", str(tmp_path / "m.json")]) in (0, 2)
+    assert "consolidat" not in capsys.readouterr().err  # a finished store: no warning either

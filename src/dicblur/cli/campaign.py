@@ -152,10 +152,16 @@ def export_command(
     csv: Path = typer.Option(..., "--csv", help="Output CSV, one row per finished task."),
 ) -> None:
     """Export the finished tasks of a store as a flat CSV."""
-    from ..campaign import export_csv
+    from ..campaign import export_csv, open_results
     from ..io import check_output
 
     check_output(csv, "--csv")
+    done = open_results(results)["done"].values
+    if not (done == 1).any():
+        raise InputError(
+            f"RESULTS={str(results)!r}: no finished task yet (0 of {done.size}), nothing to "
+            "export; run or resume it with dicblur campaign run"
+        )
     n = export_csv(results, csv)
     typer.echo(f"wrote {csv} ({n} rows)")
 

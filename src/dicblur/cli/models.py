@@ -124,7 +124,13 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         import xarray as xr
 
         try:
-            ds = xr.open_zarr(path) if suffix == ".zarr" or path.is_dir() else xr.open_dataset(path)
+            # consolidated=False, as the store reads itself: a campaign store has no
+            # consolidated metadata, and xarray's fallback warns in six lines
+            ds = (
+                xr.open_zarr(path, consolidated=False)
+                if suffix == ".zarr" or path.is_dir()
+                else xr.open_dataset(path)
+            )
         except Exception as exc:  # xarray raises many types for unreadable files
             raise InputError(f"RESULTS={str(path)!r}: cannot open as netCDF/zarr ({exc})") from exc
         if "u_e" not in ds:
@@ -335,7 +341,7 @@ def _results_compensation(results: Path, given: str | None) -> str:
         import xarray as xr
 
         try:
-            spec = json.loads(xr.open_zarr(results).attrs.get("spec", "{}"))
+            spec = json.loads(xr.open_zarr(results, consolidated=False).attrs.get("spec", "{}"))
         except Exception:  # not a campaign store: no recorded mode
             return "none"
         mode = spec.get("dic", {}).get("compensation", "none") if isinstance(spec, dict) else "none"

@@ -134,6 +134,7 @@ def build_corpus(folder: Path) -> Path:
     tifffile.imwrite(folder / "inf.tif", f)
     tifffile.imwrite(folder / "huge.tif", good * 1e298)  # values near 1e300
     tifffile.imwrite(folder / "unit.tif", (good / 255).astype(np.float32))  # normalised 0..1
+    tifffile.imwrite(folder / "signed.tif", good8.astype(np.int16) - 128)  # levels -108..107
     tifffile.imwrite(
         folder / "constant.tif", np.full((64, 64), 128, np.uint8), photometric="minisblack"
     )

@@ -467,6 +467,12 @@ CASES += [
         ("fit", "{d}/zero_noise.csv", "-o", "{o}/m.json"),
         must=("column noise", "line 2"),
     ),
+    # a signed 16-bit image with negative levels: clipped to black, exit 0
+    Case(
+        "blur-negative-levels",
+        ("blur", "{d}/signed.tif", "{o}/x.tif", "--length", "2"),
+        must=("down to -", "clip"),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr

@@ -200,18 +200,23 @@ def blur_command(
 
 def _check_levels(img: Any, dtype: str, bit_depth: int, image: Path) -> None:
     """The input's grey levels must fit the output's: above its top level they all clip
-    to white; a float image normalised to 0..1 rounds to 2 levels (black and 1 GL)."""
+    to white, below 0 to black; a float (or boolean) image in 0..1 rounds to 2 levels."""
     top = 2**bit_depth - 1
-    hi = float(img.max())
+    hi, lo = float(img.max()), float(img.min())
+    if lo < 0:
+        raise InputError(
+            f"IMAGE={str(image)!r}: grey levels down to {lo:.6g} GL ({dtype} samples): below "
+            "0 they would clip to black; shift the image to grey levels >= 0 first"
+        )
     if hi > top:
         fix = "use --bit-depth 16" if hi <= 65535 and bit_depth == 8 else "rescale the image"
         raise InputError(
             f"--bit-depth={bit_depth}: IMAGE {str(image)!r} has grey levels up to {hi:.6g} "
             f"GL, above the output's top level {top}: the blurred image would saturate; {fix}"
         )
-    if dtype.startswith("float") and hi <= 1.0:
+    if dtype.startswith(("float", "bool")) and hi <= 1.0:
         raise InputError(
-            f"IMAGE={str(image)!r}: a float image with grey levels in 0..{hi:.3g} "
+            f"IMAGE={str(image)!r}: a {dtype} image with grey levels in 0..{hi:.3g} "
             f"(normalised): quantised to {bit_depth} bits it keeps at most 2 levels; scale "
             f"it to grey levels first (x {top})"
         )

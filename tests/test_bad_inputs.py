@@ -854,3 +854,17 @@ def test_store_without_finished_tasks(
     assert len(err.strip().splitlines()) == 1 and "consolidat" not in err, err
     assert main(["fit", str(store), "-o", str(tmp_path / "m.json")]) in (0, 2)
     assert "consolidat" not in capsys.readouterr().err  # a finished store: no warning either
+
+
+def test_numeric_options_take_their_unit(corpus: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """'--noise 2GL', '--blur 2px' were usage errors although the CLI writes quantities
+    with their unit (120mm/s, 0.05mm/px, 2GL); a number in its option's unit is read, a
+    wrong unit is still refused."""
+    base = ["predict", str(corpus / "model.json")]
+    assert main([*base, "--blur", "2", "--noise", "2"]) == 0
+    plain = capsys.readouterr().out
+    assert main([*base, "--blur", "2px", "--noise=2GL"]) == 0
+    assert capsys.readouterr().out == plain
+    assert main([*base, "--blur", "2px", "--noise", "2px"]) == 2
+    err = capsys.readouterr().err
+    assert "--noise" in err and "'2px'" in err and len(err.strip().splitlines()) == 1, err

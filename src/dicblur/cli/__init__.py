@@ -7,11 +7,13 @@ code 2 (``--verbose`` adds the traceback).
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import re
 import sys
 import traceback
+import typing
 import warnings
 from collections.abc import Sequence
 from typing import Any
@@ -221,13 +223,18 @@ _PARAM = re.compile(r"(?<![\w.\-(])(?:[A-Z][A-Za-z0-9]*\.)?([A-Za-z_][A-Za-z0-9_
 _LEADING = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*):")
 
 
-def _command_options(args: Sequence[str]) -> dict[str, str]:
-    """{python parameter name: option as typed} of the command that ``args`` invoke."""
+@functools.lru_cache(maxsize=1)
+def _root_command() -> Any:
+    """The click tree of the app (built once: ~20 ms, and the app does not change)."""
+    return typer.main.get_command(app)
+
+
+def _command(args: Sequence[str]) -> Any:
+    """The click command that ``args`` invoke (the root group if none)."""
     try:
-        cmd: Any = typer.main.get_command(app)
+        cmd: Any = _root_command()
     except Exception:  # pragma: no cover - the app is built at import
-        return {}
-    names: dict[str, str] = {"max_pixels": "--max-pixels"}
+        return None
     it = iter(args)
     for tok in it:
         if tok == "--max-pixels":
@@ -237,6 +244,59 @@ def _command_options(args: Sequence[str]) -> dict[str, str]:
         sub = getattr(cmd, "commands", None)
         if isinstance(sub, dict) and tok in sub:
             cmd = sub[tok]
+    return cmd
+
+
+# a number with the unit the option's help gives: --noise 2GL, --blur 2px, --angle 90deg
+_WITH_UNIT = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(px|GL|deg)\s*")
+_UNIT_WORDS = {"px": (" px", "px)", "px."), "GL": ("grey level", " gl"), "deg": ("degree", "deg")}
+
+
+def _is_number(param: Any) -> bool:
+    """Whether an option takes numbers (``float``, ``int | None``, ``list[float]``)."""
+    ann = getattr(getattr(param, "type_descriptor", None), "annotation", None)
+    if ann is None:  # click without typer's descriptor
+        return getattr(getattr(param, "type", None), "name", "") in ("float", "integer")
+
+    def number(a: Any) -> bool:
+        if a in (int, float):
+            return True
+        parts = typing.get_args(a)
+        return bool(parts) and all(p is type(None) or number(p) for p in parts)
+
+    return number(ann)
+
+
+def strip_units(args: Sequence[str]) -> list[str]:
+    """``args`` with the unit dropped from the value of a numeric option that is in that
+    unit (``--noise 2GL`` -> ``--noise 2``: the unit syntax of the string options, for the
+    plain-number ones). A unit the option is not in is left for the usage error."""
+    cmd = _command(args)
+    numeric: dict[str, str] = {}
+    for param in getattr(cmd, "params", ()):
+        if _is_number(param):
+            help_text = f" {(getattr(param, 'help', '') or '').lower()}"
+            for opt in getattr(param, "opts", ()):
+                numeric[opt] = help_text
+    out = list(args)
+    for i, tok in enumerate(out):
+        opt, eq, value = tok.partition("=")
+        if eq and opt in numeric:
+            j, text = i, value
+        elif tok in numeric and i + 1 < len(out):
+            j, text = i + 1, out[i + 1]
+        else:
+            continue
+        m = _WITH_UNIT.fullmatch(text)
+        if m and any(w in numeric[opt] for w in _UNIT_WORDS[m.group(2)]):
+            out[j] = f"{opt}={m.group(1)}" if j == i else m.group(1)
+    return out
+
+
+def _command_options(args: Sequence[str]) -> dict[str, str]:
+    """{python parameter name: option as typed} of the command that ``args`` invoke."""
+    cmd = _command(args)
+    names: dict[str, str] = {"max_pixels": "--max-pixels"}
     for param in getattr(cmd, "params", ()):
         if getattr(param, "param_type_name", "") == "option" and param.name:
             long = [o for o in param.opts if o.startswith("--")]
@@ -303,7 +363,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     old_limit = os.environ.get("DICBLUR_MAX_PIXELS")
     try:
-        rv = app(args=args, prog_name="dicblur", standalone_mode=False)
+        rv = app(args=strip_units(args), prog_name="dicblur", standalone_mode=False)
         return rv if isinstance(rv, int) else 0
     except DicblurError as exc:
         if verbose:

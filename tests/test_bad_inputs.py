@@ -473,6 +473,12 @@ CASES += [
         ("blur", "{d}/signed.tif", "{o}/x.tif", "--length", "2"),
         must=("down to -", "clip"),
     ),
+    # options that --preset paper4 does not use were ignored
+    Case(
+        "generate-preset-softness",
+        (*GENERATE, "64", "--preset", "paper4", "--softness", "1"),
+        must=("--softness", "--preset"),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr
@@ -868,3 +874,24 @@ def test_numeric_options_take_their_unit(corpus: Path, capsys: pytest.CaptureFix
     assert main([*base, "--blur", "2px", "--noise", "2px"]) == 2
     err = capsys.readouterr().err
     assert "--noise" in err and "'2px'" in err and len(err.strip().splitlines()) == 1, err
+
+
+@pytest.mark.parametrize("command", ["generate", "blur"])
+def test_settings_json_makes_the_same_image_again(
+    command: str, corpus: Path, tmp_path: Path
+) -> None:
+    """Without --seed the sidecar said "seed": null: the image could not be made again.
+    The seed drawn is now recorded, and rerunning with it gives the same bytes."""
+    import json
+
+    first, again = tmp_path / "a.tif", tmp_path / "b.tif"
+    if command == "generate":
+        argv = ["pattern", "generate", "{out}", "--size", "32"]
+    else:
+        argv = ["blur", str(corpus / "good.tif"), "{out}", "--length", "2", "--noise", "2"]
+    assert main([a.replace("{out}", str(first)) for a in argv]) == 0
+    side = json.loads((tmp_path / "a.tif.json").read_text())
+    seed = (side["generator"] if command == "generate" else side)["seed"]
+    assert isinstance(seed, int)
+    assert main([*(a.replace("{out}", str(again)) for a in argv), "--seed", str(seed)]) == 0
+    assert first.read_bytes() == again.read_bytes()

@@ -41,6 +41,14 @@ def removes_new_empty_folder(param: str = "out") -> Callable[[F], F]:
     return deco
 
 
+def fresh_seed() -> int:
+    """A seed for a run without ``--seed``, drawn once and written to the settings JSON
+    (a null there could not make the same image again)."""
+    import secrets
+
+    return secrets.randbits(63)
+
+
 def split_sides(text: str, name: str, cast: Callable[[str], Any], expected: str) -> list[Any]:
     """The sides of ``"AxB"`` (``"A"``: a square, A both sides) cast by ``cast``; a part
     that does not parse is one error line ``name=text: expected <expected>``. The caller

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import InputError
+from ._common import fresh_seed
 from .options import AngleOption, ImageSeedOption
 
 
@@ -137,6 +138,7 @@ def blur_command(
             f"--trajectory={trajectory!r}: unknown trajectory; choose linear, sine or acceleration"
         )
     k = None if continuous else substeps
+    seed = fresh_seed() if seed is None else seed
     img = load_image(image)
     _check_levels(img, header.dtype, bit_depth, image)
     # a path as long as the image wraps it onto itself (periodic) or mirrors it (reflect):

@@ -11,7 +11,7 @@ from typing import Any
 import typer
 
 from ..errors import InputError
-from ._common import console, parse_size, print_json, print_mapping
+from ._common import console, fresh_seed, parse_size, print_json, print_mapping
 from .options import (
     AngleOption,
     BitDepthOption,
@@ -74,6 +74,15 @@ def generate(
     shape = parse_size(size)
     if preset not in ("", "paper4"):
         raise InputError(f"--preset={preset!r}: unknown preset; choose 'paper4' or omit it")
+    if preset == "paper4":
+        for opt, value, default in (
+            ("--softness", softness, 0.0),
+            ("--contrast", contrast, 1.0),
+            ("--supersample", supersample, 1),
+        ):
+            if value != default:
+                raise InputError(f"{opt}={value:g}: not used by --preset paper4; drop one")
+    seed = fresh_seed() if seed is None else seed
     if preset == "paper4":
         img = paper_pattern4(shape, speckle_size=speckle_size, density=density, seed=seed)
         settings = {

@@ -199,6 +199,10 @@ def build_corpus(folder: Path) -> Path:
     table("text_ue.csv", ["abc"] * w.size)
     table("zero_ue.csv", [0.0] * w.size)
     table("no_ue.csv", list(u), header=("blur", "sssig", "u_x"))
+    with (folder / "noisy.csv").open("w", newline="") as fh:
+        wr = csv.writer(fh)
+        wr.writerow(("blur", "sssig", "u_e", "noise"))
+        wr.writerows(zip(w, s, u, [2.0] * w.size, strict=True))
     with (folder / "zero_noise.csv").open("w", newline="") as fh:
         wr = csv.writer(fh)
         wr.writerow(("blur", "sssig", "u_e", "noise"))

@@ -479,6 +479,19 @@ CASES += [
         (*GENERATE, "64", "--preset", "paper4", "--softness", "1"),
         must=("--softness", "--preset"),
     ),
+    # --select of a numeric column with a unit: ValueError traceback, exit 1
+    Case(
+        "fit-select-not-a-number",
+        (*FIT, "--select", "blur=2px"),
+        must=("--select 'blur=2px'", "numbers"),
+    ),
+    # "--select ['--noise=3']": the user's own text rewritten into an option
+    Case(
+        "fit-select-no-match",
+        ("fit", "{d}/noisy.csv", "-o", "{o}/m.json", "--select", "noise=3"),
+        must=("'noise=3'",),
+        must_not=("--noise",),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr
@@ -895,3 +908,19 @@ def test_settings_json_makes_the_same_image_again(
     assert isinstance(seed, int)
     assert main([*(a.replace("{out}", str(again)) for a in argv), "--seed", str(seed)]) == 0
     assert first.read_bytes() == again.read_bytes()
+
+
+def test_fit_prints_no_inf_for_an_unconstrained_parameter(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A parameter the data do not constrain printed its interval as '[-inf, inf]'."""
+    import re
+
+    rows = ["blur,sssig,u_e,noise"]
+    for noise, scale in ((2, 1.0), (4, 2.0)):
+        for w, s, u in ((0, 1e5, 0.01), (1, 9e4, 0.012), (2, 8e4, 0.015), (3, 7e4, 0.02)):
+            rows.append(f"{w},{s},{u * scale},{noise}")
+    (tmp_path / "r.csv").write_text("\n".join(rows) + "\n")
+    assert main(["fit", str(tmp_path / "r.csv"), "-o", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert "unidentified" in out and not re.search(r"(?<![\w/])-?inf\b", out), out

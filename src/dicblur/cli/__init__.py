@@ -219,7 +219,7 @@ _ALIASES = {
     "confirm_realisations": "confirm",
 }
 _NUMPY_REPR = re.compile(r"np\.(?:float|int|uint|complex|bool|str)[a-z_]*\d*\(([^()]*)\)")
-_PARAM = re.compile(r"(?<![\w.\-(])(?:[A-Z][A-Za-z0-9]*\.)?([A-Za-z_][A-Za-z0-9_]*)=")
+_PARAM = re.compile(r"(?<![\w.\-('\"])(?:[A-Z][A-Za-z0-9]*\.)?([A-Za-z_][A-Za-z0-9_]*)=")
 _LEADING = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*):")
 
 

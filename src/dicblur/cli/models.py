@@ -172,10 +172,17 @@ def _aggregate(cols: dict[str, np.ndarray], select: list[str]) -> dict[str, np.n
         if col.dtype == object:
             mask &= col == value
         else:
-            mask &= np.isclose(col.astype(float), float(value))
+            try:
+                number = float(value)
+            except ValueError:
+                raise InputError(
+                    f"--select {item!r}: column {key} holds numbers; give a number, e.g. "
+                    f"'{key}={float(col[0]):g}'"
+                ) from None
+            mask &= np.isclose(col.astype(float), number)
     keep = {k: v[mask] for k, v in cols.items()}
     if not mask.any():
-        raise InputError(f"--select {select}: no row matches")
+        raise InputError(f"--select {' '.join(select)!r}: no row matches")
     for key, col in keep.items():
         if (key in _SETTINGS or col.dtype == object) and np.unique(col.astype(str)).size > 1:
             raise InputError(

@@ -531,6 +531,8 @@ class BlurUncertaintyModel:
             how = "" if fit.ci_method in ("covariance", "none") else f" ({fit.ci_method})"
             for p in fit.parameters:
                 ci = "fixed" if p.fixed else f"[{p.low:.4g}, {p.high:.4g}]{how}"
+                if not p.fixed and not (math.isfinite(p.low) and math.isfinite(p.high)):
+                    ci = f"no bounded interval{how}: the data do not constrain it"
                 lines.append(f"  {p.name:7s} = {p.value:.5g}  {ci}")
 
         block(self.decay)

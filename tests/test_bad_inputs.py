@@ -492,6 +492,14 @@ CASES += [
         must=("'noise=3'",),
         must_not=("--noise",),
     ),
+    # "smaller than the study crop ...; pass a larger image or a smaller --size": reproduce
+    # has no --size, and the message did not say which of the two images
+    Case(
+        "reproduce-small-pattern",
+        ("reproduce", "--quick", "--out", "{o}/rep", "--pattern2", "{d}/good.tif"),
+        must=("--pattern2=", "512x512"),
+        must_not=("--size",),
+    ),
     # "motion=(nan, nan)" instead of the option
     Case("pattern-predict-angle-nan", (*PREDICT_PATTERN, "--angle", "nan"), must=("--angle",)),
     # "image=array(--shape=(64, 64), ...)": the option rewrite reached inside the repr

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from ..errors import InputError
 from ._common import console, removes_new_empty_folder
 from .options import (
     BaseSeedOption,
@@ -42,6 +43,17 @@ def reproduce_command(
     from ..report.reproduce import ReproduceSettings, reproduce
 
     check_output(out, "--out", folder=True)
+    size = ReproduceSettings(out=out).size
+    for opt, path in (("--pattern1", pattern1), ("--pattern2", pattern2)):
+        if path is not None:  # the study crops its centre: refused before any work
+            from ..io import read_image_header
+
+            rows, cols = read_image_header(path).shape
+            if rows < size or cols < size:
+                raise InputError(
+                    f"{opt}={str(path)!r}: {rows}x{cols} px, smaller than the study's "
+                    f"central crop of {size}x{size} px; give a larger image"
+                )
 
     settings = ReproduceSettings(
         out=out,

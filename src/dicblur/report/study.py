@@ -63,7 +63,7 @@ def central_crop(image: NDArray[np.float64], size: int) -> tuple[NDArray[np.floa
     if rows < size or cols < size:
         raise InputError(
             f"image of {rows}x{cols} px is smaller than the study crop {size}x{size}; "
-            "pass a larger image or a smaller --size"
+            f"pass an image of at least {size}x{size} px"
         )
     r0 = (rows - size) // 2
     c0 = (cols - size) // 2

@@ -15,6 +15,7 @@ from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import IcgnPasses, scatter
 from .status import PointStatus
+from .support import unsupported
 
 __all__ = [
     "ACCEPT_DISTANCE",
@@ -317,7 +318,8 @@ class Screening(IcgnPasses):
 
     def _flag(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
         """The statuses of ``res`` after IC-GN, in place: the noise (estimated),
-        :meth:`_screen`, :meth:`_neighbour_check`, then ``IMPRECISE``; returns the screen's
+        :meth:`_screen`, :meth:`_neighbour_check`, ``IMPRECISE``, then
+        :meth:`_support_check`; returns the screen's
         noise variance (or None). The iterations get those of the check's retries."""
         st = res.status
         if self.noise_auto:
@@ -332,7 +334,36 @@ class Screening(IcgnPasses):
             if kept is not None:
                 flag &= ~kept
             st[flag] = PointStatus.IMPRECISE
+        self._support_check(res)
         return noise_var
+
+    def _support_check(self, res: kernels.Outputs) -> None:
+        """``OUTLIER`` for the converged POIs of the grid that their neighbours do not
+        support (:func:`.support.unsupported`: a lone match among failures), in place,
+        unless a noise level is known and the POI's residual passes the residual test
+        against it alone (``max_residual`` times the noise variance; no field median)."""
+        if not self.neighbour_check or self._grid_shape is None or self._grid_index is None:
+            return
+        st = res.status
+        ok = st == PointStatus.CONVERGED
+        if not ok.any():
+            return
+        # an IMPRECISE estimate may confirm a neighbour; failed in the current image: not
+        # decided by the reference (status0), and not predicted imprecise
+        finite = ok | (st == PointStatus.IMPRECISE)
+        failed = ~finite & (self._status0 == 0) & (st != PointStatus.LOW_TEXTURE)
+        if self._imprecise is not None:
+            failed &= ~self._imprecise
+        flag = ok & unsupported(
+            res.p, finite, failed, self.rows, self.cols, self._grid_shape, self._grid_index
+        )
+        if flag.any() and self.noise is not None and self.max_residual is not None:
+            # no neighbour vouches for these: kept only when the residual alone is the
+            # noise's (a chance optimum's is tens of times larger)
+            m = self.subset * self.subset - res.p.shape[1] - 2
+            unit = residual_variance(res.zncc, self._prep.fnorm, m)
+            flag &= unit > self.max_residual * self.noise.sigma**2
+        st[flag] = PointStatus.OUTLIER
 
     def _neighbour_check(
         self, coef: NDArray[np.float32], res: kernels.Outputs

@@ -1,0 +1,132 @@
+"""A converged POI that no grid neighbour supports, among failures, is not CONVERGED
+(dicblur.dic.support): chance optima on a pair that does not match must not pass."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import dicblur
+from dicblur import Correlator
+from dicblur.dic import PointStatus
+from dicblur.dic.support import unsupported
+from helpers.dic import fourier_shift, pattern
+
+REAL = next(
+    (
+        p / "shared" / "data" / "real"
+        for p in Path(__file__).resolve().parents
+        if (p / "shared" / "data" / "real").exists()
+    ),
+    Path("/nonexistent"),
+)
+
+
+def _grid(ny: int = 5, nx: int = 5, step: int = 10):
+    r, c = np.meshgrid(np.arange(ny) * step, np.arange(nx) * step, indexing="ij")
+    return r.ravel(), c.ravel(), (ny, nx), np.arange(ny * nx)
+
+
+def test_lone_converged_point_among_failures_is_unsupported():
+    rows, cols, shape, cell = _grid()
+    n = rows.size
+    p = np.zeros((n, 2))
+    conv = np.zeros(n, bool)
+    conv[12] = True  # the centre, all 8 neighbours failed
+    flag = unsupported(p, conv, ~conv, rows, cols, shape, cell)
+    assert flag[12] and flag.sum() == 1
+
+
+def test_two_adjacent_points_do_not_vouch_for_each_other_alone():
+    rows, cols, shape, cell = _grid()
+    p = np.zeros((rows.size, 2))
+    conv = np.zeros(rows.size, bool)
+    conv[[12, 13]] = True  # agreeing, but every other neighbour failed
+    flag = unsupported(p, conv, ~conv, rows, cols, shape, cell)
+    assert flag[12] and flag[13]
+
+
+def test_edge_of_a_converged_region_and_a_linear_field_are_supported():
+    rows, cols, shape, cell = _grid()
+    n = rows.size
+    # an affine field (rotation by 10 degrees, strain) that neighbours confirm through the
+    # shape function: u = a c + b r, 1-2 px between neighbours
+    a, b = 0.1, -0.17
+    p = np.zeros((n, 6))
+    p[:, 0], p[:, 1], p[:, 2] = a * cols + b * rows, a, b
+    p[:, 3], p[:, 4], p[:, 5] = -b * cols + a * rows, -b, a
+    conv = cols <= 20  # the left three columns converged, the rest failed
+    flag = unsupported(p, conv, ~conv, rows, cols, shape, cell)
+    assert not flag.any()
+    # the same field without its gradients: neighbours 1-2 px off do not confirm
+    flag2 = unsupported(p[:, [0, 3]], conv, ~conv, rows, cols, shape, cell)
+    assert flag2[conv & (cols == 20)].any()
+
+
+def test_points_neither_converged_nor_failed_count_neither_way():
+    rows, cols, shape, cell = _grid()
+    conv = np.zeros(rows.size, bool)
+    conv[12] = True
+    # the neighbours decided by the reference (LOW_TEXTURE, out of the reference)
+    flag = unsupported(np.zeros((rows.size, 2)), conv, np.zeros_like(conv), rows, cols, shape, cell)
+    assert not flag.any()
+
+
+@pytest.mark.parametrize("shape", ["affine", "translation"])
+@pytest.mark.parametrize("noise_sigma", ["auto", 2.0, None])
+def test_a_different_pattern_converges_nowhere(shape, noise_sigma):
+    """The current image is another speckle: every POI must fail (before: one affine POI
+    came back CONVERGED 50 px off, ZNCC 0.66, with any noise setting)."""
+    ref = dicblur.speckle_pattern((128, 128), speckle_size=4, seed=1)
+    other = dicblur.speckle_pattern((128, 128), speckle_size=4, seed=99)
+    res = Correlator(ref, subset=21, step=10, shape=shape, noise_sigma=noise_sigma).correlate(other)
+    assert not res.converged.any(), np.c_[res.u, res.v][res.converged]
+
+
+def test_a_shift_beyond_the_subset_from_a_zero_start_is_not_converged():
+    """30 px, subset 21, ``initial="zero"``: IC-GN cannot reach it (before: two POIs
+    CONVERGED about 1 px from zero, ZNCC 0.62-0.64)."""
+    ref = dicblur.speckle_pattern((128, 128), speckle_size=4, seed=1)
+    res = Correlator(ref, subset=21, step=10, initial="zero").correlate(np.roll(ref, 30, axis=1))
+    err = np.hypot(res.u - 30.0, res.v)
+    assert not (res.converged & ~(err < 0.1)).any()
+
+
+def test_correct_points_around_a_mismatched_region_stay_converged():
+    """A patch of the current image replaced by another pattern: its POIs fail, the POIs
+    whose subsets lie outside it keep CONVERGED, at the truth."""
+    ref = pattern(160, seed=3)
+    cur = fourier_shift(ref, -0.2, 0.3)
+    cur[50:110, 50:110] = pattern(160, seed=8)[50:110, 50:110]
+    cur += np.random.default_rng(5).normal(0, 2.0, cur.shape)
+    ref = ref + np.random.default_rng(6).normal(0, 2.0, ref.shape)
+    corr = Correlator(ref, subset=21, step=10)
+    res = corr.correlate(cur)
+    lo, hi = corr.rows - 10, corr.rows + 10  # the subsets' rows and columns
+    left, right = corr.cols - 10, corr.cols + 10
+    outside = (hi < 50) | (lo >= 110) | (right < 50) | (left >= 110)
+    inside = (lo >= 50) & (hi < 110) & (left >= 50) & (right < 110)
+    assert res.converged[outside].all()
+    assert not res.converged[inside].any()
+    err = np.hypot(res.u - 0.3, res.v + 0.2)
+    assert np.all(err[res.converged] < 0.1)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not (REAL / "dicchallenge1_sample13").exists(),
+    reason="DIC Challenge images not present (shared/data/real beside the repo)",
+)
+@pytest.mark.parametrize("shape", ["affine", "translation"])
+def test_real_sample13_frame_915_reports_no_wrong_match_as_converged(shape):
+    """Frame 915 (fracture, heavy defocus) against frame 000: DIC fails nearly everywhere;
+    the few POIs that stopped at a chance optimum (10-50 px off their neighbours' failed
+    estimates, ZNCC 0.64-0.85) were CONVERGED before."""
+    folder = REAL / "dicchallenge1_sample13"
+    ref = dicblur.load_image(folder / "pw-0mil-p2-n14-000_0.tif")
+    cur = dicblur.load_image(folder / "pw-0mil-p2-n14-915_0.tif")
+    res = Correlator(ref, subset=31, step=20, shape=shape).correlate(cur)
+    assert not res.converged.any()
+    assert np.count_nonzero(res.status == PointStatus.OUTLIER) >= 2

@@ -15,7 +15,7 @@ from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import IcgnPasses, scatter
 from .status import PointStatus
-from .support import unsupported
+from .support import unsupported, unsupported_scattered
 
 __all__ = [
     "ACCEPT_DISTANCE",
@@ -342,7 +342,7 @@ class Screening(IcgnPasses):
         support (:func:`.support.unsupported`: a lone match among failures), in place,
         unless a noise level is known and the POI's residual passes the residual test
         against it alone (``max_residual`` times the noise variance; no field median)."""
-        if not self.neighbour_check or self._grid_shape is None or self._grid_index is None:
+        if not self.neighbour_check:
             return
         st = res.status
         ok = st == PointStatus.CONVERGED
@@ -354,9 +354,15 @@ class Screening(IcgnPasses):
         failed = ~finite & (self._status0 == 0) & (st != PointStatus.LOW_TEXTURE)
         if self._imprecise is not None:
             failed &= ~self._imprecise
-        flag = ok & unsupported(
-            res.p, finite, failed, self.rows, self.cols, self._grid_shape, self._grid_index
-        )
+        if self._grid_shape is not None and self._grid_index is not None:
+            flag = ok & unsupported(
+                res.p, finite, failed, self.rows, self.cols, self._grid_shape, self._grid_index
+            )
+        else:
+            # explicit points off a grid: the neighbours whose subsets overlap
+            flag = ok & unsupported_scattered(
+                res.p, finite, failed, self.rows, self.cols, float(self.subset)
+            )
         if flag.any() and self.noise is not None and self.max_residual is not None:
             # no neighbour vouches for these: kept only when the residual alone is the
             # noise's (a chance optimum's is tens of times larger)

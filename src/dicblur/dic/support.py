@@ -19,7 +19,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MIN_AGAINST", "MIN_SUPPORT", "SUPPORT_DISTANCE", "unsupported"]
+__all__ = [
+    "MIN_AGAINST",
+    "MIN_SUPPORT",
+    "MIN_VERDICTS",
+    "SUPPORT_DISTANCE",
+    "unsupported",
+    "unsupported_scattered",
+]
 
 #: A converged neighbour confirms a POI when its (u, v) lies within this distance (px) of
 #: the POI's own shape function carried to the neighbour's centre (its displacement for
@@ -31,8 +38,11 @@ SUPPORT_DISTANCE = 1.0
 #: other alone).
 MIN_SUPPORT = 2
 #: Fewest contradicting neighbours (of 8) that make a POI with less support ``OUTLIER``:
-#: a POI at the edge of a converged region keeps more than one confirming neighbour.
+#: a POI at the edge of a converged region keeps more than one confirming neighbour. A POI
+#: with fewer neighbours that give a verdict (a corner of the grid has three) needs all of
+#: them against it, and at least :data:`MIN_VERDICTS` of them.
 MIN_AGAINST = 4
+MIN_VERDICTS = 3
 
 _OFFSETS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
@@ -70,7 +80,8 @@ def unsupported(
     -------
     ndarray of bool, shape (n,)
         Converged POIs with fewer than :data:`MIN_SUPPORT` confirming neighbours and at
-        least :data:`MIN_AGAINST` contradicting ones.
+        least :data:`MIN_AGAINST` contradicting ones (all of those that give a verdict
+        where fewer do, at least :data:`MIN_VERDICTS`).
     """
     k = params.shape[1]
     ny, nx = grid_shape
@@ -108,5 +119,60 @@ def unsupported(
         is_conv = conv[nb] > 0
         support += is_conv & near
         against += (is_conv & ~near) | (fail[nb] > 0)
-    flag = (support < MIN_SUPPORT) & (against >= MIN_AGAINST)
-    return flag.ravel()[cell] & converged
+    return _verdict(support, against).ravel()[cell] & converged
+
+
+def _verdict(support: NDArray[np.int64], against: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Too little support against enough contradiction (the rule of :func:`unsupported`)."""
+    verdicts = support + against
+    need = np.maximum(np.minimum(MIN_AGAINST, verdicts), MIN_VERDICTS)
+    return (support < MIN_SUPPORT) & (against >= need)
+
+
+def unsupported_scattered(
+    params: NDArray[np.float64],
+    converged: NDArray[np.bool_],
+    failed: NDArray[np.bool_],
+    rows: NDArray[np.int64],
+    cols: NDArray[np.int64],
+    radius: float,
+) -> NDArray[np.bool_]:
+    """:func:`unsupported` for POIs that do not fill a grid: a POI's neighbours are the
+    POIs within ``radius`` px of it (the caller's subset size: their subsets share
+    pixels, so a true match's neighbours see the same texture).
+
+    Parameters
+    ----------
+    params, converged, failed, rows, cols
+        As for :func:`unsupported`.
+    radius : float
+        Neighbour distance, px.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    from scipy.spatial import cKDTree
+
+    k = params.shape[1]
+    iu, iv = (0, 1) if k == 2 else (0, 3)
+    n = rows.size
+    support = np.zeros(n, np.int64)
+    against = np.zeros(n, np.int64)
+    xy = np.c_[rows, cols].astype(float)
+    pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray")
+    if pairs.size == 0:
+        return np.zeros(n, bool)
+    for a, b in ((pairs[:, 0], pairs[:, 1]), (pairs[:, 1], pairs[:, 0])):
+        # b's estimate against a's shape function carried to b's centre
+        drow, dcol = xy[b, 0] - xy[a, 0], xy[b, 1] - xy[a, 1]
+        pu, pv = params[a, iu], params[a, iv]
+        if k == 6:
+            pu = pu + params[a, 1] * dcol + params[a, 2] * drow
+            pv = pv + params[a, 4] * dcol + params[a, 5] * drow
+        with np.errstate(invalid="ignore"):
+            near = np.hypot(params[b, iu] - pu, params[b, iv] - pv) <= SUPPORT_DISTANCE
+        conf = converged[b] & near
+        np.add.at(support, a, conf)
+        np.add.at(against, a, (converged[b] & ~near) | failed[b])
+    return _verdict(support, against) & converged

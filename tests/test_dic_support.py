@@ -175,3 +175,34 @@ def test_real_sample13_frame_915_reports_no_wrong_match_as_converged(shape):
     res = Correlator(ref, subset=31, step=20, shape=shape).correlate(cur)
     assert not res.converged.any()
     assert np.count_nonzero(res.status == PointStatus.OUTLIER) >= 2
+
+
+def test_chance_optima_do_not_make_the_noise_estimate():
+    """Another pattern, 576 POIs: before, 75 lone chance optima (ZNCC >= 0.6) made the
+    estimated noise of this 2 GL pair 57 GL, and 20 % of the POIs IMPRECISE."""
+    shape = "translation"
+    rng = np.random.default_rng(0)
+    ref = pattern(256, seed=3) + rng.normal(0, 2.0, (256, 256))
+    other = pattern(256, seed=77) + rng.normal(0, 2.0, (256, 256))
+    corr = Correlator(ref, subset=21, step=10, shape=shape)
+    res = corr.correlate(other)
+    assert corr.noise is None and res.info["noise_sigma"] is None
+    assert not (res.status == PointStatus.IMPRECISE).any()
+    assert not res.converged.any()
+
+
+def test_a_line_of_three_chance_optima_is_flagged_whole():
+    # the middle of three agreeing POIs among failures keeps two confirmations until its
+    # ends are flagged (the second round)
+    rows, cols, shape, cell = _grid()
+    conv = np.zeros(rows.size, bool)
+    conv[[7, 12, 17]] = True  # a vertical line through the centre
+    first = unsupported(np.zeros((rows.size, 2)), conv, ~conv, rows, cols, shape, cell)
+    assert first[7] and first[17] and not first[12]
+    ref = pattern(256, seed=3) + np.random.default_rng(0).normal(0, 2.0, (256, 256))
+    from scipy.ndimage import rotate
+
+    cur = rotate(pattern(256, seed=3), 30, reshape=False, order=3, mode="reflect")
+    cur = cur + np.random.default_rng(1).normal(0, 2.0, cur.shape)
+    res = Correlator(ref, subset=21, step=10, shape="translation").correlate(cur)
+    assert not res.converged.any(), np.c_[res.u, res.v][res.converged]

@@ -24,6 +24,7 @@ __all__ = [
     "MIN_SUPPORT",
     "MIN_VERDICTS",
     "SUPPORT_DISTANCE",
+    "SUPPORT_ROUNDS",
     "unsupported",
     "unsupported_scattered",
 ]
@@ -43,6 +44,12 @@ MIN_SUPPORT = 2
 #: them against it, and at least :data:`MIN_VERDICTS` of them.
 MIN_AGAINST = 4
 MIN_VERDICTS = 3
+
+#: Rounds of the test, each with the POIs flagged before as failed: a line of three chance
+#: optima (their subsets overlap, so they agree) loses its two ends in the first round and
+#: its middle in the second; more rounds would peel a legitimate one-POI-wide strip of
+#: converged POIs from its ends.
+SUPPORT_ROUNDS = 2
 
 _OFFSETS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 

@@ -15,7 +15,7 @@ from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import IcgnPasses, scatter
 from .status import PointStatus
-from .support import SUPPORT_ROUNDS, unsupported, unsupported_scattered
+from .support import SUPPORT_ROUNDS, grid_pairs, scattered_pairs, unsupported_pairs
 
 __all__ = [
     "ACCEPT_DISTANCE",
@@ -192,6 +192,8 @@ class Screening(IcgnPasses):
     _from_nb: NDArray[np.bool_] | None = None
     #: Their starts' (u, v), (n, 2) px, NaN elsewhere: the field they are checked against.
     _nb_start: NDArray[np.float64] | None = None
+    #: The POIs' neighbour pairs of the support test (:mod:`.support`), once computed.
+    _support_pairs: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
 
     # ------------------------------------------------------------------ the noise
     def _set_noise(self, noise: NoiseEstimate | None) -> None:
@@ -364,18 +366,19 @@ class Screening(IcgnPasses):
             failed &= st != neutral
         elif self._imprecise is not None:
             failed &= ~self._imprecise
+        if self._support_pairs is None:
+            # the POIs are fixed: their neighbour pairs once per Correlator
+            if self._grid_shape is not None and self._grid_index is not None:
+                self._support_pairs = grid_pairs(self._grid_shape, self._grid_index)
+            else:
+                # explicit points off a grid: the neighbours whose subsets overlap
+                self._support_pairs = scattered_pairs(self.rows, self.cols, float(self.subset))
         flag = np.zeros_like(ok)
         for _ in range(SUPPORT_ROUNDS):
             # a later round: the POIs flagged so far vouch for no neighbour
-            if self._grid_shape is not None and self._grid_index is not None:
-                new = unsupported(
-                    res.p, finite, failed, self.rows, self.cols, self._grid_shape, self._grid_index
-                )
-            else:
-                # explicit points off a grid: the neighbours whose subsets overlap
-                new = unsupported_scattered(
-                    res.p, finite, failed, self.rows, self.cols, float(self.subset)
-                )
+            new = unsupported_pairs(
+                res.p, finite, failed, self.rows, self.cols, self._support_pairs
+            )
             new &= ok & ~flag
             if not new.any():
                 break

@@ -16,6 +16,8 @@ On a field where most POIs converge (any correct correlation) no POI is flagged 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -25,7 +27,10 @@ __all__ = [
     "MIN_VERDICTS",
     "SUPPORT_DISTANCE",
     "SUPPORT_ROUNDS",
+    "grid_pairs",
+    "scattered_pairs",
     "unsupported",
+    "unsupported_pairs",
     "unsupported_scattered",
 ]
 
@@ -52,6 +57,102 @@ MIN_VERDICTS = 3
 SUPPORT_ROUNDS = 2
 
 _OFFSETS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
+
+
+def grid_pairs(
+    grid_shape: tuple[int, int], cell: NDArray[np.intp]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The ordered pairs ``(a, b)`` of POIs that are 8-neighbours on a grid.
+
+    Parameters
+    ----------
+    grid_shape : (ny, nx)
+        Shape of the POI grid.
+    cell : ndarray of int, shape (n,)
+        Each POI's row-major cell of the grid.
+
+    Returns
+    -------
+    a, b : ndarray of int, shape (m,)
+        POI indices: ``b`` is a neighbour of ``a`` (each pair in both orders).
+    """
+    ny, nx = grid_shape
+    n = cell.size
+    index = np.full((ny + 2, nx + 2), -1, np.intp)
+    r, c = np.divmod(cell, nx)
+    index[r + 1, c + 1] = np.arange(n)
+    inner = index[1 : ny + 1, 1 : nx + 1]
+    a_parts, b_parts = [], []
+    for dr, dc in _OFFSETS:
+        nb = index[1 + dr : ny + 1 + dr, 1 + dc : nx + 1 + dc]
+        keep = (inner >= 0) & (nb >= 0)
+        a_parts.append(inner[keep])
+        b_parts.append(nb[keep])
+    return np.concatenate(a_parts), np.concatenate(b_parts)
+
+
+def scattered_pairs(
+    rows: NDArray[np.int64], cols: NDArray[np.int64], radius: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The ordered pairs ``(a, b)`` of POIs within ``radius`` px of each other (both
+    orders), for POIs that do not fill a grid."""
+    from scipy.spatial import cKDTree
+
+    xy = np.c_[rows, cols].astype(float)
+    pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray").astype(np.intp)
+    return np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]]
+
+
+def unsupported_pairs(
+    params: NDArray[np.float64],
+    converged: NDArray[np.bool_],
+    failed: NDArray[np.bool_],
+    rows: NDArray[np.int64],
+    cols: NDArray[np.int64],
+    pairs: tuple[NDArray[np.intp], NDArray[np.intp]],
+) -> NDArray[np.bool_]:
+    """The converged POIs their neighbours (``pairs``, :func:`grid_pairs` or
+    :func:`scattered_pairs`) do not support; the rule of :func:`unsupported`.
+
+    Only POIs with a failed neighbour are tested: one among converged neighbours alone is
+    the neighbour check's (:mod:`.screening`), and a clean field costs one pass over the
+    pairs.
+
+    Parameters
+    ----------
+    params, converged, failed, rows, cols
+        As for :func:`unsupported`.
+    pairs : (a, b) of ndarray of int, shape (m,)
+        Ordered neighbour pairs: ``b`` is a neighbour of ``a``.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    a, b = pairs
+    n, k = params.shape
+    out = np.zeros(n, bool)
+    cand = converged[a] & failed[b]
+    if not cand.any():
+        return out
+    test = np.zeros(n, bool)
+    test[a[cand]] = True
+    sel = test[a]
+    a, b = a[sel], b[sel]
+    iu, iv = (0, 1) if k == 2 else (0, 3)
+    # b's estimate against a's shape function carried to b's centre (px offsets)
+    drow = (rows[b] - rows[a]).astype(float)
+    dcol = (cols[b] - cols[a]).astype(float)
+    pu, pv = params[a, iu], params[a, iv]
+    if k == 6:
+        pu = pu + params[a, 1] * dcol + params[a, 2] * drow
+        pv = pv + params[a, 4] * dcol + params[a, 5] * drow
+    with np.errstate(invalid="ignore"):
+        near = np.hypot(params[b, iu] - pu, params[b, iv] - pv) <= SUPPORT_DISTANCE
+    conv_b = converged[b]
+    support = np.bincount(a, weights=conv_b & near, minlength=n)
+    against = np.bincount(a, weights=(conv_b & ~near) | failed[b], minlength=n)
+    return _verdict(support, against) & converged & test
 
 
 def unsupported(
@@ -86,50 +187,15 @@ def unsupported(
     Returns
     -------
     ndarray of bool, shape (n,)
-        Converged POIs with fewer than :data:`MIN_SUPPORT` confirming neighbours and at
-        least :data:`MIN_AGAINST` contradicting ones (all of those that give a verdict
-        where fewer do, at least :data:`MIN_VERDICTS`).
+        Converged POIs with a failed neighbour, fewer than :data:`MIN_SUPPORT`
+        confirming neighbours and at least :data:`MIN_AGAINST` contradicting ones (all
+        of those that give a verdict where fewer do, at least :data:`MIN_VERDICTS`).
     """
-    k = params.shape[1]
-    ny, nx = grid_shape
-    iu, iv = (0, 1) if k == 2 else (0, 3)
-
-    def on_grid(values: NDArray[np.float64], fill: float) -> NDArray[np.float64]:
-        g = np.full((ny + 2) * (nx + 2), fill)
-        r, c = np.divmod(cell, nx)
-        g[(r + 1) * (nx + 2) + c + 1] = values
-        return g.reshape(ny + 2, nx + 2)
-
-    conv = on_grid(converged.astype(float), 0.0)
-    fail = on_grid(failed.astype(float), 0.0)
-    u = on_grid(np.where(converged, params[:, iu], np.nan), np.nan)
-    v = on_grid(np.where(converged, params[:, iv], np.nan), np.nan)
-    gr = on_grid(rows.astype(float), np.nan)
-    gc = on_grid(cols.astype(float), np.nan)
-    grads = None
-    if k == 6:
-        grads = [on_grid(np.where(converged, params[:, j], 0.0), 0.0) for j in (1, 2, 4, 5)]
-    inner = (slice(1, ny + 1), slice(1, nx + 1))
-    support = np.zeros((ny, nx), np.int64)
-    against = np.zeros((ny, nx), np.int64)
-    for dr, dc in _OFFSETS:
-        nb = (slice(1 + dr, ny + 1 + dr), slice(1 + dc, nx + 1 + dc))
-        # the POI's shape function carried to the neighbour's centre (px offsets)
-        drow, dcol = gr[nb] - gr[inner], gc[nb] - gc[inner]
-        pu, pv = u[inner], v[inner]
-        if grads is not None:
-            ux, uy, vx, vy = (g[inner] for g in grads)
-            pu = pu + ux * dcol + uy * drow
-            pv = pv + vx * dcol + vy * drow
-        with np.errstate(invalid="ignore"):
-            near = np.hypot(u[nb] - pu, v[nb] - pv) <= SUPPORT_DISTANCE
-        is_conv = conv[nb] > 0
-        support += is_conv & near
-        against += (is_conv & ~near) | (fail[nb] > 0)
-    return _verdict(support, against).ravel()[cell] & converged
+    pairs = grid_pairs(grid_shape, cell)
+    return unsupported_pairs(params, converged, failed, rows, cols, pairs)
 
 
-def _verdict(support: NDArray[np.int64], against: NDArray[np.int64]) -> NDArray[np.bool_]:
+def _verdict(support: NDArray[Any], against: NDArray[Any]) -> NDArray[np.bool_]:
     """Too little support against enough contradiction (the rule of :func:`unsupported`)."""
     verdicts = support + against
     need = np.maximum(np.minimum(MIN_AGAINST, verdicts), MIN_VERDICTS)
@@ -159,27 +225,5 @@ def unsupported_scattered(
     -------
     ndarray of bool, shape (n,)
     """
-    from scipy.spatial import cKDTree
-
-    k = params.shape[1]
-    iu, iv = (0, 1) if k == 2 else (0, 3)
-    n = rows.size
-    support = np.zeros(n, np.int64)
-    against = np.zeros(n, np.int64)
-    xy = np.c_[rows, cols].astype(float)
-    pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray")
-    if pairs.size == 0:
-        return np.zeros(n, bool)
-    for a, b in ((pairs[:, 0], pairs[:, 1]), (pairs[:, 1], pairs[:, 0])):
-        # b's estimate against a's shape function carried to b's centre
-        drow, dcol = xy[b, 0] - xy[a, 0], xy[b, 1] - xy[a, 1]
-        pu, pv = params[a, iu], params[a, iv]
-        if k == 6:
-            pu = pu + params[a, 1] * dcol + params[a, 2] * drow
-            pv = pv + params[a, 4] * dcol + params[a, 5] * drow
-        with np.errstate(invalid="ignore"):
-            near = np.hypot(params[b, iu] - pu, params[b, iv] - pv) <= SUPPORT_DISTANCE
-        conf = converged[b] & near
-        np.add.at(support, a, conf)
-        np.add.at(against, a, (converged[b] & ~near) | failed[b])
-    return _verdict(support, against) & converged
+    pairs = scattered_pairs(rows, cols, radius)
+    return unsupported_pairs(params, converged, failed, rows, cols, pairs)

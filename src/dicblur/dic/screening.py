@@ -15,7 +15,7 @@ from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import IcgnPasses, scatter
 from .status import PointStatus
-from .support import SUPPORT_ROUNDS, grid_pairs, scattered_pairs, unsupported_pairs
+from .support import SUPPORT_ROUNDS, Pairs, grid_pairs, scattered_pairs, unsupported_pairs
 
 __all__ = [
     "ACCEPT_DISTANCE",
@@ -193,7 +193,7 @@ class Screening(IcgnPasses):
     #: Their starts' (u, v), (n, 2) px, NaN elsewhere: the field they are checked against.
     _nb_start: NDArray[np.float64] | None = None
     #: The POIs' neighbour pairs of the support test (:mod:`.support`), once computed.
-    _support_pairs: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
+    _support_pairs: Pairs | None = None
 
     # ------------------------------------------------------------------ the noise
     def _set_noise(self, noise: NoiseEstimate | None) -> None:

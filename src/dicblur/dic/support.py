@@ -27,6 +27,7 @@ __all__ = [
     "MIN_VERDICTS",
     "SUPPORT_DISTANCE",
     "SUPPORT_ROUNDS",
+    "Pairs",
     "grid_pairs",
     "scattered_pairs",
     "unsupported",
@@ -59,10 +60,8 @@ SUPPORT_ROUNDS = 2
 _OFFSETS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
 
-def grid_pairs(
-    grid_shape: tuple[int, int], cell: NDArray[np.intp]
-) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """The ordered pairs ``(a, b)`` of POIs that are 8-neighbours on a grid.
+def grid_pairs(grid_shape: tuple[int, int], cell: NDArray[np.intp]) -> Pairs:
+    """The ordered pairs ``(a, b, start)`` of POIs that are 8-neighbours on a grid.
 
     Parameters
     ----------
@@ -74,7 +73,10 @@ def grid_pairs(
     Returns
     -------
     a, b : ndarray of int, shape (m,)
-        POI indices: ``b`` is a neighbour of ``a`` (each pair in both orders).
+        POI indices: ``b`` is a neighbour of ``a`` (each pair in both orders), sorted by
+        ``a``.
+    start : ndarray of int, shape (n + 1,)
+        The pairs of POI ``i`` are ``start[i]:start[i + 1]``.
     """
     ny, nx = grid_shape
     n = cell.size
@@ -88,19 +90,37 @@ def grid_pairs(
         keep = (inner >= 0) & (nb >= 0)
         a_parts.append(inner[keep])
         b_parts.append(nb[keep])
-    return np.concatenate(a_parts), np.concatenate(b_parts)
+    return _by_first(np.concatenate(a_parts), np.concatenate(b_parts), n)
 
 
-def scattered_pairs(
-    rows: NDArray[np.int64], cols: NDArray[np.int64], radius: float
-) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """The ordered pairs ``(a, b)`` of POIs within ``radius`` px of each other (both
-    orders), for POIs that do not fill a grid."""
+def scattered_pairs(rows: NDArray[np.int64], cols: NDArray[np.int64], radius: float) -> Pairs:
+    """The ordered pairs ``(a, b, start)`` of POIs within ``radius`` px of each other
+    (both orders; as :func:`grid_pairs`), for POIs that do not fill a grid."""
     from scipy.spatial import cKDTree
 
     xy = np.c_[rows, cols].astype(float)
     pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray").astype(np.intp)
-    return np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]]
+    a, b = np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]]
+    return _by_first(a, b, rows.size)
+
+
+#: Ordered neighbour pairs ``(a, b, start)``: sorted by ``a``, the pairs of POI ``i`` at
+#: ``start[i]:start[i + 1]``.
+Pairs = tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]
+
+
+def _by_first(a: NDArray[np.intp], b: NDArray[np.intp], n: int) -> Pairs:
+    order = np.argsort(a, kind="stable")
+    a, b = a[order], b[order]
+    return a, b, np.searchsorted(a, np.arange(n + 1)).astype(np.intp)
+
+
+def _entries(start: NDArray[np.intp], sel: NDArray[np.intp]) -> NDArray[np.intp]:
+    """The indices of the pairs of the POIs ``sel`` (rows of the sorted pairs)."""
+    first = start[sel]
+    count = start[sel + 1] - first
+    offset = np.repeat(first - np.cumsum(count) + count, count)
+    return offset + np.arange(int(count.sum()))
 
 
 def unsupported_pairs(
@@ -109,7 +129,7 @@ def unsupported_pairs(
     failed: NDArray[np.bool_],
     rows: NDArray[np.int64],
     cols: NDArray[np.int64],
-    pairs: tuple[NDArray[np.intp], NDArray[np.intp]],
+    pairs: Pairs,
 ) -> NDArray[np.bool_]:
     """The converged POIs their neighbours (``pairs``, :func:`grid_pairs` or
     :func:`scattered_pairs`) do not support; the rule of :func:`unsupported`.
@@ -122,23 +142,27 @@ def unsupported_pairs(
     ----------
     params, converged, failed, rows, cols
         As for :func:`unsupported`.
-    pairs : (a, b) of ndarray of int, shape (m,)
-        Ordered neighbour pairs: ``b`` is a neighbour of ``a``.
+    pairs : (a, b, start)
+        Ordered neighbour pairs (:func:`grid_pairs`): ``b`` is a neighbour of ``a``.
 
     Returns
     -------
     ndarray of bool, shape (n,)
     """
-    a, b = pairs
+    a_all, b_all, start = pairs
     n, k = params.shape
     out = np.zeros(n, bool)
-    cand = converged[a] & failed[b]
-    if not cand.any():
+    # the candidates: the converged neighbours of the failed POIs (pairs are symmetric)
+    bad = np.flatnonzero(failed)
+    if bad.size == 0:
         return out
     test = np.zeros(n, bool)
-    test[a[cand]] = True
-    sel = test[a]
-    a, b = a[sel], b[sel]
+    test[b_all[_entries(start, bad)]] = True
+    test &= converged
+    if not test.any():
+        return out
+    sel = _entries(start, np.flatnonzero(test))
+    a, b = a_all[sel], b_all[sel]
     iu, iv = (0, 1) if k == 2 else (0, 3)
     # b's estimate against a's shape function carried to b's centre (px offsets)
     drow = (rows[b] - rows[a]).astype(float)

@@ -74,3 +74,14 @@ def test_track_strain_bad_input_exit_2(tmp_path, capsys):
     )  # fmt: skip
     err = capsys.readouterr().err
     assert code == 2 and "--strain" in err and "--points" in err
+
+
+def test_correlate_vsg_larger_than_the_grid_is_refused_before_the_work(pair, tmp_path, capsys):
+    # 128^2 image, subset 21, step 10: an 11 x 11 grid; VSG 201 px needs 19 points a side.
+    # The message speaks of --vsg in px, as typed, not of the API's window in points.
+    ref, cur = pair
+    out = tmp_path / "field.nc"
+    code = main(["correlate", str(ref), str(cur), "--strain", "--vsg", "201px", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "--vsg=201px" in err and "use --vsg <= 121px" in err
+    assert "window=" not in err and "Traceback" not in err and not out.exists()

@@ -146,6 +146,12 @@ def correlate_command(
         blur=mode,  # type: ignore[arg-type]
         **extra,  # type: ignore[arg-type]
     )
+    if window is not None:
+        from ..strain import check_window_fits, grid_of
+
+        # before the work: the window must fit the Correlator's POI grid
+        grid, _, _ = grid_of(corr.rows, corr.cols)
+        check_window_fits(window, grid, step=step, subset=subset, name="--vsg")
     notice_compile(shape)
     compile_s = corr.warmup()
     t0 = time.perf_counter()

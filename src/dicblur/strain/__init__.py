@@ -14,6 +14,7 @@ from .covariance import gradient_factor, overlap_correlation
 from .field import (
     StrainField,
     StrainStatus,
+    check_window_fits,
     grid_of,
     strain,
     strain_on_grid,
@@ -25,6 +26,7 @@ from .fit import plane_weights
 __all__ = [
     "StrainField",
     "StrainStatus",
+    "check_window_fits",
     "gradient_factor",
     "grid_of",
     "overlap_correlation",

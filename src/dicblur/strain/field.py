@@ -79,22 +79,33 @@ def window_from_vsg(
     return n
 
 
-def check_window_fits(window: int, grid_shape: tuple[int, int], *, step: int, subset: int) -> None:
+def check_window_fits(
+    window: int, grid_shape: tuple[int, int], *, step: int, subset: int, name: str = "window"
+) -> None:
     """Raise :class:`~dicblur.errors.InputError` when no point of a ``grid_shape`` (rows,
     cols) POI grid can have a complete ``window`` x ``window`` plane fit: every point would
-    otherwise fall back to a smaller window or to ``NO_WINDOW``, not the VSG asked for."""
+    otherwise fall back to a smaller window or to ``NO_WINDOW``, not the VSG asked for.
+    ``name``: the parameter as the caller typed it; an option such as ``"--vsg"`` is
+    answered in VSG px, as the command line gives it."""
     ny, nx = grid_shape
     small = min(ny, nx)
     if window <= small:
         return
+    px = f"{vsg(window, step, subset):g}px"
     if small < 3:
         fix = "a grid of at least 3 x 3 points (a larger roi or a smaller step)"
-    else:
+    elif name == "window":
         fit = small if small % 2 else small - 1
         fix = f"window <= {fit} (VSG {vsg(fit, step, subset):g} px) or a larger grid"
+    else:  # an option in VSG px (the CLI's --vsg)
+        fit = small if small % 2 else small - 1
+        fix = f"{name} <= {vsg(fit, step, subset):g}px or a larger grid"
+    asked, full = (
+        (f"window={window}", f" (VSG {px[:-2]} px)") if name == "window" else (f"{name}={px}", "")
+    )
     raise InputError(
-        f"window={window}: larger than the POI grid ({ny} x {nx} points), so no point has "
-        f"a full window (VSG {vsg(window, step, subset):g} px); use {fix}"
+        f"{asked}: larger than the POI grid ({ny} x {nx} points), so no point has a full "
+        f"window{full}; use {fix}"
     )
 
 

@@ -557,6 +557,18 @@ CASES += [
         must=("--noise", "1.0, 2.0"),
         must_not=("None", "sigma"),
     ),
+    # --serial beside --workers / --scheduler: one of the two was ignored without a word
+    Case(
+        "reproduce-serial-workers",
+        ("reproduce", "--quick", "--out", "{o}/rep", "--serial", "--workers", "2"),
+        must=("--workers=2", "--serial"),
+    ),
+    Case("calibrate-serial-workers", (*CAL, "--workers", "2"), must=("--workers=2", "--serial")),
+    Case(
+        "campaign-serial-scheduler",
+        (*RUN, "{o}/r.zarr", "--serial", "--scheduler", "tcp://127.0.0.1:8786", "-q"),
+        must=("--scheduler=tcp://127.0.0.1:8786", "--serial"),
+    ),
 ]
 
 

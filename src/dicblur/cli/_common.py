@@ -96,6 +96,17 @@ def parse_tolerance(text: str, name: str = "--tolerance") -> float | Literal["au
     return value
 
 
+def check_serial(serial: bool, *, workers: int | None, scheduler: str | None) -> None:
+    """``--serial`` runs in this process: refused beside ``--workers`` or ``--scheduler``,
+    which choose a Dask cluster (one of them would be ignored without a word)."""
+    if serial and (workers is not None or scheduler is not None):
+        opt = f"--workers={workers}" if workers is not None else f"--scheduler={scheduler}"
+        raise InputError(
+            f"{opt}: --serial runs in this process, without a Dask cluster; leave out "
+            f"{opt.split('=')[0]} or --serial"
+        )
+
+
 def check_track_choices(*, fmt: str, shape: str) -> None:
     """``--format`` and ``--shape`` of ``track`` and ``stereo track``."""
     if fmt not in ("netcdf", "zarr"):

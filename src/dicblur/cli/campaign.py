@@ -11,6 +11,7 @@ import typer
 
 from ..errors import ConfigError, InputError
 from ._common import (
+    check_serial,
     console,
     notice_on_start,
     parse_size,
@@ -79,6 +80,7 @@ def run_command(
     # every check before the spec's patterns are built: the store folder may be created,
     # its parent must exist (the rule of every output)
     check_output(out, "--output", folder=True)
+    check_serial(serial, workers=workers, scheduler=scheduler)
     if scheduler is not None and not serial:
         check_scheduler_address(scheduler)
     s = load_spec(spec)
@@ -217,6 +219,7 @@ def calibrate_command(
 
     if compensation not in ("none", "given", "estimate", "deblur"):
         raise InputError(f"--compensation={compensation!r}: choose none, given, estimate or deblur")
+    check_serial(serial, workers=workers, scheduler=scheduler)
     try:
         start, stop, inc = (float(v) for v in blur.split(":"))
     except ValueError as exc:

@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 
 from ..errors import InputError
-from ._common import console, removes_new_empty_folder
+from ._common import check_serial, console, removes_new_empty_folder
 from .options import (
     BaseSeedOption,
     CheckBrowserOption,
@@ -43,6 +43,7 @@ def reproduce_command(
     from ..report.reproduce import ReproduceSettings, reproduce
 
     check_output(out, "--out", folder=True)
+    check_serial(serial, workers=workers, scheduler=scheduler)
     size = ReproduceSettings(out=out).size
     for opt, path in (("--pattern1", pattern1), ("--pattern2", pattern2)):
         if path is not None:  # the study crops its centre: refused before any work

@@ -557,6 +557,12 @@ CASES += [
         must=("--noise", "1.0, 2.0"),
         must_not=("None", "sigma"),
     ),
+    # a predicted sigma of 0 px and the residual screen off, exit 0
+    Case(
+        "correlate-noise-zero",
+        ("correlate", "{d}/good.tif", "{d}/good.tif", "--noise", "0"),
+        must=("--noise=0", "estimate"),
+    ),
     # --serial beside --workers / --scheduler: one of the two was ignored without a word
     Case(
         "reproduce-serial-workers",

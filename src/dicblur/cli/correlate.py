@@ -118,6 +118,14 @@ def correlate_command(
         )
     if mode == "none" and blur is not None:
         raise InputError(f"--blur={blur}: only used with --blur-compensation given or estimate")
+    if noise is not None and noise == 0:
+        # the API takes 0 (noise-free synthetic images); a camera image is never free of
+        # noise, and a zero noise would switch the residual screen off
+        raise InputError(
+            "--noise=0: a camera image always carries noise (8-bit rounding alone is 0.29 GL)"
+            " and zero switches the residual screen off; give the noise std in GL, or leave"
+            " out --noise to estimate it from the pair"
+        )
     window = strain_option(strain, vsg, step=step, subset=subset)
     extra: dict[str, float | None] = {}
     if max_predicted_sigma is not None:

@@ -557,6 +557,8 @@ CASES += [
         must=("--noise", "1.0, 2.0"),
         must_not=("None", "sigma"),
     ),
+    # a value pasted from a document: the typographic minus read as "not a number" only
+    Case("usage-typographic-minus", (*GENERATE, "64", "--seed", "\u22121"), must=("ASCII '-'",)),
     # a predicted sigma of 0 px and the residual screen off, exit 0
     Case(
         "correlate-noise-zero",

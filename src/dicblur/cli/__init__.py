@@ -347,6 +347,9 @@ def usage_line(exc: Any, args: Sequence[str]) -> str:
     value = _typed_value(getattr(exc, "param", None), args)
     if value is not None:
         msg = f"{msg} (got {value!r})"
+        if any(ch in value for ch in "\u2212\u2013\u2014"):
+            # pasted from a document: a typographic minus or dash is not a number's sign
+            msg = f"{msg}, a typographic minus or dash: type the ASCII '-'"
     ctx = getattr(exc, "ctx", None)
     path = getattr(ctx, "command_path", None) or "dicblur"
     return f"error: {msg}; see '{path} --help'"

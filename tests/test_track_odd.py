@@ -48,11 +48,76 @@ def test_static_noise_skips_duplicated_frames_and_refuses_all_identical():
 def test_track_of_one_frame_repeated_says_so_and_does_not_crash():
     # the same frame, bit for bit, 6 times: no noise to measure, zero motion
     rec = _memory([_noisy(1)[0]] * 6)
-    for static in ("0:4", None):
-        ds = dicblur.track(rec, static=static, step=16, shape="translation")
+    with pytest.raises(InputError, match="static=0:4: the frames are identical"):
+        dicblur.track(rec, static="0:4", step=16, shape="translation")
+    for noise in (None, 2.0):
+        ds = dicblur.track(rec, noise=noise, step=16, shape="translation")
+        if noise is not None:
+            assert ds.attrs["noise_sigma"] == 2.0 and ds["valid"].values.any()
+            continue
         assert "no noise estimate" in ds.attrs["notes"]
         assert "noise_sigma" not in ds.attrs and ds["sigma_u"].isnull().all()
         assert not ds["valid"].values.any()
         conv = ds["status"].values == 0
         assert np.abs(ds["u"].values[conv]).max() < 1e-6
         assert np.abs(ds["v"].values[conv]).max() < 1e-6
+
+
+def test_bad_static_points_and_subset_fail_before_tracking():
+    rec = _memory(_noisy(5))
+    with pytest.raises(InputError, match="static='0:1'"):
+        dicblur.track(rec, static="0:1", step=16)
+    with pytest.raises(InputError, match=r"points=.*\(500, 10\).*64x64"):
+        dicblur.track(rec, points=[[20, 20], [500, 10]], noise=2.0)
+    with pytest.raises(InputError, match=r"^subset=71: .*64x64"):
+        dicblur.track(rec, subset=71, noise=2.0)
+
+
+def test_frame_of_another_dtype_mid_folder_is_named(tmp_path):
+    from dicblur.errors import ImageReadError
+    from dicblur.sequence import open_recording
+
+    frames = _noisy(4)
+    for k, f in enumerate(frames):
+        dicblur.save_image(tmp_path / f"f{k}.tif", f * (256 if k == 2 else 1),
+                           bit_depth=16 if k == 2 else 8)  # fmt: skip
+    rec = open_recording(tmp_path)
+    assert rec.frame(1).max() < 256
+    with pytest.raises(ImageReadError, match=r"frame 2 \(f2.tif\): 16-bit.*8-bit"):
+        rec.frame(2)
+
+
+def test_cli_names_an_uncreatable_out_and_prints_the_notes(tmp_path, capsys):
+    from dicblur.cli import main
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k, f in enumerate([_noisy(1)[0]] * 4):
+        dicblur.save_image(folder / f"f{k}.png", f, bit_depth=8)
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    args = ["track", str(folder), "--exposure", "0.1ms", "--fps", "1000", "--step", "16"]
+    rc = main([*args, "-o", str(blocker / "sub")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--out=" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    # one frame repeated, no --static or --noise: no noise estimate, and the CLI says why
+    rc = main([*args, "--no-report", "-o", str(tmp_path / "out")])
+    out = capsys.readouterr().out
+    assert rc == 0 and "no noise estimate" in out and "--noise" in out
+
+
+def test_lzw_tiff_stack_reads_without_imagecodecs(tmp_path):
+    # LZW (the default of many camera programs) needs imagecodecs in tifffile, which is
+    # not a dependency: the pages are read through Pillow then
+    from PIL import Image
+
+    from dicblur.sequence import open_recording
+
+    frames = [np.clip(np.rint(f), 0, 255).astype(np.uint8) for f in _noisy(3, size=32)]
+    ims = [Image.fromarray(f) for f in frames]
+    ims[0].save(tmp_path / "s.tif", save_all=True, append_images=ims[1:], compression="tiff_lzw")
+    with open_recording(tmp_path / "s.tif") as rec:
+        assert rec.kind == "tiff-stack" and len(rec) == 3 and rec.bit_depth == 8
+        for k in (2, 0, 1):
+            np.testing.assert_array_equal(rec.frame(k), frames[k])

@@ -13,8 +13,9 @@ Sources (:func:`open_recording`):
 
 Frames come out as float64 grey levels on the file's own scale (8, 10, 12 or 16-bit data,
 nothing rescaled); ``bit_depth`` says which. A recording shorter than its header promises
-(truncated copy) keeps its complete frames and warns; a frame of another size raises
-:class:`~dicblur.errors.ImageReadError` naming it.
+(truncated copy) keeps its complete frames and warns; a frame of another size (or, in a
+folder, of another data type than the first) raises :class:`~dicblur.errors.ImageReadError`
+naming it.
 """
 
 from __future__ import annotations
@@ -161,7 +162,16 @@ def _folder(files: list[Path], source: str) -> Recording:
     bits = _bits_of(first.dtype)
 
     def read(i: int) -> NDArray[Any]:
-        return _read_file(files[i])
+        arr = _read_file(files[i])
+        if arr.dtype != first.dtype:
+            # grey levels on another scale (a frame saved again at another bit depth):
+            # the noise and the saturation level of the recording would not hold for it
+            raise ImageReadError(
+                f"frame {i} ({files[i].name}): {_bits_of(arr.dtype)}-bit {arr.dtype}, but "
+                f"the recording's frames are {bits}-bit {first.dtype} (from "
+                f"{files[0].name}); convert or remove that frame"
+            )
+        return arr
 
     return Recording(
         source=source,
@@ -211,15 +221,27 @@ def _tiff_stack(path: Path) -> Recording:
             f"recording={str(path)!r}: cannot be read as a TIFF stack ({type(exc).__name__}: {exc})"
         ) from exc
 
+    pil: list[Any] = []  # the Pillow reader, opened on the first page tifffile cannot decode
+
     def read(i: int) -> NDArray[Any]:
         try:
             return np.asarray(pages[i].asarray())
         except Exception as exc:
+            # a compression tifffile decodes only with imagecodecs (LZW, the default of many
+            # camera programs; not a dependency): Pillow's libtiff reads those pages
+            got = _pil_page(path, i, pil) if "imagecodecs" in str(exc) else None
+            if got is not None:
+                return got
             raise ImageReadError(
                 f"recording={str(path)!r}: page {i} cannot be read "
                 f"({type(exc).__name__}: {exc}); is the file "
                 "truncated?"
             ) from exc
+
+    def close() -> None:
+        tf.close()
+        for im in pil:
+            im.close()
 
     return Recording(
         source=str(path),
@@ -231,8 +253,23 @@ def _tiff_stack(path: Path) -> Recording:
         exposure=None,
         names=[f"page {i}" for i in range(n)],
         _read=read,
-        _close=tf.close,
+        _close=close,
     )
+
+
+def _pil_page(path: Path, i: int, cache: list[Any]) -> NDArray[Any] | None:
+    """Page ``i`` of the TIFF ``path`` read by Pillow (the open image kept in ``cache``),
+    or None when Pillow cannot read it either."""
+    try:
+        from PIL import Image
+
+        if not cache:
+            cache.append(Image.open(path))
+        im = cache[0]
+        im.seek(i)
+        return np.asarray(im, dtype=np.uint16 if im.mode.startswith("I;16") else None)
+    except Exception:
+        return None
 
 
 def _cine(path: Path) -> Recording:

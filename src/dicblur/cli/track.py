@@ -182,7 +182,7 @@ def track_command(
         )
     if out.exists() and not out.is_dir():
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    _writable_folder(out)
     rec = open_recording(recording)
     target = track_store(out, "track", fmt)
     chunks = None
@@ -297,8 +297,28 @@ def track_command(
         },
         {"exposure": "s", "fps": "Hz", "noise_sigma": "GL"},
     )
+    if a.get("notes"):
+        # what the run could not do (no noise estimate, no advice, ...): said, not only
+        # stored, so a column of NaN sigma is never silent
+        for note in str(a["notes"]).split(" | "):
+            console.print(f"note: {note}")
     for w in written:
         console.print(f"wrote {w}")
+
+
+def _writable_folder(out: Path) -> None:
+    """Create ``out`` and check that a file can be written there, before any work."""
+    import tempfile
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".probe-"):
+            pass
+    except OSError as exc:
+        raise InputError(
+            f"--out={str(out)!r}: cannot write there ({exc.strerror or exc}); give a "
+            "writable folder"
+        ) from None
 
 
 def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: int) -> Path | None:

@@ -94,6 +94,35 @@ class TrackInterrupted(DicblurError, RuntimeError):
         return (type(self), (str(self), self.dataset))
 
 
+def _check_layout(
+    shape: tuple[int, int], *, subset: int, roi: Sequence[int] | None, points: ArrayLike | None
+) -> None:
+    """Refuse, naming the option, explicit POIs outside the frames and a subset larger
+    than frames of ``shape`` (rows, cols) px (the Correlator would report either as a
+    region problem, or track an off-frame point as OUT_OF_BOUNDS in every frame)."""
+    rows, cols = shape
+    if points is not None:
+        pts = np.asarray(points)
+        if pts.ndim == 2 and pts.shape[1] == 2 and pts.size:
+            off = (pts[:, 0] < 0) | (pts[:, 0] >= rows) | (pts[:, 1] < 0) | (pts[:, 1] >= cols)
+            if off.any():
+                r, c = (int(x) for x in pts[np.flatnonzero(off)[0]])
+                raise InputError(
+                    f"points={_describe_points(pts)}: ({r}, {c}) is outside the {rows}x{cols} "
+                    "px frames; give (row, col) points inside them"
+                )
+    if roi is None and points is None and isinstance(subset, int) and subset + 2 > min(shape):
+        raise InputError(
+            f"subset={subset}: larger than the {rows}x{cols} px frames less a 1-px border; "
+            f"give a subset of at most {min(shape) - 2 - (min(shape) % 2 == 0)} px"
+        )
+
+
+def _describe_points(pts: NDArray[Any]) -> str:
+    text = ";".join(f"{int(r)},{int(c)}" for r, c in pts[:4])
+    return repr(text + (";..." if len(pts) > 4 else ""))
+
+
 def track(
     recording: Recording | str,
     *,
@@ -240,6 +269,12 @@ def track(
     st_range = None
     if static is not None:
         st_range = parse_frame_range(static, n_total, "static")
+        if st_range[1] - st_range[0] < 2:
+            raise InputError(
+                f"static={static!r}: {st_range[1] - st_range[0]} frame; the noise needs at "
+                "least 2 frames of the static scene (e.g. --static 0:20)"
+            )
+    _check_layout(rec.shape, subset=subset, roi=roi, points=points)
     if noise is not None and (not math.isfinite(float(noise)) or float(noise) <= 0):
         raise InputError(f"noise={noise!r}: must be a noise std > 0 (GL)")
     limit = None
@@ -266,6 +301,8 @@ def track(
             noise_est = noise_est or est
             if noise is not None:
                 notes.append(f"static frames give {est.sigma:.3g} GL; using --noise {noise}")
+        except InputError:
+            raise  # the range given cannot give a noise (one frame repeated): say so
         except (DicblurError, OSError) as exc:
             noise_error = exc
             if noise_est is None:

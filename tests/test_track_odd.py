@@ -121,3 +121,58 @@ def test_lzw_tiff_stack_reads_without_imagecodecs(tmp_path):
         assert rec.kind == "tiff-stack" and len(rec) == 3 and rec.bit_depth == 8
         for k in (2, 0, 1):
             np.testing.assert_array_equal(rec.frame(k), frames[k])
+
+
+@pytest.mark.slow
+def test_real_sample3_shifted_recording_error_matches_its_sigma(real_data):
+    """Sample 3's first image as a recording: 4 still frames, then a known sub-pixel
+    motion per frame (exact Fourier shifts), motion blur over a half-interval exposure,
+    1.5 GL of fresh noise per frame. The error against that truth is what track predicts."""
+    from scipy.ndimage import fourier_shift
+
+    found = sorted((real_data / "dicchallenge1_sample3").glob("Sample3-000*.tif"))
+    if not found:
+        pytest.skip("DIC Challenge sample 3 not among the real images")
+    src = found[0]
+    img = np.asarray(dicblur.load_image(src), float)
+    pat = img[128:384, 128:384]
+    fps, t_exp = 1000.0, 0.5e-3
+    vel = np.array([0.9, 0.55]) * fps  # (dy, dx) px/s
+    rng = np.random.default_rng(7)
+    frames, truth = [], []
+    for k in range(12):
+        p = vel * max(k - 4, 0) / fps
+        sh = np.real(np.fft.ifft2(fourier_shift(np.fft.fft2(pat), p)))
+        if k >= 4:
+            sh, p = dicblur.motion_blur(sh, vel * t_exp, substeps=None), p + vel * t_exp / 2
+        frames.append(sh + rng.normal(0, 1.5, sh.shape))
+        truth.append(p)
+    tv, tu = np.array(truth).T
+    rec = _memory(frames, fps=fps, exposure=t_exp)
+    ds = dicblur.track(rec, static="0:4", roi=(24, 232, 24, 232), step=12, subset=21)
+    assert ds.attrs["noise_sigma"] == pytest.approx(1.5, rel=0.05)
+    val = ds["valid"].values.astype(bool)
+    assert val.mean() > 0.99 and ds["outlier"].values.mean() < 0.005
+    moving = val & (np.arange(12) >= 6)[:, None]
+    w = ds["W"].values[moving]
+    assert np.median(w) == pytest.approx(np.hypot(*(vel * t_exp)), rel=0.05)
+    for comp, t in (("u", tu), ("v", tv)):
+        z = (ds[comp].values - t[:, None]) / ds[f"sigma_{comp}"].values
+        assert 0.8 < np.sqrt(np.mean(z[val] ** 2)) < 1.3
+
+
+def test_cli_stereo_track_names_an_uncreatable_out(tmp_path, capsys):
+    from dicblur.cli import main
+    from dicblur.stereo import CameraModel, save_rig
+    from dicblur.stereo.synthetic import symmetric_rig
+
+    cam = CameraModel(2000.0, 2000.0, 31.5, 31.5, (0, 0, 0, 0, 0), (64, 64))
+    save_rig(symmetric_rig(stereo_angle=30.0, distance=400.0, camera=cam), tmp_path / "r.json")
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    rc = main(
+        ["stereo", "track", str(tmp_path), str(tmp_path), "--rig", str(tmp_path / "r.json"),
+         "--noise", "2", "-o", str(blocker / "sub")]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 2 and "--out=" in err and len(err.strip().splitlines()) == 1

@@ -166,6 +166,7 @@ def track_command(
     from ..stereo.core import track
     from ..stereo.store import write_stereo_csv
     from ..track.store import save_track
+    from .track import writable_folder
 
     check_track_choices(fmt=fmt, shape=shape)
     dep = None if depth is None else parse_quantity(depth, "length", name="--depth")
@@ -182,8 +183,8 @@ def track_command(
     if threads is None:
         threads = all_threads()
     the_rig = load_rig(rig)
+    writable_folder(out)
     rec_l, rec_r = open_recording(left), open_recording(right)
-    out.mkdir(parents=True, exist_ok=True)
     target = track_store(out, "stereo", fmt)
     with progress_bar("stereo", unit="frame pairs") as progress:
         ds = track(

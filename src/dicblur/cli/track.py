@@ -182,7 +182,7 @@ def track_command(
         )
     if out.exists() and not out.is_dir():
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
-    _writable_folder(out)
+    writable_folder(out)
     rec = open_recording(recording)
     target = track_store(out, "track", fmt)
     chunks = None
@@ -306,7 +306,7 @@ def track_command(
         console.print(f"wrote {w}")
 
 
-def _writable_folder(out: Path) -> None:
+def writable_folder(out: Path) -> None:
     """Create ``out`` and check that a file can be written there, before any work."""
     import tempfile
 

@@ -176,3 +176,29 @@ def test_cli_stereo_track_names_an_uncreatable_out(tmp_path, capsys):
     )  # fmt: skip
     err = capsys.readouterr().err
     assert rc == 2 and "--out=" in err and len(err.strip().splitlines()) == 1
+
+
+def test_subsets_with_clipped_pixels_are_not_valid():
+    # a bright region clipped at 255 (over-exposed): the noise and blur model of those
+    # subsets does not hold (no noise, no blur where clipped), so their sigma is no
+    # error bar: they are marked and left out of `valid`; the rest of the frame is not
+    from dicblur.track.saturation import saturation_level
+
+    frames = _noisy(6, size=80, seed=4)
+    for f in frames:
+        f[20:34, 20:34] = 255.0  # a clipped patch in every frame
+    rec = _memory(frames)
+    ds = dicblur.track(rec, static="0:6", step=12, subset=21, shape="translation", advice=False)
+    sat = ds["saturated"].values
+    rows, cols = ds["row"].values, ds["col"].values
+    touches = (rows + 10 >= 20) & (rows - 10 <= 33) & (cols + 10 >= 20) & (cols - 10 <= 33)
+    assert touches.any() and np.array_equal(sat > 0, touches)
+    assert 0 < sat.max() <= 196 / 441 + 1e-6
+    valid = ds["valid"].values.astype(bool)
+    assert not valid[:, touches].any() and valid[:, ~touches].mean() > 0.9
+    assert ds.attrs["saturation_level"] == 255.0 and "clipped" in ds.attrs["notes"]
+    # a clean frame has no clipped plateau; a few pixels at the top of a tail are not one
+    assert saturation_level(_noisy(1, size=80)[0]) is None
+    img = np.arange(100.0).reshape(10, 10)
+    img[0, :3] = 99.0
+    assert saturation_level(img) is None

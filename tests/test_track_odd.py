@@ -202,3 +202,16 @@ def test_subsets_with_clipped_pixels_are_not_valid():
     img = np.arange(100.0).reshape(10, 10)
     img[0, :3] = 99.0
     assert saturation_level(img) is None
+
+
+def test_folder_skips_hidden_files(tmp_path):
+    # macOS copies leave '._name' AppleDouble files beside each frame (same suffix, not
+    # an image); a glob '*' skips hidden files, and so does a folder
+    from dicblur.sequence import open_recording
+
+    for k, f in enumerate(_noisy(3, size=32)):
+        dicblur.save_image(tmp_path / f"f{k}.png", f, bit_depth=8)
+        (tmp_path / f"._f{k}.png").write_bytes(b"\x00\x05\x16\x07 not an image")
+    rec = open_recording(tmp_path)
+    assert rec.names == ["f0.png", "f1.png", "f2.png"]
+    assert rec.frame(0).shape == (32, 32)

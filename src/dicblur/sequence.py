@@ -2,8 +2,9 @@
 
 Sources (:func:`open_recording`):
 
-- a folder of TIFF/PNG/BMP images in natural order (``img2.tif`` before ``img10.tif``), or
-  a glob pattern (``"run1/*.png"``);
+- a folder of TIFF/PNG/BMP images in natural order (``img2.tif`` before ``img10.tif``;
+  hidden files such as macOS's ``._img2.tif`` left out), or a glob pattern
+  (``"run1/*.png"``);
 - a multi-page TIFF stack (pages read one at a time by ``tifffile``);
 - a Phantom ``.cine`` file (``pims.Cine``: pure Python, random access to any frame, reads
   the setup's frame rate and shutter and the per-frame exposure tag);
@@ -458,7 +459,13 @@ def open_recording(source: str | os.PathLike[str]) -> Recording:
         raise ImageReadError(f"recording={text!r}: no such file or folder; check the path")
     if p.is_dir():
         files = sorted(
-            (f for f in p.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES),
+            # hidden files ('._f1.tif' beside each frame of a macOS copy) are no frames,
+            # as a glob '*' leaves them out
+            (
+                f
+                for f in p.iterdir()
+                if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES and not f.name.startswith(".")
+            ),
             key=lambda f: natural_key(f.name),
         )
         return _folder(files, text)

@@ -215,3 +215,13 @@ def test_folder_skips_hidden_files(tmp_path):
     rec = open_recording(tmp_path)
     assert rec.names == ["f0.png", "f1.png", "f2.png"]
     assert rec.frame(0).shape == (32, 32)
+
+
+def test_exposure_longer_than_the_interval_names_where_it_came_from():
+    rec = _memory(_noisy(4), fps=2000.0, exposure=1e-3)  # a header's shutter of 1 ms
+    with pytest.raises(InputError, match=r"^the recording's metadata: exposure 0.001 s"):
+        dicblur.track(rec, noise=2.0, step=16)
+    with pytest.raises(InputError, match=r"^exposure='0.8ms' \(given\)"):
+        dicblur.track(rec, exposure="0.8ms", noise=2.0, step=16)
+    with pytest.raises(InputError, match=r"^exposure=0.001 s from the metadata.*fps=1500"):
+        dicblur.track(rec, fps=1500, noise=2.0, step=16)

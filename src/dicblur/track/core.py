@@ -254,10 +254,23 @@ def track(
     fps_v = resolve(fps, rec.fps, "rate", "fps", "--fps", "5000")
     t_exp = resolve(exposure, rec.exposure, "time", "exposure", "--exposure", "1ms")
     if t_exp > 1.0 / fps_v * (1 + 1e-6):
-        raise InputError(
-            f"exposure={t_exp:g} s: longer than the frame interval 1/fps = "
-            f"{1.0 / fps_v:g} s; check --exposure and --fps"
-        )
+        # name what was given and what came from the header (a header's shutter longer
+        # than its frame interval is the recording's, not the user's)
+        interval = f"the frame interval 1/fps = {1.0 / fps_v:g} s"
+        if exposure is None and fps is None:
+            msg = (
+                f"the recording's metadata: exposure {t_exp:g} s longer than {interval}; "
+                "give the right values with --exposure and --fps"
+            )
+        elif exposure is None:
+            msg = (
+                f"exposure={t_exp:g} s from the metadata: longer than {interval} of "
+                f"fps={fps!r}; check --fps, or give --exposure"
+            )
+        else:
+            msg = f"exposure={exposure!r} (given): longer than {interval}; check --exposure"
+            msg += " and --fps" if fps is not None else f" (the metadata's fps {fps_v:g} Hz)"
+        raise InputError(msg)
     f0, f1 = (0, n_total) if frames is None else parse_frame_range(frames, n_total, "frames")
     if not f0 <= reference < f1:
         raise InputError(f"reference={reference}: must be one of the tracked frames {f0}..{f1 - 1}")

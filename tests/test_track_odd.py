@@ -225,3 +225,12 @@ def test_exposure_longer_than_the_interval_names_where_it_came_from():
         dicblur.track(rec, exposure="0.8ms", noise=2.0, step=16)
     with pytest.raises(InputError, match=r"^exposure=0.001 s from the metadata.*fps=1500"):
         dicblur.track(rec, fps=1500, noise=2.0, step=16)
+
+
+def test_constant_reference_frame_is_named_with_the_fix():
+    # a dropped (all black) first frame as the default reference
+    frames = _noisy(5)
+    frames[0] = np.zeros_like(frames[0])
+    with pytest.raises(InputError, match=r"^reference=0 \(frame 0\): the frame is constant") as e:
+        dicblur.track(_memory(frames), noise=2.0, step=16)
+    assert "--reference 1" in str(e.value)

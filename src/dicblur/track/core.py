@@ -321,6 +321,14 @@ def track(
             if noise_est is None:
                 notes.append(f"no noise estimate: {exc}")
     ref_img = rec.frame(reference)
+    if float(ref_img.min()) == float(ref_img.max()):
+        # a dropped frame (all black) as the reference: say which and what to give
+        alt = next((k for k in range(f0, f1) if k != reference), reference)
+        raise InputError(
+            f"reference={reference} ({rec.names[reference]}): the frame is constant "
+            f"({float(ref_img.min()):g} GL everywhere, a dropped frame?); give another "
+            f"reference frame, e.g. --reference {alt}"
+        )
     if noise_est is None and st_range is None:
         # neither given: the residuals of the frames nearest the reference (auto_noise)
         noise_est = residual_frame_noise(

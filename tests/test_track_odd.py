@@ -217,6 +217,7 @@ def test_folder_skips_hidden_files(tmp_path):
     assert rec.frame(0).shape == (32, 32)
 
 
+@pytest.mark.filterwarnings("ignore:.*metadata says:UserWarning")
 def test_exposure_longer_than_the_interval_names_where_it_came_from():
     rec = _memory(_noisy(4), fps=2000.0, exposure=1e-3)  # a header's shutter of 1 ms
     with pytest.raises(InputError, match=r"^the recording's metadata: exposure 0.001 s"):
@@ -234,3 +235,21 @@ def test_constant_reference_frame_is_named_with_the_fix():
     with pytest.raises(InputError, match=r"^reference=0 \(frame 0\): the frame is constant") as e:
         dicblur.track(_memory(frames), noise=2.0, step=16)
     assert "--reference 1" in str(e.value)
+
+
+def test_foreign_frame_matches_are_flagged_not_valid():
+    # a frame of another scene in the middle (a frame of another recording, a flash):
+    # the few subsets that "converge" there are wrong by up to ~20 px; the ZNCC test
+    # normalised by that frame's own median (those same few points) let them through
+    rng = np.random.default_rng(0)
+    img, other = track_pattern(96), track_pattern(96, seed=9)
+    frames = [np.roll(img, k // 2, axis=1) + rng.normal(0, 1, img.shape) for k in range(10)]
+    frames[6] = other + rng.normal(0, 1, img.shape)
+    ds = dicblur.track(_memory(frames), noise=1.0, step=12, shape="affine", advice=False)
+    st, out = ds["status"].values[6], ds["outlier"].values[6].astype(bool)
+    wrong = np.abs(ds["u"].values[6] - 3) > 0.5
+    assert ((st == 0) & wrong).any()  # the matches to catch
+    assert not ((st == 0) & wrong & ~out).any()
+    assert not ds["valid"].values[6].any()
+    # the clean frames keep their points
+    assert ds["outlier"].values[[0, 1, 2, 3, 9]].sum() == 0

@@ -167,7 +167,9 @@ def assemble(
     crit = median_critical(u, v, conv, gshape, threshold, threads=threads)
     outlier = crit > eps
     settings["median_time_s"] = time.perf_counter() - t_med
-    low_zncc = zncc_flags(zn, conv)
+    low_zncc = zncc_flags(
+        zn, conv, correlatable=~np.isin(st, (PointStatus.OUT_OF_BOUNDS, PointStatus.LOW_TEXTURE))
+    )
     # runs of consecutive frames (one, unless tracking stopped in the middle of chunks run
     # side by side): the kinematics fits each run on its own
     cuts = [0, *(np.flatnonzero(np.diff(frames) != 1) + 1).tolist(), n_f]

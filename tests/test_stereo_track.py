@@ -134,3 +134,40 @@ def test_cli_track_writes_dataset_csv_and_report(tmp_path, capsys):
     page = (out / "report.html").read_text()
     assert 'id="fig-shape' in page and "data:image/png;base64" in page
     json.dumps(dict(ds.attrs), default=str)
+
+
+def test_bad_frame_keeps_the_pairs_tracked_before_it(tmp_path, capsys):
+    """A frame of another size in the right recording's middle: the pairs tracked before
+    it are kept (complete = 0) and written by the CLI, as dicblur track does (they were
+    lost: one error line and no output)."""
+    import xarray as xr
+
+    from dicblur.errors import ImageReadError
+    from dicblur.io import save_image
+    from dicblur.track import TrackInterrupted
+
+    lab = _lab("plane", size=128)
+    left, right = _frames(lab, 7)
+    for side, fr in (("L", left), ("R", right)):
+        (tmp_path / side).mkdir()
+        for k, img in enumerate(fr):
+            a = np.clip(img, 0, 255) * 256
+            save_image(tmp_path / side / f"f{k}.tif", a[:-4] if (side, k) == ("R", 5) else a,
+                       bit_depth=16)  # fmt: skip
+    save_rig(lab.rig, tmp_path / "rig.json")
+    kw = {"exposure": EXPOSURE, "fps": FPS, "noise": 512.0, "step": 12}
+    with pytest.raises(TrackInterrupted, match="after 5 of 7 frames") as info:
+        track(str(tmp_path / "L"), str(tmp_path / "R"), lab.rig, **kw)
+    ds = info.value.dataset
+    assert isinstance(info.value.__cause__, ImageReadError)
+    assert ds["frame"].values.tolist() == [0, 1, 2, 3, 4] and int(ds.attrs["complete"]) == 0
+    assert ds["valid"].values[:3].mean() > 0.8
+    code = main(
+        ["stereo", "track", str(tmp_path / "L"), str(tmp_path / "R"), "--rig",
+         str(tmp_path / "rig.json"), "--exposure", "0.4ms", "--fps", "2kHz", "--noise", "512",
+         "--step", "12", "--no-report", "-o", str(tmp_path / "out")]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and "f5.tif" in err and "Traceback" not in err
+    part = xr.open_dataset(tmp_path / "out" / "stereo.nc", engine="scipy")
+    assert part.sizes["frame"] == 5 and int(part.attrs["complete"]) == 0

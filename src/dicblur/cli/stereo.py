@@ -186,24 +186,38 @@ def track_command(
     writable_folder(out)
     rec_l, rec_r = open_recording(left), open_recording(right)
     target = track_store(out, "stereo", fmt)
+    from ..track import TrackInterrupted
+
     with progress_bar("stereo", unit="frame pairs") as progress:
-        ds = track(
-            rec_l,
-            rec_r,
-            the_rig,
-            exposure=exposure,
-            fps=fps,
-            static=static,
-            noise=noise,
-            subset=subset,
-            step=step,
-            shape=shape,  # type: ignore[arg-type]
-            reference=reference,
-            frames=frames,
-            depth=dep,
-            threads=threads,
-            progress=progress,
-        )
+        try:
+            ds = track(
+                rec_l,
+                rec_r,
+                the_rig,
+                exposure=exposure,
+                fps=fps,
+                static=static,
+                noise=noise,
+                subset=subset,
+                step=step,
+                shape=shape,  # type: ignore[arg-type]
+                reference=reference,
+                frames=frames,
+                depth=dep,
+                threads=threads,
+                progress=progress,
+            )
+        except TrackInterrupted as exc:
+            # the pairs tracked before a bad frame, written before the error (as track's)
+            if exc.dataset is not None:
+                save_track(exc.dataset, target)
+                if csv:
+                    write_stereo_csv(exc.dataset, out / "stereo.csv")
+                console.print(
+                    f"wrote the {exc.dataset.sizes['frame']} frames tracked before the "
+                    f"stop to {target}"
+                )
+            raise
     save_track(ds, target)
     written = [str(target)]
     if csv:

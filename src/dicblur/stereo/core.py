@@ -25,9 +25,10 @@ from numpy.typing import NDArray
 
 from .._version import __version__
 from ..dic import Correlator, PointStatus
-from ..errors import InputError
+from ..errors import DicblurError, InputError
 from ..sequence import Recording, open_recording
 from ..threads import each
+from ..track.core import TrackInterrupted
 from ..track.frames import correlate_frame, frame_gradients, poi_grid
 from ..track.grid import extrapolate_fields, fill_with_median
 from ..track.kinematics import exposure_motion
@@ -148,14 +149,15 @@ def _track_camera(
     out_s: NDArray[np.uint8],
     ok0: NDArray[np.bool_],
     grid: tuple[tuple[int, int], NDArray[np.intp]] | None,
-) -> None:
+) -> tuple[int, BaseException | None]:
     """IC-GN of the frames ``order`` (in tracking order) as ``dicblur track`` runs its
     frames (docs/track.md): each from the extrapolation of the last (up to) three
     converged fields ``history`` (params (n, k), NaN where a point failed; the increment
     smoothed over the POI grid ``grid``) with the previous frame's displacement gradients;
     a frame where more than 2 % of the correlatable points ``ok0`` fail from there is
     correlated again from the engine's FFT-CC start and the better result kept per point
-    (:func:`~dicblur.track.frames.correlate_frame`)."""
+    (:func:`~dicblur.track.frames.correlate_frame`). Returns the frames done and the
+    error that stopped it (a frame that cannot be read), or None."""
     iv = 1 if corr.shape == "translation" else 3
     hist = [(h[:, 0].copy(), h[:, iv].copy()) for h in history[-HISTORY:]]
     grads = None
@@ -165,8 +167,11 @@ def _track_camera(
         if ok.any():
             grads = last.take([1, 2, 4, 5], axis=1)
             fill_with_median(grads, ok)
-    for f in order:
-        img = corr.prefilter(rec.frame(f))
+    for done, f in enumerate(order):
+        try:
+            img = corr.prefilter(rec.frame(f))
+        except (DicblurError, OSError) as exc:
+            return done, exc  # the frames before it are kept (track below)
         guess = extrapolate_fields(hist, grid) if hist else None
         if guess is not None:
             good = np.asarray(np.isfinite(guess).all(axis=1))
@@ -181,6 +186,7 @@ def _track_camera(
         hist.append((np.where(keep, p[:, 0], np.nan), np.where(keep, p[:, iv], np.nan)))
         del hist[:-HISTORY]
         grads = frame_gradients(res)
+    return len(order), None
 
 
 def track(
@@ -303,7 +309,7 @@ def track(
     corr_r = _camera_correlator(ref_r, nz_r, subset=subset, points=rr, shape=shape)
     # (2) each camera against its own reference
     order = list(range(reference + 1, f1)) + list(range(reference - 1, f0 - 1, -1))
-    nf = f1 - f0
+    nf = n_want = f1 - f0
     k = 6 if shape == "affine" else 2
     p_l = np.full((n_total, n, k), np.nan)
     p_r = np.full((n_total, n, k), np.nan)
@@ -313,6 +319,7 @@ def track(
     p_r[reference] = 0.0
     t_track = time.perf_counter()
     done = 0
+    error: BaseException | None = None  # a frame that could not be read: what was is kept
     # the two cameras on two threads (each Correlator on single-threaded kernels, which
     # release the GIL) where numba's threading layer allows concurrent kernel calls
     two = threads >= 2 and thread_safe_kernels()
@@ -322,22 +329,48 @@ def track(
     grid = poi_grid(corr_l)  # right point i images left POI i: the same neighbours
     if two:
         cams = [(c.fork(workers=1), pp, ss, rec) for c, pp, ss, rec in cams]
-    for seg in (list(range(reference + 1, f1)), list(range(reference - 1, f0 - 1, -1))):
+    n_order = len(order)
+    for forward, seg in (
+        (True, list(range(reference + 1, f1))),
+        (False, list(range(reference - 1, f0 - 1, -1))),
+    ):
         before = [reference]  # the frames whose fields start the block's first frame
         for a in range(0, len(seg), 25):  # blocks of pairs, so that the progress moves
             blk = seg[a : a + 25]
+            got: dict[int, tuple[int, BaseException | None]] = {}
 
-            def one(cam: tuple[Any, ...], blk: list[int] = blk, before: list[int] = before) -> None:
+            def one(
+                cam: tuple[Any, ...],
+                blk: list[int] = blk,
+                before: list[int] = before,
+                got: dict[int, tuple[int, BaseException | None]] = got,
+            ) -> None:
                 cc, pp, ss, rec = cam
                 hist = [np.where((ss[f] == 0)[:, None], pp[f], np.nan) for f in before]
-                _track_camera(cc, rec, blk, hist, pp, ss, ok0, grid)
+                got[id(cam)] = _track_camera(cc, rec, blk, hist, pp, ss, ok0, grid)
 
             each(one, cams, 2 if two else 1)
-            before = (before + blk)[-HISTORY:]
-            done += len(blk)
+            n_done = min(d for d, _ in got.values())
+            error = next((e for _, e in got.values() if e is not None), None)
+            before = (before + blk[:n_done])[-HISTORY:]
+            done += n_done
             if progress is not None:
-                progress(done, len(order))
+                progress(done, n_order)
+            if error is not None:
+                # keep the pairs both cameras tracked, in one run from the reference
+                kept = blk[:n_done]
+                if forward:
+                    f1 = kept[-1] + 1 if kept else blk[0]
+                    f0 = reference  # the backward frames are not tracked yet
+                else:
+                    f0 = kept[-1] if kept else blk[0] + 1
+                break
+        if error is not None:
+            break
+    if error is not None and f1 - f0 < 2:
+        raise error  # the reference pair alone: nothing tracked to keep
     tracking_time = time.perf_counter() - t_track
+    nf = f1 - f0  # fewer when a frame stopped the tracking
     sl = slice(f0, f1)
     p_l, p_r, s_l, s_r = p_l[sl], p_r[sl], s_l[sl], s_r[sl]
     # (3) triangulation of every pair
@@ -494,6 +527,14 @@ def track(
             "prediction_time_s": prediction_time,
             "total_time_s": time.perf_counter() - t_start,
             "n_frames_tracked": nf,
+            "complete": int(error is None),
         }
     )
+    if error is not None:
+        ds.attrs["stop_reason"] = f"stopped: {error}"
+        raise TrackInterrupted(
+            f"tracking stopped: {error} after {nf} of {n_want} frames; "
+            "the frames tracked so far are kept",
+            ds,
+        ) from error
     return ds

@@ -171,3 +171,26 @@ def test_bad_frame_keeps_the_pairs_tracked_before_it(tmp_path, capsys):
     assert code == 2 and "f5.tif" in err and "Traceback" not in err
     part = xr.open_dataset(tmp_path / "out" / "stereo.nc", engine="scipy")
     assert part.sizes["frame"] == 5 and int(part.attrs["complete"]) == 0
+
+
+def test_subsets_with_clipped_pixels_in_either_camera_are_not_valid():
+    """A clipped (over-exposed) patch in the right camera: the points whose right subset
+    holds clipped pixels are marked and not valid, the others stay valid (as dicblur
+    track's `saturated`)."""
+    lab = _lab("plane", size=128)
+    left, right = _frames(lab, 5)
+    right[:, 40:60, 40:60] = 255.0  # the sensor's top level
+    left = np.clip(left, 0, 254.0)
+    ds = track(left, right, lab.rig, exposure=EXPOSURE, fps=FPS, noise=2.0, subset=21, step=12)
+    sat_r, sat_l = ds["saturated_right"].values, ds["saturated_left"].values
+    rr, rc = ds["right_row"].values, ds["right_col"].values
+    h = 10
+    touches = (rr + h >= 39.5) & (rr - h <= 59.5) & (rc + h >= 39.5) & (rc - h <= 59.5)
+    touches &= np.isfinite(rr)
+    assert (sat_r > 0).sum() >= 4 and not (sat_l > 0).any()
+    # the right subset sits at the rounded match: a half-pixel margin at the patch's edge
+    assert np.all(touches[sat_r > 0])
+    valid = ds["valid"].values.astype(bool)
+    assert not valid[:, sat_r > 0].any()
+    assert valid[:, (sat_r == 0) & (ds["status_stereo"].values == 0)].mean() > 0.9
+    assert "clipped" in ds.attrs["notes"]

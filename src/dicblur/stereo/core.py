@@ -35,6 +35,7 @@ from ..track.kinematics import exposure_motion
 from ..track.noise import NoiseEstimate, estimate_static_noise, subset_levels
 from ..track.options import parse_frame_range, parse_rate
 from ..track.parallel import HISTORY, thread_safe_kernels
+from ..track.saturation import saturated_share, saturation_level
 from ..track.uncertainty import build_blur_table
 from .camera import StereoRig
 from .matching import match_reference
@@ -294,7 +295,8 @@ def track(
     n = len(rows)
     match = match_reference(rig, corr_l, ref_r, depth=depth, max_epipolar=max_epipolar)
     half = subset // 2
-    rr = np.rint(match.right).astype(np.int64)
+    # a failed match (NaN) is cast as the corner subset (replaced below): no invalid cast
+    rr = np.rint(np.where(np.isfinite(match.right), match.right, half)).astype(np.int64)
     inside = (
         np.isfinite(match.right).all(axis=1)
         & (rr[:, 0] >= half)
@@ -451,6 +453,20 @@ def track(
     sig_n = np.sqrt(np.maximum(np.diagonal(cov3_noise, axis1=2, axis2=3), 0.0))
     sig_b = np.sqrt(np.maximum(np.diagonal(cov3_blur, axis1=2, axis2=3), 0.0))
     valid = converged & np.isfinite(sig).all(axis=-1) & np.isfinite(disp).all(axis=-1)
+    # subsets with clipped pixels in either reference: no noise or blur model there
+    # (track/saturation.py, as dicblur track's `saturated`)
+    notes: list[str] = []
+    sat: dict[str, NDArray[np.float32]] = {}
+    for nm, ref, cen in (("left", ref_l, cen_l), ("right", ref_r, cen_r)):
+        level = saturation_level(ref)
+        sat[nm] = saturated_share(ref, cen, subset, level)
+        if (sat[nm] > 0).any():
+            notes.append(
+                f"{int((sat[nm] > 0).sum())} of {n} points have clipped pixels (at {level:g} "
+                f"GL) in the {nm} reference subset: not valid; lower the exposure or the "
+                "lighting"
+            )
+    valid &= ~((sat["left"] > 0) | (sat["right"] > 0))[None, :]
     fp = ("frame", "point")
     data: dict[str, Any] = {
         "X": ("point", match.points[:, 0]),
@@ -486,6 +502,8 @@ def track(
         "status_left": (fp, s_l),
         "status_right": (fp, s_r),
         "valid": (fp, valid.astype(np.uint8)),
+        "saturated_left": ("point", sat["left"]),
+        "saturated_right": ("point", sat["right"]),
     }
     for j, nm in enumerate(("U", "V", "W3")):
         data[f"sigma_{nm}_noise"] = (fp, sig_n[..., j])
@@ -530,6 +548,8 @@ def track(
             "complete": int(error is None),
         }
     )
+    if notes:
+        ds.attrs["notes"] = " | ".join(notes)
     if error is not None:
         ds.attrs["stop_reason"] = f"stopped: {error}"
         raise TrackInterrupted(

@@ -253,3 +253,37 @@ def test_foreign_frame_matches_are_flagged_not_valid():
     assert not ds["valid"].values[6].any()
     # the clean frames keep their points
     assert ds["outlier"].values[[0, 1, 2, 3, 9]].sum() == 0
+
+
+def test_folder_of_two_image_formats_is_refused_with_a_glob_as_the_fix(tmp_path):
+    # the same frames exported twice (f0.png and f0.tif): each frame would be tracked
+    # twice, at the wrong time
+    from dicblur.errors import ImageReadError
+    from dicblur.sequence import open_recording
+
+    for k, f in enumerate(_noisy(3, size=32)):
+        dicblur.save_image(tmp_path / f"f{k}.png", f, bit_depth=8)
+        dicblur.save_image(tmp_path / f"f{k}.tif", f, bit_depth=8)
+    with pytest.raises(ImageReadError, match=r"3 \.png and 3 \.tif.*\*\.png"):
+        open_recording(tmp_path)
+    assert len(open_recording(str(tmp_path / "*.tif"))) == 3
+    (tmp_path / "f0.png").unlink()
+    for k in (1, 2):
+        (tmp_path / f"f{k}.png").unlink()
+    (tmp_path / "f3.TIFF").write_bytes((tmp_path / "f2.tif").read_bytes())
+    assert len(open_recording(tmp_path)) == 4  # .tif and .TIFF are one format
+
+
+def test_cli_plot_points_checked_before_tracking(tmp_path, capsys):
+    from dicblur.cli import main
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k, f in enumerate(_noisy(4)):
+        dicblur.save_image(folder / f"f{k}.png", f, bit_depth=8)
+    args = ["track", str(folder), "--exposure", "0.1ms", "--fps", "1000", "--noise", "2"]
+    for bad in ("-3", "9"):  # 64 px, step 16: 9 points (0..8)
+        rc = main([*args, "--step", "16", "--plot-points", bad, "-o", str(tmp_path / "o")])
+        err = capsys.readouterr().err
+        assert rc == 2 and "--plot-points" in err and "0..8" in err
+        assert not (tmp_path / "o" / "track.nc").exists()

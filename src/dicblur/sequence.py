@@ -187,6 +187,22 @@ def _folder(files: list[Path], source: str) -> Recording:
     )
 
 
+def _one_format(files: list[Path], source: str) -> None:
+    """Refuse a folder whose images come in several formats (the frames exported twice,
+    f1.png beside f1.tif: each would be a frame of its own, at the wrong time)."""
+    counts: dict[str, int] = {}
+    for f in files:
+        suffix = f.suffix.lower().replace(".tiff", ".tif")
+        counts[suffix] = counts.get(suffix, 0) + 1
+    if len(counts) > 1:
+        found = " and ".join(f"{n} {s}" for s, n in sorted(counts.items(), key=lambda x: -x[1]))
+        top = max(counts, key=lambda s: counts[s])
+        raise ImageReadError(
+            f"recording={source!r}: the folder holds {found} images; give the frames of one "
+            f"format as a glob, e.g. {str(Path(source) / ('*' + top))!r}"
+        )
+
+
 def _read_file(path: Path) -> NDArray[Any]:
     """One image file with its stored dtype (8/16-bit integers stay integers)."""
     try:
@@ -468,6 +484,7 @@ def open_recording(source: str | os.PathLike[str]) -> Recording:
             ),
             key=lambda f: natural_key(f.name),
         )
+        _one_format(files, text)
         return _folder(files, text)
     if p.stat().st_size == 0:
         raise ImageReadError(f"recording={text!r}: the file is empty (0 bytes)")

@@ -199,9 +199,15 @@ def test_subsets_with_clipped_pixels_are_not_valid():
     assert ds.attrs["saturation_level"] == 255.0 and "clipped" in ds.attrs["notes"]
     # a clean frame has no clipped plateau; a few pixels at the top of a tail are not one
     assert saturation_level(_noisy(1, size=80)[0]) is None
-    img = np.arange(100.0).reshape(10, 10)
-    img[0, :3] = 99.0
+    img = np.arange(256.0).reshape(16, 16)
+    img[0, :3] = 255.0
     assert saturation_level(img) is None
+    # a noise-free pattern's flat white below a top code is no clipping; 12-bit data in
+    # 16-bit files, and 8-bit data scaled into 16 bits, clip at their own top
+    assert saturation_level(track_pattern(64)) is None
+    noisy = _noisy(1, size=64)[0]
+    assert saturation_level(np.minimum(np.rint(noisy * 20), 4095)) == 4095
+    assert saturation_level(np.minimum(np.rint(noisy * 1.3), 255) * 256) == 65280
 
 
 def test_folder_skips_hidden_files(tmp_path):

@@ -7,11 +7,14 @@ bright speckles clip, the error of such subsets ran 3-5x their predicted sigma (
 worst) while the others stayed at 1.0-1.9x. The track marks them (``saturated``: the share
 of clipped pixels in each point's reference subset) and leaves them out of ``valid``.
 
-The clipping level is read from the reference itself, not from the bit depth (12-bit data
-in 16-bit files clip at 4095, a camera's white point may sit below the top code): a
+The clipping level is read from the reference itself, not from the file's bit depth
+(12-bit data in 16-bit files clip at 4095, 8-bit data scaled into 16 bits at 65280): a
 plateau at the image's maximum, held by at least :data:`SATURATION_MIN_PIXELS` pixels and
-by more than the next level down (an unclipped distribution thins out towards its
-maximum).
+by more than the next level down (an unclipped, noisy distribution thins out towards its
+maximum), at a top code of 8-16-bit data (:func:`top_codes`). A noise-free synthetic
+pattern has such a plateau too (the flat inside of its white speckles): below a top code
+(``track_pattern``'s 210) it is not taken for clipping; at one (a pattern stretched to
+0-255) it is, as the camera would clip it.
 """
 
 from __future__ import annotations
@@ -20,18 +23,31 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter
 
-__all__ = ["SATURATION_MIN_PIXELS", "saturated_share", "saturation_level"]
+__all__ = ["SATURATION_MIN_PIXELS", "saturated_share", "saturation_level", "top_codes"]
 
 #: Fewest pixels at the maximum grey level that make it a clipping plateau.
 SATURATION_MIN_PIXELS = 5
 
 
+def top_codes() -> frozenset[float]:
+    """The grey levels a sensor clips at: ``2**k - 1`` of k-bit data (k = 8..16) and the
+    same left-aligned in 16 bits, ``(2**k - 1) 2**(16 - k)`` (65280 for 8-bit, 65520 for
+    12-bit data)."""
+    return frozenset(
+        [float(2**k - 1) for k in range(8, 17)]
+        + [float((2**k - 1) * 2 ** (16 - k)) for k in range(8, 16)]
+    )
+
+
 def saturation_level(image: NDArray[np.float64]) -> float | None:
     """The grey level (GL) at which ``image`` (rows, cols) is clipped, or None when its
-    maximum is no plateau (fewer than :data:`SATURATION_MIN_PIXELS` pixels there, or
-    no more than at the next level down)."""
+    maximum is no top code (:func:`top_codes`) or no plateau (fewer than
+    :data:`SATURATION_MIN_PIXELS` pixels there, or no more than at the next level
+    down)."""
     img = np.asarray(image, dtype=np.float64)
     top = float(img.max())
+    if top not in top_codes():
+        return None
     n_top = int(np.count_nonzero(img == top))
     if n_top < SATURATION_MIN_PIXELS:
         return None

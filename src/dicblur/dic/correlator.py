@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..checks import (
+    as_float_array,
     as_image,
     check_choice,
     check_positive,
@@ -469,7 +470,7 @@ class Correlator(BlurMatching):
             )
         self._check_prepared(current)
         n, k = self.n_points, N_PARAMS[self.shape]
-        p0 = np.asarray(start, dtype=np.float64)
+        p0 = as_float_array(start, "start", expected=f"expected finite (u, v) px, shape ({n}, 2)")
         if p0.shape == (n, 2) and k != 2:
             p0 = self._guess_to_params(p0[:, 0], p0[:, 1])
         if p0.shape != (n, k) or not np.isfinite(p0).all():
@@ -584,7 +585,14 @@ class Correlator(BlurMatching):
         method = self.initial
         full: NDArray[np.float64] | None = None
         if initial is not None:
-            guess = np.asarray(initial, dtype=np.float64)
+            if isinstance(initial, str):
+                raise InputError(
+                    f"initial={initial!r}: correlate() takes initial guesses (u, v) px; "
+                    f"set the method with Correlator(..., initial={initial!r})"
+                )
+            guess = as_float_array(
+                initial, "initial", expected="expected finite (u, v) px, shape (2,) or (n, 2)"
+            )
             if guess.shape == (2,):
                 guess = np.broadcast_to(guess, (n, 2))
             k = N_PARAMS[self.shape]

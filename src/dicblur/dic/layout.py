@@ -36,6 +36,11 @@ def layout(
     half = subset // 2
     if points is not None:
         pts = np.asarray(points)
+        if pts.dtype.kind not in "iuf":
+            raise InputError(
+                f"points={describe(points)}: expected an (n, 2) array of integer "
+                "(row, col) POI centres, px"
+            )
         if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] == 0:
             raise InputError(
                 f"points={describe(pts)}: expected an (n, 2) array of "
@@ -61,10 +66,17 @@ def layout(
     if roi is not None:
         try:
             r0, r1, c0, c1 = (int(x) for x in roi)
+            whole = all(float(x) == int(x) for x in roi)
         except (TypeError, ValueError) as exc:
             raise InputError(
                 f"roi={describe(roi)}: expected (row_start, row_stop, col_start, col_stop) in px"
             ) from exc
+        if not whole:
+            # int() would truncate a fractional bound silently
+            raise InputError(
+                f"roi={describe(roi)}: the bounds must be whole pixels (row_start, row_stop, "
+                "col_start, col_stop); round them first"
+            )
         if not (0 <= r0 < r1 <= rows_img and 0 <= c0 < c1 <= cols_img):
             raise InputError(
                 f"roi={describe(roi)}: must satisfy 0 <= row_start < "

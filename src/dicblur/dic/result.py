@@ -130,7 +130,12 @@ class DICResult:
         ):
             if truth is None:
                 continue
-            t = float(truth)
+            try:
+                t = float(truth)
+            except (TypeError, ValueError):
+                raise InputError(
+                    f"true_{name}={truth!r}: expected the true displacement, a number (px)"
+                ) from None
             if not math.isfinite(t):
                 raise InputError(f"true_{name}={truth!r}: must be a finite number (px)")
             err = est - t

@@ -15,6 +15,7 @@ from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import IcgnPasses, scatter
 from .status import PointStatus
+from .support import SUPPORT_ROUNDS, Pairs, grid_pairs, scattered_pairs, unsupported_pairs
 
 __all__ = [
     "ACCEPT_DISTANCE",
@@ -191,6 +192,8 @@ class Screening(IcgnPasses):
     _from_nb: NDArray[np.bool_] | None = None
     #: Their starts' (u, v), (n, 2) px, NaN elsewhere: the field they are checked against.
     _nb_start: NDArray[np.float64] | None = None
+    #: The POIs' neighbour pairs of the support test (:mod:`.support`), once computed.
+    _support_pairs: Pairs | None = None
 
     # ------------------------------------------------------------------ the noise
     def _set_noise(self, noise: NoiseEstimate | None) -> None:
@@ -317,11 +320,17 @@ class Screening(IcgnPasses):
 
     def _flag(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
         """The statuses of ``res`` after IC-GN, in place: the noise (estimated),
-        :meth:`_screen`, :meth:`_neighbour_check`, then ``IMPRECISE``; returns the screen's
+        :meth:`_screen`, :meth:`_neighbour_check`, ``IMPRECISE``, then
+        :meth:`_support_check`; returns the screen's
         noise variance (or None). The iterations get those of the check's retries."""
         st = res.status
         if self.noise_auto:
-            self._estimate_noise(res.zncc, st)
+            # chance optima (lone converged POIs among failures) are no measure of the
+            # noise: on a pair that does not match, 50-80 of them made a 2 GL pair's
+            # estimate ~55 GL and flooded the field with IMPRECISE
+            lone = self._unsupported(res, neutral=PointStatus.MAX_ITERATIONS)
+            est_st = st if lone is None else np.where(lone, PointStatus.OUTLIER, st)
+            self._estimate_noise(res.zncc, est_st)
         noise_var = self._screen(coef, res)
         kept = self._neighbour_check(coef, res)
         if self._imprecise is not None:
@@ -332,7 +341,67 @@ class Screening(IcgnPasses):
             if kept is not None:
                 flag &= ~kept
             st[flag] = PointStatus.IMPRECISE
+        self._support_check(res)
         return noise_var
+
+    def _unsupported(
+        self, res: kernels.Outputs, *, neutral: PointStatus | None = None
+    ) -> NDArray[np.bool_] | None:
+        """The converged POIs of ``res`` their neighbours do not support
+        (:func:`.support.unsupported`, or :func:`.support.unsupported_scattered` off a
+        grid), or None without the neighbour check. A neighbour with status ``neutral``
+        counts neither way (before the screening: ``MAX_ITERATIONS``, which a
+        predicted-imprecise subset reaches at its reduced limit)."""
+        if not self.neighbour_check:
+            return None
+        st = res.status
+        ok = st == PointStatus.CONVERGED
+        if not ok.any():
+            return None
+        # an IMPRECISE estimate may confirm a neighbour; failed in the current image: not
+        # decided by the reference (status0), and not predicted imprecise
+        finite = ok | (st == PointStatus.IMPRECISE)
+        failed = ~finite & (self._status0 == 0) & (st != PointStatus.LOW_TEXTURE)
+        if neutral is not None:
+            failed &= st != neutral
+        elif self._imprecise is not None:
+            failed &= ~self._imprecise
+        if self._support_pairs is None:
+            # the POIs are fixed: their neighbour pairs once per Correlator
+            if self._grid_shape is not None and self._grid_index is not None:
+                self._support_pairs = grid_pairs(self._grid_shape, self._grid_index)
+            else:
+                # explicit points off a grid: the neighbours whose subsets overlap
+                self._support_pairs = scattered_pairs(self.rows, self.cols, float(self.subset))
+        flag = np.zeros_like(ok)
+        for _ in range(SUPPORT_ROUNDS):
+            # a later round: the POIs flagged so far vouch for no neighbour
+            new = unsupported_pairs(
+                res.p, finite, failed, self.rows, self.cols, self._support_pairs
+            )
+            new &= ok & ~flag
+            if not new.any():
+                break
+            flag |= new
+            finite, failed = finite & ~new, failed | new
+        return flag
+
+    def _support_check(self, res: kernels.Outputs) -> None:
+        """``OUTLIER`` for the converged POIs of the grid that their neighbours do not
+        support (:func:`.support.unsupported`: a lone match among failures), in place,
+        unless a noise level is known and the POI's residual passes the residual test
+        against it alone (``max_residual`` times the noise variance; no field median)."""
+        flag = self._unsupported(res)
+        if flag is None:
+            return
+        st = res.status
+        if flag.any() and self.noise is not None and self.max_residual is not None:
+            # no neighbour vouches for these: kept only when the residual alone is the
+            # noise's (a chance optimum's is tens of times larger)
+            m = self.subset * self.subset - res.p.shape[1] - 2
+            unit = residual_variance(res.zncc, self._prep.fnorm, m)
+            flag &= unit > self.max_residual * self.noise.sigma**2
+        st[flag] = PointStatus.OUTLIER
 
     def _neighbour_check(
         self, coef: NDArray[np.float32], res: kernels.Outputs

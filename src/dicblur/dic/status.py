@@ -34,7 +34,8 @@ class PointStatus(IntEnum):
     HIGH_RESIDUAL = 6
     #: Converged, but inconsistent with its grid neighbours: it fails the normalised
     #: median test, or the neighbours' displacement matches its subset better (a false
-    #: optimum; see :func:`dicblur.dic.normalized_median_test`).
+    #: optimum; see :func:`dicblur.dic.normalized_median_test`), or no neighbour supports
+    #: it among failed ones (:func:`dicblur.dic.support.unsupported`).
     OUTLIER = 7
     #: The subset's predicted random error ``hypot(predicted_sigma_u, predicted_sigma_v)``
     #: exceeds ``max_predicted_sigma`` px (``noise_sigma`` given): too little texture for

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..checks import as_blur, as_positive, as_vector, check_choice, describe
+from ..checks import as_blur, as_positive, as_vector, check_choice, check_odd_subset, describe
 from ..errors import FitError, InputError
 from .decay import fit_sssig_decay
 from .domain import COMPENSATIONS, ValidityDomain
@@ -202,6 +202,9 @@ def fit_blur_model(
     if default not in ("auto", "mismatch", "power_law"):
         raise InputError(f"default={default!r}: choose 'mismatch', 'power_law' or 'auto'")
     compensation = check_choice(compensation, "compensation", COMPENSATIONS)
+    if subset is not None:
+        # the domain's subset is a DIC subset: odd, >= 3 px
+        subset = check_odd_subset(subset)
     if compensation in ("given", "estimate") and subset is not None:
         if breakdown_blur is None or breakdown_blur > subset:
             breakdown_blur = float(subset)

@@ -79,6 +79,25 @@ def window_from_vsg(
     return n
 
 
+def check_window_fits(window: int, grid_shape: tuple[int, int], *, step: int, subset: int) -> None:
+    """Raise :class:`~dicblur.errors.InputError` when no point of a ``grid_shape`` (rows,
+    cols) POI grid can have a complete ``window`` x ``window`` plane fit: every point would
+    otherwise fall back to a smaller window or to ``NO_WINDOW``, not the VSG asked for."""
+    ny, nx = grid_shape
+    small = min(ny, nx)
+    if window <= small:
+        return
+    if small < 3:
+        fix = "a grid of at least 3 x 3 points (a larger roi or a smaller step)"
+    else:
+        fit = small if small % 2 else small - 1
+        fix = f"window <= {fit} (VSG {vsg(fit, step, subset):g} px) or a larger grid"
+    raise InputError(
+        f"window={window}: larger than the POI grid ({ny} x {nx} points), so no point has "
+        f"a full window (VSG {vsg(window, step, subset):g} px); use {fix}"
+    )
+
+
 @dataclass(frozen=True)
 class StrainField:
     """Strains of a POI grid, their covariance and status.
@@ -456,6 +475,8 @@ def strain(
     if subset <= 0:
         raise InputError("result: info has no 'subset' (px); use a Correlator's result")
     shape = (ny, nx)
+    if method == "fit" and isinstance(window, int | np.integer) and not isinstance(window, bool):
+        check_window_fits(int(window), shape, step=step, subset=subset)
     valid = (result.status == PointStatus.CONVERGED).reshape(shape)
     grads = None
     if method == "subset":

@@ -134,3 +134,63 @@ def test_cli_track_writes_dataset_csv_and_report(tmp_path, capsys):
     page = (out / "report.html").read_text()
     assert 'id="fig-shape' in page and "data:image/png;base64" in page
     json.dumps(dict(ds.attrs), default=str)
+
+
+def test_bad_frame_keeps_the_pairs_tracked_before_it(tmp_path, capsys):
+    """A frame of another size in the right recording's middle: the pairs tracked before
+    it are kept (complete = 0) and written by the CLI, as dicblur track does (they were
+    lost: one error line and no output)."""
+    import xarray as xr
+
+    from dicblur.errors import ImageReadError
+    from dicblur.io import save_image
+    from dicblur.track import TrackInterrupted
+
+    lab = _lab("plane", size=128)
+    left, right = _frames(lab, 7)
+    for side, fr in (("L", left), ("R", right)):
+        (tmp_path / side).mkdir()
+        for k, img in enumerate(fr):
+            a = np.clip(img, 0, 255) * 256
+            save_image(tmp_path / side / f"f{k}.tif", a[:-4] if (side, k) == ("R", 5) else a,
+                       bit_depth=16)  # fmt: skip
+    save_rig(lab.rig, tmp_path / "rig.json")
+    kw = {"exposure": EXPOSURE, "fps": FPS, "noise": 512.0, "step": 12}
+    with pytest.raises(TrackInterrupted, match="after 5 of 7 frames") as info:
+        track(str(tmp_path / "L"), str(tmp_path / "R"), lab.rig, **kw)
+    ds = info.value.dataset
+    assert isinstance(info.value.__cause__, ImageReadError)
+    assert ds["frame"].values.tolist() == [0, 1, 2, 3, 4] and int(ds.attrs["complete"]) == 0
+    assert ds["valid"].values[:3].mean() > 0.8
+    code = main(
+        ["stereo", "track", str(tmp_path / "L"), str(tmp_path / "R"), "--rig",
+         str(tmp_path / "rig.json"), "--exposure", "0.4ms", "--fps", "2kHz", "--noise", "512",
+         "--step", "12", "--no-report", "-o", str(tmp_path / "out")]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and "f5.tif" in err and "Traceback" not in err
+    part = xr.open_dataset(tmp_path / "out" / "stereo.nc", engine="scipy")
+    assert part.sizes["frame"] == 5 and int(part.attrs["complete"]) == 0
+
+
+def test_subsets_with_clipped_pixels_in_either_camera_are_not_valid():
+    """A clipped (over-exposed) patch in the right camera: the points whose right subset
+    holds clipped pixels are marked and not valid, the others stay valid (as dicblur
+    track's `saturated`)."""
+    lab = _lab("plane", size=128)
+    left, right = _frames(lab, 5)
+    right[:, 40:60, 40:60] = 255.0  # the sensor's top level
+    left = np.clip(left, 0, 254.0)
+    ds = track(left, right, lab.rig, exposure=EXPOSURE, fps=FPS, noise=2.0, subset=21, step=12)
+    sat_r, sat_l = ds["saturated_right"].values, ds["saturated_left"].values
+    rr, rc = ds["right_row"].values, ds["right_col"].values
+    h = 10
+    touches = (rr + h >= 39.5) & (rr - h <= 59.5) & (rc + h >= 39.5) & (rc - h <= 59.5)
+    touches &= np.isfinite(rr)
+    assert (sat_r > 0).sum() >= 4 and not (sat_l > 0).any()
+    # the right subset sits at the rounded match: a half-pixel margin at the patch's edge
+    assert np.all(touches[sat_r > 0])
+    valid = ds["valid"].values.astype(bool)
+    assert not valid[:, sat_r > 0].any()
+    assert valid[:, (sat_r == 0) & (ds["status_stereo"].values == 0)].mean() > 0.9
+    assert "clipped" in ds.attrs["notes"]

@@ -385,8 +385,9 @@ def test_cli_default_chunks_on_threads_and_serial_opt_out(tmp_path, capsys):
 @pytest.mark.parametrize("threads", [1, 2])
 def test_chunk_keeps_the_frames_before_a_bad_frame(tmp_path, threads):
     """A frame of another size in the middle of a chunk: the frames tracked before it in
-    that chunk are kept (as in the serial loop; they were lost before), the finished
-    chunks too, and the error names the frame."""
+    that chunk are kept (as in the serial loop; they were lost before), the other chunks
+    run to their end whatever the threads (the chunks not yet started were dropped,
+    so the frames kept varied with the scheduling), and the error names the frame."""
     import tifffile
 
     frames = tmp_path / "frames"
@@ -399,16 +400,16 @@ def test_chunk_keeps_the_frames_before_a_bad_frame(tmp_path, threads):
         })  # fmt: skip
     ds = info.value.dataset
     got = set(ds["frame"].values.tolist())
-    assert set(range(13)) <= got and 13 not in got and 14 not in got
+    assert got == set(range(13)) | set(range(15, 20))
     assert int(ds.attrs["complete"]) == 0
     if threads == 1:
-        assert got == set(range(13))
         # the serial loop's frames, as far as they go (chunk 0 starts at the reference)
         ser = dicblur.track(str(frames), exposure="0.4ms", fps=2000, noise=2, frames="0:13", **{
             k: v for k, v in KW.items() if k != "static"
         })  # fmt: skip
-        np.testing.assert_array_equal(ds["status"].values, ser["status"].values)
-        assert np.nanmax(np.abs(ds["u"].values - ser["u"].values)) < 2 * ser.attrs["tolerance"]
+        first = ds.sel(frame=list(range(13)))
+        np.testing.assert_array_equal(first["status"].values, ser["status"].values)
+        assert np.nanmax(np.abs(first["u"].values - ser["u"].values)) < 2 * ser.attrs["tolerance"]
 
 
 def test_blur_estimated_within_each_run_of_frames_around_a_gap(tmp_path):

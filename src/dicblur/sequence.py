@@ -2,8 +2,9 @@
 
 Sources (:func:`open_recording`):
 
-- a folder of TIFF/PNG/BMP images in natural order (``img2.tif`` before ``img10.tif``), or
-  a glob pattern (``"run1/*.png"``);
+- a folder of TIFF/PNG/BMP images in natural order (``img2.tif`` before ``img10.tif``;
+  hidden files such as macOS's ``._img2.tif`` left out), or a glob pattern
+  (``"run1/*.png"``);
 - a multi-page TIFF stack (pages read one at a time by ``tifffile``);
 - a Phantom ``.cine`` file (``pims.Cine``: pure Python, random access to any frame, reads
   the setup's frame rate and shutter and the per-frame exposure tag);
@@ -13,8 +14,9 @@ Sources (:func:`open_recording`):
 
 Frames come out as float64 grey levels on the file's own scale (8, 10, 12 or 16-bit data,
 nothing rescaled); ``bit_depth`` says which. A recording shorter than its header promises
-(truncated copy) keeps its complete frames and warns; a frame of another size raises
-:class:`~dicblur.errors.ImageReadError` naming it.
+(truncated copy) keeps its complete frames and warns; a frame of another size (or, in a
+folder, of another data type than the first) raises :class:`~dicblur.errors.ImageReadError`
+naming it.
 """
 
 from __future__ import annotations
@@ -161,7 +163,16 @@ def _folder(files: list[Path], source: str) -> Recording:
     bits = _bits_of(first.dtype)
 
     def read(i: int) -> NDArray[Any]:
-        return _read_file(files[i])
+        arr = _read_file(files[i])
+        if arr.dtype != first.dtype:
+            # grey levels on another scale (a frame saved again at another bit depth):
+            # the noise and the saturation level of the recording would not hold for it
+            raise ImageReadError(
+                f"frame {i} ({files[i].name}): {_bits_of(arr.dtype)}-bit {arr.dtype}, but "
+                f"the recording's frames are {bits}-bit {first.dtype} (from "
+                f"{files[0].name}); convert or remove that frame"
+            )
+        return arr
 
     return Recording(
         source=source,
@@ -174,6 +185,22 @@ def _folder(files: list[Path], source: str) -> Recording:
         names=[f.name for f in files],
         _read=read,
     )
+
+
+def _one_format(files: list[Path], source: str) -> None:
+    """Refuse a folder whose images come in several formats (the frames exported twice,
+    f1.png beside f1.tif: each would be a frame of its own, at the wrong time)."""
+    counts: dict[str, int] = {}
+    for f in files:
+        suffix = f.suffix.lower().replace(".tiff", ".tif")
+        counts[suffix] = counts.get(suffix, 0) + 1
+    if len(counts) > 1:
+        found = " and ".join(f"{n} {s}" for s, n in sorted(counts.items(), key=lambda x: -x[1]))
+        top = max(counts, key=lambda s: counts[s])
+        raise ImageReadError(
+            f"recording={source!r}: the folder holds {found} images; give the frames of one "
+            f"format as a glob, e.g. {str(Path(source) / ('*' + top))!r}"
+        )
 
 
 def _read_file(path: Path) -> NDArray[Any]:
@@ -211,15 +238,27 @@ def _tiff_stack(path: Path) -> Recording:
             f"recording={str(path)!r}: cannot be read as a TIFF stack ({type(exc).__name__}: {exc})"
         ) from exc
 
+    pil: list[Any] = []  # the Pillow reader, opened on the first page tifffile cannot decode
+
     def read(i: int) -> NDArray[Any]:
         try:
             return np.asarray(pages[i].asarray())
         except Exception as exc:
+            # a compression tifffile decodes only with imagecodecs (LZW, the default of many
+            # camera programs; not a dependency): Pillow's libtiff reads those pages
+            got = _pil_page(path, i, pil) if "imagecodecs" in str(exc) else None
+            if got is not None:
+                return got
             raise ImageReadError(
                 f"recording={str(path)!r}: page {i} cannot be read "
                 f"({type(exc).__name__}: {exc}); is the file "
                 "truncated?"
             ) from exc
+
+    def close() -> None:
+        tf.close()
+        for im in pil:
+            im.close()
 
     return Recording(
         source=str(path),
@@ -231,8 +270,23 @@ def _tiff_stack(path: Path) -> Recording:
         exposure=None,
         names=[f"page {i}" for i in range(n)],
         _read=read,
-        _close=tf.close,
+        _close=close,
     )
+
+
+def _pil_page(path: Path, i: int, cache: list[Any]) -> NDArray[Any] | None:
+    """Page ``i`` of the TIFF ``path`` read by Pillow (the open image kept in ``cache``),
+    or None when Pillow cannot read it either."""
+    try:
+        from PIL import Image
+
+        if not cache:
+            cache.append(Image.open(path))
+        im = cache[0]
+        im.seek(i)
+        return np.asarray(im, dtype=np.uint16 if im.mode.startswith("I;16") else None)
+    except Exception:
+        return None
 
 
 def _cine(path: Path) -> Recording:
@@ -421,9 +475,16 @@ def open_recording(source: str | os.PathLike[str]) -> Recording:
         raise ImageReadError(f"recording={text!r}: no such file or folder; check the path")
     if p.is_dir():
         files = sorted(
-            (f for f in p.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES),
+            # hidden files ('._f1.tif' beside each frame of a macOS copy) are no frames,
+            # as a glob '*' leaves them out
+            (
+                f
+                for f in p.iterdir()
+                if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES and not f.name.startswith(".")
+            ),
             key=lambda f: natural_key(f.name),
         )
+        _one_format(files, text)
         return _folder(files, text)
     if p.stat().st_size == 0:
         raise ImageReadError(f"recording={text!r}: the file is empty (0 bytes)")

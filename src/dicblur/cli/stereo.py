@@ -166,6 +166,7 @@ def track_command(
     from ..stereo.core import track
     from ..stereo.store import write_stereo_csv
     from ..track.store import save_track
+    from .track import writable_folder
 
     check_track_choices(fmt=fmt, shape=shape)
     dep = None if depth is None else parse_quantity(depth, "length", name="--depth")
@@ -182,27 +183,41 @@ def track_command(
     if threads is None:
         threads = all_threads()
     the_rig = load_rig(rig)
+    writable_folder(out)
     rec_l, rec_r = open_recording(left), open_recording(right)
-    out.mkdir(parents=True, exist_ok=True)
     target = track_store(out, "stereo", fmt)
+    from ..track import TrackInterrupted
+
     with progress_bar("stereo", unit="frame pairs") as progress:
-        ds = track(
-            rec_l,
-            rec_r,
-            the_rig,
-            exposure=exposure,
-            fps=fps,
-            static=static,
-            noise=noise,
-            subset=subset,
-            step=step,
-            shape=shape,  # type: ignore[arg-type]
-            reference=reference,
-            frames=frames,
-            depth=dep,
-            threads=threads,
-            progress=progress,
-        )
+        try:
+            ds = track(
+                rec_l,
+                rec_r,
+                the_rig,
+                exposure=exposure,
+                fps=fps,
+                static=static,
+                noise=noise,
+                subset=subset,
+                step=step,
+                shape=shape,  # type: ignore[arg-type]
+                reference=reference,
+                frames=frames,
+                depth=dep,
+                threads=threads,
+                progress=progress,
+            )
+        except TrackInterrupted as exc:
+            # the pairs tracked before a bad frame, written before the error (as track's)
+            if exc.dataset is not None:
+                save_track(exc.dataset, target)
+                if csv:
+                    write_stereo_csv(exc.dataset, out / "stereo.csv")
+                console.print(
+                    f"wrote the {exc.dataset.sizes['frame']} frames tracked before the "
+                    f"stop to {target}"
+                )
+            raise
     save_track(ds, target)
     written = [str(target)]
     if csv:

@@ -182,8 +182,20 @@ def track_command(
         )
     if out.exists() and not out.is_dir():
         raise InputError(f"--out={str(out)!r}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    writable_folder(out)
     rec = open_recording(recording)
+    plot_pts = None if plot is None else _ints(plot, "--plot-points")
+    if plot_pts and (roi_v is not None or pts is not None or subset + 2 <= min(rec.shape)):
+        # (a subset larger than the frames: track's own error names --subset)
+        # checked before tracking: the POIs follow from the frame size and the grid options
+        from ..dic import Correlator
+
+        layout = Correlator.layout(rec.shape, subset=subset, step=step, roi=roi_v, points=pts)
+        n_pts = len(layout[0])
+        if not all(0 <= p < n_pts for p in plot_pts):
+            raise InputError(
+                f"--plot-points={plot!r}: the recording has {n_pts} points (0..{n_pts - 1})"
+            )
     target = track_store(out, "track", fmt)
     chunks = None
     n_threads = threads if threads is not None else all_threads()
@@ -255,12 +267,6 @@ def track_command(
     if report:
         from ..report.track import write_track_report
 
-        plot_pts = None if plot is None else _ints(plot, "--plot-points")
-        if plot_pts and max(plot_pts) >= ds.sizes["point"]:
-            raise InputError(
-                f"--plot-points={plot!r}: the recording has "
-                f"{ds.sizes['point']} points (0..{ds.sizes['point'] - 1})"
-            )
         written.append(
             str(write_track_report(ds, out, image=rec.frame(reference), points=plot_pts))
         )
@@ -297,8 +303,28 @@ def track_command(
         },
         {"exposure": "s", "fps": "Hz", "noise_sigma": "GL"},
     )
+    if a.get("notes"):
+        # what the run could not do (no noise estimate, no advice, ...): said, not only
+        # stored, so a column of NaN sigma is never silent
+        for note in str(a["notes"]).split(" | "):
+            console.print(f"note: {note}")
     for w in written:
         console.print(f"wrote {w}")
+
+
+def writable_folder(out: Path) -> None:
+    """Create ``out`` and check that a file can be written there, before any work."""
+    import tempfile
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".probe-"):
+            pass
+    except OSError as exc:
+        raise InputError(
+            f"--out={str(out)!r}: cannot write there ({exc.strerror or exc}); give a "
+            "writable folder"
+        ) from None
 
 
 def _write_planner_page(ds: Any, image: Any, out: Path, *, subset: int, step: int) -> Path | None:

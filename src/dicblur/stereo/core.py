@@ -25,15 +25,17 @@ from numpy.typing import NDArray
 
 from .._version import __version__
 from ..dic import Correlator, PointStatus
-from ..errors import InputError
+from ..errors import DicblurError, InputError
 from ..sequence import Recording, open_recording
 from ..threads import each
+from ..track.core import TrackInterrupted
 from ..track.frames import correlate_frame, frame_gradients, poi_grid
 from ..track.grid import extrapolate_fields, fill_with_median
 from ..track.kinematics import exposure_motion
 from ..track.noise import NoiseEstimate, estimate_static_noise, subset_levels
 from ..track.options import parse_frame_range, parse_rate
 from ..track.parallel import HISTORY, thread_safe_kernels
+from ..track.saturation import saturated_share, saturation_level
 from ..track.uncertainty import build_blur_table
 from .camera import StereoRig
 from .matching import match_reference
@@ -148,14 +150,15 @@ def _track_camera(
     out_s: NDArray[np.uint8],
     ok0: NDArray[np.bool_],
     grid: tuple[tuple[int, int], NDArray[np.intp]] | None,
-) -> None:
+) -> tuple[int, BaseException | None]:
     """IC-GN of the frames ``order`` (in tracking order) as ``dicblur track`` runs its
     frames (docs/track.md): each from the extrapolation of the last (up to) three
     converged fields ``history`` (params (n, k), NaN where a point failed; the increment
     smoothed over the POI grid ``grid``) with the previous frame's displacement gradients;
     a frame where more than 2 % of the correlatable points ``ok0`` fail from there is
     correlated again from the engine's FFT-CC start and the better result kept per point
-    (:func:`~dicblur.track.frames.correlate_frame`)."""
+    (:func:`~dicblur.track.frames.correlate_frame`). Returns the frames done and the
+    error that stopped it (a frame that cannot be read), or None."""
     iv = 1 if corr.shape == "translation" else 3
     hist = [(h[:, 0].copy(), h[:, iv].copy()) for h in history[-HISTORY:]]
     grads = None
@@ -165,8 +168,11 @@ def _track_camera(
         if ok.any():
             grads = last.take([1, 2, 4, 5], axis=1)
             fill_with_median(grads, ok)
-    for f in order:
-        img = corr.prefilter(rec.frame(f))
+    for done, f in enumerate(order):
+        try:
+            img = corr.prefilter(rec.frame(f))
+        except (DicblurError, OSError) as exc:
+            return done, exc  # the frames before it are kept (track below)
         guess = extrapolate_fields(hist, grid) if hist else None
         if guess is not None:
             good = np.asarray(np.isfinite(guess).all(axis=1))
@@ -181,6 +187,7 @@ def _track_camera(
         hist.append((np.where(keep, p[:, 0], np.nan), np.where(keep, p[:, iv], np.nan)))
         del hist[:-HISTORY]
         grads = frame_gradients(res)
+    return len(order), None
 
 
 def track(
@@ -288,7 +295,8 @@ def track(
     n = len(rows)
     match = match_reference(rig, corr_l, ref_r, depth=depth, max_epipolar=max_epipolar)
     half = subset // 2
-    rr = np.rint(match.right).astype(np.int64)
+    # a failed match (NaN) is cast as the corner subset (replaced below): no invalid cast
+    rr = np.rint(np.where(np.isfinite(match.right), match.right, half)).astype(np.int64)
     inside = (
         np.isfinite(match.right).all(axis=1)
         & (rr[:, 0] >= half)
@@ -303,7 +311,7 @@ def track(
     corr_r = _camera_correlator(ref_r, nz_r, subset=subset, points=rr, shape=shape)
     # (2) each camera against its own reference
     order = list(range(reference + 1, f1)) + list(range(reference - 1, f0 - 1, -1))
-    nf = f1 - f0
+    nf = n_want = f1 - f0
     k = 6 if shape == "affine" else 2
     p_l = np.full((n_total, n, k), np.nan)
     p_r = np.full((n_total, n, k), np.nan)
@@ -313,6 +321,7 @@ def track(
     p_r[reference] = 0.0
     t_track = time.perf_counter()
     done = 0
+    error: BaseException | None = None  # a frame that could not be read: what was is kept
     # the two cameras on two threads (each Correlator on single-threaded kernels, which
     # release the GIL) where numba's threading layer allows concurrent kernel calls
     two = threads >= 2 and thread_safe_kernels()
@@ -322,22 +331,48 @@ def track(
     grid = poi_grid(corr_l)  # right point i images left POI i: the same neighbours
     if two:
         cams = [(c.fork(workers=1), pp, ss, rec) for c, pp, ss, rec in cams]
-    for seg in (list(range(reference + 1, f1)), list(range(reference - 1, f0 - 1, -1))):
+    n_order = len(order)
+    for forward, seg in (
+        (True, list(range(reference + 1, f1))),
+        (False, list(range(reference - 1, f0 - 1, -1))),
+    ):
         before = [reference]  # the frames whose fields start the block's first frame
         for a in range(0, len(seg), 25):  # blocks of pairs, so that the progress moves
             blk = seg[a : a + 25]
+            got: dict[int, tuple[int, BaseException | None]] = {}
 
-            def one(cam: tuple[Any, ...], blk: list[int] = blk, before: list[int] = before) -> None:
+            def one(
+                cam: tuple[Any, ...],
+                blk: list[int] = blk,
+                before: list[int] = before,
+                got: dict[int, tuple[int, BaseException | None]] = got,
+            ) -> None:
                 cc, pp, ss, rec = cam
                 hist = [np.where((ss[f] == 0)[:, None], pp[f], np.nan) for f in before]
-                _track_camera(cc, rec, blk, hist, pp, ss, ok0, grid)
+                got[id(cam)] = _track_camera(cc, rec, blk, hist, pp, ss, ok0, grid)
 
             each(one, cams, 2 if two else 1)
-            before = (before + blk)[-HISTORY:]
-            done += len(blk)
+            n_done = min(d for d, _ in got.values())
+            error = next((e for _, e in got.values() if e is not None), None)
+            before = (before + blk[:n_done])[-HISTORY:]
+            done += n_done
             if progress is not None:
-                progress(done, len(order))
+                progress(done, n_order)
+            if error is not None:
+                # keep the pairs both cameras tracked, in one run from the reference
+                kept = blk[:n_done]
+                if forward:
+                    f1 = kept[-1] + 1 if kept else blk[0]
+                    f0 = reference  # the backward frames are not tracked yet
+                else:
+                    f0 = kept[-1] if kept else blk[0] + 1
+                break
+        if error is not None:
+            break
+    if error is not None and f1 - f0 < 2:
+        raise error  # the reference pair alone: nothing tracked to keep
     tracking_time = time.perf_counter() - t_track
+    nf = f1 - f0  # fewer when a frame stopped the tracking
     sl = slice(f0, f1)
     p_l, p_r, s_l, s_r = p_l[sl], p_r[sl], s_l[sl], s_r[sl]
     # (3) triangulation of every pair
@@ -418,6 +453,20 @@ def track(
     sig_n = np.sqrt(np.maximum(np.diagonal(cov3_noise, axis1=2, axis2=3), 0.0))
     sig_b = np.sqrt(np.maximum(np.diagonal(cov3_blur, axis1=2, axis2=3), 0.0))
     valid = converged & np.isfinite(sig).all(axis=-1) & np.isfinite(disp).all(axis=-1)
+    # subsets with clipped pixels in either reference: no noise or blur model there
+    # (track/saturation.py, as dicblur track's `saturated`)
+    notes: list[str] = []
+    sat: dict[str, NDArray[np.float32]] = {}
+    for nm, ref, cen in (("left", ref_l, cen_l), ("right", ref_r, cen_r)):
+        level = saturation_level(ref)
+        sat[nm] = saturated_share(ref, cen, subset, level)
+        if (sat[nm] > 0).any():
+            notes.append(
+                f"{int((sat[nm] > 0).sum())} of {n} points have clipped pixels (at {level:g} "
+                f"GL) in the {nm} reference subset: not valid; lower the exposure or the "
+                "lighting"
+            )
+    valid &= ~((sat["left"] > 0) | (sat["right"] > 0))[None, :]
     fp = ("frame", "point")
     data: dict[str, Any] = {
         "X": ("point", match.points[:, 0]),
@@ -453,6 +502,8 @@ def track(
         "status_left": (fp, s_l),
         "status_right": (fp, s_r),
         "valid": (fp, valid.astype(np.uint8)),
+        "saturated_left": ("point", sat["left"]),
+        "saturated_right": ("point", sat["right"]),
     }
     for j, nm in enumerate(("U", "V", "W3")):
         data[f"sigma_{nm}_noise"] = (fp, sig_n[..., j])
@@ -494,6 +545,16 @@ def track(
             "prediction_time_s": prediction_time,
             "total_time_s": time.perf_counter() - t_start,
             "n_frames_tracked": nf,
+            "complete": int(error is None),
         }
     )
+    if notes:
+        ds.attrs["notes"] = " | ".join(notes)
+    if error is not None:
+        ds.attrs["stop_reason"] = f"stopped: {error}"
+        raise TrackInterrupted(
+            f"tracking stopped: {error} after {nf} of {n_want} frames; "
+            "the frames tracked so far are kept",
+            ds,
+        ) from error
     return ds

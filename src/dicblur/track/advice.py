@@ -193,6 +193,11 @@ def advise_exposure(
         gain = noise.sigma**2 / max(level, 1e-9)
         read_e = 0.0
         assumption = "noise not level-dependent in the static frames: shot-noise limited"
+    if not (gain > 0 and mean_level > 0):
+        raise InputError(
+            f"noise: {noise.sigma:.3g} GL and a mean level of {mean_level:.3g} GL give no "
+            "camera model; give the noise std (--noise 2, GL)"
+        )
     flux = mean_level / (gain * exposure)
     cam = PoissonGaussianCamera(
         full_well=top / gain,

@@ -61,7 +61,8 @@ def residual_frame_noise(
     -------
     NoiseEstimate or None
         ``source`` names the frames and the 95 % interval (``interval``); None when too
-        few subsets converge (:data:`dicblur.dic.noise.MIN_SUBSETS`).
+        few subsets converge (:data:`dicblur.dic.noise.MIN_SUBSETS`) or every frame
+        is the reference repeated bit for bit (skipped: no residual noise).
     """
     others = [k for k in range(*frames) if k != reference]
     if not others:
@@ -73,7 +74,10 @@ def residual_frame_noise(
     m = corr.subset * corr.subset - (6 if corr.shape == "affine" else 2) - 2
     per: list[tuple[int, NDArray[np.float64], NDArray[np.bool_], Any]] = []
     for k in use:
-        res = corr.correlate(rec.frame(k))
+        img = rec.frame(k)
+        if np.array_equal(img, reference_image):
+            continue  # the reference repeated bit for bit: a zero residual, no noise
+        res = corr.correlate(img)
         unit = residual_variance(np.asarray(res.zncc, np.float64), fnorm, m)
         ok = np.asarray(res.status) == PointStatus.CONVERGED
         per.append((k, unit, ok, residual_noise(unit, ok)))
@@ -84,8 +88,10 @@ def residual_frame_noise(
         keep = [p for p in keep if p[3].low <= low.high]
     else:
         keep = per  # too few subsets per frame to compare them: all pooled
+    if not keep:
+        return None
     est = residual_noise(np.concatenate([p[1] for p in keep]), np.concatenate([p[2] for p in keep]))
-    if est is None:
+    if est is None or not est.sigma > 0:
         return None
     use = [p[0] for p in keep]
     names = ",".join(str(k) for k in use)

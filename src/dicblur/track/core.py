@@ -94,6 +94,35 @@ class TrackInterrupted(DicblurError, RuntimeError):
         return (type(self), (str(self), self.dataset))
 
 
+def _check_layout(
+    shape: tuple[int, int], *, subset: int, roi: Sequence[int] | None, points: ArrayLike | None
+) -> None:
+    """Refuse, naming the option, explicit POIs outside the frames and a subset larger
+    than frames of ``shape`` (rows, cols) px (the Correlator would report either as a
+    region problem, or track an off-frame point as OUT_OF_BOUNDS in every frame)."""
+    rows, cols = shape
+    if points is not None:
+        pts = np.asarray(points)
+        if pts.ndim == 2 and pts.shape[1] == 2 and pts.size:
+            off = (pts[:, 0] < 0) | (pts[:, 0] >= rows) | (pts[:, 1] < 0) | (pts[:, 1] >= cols)
+            if off.any():
+                r, c = (int(x) for x in pts[np.flatnonzero(off)[0]])
+                raise InputError(
+                    f"points={_describe_points(pts)}: ({r}, {c}) is outside the {rows}x{cols} "
+                    "px frames; give (row, col) points inside them"
+                )
+    if roi is None and points is None and isinstance(subset, int) and subset + 2 > min(shape):
+        raise InputError(
+            f"subset={subset}: larger than the {rows}x{cols} px frames less a 1-px border; "
+            f"give a subset of at most {min(shape) - 2 - (min(shape) % 2 == 0)} px"
+        )
+
+
+def _describe_points(pts: NDArray[Any]) -> str:
+    text = ";".join(f"{int(r)},{int(c)}" for r, c in pts[:4])
+    return repr(text + (";..." if len(pts) > 4 else ""))
+
+
 def track(
     recording: Recording | str,
     *,
@@ -225,10 +254,23 @@ def track(
     fps_v = resolve(fps, rec.fps, "rate", "fps", "--fps", "5000")
     t_exp = resolve(exposure, rec.exposure, "time", "exposure", "--exposure", "1ms")
     if t_exp > 1.0 / fps_v * (1 + 1e-6):
-        raise InputError(
-            f"exposure={t_exp:g} s: longer than the frame interval 1/fps = "
-            f"{1.0 / fps_v:g} s; check --exposure and --fps"
-        )
+        # name what was given and what came from the header (a header's shutter longer
+        # than its frame interval is the recording's, not the user's)
+        interval = f"the frame interval 1/fps = {1.0 / fps_v:g} s"
+        if exposure is None and fps is None:
+            msg = (
+                f"the recording's metadata: exposure {t_exp:g} s longer than {interval}; "
+                "give the right values with --exposure and --fps"
+            )
+        elif exposure is None:
+            msg = (
+                f"exposure={t_exp:g} s from the metadata: longer than {interval} of "
+                f"fps={fps!r}; check --fps, or give --exposure"
+            )
+        else:
+            msg = f"exposure={exposure!r} (given): longer than {interval}; check --exposure"
+            msg += " and --fps" if fps is not None else f" (the metadata's fps {fps_v:g} Hz)"
+        raise InputError(msg)
     f0, f1 = (0, n_total) if frames is None else parse_frame_range(frames, n_total, "frames")
     if not f0 <= reference < f1:
         raise InputError(f"reference={reference}: must be one of the tracked frames {f0}..{f1 - 1}")
@@ -240,6 +282,12 @@ def track(
     st_range = None
     if static is not None:
         st_range = parse_frame_range(static, n_total, "static")
+        if st_range[1] - st_range[0] < 2:
+            raise InputError(
+                f"static={static!r}: {st_range[1] - st_range[0]} frame; the noise needs at "
+                "least 2 frames of the static scene (e.g. --static 0:20)"
+            )
+    _check_layout(rec.shape, subset=subset, roi=roi, points=points)
     if noise is not None and (not math.isfinite(float(noise)) or float(noise) <= 0):
         raise InputError(f"noise={noise!r}: must be a noise std > 0 (GL)")
     limit = None
@@ -266,11 +314,21 @@ def track(
             noise_est = noise_est or est
             if noise is not None:
                 notes.append(f"static frames give {est.sigma:.3g} GL; using --noise {noise}")
+        except InputError:
+            raise  # the range given cannot give a noise (one frame repeated): say so
         except (DicblurError, OSError) as exc:
             noise_error = exc
             if noise_est is None:
                 notes.append(f"no noise estimate: {exc}")
     ref_img = rec.frame(reference)
+    if float(ref_img.min()) == float(ref_img.max()):
+        # a dropped frame (all black) as the reference: say which and what to give
+        alt = next((k for k in range(f0, f1) if k != reference), reference)
+        raise InputError(
+            f"reference={reference} ({rec.names[reference]}): the frame is constant "
+            f"({float(ref_img.min()):g} GL everywhere, a dropped frame?); give another "
+            f"reference frame, e.g. --reference {alt}"
+        )
     if noise_est is None and st_range is None:
         # neither given: the residuals of the frames nearest the reference (auto_noise)
         noise_est = residual_frame_noise(

@@ -85,8 +85,17 @@ def frame_filled(x: NDArray[np.floating[Any]], use: NDArray[np.bool_]) -> NDArra
     return np.where(np.isnan(x), med[:, None].astype(x.dtype), x)
 
 
+#: A frame whose converged share of its correlatable points is below this sets no median
+#: of its own for :func:`zncc_flags` (its few converged points are the ones to test).
+RELIABLE_SHARE = 0.5
+
+
 def zncc_flags(
-    zncc: NDArray[np.floating[Any]], converged: NDArray[np.bool_], *, ratio: float = ZNCC_RATIO
+    zncc: NDArray[np.floating[Any]],
+    converged: NDArray[np.bool_],
+    *,
+    ratio: float = ZNCC_RATIO,
+    correlatable: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
     """Converged points whose match is much worse than usual (frames, points).
 
@@ -94,11 +103,23 @@ def zncc_flags(
     texture a subset has; dividing by the frame's median ``q`` removes the first, by the
     point's median of that ratio over the recording the second. A foreign texture in the
     subset (debris, glare, a false convergence) leaves the ratio far above 1.
+
+    With ``correlatable`` (frames, points: the points that can be correlated there, not
+    out of bounds nor textureless), a frame where fewer than :data:`RELIABLE_SHARE` of
+    them converge (a frame of another scene, a flash) takes the largest median of the
+    other frames instead of its own: its own is that of the few false convergences
+    themselves, which then passed (up to 20 px off, one of them valid).
     """
     q = np.where(converged, 1.0 - zncc, np.nan)
     with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
         med_f = nanmedian_last(q)[:, None]
+        if correlatable is not None:
+            share = converged.sum(axis=1) / np.maximum(correlatable.sum(axis=1), 1)
+            reliable = (share >= RELIABLE_SHARE) & np.isfinite(med_f[:, 0])
+            if reliable.any() and not reliable.all():
+                # the most blurred reliable frame's median: the fewest flags it can give
+                med_f = np.where(reliable[:, None], med_f, np.nanmax(med_f[reliable, 0]))
         rel = np.where(med_f > 0, q / med_f, np.nan)
         med_p = nanmedian_last(rel.T)[None, :]
         score = rel / med_p

@@ -95,12 +95,22 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24)
     squares over the bins), kept when it explains the data better than one variance
     (slope > 0 and the variance changes by > 20 % over the levels present).
 
+    A frame identical bit for bit to the one before it (a camera or a copy repeating a
+    frame) carries no noise: such pairs are skipped (their zero difference would pull the
+    estimate down; ``source`` counts them), and a static range of one frame repeated is
+    refused.
+
     Parameters
     ----------
     frames : Recording or sequence of arrays
         Indexable by frame number.
     start, stop : int
         Static frames, half-open (at least 2).
+
+    Raises
+    ------
+    InputError
+        Fewer than 2 frames, or all of them identical.
     """
     if stop - start < 2:
         raise InputError(
@@ -113,8 +123,12 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24)
     s2 = np.zeros(bins)
     cnt = np.zeros(bins)
     sig2 = []
+    duplicated = 0
     for k in range(start + 1, stop):
         cur = frames[k]
+        if np.array_equal(prev, cur):
+            duplicated += 1
+            continue
         sig2.append(estimate_noise(prev, cur) ** 2)
         d = prev - cur
         d = d - d.mean()
@@ -123,6 +137,11 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24)
         s2 += np.bincount(idx, weights=d.ravel() ** 2, minlength=bins)
         cnt += np.bincount(idx, minlength=bins)
         prev = cur
+    if not sig2 or not np.mean(sig2) > 0:
+        raise InputError(
+            f"static={start}:{stop}: the frames are identical bit for bit (one frame "
+            "repeated: no noise to measure); give the noise std instead (--noise 2, GL)"
+        )
     sigma = math.sqrt(float(np.mean(sig2)))
     ok = cnt >= 200
     read, slope, dep = sigma**2, 0.0, False
@@ -140,7 +159,8 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24)
         read_variance=read,
         slope=slope,
         level_dependent=dep,
-        source=f"static frames {start}:{stop}",
+        source=f"static frames {start}:{stop}"
+        + (f" ({duplicated} duplicated frames skipped)" if duplicated else ""),
         pairs=len(sig2),
     )
 

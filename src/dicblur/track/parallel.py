@@ -254,8 +254,10 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
         ``frames`` (m,), ``u``, ``v``, ``zncc`` (m, n_points) float64, ``status`` (m,
         n_points) uint8, ``fallback`` (m,) bool: as the serial loop records them. When a
         frame cannot be read or tracked after some of the chunk's frames were, the frames
-        before it and ``error`` (the exception): nothing tracked is lost, as in the
-        serial loop (:meth:`ChunkedRun.run` keeps them and stops there).
+        before it (none, if it was the first) and ``error`` (the exception): nothing
+        tracked is lost, as in the serial loop (:meth:`ChunkedRun.run` keeps them and
+        runs the other chunks). A warm-up frame that cannot be read is skipped (the
+        next frame starts from the engine's FFT-CC start).
     """
     rec, corr, ref, spectrum = _prepared(job)
     if _key(job) not in _SEEDS:
@@ -280,10 +282,19 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
     rig: list[NDArray[np.float64] | None] = []
     grads: NDArray[np.float64] | None = None
     done = 0  # the chunk's frames finished, in order
+    warm = set(chunk.warm)
     try:
         for k in (*chunk.warm, *chunk.frames):
             # one prefilter for the seeds, the frame and a fallback
-            img = corr.prefilter(_frame(rec, k))
+            try:
+                img = corr.prefilter(_frame(rec, k))
+            except (DicblurError, OSError):
+                if k not in warm:
+                    raise
+                # a bad frame in the warm-up (the one that stopped the chunk before this
+                # one): the next frame starts afresh, as a chunk's first warm-up frame does
+                hist, rig, grads = [], [], None
+                continue
             guess, g_abs = frame_guess(
                 hist, rig, img, spectrum, base, seeds, grid=grid, grads=grads
             )
@@ -305,8 +316,7 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
                 out["fallback"][i] = bool(fb)
                 done = i + 1
     except (DicblurError, OSError) as exc:
-        if done == 0:
-            raise
+        # even with no frame done: the run records the error and its other chunks go on
         part: dict[str, Any] = {key: a[:done] for key, a in out.items()}
         part["error"] = exc
         return part
@@ -533,16 +543,21 @@ class ChunkedRun:
             if progress is not None:
                 progress(done_frames[0], total)
 
+            failures: list[tuple[int, BaseException]] = []
+
             def finish(chunk: Any, res: dict[str, Any]) -> None:
                 failed = res.pop("error", None)
                 if failed is not None:
                     # the frames of a chunk before a bad frame: kept, not stored (the
-                    # chunk is not finished), then the run stops as on the task's error
+                    # chunk is not finished); the other chunks still run, so the frames
+                    # kept do not depend on which chunks happened to be running (they
+                    # did: on threads or workers the chunks not started were dropped)
                     results[chunk.index] = res
+                    failures.append((chunk.index, failed))
                     done_frames[0] += len(res["frames"])
                     if progress is not None:
                         progress(done_frames[0], total)
-                    raise failed
+                    return
                 if st is not None:
                     st.write(chunk.index, res)
                 results[chunk.index] = res
@@ -570,6 +585,8 @@ class ChunkedRun:
                     _release_own(rec)
             if summary is not None and summary.interrupted:
                 error = KeyboardInterrupt()
+            if error is None and failures:
+                error = min(failures, key=lambda f: f[0])[1]  # the first in the order
         stats = {
             "n_chunks": len(chunks),
             "n_resumed": n_resumed,

@@ -31,6 +31,7 @@ from .flags import (
 from .frames import Tracked
 from .kinematics import exposure_motion, exposure_skew
 from .noise import NoiseEstimate, subset_levels
+from .saturation import saturated_share, saturation_level
 from .skew import build_skew_table
 from .uncertainty import build_blur_table
 
@@ -166,7 +167,9 @@ def assemble(
     crit = median_critical(u, v, conv, gshape, threshold, threads=threads)
     outlier = crit > eps
     settings["median_time_s"] = time.perf_counter() - t_med
-    low_zncc = zncc_flags(zn, conv)
+    low_zncc = zncc_flags(
+        zn, conv, correlatable=~np.isin(st, (PointStatus.OUT_OF_BOUNDS, PointStatus.LOW_TEXTURE))
+    )
     # runs of consecutive frames (one, unless tracking stopped in the middle of chunks run
     # side by side): the kinematics fits each run on its own
     cuts = [0, *(np.flatnonzero(np.diff(frames) != 1) + 1).tolist(), n_f]
@@ -352,6 +355,17 @@ def assemble(
             for c in ("u", "v"):
                 carry = np.hypot(sig[f"sigma_{c}_noise"][j], sig[f"sigma_{c}_blur"][j])
                 sig[f"sigma_{c}_noise"][i] = np.hypot(sig[f"sigma_{c}_noise"][i], carry)
+    # subsets with clipped pixels in the reference: their sigma does not hold (saturation)
+    sat_level = saturation_level(ref_img)
+    saturated = saturated_share(ref_img, centres, corr.subset, sat_level)
+    clipped = saturated > 0
+    if clipped.any():
+        settings["saturation_level"] = sat_level
+        notes.append(
+            f"{int(clipped.sum())} of {n_p} points have clipped pixels (at {sat_level:g} GL) "
+            "in their reference subset: not valid (no noise or blur model there); lower "
+            "the exposure or the lighting, or move the subsets"
+        )
     sigma_u = np.empty((n_f, n_p), np.float32)
     sigma_v = np.empty((n_f, n_p), np.float32)
     valid = np.empty((n_f, n_p), bool)
@@ -364,6 +378,7 @@ def assemble(
         np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r], out=sigma_u[r])
         np.hypot(sig["sigma_v_noise"][r], sig["sigma_v_blur"][r], out=sigma_v[r])
         valid[r] = good[r] & np.isfinite(sigma_u[r]) & np.isfinite(sigma_v[r]) & np.isfinite(w[r])
+        valid[r] &= ~clipped
         with np.errstate(invalid="ignore"):
             dom = np.hypot(sig["sigma_u_blur"][r], sig["sigma_v_blur"][r]) > np.hypot(
                 sig["sigma_u_noise"][r], sig["sigma_v_noise"][r]
@@ -532,6 +547,11 @@ def assemble(
             },
         ),
         "valid": (fr, valid.astype(np.uint8)),
+        "saturated": (
+            "point",
+            saturated,
+            {"long_name": "share of clipped pixels in the reference subset (not valid if > 0)"},
+        ),
         "n_converged": ("frame", conv.sum(axis=1).astype(np.int32)),
         "n_outliers": ("frame", outlier.sum(axis=1).astype(np.int32)),
         "blur_dominated_share": ("frame", blur_dom),

@@ -9,15 +9,18 @@ Positive scale factors (``eta``, the noise factor ``a`` or ``k``) get the interv
 symmetric in their logarithm, ``value * exp(+-t se / value)``.
 ``ci="bootstrap"``: pairs bootstrap over the measured points (resampled with replacement,
 refitted ``n_boot`` times) and percentile intervals; the covariance is then the bootstrap
-covariance.
+covariance. Each refit starts from the fit to all points (``refit_from``), to a tolerance
+far below the bootstrap's own Monte Carlo error; a refit that does not converge within its
+budget is not a replicate, and a model that most resamples cannot refit gets no bootstrap
+interval (``ci_method = "unidentified"``, or a FitError with ``ci="bootstrap"``) instead of
+minutes of refits that crawl along a valley the data do not constrain.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,7 +28,24 @@ from scipy import stats
 
 from ..errors import FitError, InputError
 
-__all__ = ["FitResult", "ParameterEstimate"]
+__all__ = ["BOOT_GIVE_UP", "FitOnce", "FitResult", "ParameterEstimate"]
+
+#: The bootstrap stops, with no interval, once this many refits failed and they are more
+#: than a quarter of those tried: the resamples do not identify the model (a degenerate
+#: fit), and percentiles of the refits that did converge would be biased towards them.
+BOOT_GIVE_UP = 20
+
+
+class FitOnce(Protocol):
+    """One least-squares fit of a model to the points ``idx``: ``(values, jacobian,
+    residuals)``, the Jacobian of the residual vector at the solution (rows: points).
+    ``refit_from``: the values of the fit to all points, given for a bootstrap refit (start
+    there, to a looser tolerance, where the fit is iterative; raise
+    :class:`~dicblur.errors.FitError` when the refit does not converge within its budget)."""
+
+    def __call__(
+        self, idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
+    ) -> tuple[NDArray[np.float64], ...]: ...
 
 
 @dataclass(frozen=True)
@@ -190,7 +210,7 @@ def make_result(
     *,
     model: str,
     names: tuple[str, ...],
-    fit_once: Callable[[NDArray[np.intp]], tuple[NDArray[np.float64], ...]],
+    fit_once: FitOnce,
     n: int,
     data_space: NDArray[np.float64],
     blur: NDArray[np.float64],
@@ -238,7 +258,7 @@ def make_result(
             method = "bootstrap"
             seed = 0 if seed is None else seed
     if method == "bootstrap":
-        boot = _bootstrap(fit_once, n, p, blur, confidence, n_boot, seed)
+        boot = _bootstrap(fit_once, values, n, p, blur, confidence, n_boot, seed)
         if boot is not None:
             low, high, cov = boot
         else:
@@ -327,7 +347,8 @@ def _wald(
 
 
 def _bootstrap(
-    fit_once: Callable[[NDArray[np.intp]], tuple[NDArray[np.float64], ...]],
+    fit_once: FitOnce,
+    values: NDArray[np.float64],
     n: int,
     p: int,
     blur: NDArray[np.float64],
@@ -335,16 +356,21 @@ def _bootstrap(
     n_boot: int,
     seed: int | np.random.Generator | None,
 ) -> tuple[Any, Any, Any] | None:
-    """Pairs bootstrap percentile intervals and covariance, or None if it fails."""
+    """Pairs bootstrap percentile intervals and covariance, or None if it fails (fewer
+    than 10 replicates, or :data:`BOOT_GIVE_UP` failed refits, over a quarter of those tried)."""
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     boots = []
+    failed = 0
     for _ in range(n_boot):
         idx = np.sort(rng.integers(0, n, n))
         if np.unique(blur[idx]).size < p + 1:
             continue
         try:
-            boots.append(fit_once(idx)[0])
+            boots.append(fit_once(idx, refit_from=values)[0])
         except (FitError, np.linalg.LinAlgError, ValueError):
+            failed += 1
+            if failed >= BOOT_GIVE_UP and 4 * failed > failed + len(boots):
+                return None
             continue
     if len(boots) < 10:
         return None

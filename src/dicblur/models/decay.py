@@ -88,7 +88,10 @@ def fit_sssig_decay(
     s = as_positive(sssig, "sssig", len(w))
     ci_options = CIOptions(confidence, ci, n_boot, seed)
 
-    def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
+    def fit_once(
+        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
+    ) -> tuple[NDArray[np.float64], ...]:
+        # refit_from (a bootstrap refit) unused: a smooth, bounded fit from its linear start
         wi, si = w[idx], s[idx]
         # Start from the linear form 1/S = 1/S0 + (beta/S0) W^2.
         a, b = np.polyfit(wi * wi, 1.0 / si, 1) if np.ptp(wi) > 0 else (0.0, 1.0 / si.mean())

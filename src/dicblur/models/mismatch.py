@@ -314,7 +314,9 @@ def _fit_one(
         d.setdefault("cross", 0.0)
         return d
 
-    def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
+    def fit_once(
+        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
+    ) -> tuple[NDArray[np.float64], ...]:
         wi, si, ui = w[idx], s[idx], u[idx]
         sg = None if sig is None else sig[idx]
         q = si if sg is None else si / sg**2
@@ -368,19 +370,26 @@ def _fit_one(
             )
             return np.log(np.maximum(m, 1e-300)) - np.log(ui)
 
+        # a bootstrap refit (_result.FitOnce) starts at the fit to all points, to a
+        # tolerance far below the bootstrap's Monte Carlo error, within a budget
+        refit = refit_from is not None
+        x0 = p0 if refit_from is None else np.clip(refit_from, lower, upper)
+        tol = 1e-8 if refit else 1e-12
         r = optimize.least_squares(
             resid,
-            p0 / scl,
+            x0 / scl,
             bounds=(lower / scl, upper / scl),
             method="trf",
             x_scale="jac",
-            xtol=1e-12,
-            ftol=1e-12,
-            gtol=1e-12,
-            max_nfev=2000,
+            xtol=tol,
+            ftol=tol,
+            gtol=tol,
+            max_nfev=150 if refit else 2000,
         )
         if not np.all(np.isfinite(r.fun)):
             raise FitError("mismatch: the fit produced non-finite residuals; check the data")
+        if refit and r.status == 0:
+            raise FitError("mismatch: a bootstrap refit did not converge within its budget")
         return r.x * scl, r.jac / scl, r.fun
 
     extra = {

@@ -180,7 +180,10 @@ def fit_power_law(
     z = np.log(sig / sigma_ref) if (sig is not None and sigma_ref is not None) else np.zeros_like(x)
     names: tuple[str, ...] = ("u_ref", "alpha", "kappa") if fit_kappa else ("u_ref", "alpha")
 
-    def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
+    def fit_once(
+        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
+    ) -> tuple[NDArray[np.float64], ...]:
+        # refit_from (a bootstrap refit) unused: a linear least-squares fit
         cols = [np.ones(idx.size), -x[idx]] + ([z[idx]] if fit_kappa else [])
         a = np.stack(cols, axis=1)
         if not fit_kappa and multi:

@@ -29,6 +29,7 @@ model does not (BENCHMARKS.md, large-blur regime).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -244,18 +245,16 @@ def fit_static_scales(
     if k_fixed is not None:
         return _fit_blur_scale(w, sig, u, noise, b2, k_fixed, ci_options, extra)
 
-    def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
+    def fit_once(
+        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
+    ) -> tuple[NDArray[np.float64], ...]:
         nv, bv, lu = noise[idx], b2[idx], np.log(u[idx])
 
         def resid(z: NDArray[np.float64]) -> NDArray[np.float64]:
             kn, kb = np.exp(z)
             return 0.5 * np.log(np.maximum(kn**2 * nv + kb**2 * bv, 1e-300)) - lu
 
-        r = optimize.least_squares(
-            resid, np.zeros(2), method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=500
-        )
-        if not np.all(np.isfinite(r.fun)):
-            raise FitError("static: the fit produced non-finite residuals; check the data")
+        r = _least_squares(resid, 2, refit_from)
         k = np.exp(r.x)
         tot = k[0] ** 2 * nv + k[1] ** 2 * bv
         jac = np.column_stack([k[0] * nv / tot, k[1] * bv / tot])  # d resid / d k
@@ -288,17 +287,15 @@ def _fit_blur_scale(
     """:func:`fit_static_scales` with ``k_noise`` fixed: ``k_blur`` alone, then the result
     with both names (the fixed scale with zero variance and zero-width interval)."""
 
-    def fit_once(idx: NDArray[np.intp]) -> tuple[NDArray[np.float64], ...]:
+    def fit_once(
+        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
+    ) -> tuple[NDArray[np.float64], ...]:
         nv, bv, lu = k_noise**2 * noise[idx], b2[idx], np.log(u[idx])
 
         def resid(z: NDArray[np.float64]) -> NDArray[np.float64]:
             return 0.5 * np.log(np.maximum(nv + np.exp(2 * z[0]) * bv, 1e-300)) - lu
 
-        r = optimize.least_squares(
-            resid, np.zeros(1), method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=500
-        )
-        if not np.all(np.isfinite(r.fun)):
-            raise FitError("static: the fit produced non-finite residuals; check the data")
+        r = _least_squares(resid, 1, refit_from)
         kb = float(np.exp(r.x[0]))
         tot = nv + kb**2 * bv
         return np.array([kb]), (kb * bv / tot)[:, None], r.fun
@@ -397,3 +394,24 @@ def _held_out(
     ):
         out[key] = {**comparison.get(key, {}), "static": value}
     return out
+
+
+def _least_squares(
+    resid: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    n_params: int,
+    refit_from: NDArray[np.float64] | None,
+) -> Any:
+    """The log-scale fit of the static scales (``z = log k``), from ``z = 0``; a bootstrap
+    refit (:class:`~dicblur.models._result.FitOnce`) from the fit to all points, to a
+    looser tolerance, failing when its budget runs out."""
+    refit = refit_from is not None
+    z0 = np.zeros(n_params) if refit_from is None else np.log(np.maximum(refit_from, 1e-300))
+    tol = 1e-8 if refit else 1e-12
+    r = optimize.least_squares(
+        resid, z0, method="trf", xtol=tol, ftol=tol, gtol=tol, max_nfev=200 if refit else 500
+    )
+    if not np.all(np.isfinite(r.fun)):
+        raise FitError("static: the fit produced non-finite residuals; check the data")
+    if refit and r.status == 0:
+        raise FitError("static: a bootstrap refit did not converge within its budget")
+    return r

@@ -23,8 +23,9 @@ from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from .arrays import Float64Array
 from .checks import as_image, check_choice, check_positive, describe
 from .errors import InputError
 from .patterns import SeedLike, make_rng
@@ -54,7 +55,7 @@ def add_gaussian_noise(
     substeps: int = 100,
     rng: np.random.Generator | None = None,
     seed: SeedLike = None,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Add zero-mean Gaussian noise (grey levels) to an image.
 
     Parameters
@@ -166,7 +167,7 @@ class Camera:
         """Top grey level of the ADC (inf without quantisation)."""
         return math.inf if self.bit_depth is None else 2.0**self.bit_depth - 1.0
 
-    def variance(self, signal: ArrayLike) -> NDArray[np.float64]:
+    def variance(self, signal: ArrayLike) -> Float64Array:
         """Predicted noise variance (grey levels^2) at noise-free ``signal`` grey levels."""
         sig = np.asarray(signal, dtype=np.float64) * self.exposure_scale
         g = self.effective_gain
@@ -183,7 +184,7 @@ class Camera:
         *,
         rng: np.random.Generator | None = None,
         seed: SeedLike = None,
-    ) -> NDArray[np.float64]:
+    ) -> Float64Array:
         """Simulate one exposure of a noise-free image.
 
         Parameters

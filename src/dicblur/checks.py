@@ -10,8 +10,9 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from .arrays import Float64Array
 from .errors import DicblurError, InputError
 
 __all__ = [
@@ -61,7 +62,7 @@ def bad_value(
     return error(f"{name}={describe(value)}: {why}")
 
 
-def as_image(image: ArrayLike, name: str = "image", *, min_size: int = 2) -> NDArray[np.float64]:
+def as_image(image: ArrayLike, name: str = "image", *, min_size: int = 2) -> Float64Array:
     """Return ``image`` as a C-contiguous 2-D float64 array of finite grey levels.
 
     Parameters
@@ -118,7 +119,7 @@ def as_image(image: ArrayLike, name: str = "image", *, min_size: int = 2) -> NDA
     return out
 
 
-def check_textured(image: NDArray[np.float64], name: str = "image") -> None:
+def check_textured(image: Float64Array, name: str = "image") -> None:
     """Refuse an image without texture (every pixel the same grey level): no metric, no
     correlation and no blur sensitivity is defined on it."""
     if image.size and float(np.ptp(image)) == 0.0:
@@ -254,7 +255,7 @@ def check_shape2d(shape: Any, name: str = "shape", *, min_size: int = 2) -> tupl
     return rows, cols
 
 
-def as_float_array(value: Any, name: str, *, expected: str) -> NDArray[np.float64]:
+def as_float_array(value: Any, name: str, *, expected: str) -> Float64Array:
     """``value`` as a float64 array of any shape; the shape and the values are the caller's
     to check. Raises ``InputError("{name}={value}: {expected}")`` when it holds no numbers."""
     try:
@@ -266,7 +267,7 @@ def as_float_array(value: Any, name: str, *, expected: str) -> NDArray[np.float6
 # -- measurement vectors of the model fits ----------------------------------------------
 
 
-def as_vector(x: ArrayLike, name: str, n: int | None = None) -> NDArray[np.float64]:
+def as_vector(x: ArrayLike, name: str, n: int | None = None) -> Float64Array:
     """``x`` as a 1-D float64 array of finite values (``n`` of them when given)."""
     a = as_float_array(x, name, expected="expected a 1-D array of numbers")
     if a.ndim == 0:
@@ -289,8 +290,8 @@ def as_blur(
     name: str = "blur",
     *,
     increasing: bool = True,
-    groups: NDArray[np.float64] | None = None,
-) -> NDArray[np.float64]:
+    groups: Float64Array | None = None,
+) -> Float64Array:
     """Blur lengths W (px): a non-empty 1-D array of values >= 0, strictly increasing
     (within each of ``groups``, e.g. per noise level) unless ``increasing=False``."""
     w = as_vector(x, name)
@@ -313,7 +314,7 @@ def as_blur(
     return w
 
 
-def as_positive(x: ArrayLike, name: str, n: int) -> NDArray[np.float64]:
+def as_positive(x: ArrayLike, name: str, n: int) -> Float64Array:
     """``n`` finite values > 0 as a 1-D float64 array."""
     a = as_vector(x, name, n)
     if np.any(a <= 0):

@@ -34,8 +34,9 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from .arrays import Float64Array
 from .checks import as_image
 from .errors import ImageReadError, InputError
 
@@ -516,7 +517,7 @@ def _to_grey(arr: np.ndarray, path: Path) -> np.ndarray:
 
 def load_image(
     path: str | os.PathLike[str], *, max_pixels: int | float | None = None
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Read an image file as grey levels.
 
     Parameters

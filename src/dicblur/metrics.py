@@ -25,9 +25,10 @@ from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import ndimage
 
+from .arrays import Float64Array, IndexArray
 from .checks import (
     as_image,
     check_choice,
@@ -64,7 +65,7 @@ _GRADIENTS = ("central", "sobel")
 
 def image_gradients(
     image: ArrayLike, *, gradient: Gradient = "central"
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """Intensity gradients ``(df/dy, df/dx)`` (grey levels / px), in (row, col) order.
 
     Parameters
@@ -95,7 +96,7 @@ def image_gradients(
     return gy, gx
 
 
-def subset_centres(shape: tuple[int, int], *, subset: int, step: int) -> NDArray[np.intp]:
+def subset_centres(shape: tuple[int, int], *, subset: int, step: int) -> IndexArray:
     """Centres ``(row, col)`` of a regular grid of square subsets inside an image.
 
     The first centre is at ``(h + 1, h + 1)`` with ``h = subset // 2`` (so that every
@@ -120,9 +121,7 @@ def subset_centres(shape: tuple[int, int], *, subset: int, step: int) -> NDArray
     return np.stack([rr.ravel(), cc.ravel()], axis=1)
 
 
-def _box_sums(
-    values: NDArray[np.float64], centres: NDArray[np.intp], subset: int
-) -> NDArray[np.float64]:
+def _box_sums(values: Float64Array, centres: IndexArray, subset: int) -> Float64Array:
     """Sum of ``values`` over each square subset (summed-area table, O(1) per subset)."""
     sat = np.zeros((values.shape[0] + 1, values.shape[1] + 1))
     sat[1:, 1:] = values.cumsum(axis=0).cumsum(axis=1)
@@ -136,7 +135,7 @@ def _box_sums(
 
 def resolve_points(
     shape: tuple[int, int], subset: int, step: int | None, points: ArrayLike | None
-) -> NDArray[np.intp]:
+) -> IndexArray:
     """Subset centres ``(row, col)``, shape (n, 2): the grid of ``step`` px (default
     ``subset``, see :func:`subset_centres`) or the given ``points``, each checked to keep
     its subset one pixel inside an image of ``shape``."""
@@ -177,7 +176,7 @@ def sssig(
     points: ArrayLike | None = None,
     direction: Literal["x", "y"] = "x",
     gradient: Gradient = "central",
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Sum of square of subset intensity gradients (SSSIG), paper eq. 1 / Pan et al. 2008.
 
     ``SSSIG_x = sum over the subset of (df/dx)**2``, in grey levels**2 / px**2 summed over
@@ -244,7 +243,7 @@ def gradient_variance(
     return float(np.var(gx if direction == "x" else gy))
 
 
-def _half_width(profile: NDArray[np.float64]) -> float:
+def _half_width(profile: Float64Array) -> float:
     """First lag at which a decreasing profile (profile[0] == 1) crosses 1/2, interpolated."""
     below = np.nonzero(profile <= 0.5)[0]
     if below.size == 0:
@@ -317,7 +316,7 @@ def rms_contrast(image: ArrayLike) -> float:
     return float(img.std() / m)
 
 
-def match_score_sigma(sssig_values: ArrayLike, noise_sigma: float) -> NDArray[np.float64]:
+def match_score_sigma(sssig_values: ArrayLike, noise_sigma: float) -> Float64Array:
     """Static random error of the match-score model (paper eq. 2), px.
 
     ``u_e = sqrt(2 sigma**2 / SSSIG)`` for Gaussian noise of std ``noise_sigma`` (grey
@@ -336,7 +335,7 @@ def match_score_sigma(sssig_values: ArrayLike, noise_sigma: float) -> NDArray[np
         return np.sqrt(2.0 * sigma**2 / s)
 
 
-def pan_sigma(mig_value: ArrayLike, noise_sigma: float, subset: int) -> NDArray[np.float64]:
+def pan_sigma(mig_value: ArrayLike, noise_sigma: float, subset: int) -> Float64Array:
     """Pan's MIG-based estimate of the random error (paper eq. 5), px.
 
     ``u_e ~= sqrt(2) sigma / (N MIG)``, from ``SSSIG ~= N**2 MIG**2`` (N = subset size).
@@ -483,8 +482,8 @@ def pattern_metrics(
 
 
 def directional_sssig(
-    image: NDArray[np.float64], points: NDArray[np.intp], *, subset: int, angle: float
-) -> NDArray[np.float64]:
+    image: Float64Array, points: IndexArray, *, subset: int, angle: float
+) -> Float64Array:
     """SSSIG along a direction: sum over each subset of ``(cos a f_x + sin a f_y)**2``.
 
     Central-difference gradients as :func:`dicblur.image_gradients`; ``angle = 0`` is
@@ -510,13 +509,13 @@ def directional_sssig(
 
 
 def box_sssig(
-    gy: NDArray[np.float64],
-    gx: NDArray[np.float64],
-    points: NDArray[np.intp],
+    gy: Float64Array,
+    gx: Float64Array,
+    points: IndexArray,
     *,
     subset: int,
     angle: float,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """:func:`directional_sssig` from given gradient images (summed-area table)."""
     a = math.radians(angle)
     g = math.cos(a) * gx + math.sin(a) * gy

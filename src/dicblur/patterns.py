@@ -29,9 +29,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy import integrate, optimize, special
 
+from .arrays import Float64Array
 from .checks import (
     check_finite_number,
     check_positive,
@@ -124,7 +124,7 @@ def _half_correlation(density: float) -> float:
     return float(optimize.brentq(cov, 1e-9, 1.0 - 1e-12, xtol=1e-14))
 
 
-def gaussian_filter_periodic(field: NDArray[np.float64], sigma: float) -> NDArray[np.float64]:
+def gaussian_filter_periodic(field: Float64Array, sigma: float) -> Float64Array:
     """Gaussian filter of std ``sigma`` px with periodic boundaries (one rFFT pair)."""
     if sigma <= 0:
         return field
@@ -144,7 +144,7 @@ def speckle_pattern(
     levels: tuple[float, float] = (0.0, 255.0),
     supersample: int = 1,
     seed: SeedLike = None,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Generate a random speckle pattern (black speckles on white).
 
     Parameters
@@ -226,7 +226,7 @@ def speckle_pattern(
     return (mid + half) - 2.0 * half * blackness
 
 
-def gaussian_mask(size: int = 4, sigma: float = 0.5) -> NDArray[np.float64]:
+def gaussian_mask(size: int = 4, sigma: float = 0.5) -> Float64Array:
     """Normalised square Gaussian mask, as MATLAB's ``fspecial('gaussian', size, sigma)``.
 
     Taps sit at offsets ``k - (size - 1) / 2``; for an even ``size`` the mask's centre is
@@ -247,7 +247,7 @@ def paper_pattern4(
     density: float = 0.5,
     mask_sigma: float = 0.5,
     seed: SeedLike = None,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """The paper's numerical pattern #4: a random pattern smoothed by a 4x4 Gaussian mask.
 
     Lavatelli & Zappa (2017, Section III) describe pattern #4 as "numerically generated ...

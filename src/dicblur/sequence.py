@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .arrays import Float64Array
 from .errors import ImageReadError, InputError
 from .io import load_image
 
@@ -88,10 +89,10 @@ class Recording:
     def __len__(self) -> int:
         return self.n_frames
 
-    def __getitem__(self, index: int) -> NDArray[np.float64]:
+    def __getitem__(self, index: int) -> Float64Array:
         return self.frame(index)
 
-    def frame(self, index: int) -> NDArray[np.float64]:
+    def frame(self, index: int) -> Float64Array:
         """Frame ``index`` (0-based) as float64 grey levels, shape ``(rows, cols)``."""
         i = int(index)
         if i < 0:
@@ -116,7 +117,7 @@ class Recording:
             raise ImageReadError(f"frame {i} ({self.names[i]}): pixels are not finite")
         return out
 
-    def frames(self, start: int = 0, stop: int | None = None) -> Iterator[NDArray[np.float64]]:
+    def frames(self, start: int = 0, stop: int | None = None) -> Iterator[Float64Array]:
         """Iterate over frames ``start .. stop - 1`` (one in memory at a time)."""
         for i in range(start, self.n_frames if stop is None else min(stop, self.n_frames)):
             yield self.frame(i)

@@ -8,9 +8,10 @@ import math
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import fft as sfft
 
+from ..arrays import Float64Array
 from ..checks import as_image, check_choice, describe
 from ..errors import InputError
 from .trajectory import Trajectory, check_substeps, is_array_path, trajectory_positions
@@ -22,13 +23,13 @@ Boundary = Literal["periodic", "reflect"]
 Method = Literal["fft", "loop"]
 
 
-def _mirror(img: NDArray[np.float64]) -> NDArray[np.float64]:
+def _mirror(img: Float64Array) -> Float64Array:
     """Even (half-sample symmetric) extension to 2x size: periodic and continuous."""
     top = np.concatenate([img, img[:, ::-1]], axis=1)
     return np.concatenate([top, top[::-1, :]], axis=0)
 
 
-def _loop(img: NDArray[np.float64], pos: NDArray[np.float64], w: NDArray[np.float64]):
+def _loop(img: Float64Array, pos: Float64Array, w: Float64Array):
     """Literal Algorithm 1: complex FFT, one inverse FFT per sub-frame, weighted average."""
     n, m = img.shape
     spectrum = sfft.fft2(img)
@@ -57,7 +58,7 @@ def motion_blur(
     trajectory: Trajectory = "linear",
     boundary: Boundary = "periodic",
     method: Method = "fft",
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Noise-free motion-blurred image (the paper's Algorithm 1 without its noise step).
 
     The image content travels along a path ``p(t)``, t in [0, 1], during the exposure; the
@@ -178,7 +179,7 @@ def render_blurred(
     supersample: int,
     substeps: int | None = None,
     trajectory: Trajectory = "linear",
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Blurred camera image rendered without interpolation (unbiased reference).
 
     Fourier-shifted test images can make DIC look more accurate than it is (Reu, Exp.

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..arrays import Float64Array
 from ..checks import as_float_array, check_choice, check_finite_number, describe
 from ..errors import InputError
 
@@ -27,7 +28,7 @@ __all__ = [
     "trajectory_positions",
 ]
 
-PathFunction = Callable[[NDArray[np.float64]], ArrayLike]
+PathFunction = Callable[[Float64Array], ArrayLike]
 
 _TRAJECTORY_NAMES = ("linear", "sine", "acceleration")
 # Composite Gauss-Legendre rule of the continuous limit for non-linear paths: nodes per
@@ -63,7 +64,7 @@ class SineMotion:
         check_finite_number(self.cycles, "SineMotion.cycles")
         check_finite_number(self.phase, "SineMotion.phase")
 
-    def positions(self, motion: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray:
+    def positions(self, motion: Float64Array, t: Float64Array) -> NDArray:
         """Positions (n, 2) px, (dy, dx), at normalised times ``t`` (n,)."""
         s = np.sin(2.0 * math.pi * self.cycles * t + self.phase)
         return s[:, None] * motion[None, :]
@@ -88,7 +89,7 @@ class AcceleratedMotion:
     def __post_init__(self) -> None:
         check_finite_number(self.start_speed, "AcceleratedMotion.start_speed")
 
-    def positions(self, motion: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray:
+    def positions(self, motion: Float64Array, t: Float64Array) -> NDArray:
         """Positions (n, 2) px, (dy, dx), at normalised times ``t`` (n,)."""
         s = self.start_speed
         frac = s * t + (1.0 - s) * t * t
@@ -98,7 +99,7 @@ class AcceleratedMotion:
 Trajectory = str | SineMotion | AcceleratedMotion | PathFunction | ArrayLike
 
 
-def check_motion(motion: Any) -> NDArray[np.float64]:
+def check_motion(motion: Any) -> Float64Array:
     """A motion vector ``(dy, dx)`` px as a finite float64 array of shape (2,)."""
     arr = as_float_array(motion, "motion", expected="expected (dy, dx) in px, e.g. (0.0, 3.5)")
     if arr.shape != (2,):
@@ -125,7 +126,7 @@ def check_substeps(substeps: Any) -> int | None:
     return int(substeps)
 
 
-def _check_path_array(path: Any) -> NDArray[np.float64]:
+def _check_path_array(path: Any) -> Float64Array:
     arr = as_float_array(
         path,
         "trajectory",
@@ -141,7 +142,7 @@ def _check_path_array(path: Any) -> NDArray[np.float64]:
     return arr
 
 
-def _call_path(fn: PathFunction, t: NDArray[np.float64]) -> NDArray[np.float64]:
+def _call_path(fn: PathFunction, t: Float64Array) -> Float64Array:
     out = np.asarray(fn(t), dtype=np.float64)
     if out.shape != (t.size, 2):
         raise InputError(
@@ -153,7 +154,7 @@ def _call_path(fn: PathFunction, t: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-def classify(trajectory: Any, motion: Any) -> tuple[str, Any, NDArray[np.float64] | None]:
+def classify(trajectory: Any, motion: Any) -> tuple[str, Any, Float64Array | None]:
     """Return (kind, object, motion) with kind in linear|preset|array|callable."""
     if isinstance(trajectory, str):
         name = check_choice(trajectory, "trajectory", _TRAJECTORY_NAMES)
@@ -179,7 +180,7 @@ def classify(trajectory: Any, motion: Any) -> tuple[str, Any, NDArray[np.float64
     )
 
 
-def _composite_gauss_legendre(segments: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _composite_gauss_legendre(segments: int) -> tuple[Float64Array, Float64Array]:
     """Nodes and weights on [0, 1]: ``segments`` equal pieces, each a Gauss-Legendre rule."""
     x, w = np.polynomial.legendre.leggauss(_GL_NODES)
     edges = np.arange(segments, dtype=np.float64)[:, None] / segments
@@ -189,8 +190,8 @@ def _composite_gauss_legendre(segments: int) -> tuple[NDArray[np.float64], NDArr
 
 
 def _continuous_nodes(
-    fn: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    fn: Callable[[Float64Array], Float64Array],
+) -> tuple[Float64Array, Float64Array]:
     """Quadrature nodes/weights on [0, 1] able to resolve exp(-2 pi i f.p(t)).
 
     The phase changes by at most pi times the path's total variation (|f| <= 1/2 cycle/px
@@ -210,7 +211,7 @@ def trajectory_positions(
     *,
     substeps: int | None = 100,
     trajectory: Trajectory = "linear",
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """Sub-frame positions and weights of a trajectory.
 
     Parameters
@@ -237,7 +238,7 @@ def trajectory_positions(
         path = obj
         return path, np.full(path.shape[0], 1.0 / path.shape[0])
 
-    def fn(t: NDArray[np.float64]) -> NDArray[np.float64]:
+    def fn(t: Float64Array) -> Float64Array:
         if kind == "linear":
             assert vec is not None
             return t[:, None] * vec[None, :]

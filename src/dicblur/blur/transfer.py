@@ -11,12 +11,13 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..arrays import Float64Array
 from .trajectory import Trajectory, check_motion, check_substeps, classify, trajectory_positions
 
 __all__ = ["blur_transfer", "transfer_product"]
 
 
-def _axis_factors(freqs: NDArray[np.float64], shifts: NDArray[np.float64], nyq: int | None):
+def _axis_factors(freqs: Float64Array, shifts: Float64Array, nyq: int | None):
     """exp(-2 pi i f p) for shifts (n,) x freqs (m,), Nyquist column -> cos(pi p)."""
     e = np.exp(-2j * math.pi * shifts[:, None] * freqs[None, :])
     if nyq is not None:
@@ -80,7 +81,7 @@ def _symmetrise(h: Callable[[NDArray, NDArray], NDArray], grid: _Grid) -> NDArra
     return H
 
 
-def _dirichlet(theta: NDArray[np.float64], k: int) -> NDArray[np.complex128]:
+def _dirichlet(theta: Float64Array, k: int) -> NDArray[np.complex128]:
     """mean_{j=0..K} exp(-i j theta), accurate near every pole of the closed form.
 
     Closed form exp(-i K theta/2) sin((K+1) theta/2) / ((K+1) sin(theta/2)), which is

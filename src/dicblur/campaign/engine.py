@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from .cluster import Interrupt, TaskMap, check_scheduler_address, map_dask
 from .lock import StoreLock
 from .mapping import TasksSummary as TasksSummary
@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 
-TaskFunction = Callable[[NDArray[np.float64], Batch, CampaignSpec], Mapping[str, Any]]
+TaskFunction = Callable[[Float64Array, Batch, CampaignSpec], Mapping[str, Any]]
 ProgressCallback = Callable[[int, int], None]
 
 
@@ -104,7 +104,7 @@ class RunSummary:
 
 
 def _timed_task(
-    fn: TaskFunction, image: NDArray[np.float64], batch: Batch, spec: CampaignSpec
+    fn: TaskFunction, image: Float64Array, batch: Batch, spec: CampaignSpec
 ) -> dict[str, Any]:
     """Call the task function and add its process CPU time (s) as ``"_cpu_s"``."""
     t = time.process_time()
@@ -327,7 +327,7 @@ def _compile_kernels_first(shape: str) -> None:
 
 def _run_dask(
     spec: CampaignSpec,
-    images: Mapping[str, NDArray[np.float64]],
+    images: Mapping[str, Float64Array],
     pending: list[Batch],
     fn: TaskFunction,
     finish: Callable[[Batch, Mapping[str, Any]], None],

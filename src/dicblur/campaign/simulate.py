@@ -21,8 +21,8 @@ import time
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, IndexArray
 from ..errors import ConfigError, InputError
 
 # re-exported: the campaigns' SSSIG along the motion lives with the other metrics
@@ -56,7 +56,7 @@ def _motion(length: float, angle: float) -> tuple[float, float]:
 
 def task_points(
     shape: tuple[int, int], spec: CampaignSpec, *, subset: int, angle: float
-) -> NDArray[np.intp]:
+) -> IndexArray:
     """POIs (row, col) of a task: the subset grid of ``spec.step``, restricted, when the
     blur boundary is not periodic, to subsets inside the region that only saw image
     content at the campaign's largest W (so every W of the campaign uses the same POIs).
@@ -88,8 +88,8 @@ def task_points(
 
 
 def _noisy(
-    image: NDArray[np.float64], spec: CampaignSpec, level: float, seed: np.random.SeedSequence
-) -> NDArray[np.float64]:
+    image: Float64Array, spec: CampaignSpec, level: float, seed: np.random.SeedSequence
+) -> Float64Array:
     from ..camera import Camera, add_gaussian_noise
 
     if spec.noise_model == "poisson-gaussian":
@@ -108,7 +108,7 @@ def _noisy(
     )
 
 
-def _effective_noise(spec: CampaignSpec, level: float, image: NDArray[np.float64]) -> float:
+def _effective_noise(spec: CampaignSpec, level: float, image: Float64Array) -> float:
     if spec.noise_model == "per-subframe":
         k = 100 if spec.substeps is None else spec.substeps
         return level / math.sqrt(k + 1)
@@ -119,8 +119,8 @@ def _effective_noise(spec: CampaignSpec, level: float, image: NDArray[np.float64
 
 
 def simulate_batch(
-    image: NDArray[np.float64], batch: Batch, spec: CampaignSpec
-) -> dict[str, NDArray[np.float64]]:
+    image: Float64Array, batch: Batch, spec: CampaignSpec
+) -> dict[str, Float64Array]:
     """Run the tasks of one batch: one reference, one Correlator, every W of the batch.
 
     Parameters
@@ -175,10 +175,10 @@ def simulate_batch(
     if spec.compensation in ("given", "estimate") and spec.boundary == "periodic":
         pad = math.ceil(max(spec.blur) / 2) + 16
 
-    def wrap(img: NDArray[np.float64]) -> NDArray[np.float64]:
+    def wrap(img: Float64Array) -> Float64Array:
         return img if pad == 0 else np.pad(img, pad, mode="wrap")
 
-    def make_correlator(ref: NDArray[np.float64], pts: NDArray[np.intp], blur: str) -> Any:
+    def make_correlator(ref: Float64Array, pts: IndexArray, blur: str) -> Any:
         return Correlator(
             ref,
             settings=spec.matcher(batch.subset),

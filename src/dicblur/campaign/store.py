@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._version import package_versions
+from ..arrays import BoolArray, Float64Array
 from ..errors import StoreError
 from ..io import fsync_path
 from .spec import CampaignSpec
@@ -130,8 +131,8 @@ class StoreScan:
         missing, truncated or does not match its checksum: a rerun recomputes it.
     """
 
-    finished: NDArray[np.bool_]
-    damaged: NDArray[np.bool_]
+    finished: BoolArray
+    damaged: BoolArray
 
     @property
     def n_finished(self) -> int:
@@ -203,7 +204,7 @@ def _fsync_tree(root: Path) -> None:
         fsync_path(folder)
 
 
-def _task_checksums(values: Mapping[str, NDArray[np.float64]], n: int) -> NDArray[np.uint32]:
+def _task_checksums(values: Mapping[str, Float64Array], n: int) -> NDArray[np.uint32]:
     """Per task, CRC-32 of its values of every variable (little-endian float64, in
     :data:`VARIABLES` order)."""
     table = np.empty((n, len(VARIABLES)), dtype="<f8")
@@ -403,7 +404,7 @@ class CampaignStore:
         return dict(json.loads(self.attrs["spec"]))
 
     # -- progress -----------------------------------------------------------------------
-    def done_mask(self) -> NDArray[np.bool_]:
+    def done_mask(self) -> BoolArray:
         """Boolean array (dims as the variables): True where the task is finished (flagged
         done and verified, see :meth:`scan`)."""
         return self.scan().finished
@@ -438,7 +439,7 @@ class CampaignStore:
             damaged[region] = flagged & ~good
         return StoreScan(finished, damaged)
 
-    def _verify(self, key: tuple[int, ...], n: int) -> NDArray[np.bool_]:
+    def _verify(self, key: tuple[int, ...], n: int) -> BoolArray:
         """Per task of one chunk: whether its values are whole and match the checksum."""
         values: dict[str, NDArray[Any]] = {}
         for name in VARIABLES:
@@ -484,7 +485,7 @@ class CampaignStore:
         """Values of one stored variable (NaN where no task wrote)."""
         return np.asarray(self._arrays[name][...])
 
-    def batch_done(self, batch: Batch, mask: NDArray[np.bool_] | None = None) -> bool:
+    def batch_done(self, batch: Batch, mask: BoolArray | None = None) -> bool:
         """Whether every task of ``batch`` is stored."""
         m = self.done_mask() if mask is None else mask
         return bool(m[batch.region].all())

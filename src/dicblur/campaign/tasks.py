@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..errors import ConfigError, InputError
 from .spec import CampaignSpec, PatternSpec, check_pattern_fits
 
@@ -126,7 +126,7 @@ def task_seed(base_seed: int, role: str, **coords: Any) -> np.random.SeedSequenc
     return np.random.SeedSequence(int(base_seed), spawn_key=words)
 
 
-def make_pattern(spec: CampaignSpec, pattern: PatternSpec) -> NDArray[np.float64]:
+def make_pattern(spec: CampaignSpec, pattern: PatternSpec) -> Float64Array:
     """The reference image of a pattern: generated, or read from its file and cropped.
 
     Returns
@@ -180,7 +180,7 @@ def make_pattern(spec: CampaignSpec, pattern: PatternSpec) -> NDArray[np.float64
     return np.ascontiguousarray(img, dtype=np.float64)
 
 
-def input_hashes(spec: CampaignSpec, images: dict[str, NDArray[np.float64]]) -> dict[str, str]:
+def input_hashes(spec: CampaignSpec, images: dict[str, Float64Array]) -> dict[str, str]:
     """Content hash of every input image, by pattern name.
 
     Image files: ``"file-sha256:<hex>"`` of the file's bytes (what ``sha256sum`` prints).

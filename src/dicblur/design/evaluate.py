@@ -28,8 +28,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..errors import FitError, InputError
 from .family import Candidate
 from .problem import DesignProblem
@@ -164,7 +164,7 @@ def campaign_spec(
     return parse_spec(data)
 
 
-def measure_candidate(spec: Any) -> dict[str, NDArray[np.float64]]:
+def measure_candidate(spec: Any) -> dict[str, Float64Array]:
     """Run a candidate's campaign (its :func:`campaign_spec`) in this process; variables
     of shape (realisation, W).
 
@@ -174,7 +174,7 @@ def measure_candidate(spec: Any) -> dict[str, NDArray[np.float64]]:
     from ..campaign import iter_batches, make_pattern, simulate_batch
 
     images = {p.name: make_pattern(spec, p) for p in spec.patterns}
-    rows: dict[str, list[NDArray[np.float64]]] = {}
+    rows: dict[str, list[Float64Array]] = {}
     for batch in iter_batches(spec):
         out = simulate_batch(images[batch.pattern], batch, spec)
         for k, v in out.items():
@@ -185,8 +185,8 @@ def measure_candidate(spec: Any) -> dict[str, NDArray[np.float64]]:
 
 
 def surrogate(
-    images: NDArray[np.float64], problem: DesignProblem, *, blurs: Any = None
-) -> tuple[NDArray[np.float64], float]:
+    images: Float64Array, problem: DesignProblem, *, blurs: Any = None
+) -> tuple[Float64Array, float]:
     """Static prediction of u_e (px) at ``blurs`` (default the design blurs), no DIC.
 
     Parameters

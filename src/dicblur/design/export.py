@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import UInt8Array
 from ..checks import check_positive, describe
 from ..errors import InputError
 from ..io import atomic_path, write_text
@@ -227,7 +227,7 @@ def export_pattern(
     )
 
 
-def regenerate(settings: str | os.PathLike[str] | dict[str, Any]) -> NDArray[np.uint8]:
+def regenerate(settings: str | os.PathLike[str] | dict[str, Any]) -> UInt8Array:
     """Regenerate an exported pattern (8-bit dots) from its JSON file or dict."""
     from ..patterns import speckle_pattern
 

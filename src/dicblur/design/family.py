@@ -28,8 +28,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..checks import check_finite_number, describe
 from ..errors import InputError
 
@@ -154,7 +154,7 @@ class PatternFamily:
         """Which settings vary (bounds of non-zero width)."""
         return tuple(hi > lo for lo, hi in self.bounds)
 
-    def axis(self, i: int) -> NDArray[np.float64]:
+    def axis(self, i: int) -> Float64Array:
         """Grid values of setting ``i`` (0 speckle_size, 1 density, 2 softness)."""
         lo, hi = self.bounds[i]
         n = self.grid[i]
@@ -173,7 +173,7 @@ class PatternFamily:
             for s in self.axis(2)
         ]
 
-    def to_unit(self, c: Candidate) -> NDArray[np.float64]:
+    def to_unit(self, c: Candidate) -> Float64Array:
         """Map a candidate to [0, 1]^3 (log scale for the speckle size)."""
         z = np.zeros(3)
         vals = (c.speckle_size, c.density, c.softness)
@@ -182,7 +182,7 @@ class PatternFamily:
                 z[i] = (math.log(v / lo) / math.log(hi / lo)) if i == 0 else (v - lo) / (hi - lo)
         return z
 
-    def from_unit(self, z: Sequence[float] | NDArray[np.float64]) -> Candidate:
+    def from_unit(self, z: Sequence[float] | Float64Array) -> Candidate:
         """Candidate at unit coordinates ``z`` (clipped to the bounds)."""
         vals = []
         for i, (lo, hi) in enumerate(self.bounds):

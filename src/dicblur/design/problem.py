@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..checks import check_finite_number, check_odd_subset, check_positive, describe
 from ..errors import InputError
 
@@ -63,14 +63,14 @@ class DesignProblem:
     seed: int = 0
 
     @property
-    def blur_array(self) -> NDArray[np.float64]:
+    def blur_array(self) -> Float64Array:
         return np.asarray(self.blurs, dtype=np.float64)
 
     @property
-    def weight_array(self) -> NDArray[np.float64]:
+    def weight_array(self) -> Float64Array:
         return np.asarray(self.weights, dtype=np.float64)
 
-    def objective(self, u_e: NDArray[np.float64]) -> float:
+    def objective(self, u_e: Float64Array) -> float:
         """Weighted mean of ``u_e`` given at :attr:`blurs` (px)."""
         return float(np.dot(self.weight_array, np.asarray(u_e, dtype=np.float64)))
 
@@ -100,7 +100,7 @@ class DesignProblem:
 
 def sine_blur_distribution(
     amplitude: float, frequency: float, exposure: float, *, points: int = 11
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """Blur lengths seen by a camera triggered at a random phase of a sine vibration.
 
     The target moves as ``x(t) = A sin(2 pi f t)`` (px). An exposure of length T starting

@@ -10,8 +10,9 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float32Array, Float64Array, IndexArray, Int64Array, UInt8Array
 from ..checks import describe
 from ..errors import InputError
 from . import kernels
@@ -42,10 +43,10 @@ class _BlurredReference:
     """A plain Correlator on the blurred reference, and (estimation) the joint-step data."""
 
     corr: Any  # a Correlator
-    index: NDArray[np.intp] | None
-    vector: NDArray[np.float64]
+    index: IndexArray | None
+    vector: Float64Array
     step: Any = None
-    images: tuple[NDArray[np.float64], ...] = ()
+    images: tuple[Float64Array, ...] = ()
 
 
 class BlurMatching(Screening):
@@ -55,15 +56,15 @@ class BlurMatching(Screening):
 
         def _correlate(
             self,
-            cur: NDArray[np.float64],
+            cur: Float64Array,
             initial: ArrayLike | None,
-            prepared: NDArray[np.float32] | None = None,
+            prepared: Float32Array | None = None,
         ) -> DICResult: ...
 
     def _blurred(
         self,
-        vec: NDArray[np.float64],
-        index: NDArray[np.intp] | None,
+        vec: Float64Array,
+        index: IndexArray | None,
         *,
         tag: str = "given",
         step: bool = False,
@@ -93,7 +94,7 @@ class BlurMatching(Screening):
             max_predicted_sigma=self.max_predicted_sigma,
         )
         prep = None
-        images: tuple[NDArray[np.float64], ...] = ()
+        images: tuple[Float64Array, ...] = ()
         if step:
             assert dimg is not None
             coef = bspline_coefficients(blurred, order=self.order, dtype=np.float64)
@@ -113,9 +114,7 @@ class BlurMatching(Screening):
         return entry
 
     @staticmethod
-    def _initial_for(
-        initial: ArrayLike | None, index: NDArray[np.intp], n: int
-    ) -> ArrayLike | None:
+    def _initial_for(initial: ArrayLike | None, index: IndexArray, n: int) -> ArrayLike | None:
         if initial is None:
             return None
         arr = np.asarray(initial, dtype=np.float64)
@@ -127,7 +126,7 @@ class BlurMatching(Screening):
         return replace(res, info=info)
 
     def _correlate_given(
-        self, cur: NDArray[np.float64], initial: ArrayLike | None, vec: NDArray[np.float64]
+        self, cur: Float64Array, initial: ArrayLike | None, vec: Float64Array
     ) -> DICResult:
         t0 = time.perf_counter()
         n = self.n_points
@@ -173,7 +172,7 @@ class BlurMatching(Screening):
 
     def _blur_direction(
         self, blur_vector: ArrayLike | None, blur_angle: float | None
-    ) -> tuple[NDArray[np.float64], float | None]:
+    ) -> tuple[Float64Array, float | None]:
         if blur_vector is not None:
             vec = check_blur_vector(blur_vector, n_points=self.n_points, subset=self.subset)
             if vec.ndim != 1:
@@ -205,12 +204,12 @@ class BlurMatching(Screening):
     def _joint_step(
         self, entry: _BlurredReference, cur_corr: BlurMatching, res: DICResult, max_iter: int = 10
     ) -> tuple[
-        NDArray[np.float64],
-        NDArray[np.float64],
-        NDArray[np.float64],
-        NDArray[np.float64],
-        NDArray[np.int64],
-        NDArray[np.uint8],
+        Float64Array,
+        Float64Array,
+        Float64Array,
+        Float64Array,
+        Int64Array,
+        UInt8Array,
     ]:
         """Joint (shape, blur length) Gauss-Newton from the compensated IC-GN result."""
         from .kernels.blur import (
@@ -268,7 +267,7 @@ class BlurMatching(Screening):
 
     def _correlate_estimate(
         self,
-        cur: NDArray[np.float64],
+        cur: Float64Array,
         initial: ArrayLike | None,
         blur_vector: ArrayLike | None,
         blur_angle: float | None,

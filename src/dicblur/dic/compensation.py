@@ -36,6 +36,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy import fft as sfft
 
+from ..arrays import BoolArray, Float64Array, Int64Array
 from ..checks import as_float_array, as_image, check_positive, describe
 from ..errors import InputError
 from .icgn import (
@@ -64,7 +65,7 @@ BLUR_MODES: tuple[str, ...] = ("none", "given", "estimate")
 
 def check_blur_vector(
     value: Any, *, n_points: int, subset: int, name: str = "blur_vector"
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Validate a blur vector ``(dy, dx)`` px, or one per POI (shape (n_points, 2)).
 
     Returns an array of shape (2,) or (n_points, 2). Raises :class:`InputError` on NaN or
@@ -95,16 +96,14 @@ def check_blur_vector(
     return arr
 
 
-def _dsinc(x: NDArray[np.float64]) -> NDArray[np.float64]:
+def _dsinc(x: Float64Array) -> Float64Array:
     """d sinc(x) / dx with ``sinc(x) = sin(pi x) / (pi x)``; ``-pi^2 x / 3`` near 0."""
     small = np.abs(x) < 1e-4
     safe = np.where(small, 1.0, x)
     return np.where(small, -(math.pi**2) * x / 3.0, (np.cos(math.pi * safe) - np.sinc(safe)) / safe)
 
 
-def _symmetric_grid(
-    h: Callable[[NDArray, NDArray], NDArray], n: int, m: int
-) -> NDArray[np.float64]:
+def _symmetric_grid(h: Callable[[NDArray, NDArray], NDArray], n: int, m: int) -> Float64Array:
     """Real, even transfer function ``h(fy, fx)`` on the rfft2 grid of an (n, m) image
     with even n and m: the Nyquist row and column average ``+1/2`` and ``-1/2`` cycles/px
     (the symmetric convention of :mod:`dicblur.blur`), so the output stays real."""
@@ -118,14 +117,14 @@ def _symmetric_grid(
     return out
 
 
-def _mirror(img: NDArray[np.float64]) -> NDArray[np.float64]:
+def _mirror(img: Float64Array) -> Float64Array:
     top = np.concatenate([img, img[:, ::-1]], axis=1)
     return np.concatenate([top, top[::-1, :]], axis=0)
 
 
 def blur_reference(
     image: ArrayLike, blur_vector: ArrayLike, *, derivative: bool = False
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+) -> tuple[Float64Array, Float64Array | None]:
     """The image convolved with a centred box of the blur vector (the forward model).
 
     Parameters
@@ -190,9 +189,7 @@ def blur_reference(
     return np.ascontiguousarray(blurred), d_out
 
 
-def deblur_wiener(
-    image: ArrayLike, blur_vector: ArrayLike, noise_sigma: float
-) -> NDArray[np.float64]:
+def deblur_wiener(image: ArrayLike, blur_vector: ArrayLike, noise_sigma: float) -> Float64Array:
     """Deblur a motion-blurred image with the Wiener filter of the known kernel.
 
     The baseline of issue 18 (Lavatelli, Zappa et al., Acta IMEKO, "Optimization of the
@@ -274,25 +271,25 @@ class BlurStepPrep:
     regular (the subset's texture tells the blur from the shape).
     """
 
-    hinv: NDArray[np.float64]
-    fmean: NDArray[np.float64]
-    fnorm: NDArray[np.float64]
-    jsum: NDArray[np.float64]
-    avec: NDArray[np.float64]
-    evec: NDArray[np.float64]
-    dsum: NDArray[np.float64]
-    bval: NDArray[np.float64]
-    dd: NDArray[np.float64]
-    ok: NDArray[np.bool_]
+    hinv: Float64Array
+    fmean: Float64Array
+    fnorm: Float64Array
+    jsum: Float64Array
+    avec: Float64Array
+    evec: Float64Array
+    dsum: Float64Array
+    bval: Float64Array
+    dd: Float64Array
+    ok: BoolArray
 
 
 def prepare_blur_step(
-    f0: NDArray[np.float64],
-    gx: NDArray[np.float64],
-    gy: NDArray[np.float64],
-    dimg: NDArray[np.float64],
-    rows: NDArray[np.int64],
-    cols: NDArray[np.int64],
+    f0: Float64Array,
+    gx: Float64Array,
+    gy: Float64Array,
+    dimg: Float64Array,
+    rows: Int64Array,
+    cols: Int64Array,
     half: int,
     shape: str,
     *,

@@ -18,8 +18,9 @@ from typing import Any, Literal
 
 import numba
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import BoolArray, Float32Array, Float64Array
 from ..checks import (
     as_float_array,
     as_image,
@@ -299,13 +300,13 @@ class Correlator(BlurMatching):
         self._setup_seeds()
         self._pack_translation()
         self._ref_spectrum = window_spectrum(ref)
-        self.predicted_sigma_u: NDArray[np.float64] | None = None
-        self.predicted_sigma_v: NDArray[np.float64] | None = None
+        self.predicted_sigma_u: Float64Array | None = None
+        self.predicted_sigma_v: Float64Array | None = None
         #: The noise of the last correlation (given or estimated), or None.
         self.noise: NoiseEstimate | None = (
             None if self.noise_sigma is None else NoiseEstimate.given(self.noise_sigma)
         )
-        self._unit_sigma: NDArray[np.float64] | None = None
+        self._unit_sigma: Float64Array | None = None
         if self.noise_sigma is not None or self.noise_auto:
             # predicted sigma from the project's SSSIG (central differences, as
             # dicblur.metrics.sssig): see docs/dic.md for why not the spline gradients
@@ -327,7 +328,7 @@ class Correlator(BlurMatching):
                 self.predicted_sigma_u = np.where(bad, np.nan, pu)
                 self.predicted_sigma_v = np.where(bad, np.nan, pv)
         #: POIs whose predicted random error exceeds ``max_predicted_sigma`` (or None).
-        self._imprecise: NDArray[np.bool_] | None = None
+        self._imprecise: BoolArray | None = None
         pu_, pv_ = self.predicted_sigma_u, self.predicted_sigma_v
         if pu_ is not None and pv_ is not None and self.max_predicted_sigma is not None:
             with np.errstate(invalid="ignore"):
@@ -396,7 +397,7 @@ class Correlator(BlurMatching):
             self._coefficients_into(cur, coef)
         return PreparedImage(cur, coef, self.order)
 
-    def _coefficients_into(self, cur: NDArray[np.float64], buf: NDArray[np.float32]) -> None:
+    def _coefficients_into(self, cur: Float64Array, buf: Float32Array) -> None:
         """The float32 B-spline coefficients of ``cur`` into ``buf`` (the padded layout of
         ``_coef_buf``; its zero columns on the right stay zero)."""
         cols_img = self.image_shape[1]
@@ -491,7 +492,7 @@ class Correlator(BlurMatching):
             self._flag(coef, res)
         return Refined(*res)
 
-    def _checked(self, current: ArrayLike) -> NDArray[np.float64]:
+    def _checked(self, current: ArrayLike) -> Float64Array:
         cur = as_image(current, "current", min_size=3)
         if cur.shape != self.image_shape:
             raise InputError(
@@ -537,7 +538,7 @@ class Correlator(BlurMatching):
             (``d0 + X / 2`` for a target moving from ``d0`` to ``d0 + X``);
             ``blur="estimate"`` adds ``blur_length``, ``blur_sigma``, ``blur_identified``.
         """
-        coef: NDArray[np.float32] | None = None
+        coef: Float32Array | None = None
         if isinstance(current, PreparedImage):
             self._check_prepared(current)
             cur, coef = current.image, current.coefficients
@@ -569,9 +570,9 @@ class Correlator(BlurMatching):
 
     def _correlate(
         self,
-        cur: NDArray[np.float64],
+        cur: Float64Array,
         initial: ArrayLike | None,
-        prepared: NDArray[np.float32] | None = None,
+        prepared: Float32Array | None = None,
     ) -> DICResult:
         t0 = time.perf_counter()
         if prepared is None:
@@ -583,7 +584,7 @@ class Correlator(BlurMatching):
         n = self.n_points
         status0 = self._status0
         method = self.initial
-        full: NDArray[np.float64] | None = None
+        full: Float64Array | None = None
         if initial is not None:
             if isinstance(initial, str):
                 raise InputError(

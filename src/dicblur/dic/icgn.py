@@ -31,8 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float64Array, FloatArray, IndexArray, UInt8Array
 from .interpolation import interpolate_reference
 from .kernels import GAIN_MIN, JUMP_SLACK, STALL_ITERATIONS
 from .status import PointStatus
@@ -73,28 +73,24 @@ class PreparedSubsets:
     of the reference subset ((GL/px)^2).
     """
 
-    hinv: NDArray[np.float64]
-    jsum: NDArray[np.float64]
-    avec: NDArray[np.float64]
-    fmean: NDArray[np.float64]
-    fnorm: NDArray[np.float64]
-    status: NDArray[np.uint8]
-    cov_unit: NDArray[np.float64]
-    sssig_x: NDArray[np.float64]
-    sssig_y: NDArray[np.float64]
+    hinv: Float64Array
+    jsum: Float64Array
+    avec: Float64Array
+    fmean: Float64Array
+    fnorm: Float64Array
+    status: UInt8Array
+    cov_unit: Float64Array
+    sssig_x: Float64Array
+    sssig_y: Float64Array
 
 
-def _patches(
-    image: NDArray[np.float64], rows: NDArray[np.intp], cols: NDArray[np.intp], half: int
-) -> NDArray[np.float64]:
+def _patches(image: Float64Array, rows: IndexArray, cols: IndexArray, half: int) -> Float64Array:
     size = 2 * half + 1
     view = sliding_window_view(image, (size, size))
     return np.asarray(view[rows - half, cols - half], dtype=np.float64).reshape(len(rows), -1)
 
 
-def raw_jacobian(
-    gx: NDArray[np.float64], gy: NDArray[np.float64], half: int, shape: str
-) -> NDArray[np.float64]:
+def raw_jacobian(gx: Float64Array, gy: Float64Array, half: int, shape: str) -> Float64Array:
     """Raw steepest-descent images ``J`` (n, npx, k) from subset gradients (n, npx).
 
     Column order follows the parameters: translation ``(u, v)``; affine
@@ -115,15 +111,15 @@ class CentredSubsets(NamedTuple):
     (n,) ``Df = ||f_c||``, GL; ``safe`` (n,) ``Df``, 1 where it is 0; ``fh`` (n, npx)
     ``f_c / safe``; ``jsum`` (n, k) ``sum J``; ``jc`` (n, npx, k) the column-centred ``J``."""
 
-    fmean: NDArray[np.float64]
-    fnorm: NDArray[np.float64]
-    safe: NDArray[np.float64]
-    fh: NDArray[np.float64]
-    jsum: NDArray[np.float64]
-    jc: NDArray[np.float64]
+    fmean: Float64Array
+    fnorm: Float64Array
+    safe: Float64Array
+    fh: Float64Array
+    jsum: Float64Array
+    jc: Float64Array
 
 
-def centre_subsets(fp: NDArray[np.float64], jac: NDArray[np.float64]) -> CentredSubsets:
+def centre_subsets(fp: Float64Array, jac: Float64Array) -> CentredSubsets:
     """The subsets ``fp`` (n, npx) and their ``jac`` (n, npx, k) centred for ZNSSD."""
     npx = fp.shape[1]
     fmean = fp.mean(axis=1)
@@ -135,7 +131,7 @@ def centre_subsets(fp: NDArray[np.float64], jac: NDArray[np.float64]) -> Centred
     return CentredSubsets(fmean, fnorm, safe, fc / safe[:, None], jsum, jc)
 
 
-def regular(big: NDArray[np.float64]) -> NDArray[np.bool_]:
+def regular(big: Float64Array) -> BoolArray:
     """Which symmetric Gauss-Newton matrices ``big`` (n, k, k) are regular: the smallest
     eigenvalue above 1e-10 of the largest (else the subset's texture cannot fix all the
     parameters)."""
@@ -144,8 +140,8 @@ def regular(big: NDArray[np.float64]) -> NDArray[np.bool_]:
 
 
 def gauss_newton_matrix(
-    jc: NDArray[np.float64], fh: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    jc: Float64Array, fh: Float64Array
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """The exact ZNSSD Gauss-Newton matrix (module docstring) of the centred
     steepest-descent images ``jc`` (n, npx, k) and the normalised subsets ``fh`` (n, npx):
     ``a = J_c^T fh`` (n, k), the Gram matrix ``J_c^T J_c`` and ``Df^2 H = J_c^T J_c - a a^T``
@@ -158,8 +154,8 @@ def gauss_newton_matrix(
 
 
 def scaled_inverse(
-    big: NDArray[np.float64], bad: NDArray[np.bool_], safe: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    big: Float64Array, bad: BoolArray, safe: Float64Array
+) -> tuple[Float64Array, Float64Array]:
     """``hinv = H^-1 = Df^2 (Df^2 H)^-1`` (0 where ``bad``) and ``(Df^2 H)^-1`` (the
     identity where ``bad``), each (n, k, k), from ``big = Df^2 H`` (n, k, k) and ``safe``
     (n,) ``Df`` (:class:`CentredSubsets`)."""
@@ -170,11 +166,11 @@ def scaled_inverse(
 
 
 def prepare_subsets(
-    f: NDArray[np.float64],
-    gx: NDArray[np.float64],
-    gy: NDArray[np.float64],
-    rows: NDArray[np.intp],
-    cols: NDArray[np.intp],
+    f: Float64Array,
+    gx: Float64Array,
+    gy: Float64Array,
+    rows: IndexArray,
+    cols: IndexArray,
     half: int,
     shape: str,
 ) -> PreparedSubsets:
@@ -218,10 +214,10 @@ def prepare_subsets(
     )
 
 
-def compose_affine(p: NDArray[np.float64], dp: NDArray[np.float64]) -> NDArray[np.float64]:
+def compose_affine(p: Float64Array, dp: Float64Array) -> Float64Array:
     """``W(p) o W(dp)^-1`` for affine parameters ``(u, ux, uy, v, vx, vy)``."""
 
-    def mat(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    def mat(q: Float64Array) -> Float64Array:
         return np.array([[1 + q[1], q[2], q[0]], [q[4], 1 + q[5], q[3]], [0, 0, 1.0]])
 
     m = mat(p) @ np.linalg.inv(mat(dp))
@@ -229,21 +225,21 @@ def compose_affine(p: NDArray[np.float64], dp: NDArray[np.float64]) -> NDArray[n
 
 
 def icgn_reference(
-    ref: NDArray[np.float64],
-    gx: NDArray[np.float64],
-    gy: NDArray[np.float64],
-    coef: NDArray[np.floating],
+    ref: Float64Array,
+    gx: Float64Array,
+    gy: Float64Array,
+    coef: FloatArray,
     order: int,
     row: int,
     col: int,
     half: int,
     shape: str,
-    p0: NDArray[np.float64],
+    p0: Float64Array,
     *,
     max_iterations: int = 50,
     tolerance: float = 1e-4,
     step_gain: bool = True,
-) -> tuple[NDArray[np.float64], float, int, bool]:
+) -> tuple[Float64Array, float, int, bool]:
     """Plain IC-GN for one POI (direct ZNSSD formulas, no precomputed sums): reference.
 
     Returns ``(p, zncc, iterations, converged)``; ``p`` as in the kernels (translation

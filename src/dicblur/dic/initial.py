@@ -21,6 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft as sfft
 
+from ..arrays import Float32Array, Float64Array, FloatArray, IndexArray, Int64Array
+
 __all__ = ["global_shift", "subset_fftcc", "window_spectrum"]
 
 
@@ -34,7 +36,7 @@ def _window(shape: tuple[int, int], window: int) -> tuple[slice, slice]:
 
 
 @lru_cache(maxsize=8)
-def _taper(rows: int, cols: int) -> NDArray[np.float32]:
+def _taper(rows: int, cols: int) -> Float32Array:
     """The 2-D Hann taper (rows, cols) of :func:`window_spectrum`, made once per window
     shape (read-only: shared by all callers; ~0.1 ms per tracked frame otherwise)."""
     t = np.outer(np.hanning(rows), np.hanning(cols)).astype(np.float32)
@@ -43,7 +45,7 @@ def _taper(rows: int, cols: int) -> NDArray[np.float32]:
 
 
 def window_spectrum(
-    image: NDArray[np.floating], *, window: int = 128, workers: int | None = None
+    image: FloatArray, *, window: int = 128, workers: int | None = None
 ) -> NDArray[np.complex64]:
     """Spectrum of the Hann-tapered, mean-free central ``window`` x ``window`` region of
     ``image`` (clipped to the image): the reference half of :func:`global_shift`, computed
@@ -55,8 +57,8 @@ def window_spectrum(
 
 
 def global_shift(
-    reference: NDArray[np.floating],
-    current: NDArray[np.floating],
+    reference: FloatArray,
+    current: FloatArray,
     *,
     window: int = 128,
     workers: int | None = None,
@@ -95,18 +97,18 @@ def global_shift(
 
 
 def subset_fftcc(
-    reference: NDArray[np.floating],
-    current: NDArray[np.floating],
-    rows: NDArray[np.intp],
-    cols: NDArray[np.intp],
+    reference: FloatArray,
+    current: FloatArray,
+    rows: IndexArray,
+    cols: IndexArray,
     half: int,
     *,
-    guess_u: NDArray[np.floating] | None = None,
-    guess_v: NDArray[np.floating] | None = None,
+    guess_u: FloatArray | None = None,
+    guess_v: FloatArray | None = None,
     search: int | None = None,
     chunk: int = 256,
     workers: int | None = None,
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+) -> tuple[Int64Array, Int64Array, Float64Array]:
     """Per-subset integer displacement by ZNCC over a +-``search`` px window.
 
     Parameters
@@ -169,7 +171,7 @@ def subset_fftcc(
         sat2 = np.zeros((m, win + 1, win + 1))
         sat2[:, 1:, 1:] = (gwin**2).cumsum(1).cumsum(2)
 
-        def box(t: NDArray[np.float64]) -> NDArray[np.float64]:
+        def box(t: Float64Array) -> Float64Array:
             return (
                 t[:, size:, size:]
                 - t[:, :-size, size:]

@@ -17,9 +17,10 @@ import math
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import ndimage
 
+from ..arrays import Float64Array, FloatArray
 from ..checks import check_choice
 from ..errors import InputError
 from . import kernels
@@ -50,7 +51,7 @@ def order_of(interpolation: str) -> int:
     return int(check_choice(interpolation, "interpolation", INTERPOLATIONS)[-1])
 
 
-def bspline_kernel(x: ArrayLike, order: int) -> NDArray[np.float64]:
+def bspline_kernel(x: ArrayLike, order: int) -> Float64Array:
     """Centred B-spline ``beta_n(x)`` of degree ``order`` (closed form, reference).
 
     ``beta_n(x) = 1/n! sum_{j=0}^{n+1} (-1)^j C(n+1, j) max(0, x + (n+1)/2 - j)^n``.
@@ -63,13 +64,13 @@ def bspline_kernel(x: ArrayLike, order: int) -> NDArray[np.float64]:
     return out / math.factorial(order)
 
 
-def bspline_kernel_derivative(x: ArrayLike, order: int) -> NDArray[np.float64]:
+def bspline_kernel_derivative(x: ArrayLike, order: int) -> Float64Array:
     """Derivative ``beta_n'(x) = beta_{n-1}(x + 1/2) - beta_{n-1}(x - 1/2)``."""
     x = np.asarray(x, dtype=np.float64)
     return bspline_kernel(x + 0.5, order - 1) - bspline_kernel(x - 0.5, order - 1)
 
 
-def bspline_weights(t: float, order: int) -> NDArray[np.float64]:
+def bspline_weights(t: float, order: int) -> Float64Array:
     """Weights of the ``order + 1`` taps for a sample at fractional offset ``t`` in [0, 1).
 
     The taps sit at integer offsets ``k = -(order-1)/2, ..., (order+1)/2`` from
@@ -79,7 +80,7 @@ def bspline_weights(t: float, order: int) -> NDArray[np.float64]:
     return bspline_kernel(t - ks, order)
 
 
-def prefilter_reference(image: ArrayLike, order: int) -> NDArray[np.float64]:
+def prefilter_reference(image: ArrayLike, order: int) -> Float64Array:
     """B-spline coefficients by :func:`scipy.ndimage.spline_filter` (mirror boundary).
 
     Plain reference for :func:`bspline_coefficients` (float64, unpadded).
@@ -92,8 +93,8 @@ def bspline_coefficients(
     *,
     order: int = 3,
     dtype: type = np.float32,
-    out: NDArray[np.floating] | None = None,
-) -> NDArray[np.floating]:
+    out: FloatArray | None = None,
+) -> FloatArray:
     """Padded B-spline coefficients of ``image`` (compiled recursive prefilter).
 
     Parameters
@@ -115,7 +116,7 @@ def bspline_coefficients(
     """
     if order not in (3, 5):
         raise InputError(f"order={order}: the B-spline order must be 3 or 5 (bspline3 or bspline5)")
-    img: NDArray[np.floating] = np.asarray(image)
+    img: FloatArray = np.asarray(image)
     if img.dtype not in (np.float32, np.float64):
         img = img.astype(np.float64)
     img = np.ascontiguousarray(img)
@@ -132,8 +133,8 @@ def bspline_coefficients(
 
 
 def bspline_gradients(
-    coeffs: NDArray[np.floating], order: int, shape: tuple[int, int]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    coeffs: FloatArray, order: int, shape: tuple[int, int]
+) -> tuple[Float64Array, Float64Array]:
     """Exact derivatives ``(d/drow, d/dcol)`` of the spline at the integer pixels:
     :func:`bspline_at_offset` at offset 0 without the values (``coeffs``, ``order``,
     ``shape`` as there).
@@ -148,14 +149,14 @@ def bspline_gradients(
 
 
 def bspline_at_offset(
-    coeffs: NDArray[np.floating],
+    coeffs: FloatArray,
     order: int,
     shape: tuple[int, int],
     oy: float,
     ox: float,
     *,
     values: bool = True,
-) -> tuple[NDArray[np.float64] | None, NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array | None, Float64Array, Float64Array]:
     """The spline and its exact derivatives at every pixel moved by ``(oy, ox)``.
 
     Parameters
@@ -210,8 +211,8 @@ def bspline_at_offset(
 
 
 def interpolate_reference(
-    coeffs: NDArray[np.floating], y: ArrayLike, x: ArrayLike, order: int
-) -> NDArray[np.float64]:
+    coeffs: FloatArray, y: ArrayLike, x: ArrayLike, order: int
+) -> Float64Array:
     """Evaluate the spline at image positions ``(y, x)`` (px, row and column): reference.
 
     Plain NumPy tap loop over the closed-form kernel; positions must lie inside the padded

@@ -5,8 +5,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import IndexArray, Int64Array, UInt8Array
 from ..checks import describe
 from ..errors import InputError
 from ..metrics import subset_centres
@@ -22,7 +23,7 @@ def layout(
     step: int,
     roi: Sequence[int] | None = None,
     points: ArrayLike | None = None,
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]:
+) -> tuple[Int64Array, Int64Array, UInt8Array]:
     """The POIs a Correlator on an image of ``image_shape`` lays out, without
     preparing it: ``(rows, cols, status)``, each shape (n,), ``status``
     ``OUT_OF_BOUNDS`` for given ``points`` whose subset leaves the image, else 0.
@@ -95,8 +96,8 @@ def layout(
 
 
 def grid_of(
-    rows: NDArray[np.int64], cols: NDArray[np.int64], *, required: bool
-) -> tuple[tuple[int, int] | None, NDArray[np.intp] | None]:
+    rows: Int64Array, cols: Int64Array, *, required: bool
+) -> tuple[tuple[int, int] | None, IndexArray | None]:
     """Shape of the POI grid and each POI's row-major cell, when the POIs fill one."""
     ur, ri = np.unique(rows, return_inverse=True)
     uc, ci = np.unique(cols, return_inverse=True)
@@ -113,8 +114,8 @@ def grid_of(
 
 
 def seed_passes(
-    rows: NDArray[np.int64], cols: NDArray[np.int64], step: int
-) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]] | None:
+    rows: Int64Array, cols: Int64Array, step: int
+) -> tuple[IndexArray, IndexArray, IndexArray] | None:
     """Two-pass start: IC-GN first on sparse seed POIs (about 1 in 16), then every other
     POI starts from its nearest seed's warp carried to its own centre. A start within a
     few hundredths of a px saves about one IC-GN iteration per POI (Pan et al. 2013 use

@@ -21,7 +21,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+
+from ..arrays import BoolArray, Float64Array
 
 __all__ = [
     "MIN_SUBSETS",
@@ -80,9 +81,7 @@ class NoiseEstimate:
         )
 
 
-def residual_variance(
-    zncc: NDArray[np.float64], fnorm: NDArray[np.float64], m: int
-) -> NDArray[np.float64]:
+def residual_variance(zncc: Float64Array, fnorm: Float64Array, m: int) -> Float64Array:
     """Each subset's noise variance from its residual, ``(1 - zncc) Df^2 / m``, GL^2.
 
     Parameters
@@ -97,7 +96,7 @@ def residual_variance(
     return np.maximum(1.0 - zncc, 0.0) * fnorm**2 / m
 
 
-def residual_noise(unit: NDArray[np.float64], ok: NDArray[np.bool_]) -> NoiseEstimate | None:
+def residual_noise(unit: Float64Array, ok: BoolArray) -> NoiseEstimate | None:
     """The pair's noise std from the residual variances ``unit`` of the ``ok`` subsets.
 
     Parameters

@@ -18,8 +18,9 @@ from typing import Any
 
 import numba as nb
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import BoolArray, Float64Array, IndexArray
 from ..checks import check_positive, describe
 from ..errors import InputError
 
@@ -38,7 +39,7 @@ MEDIAN_EPS = 0.1
 MEDIAN_THRESHOLD = 2.0
 
 
-def _grid(name: str, values: ArrayLike, shape: tuple[int, int]) -> NDArray[np.float64]:
+def _grid(name: str, values: ArrayLike, shape: tuple[int, int]) -> Float64Array:
     a = np.asarray(values, dtype=np.float64)
     n = shape[0] * shape[1]
     if a.shape == shape:
@@ -172,7 +173,7 @@ def median_screen(
     threshold: float = MEDIAN_THRESHOLD,
     min_neighbours: int = 3,
     within: float | None = None,
-) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+) -> tuple[BoolArray, Float64Array]:
     """The normalised median test on components ``0..ntest-1`` of ``values`` (k, ny, nx)
     and the neighbour medians of all k components where they were needed.
 
@@ -200,9 +201,7 @@ def median_screen(
     return flag, med
 
 
-def _medians(
-    stack: NDArray[np.float64], ok: NDArray[np.bool_]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
+def _medians(stack: Float64Array, ok: BoolArray) -> tuple[Float64Array, Float64Array, IndexArray]:
     """Neighbour medians of each component of ``stack`` (k, ny, nx) over the ``ok``
     points: ``(median, residual median, count)``, shapes (k, ny, nx), (k, ny, nx),
     (ny, nx)."""
@@ -233,7 +232,7 @@ def _medians_at(a, ok, ys, xs, out):  # pragma: no cover - compiled
             out[c, m] = _sorted_median(buf, n) if n > 0 else np.nan
 
 
-def neighbour_medians(values: ArrayLike, valid: ArrayLike, at: ArrayLike) -> NDArray[np.float64]:
+def neighbour_medians(values: ArrayLike, valid: ArrayLike, at: ArrayLike) -> Float64Array:
     """Median of the valid 3x3 neighbours of some grid points, for each component.
 
     Parameters
@@ -261,7 +260,7 @@ def neighbour_medians(values: ArrayLike, valid: ArrayLike, at: ArrayLike) -> NDA
 
 def neighbour_median(
     values: ArrayLike, grid_shape: tuple[int, int], *, valid: ArrayLike | None = None
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
+) -> tuple[Float64Array, Float64Array, IndexArray]:
     """Median of each point's valid 3x3 neighbours and of their residuals.
 
     Parameters
@@ -297,7 +296,7 @@ def normalized_median_test(
     eps: float = MEDIAN_EPS,
     threshold: float = MEDIAN_THRESHOLD,
     min_neighbours: int = 3,
-) -> NDArray[np.bool_]:
+) -> BoolArray:
     """Outliers of a displacement field on a regular POI grid (Westerweel & Scarano 2005).
 
     Parameters

@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float32Array, Float64Array, IndexArray, UInt8Array
 from . import cache, kernels
 from .icgn import N_PARAMS, uv_columns
 from .initial import subset_fftcc
@@ -53,7 +53,7 @@ IMPRECISE_MIN = 3
 SERIAL_BELOW = 128
 
 
-def scatter(dst: kernels.Outputs, idx: NDArray[np.intp], src: kernels.Outputs) -> None:
+def scatter(dst: kernels.Outputs, idx: IndexArray, src: kernels.Outputs) -> None:
     """Write the IC-GN results ``src`` of the POIs ``idx`` into ``dst``, in place."""
     dst.p[idx], dst.zncc[idx], dst.iterations[idx], dst.status[idx] = src
 
@@ -65,15 +65,15 @@ class IcgnPasses(CorrelatorState):
     #: ``Screening._run_deferred`` (set by ``correlate`` for the grid's main pass).
     _defer_imprecise = False
     #: The POIs the main pass left (None: none).
-    _deferred: NDArray[np.intp] | None = None
+    _deferred: IndexArray | None = None
 
     if TYPE_CHECKING:
 
         def _estimate_noise(
             self,
-            z: NDArray[np.float64],
-            st: NDArray[np.uint8],
-            idx: NDArray[np.intp] | None = None,
+            z: Float64Array,
+            st: UInt8Array,
+            idx: IndexArray | None = None,
         ) -> None: ...
 
     def _settings(
@@ -112,9 +112,9 @@ class IcgnPasses(CorrelatorState):
 
     def _translation(
         self,
-        coef: NDArray[np.float32],
-        p0: NDArray[np.float64],
-        status_in: NDArray[np.uint8],
+        coef: Float32Array,
+        p0: Float64Array,
+        status_in: UInt8Array,
         passes: kernels.Passes,
         settings: kernels.Settings,
     ) -> kernels.Outputs:
@@ -145,10 +145,10 @@ class IcgnPasses(CorrelatorState):
 
     def _run_icgn(
         self,
-        coef: NDArray[np.float32],
-        p0: NDArray[np.float64],
-        status_in: NDArray[np.uint8],
-        idx: NDArray[np.intp] | None = None,
+        coef: Float32Array,
+        p0: Float64Array,
+        status_in: UInt8Array,
+        idx: IndexArray | None = None,
         max_iter: int | None = None,
         max_step: float | None = None,
         tol: float | None = None,
@@ -201,8 +201,8 @@ class IcgnPasses(CorrelatorState):
         return out
 
     def _imprecise_split(
-        self, idx: NDArray[np.intp] | None
-    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]] | None:
+        self, idx: IndexArray | None
+    ) -> tuple[IndexArray, IndexArray, IndexArray, IndexArray] | None:
         """``idx`` (None: all POIs) split into the precise and the predicted-imprecise POIs:
         (positions in idx, POIs) of each, or None when none is imprecise."""
         assert self._imprecise is not None
@@ -224,11 +224,11 @@ class IcgnPasses(CorrelatorState):
 
     def _run_split(
         self,
-        coef: NDArray[np.float32],
-        p0: NDArray[np.float64],
-        status_in: NDArray[np.uint8],
-        idx: NDArray[np.intp] | None,
-        split: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
+        coef: Float32Array,
+        p0: Float64Array,
+        status_in: UInt8Array,
+        idx: IndexArray | None,
+        split: tuple[IndexArray, IndexArray, IndexArray, IndexArray],
     ) -> kernels.Outputs:
         """Affine IC-GN, the predicted-imprecise POIs after the precise ones, within
         IMPRECISE_BUDGET times the median iterations of the precise converged POIs."""
@@ -254,7 +254,7 @@ class IcgnPasses(CorrelatorState):
         return out
 
     def _seeded_icgn(
-        self, coef: NDArray[np.float32], p0: NDArray[np.float64], status0: NDArray[np.uint8]
+        self, coef: Float32Array, p0: Float64Array, status0: UInt8Array
     ) -> kernels.Outputs:
         assert self._seeds is not None and self._rest is not None
         seeds, rest, src = self._seeds, self._rest, self._rest_seed
@@ -290,9 +290,7 @@ class IcgnPasses(CorrelatorState):
         scatter(out, rest, self._run_icgn(coef, start, status0[rest], rest))
         return out
 
-    def _guess_to_params(
-        self, u: NDArray[np.float64], v: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
+    def _guess_to_params(self, u: Float64Array, v: Float64Array) -> Float64Array:
         k = N_PARAMS[self.shape]
         ucol, vcol = uv_columns(k)
         p0 = np.zeros((len(u), k))
@@ -302,10 +300,10 @@ class IcgnPasses(CorrelatorState):
 
     def _retry(
         self,
-        cur: NDArray[np.float64],
-        coef: NDArray[np.float32],
-        gu: NDArray[np.float64],
-        gv: NDArray[np.float64],
+        cur: Float64Array,
+        coef: Float32Array,
+        gu: Float64Array,
+        gv: Float64Array,
         res: kernels.Outputs,
     ) -> None:
         """Second chance for the failed POIs of ``res``, in place, within an iteration budget.

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float64Array, Int64Array, UInt8Array
 from ..errors import InputError, StoreError
 from ..io import atomic_open
 from .status import PointStatus
@@ -22,7 +23,7 @@ __all__ = ["PARAM_NAMES", "DICResult"]
 PARAM_NAMES = {2: ("u", "v"), 6: ("u", "du_dx", "du_dy", "v", "dv_dx", "dv_dy")}
 
 
-def _nanstat(fn: Any, x: NDArray[np.float64]) -> float:
+def _nanstat(fn: Any, x: Float64Array) -> float:
     return float(fn(x)) if x.size else float("nan")
 
 
@@ -60,23 +61,23 @@ class DICResult:
         image's blur length.
     """
 
-    rows: NDArray[np.int64]
-    cols: NDArray[np.int64]
-    u: NDArray[np.float64]
-    v: NDArray[np.float64]
-    params: NDArray[np.float64]
-    zncc: NDArray[np.float64]
-    iterations: NDArray[np.int64]
-    status: NDArray[np.uint8]
-    predicted_sigma_u: NDArray[np.float64] | None = None
-    predicted_sigma_v: NDArray[np.float64] | None = None
+    rows: Int64Array
+    cols: Int64Array
+    u: Float64Array
+    v: Float64Array
+    params: Float64Array
+    zncc: Float64Array
+    iterations: Int64Array
+    status: UInt8Array
+    predicted_sigma_u: Float64Array | None = None
+    predicted_sigma_v: Float64Array | None = None
     info: Mapping[str, Any] = field(default_factory=dict)
-    blur_length: NDArray[np.float64] | None = None
-    blur_sigma: NDArray[np.float64] | None = None
-    blur_identified: NDArray[np.bool_] | None = None
+    blur_length: Float64Array | None = None
+    blur_sigma: Float64Array | None = None
+    blur_identified: BoolArray | None = None
 
     @property
-    def converged(self) -> NDArray[np.bool_]:
+    def converged(self) -> BoolArray:
         """Boolean mask of the POIs with status ``CONVERGED``."""
         return np.asarray(self.status == PointStatus.CONVERGED)
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, IndexArray, Int64Array, UInt8Array
 from . import kernels
 from .icgn import N_PARAMS, uv_columns
 from .noise import NoiseEstimate, residual_noise, residual_variance
@@ -77,11 +77,11 @@ PAIRS_MIN = 3
 
 
 def pair_medians(
-    values: NDArray[np.float64],
+    values: Float64Array,
     grid_shape: tuple[int, int],
     *,
-    cells: NDArray[np.intp] | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    cells: IndexArray | None = None,
+) -> tuple[Float64Array, Int64Array]:
     """Median over the four pairs of opposite 3x3 neighbours of each pair's mean.
 
     Parameters
@@ -137,7 +137,7 @@ def pair_medians(
     return med, count
 
 
-def _median_iterations(conv: NDArray[np.int64]) -> int:
+def _median_iterations(conv: Int64Array) -> int:
     """The median of the converged POIs' iterations ``conv`` (2 when there are none)."""
     return 2 if conv.size == 0 else int(np.median(conv))
 
@@ -149,9 +149,7 @@ def _uv_first(k: int) -> tuple[int, int, list[int]]:
     return ucol, vcol, [ucol, vcol] + [j for j in range(k) if j not in (ucol, vcol)]
 
 
-def grow_start(
-    grid: NDArray[np.float64], cells: NDArray[np.intp], start: NDArray[np.float64]
-) -> NDArray[np.int64]:
+def grow_start(grid: Float64Array, cells: IndexArray, start: Float64Array) -> Int64Array:
     """Fill the NaN rows of ``start`` (m, k) at the row-major ``cells`` (m,), in place:
     the mean of the valid 3x3 neighbours on ``grid`` (k, ny, nx; NaN where unknown),
     repeated while it adds cells (a region of predicted-imprecise POIs filled inwards
@@ -189,9 +187,9 @@ class Screening(IcgnPasses):
     """The statuses of a Correlator's results after IC-GN."""
 
     #: The POIs :meth:`_run_deferred` started from their neighbours (None: none).
-    _from_nb: NDArray[np.bool_] | None = None
+    _from_nb: BoolArray | None = None
     #: Their starts' (u, v), (n, 2) px, NaN elsewhere: the field they are checked against.
-    _nb_start: NDArray[np.float64] | None = None
+    _nb_start: Float64Array | None = None
     #: The POIs' neighbour pairs of the support test (:mod:`.support`), once computed.
     _support_pairs: Pairs | None = None
 
@@ -226,9 +224,9 @@ class Screening(IcgnPasses):
 
     def _estimate_noise(
         self,
-        z: NDArray[np.float64],
-        st: NDArray[np.uint8],
-        idx: NDArray[np.intp] | None = None,
+        z: Float64Array,
+        st: UInt8Array,
+        idx: IndexArray | None = None,
     ) -> None:
         """The pair's noise from the converged residuals of the POIs ``idx`` (None: all;
         ``z``, ``st`` of those POIs): :func:`.noise.residual_noise`."""
@@ -250,7 +248,7 @@ class Screening(IcgnPasses):
         }
 
     # ------------------------------------------------------------------ the statuses
-    def _run_deferred(self, coef: NDArray[np.float32], res: kernels.Outputs) -> None:
+    def _run_deferred(self, coef: Float32Array, res: kernels.Outputs) -> None:
         """IC-GN of the predicted-imprecise POIs the main pass left, in ``res`` in place.
 
         Each starts from the precise converged POIs' field: :func:`pair_medians` of its
@@ -318,7 +316,7 @@ class Screening(IcgnPasses):
             rest = pts[~near]
             scatter(res, rest, self._run_icgn(coef, p[rest], self._status0[rest], rest, reduced))
 
-    def _flag(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
+    def _flag(self, coef: Float32Array, res: kernels.Outputs) -> float | None:
         """The statuses of ``res`` after IC-GN, in place: the noise (estimated),
         :meth:`_screen`, :meth:`_neighbour_check`, ``IMPRECISE``, then
         :meth:`_support_check`; returns the screen's
@@ -346,7 +344,7 @@ class Screening(IcgnPasses):
 
     def _unsupported(
         self, res: kernels.Outputs, *, neutral: PointStatus | None = None
-    ) -> NDArray[np.bool_] | None:
+    ) -> BoolArray | None:
         """The converged POIs of ``res`` their neighbours do not support
         (:func:`.support.unsupported`, or :func:`.support.unsupported_scattered` off a
         grid), or None without the neighbour check. A neighbour with status ``neutral``
@@ -403,9 +401,7 @@ class Screening(IcgnPasses):
             flag &= unit > self.max_residual * self.noise.sigma**2
         st[flag] = PointStatus.OUTLIER
 
-    def _neighbour_check(
-        self, coef: NDArray[np.float32], res: kernels.Outputs
-    ) -> NDArray[np.bool_] | None:
+    def _neighbour_check(self, coef: Float32Array, res: kernels.Outputs) -> BoolArray | None:
         """Each converged POI of the grid against ``m``, the median of the means of its
         pairs of opposite converged neighbours (:func:`pair_medians`; the precise ones
         where at least :data:`PAIRS_MIN` pairs are, else all), in place.
@@ -511,12 +507,12 @@ class Screening(IcgnPasses):
 
     def _check_retry(
         self,
-        coef: NDArray[np.float32],
-        start: NDArray[np.float64],
-        idx: NDArray[np.intp],
+        coef: Float32Array,
+        start: Float64Array,
+        idx: IndexArray,
         cap: int,
-        thr: NDArray[np.float64],
-        is_imp: NDArray[np.bool_],
+        thr: Float64Array,
+        is_imp: BoolArray,
     ) -> kernels.Outputs:
         """The neighbour check's IC-GN of the POIs ``idx`` from ``start`` within ``cap``
         iterations (``thr`` their acceptance distances, px; ``is_imp`` predicted imprecise).
@@ -539,7 +535,7 @@ class Screening(IcgnPasses):
             scatter(out, loc, r)
         return out
 
-    def _screen(self, coef: NDArray[np.float32], res: kernels.Outputs) -> float | None:
+    def _screen(self, coef: Float32Array, res: kernels.Outputs) -> float | None:
         """Flag false convergence in ``res`` in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
 
         Returns the noise variance (GL^2) the tests used, or None when none ran.

@@ -17,8 +17,8 @@ from enum import Enum
 from typing import Any, NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, IndexArray, Int64Array, UInt8Array
 from . import kernels
 from .icgn import PreparedSubsets, uv_columns
 from .noise import NoiseEstimate
@@ -43,8 +43,8 @@ class PreparedImage:
         B-spline degree (3 or 5).
     """
 
-    image: NDArray[np.float64]
-    coefficients: NDArray[np.float32]
+    image: Float64Array
+    coefficients: Float32Array
     order: int
 
 
@@ -61,10 +61,10 @@ class Refined(NamedTuple):
         :class:`PointStatus` codes.
     """
 
-    params: NDArray[np.float64]
-    zncc: NDArray[np.float64]
-    iterations: NDArray[np.int64]
-    status: NDArray[np.uint8]
+    params: Float64Array
+    zncc: Float64Array
+    iterations: Int64Array
+    status: UInt8Array
 
 
 class Unset(Enum):
@@ -101,33 +101,33 @@ class CorrelatorState:
     blur: str
     max_blur_sigma: float
     image_shape: tuple[int, int]
-    rows: NDArray[np.int64]
-    cols: NDArray[np.int64]
-    predicted_sigma_u: NDArray[np.float64] | None
-    predicted_sigma_v: NDArray[np.float64] | None
+    rows: Int64Array
+    cols: Int64Array
+    predicted_sigma_u: Float64Array | None
+    predicted_sigma_v: Float64Array | None
     last_timings: dict[str, float]
     prepare_time_s: float
     _grid_shape: tuple[int, int] | None
-    _grid_index: NDArray[np.intp] | None
+    _grid_index: IndexArray | None
     _prep: PreparedSubsets
-    _status0: NDArray[np.uint8]
-    _ref: NDArray[np.float64]
+    _status0: UInt8Array
+    _ref: Float64Array
     _tw: int
     _w: int
     _images: kernels.ReferenceImages
     _subsets: kernels.Subsets
     _packed: kernels.Packed
-    _coef_buf: NDArray[np.float32]
-    _all: NDArray[np.intp]
-    _none: NDArray[np.intp]
+    _coef_buf: Float32Array
+    _all: IndexArray
+    _none: IndexArray
     _args_cache: dict[int, Any]
     _split_cache: dict[int, Any]
     _split_ids: set[int]
-    _seeds: NDArray[np.intp] | None
-    _rest: NDArray[np.intp] | None
-    _rest_seed: NDArray[np.intp]
-    _imprecise: NDArray[np.bool_] | None
-    _unit_sigma: NDArray[np.float64] | None
+    _seeds: IndexArray | None
+    _rest: IndexArray | None
+    _rest_seed: IndexArray
+    _imprecise: BoolArray | None
+    _unit_sigma: Float64Array | None
     _blur_cache: OrderedDict[tuple[Any, ...], Any]
     _last_blur_length: float | None
 
@@ -147,7 +147,7 @@ class CorrelatorState:
         return self._grid_shape
 
     @property
-    def grid_cells(self) -> NDArray[np.intp] | None:
+    def grid_cells(self) -> IndexArray | None:
         """Row-major grid cell of each POI (n,), or None (see :attr:`grid_shape`)."""
         return None if self._grid_index is None else self._grid_index.copy()
 
@@ -179,8 +179,8 @@ class CorrelatorState:
         res: kernels.Outputs,
         *,
         info: dict[str, Any],
-        predicted_sigma: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
-        blur: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]] | None = None,
+        predicted_sigma: tuple[Float64Array | None, Float64Array | None],
+        blur: tuple[Float64Array, Float64Array, BoolArray] | None = None,
     ) -> DICResult:
         """The :class:`DICResult` of all POIs from their IC-GN results ``res`` (``u``, ``v``
         the translation columns of its parameters; ``blur``: ``blur="estimate"``'s

@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float64Array, IndexArray, Int64Array
+
 __all__ = [
     "MIN_AGAINST",
     "MIN_SUPPORT",
@@ -60,7 +62,7 @@ SUPPORT_ROUNDS = 2
 _OFFSETS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
 
-def grid_pairs(grid_shape: tuple[int, int], cell: NDArray[np.intp]) -> Pairs:
+def grid_pairs(grid_shape: tuple[int, int], cell: IndexArray) -> Pairs:
     """The ordered pairs ``(a, b, start)`` of POIs that are 8-neighbours on a grid.
 
     Parameters
@@ -93,7 +95,7 @@ def grid_pairs(grid_shape: tuple[int, int], cell: NDArray[np.intp]) -> Pairs:
     return _by_first(np.concatenate(a_parts), np.concatenate(b_parts), n)
 
 
-def scattered_pairs(rows: NDArray[np.int64], cols: NDArray[np.int64], radius: float) -> Pairs:
+def scattered_pairs(rows: Int64Array, cols: Int64Array, radius: float) -> Pairs:
     """The ordered pairs ``(a, b, start)`` of POIs within ``radius`` px of each other
     (both orders; as :func:`grid_pairs`), for POIs that do not fill a grid."""
     from scipy.spatial import cKDTree
@@ -106,16 +108,16 @@ def scattered_pairs(rows: NDArray[np.int64], cols: NDArray[np.int64], radius: fl
 
 #: Ordered neighbour pairs ``(a, b, start)``: sorted by ``a``, the pairs of POI ``i`` at
 #: ``start[i]:start[i + 1]``.
-Pairs = tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]
+Pairs = tuple[IndexArray, IndexArray, IndexArray]
 
 
-def _by_first(a: NDArray[np.intp], b: NDArray[np.intp], n: int) -> Pairs:
+def _by_first(a: IndexArray, b: IndexArray, n: int) -> Pairs:
     order = np.argsort(a, kind="stable")
     a, b = a[order], b[order]
     return a, b, np.searchsorted(a, np.arange(n + 1)).astype(np.intp)
 
 
-def _entries(start: NDArray[np.intp], sel: NDArray[np.intp]) -> NDArray[np.intp]:
+def _entries(start: IndexArray, sel: IndexArray) -> IndexArray:
     """The indices of the pairs of the POIs ``sel`` (rows of the sorted pairs)."""
     first = start[sel]
     count = start[sel + 1] - first
@@ -124,13 +126,13 @@ def _entries(start: NDArray[np.intp], sel: NDArray[np.intp]) -> NDArray[np.intp]
 
 
 def unsupported_pairs(
-    params: NDArray[np.float64],
-    converged: NDArray[np.bool_],
-    failed: NDArray[np.bool_],
-    rows: NDArray[np.int64],
-    cols: NDArray[np.int64],
+    params: Float64Array,
+    converged: BoolArray,
+    failed: BoolArray,
+    rows: Int64Array,
+    cols: Int64Array,
     pairs: Pairs,
-) -> NDArray[np.bool_]:
+) -> BoolArray:
     """The converged POIs their neighbours (``pairs``, :func:`grid_pairs` or
     :func:`scattered_pairs`) do not support; the rule of :func:`unsupported`.
 
@@ -180,14 +182,14 @@ def unsupported_pairs(
 
 
 def unsupported(
-    params: NDArray[np.float64],
-    converged: NDArray[np.bool_],
-    failed: NDArray[np.bool_],
-    rows: NDArray[np.int64],
-    cols: NDArray[np.int64],
+    params: Float64Array,
+    converged: BoolArray,
+    failed: BoolArray,
+    rows: Int64Array,
+    cols: Int64Array,
     grid_shape: tuple[int, int],
-    cell: NDArray[np.intp],
-) -> NDArray[np.bool_]:
+    cell: IndexArray,
+) -> BoolArray:
     """The converged POIs of a grid that their neighbours do not support.
 
     Parameters
@@ -219,7 +221,7 @@ def unsupported(
     return unsupported_pairs(params, converged, failed, rows, cols, pairs)
 
 
-def _verdict(support: NDArray[Any], against: NDArray[Any]) -> NDArray[np.bool_]:
+def _verdict(support: NDArray[Any], against: NDArray[Any]) -> BoolArray:
     """Too little support against enough contradiction (the rule of :func:`unsupported`)."""
     verdicts = support + against
     need = np.maximum(np.minimum(MIN_AGAINST, verdicts), MIN_VERDICTS)
@@ -227,13 +229,13 @@ def _verdict(support: NDArray[Any], against: NDArray[Any]) -> NDArray[np.bool_]:
 
 
 def unsupported_scattered(
-    params: NDArray[np.float64],
-    converged: NDArray[np.bool_],
-    failed: NDArray[np.bool_],
-    rows: NDArray[np.int64],
-    cols: NDArray[np.int64],
+    params: Float64Array,
+    converged: BoolArray,
+    failed: BoolArray,
+    rows: Int64Array,
+    cols: Int64Array,
     radius: float,
-) -> NDArray[np.bool_]:
+) -> BoolArray:
     """:func:`unsupported` for POIs that do not fill a grid: a POI's neighbours are the
     POIs within ``radius`` px of it (the caller's subset size: their subsets share
     pixels, so a true match's neighbours see the same texture).

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field, fields
 from typing import Any, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy import stats
 
+from ..arrays import Float64Array, IndexArray
 from ..errors import FitError, InputError
 
 __all__ = ["BOOT_GIVE_UP", "FitOnce", "FitResult", "ParameterEstimate"]
@@ -44,8 +44,8 @@ class FitOnce(Protocol):
     :class:`~dicblur.errors.FitError` when the refit does not converge within its budget)."""
 
     def __call__(
-        self, idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
-    ) -> tuple[NDArray[np.float64], ...]: ...
+        self, idx: IndexArray, refit_from: Float64Array | None = None
+    ) -> tuple[Float64Array, ...]: ...
 
 
 @dataclass(frozen=True)
@@ -147,7 +147,7 @@ class FitResult:
         return tuple(self.parameter(n) for n in (*self.names, *self.fixed))
 
     @property
-    def cov_array(self) -> NDArray[np.float64]:
+    def cov_array(self) -> Float64Array:
         return np.array(self.covariance, dtype=np.float64).reshape(len(self.names), -1)
 
     def to_dict(self) -> dict[str, Any]:
@@ -212,8 +212,8 @@ def make_result(
     names: tuple[str, ...],
     fit_once: FitOnce,
     n: int,
-    data_space: NDArray[np.float64],
-    blur: NDArray[np.float64],
+    data_space: Float64Array,
+    blur: Float64Array,
     fixed: dict[str, float],
     ci_options: CIOptions,
     extra: dict[str, Any] | None = None,
@@ -301,8 +301,8 @@ _MAX_COND = 1e12
 
 
 def _wald(
-    values: NDArray[np.float64],
-    jac: NDArray[np.float64],
+    values: Float64Array,
+    jac: Float64Array,
     s2: float,
     names: tuple[str, ...],
     log_params: tuple[str, ...],
@@ -348,10 +348,10 @@ def _wald(
 
 def _bootstrap(
     fit_once: FitOnce,
-    values: NDArray[np.float64],
+    values: Float64Array,
     n: int,
     p: int,
-    blur: NDArray[np.float64],
+    blur: Float64Array,
     confidence: float,
     n_boot: int,
     seed: int | np.random.Generator | None,

@@ -10,8 +10,9 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array, IndexArray
 from ..threads import each
 from .derivatives import (
     blurred_images,
@@ -39,9 +40,9 @@ from .subset_algebra import (
 
 
 def subset_blur_response(
-    image: NDArray[np.float64],
+    image: Float64Array,
     blur: ArrayLike,
-    centres: NDArray[np.intp],
+    centres: IndexArray,
     subset: int,
     matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
@@ -49,7 +50,7 @@ def subset_blur_response(
     chunk: int = 256,
     complete: bool = True,
     threads: int = 1,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """Blur-mismatch shift vector and noise covariance of each subset, along x and y.
 
     The same fixed point and linear noise response as :func:`subset_blur_shifts` and
@@ -125,13 +126,13 @@ def subset_blur_response(
     def _response_chunk(
         j: int,
         rows: slice,
-        jf: NDArray[np.float64],
-        jg: NDArray[np.float64],
-        fh: NDArray[np.float64],
-        sf: NDArray[np.float64],
-        pf: NDArray[np.float64],
-        pf_gram: NDArray[np.float64],
-        gg: NDArray[np.float64],
+        jf: Float64Array,
+        jg: Float64Array,
+        fh: Float64Array,
+        sf: Float64Array,
+        pf: Float64Array,
+        pf_gram: Float64Array,
+        gg: Float64Array,
     ) -> None:
         """The shift and covariances of the subsets ``rows`` at ``W = w[j]``."""
         if w[j] == 0:  # g is f: its normalised subsets and projection are f's
@@ -210,14 +211,14 @@ def subset_blur_response(
 
 
 def subset_skew_coefficients(
-    image: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    image: Float64Array,
+    centres: IndexArray,
     subset: int,
     matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
     chunk: int = 256,
     threads: int = 1,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Per-subset shift per unit third moment of the blur kernel, ``(u, v)`` px / px**3.
 
     A blur kernel of positions ``s`` along ``d`` (an accelerating target: the time spent

@@ -28,8 +28,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array, IndexArray
 from ..checks import as_blur, as_image, check_choice, check_odd_subset, check_positive, describe
 from ..dic.compensation import blur_reference
 from ..dic.icgn import raw_jacobian
@@ -45,8 +46,8 @@ __all__ = ["compensated_covariance", "model_from_compensated", "predict_compensa
 
 
 def _points(
-    img: NDArray[np.float64], subset: int, step: int | None, points: ArrayLike | None
-) -> NDArray[np.intp]:
+    img: Float64Array, subset: int, step: int | None, points: ArrayLike | None
+) -> IndexArray:
     half = subset // 2
     if points is None:
         if subset + 2 > min(img.shape):
@@ -74,9 +75,7 @@ def _points(
     return pts
 
 
-def _gradients(
-    img: NDArray[np.float64], derivative: str
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _gradients(img: Float64Array, derivative: str) -> tuple[Float64Array, Float64Array]:
     """(d/drow, d/dcol): exact B-spline derivatives (as the matcher) or central
     differences (as dicblur.sssig)."""
     if derivative == "central":
@@ -86,12 +85,12 @@ def _gradients(
 
 
 def _windows(
-    fw: NDArray[np.float64],
-    fww: NDArray[np.float64],
-    pts: NDArray[np.intp],
+    fw: Float64Array,
+    fww: Float64Array,
+    pts: IndexArray,
     half: int,
     derivative: str,
-) -> tuple[NDArray[np.float64], ...]:
+) -> tuple[Float64Array, ...]:
     """Flat subsets (n, size**2) of ``f_W`` and of the gradients of ``f_W`` and ``B f_W``:
     ``f, gx, gy, hx, hy``."""
     size = 2 * half + 1
@@ -105,8 +104,8 @@ def _windows(
 
 
 def _fisher(
-    windows: tuple[NDArray[np.float64], ...], half: int, shape: str
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    windows: tuple[Float64Array, ...], half: int, shape: str
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """ZNSSD Fisher matrices ``A`` (current image, ``f_W``) and ``C`` (reference, ``B
     f_W``) of each subset, (n, k, k), and the norm of the centred subset ``f_W``, (n,)."""
     f, gxp, gyp, hxp, hyp = windows
@@ -114,7 +113,7 @@ def _fisher(
     fn = np.sqrt(np.einsum("ij,ij->i", fc, fc))
     fh = fc / np.where(fn > 0, fn, 1.0)[:, None]
 
-    def perp(jac: NDArray[np.float64]) -> NDArray[np.float64]:
+    def perp(jac: Float64Array) -> Float64Array:
         jc = jac - jac.mean(axis=1, keepdims=True)
         a = np.einsum("npk,np->nk", jc, fh)
         return np.asarray(jc - fh[:, :, None] * a[:, None, :])
@@ -127,14 +126,14 @@ def _fisher(
 
 
 def _noise_variance(
-    fw: NDArray[np.float64],
-    fww: NDArray[np.float64],
-    pts: NDArray[np.intp],
+    fw: Float64Array,
+    fww: Float64Array,
+    pts: IndexArray,
     half: int,
     shape: str,
     e: tuple[float, float],
     derivative: str,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Per-subset variance along ``e`` (dy, dx) per unit noise variance, px^2 / GL^2."""
     windows = _windows(fw, fww, pts, half, derivative)
     if shape == "translation":
@@ -330,7 +329,7 @@ def compensated_covariance(
     subset: int,
     shape: str = "affine",
     derivative: str = "bspline3",
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Per-subset 2x2 covariance of (u, v) of the blur-compensated matcher per unit noise
     variance (px^2 / GL^2), from the blurred reference (the module docstring's two terms).
 

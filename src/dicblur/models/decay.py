@@ -13,9 +13,10 @@
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import optimize
 
+from ..arrays import Float64Array, IndexArray
 from ..checks import as_blur, as_positive
 from ..errors import FitError
 from ._result import CIOptions, FitResult, make_result
@@ -30,7 +31,7 @@ __all__ = [
 ]
 
 
-def sssig_decay(blur: ArrayLike, sssig0: float, beta: float) -> NDArray[np.float64]:
+def sssig_decay(blur: ArrayLike, sssig0: float, beta: float) -> Float64Array:
     """``SSSIG_0 / (beta W**2 + 1)`` (eq. 18); ``blur`` W in px, ``beta`` in 1/px**2."""
     w = np.asarray(blur, dtype=np.float64)
     return sssig0 / (beta * w * w + 1.0)
@@ -38,14 +39,14 @@ def sssig_decay(blur: ArrayLike, sssig0: float, beta: float) -> NDArray[np.float
 
 def combined_model(
     blur: ArrayLike, eta: float, alpha: float, sssig0: float, beta: float
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """``u_e(W) = eta (SSSIG_0 / (beta W**2 + 1))**(-alpha)`` (eq. 19), px."""
     return eta * sssig_decay(blur, sssig0, beta) ** (-alpha)
 
 
 def combined_pan_model(
     blur: ArrayLike, eta: float, alpha: float, beta: float, *, mig0: float, subset: int
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Eq. 20: eq. 19 with Pan's ``SSSIG_0 ~= N**2 MIG_0**2`` (``subset`` N px, MIG GL/px)."""
     return combined_model(blur, eta, alpha, float(subset) ** 2 * mig0**2, beta)
 
@@ -55,7 +56,7 @@ def mbrf(alpha: float, beta: float) -> float:
     return 2.0 * alpha * beta
 
 
-def taylor_model(blur: ArrayLike, u0: float, alpha: float, beta: float) -> NDArray[np.float64]:
+def taylor_model(blur: ArrayLike, u0: float, alpha: float, beta: float) -> Float64Array:
     """Second-order expansion of eq. 19: ``u_e(0) (1 + alpha beta W**2)`` (= 1 + MBRF W^2/2)."""
     w = np.asarray(blur, dtype=np.float64)
     return u0 * (1.0 + alpha * beta * w * w)
@@ -89,8 +90,8 @@ def fit_sssig_decay(
     ci_options = CIOptions(confidence, ci, n_boot, seed)
 
     def fit_once(
-        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
-    ) -> tuple[NDArray[np.float64], ...]:
+        idx: IndexArray, refit_from: Float64Array | None = None
+    ) -> tuple[Float64Array, ...]:
         # refit_from (a bootstrap refit) unused: a smooth, bounded fit from its linear start
         wi, si = w[idx], s[idx]
         # Start from the linear form 1/S = 1/S0 + (beta/S0) W^2.
@@ -99,7 +100,7 @@ def fit_sssig_decay(
         beta0 = max(a * s0, 0.0)
         scale = float(si.max())
 
-        def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        def resid(p: Float64Array) -> Float64Array:
             return (sssig_decay(wi, p[0] * scale, p[1]) - si) / scale
 
         r = optimize.least_squares(

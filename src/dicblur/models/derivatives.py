@@ -10,8 +10,8 @@ import math
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..dic.interpolation import (
     bspline_at_offset,
     bspline_coefficients,
@@ -42,7 +42,7 @@ def unit_direction(motion: tuple[float, float]) -> tuple[float, float]:
     return dy / n, dx / n
 
 
-def extend(image: NDArray[np.float64], boundary: Boundary) -> NDArray[np.float64]:
+def extend(image: Float64Array, boundary: Boundary) -> Float64Array:
     """The periodic image the spectral operators act on (mirror: even 2x extension)."""
     if boundary == "reflect":
         rows, cols = image.shape
@@ -53,13 +53,13 @@ def extend(image: NDArray[np.float64], boundary: Boundary) -> NDArray[np.float64
 
 
 def spectral_derivatives(
-    image: NDArray[np.float64],
+    image: Float64Array,
     boundary: Boundary,
     dy: float,
     dx: float,
     blur: float | None = None,
     spectrum: tuple[Any, tuple[int, int]] | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """Spectral ``(f_y, f_x, f_dd)``; with ``blur`` the centred box blur along ``(dy, dx)``
     of length ``blur`` px replaces ``f_dd`` (transfer ``sinc(blur * k.d)``, real: no shift).
     ``spectrum``: ``_spectrum(image, boundary)`` computed before (the same numbers; one
@@ -83,13 +83,13 @@ def spectral_derivatives(
     return fy, fx, _second(spec, shp, dy, dx, rows, cols)
 
 
-def _spectrum(image: NDArray[np.float64], boundary: Boundary) -> tuple[Any, tuple[int, int]]:
+def _spectrum(image: Float64Array, boundary: Boundary) -> tuple[Any, tuple[int, int]]:
     """``rfft2`` of the extended image and the extended shape."""
     ext = extend(image, boundary)
     return np.fft.rfft2(ext), (int(ext.shape[0]), int(ext.shape[1]))
 
 
-def crop(full: NDArray[np.float64], rows: int, cols: int) -> NDArray[np.float64]:
+def crop(full: Float64Array, rows: int, cols: int) -> Float64Array:
     """The image's part of an extended result, as its own array: a view would keep the
     extended buffer (4x the image) alive (a long track's memory, issue 17)."""
     return np.ascontiguousarray(full[:rows, :cols])
@@ -97,7 +97,7 @@ def crop(full: NDArray[np.float64], rows: int, cols: int) -> NDArray[np.float64]
 
 def _second(
     spec: Any, shp: tuple[int, int], dy: float, dx: float, rows: int, cols: int
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Second derivative along ``(dy, dx)`` from the spectrum of the extended image."""
     ky = 2j * np.pi * np.fft.fftfreq(shp[0])[:, None]
     kx = 2j * np.pi * np.fft.rfftfreq(shp[1])[None, :]
@@ -108,28 +108,26 @@ def _second(
 
 
 def box_blurred(
-    image: NDArray[np.float64],
+    image: Float64Array,
     boundary: Boundary,
     dy: float,
     dx: float,
     blur: float,
     spectrum: tuple[Any, tuple[int, int]] | None = None,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """``image`` blurred by the centred box of length ``blur`` px along the unit ``(dy, dx)``
     (exact spectral blur, :func:`spectral_derivatives`, whose ``spectrum`` it passes on),
     shape (rows, cols)."""
     return spectral_derivatives(image, boundary, dy, dx, blur=blur, spectrum=spectrum)[0]
 
 
-def image_spectrum(image: NDArray[np.float64], boundary: Boundary) -> tuple[Any, tuple[int, int]]:
+def image_spectrum(image: Float64Array, boundary: Boundary) -> tuple[Any, tuple[int, int]]:
     """The spectrum :func:`box_blurred` takes to blur ``image`` by several lengths with one
     forward FFT: ``rfft2`` of the image extended as ``boundary`` asks, and its shape."""
     return _spectrum(image, boundary)
 
 
-def spline_gradients(
-    image: NDArray[np.float64], derivative: str
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def spline_gradients(image: Float64Array, derivative: str) -> tuple[Float64Array, Float64Array]:
     """``(f_y, f_x)`` of the matcher's B-spline interpolant at the pixels (as IC-GN uses),
     ``derivative`` "bspline3" or "bspline5"; shape (rows, cols) each, GL / px."""
     order = 3 if derivative == "bspline3" else 5
@@ -138,8 +136,8 @@ def spline_gradients(
 
 
 def _interpolated_at(
-    image: NDArray[np.float64], boundary: Boundary, oy: float, ox: float, order: int
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    image: Float64Array, boundary: Boundary, oy: float, ox: float, order: int
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """The current image of a target moved by the sub-pixel offset ``(oy, ox)`` (px), as
     the matcher sees it back on the reference grid: ``(h~, h~_y, h~_x)`` at ``x + o``, with
     ``h = image(x - o)`` (exact spectral shift) sampled at the pixels and ``h~`` its B-spline
@@ -158,7 +156,7 @@ def _interpolated_at(
     return out, gy, gx
 
 
-def interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[np.float64]:
+def interpolated_noise_covariance(t: float, order: int, size: int) -> Float64Array:
     """Toeplitz covariance (size, size) of unit white noise after B-spline interpolation of
     degree ``order`` at the fractional offset ``t`` (px): ``C(d) = sum_m k(m) k(m + d)``
     with ``k`` the interpolator's impulse response, transfer
@@ -180,7 +178,7 @@ def interpolated_noise_covariance(t: float, order: int, size: int) -> NDArray[np
     return np.asarray(acov[d])
 
 
-def derivative_kernel(derivative: str, subset: int, tol: float = 1e-9) -> NDArray[np.float64]:
+def derivative_kernel(derivative: str, subset: int, tol: float = 1e-9) -> Float64Array:
     """Impulse response ``d[m]``, ``m = -L..L``, of the matcher's derivative at the pixels:
     ``f_x[j] = sum_m d[m] n[j - m]``. For a B-spline, the derivative of the interpolant of
     the samples ``n`` (prefilter, then the derivative taps; transfer ``sum_m beta'(m)
@@ -221,12 +219,12 @@ def check_derivative(derivative: str) -> None:
 
 
 def directional_derivatives(
-    image: NDArray[np.float64],
+    image: Float64Array,
     motion: tuple[float, float] = (0.0, 1.0),
     *,
     derivative: Derivative = "bspline3",
     boundary: Boundary = "reflect",
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """``(f_y, f_x, f_dd)``: gradients and the second derivative along ``motion``.
 
     Parameters
@@ -276,11 +274,11 @@ def directional_derivatives(
 
 
 def matcher_gradients(
-    image: NDArray[np.float64],
+    image: Float64Array,
     motion: tuple[float, float],
     derivative: Derivative,
     boundary: Boundary,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """``(f_y, f_x)``: the gradients the matcher uses, its B-spline's (no spectral pass:
     ``f_dd`` is not needed) or those of :func:`directional_derivatives` (``motion`` as
     there). Raises the boundary error for an unknown ``boundary`` either way."""
@@ -292,15 +290,15 @@ def matcher_gradients(
 
 
 def blurred_images(
-    image: NDArray[np.float64],
+    image: Float64Array,
     blur: float,
     direction: tuple[float, float],
-    grads: tuple[NDArray[np.float64], NDArray[np.float64]],
+    grads: tuple[Float64Array, Float64Array],
     derivative: Derivative,
     boundary: Boundary,
     spec: tuple[Any, tuple[int, int]] | None,
     offset: float | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """``(g, g_y, g_x)``: ``image`` blurred by the centred box of length ``blur`` px along
     the unit ``direction`` (dy, dx) and its matcher gradients (:func:`blurred_subsets`;
     ``grads`` = ``(f_y, f_x)`` of the sharp image, ``spec`` its spectrum

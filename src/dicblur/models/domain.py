@@ -15,7 +15,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+
+from ..arrays import BoolArray, Float64Array
 
 __all__ = ["COMPENSATIONS", "ValidityDomain", "compensation_label"]
 
@@ -81,13 +82,13 @@ class ValidityDomain:
     # tolerance of the range checks: W and sigma are read from files and units
     _REL = 1e-9
 
-    def inside_blur(self, blur: NDArray[np.float64]) -> NDArray[np.bool_]:
+    def inside_blur(self, blur: Float64Array) -> BoolArray:
         """Per W: inside the fitted blur range (px)."""
         w = np.asarray(blur, dtype=np.float64)
         tol = self._REL * max(1.0, abs(self.blur_max))
         return (w >= self.blur_min - tol) & (w <= self.blur_max + tol)
 
-    def broken_down(self, blur: NDArray[np.float64]) -> NDArray[np.bool_]:
+    def broken_down(self, blur: Float64Array) -> BoolArray:
         """Per W: at or beyond the breakdown blur."""
         w = np.asarray(blur, dtype=np.float64)
         if self.breakdown_blur is None:
@@ -120,7 +121,7 @@ class ValidityDomain:
             parts.append(compensation_label(self.compensation))
         return ", ".join(parts)
 
-    def outside_reason(self, blur: NDArray[np.float64], sigma: float | None) -> str | None:
+    def outside_reason(self, blur: Float64Array, sigma: float | None) -> str | None:
         """One-line reason why (blur, sigma) lies outside the domain, or None."""
         w = np.asarray(blur, dtype=np.float64)
         out = w[~self.inside_blur(w)]

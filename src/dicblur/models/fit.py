@@ -9,8 +9,9 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array
 from ..checks import as_blur, as_positive, as_vector, check_choice, check_odd_subset, describe
 from ..errors import FitError, InputError
 from .decay import fit_sssig_decay
@@ -32,7 +33,7 @@ def _json_clean(obj: Any) -> Any:
         raise InputError(f"provenance: not JSON-serialisable ({exc})") from exc
 
 
-def _noise_vector(noise_sigma: ArrayLike | None, n: int) -> NDArray[np.float64] | None:
+def _noise_vector(noise_sigma: ArrayLike | None, n: int) -> Float64Array | None:
     if noise_sigma is None:
         return None
     arr = np.asarray(noise_sigma, dtype=np.float64)
@@ -232,7 +233,7 @@ def fit_blur_model(
             contrast = as_positive(contrast, "contrast", n)[keep]
         n = w.size
         levels_w = np.unique(w)
-    ratio: NDArray[np.float64] | None = None
+    ratio: Float64Array | None = None
     if contrast_ratio is not None:
         ratio = as_positive(contrast_ratio, "contrast_ratio", n)
     elif contrast_ref is not None and contrast is not None:

@@ -43,9 +43,10 @@ import math
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import optimize
 
+from ..arrays import Float64Array, IndexArray
 from ..checks import as_blur, as_positive, as_vector
 from ..errors import FitError, InputError
 from ._result import CIOptions, FitResult, make_result
@@ -66,7 +67,7 @@ def mismatch_terms(
     noise_blur: float = 0.0,
     cross: float = 0.0,
     noise_blur2: float = 0.0,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """The two variance terms of the noise + blur-mismatch model (docs/models.md eq. M1).
 
     This is the one implementation of the formula (``mismatch_model``, the fitted
@@ -122,7 +123,7 @@ def mismatch_model(
     noise_blur: float = 0.0,
     cross: float = 0.0,
     noise_blur2: float = 0.0,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """``sqrt(a (SSSIG/sigma**2)**(-gamma) [(1 + d W**2)**2 + e W**4] + floor**2
     + (b W)**2 + (c W**2 + c4 W**4)**2)`` (docs/models.md eq. M1, via
     :func:`mismatch_terms`).
@@ -149,9 +150,7 @@ def mismatch_model(
     return np.sqrt(noise + floor * floor + blur2)
 
 
-def noise_growth(
-    blur: ArrayLike, noise_blur: float, noise_blur2: float = 0.0
-) -> NDArray[np.float64]:
+def noise_growth(blur: ArrayLike, noise_blur: float, noise_blur2: float = 0.0) -> Float64Array:
     """Growth factor of the noise term with the blur mismatch, ``(1 + d W**2)**2 + e W**4``
     (``d = noise_blur2`` px**-2, any sign: the negative covariance of the reference
     gradients' noise with its intensities' noise; ``e = noise_blur`` px**-4 >= 0). Positive
@@ -216,7 +215,7 @@ def fit_mismatch(
     u = as_positive(u_e, "u_e", w.size)
     as_blur(w, "blur", increasing=False)
     ci_options = CIOptions(confidence, ci, n_boot, seed)
-    sig: NDArray[np.float64] | None = None
+    sig: Float64Array | None = None
     if noise_sigma is not None:
         sig = as_positive(
             np.broadcast_to(np.asarray(noise_sigma, dtype=np.float64), w.shape).copy(),
@@ -295,16 +294,16 @@ def fit_mismatch(
 
 
 def _fit_one(
-    w: NDArray[np.float64],
-    s: NDArray[np.float64],
-    u: NDArray[np.float64],
-    sig: NDArray[np.float64] | None,
+    w: Float64Array,
+    s: Float64Array,
+    u: Float64Array,
+    sig: Float64Array | None,
     names: tuple[str, ...],
     ci_options: CIOptions,
     *,
     intervals: bool = True,
 ) -> FitResult:
-    def unpack(p: NDArray[np.float64]) -> dict[str, float]:
+    def unpack(p: Float64Array) -> dict[str, float]:
         d = dict(zip(names, p, strict=True))
         d.setdefault("gamma", 1.0)
         d.setdefault("c4", 0.0)
@@ -315,8 +314,8 @@ def _fit_one(
         return d
 
     def fit_once(
-        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
-    ) -> tuple[NDArray[np.float64], ...]:
+        idx: IndexArray, refit_from: Float64Array | None = None
+    ) -> tuple[Float64Array, ...]:
         wi, si, ui = w[idx], s[idx], u[idx]
         sg = None if sig is None else sig[idx]
         q = si if sg is None else si / sg**2
@@ -352,7 +351,7 @@ def _fit_one(
         )
         upper = np.array([5.0 if n == "gamma" else np.inf for n in names])
 
-        def resid(pn: NDArray[np.float64]) -> NDArray[np.float64]:
+        def resid(pn: Float64Array) -> Float64Array:
             d = unpack(pn * scl)
             m = mismatch_model(
                 wi,

@@ -19,8 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array, IndexArray
 from ..checks import as_blur, as_image, check_odd_subset, check_positive, check_subpixel
 from ..errors import InputError
 from ..metrics import resolve_points
@@ -43,7 +44,7 @@ def subset_inputs(
     step: int | None,
     points: ArrayLike | None,
     boundary: str = "reflect",
-) -> tuple[NDArray[np.float64], int, NDArray[np.intp]]:
+) -> tuple[Float64Array, int, IndexArray]:
     """Checked image, subset size and subset centres (row, col) of the static predictions."""
     img = as_image(image, "image", min_size=5)
     subset = check_odd_subset(subset)
@@ -75,13 +76,13 @@ class BlurSensitivity:
 
     c: float
     mean: float
-    k: NDArray[np.float64]
-    centres: NDArray[np.intp]
+    k: Float64Array
+    centres: IndexArray
     subset: int
     motion: tuple[float, float]
     shape: str
 
-    def u_blur(self, blur: ArrayLike) -> NDArray[np.float64]:
+    def u_blur(self, blur: ArrayLike) -> Float64Array:
         """Predicted mismatch uncertainty ``c W**2`` (px) at blur lengths ``blur`` (px)."""
         w = np.asarray(blur, dtype=np.float64)
         return self.c * w * w
@@ -189,12 +190,12 @@ class BlurMismatchCurve:
         ``"translation"`` or ``"affine"``.
     """
 
-    blur: NDArray[np.float64]
-    u_blur: NDArray[np.float64]
-    mean: NDArray[np.float64]
-    valid_fraction: NDArray[np.float64]
-    shifts: NDArray[np.float64]
-    centres: NDArray[np.intp]
+    blur: Float64Array
+    u_blur: Float64Array
+    mean: Float64Array
+    valid_fraction: Float64Array
+    shifts: Float64Array
+    centres: IndexArray
     subset: int
     motion: tuple[float, float]
     shape: str

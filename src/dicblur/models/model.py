@@ -8,9 +8,10 @@ from dataclasses import dataclass, fields
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import optimize
 
+from ..arrays import BoolArray, Float64Array
 from ..checks import as_vector, check_positive
 from ..errors import FitError, InputError
 from ._result import FitResult, t_quantile
@@ -64,18 +65,18 @@ class Prediction:
         blur-compensated; ``"deblur"``), from its validity domain.
     """
 
-    blur: NDArray[np.float64]
-    u_e: NDArray[np.float64]
-    low: NDArray[np.float64]
-    high: NDArray[np.float64]
-    u_noise: NDArray[np.float64] | None
-    u_blur: NDArray[np.float64] | None
+    blur: Float64Array
+    u_e: Float64Array
+    low: Float64Array
+    high: Float64Array
+    u_noise: Float64Array | None
+    u_blur: Float64Array | None
     sigma: float | None
     model: str
     confidence: float
     u_floor: float | None = None
-    inside_domain: NDArray[np.bool_] | None = None
-    broken_down: NDArray[np.bool_] | None = None
+    inside_domain: BoolArray | None = None
+    broken_down: BoolArray | None = None
     extrapolated: bool = False
     notes: tuple[str, ...] = ()
     compensation: str = "none"
@@ -198,7 +199,7 @@ class BlurUncertaintyModel:
         """Fitted blur-mismatch coefficient (px / px**2), or None."""
         return None if self.mismatch is None else self.mismatch["c"]
 
-    def sssig(self, blur: ArrayLike) -> NDArray[np.float64]:
+    def sssig(self, blur: ArrayLike) -> Float64Array:
         """SSSIG(W) from the eq. 18 fit, (GL/px)**2."""
         return sssig_decay(blur, self.decay["sssig0"], self.decay["beta"])
 
@@ -225,8 +226,8 @@ class BlurUncertaintyModel:
         return fit
 
     def _log_u(
-        self, kind: str, w: NDArray[np.float64], sigma: float | None, theta: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
+        self, kind: str, w: Float64Array, sigma: float | None, theta: Float64Array
+    ) -> Float64Array:
         fit = self._fit(kind)
         nf = len(fit.names)
         p = dict(zip(fit.names, theta[:nf], strict=True))
@@ -249,10 +250,10 @@ class BlurUncertaintyModel:
     def _mismatch_terms(
         self,
         p: dict[str, float],
-        w: NDArray[np.float64],
-        s: NDArray[np.float64],
+        w: Float64Array,
+        s: Float64Array,
         sigma: float | None,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[Float64Array, Float64Array]:
         gamma = p.get("gamma", self.mismatch.fixed.get("gamma", 1.0) if self.mismatch else 1.0)
         if "k" in p:
             return mismatch_terms(
@@ -325,7 +326,7 @@ class BlurUncertaintyModel:
             "another noise level"
         )
 
-    def _theta(self, kind: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _theta(self, kind: str) -> tuple[Float64Array, Float64Array]:
         fit = self._fit(kind)
         theta = np.array([*fit.values, *self.decay.values])
         nf = len(fit.names)
@@ -411,7 +412,7 @@ class BlurUncertaintyModel:
             compensation=dom.compensation,
         )
 
-    def breakdown_note(self, blur: NDArray[np.float64]) -> str:
+    def breakdown_note(self, blur: Float64Array) -> str:
         """The one-line reason why no prediction is made at ``blur`` (px)."""
         dom = self.domain
         assert dom is not None and dom.breakdown_blur is not None
@@ -422,12 +423,12 @@ class BlurUncertaintyModel:
         )
 
     def _evaluate(
-        self, kind: str, w: NDArray[np.float64], sig: float | None
+        self, kind: str, w: Float64Array, sig: float | None
     ) -> tuple[
-        NDArray[np.float64],
-        NDArray[np.float64],
-        NDArray[np.float64] | None,
-        NDArray[np.float64] | None,
+        Float64Array,
+        Float64Array,
+        Float64Array | None,
+        Float64Array | None,
         float | None,
     ]:
         """log u_e, the half-width of its prediction interval and the mismatch terms."""
@@ -460,7 +461,7 @@ class BlurUncertaintyModel:
             u_noise, u_blur = np.sqrt(nv), np.sqrt(bv)
         return lu, half, u_noise, u_blur, u_floor
 
-    def taylor(self, blur: ArrayLike) -> NDArray[np.float64]:
+    def taylor(self, blur: ArrayLike) -> Float64Array:
         """Small-W expansion of eq. 19 at the fit noise: ``u_e(0) (1 + alpha beta W**2)``."""
         w = as_vector(blur, "blur")
         u0 = float(self.predict([0.0], model="power_law").u_e[0])

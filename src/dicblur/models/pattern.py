@@ -33,8 +33,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array, IndexArray
 from ..checks import as_blur, check_positive, check_subpixel
 from ..errors import InputError
 from ..metrics import directional_sssig
@@ -95,19 +96,19 @@ class PatternPrediction:
         subsets (``nan`` where fewer than two survive). ``None``: no breakdown in ``blur``.
     """
 
-    blur: NDArray[np.float64]
-    u_e: NDArray[np.float64]
-    u_noise: NDArray[np.float64]
-    u_blur: NDArray[np.float64]
-    sssig: NDArray[np.float64]
-    valid_fraction: NDArray[np.float64]
+    blur: Float64Array
+    u_e: Float64Array
+    u_noise: Float64Array
+    u_blur: Float64Array
+    sssig: Float64Array
+    valid_fraction: Float64Array
     noise_sigma: float
     subset: int
     shape: str
     motion: tuple[float, float]
-    u_noise_reference: NDArray[np.float64] | None = None
-    u_noise_current: NDArray[np.float64] | None = None
-    u_noise_interaction: NDArray[np.float64] | None = None
+    u_noise_reference: Float64Array | None = None
+    u_noise_current: Float64Array | None = None
+    u_noise_interaction: Float64Array | None = None
     breakdown_blur: float | None = None
 
 
@@ -118,7 +119,7 @@ N_OFFSETS = 8  # sub-pixel positions averaged by subpixel="average" (midpoint ru
 NOISE_FACTORS = (0.5, 1.0, 2.0)  # noise levels (times sigma) a prediction is fitted on
 
 
-def model_blur(blur: ArrayLike | None, *, below: int | None = None) -> NDArray[np.float64]:
+def model_blur(blur: ArrayLike | None, *, below: int | None = None) -> Float64Array:
     """Blur lengths (px) a model of a static prediction is fitted on: ``blur``, or by
     default W = 0..8 px in steps of 0.5 (those shorter than ``below`` px, when given);
     at least 4 distinct values."""
@@ -133,10 +134,10 @@ def model_blur(blur: ArrayLike | None, *, below: int | None = None) -> NDArray[n
 
 
 def fit_prediction(
-    image: NDArray[np.float64],
-    blur: NDArray[np.float64],
-    sssig: NDArray[np.float64],
-    u_e: list[NDArray[np.float64]],
+    image: Float64Array,
+    blur: Float64Array,
+    sssig: Float64Array,
+    u_e: list[Float64Array],
     *,
     noise_sigma: float,
     subset: int,
@@ -188,9 +189,9 @@ def _offsets(subpixel: float | str | None) -> list[float | None]:
 
 
 def _terms(
-    img: NDArray[np.float64],
-    w: NDArray[np.float64],
-    pts: NDArray[np.intp],
+    img: Float64Array,
+    w: Float64Array,
+    pts: IndexArray,
     subset: int,
     matcher: SubsetMatcher,
     max_shift: float,
@@ -198,7 +199,7 @@ def _terms(
     min_contraction: float = 0.0,
     sssig: bool = True,
     reference: ReferenceTerms | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array, Float64Array]:
     """Per W: mean noise variance (shape (3, m): the reference and the current image's
     shares per GL**2, their interaction per GL**4), mismatch variance, SSSIG, valid
     fraction (subsets with a shift <= ``max_shift`` and an IC-GN contraction >=
@@ -554,7 +555,7 @@ def static_terms(
     # in chunks of increasing W: nothing is computed beyond the first breakdown's chunk
     # (8 W: every offset W/2 mod 1 of a 0.25 px grid once; the W beyond the breakdown are
     # dropped below, so a shorter chunk gives the same table with less work past it)
-    def one(sel: NDArray[np.intp], first: bool) -> None:
+    def one(sel: IndexArray, first: bool) -> None:
         try:
             mean_var, mis_var, _, fr = _terms(
                 img,

@@ -30,9 +30,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy import optimize
 
+from ..arrays import Float64Array
 from ..checks import as_image, check_positive, check_textured
 from ..errors import InputError
 from .domain import ValidityDomain, compensation_label
@@ -126,8 +126,8 @@ class PoissonGaussianCamera:
         return self.full_well / (self.flux * self.peak_to_mean)
 
     def noise_gl(
-        self, exposure: NDArray[np.float64] | float, mean_level: float, level: float | None = None
-    ) -> NDArray[np.float64]:
+        self, exposure: Float64Array | float, mean_level: float, level: float | None = None
+    ) -> Float64Array:
         """Noise std in grey levels of images normalised to ``mean_level`` (see module).
 
         ``level`` (GL, same images): intensity at which the shot noise is evaluated
@@ -203,9 +203,9 @@ class ExposurePlan:
     saturation_exposure: float | None
     rule_of_thumb_exposure: float
     rule_of_thumb_u_e: float
-    curve_exposure: NDArray[np.float64] = field(repr=False)
-    curve_blur: NDArray[np.float64] = field(repr=False)
-    curve_u_e: NDArray[np.float64] = field(repr=False)
+    curve_exposure: Float64Array = field(repr=False)
+    curve_blur: Float64Array = field(repr=False)
+    curve_u_e: Float64Array = field(repr=False)
     notes: tuple[str, ...] = ()
     camera: dict[str, float] | None = None
     inside_domain: bool = True
@@ -445,12 +445,12 @@ def plan_exposure(
     if noise_level is not None:
         noise_level = check_positive(noise_level, "noise_level")
 
-    def noise(tt: NDArray[np.float64] | float) -> NDArray[np.float64]:
+    def noise(tt: Float64Array | float) -> Float64Array:
         if noise_level is None:
             return np.asarray(camera.noise_gl(tt, mean_level))
         return np.asarray(camera.noise_gl(tt, mean_level, noise_level))
 
-    def log_u(tt: NDArray[np.float64]) -> NDArray[np.float64]:
+    def log_u(tt: Float64Array) -> Float64Array:
         sig = noise(tt)
         return np.array(
             [

@@ -48,8 +48,9 @@ import math
 import warnings
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array, IndexArray
 from ..checks import as_blur, as_positive, as_vector
 from ..errors import InputError
 from ._result import CIOptions, FitResult, make_result
@@ -57,7 +58,7 @@ from ._result import CIOptions, FitResult, make_result
 __all__ = ["edge_driven_range", "fit_power_law", "power_law"]
 
 
-def power_law(sssig: ArrayLike, eta: float, alpha: float) -> NDArray[np.float64]:
+def power_law(sssig: ArrayLike, eta: float, alpha: float) -> Float64Array:
     """``eta / SSSIG**alpha`` (eq. 17), px."""
     return eta * np.asarray(sssig, dtype=np.float64) ** (-alpha)
 
@@ -163,7 +164,7 @@ def fit_power_law(
     s_ref = float(s.max()) if sssig_ref is None else float(sssig_ref)
     if not (math.isfinite(s_ref) and s_ref > 0):
         raise InputError(f"sssig_ref={sssig_ref!r}: must be a finite SSSIG > 0 ((GL/px)^2)")
-    sig: NDArray[np.float64] | None = None
+    sig: Float64Array | None = None
     if noise_sigma is not None:
         sig = np.broadcast_to(np.asarray(noise_sigma, dtype=np.float64), s.shape).copy()
         sig = as_positive(sig, "noise_sigma", s.size)
@@ -181,8 +182,8 @@ def fit_power_law(
     names: tuple[str, ...] = ("u_ref", "alpha", "kappa") if fit_kappa else ("u_ref", "alpha")
 
     def fit_once(
-        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
-    ) -> tuple[NDArray[np.float64], ...]:
+        idx: IndexArray, refit_from: Float64Array | None = None
+    ) -> tuple[Float64Array, ...]:
         # refit_from (a bootstrap refit) unused: a linear least-squares fit
         cols = [np.ones(idx.size), -x[idx]] + ([z[idx]] if fit_kappa else [])
         a = np.stack(cols, axis=1)

@@ -16,16 +16,14 @@ import hashlib
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, IndexArray
 from ..errors import InputError
 from .subset_algebra import gram, normalise, project
 
 __all__ = ["ReferenceTerms"]
 
-Terms = tuple[
-    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], Any
-]
+Terms = tuple[Float64Array, Float64Array, Float64Array, Float64Array, Any]
 
 
 class ReferenceTerms:
@@ -51,7 +49,7 @@ class ReferenceTerms:
         self._store: dict[tuple[int, int], Terms] = {}
         self._bytes = 0
 
-    def bind(self, image: NDArray[np.float64], centres: NDArray[np.intp], *settings: Any) -> None:
+    def bind(self, image: Float64Array, centres: IndexArray, *settings: Any) -> None:
         """Check (or, on first use, fix) the image, centres and settings the terms are of."""
         h = hashlib.blake2b(np.ascontiguousarray(image).tobytes(), digest_size=16)
         h.update(np.ascontiguousarray(centres).tobytes())
@@ -64,7 +62,7 @@ class ReferenceTerms:
                 "matcher; use one ReferenceTerms per image and settings"
             )
 
-    def terms(self, start: int, jf: NDArray[np.float64], f: NDArray[np.float64]) -> Terms:
+    def terms(self, start: int, jf: Float64Array, f: Float64Array) -> Terms:
         """The terms of the chunk of subsets from ``start`` (``jf``, ``f``: its reference
         steepest-descent images and intensities, as :func:`blurred_subsets` yields them)."""
         key = (start, len(f))

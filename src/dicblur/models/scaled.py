@@ -34,9 +34,10 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import optimize
 
+from ..arrays import Float64Array, IndexArray
 from ..checks import as_positive, as_vector, check_positive
 from ..errors import FitError, InputError
 from ._result import CIOptions, FitResult, make_result
@@ -147,7 +148,7 @@ def _second_derivatives(x: list[float], y: list[float]) -> list[float]:
     return m
 
 
-def _interp(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64]) -> Any:
+def _interp(x: Float64Array, y: Float64Array, w: Float64Array) -> Any:
     """Natural cubic spline ``y(w)`` on the grid ``x``, clipped at 0; beyond ``x[-1]`` the
     spline's end slope if it rises, else the end value (the planner's JavaScript does the
     same)."""
@@ -164,7 +165,7 @@ def _interp(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float6
 
 def interpolate_terms(
     extra: dict[str, Any], blur: ArrayLike
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """``noise``, ``noise2`` and ``mismatch`` of a static fit's table at ``blur`` (px)."""
     x = np.asarray(extra["table_blur"], dtype=np.float64)
     w = np.asarray(blur, dtype=np.float64)
@@ -176,7 +177,7 @@ def interpolate_terms(
 
 def static_variance(
     extra: dict[str, Any], blur: ArrayLike, sigma: float, k_noise: float, k_blur: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """The scaled noise and noise-free variances (px**2) at ``blur`` (px) and ``sigma`` (GL)."""
     n1, n2, b2 = interpolate_terms(extra, blur)
     return k_noise**2 * (sigma**2 * n1 + sigma**4 * n2), k_blur**2 * b2
@@ -246,11 +247,11 @@ def fit_static_scales(
         return _fit_blur_scale(w, sig, u, noise, b2, k_fixed, ci_options, extra)
 
     def fit_once(
-        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
-    ) -> tuple[NDArray[np.float64], ...]:
+        idx: IndexArray, refit_from: Float64Array | None = None
+    ) -> tuple[Float64Array, ...]:
         nv, bv, lu = noise[idx], b2[idx], np.log(u[idx])
 
-        def resid(z: NDArray[np.float64]) -> NDArray[np.float64]:
+        def resid(z: Float64Array) -> Float64Array:
             kn, kb = np.exp(z)
             return 0.5 * np.log(np.maximum(kn**2 * nv + kb**2 * bv, 1e-300)) - lu
 
@@ -275,11 +276,11 @@ def fit_static_scales(
 
 
 def _fit_blur_scale(
-    w: NDArray[np.float64],
-    sig: NDArray[np.float64],
-    u: NDArray[np.float64],
-    noise: NDArray[np.float64],
-    b2: NDArray[np.float64],
+    w: Float64Array,
+    sig: Float64Array,
+    u: Float64Array,
+    noise: Float64Array,
+    b2: Float64Array,
     k_noise: float,
     ci_options: CIOptions,
     extra: dict[str, Any],
@@ -288,11 +289,11 @@ def _fit_blur_scale(
     with both names (the fixed scale with zero variance and zero-width interval)."""
 
     def fit_once(
-        idx: NDArray[np.intp], refit_from: NDArray[np.float64] | None = None
-    ) -> tuple[NDArray[np.float64], ...]:
+        idx: IndexArray, refit_from: Float64Array | None = None
+    ) -> tuple[Float64Array, ...]:
         nv, bv, lu = k_noise**2 * noise[idx], b2[idx], np.log(u[idx])
 
-        def resid(z: NDArray[np.float64]) -> NDArray[np.float64]:
+        def resid(z: Float64Array) -> Float64Array:
             return 0.5 * np.log(np.maximum(nv + np.exp(2 * z[0]) * bv, 1e-300)) - lu
 
         r = _least_squares(resid, 1, refit_from)
@@ -365,9 +366,9 @@ def with_static_model(
 def _held_out(
     comparison: dict[str, Any],
     terms: StaticTerms,
-    w: NDArray[np.float64],
-    sig: NDArray[np.float64],
-    u: NDArray[np.float64],
+    w: Float64Array,
+    sig: Float64Array,
+    u: Float64Array,
 ) -> dict[str, Any]:
     """The comparison with the static kind scored on its held-out split."""
     train = w <= comparison["train_max_blur"]
@@ -397,9 +398,9 @@ def _held_out(
 
 
 def _least_squares(
-    resid: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    resid: Callable[[Float64Array], Float64Array],
     n_params: int,
-    refit_from: NDArray[np.float64] | None,
+    refit_from: Float64Array | None,
 ) -> Any:
     """The log-scale fit of the static scales (``z = log k``), from ``z = 0``; a bootstrap
     refit (:class:`~dicblur.models._result.FitOnce`) from the fit to all points, to a

@@ -45,8 +45,9 @@ import math
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array, IndexArray
 from ..errors import InputError
 from .blur_response import subset_blur_response as subset_blur_response
 from .blur_response import subset_skew_coefficients as subset_skew_coefficients
@@ -97,14 +98,14 @@ __all__ = [
 
 
 def subset_blur_coefficients(
-    image: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    image: Float64Array,
+    centres: IndexArray,
     subset: int,
     matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
     criterion: Criterion = "znssd",
     chunk: int = 256,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Per-subset blur-mismatch coefficient ``k_i`` (px / px**2): ``xi_i = k_i W**2``.
 
     ``xi_i`` is the displacement (px) along ``motion`` that a matcher with the given shape
@@ -156,9 +157,9 @@ def subset_blur_coefficients(
 
 
 def subset_blur_shifts(
-    image: NDArray[np.float64],
-    blur: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    image: Float64Array,
+    blur: Float64Array,
+    centres: IndexArray,
     subset: int,
     matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
@@ -166,7 +167,7 @@ def subset_blur_shifts(
     max_shift: float = 1.0,
     chunk: int = 256,
     offset: float | None = None,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Per-subset blur-mismatch shifts at finite blur lengths, every order in ``W``.
 
     The displacement (px) along ``motion`` at which the matcher's fixed point
@@ -222,9 +223,9 @@ def subset_blur_shifts(
 
 
 def shifts_and_variance(
-    image: NDArray[np.float64],
+    image: Float64Array,
     blur: ArrayLike,
-    centres: NDArray[np.intp],
+    centres: IndexArray,
     subset: int,
     matcher: SubsetMatcher,
     *,
@@ -235,9 +236,9 @@ def shifts_and_variance(
     offset: float | None = None,
     complete: bool = True,
     min_contraction: float = 0.0,
-    contraction_out: NDArray[np.float64] | None = None,
+    contraction_out: Float64Array | None = None,
     reference: ReferenceTerms | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+) -> tuple[Float64Array, Float64Array | None]:
     """One pass over blur lengths and subsets: the shifts (and, with ``variance``, the
     noise variance per unit noise variance) of :func:`subset_blur_shifts` and
     :func:`subset_noise_variance`.
@@ -269,7 +270,7 @@ def shifts_and_variance(
             "position is seen through the matcher's B-spline; use "
             "derivative='bspline3' or 'bspline5'"
         )
-    noise_cov: tuple[NDArray[np.float64] | None, ...] | None = None
+    noise_cov: tuple[Float64Array | None, ...] | None = None
     if offset is not None and variance:
         order = 3 if derivative == "bspline3" else 5
         oy, ox = offset * dy, offset * dx
@@ -385,14 +386,14 @@ def shifts_and_variance(
 
 
 def subset_noise_variance(
-    image: NDArray[np.float64],
-    blur: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    image: Float64Array,
+    blur: Float64Array,
+    centres: IndexArray,
     subset: int,
     matcher: SubsetMatcher = ENGINE_MATCHER,
     *,
     chunk: int = 256,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Per-subset variance of the ZNSSD IC-GN shift along ``motion`` per unit noise variance.
 
     Independent Gaussian noise of std ``sigma`` (GL) in both images moves the fixed point

@@ -7,22 +7,23 @@ Vectorised wrappers around :func:`dicblur.metrics.match_score_sigma` and
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array
 from ..errors import InputError
 from ..metrics import match_score_sigma, pan_sigma
 
 __all__ = ["match_score_uncertainty", "pan_uncertainty"]
 
 
-def _noise(noise_sigma: ArrayLike) -> NDArray[np.float64]:
+def _noise(noise_sigma: ArrayLike) -> Float64Array:
     s = np.asarray(noise_sigma, dtype=np.float64)
     if not np.all(np.isfinite(s)) or np.any(s < 0):
         raise InputError("noise_sigma: must be finite and >= 0 (grey levels)")
     return s
 
 
-def match_score_uncertainty(sssig: ArrayLike, noise_sigma: ArrayLike) -> NDArray[np.float64]:
+def match_score_uncertainty(sssig: ArrayLike, noise_sigma: ArrayLike) -> Float64Array:
     """``u_e = sqrt(2 sigma**2 / SSSIG)`` (px), eq. 2, broadcast over both arguments.
 
     Parameters
@@ -39,7 +40,7 @@ def match_score_uncertainty(sssig: ArrayLike, noise_sigma: ArrayLike) -> NDArray
     return match_score_sigma(s_b, 1.0) * sig_b
 
 
-def pan_uncertainty(mig: ArrayLike, noise_sigma: ArrayLike, subset: int) -> NDArray[np.float64]:
+def pan_uncertainty(mig: ArrayLike, noise_sigma: ArrayLike, subset: int) -> Float64Array:
     """``u_e ~= sqrt(2) sigma / (N MIG)`` (px), eq. 5, broadcast over MIG and noise."""
     m = np.asarray(mig, dtype=np.float64)
     sig = _noise(noise_sigma)

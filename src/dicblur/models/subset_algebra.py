@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, IndexArray
 from ..errors import InputError
 from .derivatives import (
     Boundary,
@@ -56,17 +56,17 @@ ENGINE_MATCHER = SubsetMatcher()  # the defaults: the DIC engine's matcher, moti
 
 
 def reference_noise_middle(
-    pf: NDArray[np.float64],
-    ratio: NDArray[np.float64],
-    sg: NDArray[np.float64],
-    r0: NDArray[np.float64],
+    pf: Float64Array,
+    ratio: Float64Array,
+    sg: Float64Array,
+    r0: Float64Array,
     subset: int,
     shape: str,
-    ex: NDArray[np.float64],
-    ey: NDArray[np.float64],
-    kernel: NDArray[np.float64],
-    pf_gram: NDArray[np.float64] | None = None,
-) -> NDArray[np.float64]:
+    ex: Float64Array,
+    ey: Float64Array,
+    kernel: Float64Array,
+    pf_gram: Float64Array | None = None,
+) -> Float64Array:
     """``M^T M`` of the reference noise's response ``A^-1 M^T n``, per unit noise variance:
     ``M = ratio P_f J_f + sigma_g Q`` with ``Q = [D_k^T (S_k r0)]`` (docs/models.md s. 4,
     the complete noise term). Shape (m, k, k). ``pf_gram``: ``(P_f J_f)^T (P_f J_f)``
@@ -133,20 +133,18 @@ def check_criterion(criterion: str) -> None:
 class Windows:
     """Subset windows of several images, gathered a chunk of centres at a time."""
 
-    def __init__(self, subset: int, *images: NDArray[np.float64]) -> None:
+    def __init__(self, subset: int, *images: Float64Array) -> None:
         self.h = subset // 2
         self.views = [np.lib.stride_tricks.sliding_window_view(a, (subset, subset)) for a in images]
         off = np.arange(-self.h, self.h + 1, dtype=np.float64)
         oy, ox = np.meshgrid(off, off, indexing="ij")
         self.ex, self.ey = ox.ravel()[None, :], oy.ravel()[None, :]
 
-    def take(self, cc: NDArray[np.intp]) -> list[NDArray[np.float64]]:
+    def take(self, cc: IndexArray) -> list[Float64Array]:
         r0, c0 = cc[:, 0] - self.h, cc[:, 1] - self.h
         return [v[r0, c0].reshape(len(cc), -1) for v in self.views]
 
-    def jacobian(
-        self, gx: NDArray[np.float64], gy: NDArray[np.float64], shape: str
-    ) -> NDArray[np.float64]:
+    def jacobian(self, gx: Float64Array, gy: Float64Array, shape: str) -> Float64Array:
         """Steepest-descent images, shape (m, pixels, 2 | 6)."""
         if shape == "translation":
             return np.stack([gx, gy], axis=2)
@@ -163,14 +161,14 @@ class Windows:
         return out
 
 
-def normalise(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def normalise(a: Float64Array) -> tuple[Float64Array, Float64Array]:
     """Rows with mean removed and unit norm, and their norms (m, pixels), (m,)."""
     z = a - a.mean(axis=1, keepdims=True)
     n = np.sqrt(np.einsum("np,np->n", z, z))
     return z / np.where(n > 0, n, 1.0)[:, None], n
 
 
-def project(jac: NDArray[np.float64], hat: NDArray[np.float64]) -> NDArray[np.float64]:
+def project(jac: Float64Array, hat: Float64Array) -> Float64Array:
     """``P jac``: remove from each column the constant and the component along ``hat``
     (zero-mean, unit-norm rows): the ZNSSD offset and scale nuisance parameters."""
     z = jac - jac.mean(axis=1, keepdims=True)
@@ -178,22 +176,22 @@ def project(jac: NDArray[np.float64], hat: NDArray[np.float64]) -> NDArray[np.fl
     return z
 
 
-def gram(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+def gram(a: Float64Array, b: Float64Array) -> Float64Array:
     """Batched ``a^T b`` over the pixels: (m, P, i), (m, P, j) -> (m, i, j) (BLAS)."""
     return np.asarray(np.matmul(np.swapaxes(a, 1, 2), b))
 
 
-def tdot(a: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+def tdot(a: Float64Array, v: Float64Array) -> Float64Array:
     """Batched ``a^T v``: (m, P, i), (m, P) -> (m, i)."""
     return np.asarray(np.matmul(np.swapaxes(a, 1, 2), v[:, :, None])[:, :, 0])
 
 
-def solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+def solve(a: Float64Array, b: Float64Array) -> Float64Array:
     """Batched ``a^-1 b``; NaN rows where ``a`` is singular (no gradient in the subset)."""
     return solve_each(a, [b])[0]
 
 
-def solve_each(a: NDArray[np.float64], bs: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+def solve_each(a: Float64Array, bs: list[Float64Array]) -> list[Float64Array]:
     """:func:`solve` of one batch of matrices ``a`` for each right-hand side of ``bs``
     (each (m, k)): the condition numbers (an SVD per matrix) computed once, each system
     solved as :func:`solve` solves it (the same numbers)."""
@@ -211,21 +209,21 @@ def solve_each(a: NDArray[np.float64], bs: list[NDArray[np.float64]]) -> list[ND
 
 
 def along_motion(
-    sol: NDArray[np.float64], shape: str, dy: float, dx: float, max_shift: float = np.inf
-) -> NDArray[np.float64]:
+    sol: Float64Array, shape: str, dy: float, dx: float, max_shift: float = np.inf
+) -> Float64Array:
     u = sol[:, 0]
     v = sol[:, 1] if shape == "translation" else sol[:, 3]
     return np.where(np.hypot(u, v) <= max_shift, dx * u + dy * v, np.nan)
 
 
 def contraction(
-    jf: NDArray[np.float64],
-    fh: NDArray[np.float64],
-    sf: NDArray[np.float64],
-    cross: NDArray[np.float64],
-    sg: NDArray[np.float64],
+    jf: Float64Array,
+    fh: Float64Array,
+    sf: Float64Array,
+    cross: Float64Array,
+    sg: Float64Array,
     reference: tuple[Any, ...] | None = None,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Smallest real part of the eigenvalues of ``K = (sigma_f / sigma_g) H^-1 A`` per subset,
     ``H = J_f^T P_f J_f`` (the IC-GN Hessian of ZNSSD) and ``A = J_f^T P_g J_g`` (the
     fixed point's Jacobian). IC-GN against the blurred image moves by ``I - K`` per step
@@ -249,18 +247,14 @@ def contraction(
 
 
 def blurred_subsets(
-    image: NDArray[np.float64],
-    blur: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    image: Float64Array,
+    blur: Float64Array,
+    centres: IndexArray,
     subset: int,
     matcher: SubsetMatcher,
     chunk: int,
     offset: float | None = None,
-) -> Iterator[
-    tuple[
-        int, int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
-    ]
-]:
+) -> Iterator[tuple[int, int, Float64Array, Float64Array, Float64Array, Float64Array]]:
     """``(j, start, J_f, J_g, f, g)`` for every blur length and chunk of subsets: the
     steepest-descent images of the sharp and of the centred-box-blurred image, and their
     subset intensities (W = 0: ``g = f``). With ``offset`` (px along the motion) the

@@ -24,9 +24,10 @@ signals, ``S_b = SSSIG`` of the blurred signal, ``S_o`` of the reference and
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy import optimize
 
+from ..arrays import Float64Array
 from ..checks import check_positive
 from .signal import PulseTrain, as_widths, check_width, edge_length
 
@@ -44,7 +45,7 @@ __all__ = [
 
 def chi2_regime_a(
     xi: ArrayLike, w: ArrayLike, *, a: float = 1.0, n_periods: float = 1.0
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Regime-(a) analytic SSD, continuous, sharp reference (``w_ref = 0``).
 
     ``N a^2 (w/6 + 2 xi^2 / w)`` for ``|xi| <= w/2`` and ``2 N a^2 (|xi| - w/6)`` beyond
@@ -58,7 +59,7 @@ def chi2_regime_a(
     return 2 * n_periods * a**2 * np.where(x <= wa / 2, inner, outer)
 
 
-def _piecewise_integral(f, breaks: NDArray[np.float64], lo: float, hi: float) -> float:
+def _piecewise_integral(f, breaks: Float64Array, lo: float, hi: float) -> float:
     """Exact integral over [lo, hi] of ``f``, polynomial of degree <= 3 between ``breaks``.
 
     Two-point Gauss-Legendre on each piece: exact for cubics and never evaluates ``f`` at a
@@ -73,7 +74,7 @@ def _piecewise_integral(f, breaks: NDArray[np.float64], lo: float, hi: float) ->
 
 def chi2_continuous(
     train: PulseTrain, xi: ArrayLike, w: float, *, w_ref: float = 0.0, n_periods: float = 1.0
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """SSD ``integral of [p_b(x - xi, w) - p_b(x, w_ref)]^2`` over ``n_periods`` periods.
 
     Exact for continuous x: the integrand is piecewise quadratic, integrated by the two-point
@@ -100,7 +101,7 @@ def chi2_continuous(
 
 def chi2_sampled(
     train: PulseTrain, xi: ArrayLike, w: float, *, w_ref: float = 1.0, n_periods: int = 1
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """SSD summed over pixel centres ``x = 0 .. N du - 1`` (the pixel-level version)."""
     n = round(train.du * n_periods)
     x = np.arange(n, dtype=np.float64)
@@ -112,7 +113,7 @@ def chi2_sampled(
 
 def min_chi2(
     train: PulseTrain, w: ArrayLike, *, w_ref: float = 0.0, n_periods: float = 1.0
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """Minimum over xi (|xi| <= du/2) of the continuous SSD, and its minimiser (paper Fig. 5).
 
     A grid search (0.1 px) is refined by bounded Brent minimisation.
@@ -144,7 +145,7 @@ def min_chi2(
 
 def gradient_sums(
     train: PulseTrain, w: ArrayLike, *, w_ref: float = 1.0, n_periods: float = 1.0
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """Closed-form ``S_o``, ``S_b`` and the cross-gradient ``C`` over N periods (continuous).
 
     With ``R(s) = a^2 (dp - m(s))`` the pulse autocorrelation per period,
@@ -171,7 +172,7 @@ def gradient_sums(
 
 def predict_first_principles(
     train: PulseTrain, w: ArrayLike, *, sigma: float, n_periods: float
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """``sqrt(2 sigma^2 / S_b)`` px: match score with the blurred SSSIG (brief section 6)."""
     sigma = check_positive(sigma, "sigma")
     _, s_b, _ = gradient_sums(train, w, n_periods=n_periods)
@@ -181,7 +182,7 @@ def predict_first_principles(
 
 def predict_interpolated_noise(
     train: PulseTrain, w: ArrayLike, *, sigma: float, n_periods: float, w_ref: float = 1.0
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """``sigma sqrt(S_o + S_b) / |C|`` px: linearised minimiser when the shifted signal is
     interpolated together with its noise (exact Fourier shift). ``inf`` where ``C = 0``."""
     sigma = check_positive(sigma, "sigma")
@@ -192,7 +193,7 @@ def predict_interpolated_noise(
 
 def predict_paper_linear(
     train: PulseTrain, w: ArrayLike, *, sigma: float, n_periods: float
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """The paper's linear reading of eq. 16, ``u_e ~ w``, anchored at w = 1 on the match
     score ``sigma / (a sqrt(N))``: ``sigma w / (a sqrt(N))`` px."""
     sigma = check_positive(sigma, "sigma")

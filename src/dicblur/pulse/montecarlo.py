@@ -49,6 +49,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
+from ..arrays import Float64Array, IndexArray, UInt8Array
 from ..checks import as_whole, check_choice, check_finite_number, check_positive, describe
 from ..errors import InputError
 from ..patterns import SeedLike
@@ -161,14 +162,14 @@ def _newton_fourier(h, gn, fn, length, start, lo, hi, tol, max_iter):  # pragma:
     return out, status
 
 
-def _lag_window(length: int, du: float) -> NDArray[np.intp]:
+def _lag_window(length: int, du: float) -> IndexArray:
     half = math.floor(du / 2 + 1e-9)
     return np.arange(-half, half + 1)
 
 
 def _fourier_shift_estimate(
-    moving: NDArray[np.float64], fixed: NDArray[np.float64], du: float, tol: float = 1e-11
-) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+    moving: Float64Array, fixed: Float64Array, du: float, tol: float = 1e-11
+) -> tuple[Float64Array, UInt8Array]:
     length = moving.shape[-1]
     return _fourier_estimate_from_spectra(
         np.fft.rfft(moving, axis=-1), np.fft.rfft(fixed, axis=-1), length, du, tol
@@ -181,7 +182,7 @@ def _fourier_estimate_from_spectra(
     length: int,
     du: float,
     tol: float = 1e-11,
-) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+) -> tuple[Float64Array, UInt8Array]:
     """Fourier-shift SSD minimiser from the rFFTs of the moving and fixed signals."""
     cross = gm * np.conj(fm)
     corr = np.fft.irfft(cross, length, axis=-1)  # corr[j] = sum_k g(k + j) f(k)
@@ -238,8 +239,8 @@ def _white_noise_spectrum(
 # Linear-interpolation estimator
 # --------------------------------------------------------------------------------------
 def _linear_shift_estimate(
-    moving: NDArray[np.float64], fixed: NDArray[np.float64], du: float
-) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+    moving: Float64Array, fixed: Float64Array, du: float
+) -> tuple[Float64Array, UInt8Array]:
     length = moving.shape[-1]
     gm = np.fft.rfft(moving, axis=-1)
     corr = np.fft.irfft(gm * np.conj(np.fft.rfft(fixed, axis=-1)), length, axis=-1)
@@ -265,8 +266,8 @@ def _linear_shift_estimate(
 # Analytic (oracle) estimator: noise-free closed form moved, noise fixed on the pixels
 # --------------------------------------------------------------------------------------
 def _analytic_shift_estimate(
-    train: PulseTrain, model_w: float, model_shift: float, data: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+    train: PulseTrain, model_w: float, model_shift: float, data: Float64Array
+) -> tuple[Float64Array, UInt8Array]:
     length = data.shape[-1]
     half = math.floor(train.du / 2 + 1e-9)
     k = np.arange(length, dtype=np.float64)
@@ -315,7 +316,7 @@ def derivative_multiplier(length: int, kind: str) -> NDArray[np.complex128]:
     return out
 
 
-def _taps(t: NDArray[np.float64], kind: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _taps(t: Float64Array, kind: str) -> tuple[Float64Array, Float64Array]:
     """Weights (4, n) of taps -1..2 around ``floor(x)`` and of their derivative in ``t``."""
     if kind == "bspline":
         u = 1.0 - t
@@ -346,13 +347,13 @@ def _taps(t: NDArray[np.float64], kind: str) -> tuple[NDArray[np.float64], NDArr
 
 
 def _icgn_shift_estimate(
-    moving: NDArray[np.float64],
-    fixed: NDArray[np.float64],
+    moving: Float64Array,
+    fixed: Float64Array,
     du: float,
     kind: str,
     tol: float = 1e-11,
     max_iter: int = 60,
-) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+) -> tuple[Float64Array, UInt8Array]:
     """Root of ``F(xi) = sum_k D f(k) [g(k + xi) - f(k)]`` (IC-GN's fixed point for a
     translation) with ``g`` the moved signal read through the ``kind`` interpolant."""
     n, length = moving.shape
@@ -414,7 +415,7 @@ def estimate_shift(
     period: float,
     interpolation: Interpolation = "fourier",
     shifted: Shifted = "blurred",
-) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+) -> tuple[Float64Array, UInt8Array]:
     """Displacement of ``current`` relative to ``reference`` (px), minimising the SSD.
 
     Parameters
@@ -450,9 +451,7 @@ def estimate_shift(
     check_choice(interpolation, "interpolation", ("fourier", "linear", *_ICGN_KINDS))
     check_choice(shifted, "shifted", ("blurred", "reference"))
 
-    def fn(
-        m: NDArray[np.float64], f: NDArray[np.float64], du: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+    def fn(m: Float64Array, f: Float64Array, du: float) -> tuple[Float64Array, UInt8Array]:
         if interpolation in _ICGN_KINDS:
             return _icgn_shift_estimate(m, f, du, interpolation)
         if interpolation == "fourier":
@@ -469,7 +468,7 @@ def estimate_shift(
 # --------------------------------------------------------------------------------------
 # Monte Carlo driver
 # --------------------------------------------------------------------------------------
-def _std_ci(x: NDArray[np.float64]) -> tuple[float, float, float]:
+def _std_ci(x: Float64Array) -> tuple[float, float, float]:
     """Sample std and a 95% CI valid for non-Gaussian samples (delta method with the
     fourth central moment: ``var(s) ~ (m4 - s^4) / (4 n s^2)``)."""
     n = x.size

@@ -32,8 +32,9 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array
 from ..checks import as_whole, check_finite_number, check_positive, describe
 from ..errors import InputError
 
@@ -102,19 +103,19 @@ class PulseTrain:
         return self.du - self.dp
 
     # -- signal ---------------------------------------------------------------------------
-    def antiderivative(self, x: ArrayLike) -> NDArray[np.float64]:
+    def antiderivative(self, x: ArrayLike) -> Float64Array:
         """``P(x) = integral from x0 to x of p``, exact (grey levels x px)."""
         t = np.asarray(x, dtype=np.float64) - self.x0
         k = np.floor(t / self.du)
         r = t - k * self.du
         return self.a * (k * self.dp + np.clip(r, 0.0, self.dp))
 
-    def value(self, x: ArrayLike) -> NDArray[np.float64]:
+    def value(self, x: ArrayLike) -> Float64Array:
         """The sharp (unblurred, continuous) signal ``p(x)``: ``a`` inside pulses, else 0."""
         t = np.mod(np.asarray(x, dtype=np.float64) - self.x0, self.du)
         return np.where(t < self.dp, self.a, 0.0)
 
-    def blurred(self, x: ArrayLike, w: float) -> NDArray[np.float64]:
+    def blurred(self, x: ArrayLike, w: float) -> Float64Array:
         """Box-blurred signal ``p_b(x, w)``, exact at any x (closed form).
 
         Parameters
@@ -135,7 +136,7 @@ class PulseTrain:
             return self.value(x)
         return (self.antiderivative(x + w / 2) - self.antiderivative(x - w / 2)) / w
 
-    def blurred_gradient(self, x: ArrayLike, w: float) -> NDArray[np.float64]:
+    def blurred_gradient(self, x: ArrayLike, w: float) -> Float64Array:
         """Exact derivative ``d p_b / dx`` (grey levels / px), values in {0, +a/w, -a/w}.
 
         At a kink the right-hand derivative is returned (pulses are closed on the left).
@@ -146,14 +147,14 @@ class PulseTrain:
         x = np.asarray(x, dtype=np.float64)
         return (self.value(x + w / 2) - self.value(x - w / 2)) / w
 
-    def breakpoints(self, w: float) -> NDArray[np.float64]:
+    def breakpoints(self, w: float) -> Float64Array:
         """Kinks of ``p_b(., w)`` in one period ``[0, du)`` (edges of the sharp pulse if w = 0)."""
         w = check_width(w)
         edges = np.array([self.x0, self.x0 + self.dp])
         pts = edges if w == 0.0 else np.concatenate([edges - w / 2, edges + w / 2])
         return np.unique(np.mod(pts, self.du))
 
-    def sample(self, n: int, w: float, *, shift: float = 0.0) -> NDArray[np.float64]:
+    def sample(self, n: int, w: float, *, shift: float = 0.0) -> Float64Array:
         """The blurred signal at pixel centres ``x = 0, 1, ..., n - 1``, displaced by ``shift``.
 
         Returns ``p_b(k - shift, w)``, shape (n,), grey levels: pixel values of a camera whose
@@ -174,7 +175,7 @@ def check_width(w: float, name: str = "w") -> float:
     return value
 
 
-def as_widths(w: ArrayLike, name: str = "w") -> NDArray[np.float64]:
+def as_widths(w: ArrayLike, name: str = "w") -> Float64Array:
     """Blur window widths ``w`` (px) as a float array; InputError unless finite and > 0."""
     arr = np.asarray(w, dtype=np.float64)
     if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
@@ -182,7 +183,7 @@ def as_widths(w: ArrayLike, name: str = "w") -> NDArray[np.float64]:
     return arr
 
 
-def edge_length(train: PulseTrain, w: ArrayLike) -> NDArray[np.float64]:
+def edge_length(train: PulseTrain, w: ArrayLike) -> Float64Array:
     """``m(w)``: length per period (px) on which the blurred gradient is ``+a/w``.
 
     ``m(w) = min(s, dp, g, du - s)``, ``s = w mod du``: the circular cross-correlation, at
@@ -218,13 +219,13 @@ class PulseMetrics:
     ``n_periods * du`` unit pixels, ``m`` px.
     """
 
-    w: NDArray[np.float64]
-    m: NDArray[np.float64]
-    mig: NDArray[np.float64]
-    gradient_mean: NDArray[np.float64]
-    gradient_variance: NDArray[np.float64]
-    contrast: NDArray[np.float64]
-    sssig: NDArray[np.float64]
+    w: Float64Array
+    m: Float64Array
+    mig: Float64Array
+    gradient_mean: Float64Array
+    gradient_variance: Float64Array
+    contrast: Float64Array
+    sssig: Float64Array
     n_periods: float
     method: str
 
@@ -262,9 +263,7 @@ def closed_form_metrics(train: PulseTrain, w: ArrayLike, *, n_periods: float = 1
     )
 
 
-def _gradient_stats(
-    f: NDArray[np.float64], d: NDArray[np.float64]
-) -> tuple[float, float, float, float, float]:
+def _gradient_stats(f: Float64Array, d: Float64Array) -> tuple[float, float, float, float, float]:
     """``(mean |d|, mean d, var d, max f - min f, sum d**2)`` of samples ``f`` of one
     signal and their derivative ``d``: MIG, gradient mean and variance, contrast, and
     the SSSIG sum before its scaling to the window."""
@@ -279,7 +278,7 @@ def _gradient_stats(
 
 
 def _pulse_metrics(
-    wa: NDArray[np.float64], out: NDArray[np.float64], n_periods: float, method: str
+    wa: Float64Array, out: Float64Array, n_periods: float, method: str
 ) -> PulseMetrics:
     """:class:`PulseMetrics` from the rows of ``out`` (shape (5, n): the metrics of
     :func:`_gradient_stats`, the SSSIG scaled) at the widths ``wa``."""
@@ -384,7 +383,7 @@ def pixel_metrics(
     return _pulse_metrics(wa, out, float(n_periods), f"pixel samples, {gradient} differences")
 
 
-def spectral_derivative(f: NDArray[np.float64]) -> NDArray[np.float64]:
+def spectral_derivative(f: Float64Array) -> Float64Array:
     """Derivative (per px) of the band-limited periodic interpolant of the last axis of ``f``.
 
     The Nyquist bin (even length) is dropped: the derivative of the real interpolant's

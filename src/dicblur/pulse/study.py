@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..checks import describe
 from ..errors import InputError
 from ..patterns import SeedLike
@@ -133,7 +133,7 @@ def table_ii(*, supersample: int = 64, n_periods: int = 1) -> tuple[dict[str, An
     return tuple(rows)
 
 
-def segments(train: PulseTrain, w: NDArray[np.float64], w_ref: float = 1.0) -> list[str]:
+def segments(train: PulseTrain, w: Float64Array, w_ref: float = 1.0) -> list[str]:
     """Segment label per width: the regime letter, with ``'`` appended where the blurred
     ramps no longer cover the reference edges (``w > 2 min(dp, g) - w_ref``: the noise-free
     SSD curvature at zero shift has dropped, the minimum turns flat)."""

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..design.export import PrintExport
 from ..design.search import DesignResult
 from ._data import spearman
@@ -24,7 +24,7 @@ from ._figure import subplots
 __all__ = ["spearman", "write_design_report"]
 
 
-def _grid_array(result: DesignResult, attr: str) -> NDArray[np.float64]:
+def _grid_array(result: DesignResult, attr: str) -> Float64Array:
     fam = result.family
     axes = [fam.axis(i) for i in range(3)]
     out = np.full([len(a) for a in axes], np.nan)

@@ -13,7 +13,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+
+from ..arrays import Float64Array
 
 __all__ = [
     "Algorithm1Check",
@@ -87,7 +88,7 @@ class ClaimExperiments:
     paired: PairedReplicates
 
 
-def algorithm1_translation(image: NDArray[np.float64], blur: float) -> Algorithm1Check:
+def algorithm1_translation(image: Float64Array, blur: float) -> Algorithm1Check:
     """Translation and symmetry of Algorithm 1 measured on the image itself.
 
     The blurred image's spectrum over the sharp one's is the transfer function H(f) of
@@ -117,7 +118,7 @@ def algorithm1_translation(image: NDArray[np.float64], blur: float) -> Algorithm
 
 
 def paired_replicates(
-    image: NDArray[np.float64],
+    image: Float64Array,
     *,
     blur: tuple[float, ...],
     replicates: int,
@@ -137,7 +138,7 @@ def paired_replicates(
 
     rng = np.random.default_rng(np.random.SeedSequence([seed, 21]))
 
-    def matcher(reference: NDArray[np.float64]) -> Correlator:
+    def matcher(reference: Float64Array) -> Correlator:
         # the scatter of every converged point is measured: no noise-based screening
         return Correlator(
             reference, subset=subset, step=step, shape="translation", noise_sigma=None
@@ -178,7 +179,7 @@ def paired_replicates(
 
 
 def run_claim_experiments(
-    image: NDArray[np.float64],
+    image: Float64Array,
     *,
     noise_sigma: float,
     subset: int,

@@ -11,8 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
+from ..arrays import BoolArray
 
 if TYPE_CHECKING:  # pragma: no cover - types only
     from ..pulse.study import PulseStudy
@@ -146,7 +145,7 @@ class StudyFits:
 
     fits: dict[str, dict[str, Any]]
     models: dict[str, tuple[Any, Any]]
-    valid: dict[str, NDArray[np.bool_]]
+    valid: dict[str, BoolArray]
     family: list[dict[str, Any]]
 
 

@@ -32,9 +32,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from .._version import package_versions
+from ..arrays import BoolArray, Float64Array
 from ..errors import InputError
 from ..io import atomic_path, check_output, write_text
 from ._data import series
@@ -435,8 +435,8 @@ def _fit_pattern(
     p: StudyPattern,
     c_static: float,
     ds: Any,
-    W: NDArray[np.float64],
-    ok: dict[float, NDArray[np.bool_]],
+    W: Float64Array,
+    ok: dict[float, BoolArray],
 ) -> tuple[Any, Any, list[str]]:
     """The paper-like fit of pattern ``p`` at the main noise level, the fit over every
     level (with the mismatch model) and the notes on eq. 17's automatic range."""
@@ -494,9 +494,7 @@ def _fit_pattern(
     return paper, full, range_notes
 
 
-def _static_prediction(
-    s: ReproduceSettings, p: StudyPattern, W: NDArray[np.float64]
-) -> dict[str, Any]:
+def _static_prediction(s: ReproduceSettings, p: StudyPattern, W: Float64Array) -> dict[str, Any]:
     """The whole u_e(W) of ``p`` from the static image alone, no fit (docs/models.md s. 4),
     per noise level, and the W where that prediction stops describing DIC."""
     from scipy.interpolate import CubicSpline
@@ -534,8 +532,8 @@ def _fit_numbers(
     k: str,
     static: dict[str, Any],
     ds: Any,
-    W: NDArray[np.float64],
-    v: NDArray[np.bool_],
+    W: Float64Array,
+    v: BoolArray,
     paper: Any,
     full: Any,
     range_notes: list[str],

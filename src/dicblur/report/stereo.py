@@ -7,8 +7,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ._figure import figure, figure_axes
 from .html import HtmlReport
 
@@ -102,7 +102,7 @@ def write_stereo_report(
     ds: Any,
     folder: Path,
     *,
-    image: NDArray[np.float64] | None = None,
+    image: Float64Array | None = None,
     title: str = "dicblur stereo track",
 ) -> Path:
     """Write ``folder/report.html`` (figures also as PNG/SVG in ``folder/figures``)."""

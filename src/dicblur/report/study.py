@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..errors import InputError
 from ..io import file_sha256, load_image
 from ..patterns import paper_pattern4, speckle_pattern
@@ -51,13 +51,13 @@ class StudyPattern:
 
     key: str
     label: str
-    image: NDArray[np.float64]
+    image: Float64Array
     synthetic: bool
     source: str
     sha256: str | None = None
 
 
-def central_crop(image: NDArray[np.float64], size: int) -> tuple[NDArray[np.float64], str]:
+def central_crop(image: Float64Array, size: int) -> tuple[Float64Array, str]:
     """Central ``size x size`` window of ``image`` and a text stating the crop."""
     rows, cols = image.shape
     if rows < size or cols < size:
@@ -71,7 +71,7 @@ def central_crop(image: NDArray[np.float64], size: int) -> tuple[NDArray[np.floa
     return image[r0 : r0 + size, c0 : c0 + size].copy(), crop
 
 
-def stand_in_pattern1(size: int, seed: int) -> NDArray[np.float64]:
+def stand_in_pattern1(size: int, seed: int) -> Float64Array:
     """Stand-in for Sample 13: fine soft speckle, low contrast.
 
     2 px binary speckles with a 0.9 px edge blur in grey levels 55..135; it measures about
@@ -83,7 +83,7 @@ def stand_in_pattern1(size: int, seed: int) -> NDArray[np.float64]:
     )
 
 
-def stand_in_pattern2(size: int, seed: int) -> NDArray[np.float64]:
+def stand_in_pattern2(size: int, seed: int) -> Float64Array:
     """Stand-in for Sample 3: larger, sharper-looking speckles, high contrast.
 
     7 px binary speckles with a 1.6 px edge blur in grey levels 30..190; it measures about

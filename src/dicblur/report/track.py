@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ._figure import figure, figure_axes
 from .html import HtmlReport
 
@@ -108,7 +108,7 @@ def worst_frame(ds: Any) -> int:
     return int(np.nanargmax(med)) if np.isfinite(med).any() else 0
 
 
-def fig_sigma_map(ds: Any, image: NDArray[np.float64] | None, index: int) -> Any:
+def fig_sigma_map(ds: Any, image: Float64Array | None, index: int) -> Any:
     """sigma = hypot(sigma_u, sigma_v) of every valid point at frame position ``index``
     over the reference image."""
     fig, ax = figure_axes(6.4, 5.2)
@@ -180,7 +180,7 @@ def write_track_report(
     ds: Any,
     folder: Path,
     *,
-    image: NDArray[np.float64] | None = None,
+    image: Float64Array | None = None,
     points: Sequence[int] | None = None,
     title: str = "dicblur track",
 ) -> Path:

@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float32Array, Float64Array
 from ..errors import ImageReadError, InputError
 from ..io import load_image
 from ..sequence import natural_key
@@ -28,7 +28,7 @@ __all__ = ["board_points", "calibrate_rig", "find_corners", "pair_images"]
 _SIDE = re.compile(r"(left|right)", re.IGNORECASE)
 
 
-def board_points(board: tuple[int, int], square: float) -> NDArray[np.float32]:
+def board_points(board: tuple[int, int], square: float) -> Float32Array:
     """Inner-corner coordinates of the board (cols x rows corners), (n, 3) mm, z = 0,
     in OpenCV's order (along a row first)."""
     nx, ny = board
@@ -37,9 +37,7 @@ def board_points(board: tuple[int, int], square: float) -> NDArray[np.float32]:
     return g
 
 
-def find_corners(
-    image: NDArray[np.float64], board: tuple[int, int], name: str
-) -> NDArray[np.float32]:
+def find_corners(image: Float64Array, board: tuple[int, int], name: str) -> Float32Array:
     """Sub-pixel inner corners of the board in ``image``, (n, 1, 2) as OpenCV's (x, y).
 
     Raises
@@ -114,7 +112,7 @@ def pair_images(paths: Sequence[str | os.PathLike[str]]) -> list[tuple[Path, Pat
 
 
 def calibrate_rig(
-    pairs: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    pairs: Sequence[tuple[Float64Array, Float64Array]],
     *,
     board: tuple[int, int],
     square: float,
@@ -229,6 +227,6 @@ def calibrate_rig(
 
 def load_pairs(
     pairs: Sequence[tuple[Path, Path]],
-) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+) -> list[tuple[Float64Array, Float64Array]]:
     """The images of :func:`pair_images` as grey-level arrays."""
     return [(load_image(a), load_image(b)) for a, b in pairs]

@@ -28,9 +28,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from .._version import __version__
+from ..arrays import Float64Array
 from ..errors import ConfigError, InputError
 from ..io import write_text
 
@@ -41,7 +42,7 @@ __all__ = ["CameraModel", "StereoRig", "load_rig", "rotation_matrix", "save_rig"
 UNDISTORT_ITERATIONS = 20
 
 
-def rotation_matrix(rvec: ArrayLike) -> NDArray[np.float64]:
+def rotation_matrix(rvec: ArrayLike) -> Float64Array:
     """Rotation matrix (3, 3) of a rotation vector (axis times angle, rad; Rodrigues)."""
     r = np.asarray(rvec, dtype=np.float64).reshape(3)
     theta = float(np.linalg.norm(r))
@@ -52,7 +53,7 @@ def rotation_matrix(rvec: ArrayLike) -> NDArray[np.float64]:
     return np.eye(3) + math.sin(theta) * kx + (1.0 - math.cos(theta)) * (kx @ kx)
 
 
-def _array(value: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:
+def _array(value: ArrayLike, shape: tuple[int, ...], name: str) -> Float64Array:
     a = np.asarray(value, dtype=np.float64)
     if a.size != int(np.prod(shape)) or not np.isfinite(a).all():
         raise InputError(f"{name}={value!r}: expected {int(np.prod(shape))} finite numbers")
@@ -102,11 +103,11 @@ class CameraModel:
             object.__setattr__(self, name, float(getattr(self, name)))
 
     @property
-    def matrix(self) -> NDArray[np.float64]:
+    def matrix(self) -> Float64Array:
         """The 3 x 3 intrinsic matrix K (OpenCV's cameraMatrix)."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
-    def distort(self, ab: ArrayLike) -> NDArray[np.float64]:
+    def distort(self, ab: ArrayLike) -> Float64Array:
         """Distorted normalised coordinates of ideal ones, shape (..., 2) as (a, b)."""
         p = np.asarray(ab, dtype=np.float64)
         a, b = p[..., 0], p[..., 1]
@@ -117,7 +118,7 @@ class CameraModel:
         bd = b * radial + p1 * (r2 + 2.0 * b * b) + 2.0 * p2 * a * b
         return np.stack([ad, bd], axis=-1)
 
-    def undistort(self, abd: ArrayLike) -> NDArray[np.float64]:
+    def undistort(self, abd: ArrayLike) -> Float64Array:
         """Ideal normalised coordinates of distorted ones (fixed-point iteration, as
         OpenCV's undistortPoints), shape (..., 2)."""
         d = np.asarray(abd, dtype=np.float64)
@@ -134,7 +135,7 @@ class CameraModel:
             b = (d[..., 1] - db) / radial
         return np.stack([a, b], axis=-1)
 
-    def project(self, xc: ArrayLike) -> NDArray[np.float64]:
+    def project(self, xc: ArrayLike) -> Float64Array:
         """Image points ``(row, col)`` px of camera-frame points ``xc`` (..., 3) mm;
         NaN for points at or behind the camera (Z <= 0)."""
         p = np.asarray(xc, dtype=np.float64)
@@ -144,14 +145,14 @@ class CameraModel:
         d = self.distort(ab)
         return np.stack([self.fy * d[..., 1] + self.cy, self.fx * d[..., 0] + self.cx], axis=-1)
 
-    def normalised(self, rc: ArrayLike) -> NDArray[np.float64]:
+    def normalised(self, rc: ArrayLike) -> Float64Array:
         """Ideal normalised coordinates ``(a, b)`` of image points ``(row, col)`` px
         (the distortion removed), shape (..., 2)."""
         q = np.asarray(rc, dtype=np.float64)
         d = np.stack([(q[..., 1] - self.cx) / self.fx, (q[..., 0] - self.cy) / self.fy], -1)
         return self.undistort(d)
 
-    def rays(self, rc: ArrayLike) -> NDArray[np.float64]:
+    def rays(self, rc: ArrayLike) -> Float64Array:
         """Directions (..., 3) (not normalised, Z = 1) of the rays through image points
         ``(row, col)`` px, in the camera frame."""
         ab = self.normalised(rc)
@@ -202,8 +203,8 @@ class StereoRig:
 
     left: CameraModel
     right: CameraModel
-    rotation: NDArray[np.float64]
-    translation: NDArray[np.float64]
+    rotation: Float64Array
+    translation: Float64Array
     rms: float = float("nan")
     info: dict[str, Any] = field(default_factory=dict)
 
@@ -225,7 +226,7 @@ class StereoRig:
         return float(np.linalg.norm(self.translation))
 
     @property
-    def right_centre(self) -> NDArray[np.float64]:
+    def right_centre(self) -> Float64Array:
         """Optical centre of the right camera in the left frame, mm: ``-R^T t``."""
         return np.asarray(-self.rotation.T @ self.translation)
 
@@ -235,17 +236,17 @@ class StereoRig:
         c = float(np.clip(self.rotation[2, 2], -1.0, 1.0))  # z_R . z_L in the left frame
         return math.degrees(math.acos(c))
 
-    def to_right(self, x: ArrayLike) -> NDArray[np.float64]:
+    def to_right(self, x: ArrayLike) -> Float64Array:
         """Left-frame points (..., 3) in the right camera's frame."""
         p = np.asarray(x, dtype=np.float64)
         return np.asarray(p @ self.rotation.T + self.translation)
 
-    def project(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def project(self, x: ArrayLike) -> tuple[Float64Array, Float64Array]:
         """``(row, col)`` in the left and the right image of left-frame points (..., 3)."""
         return self.left.project(x), self.right.project(self.to_right(x))
 
     @property
-    def fundamental(self) -> NDArray[np.float64]:
+    def fundamental(self) -> Float64Array:
         """Fundamental matrix F (3, 3) of the ideal (undistorted) pixel coordinates
         ``(x, y, 1) = (col, row, 1)``: ``x_R^T F x_L = 0``."""
         t = self.translation
@@ -253,7 +254,7 @@ class StereoRig:
         e = tx @ self.rotation
         return np.asarray(np.linalg.inv(self.right.matrix).T @ e @ np.linalg.inv(self.left.matrix))
 
-    def converge_point(self) -> NDArray[np.float64]:
+    def converge_point(self) -> Float64Array:
         """The point nearest both optical axes (left frame, mm): a rough working distance
         for the start of the stereo matching."""
         c_l, d_l = np.zeros(3), np.array([0.0, 0.0, 1.0])
@@ -335,7 +336,7 @@ def _yaml_read(path: Path) -> StereoRig:
         if not fs.isOpened():
             raise ConfigError(f"rig={str(path)!r}: cannot be read as OpenCV YAML")
 
-        def mat(key: str) -> NDArray[np.float64]:
+        def mat(key: str) -> Float64Array:
             node = fs.getNode(key)
             m = None if node.empty() else node.mat()
             if m is None:

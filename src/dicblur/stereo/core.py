@@ -21,9 +21,9 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
 from .._version import __version__
+from ..arrays import BoolArray, Float32Array, Float64Array, IndexArray, UInt8Array
 from ..dic import Correlator, PointStatus
 from ..errors import DicblurError, InputError
 from ..sequence import Recording, open_recording
@@ -63,10 +63,10 @@ class ArrayRecording:
     def __len__(self) -> int:
         return len(self._frames)
 
-    def __getitem__(self, index: int) -> NDArray[np.float64]:
+    def __getitem__(self, index: int) -> Float64Array:
         return self.frame(index)
 
-    def frame(self, index: int) -> NDArray[np.float64]:
+    def frame(self, index: int) -> Float64Array:
         return np.asarray(self._frames[index], dtype=np.float64)
 
 
@@ -116,9 +116,7 @@ def _noise(rec: Any, static: Any, noise: float | None, name: str) -> NoiseEstima
     return est
 
 
-def _camera_correlator(
-    reference: NDArray[np.float64], noise: NoiseEstimate, **where: Any
-) -> Correlator:
+def _camera_correlator(reference: Float64Array, noise: NoiseEstimate, **where: Any) -> Correlator:
     """One camera's matcher on its reference (``where``: the grid or points, subset and
     shape). Gross errors: the epipolar test of every pair instead of the engine's neighbour
     check, exact on linear fields only (docs/stereo.md)."""
@@ -132,7 +130,7 @@ def _camera_correlator(
     )
 
 
-def _combine(*statuses: NDArray[np.uint8]) -> NDArray[np.uint8]:
+def _combine(*statuses: UInt8Array) -> UInt8Array:
     """The first non-converged status of the stages (stereo, left, right)."""
     out = np.zeros(np.broadcast_shapes(*(s.shape for s in statuses)), np.uint8)
     for s in reversed(statuses):
@@ -145,11 +143,11 @@ def _track_camera(
     corr: Correlator,
     rec: Any,
     order: Sequence[int],
-    history: list[NDArray[np.float64]],
-    out_p: NDArray[np.float64],
-    out_s: NDArray[np.uint8],
-    ok0: NDArray[np.bool_],
-    grid: tuple[tuple[int, int], NDArray[np.intp]] | None,
+    history: list[Float64Array],
+    out_p: Float64Array,
+    out_s: UInt8Array,
+    ok0: BoolArray,
+    grid: tuple[tuple[int, int], IndexArray] | None,
 ) -> tuple[int, BaseException | None]:
     """IC-GN of the frames ``order`` (in tracking order) as ``dicblur track`` runs its
     frames (docs/track.md): each from the extrapolation of the last (up to) three
@@ -456,7 +454,7 @@ def track(
     # subsets with clipped pixels in either reference: no noise or blur model there
     # (track/saturation.py, as dicblur track's `saturated`)
     notes: list[str] = []
-    sat: dict[str, NDArray[np.float32]] = {}
+    sat: dict[str, Float32Array] = {}
     for nm, ref, cen in (("left", ref_l, cen_l), ("right", ref_r, cen_r)):
         level = saturation_level(ref)
         sat[nm] = saturated_share(ref, cen, subset, level)

@@ -18,7 +18,8 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from numpy.typing import NDArray
+
+from ..arrays import Float64Array
 
 __all__ = ["PackedRig", "pack_camera", "projection_jacobian_kernel", "triangulate_kernel"]
 
@@ -27,13 +28,13 @@ class PackedRig(NamedTuple):
     """A rig as the kernels read it: each camera's packed parameters (9,) and pose
     ``[R | t]`` (3, 4), C-contiguous (the left pose the identity)."""
 
-    cam_l: NDArray[np.float64]
-    cam_r: NDArray[np.float64]
-    pose_l: NDArray[np.float64]
-    pose_r: NDArray[np.float64]
+    cam_l: Float64Array
+    cam_r: Float64Array
+    pose_l: Float64Array
+    pose_r: Float64Array
 
 
-def pack_camera(cam: object) -> NDArray[np.float64]:
+def pack_camera(cam: object) -> Float64Array:
     """``(fx, fy, cx, cy, k1, k2, p1, p2, k3)`` of a :class:`~dicblur.stereo.CameraModel`."""
     return np.array(
         [cam.fx, cam.fy, cam.cx, cam.cy, *cam.dist],  # type: ignore[attr-defined]
@@ -42,7 +43,7 @@ def pack_camera(cam: object) -> NDArray[np.float64]:
 
 
 @nb.njit(inline="always", cache=True)
-def _undistort(cam: NDArray[np.float64], row: float, col: float, iters: int) -> tuple[float, float]:
+def _undistort(cam: Float64Array, row: float, col: float, iters: int) -> tuple[float, float]:
     k1, k2, p1, p2, k3 = cam[4], cam[5], cam[6], cam[7], cam[8]
     ad = (col - cam[2]) / cam[0]
     bd = (row - cam[3]) / cam[1]
@@ -61,12 +62,12 @@ def _undistort(cam: NDArray[np.float64], row: float, col: float, iters: int) -> 
 
 @nb.njit(inline="always", cache=True)
 def _project_jac(
-    cam: NDArray[np.float64],
-    rot: NDArray[np.float64],
+    cam: Float64Array,
+    rot: Float64Array,
     x: float,
     y: float,
     z: float,
-    jac: NDArray[np.float64],
+    jac: Float64Array,
     r0: int,
 ) -> tuple[float, float]:
     """(row, col) of the world point in the camera ``rot`` (3 x 4: R | t), and the 2 x 3
@@ -102,7 +103,7 @@ def _project_jac(
 
 
 @nb.njit(inline="always", cache=True)
-def _solve3(m: NDArray[np.float64], v: NDArray[np.float64], out: NDArray[np.float64]) -> bool:
+def _solve3(m: Float64Array, v: Float64Array, out: Float64Array) -> bool:
     """``out = m^-1 v`` of a symmetric 3 x 3 (Cramer); False when singular."""
     c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
     c01 = m[1, 2] * m[2, 0] - m[1, 0] * m[2, 2]
@@ -123,9 +124,7 @@ def _solve3(m: NDArray[np.float64], v: NDArray[np.float64], out: NDArray[np.floa
 
 
 @nb.njit(inline="always", cache=True)
-def _normal_equations(
-    a: NDArray[np.float64], b: NDArray[np.float64], m: NDArray[np.float64], v: NDArray[np.float64]
-) -> None:
+def _normal_equations(a: Float64Array, b: Float64Array, m: Float64Array, v: Float64Array) -> None:
     """``m = a^T a`` (3, 3) and ``v = a^T b`` (3,) of a (4, 3) system, in place: the linear
     point's and each Gauss-Newton step's least squares."""
     for j in range(3):
@@ -141,12 +140,12 @@ def _normal_equations(
 
 @nb.njit(cache=True, nogil=True)
 def triangulate_kernel(
-    left: NDArray[np.float64],
-    right: NDArray[np.float64],
+    left: Float64Array,
+    right: Float64Array,
     rig: PackedRig,
     iterations: int,
     undistort_iterations: int,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """Refined 3-D points (n, 3) mm and RMS reprojection residuals (n,) px of the pairs
     ``left``, ``right`` (n, 2) ``(row, col)`` px; NaN where an input is NaN or the point
     is degenerate."""
@@ -208,7 +207,7 @@ def triangulate_kernel(
 
 
 @nb.njit(cache=True, nogil=True)
-def projection_jacobian_kernel(points: NDArray[np.float64], rig: PackedRig) -> NDArray[np.float64]:
+def projection_jacobian_kernel(points: Float64Array, rig: PackedRig) -> Float64Array:
     """``d(r_L, c_L, r_R, c_R)/d(X, Y, Z)`` (n, 4, 3) px/mm at points (n, 3) mm."""
     cam_l, cam_r, pose_l, pose_r = rig
     n = points.shape[0]

@@ -6,8 +6,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, UInt8Array
 from ..dic import Correlator, PointStatus
 from .camera import StereoRig
 from .triangulate import triangulate
@@ -15,17 +15,17 @@ from .triangulate import triangulate
 __all__ = ["StereoMatch", "match_reference", "plane_start"]
 
 
-def _unit(v: NDArray[np.float64]) -> NDArray[np.float64]:
+def _unit(v: Float64Array) -> Float64Array:
     return np.asarray(v / np.linalg.norm(v))
 
 
 def plane_start(
     rig: StereoRig,
-    rows: NDArray[np.float64],
-    cols: NDArray[np.float64],
+    rows: Float64Array,
+    cols: Float64Array,
     *,
     depth: float | None = None,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Affine start ``(u, du/dx, du/dy, v, dv/dx, dv/dy)`` (n, 6) of the left-to-right
     match of each POI, from a plane through the rig's crossing point (or at ``depth`` mm
     along the left axis) facing the bisector of the optical axes: the POI's ray meets the
@@ -36,7 +36,7 @@ def plane_start(
         p0 = np.array([0.0, 0.0, float(depth)])
     n = -(_unit(p0) + _unit(p0 - rig.right_centre))
 
-    def right_of(r: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
+    def right_of(r: Float64Array, c: Float64Array) -> Float64Array:
         d = rig.left.rays(np.stack([r, c], axis=1))
         with np.errstate(divide="ignore", invalid="ignore"):
             lam = (p0 @ n) / (d @ n)
@@ -81,19 +81,19 @@ class StereoMatch:
     def __init__(self, **kw: Any) -> None:
         self.__dict__.update(kw)
 
-    params: NDArray[np.float64]
-    right: NDArray[np.float64]
-    status: NDArray[np.uint8]
-    sigma: NDArray[np.float64]
-    points: NDArray[np.float64]
-    residual: NDArray[np.float64]
-    zncc: NDArray[np.float64]
+    params: Float64Array
+    right: Float64Array
+    status: UInt8Array
+    sigma: Float64Array
+    points: Float64Array
+    residual: Float64Array
+    zncc: Float64Array
 
 
 def match_reference(
     rig: StereoRig,
     left: Correlator,
-    right_image: NDArray[np.float64],
+    right_image: Float64Array,
     *,
     depth: float | None = None,
     max_epipolar: float = 1.0,
@@ -117,7 +117,7 @@ def match_reference(
 def _match(
     rig: StereoRig,
     left: Correlator,
-    right_image: NDArray[np.float64],
+    right_image: Float64Array,
     *,
     depth: float | None,
     max_epipolar: float,
@@ -135,7 +135,7 @@ def _match(
     if bad.any() and good.sum() >= 12:
         # a curved surface leaves the plane's start too far off at the edges: start the
         # failures from a quadratic in (row, col) fitted to the converged parameters
-        def basis(r: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
+        def basis(r: Float64Array, c: Float64Array) -> Float64Array:
             s_ = max(float(np.ptp(rows)), float(np.ptp(cols)), 1.0)
             x, y = (c - cols.mean()) / s_, (r - rows.mean()) / s_
             return np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)

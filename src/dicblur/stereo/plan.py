@@ -27,8 +27,8 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..errors import InputError
 from ..models import BlurUncertaintyModel, parse_quantity
 from .camera import StereoRig
@@ -50,7 +50,7 @@ Component = Literal["worst", "x", "y", "z"]
 ANGLES = (10.0, 15.0, 20.0, 30.0, 45.0, 60.0)
 
 
-def parse_vector(value: str | Sequence[Any], kind: str, name: str) -> NDArray[np.float64]:
+def parse_vector(value: str | Sequence[Any], kind: str, name: str) -> Float64Array:
     """Three components ``"0,0,100mm/s"`` (the unit of the last applies to bare numbers;
     each may carry its own) or a sequence of 3 numbers / strings, in the base unit of
     ``kind`` (:func:`dicblur.models.parse_quantity`)."""
@@ -74,7 +74,7 @@ def parse_vector(value: str | Sequence[Any], kind: str, name: str) -> NDArray[np
     return np.array(out, dtype=np.float64)
 
 
-def target_frame(rig: StereoRig, point: NDArray[np.float64]) -> NDArray[np.float64]:
+def target_frame(rig: StereoRig, point: Float64Array) -> Float64Array:
     """Rows ``x, y, z`` (3, 3) of the target frame at ``point`` (left frame, mm): ``z``
     the bisector of the two lines of sight (away from the rig), ``x`` the baseline made
     orthogonal to it, ``y = z x x`` (module docstring)."""
@@ -91,10 +91,10 @@ def target_frame(rig: StereoRig, point: NDArray[np.float64]) -> NDArray[np.float
 
 def _camera_cov(
     model: BlurUncertaintyModel,
-    vec: NDArray[np.float64],
+    vec: Float64Array,
     sigma: float | None,
     which: str | None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+) -> tuple[Float64Array, Float64Array, bool]:
     """(row, col) covariances (n, 2, 2) px^2 of blur vectors (n, 2), their W (n,), and
     whether every W lies inside the model's domain."""
     w = np.hypot(vec[:, 0], vec[:, 1])
@@ -117,11 +117,11 @@ def stereo_sigma(
     rig: StereoRig,
     model: BlurUncertaintyModel,
     *,
-    point: NDArray[np.float64],
-    motion: NDArray[np.float64],
+    point: Float64Array,
+    motion: Float64Array,
     sigma: float | None = None,
     which: str | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], bool]:
+) -> tuple[Float64Array, Float64Array, Float64Array, bool]:
     """Predicted sigma (n, 3) mm in the target frame of ``point`` for the motions during
     the exposure ``motion`` (n, 3) mm (left frame), with each camera's W (n,) px (left,
     right) and whether all W are inside the model's domain (module docstring)."""
@@ -215,8 +215,8 @@ class StereoPlan:
     inside_domain: bool
     angles: tuple[AngleOption, ...]
     best_angle: float
-    curve_exposure: NDArray[np.float64]
-    curve_sigma: NDArray[np.float64]
+    curve_exposure: Float64Array
+    curve_sigma: Float64Array
     notes: tuple[str, ...]
 
     def to_dict(self) -> dict[str, Any]:
@@ -232,7 +232,7 @@ class StereoPlan:
         return out
 
 
-def _score(sig: NDArray[np.float64], component: str) -> NDArray[np.float64]:
+def _score(sig: Float64Array, component: str) -> Float64Array:
     if component == "worst":
         return np.asarray(np.max(sig, axis=-1))
     return np.asarray(sig[..., "xyz".index(component)])
@@ -241,8 +241,8 @@ def _score(sig: NDArray[np.float64], component: str) -> NDArray[np.float64]:
 def _longest(
     rig: StereoRig,
     model: BlurUncertaintyModel,
-    point: NDArray[np.float64],
-    v_left: NDArray[np.float64],
+    point: Float64Array,
+    v_left: Float64Array,
     target: float,
     component: str,
     sigma: float | None,
@@ -257,7 +257,7 @@ def _longest(
     vl, vr = blur_vectors(rig, point[None], v_left[None])
     rate = max(float(np.hypot(*vl[0])), float(np.hypot(*vr[0])))
 
-    def scores(t: NDArray[np.float64]) -> NDArray[np.float64]:
+    def scores(t: Float64Array) -> Float64Array:
         sg = stereo_sigma(
             rig, model, point=point, motion=t[:, None] * v_left[None], sigma=sigma, which=which
         )[0]

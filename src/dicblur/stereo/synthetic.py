@@ -24,8 +24,9 @@ from typing import Literal
 
 import numba as nb
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array
 from ..camera import Camera
 from ..errors import InputError
 from ..patterns import SeedLike, make_rng, speckle_pattern
@@ -33,7 +34,7 @@ from .camera import CameraModel, StereoRig
 
 __all__ = ["SpeckleTarget", "StereoLab", "symmetric_rig"]
 
-Trajectory = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+Trajectory = Callable[[Float64Array], Float64Array]
 
 
 def symmetric_rig(
@@ -96,7 +97,7 @@ class SpeckleTarget:
     kind: Literal["plane", "cylinder"]
     origin: tuple[float, float, float]
     normal: tuple[float, float, float]
-    texture: NDArray[np.float64]
+    texture: Float64Array
     texel: float
     radius: float = math.inf
 
@@ -210,7 +211,7 @@ class SpeckleTarget:
             texel=float(texel),
         )
 
-    def frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    def frame(self) -> tuple[Float64Array, Float64Array, Float64Array]:
         """Unit axes ``(e_s, e_t, n)`` of the texture at ``origin``: ``e_t`` along the
         rig's y projected on the surface, ``e_s = e_t x n``."""
         n = np.asarray(self.normal)
@@ -220,8 +221,8 @@ class SpeckleTarget:
         return es, et, n
 
     def intersect(
-        self, origins: NDArray[np.float64], dirs: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        self, origins: Float64Array, dirs: Float64Array
+    ) -> tuple[Float64Array, Float64Array]:
         """Ray parameter ``lam`` (n,) of the first hit of rays ``origins + lam dirs`` and
         the texture coordinates (n, 2) ``(s, t)`` mm there (NaN: a miss)."""
         o0 = np.asarray(self.origin)
@@ -249,7 +250,7 @@ class SpeckleTarget:
         st = np.stack([rad * ang, p @ et], axis=1)
         return lam, st
 
-    def point(self, st: ArrayLike) -> NDArray[np.float64]:
+    def point(self, st: ArrayLike) -> Float64Array:
         """Surface points (n, 3) mm at texture coordinates ``(s, t)`` (n, 2) mm, at rest."""
         q = np.asarray(st, dtype=np.float64)
         es, et, n = self.frame()
@@ -296,10 +297,10 @@ class StereoLab:
     camera: Camera = field(default_factory=lambda: Camera(read_noise=2.0, bit_depth=None))
     supersample: int = 2
     substeps: int | None = None
-    _rays_cache: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
+    _rays_cache: dict[str, tuple[Float64Array, Float64Array]] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
-    _coef: NDArray[np.float64] | None = field(default=None, init=False, repr=False, compare=False)
+    _coef: Float64Array | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.fps > 0 or not 0 <= self.exposure <= 1.0 / self.fps:
@@ -309,7 +310,7 @@ class StereoLab:
         if not 1 <= int(self.supersample) <= 8:
             raise InputError(f"supersample={self.supersample!r}: expected 1..8")
 
-    def times(self, frame: int) -> NDArray[np.float64]:
+    def times(self, frame: int) -> Float64Array:
         """Sub-exposure instants of a frame, s (the mid-points of equal slices)."""
         k = self._substeps(frame)
         t0 = frame / self.fps
@@ -325,23 +326,19 @@ class StereoLab:
         w = max(float(np.linalg.norm(wl[1] - wl[0])), float(np.linalg.norm(wr[1] - wr[0])))
         return max(8, math.ceil(4 * w) + 1) if self.exposure > 0 else 1
 
-    def mean_displacement(self, frame: int) -> NDArray[np.float64]:
+    def mean_displacement(self, frame: int) -> Float64Array:
         """The target's translation averaged over the frame's exposure (3,) mm: what a
         blurred frame shows (its sub-exposures' mean, as rendered)."""
         return np.asarray(self.trajectory(self.times(frame)).mean(axis=0))
 
-    def _rays(
-        self, side: Literal["left", "right"]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _rays(self, side: Literal["left", "right"]) -> tuple[Float64Array, Float64Array]:
         # cast once per laboratory and camera (kept on the instance: a key such as id()
         # could be reused by a later laboratory)
         if side not in self._rays_cache:
             self._rays_cache[side] = self._cast(side)
         return self._rays_cache[side]
 
-    def _cast(
-        self, side: Literal["left", "right"]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _cast(self, side: Literal["left", "right"]) -> tuple[Float64Array, Float64Array]:
         """Origins and directions (n, 3) of the supersampled pixel rays (left frame)."""
         cam = self.rig.left if side == "left" else self.rig.right
         s = int(self.supersample)
@@ -357,7 +354,7 @@ class StereoLab:
 
     def render(
         self, frame: int, *, seed: SeedLike = None, noise: bool = True
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[Float64Array, Float64Array]:
         """The left and the right image of ``frame`` (grey levels, (rows, cols) each).
 
         ``seed`` draws the two images' noise (independent streams of one generator);
@@ -391,7 +388,7 @@ class StereoLab:
             out.append(self.camera.capture(img, rng=rng) if noise else img)
         return out[0], out[1]
 
-    def surface_point(self, left_rc: ArrayLike, frame: int | None = None) -> NDArray[np.float64]:
+    def surface_point(self, left_rc: ArrayLike, frame: int | None = None) -> Float64Array:
         """The true 3-D point (n, 3) mm seen at left image points ``(row, col)`` with the
         target at rest (``frame`` None) or at its mean position of ``frame``."""
         rc = np.atleast_2d(np.asarray(left_rc, dtype=np.float64))
@@ -402,7 +399,7 @@ class StereoLab:
 
 
 @nb.njit(cache=True, nogil=True)
-def _bspline3(coef: NDArray[np.float64], y: float, x: float) -> float:  # pragma: no cover
+def _bspline3(coef: Float64Array, y: float, x: float) -> float:  # pragma: no cover
     """The periodic cubic B-spline of coefficients ``coef`` at texel coordinates."""
     ny, nx = coef.shape
     fy, fx = math.floor(y), math.floor(x)
@@ -426,13 +423,13 @@ def _bspline3(coef: NDArray[np.float64], y: float, x: float) -> float:  # pragma
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def accumulate_rays(
-    coef: NDArray[np.float64],
-    origins: NDArray[np.float64],
-    dirs: NDArray[np.float64],
-    frame: NDArray[np.float64],
+    coef: Float64Array,
+    origins: Float64Array,
+    dirs: Float64Array,
+    frame: Float64Array,
     radius: float,
     texel: float,
-    acc: NDArray[np.float64],
+    acc: Float64Array,
 ) -> None:  # pragma: no cover - compiled
     """``acc += texture`` where each ray ``origins + lam dirs`` first meets the surface
     (``SpeckleTarget.intersect``, the same formulas; a miss adds 0). ``frame`` rows:

@@ -15,8 +15,9 @@ order ``dX/dx = (J_p^T J_p)^-1 J_p^T`` (exact for a zero residual) and the covar
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import Float64Array
 from ..errors import InputError
 from .camera import UNDISTORT_ITERATIONS, StereoRig
 from .kernels import PackedRig, pack_camera, projection_jacobian_kernel, triangulate_kernel
@@ -34,7 +35,7 @@ __all__ = [
 REFINE_ITERATIONS = 4
 
 
-def _points(rc: ArrayLike, name: str) -> NDArray[np.float64]:
+def _points(rc: ArrayLike, name: str) -> Float64Array:
     p = np.asarray(rc, dtype=np.float64)
     if p.ndim == 1:
         p = p[None, :]
@@ -43,9 +44,7 @@ def _points(rc: ArrayLike, name: str) -> NDArray[np.float64]:
     return p
 
 
-def _dlt(
-    rig: StereoRig, ab_l: NDArray[np.float64], ab_r: NDArray[np.float64]
-) -> NDArray[np.float64]:
+def _dlt(rig: StereoRig, ab_l: Float64Array, ab_r: Float64Array) -> Float64Array:
     """Linear triangulation of normalised coordinates, (n, 3); the smallest singular vector
     of the 4 x 4 system of each pair."""
     p_l = np.hstack([np.eye(3), np.zeros((3, 1))])
@@ -65,7 +64,7 @@ def _dlt(
     return out
 
 
-def _project4(rig: StereoRig, x: NDArray[np.float64]) -> NDArray[np.float64]:
+def _project4(rig: StereoRig, x: Float64Array) -> Float64Array:
     pl, pr = rig.project(x)
     return np.concatenate([pl, pr], axis=-1)
 
@@ -76,14 +75,14 @@ def _packed(rig: StereoRig) -> PackedRig:
     return PackedRig(pack_camera(rig.left), pack_camera(rig.right), pose_l, pose_r)
 
 
-def projection_jacobian(rig: StereoRig, x: ArrayLike) -> NDArray[np.float64]:
+def projection_jacobian(rig: StereoRig, x: ArrayLike) -> Float64Array:
     """``d(r_L, c_L, r_R, c_R) / d(X, Y, Z)`` at left-frame points (n, 3) mm: (n, 4, 3)
     px/mm (analytic, :mod:`.kernels`; NaN for a point at or behind a camera)."""
     p = np.ascontiguousarray(np.atleast_2d(np.asarray(x, dtype=np.float64)))
     return np.asarray(projection_jacobian_kernel(p, _packed(rig)))
 
 
-def numeric_projection_jacobian(rig: StereoRig, x: ArrayLike) -> NDArray[np.float64]:
+def numeric_projection_jacobian(rig: StereoRig, x: ArrayLike) -> Float64Array:
     """:func:`projection_jacobian` by central differences (step 1e-6 of the distance:
     relative error ~1e-10), the check of the analytic one."""
     p = np.atleast_2d(np.asarray(x, dtype=np.float64))
@@ -98,7 +97,7 @@ def numeric_projection_jacobian(rig: StereoRig, x: ArrayLike) -> NDArray[np.floa
 
 def triangulate(
     rig: StereoRig, left: ArrayLike, right: ArrayLike, *, refine: bool = True
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """3-D points of image-point pairs.
 
     Parameters
@@ -138,7 +137,7 @@ def triangulate(
     return x, np.sqrt(np.mean(res * res, axis=1))
 
 
-def triangulation_jacobian(rig: StereoRig, points: ArrayLike) -> NDArray[np.float64]:
+def triangulation_jacobian(rig: StereoRig, points: ArrayLike) -> Float64Array:
     """``G = dX / d(r_L, c_L, r_R, c_R)`` at triangulated points (n, 3): (n, 3, 4) mm/px,
     ``(J_p^T J_p)^-1 J_p^T`` (module docstring)."""
     jp = projection_jacobian(rig, points)
@@ -146,9 +145,7 @@ def triangulation_jacobian(rig: StereoRig, points: ArrayLike) -> NDArray[np.floa
     return np.asarray(np.linalg.solve(jtj, np.transpose(jp, (0, 2, 1))))
 
 
-def propagate(
-    jacobian: ArrayLike, cov_left: ArrayLike, cov_right: ArrayLike
-) -> NDArray[np.float64]:
+def propagate(jacobian: ArrayLike, cov_left: ArrayLike, cov_right: ArrayLike) -> Float64Array:
     """Covariance of the 3-D points (n, 3, 3), mm^2, from the image covariances.
 
     Parameters

@@ -26,8 +26,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..track.uncertainty import BlurTable
 from .camera import StereoRig
 
@@ -40,8 +40,8 @@ __all__ = [
 
 
 def blur_vectors(
-    rig: StereoRig, points: NDArray[np.float64], motion: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    rig: StereoRig, points: Float64Array, motion: Float64Array
+) -> tuple[Float64Array, Float64Array]:
     """Each camera's blur vector ``(d_row, d_col)`` px, (..., 2) each, of points (..., 3)
     mm moving by ``motion`` (..., 3) mm during the exposure (left frame)."""
     a, b = points - 0.5 * motion, points + 0.5 * motion
@@ -50,7 +50,7 @@ def blur_vectors(
     return lb - la, rb - ra
 
 
-def length_angle(vec: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def length_angle(vec: Float64Array) -> tuple[Float64Array, Float64Array]:
     """Blur length W (px) and direction (deg in [0, 180) from +x towards +y) of
     ``(d_row, d_col)`` vectors, as ``dicblur track`` stores them."""
     w = np.hypot(vec[..., 0], vec[..., 1])
@@ -60,10 +60,10 @@ def length_angle(vec: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray
 
 def camera_covariance(
     table: BlurTable,
-    blur: NDArray[np.float64],
-    angle: NDArray[np.float64],
-    variance: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    blur: Float64Array,
+    angle: Float64Array,
+    variance: Float64Array,
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """Image-plane noise covariance (frames, points, 2, 2) px^2 in ``(row, col)`` of one
     camera, its noise std per component (frames, points, 2), and the signed blur-mismatch
     shift ``xi`` (frames, points, 2) px in ``(row, col)`` (module docstring).
@@ -81,7 +81,7 @@ def camera_covariance(
     return cov, noise, xi
 
 
-def relative_shift(xi: NDArray[np.float64], reference: int) -> NDArray[np.float64]:
+def relative_shift(xi: Float64Array, reference: int) -> Float64Array:
     """The mismatch shift of each frame against a reference that is itself blurred,
     (frames, points, k) px: ``xi - xi[reference]``.
 

@@ -25,8 +25,8 @@ from __future__ import annotations
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from .fit import plane_weights
 
 __all__ = [
@@ -40,7 +40,7 @@ __all__ = [
 Kind = Literal["green-lagrange", "small"]
 
 
-def overlap_correlation(dr: Any, dc: Any, subset: int) -> NDArray[np.float64]:
+def overlap_correlation(dr: Any, dc: Any, subset: int) -> Float64Array:
     """Correlation of the noise errors of two points ``(dr, dc)`` px apart whose square
     subsets of ``subset`` px share pixels: their shared area over a subset's (eq. 4)."""
     a = np.clip(1.0 - np.abs(np.asarray(dr, np.float64)) / subset, 0.0, None)
@@ -48,7 +48,7 @@ def overlap_correlation(dr: Any, dc: Any, subset: int) -> NDArray[np.float64]:
     return np.asarray(a * b)
 
 
-def window_correlation(half: int, step: float, subset: int) -> NDArray[np.float64]:
+def window_correlation(half: int, step: float, subset: int) -> Float64Array:
     """The (N**2, N**2) correlation matrix of the noise errors of a window's points
     (row-major), eq. 4."""
     k = np.arange(-half, half + 1)
@@ -60,7 +60,7 @@ def window_correlation(half: int, step: float, subset: int) -> NDArray[np.float6
 
 def noise_kernels(
     half: int, step: float, subset: int
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array, Float64Array]:
     """Kernels ``K`` with ``var(ux) = sum_k K_xx[k] s_k**2`` (eq. 5), and ``K_yy``,
     ``K_xy`` (for ``cov(ux, uy)``), each (N, N), 1/px**2."""
     gx, gy = plane_weights(half, step)

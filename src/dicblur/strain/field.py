@@ -9,6 +9,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float64Array, FloatArray, Int64Array, UInt8Array
 from ..dic.result import DICResult
 from ..dic.status import PointStatus
 from ..errors import InputError
@@ -144,25 +145,25 @@ class StrainField:
         Grid step and subset size, px.
     """
 
-    rows: NDArray[np.int64]
-    cols: NDArray[np.int64]
-    exx: NDArray[np.float64]
-    eyy: NDArray[np.float64]
-    exy: NDArray[np.float64]
-    e1: NDArray[np.float64]
-    e2: NDArray[np.float64]
-    angle: NDArray[np.float64]
-    sigma_exx: NDArray[np.float64] | None
-    sigma_eyy: NDArray[np.float64] | None
-    sigma_exy: NDArray[np.float64] | None
-    sigma_e1: NDArray[np.float64] | None
-    sigma_e2: NDArray[np.float64] | None
-    sigma_angle: NDArray[np.float64] | None
-    sigma_exx_noise: NDArray[np.float64] | None
-    sigma_exx_blur: NDArray[np.float64] | None
-    cov: NDArray[np.float64] | None
-    status: NDArray[np.uint8]
-    window: NDArray[np.int64]
+    rows: Int64Array
+    cols: Int64Array
+    exx: Float64Array
+    eyy: Float64Array
+    exy: Float64Array
+    e1: Float64Array
+    e2: Float64Array
+    angle: Float64Array
+    sigma_exx: Float64Array | None
+    sigma_eyy: Float64Array | None
+    sigma_exy: Float64Array | None
+    sigma_e1: Float64Array | None
+    sigma_e2: Float64Array | None
+    sigma_angle: Float64Array | None
+    sigma_exx_noise: Float64Array | None
+    sigma_exx_blur: Float64Array | None
+    cov: Float64Array | None
+    status: UInt8Array
+    window: Int64Array
     vsg: float
     kind: str
     method: str
@@ -223,9 +224,7 @@ def grid_of(rows: NDArray[Any], cols: NDArray[Any]) -> tuple[tuple[int, int], in
     return (ny, nx), int(sr[0]) if sr.size else 0, int(sc[0]) if sc.size else 0
 
 
-def _principal(
-    exx: NDArray[np.float64], eyy: NDArray[np.float64], exy: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], ...]:
+def _principal(exx: Float64Array, eyy: Float64Array, exy: Float64Array) -> tuple[Float64Array, ...]:
     """``e1, e2, angle`` and the rows of the Jacobian of ``r = (e1 - e2) / 2`` and of the
     angle with respect to (exx, eyy, exy) (eq. 10)."""
     m = 0.5 * (exx + eyy)
@@ -240,19 +239,19 @@ def _principal(
 
 
 def strain_on_grid(
-    u: NDArray[np.floating[Any]],
-    v: NDArray[np.floating[Any]],
-    valid: NDArray[np.bool_],
+    u: FloatArray,
+    v: FloatArray,
+    valid: BoolArray,
     *,
     step: int,
     subset: int,
     window: int = 5,
     kind: Kind = "green-lagrange",
-    sigma_u: NDArray[np.floating[Any]] | None = None,
-    sigma_v: NDArray[np.floating[Any]] | None = None,
-    shift_u: NDArray[np.floating[Any]] | None = None,
-    shift_v: NDArray[np.floating[Any]] | None = None,
-    gradients: tuple[NDArray[np.floating[Any]], ...] | None = None,
+    sigma_u: FloatArray | None = None,
+    sigma_v: FloatArray | None = None,
+    shift_u: FloatArray | None = None,
+    shift_v: FloatArray | None = None,
+    gradients: tuple[FloatArray, ...] | None = None,
     rows: NDArray[Any] | None = None,
     cols: NDArray[Any] | None = None,
     with_principal_sigma: bool = True,

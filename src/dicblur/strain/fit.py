@@ -16,12 +16,13 @@ so a crack or an edge (failed points there) is never smoothed over.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
+
+from ..arrays import BoolArray, Float64Array, Int64Array
 
 __all__ = ["box_count", "choose_half", "plane_weights"]
 
 
-def plane_weights(half: int, step: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def plane_weights(half: int, step: float) -> tuple[Float64Array, Float64Array]:
     """The weights of the plane fit's slopes over a complete ``(2 half + 1)**2`` window.
 
     Parameters
@@ -44,7 +45,7 @@ def plane_weights(half: int, step: float) -> tuple[NDArray[np.float64], NDArray[
     return np.ascontiguousarray(gx), np.ascontiguousarray(gx.T)
 
 
-def box_count(mask: NDArray[np.bool_], half: int) -> NDArray[np.int64]:
+def box_count(mask: BoolArray, half: int) -> Int64Array:
     """Number of True cells in the ``(2 half + 1)**2`` window around every cell of
     ``mask`` (..., rows, cols); cells outside the grid count as False."""
     m = np.asarray(mask, np.int64)
@@ -56,7 +57,7 @@ def box_count(mask: NDArray[np.bool_], half: int) -> NDArray[np.int64]:
     )
 
 
-def choose_half(valid: NDArray[np.bool_], half: int) -> NDArray[np.int64]:
+def choose_half(valid: BoolArray, half: int) -> Int64Array:
     """The largest window half-width ``<= half`` whose complete window around each cell
     is all valid (0: none of at least 1), shape of ``valid`` (..., rows, cols)."""
     use = np.zeros(valid.shape, np.int64)

@@ -7,7 +7,8 @@ from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
-from numpy.typing import NDArray
+
+from ..arrays import Float64Array, Int64Array
 
 __all__ = [
     "N_GRAD",
@@ -34,13 +35,13 @@ N_GRAD = 14
 class WindowFields(NamedTuple):
     """The (frames, rows, cols) fields of :func:`window_pass`."""
 
-    u: NDArray[np.float64]  # displacements, px (0 where not valid)
-    v: NDArray[np.float64]
-    use: NDArray[np.int64]  # window half-width of each point (0: no window)
-    s2u: NDArray[np.float64]  # noise variances, px**2
-    s2v: NDArray[np.float64]
-    xu: NDArray[np.float64]  # signed blur shifts, px (read when ``blur``)
-    xv: NDArray[np.float64]
+    u: Float64Array  # displacements, px (0 where not valid)
+    v: Float64Array
+    use: Int64Array  # window half-width of each point (0: no window)
+    s2u: Float64Array  # noise variances, px**2
+    s2v: Float64Array
+    xu: Float64Array  # signed blur shifts, px (read when ``blur``)
+    xv: Float64Array
 
 
 class WindowKernels(NamedTuple):
@@ -48,17 +49,15 @@ class WindowKernels(NamedTuple):
     the window centred at index ``H``: the slope weights ``gx[h]``, ``gy[h]`` (eq. 1) and
     the noise kernels ``kxx[h]``, ``kyy[h]``, ``kxy[h]`` (eq. 5)."""
 
-    gx: NDArray[np.float64]
-    gy: NDArray[np.float64]
-    kxx: NDArray[np.float64]
-    kyy: NDArray[np.float64]
-    kxy: NDArray[np.float64]
+    gx: Float64Array
+    gy: Float64Array
+    kxx: Float64Array
+    kyy: Float64Array
+    kxy: Float64Array
 
 
 @nb.njit(inline="always", cache=True)
-def _add_gradient(
-    acc: NDArray[np.float64], i0: int, wx: float, wy: float, a: float, b: float
-) -> None:
+def _add_gradient(acc: Float64Array, i0: int, wx: float, wy: float, a: float, b: float) -> None:
     """``acc[i0:i0 + 4] += (wx a, wy a, wx b, wy b)``: one point's share of the slopes of
     the two fields ``a`` (u) and ``b`` (v)."""
     acc[i0] += wx * a
@@ -69,7 +68,7 @@ def _add_gradient(
 
 @nb.njit(inline="always", cache=True)
 def _add_variance(
-    acc: NDArray[np.float64], i0: int, qxx: float, qyy: float, qxy: float, s2: float
+    acc: Float64Array, i0: int, qxx: float, qyy: float, qxy: float, s2: float
 ) -> None:
     """``acc[i0:i0 + 3] += (qxx, qyy, qxy) s2``: one point's share of the slopes' noise
     covariance of one field of noise variance ``s2``."""
@@ -79,9 +78,7 @@ def _add_variance(
 
 
 @nb.njit(cache=True, nogil=True)
-def window_pass(
-    fields: WindowFields, blur: bool, kern: WindowKernels, out: NDArray[np.float64]
-) -> None:
+def window_pass(fields: WindowFields, blur: bool, kern: WindowKernels, out: Float64Array) -> None:
     """Window sums of every point of the (frames, rows, cols) ``fields`` whose window
     half-width ``use`` is > 0: ``out[f, r, c, :]`` (:data:`N_GRAD` values; NaN where
     ``use`` is 0, the blur errors 0 without ``blur``). Callers give windows that lie
@@ -120,7 +117,7 @@ def window_pass(
 
 
 @nb.njit(cache=True, nogil=True)
-def measure_pass(grad: NDArray[np.float64], green: bool, out: NDArray[np.float64]) -> None:
+def measure_pass(grad: Float64Array, green: bool, out: Float64Array) -> None:
     """Strains and their covariance from the gradients of :func:`window_pass` (any
     leading shape flattened: ``grad`` (n, N_GRAD), ``out`` (n, N_OUT)): eq. 7 (the
     measure: Green-Lagrange when ``green``, else small strain) and eq. 8 (``J Sigma_g

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array
 from ..errors import InputError
 from ..models.model import BlurUncertaintyModel
 from ..models.units import parse_quantity
@@ -48,14 +48,14 @@ def factors(window: int, step: float, subset: int) -> tuple[float, float]:
 
 def strain_sigma_curve(
     model: BlurUncertaintyModel,
-    blur: NDArray[np.float64],
+    blur: Float64Array,
     *,
     window: int,
     step: float,
     subset: int,
     sigma: float | None = None,
     which: str | None = None,
-) -> tuple[NDArray[np.float64], bool]:
+) -> tuple[Float64Array, bool]:
     """``sigma_exx`` at the blur lengths ``blur`` (px) for a window of N points, grid step
     and subset in px (eq. 11), and whether the model split noise from blur."""
     pred = model.predict(blur, sigma, model=which)
@@ -96,11 +96,11 @@ class StrainPlan:
     exposure: float
     blur: float
     sigma_exx: float
-    curve_exposure: NDArray[np.float64]
-    curve_sigma_exx: NDArray[np.float64]
-    tradeoff_vsg: NDArray[np.float64]
-    tradeoff_exposure: NDArray[np.float64]
-    tradeoff_sigma: NDArray[np.float64]
+    curve_exposure: Float64Array
+    curve_sigma_exx: Float64Array
+    tradeoff_vsg: Float64Array
+    tradeoff_exposure: Float64Array
+    tradeoff_sigma: Float64Array
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     def summary(self) -> str:

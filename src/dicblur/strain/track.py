@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, IndexArray
 from ..errors import InputError
 from .covariance import Kind
 from .field import strain_on_grid, vsg
@@ -53,13 +54,13 @@ def check_strain_window(window: Any, points: Any = None, name: str = "strain") -
 def track_strain(
     u: NDArray[Any],
     v: NDArray[Any],
-    valid: NDArray[np.bool_],
+    valid: BoolArray,
     sigma_u_noise: NDArray[Any],
     sigma_v_noise: NDArray[Any],
     table: Any,
     w: NDArray[Any],
     angle: NDArray[Any],
-    table_points: NDArray[np.intp],
+    table_points: IndexArray,
     grid_shape: tuple[int, int],
     *,
     step: int,

@@ -25,8 +25,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, IndexArray
 from ..errors import InputError
 from ..models import PoissonGaussianCamera, predict_compensated, predict_from_pattern
 from .noise import NoiseEstimate
@@ -59,8 +59,8 @@ def _fmt(t: float) -> str:
 
 
 def static_error_curve(
-    reference: NDArray[np.float64],
-    points: NDArray[np.intp],
+    reference: Float64Array,
+    points: IndexArray,
     *,
     w_max: float,
     noise_sigma: float,
@@ -103,16 +103,16 @@ def static_error_curve(
 
 
 def _curve(
-    nodes: NDArray[np.float64],
-    lin: NDArray[np.float64],
-    quad: NDArray[np.float64],
-    mis: NDArray[np.float64],
+    nodes: Float64Array,
+    lin: Float64Array,
+    quad: Float64Array,
+    mis: Float64Array,
 ) -> Any:
     """``u_e(W, sigma)`` from the terms per unit sigma^2, sigma^4 and the mismatch (px) at
     ``nodes``, linear in W^2 between them; NaN beyond the last node."""
     b2 = nodes**2
 
-    def u_e(w: NDArray[np.float64], sigma: float) -> NDArray[np.float64]:
+    def u_e(w: Float64Array, sigma: float) -> Float64Array:
         w2 = np.asarray(w, dtype=np.float64) ** 2
         out = np.sqrt(
             sigma**2 * np.interp(w2, b2, lin)
@@ -125,10 +125,10 @@ def _curve(
 
 
 def advise_exposure(
-    reference: NDArray[np.float64],
-    centres: NDArray[np.intp],
-    speed: NDArray[np.float64],
-    angle: NDArray[np.float64],
+    reference: Float64Array,
+    centres: IndexArray,
+    speed: Float64Array,
+    angle: Float64Array,
     *,
     exposure: float,
     fps: float,

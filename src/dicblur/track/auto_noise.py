@@ -19,9 +19,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter
 
+from ..arrays import BoolArray, Float64Array
 from ..dic import Correlator, PointStatus
 from ..dic.noise import residual_noise, residual_variance
 from ..sequence import Recording
@@ -33,7 +33,7 @@ NOISE_FRAMES = 8
 __all__ = ["NOISE_FRAMES", "residual_frame_noise"]
 
 
-def _subset_norms(reference: NDArray[np.float64], corr: Correlator) -> NDArray[np.float64]:
+def _subset_norms(reference: Float64Array, corr: Correlator) -> Float64Array:
     """``Df`` of every POI: the norm of its zero-mean reference subset, GL."""
     n = corr.subset
     img = np.asarray(reference, np.float64)
@@ -46,7 +46,7 @@ def _subset_norms(reference: NDArray[np.float64], corr: Correlator) -> NDArray[n
 def residual_frame_noise(
     rec: Recording,
     corr: Correlator,
-    reference_image: NDArray[np.float64],
+    reference_image: Float64Array,
     *,
     reference: int,
     frames: tuple[int, int],
@@ -72,7 +72,7 @@ def residual_frame_noise(
     use = sorted(set(near) | {others[i] for i in spread})
     fnorm = _subset_norms(reference_image, corr)
     m = corr.subset * corr.subset - (6 if corr.shape == "affine" else 2) - 2
-    per: list[tuple[int, NDArray[np.float64], NDArray[np.bool_], Any]] = []
+    per: list[tuple[int, Float64Array, BoolArray, Any]] = []
     for k in use:
         img = rec.frame(k)
         if np.array_equal(img, reference_image):

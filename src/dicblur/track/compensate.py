@@ -37,8 +37,8 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, FloatArray, IndexArray, Int64Array, UInt8Array
 from ..dic import Correlator, PointStatus
 from ..dic.compensation import blur_reference
 from ..models.compensated import compensated_covariance
@@ -79,16 +79,16 @@ MATCHER_COMPENSATED = "compensated (blur='given', blur vector per point from the
 
 
 def blur_vectors(
-    frames: NDArray[np.int64],
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    status: NDArray[np.uint8],
+    frames: Int64Array,
+    u: Float64Array,
+    v: Float64Array,
+    status: UInt8Array,
     *,
     fps: float,
     exposure: float,
     half_window: int,
     grid_shape: tuple[int, int] | None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[Float64Array, Float64Array]:
     """Motion of every point during every exposure, ``(blur_u, blur_v)`` (frames, points)
     px, from the track (converged points passing the normalised median test); NaN where
     unknown, all NaN when the frames are not consecutive."""
@@ -112,13 +112,13 @@ def blur_vectors(
 
 
 def group_vectors(
-    vec: NDArray[np.float64],
+    vec: Float64Array,
     *,
     subset: int,
     quantum: float = QUANTUM,
     max_groups: int = MAX_GROUPS,
     uniform: float = UNIFORM_PX,
-) -> tuple[NDArray[np.float64], int]:
+) -> tuple[Float64Array, int]:
     """Blur vectors (n, 2) ``(dy, dx)`` px of one frame, grouped for the matcher.
 
     Vectors within ``uniform`` px of the frame's median vector take it (rounded to
@@ -162,12 +162,12 @@ class PassStart:
         (``OUT_OF_BOUNDS``) keeps that result.
     """
 
-    frames: NDArray[np.int64]
-    u: NDArray[np.float64]
-    v: NDArray[np.float64]
-    blur_u: NDArray[np.float64]
-    blur_v: NDArray[np.float64]
-    status: NDArray[np.uint8]
+    frames: Int64Array
+    u: Float64Array
+    v: Float64Array
+    blur_u: Float64Array
+    blur_v: Float64Array
+    status: UInt8Array
 
     def rows(self, start: int, stop: int) -> PassStart:
         """The frames ``start .. stop - 1`` (positions, not frame numbers)."""
@@ -249,13 +249,13 @@ def pass_frames(
 
 
 def build_compensated_table(
-    reference: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    reference: Float64Array,
+    centres: IndexArray,
     *,
     subset: int,
     shape: str,
-    blur: NDArray[np.floating[Any]],
-    angle: NDArray[np.floating[Any]],
+    blur: FloatArray,
+    angle: FloatArray,
     min_blur: float = 0.5,
     have: BlurTable | None = None,
     threads: int = 1,

@@ -30,6 +30,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..arrays import Float64Array
 from ..checks import check_positive
 from ..dic import Correlator, MatcherSettings, PointStatus
 from ..dic.initial import window_spectrum
@@ -376,8 +377,8 @@ def track(
     # the serial loop's seeds (the chunks make theirs: track.parallel)
     seeds0 = seeds = None if chunks is not None else seed_correlator(ref_img, corr0, opts)
     # the last frame's displacement gradients (affine: the next frame's start)
-    grads: NDArray[np.float64] | None = None
-    grads0: NDArray[np.float64] | None = None
+    grads: Float64Array | None = None
+    grads0: Float64Array | None = None
     corr = corr0
     grid = poi_grid(corr0)  # the current Correlator's grid (the guesses' smoothing)
     n_pts = corr0.n_points
@@ -386,15 +387,15 @@ def track(
     order = list(range(reference, f1)) + list(range(reference - 1, f0 - 1, -1))
     out = Tracked([], [], [], [], [], [])
     refs: list[int] = []
-    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    hist: list[tuple[Float64Array, Float64Array]] = []
     # the rigid shift of each frame in hist (sub-pixel phase correlation; None: no peak)
-    rig: list[NDArray[np.float64] | None] = []
-    rig_ref: NDArray[np.float64] | None = None
-    ref_field: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+    rig: list[Float64Array | None] = []
+    rig_ref: Float64Array | None = None
+    ref_field: tuple[Float64Array, Float64Array] | None = None
     base = np.zeros((n_pts, 2))  # displacement of the current reference's POIs (px)
     ref_now, ref_share = reference, 1.0
     spectrum = {reference: window_spectrum(ref_img)}
-    prev: tuple[int, NDArray[np.float64]] | None = None
+    prev: tuple[int, Float64Array] | None = None
     error: BaseException | None = None
     t_start = time.perf_counter()
     t_corr = 0.0  # inside Correlator.correlate (the engine, with the loop's guesses)

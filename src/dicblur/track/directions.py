@@ -6,12 +6,11 @@
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numba as nb
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, FloatArray, IndexArray
 from ..errors import InputError
 from ..threads import each
 
@@ -22,9 +21,7 @@ BLUR_STEP = 1.0  # px between blur nodes of the table
 ANGLE_TOLERANCE_PX = 0.05
 
 
-def samples(
-    w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
-) -> tuple[NDArray[np.floating[Any]], NDArray[np.floating[Any]]]:
+def samples(w: FloatArray, angle: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``w``, ``angle`` as C-contiguous 2-d float arrays of one shape (float32 stays
     float32: :func:`_interpolate` squares ``w`` in its own precision, as the table's
     lookup always has)."""
@@ -56,9 +53,7 @@ def _mod180(t: float) -> float:
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def direction_pair(
-    angle: float, phase: float, node: NDArray[np.intp]
-) -> tuple[int, int, float, bool]:
+def direction_pair(angle: float, phase: float, node: IndexArray) -> tuple[int, int, float, bool]:
     """The direction nodes ``phase + k ANGLE_STEP`` (deg) around ``angle`` (deg; NaN: 0)
     and the fraction of the way from the first to the second: ``(j0, j1, t, True)`` when
     both were computed (``node[k]`` is ``k``, else -1), else ``(k, k, 0, False)`` with
@@ -89,10 +84,10 @@ def direction_pair(
 #: ``(values, b2, w_top, phase, node)``, the values (a, m, n, 6), the squares of the W
 #: nodes (m,), the last W node (px), the first direction node (deg) and
 #: :func:`node_index` of the computed direction nodes.
-KernelTable = tuple[NDArray[np.float64], NDArray[np.float64], float, float, NDArray[np.intp]]
+KernelTable = tuple[Float64Array, Float64Array, float, float, IndexArray]
 
 
-def node_index(available: NDArray[np.bool_]) -> NDArray[np.intp]:
+def node_index(available: BoolArray) -> IndexArray:
     """``node[k]``: ``k`` where direction node ``k`` was computed, else -1 (as
     :func:`direction_pair` takes them)."""
     return np.where(available, np.arange(available.size), -1).astype(np.intp)
@@ -104,7 +99,7 @@ def _interpolate(
     w: float,
     angle: float,
     q: int,
-    buf: NDArray[np.float64],
+    buf: Float64Array,
 ) -> None:
     """The 6 table values of point ``q`` at blur ``w`` (px) along ``angle`` (deg) into
     ``buf``: linear in ``W**2`` between the W nodes (squares ``b2``; the mismatch shift's
@@ -142,10 +137,10 @@ def _interpolate(
 @nb.njit(cache=True, nogil=True)
 def lookup_rows(
     table: KernelTable,
-    w: NDArray[np.floating[Any]],
-    angle: NDArray[np.floating[Any]],
-    cols: NDArray[np.intp],
-    out: NDArray[np.float64],
+    w: FloatArray,
+    angle: FloatArray,
+    cols: IndexArray,
+    out: Float64Array,
 ) -> None:
     """:func:`_interpolate` of every frame of ``w``, ``angle`` (frames, points) and table
     point ``q`` (column ``cols[q]``) into ``out`` (frames, n, 6)."""
@@ -157,12 +152,12 @@ def lookup_rows(
 @nb.njit(cache=True, nogil=True)
 def sigma_rows(
     table: KernelTable,
-    w: NDArray[np.floating[Any]],
-    angle: NDArray[np.floating[Any]],
-    variance: NDArray[np.float64],
-    rows: NDArray[np.intp],
-    cols: NDArray[np.intp],
-    out: tuple[NDArray[np.float32], ...],
+    w: FloatArray,
+    angle: FloatArray,
+    variance: Float64Array,
+    rows: IndexArray,
+    cols: IndexArray,
+    out: tuple[Float32Array, ...],
 ) -> None:
     """:meth:`BlurTable.predict_into`: per frame ``rows[i]`` and table point ``q``, the
     interpolated values (:func:`_interpolate`) into ``out = (su_n, sv_n, su_b, sv_b)``
@@ -186,13 +181,13 @@ _SAMPLE_BLOCK = 1 << 18
 
 
 def direction_nodes(
-    blur: NDArray[np.floating[Any]],
-    angle: NDArray[np.floating[Any]],
+    blur: FloatArray,
+    angle: FloatArray,
     *,
     min_blur: float = 0.5,
     tolerance: float = ANGLE_TOLERANCE_PX,
     threads: int = 1,
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+) -> tuple[Float64Array, BoolArray]:
     """Direction nodes of a table for blur lengths ``blur`` (px; for the skew table any
     weight) along ``angle`` (deg), NaN ignored: the nodes (every :data:`ANGLE_STEP`, one
     on the ``blur``-weighted dominant direction of the samples with ``blur >= min_blur``)
@@ -252,10 +247,10 @@ def direction_nodes(
 
 @nb.njit(cache=True, nogil=True)
 def _direction_sums(
-    w: NDArray[np.floating[Any]],
-    t: NDArray[np.floating[Any]],
+    w: FloatArray,
+    t: FloatArray,
     min_blur: float,
-    out: NDArray[np.float64],
+    out: Float64Array,
 ) -> None:
     """:func:`direction_nodes`' pass 1 over samples ``w``, ``t`` (deg): ``out`` = (count
     with ``w >= min_blur``, their ``sum (w + 1e-12) cos 2t``, ``... sin 2t``, the same two
@@ -286,12 +281,12 @@ def _direction_sums(
 
 @nb.njit(cache=True, nogil=True)
 def _direction_hits(
-    w: NDArray[np.floating[Any]],
-    t: NDArray[np.floating[Any]],
+    w: FloatArray,
+    t: FloatArray,
     min_blur: float,
     phase: float,
     tolerance: float,
-    hit: NDArray[np.bool_],
+    hit: BoolArray,
 ) -> None:
     """:func:`direction_nodes`' pass 2: the direction nodes ``phase + k ANGLE_STEP`` that
     the samples with ``w >= min_blur`` need (``hit[k]`` set): the nearest node alone when
@@ -321,12 +316,12 @@ def _direction_hits(
 
 
 def table_nodes(
-    blur: NDArray[np.floating[Any]],
-    angle: NDArray[np.floating[Any]],
+    blur: FloatArray,
+    angle: FloatArray,
     *,
     min_blur: float = 0.5,
     threads: int = 1,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+) -> tuple[Float64Array, Float64Array, BoolArray]:
     """Nodes of a blur table for the measured ``blur`` (px) and ``angle`` (deg), both
     shape (frames, points), NaN ignored: the W nodes (every ``BLUR_STEP`` from 0 up to
     the first at or beyond the largest W) and the direction nodes with which of them to

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, FloatArray, IndexArray
 from ..threads import each
 from .median import median_critical_eps
 
@@ -28,11 +29,11 @@ _K_VALUES = np.array([1.044, 1.434, 1.751])
 
 
 def own_sigma_eps(
-    sigma: NDArray[np.floating[Any]] | float,
+    sigma: FloatArray | float,
     threshold: float,
     *,
     false_alarm: float = FALSE_ALARM,
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """``eps`` (px) of the normalised median test at which a correct point whose predicted
     random error is ``sigma`` (px, any shape) is flagged with probability ``false_alarm``.
 
@@ -76,7 +77,7 @@ def nanmedian_last(x: NDArray[Any], *, overwrite: bool = False) -> NDArray[Any]:
     return np.where(n > 0, mid, np.nan).astype(x.dtype, copy=False)
 
 
-def frame_filled(x: NDArray[np.floating[Any]], use: NDArray[np.bool_]) -> NDArray[np.floating[Any]]:
+def frame_filled(x: FloatArray, use: BoolArray) -> FloatArray:
     """``x`` (frames, points) with its NaN replaced by the frame's median of the finite
     values at the points ``use`` (NaN where a frame has none)."""
     with warnings.catch_warnings():
@@ -91,12 +92,12 @@ RELIABLE_SHARE = 0.5
 
 
 def zncc_flags(
-    zncc: NDArray[np.floating[Any]],
-    converged: NDArray[np.bool_],
+    zncc: FloatArray,
+    converged: BoolArray,
     *,
     ratio: float = ZNCC_RATIO,
-    correlatable: NDArray[np.bool_] | None = None,
-) -> NDArray[np.bool_]:
+    correlatable: BoolArray | None = None,
+) -> BoolArray:
     """Converged points whose match is much worse than usual (frames, points).
 
     ``q = 1 - ZNCC`` grows with the noise and the blur of a frame and with how little
@@ -127,15 +128,15 @@ def zncc_flags(
 
 
 def median_critical(
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    ok: NDArray[np.bool_],
+    u: Float64Array,
+    v: Float64Array,
+    ok: BoolArray,
     gshape: tuple[int, int] | None,
     threshold: float,
-    frames: NDArray[np.intp] | None = None,
-    out: NDArray[np.float32] | None = None,
+    frames: IndexArray | None = None,
+    out: Float32Array | None = None,
     threads: int = 1,
-) -> NDArray[np.float32]:
+) -> Float32Array:
     """:func:`.median.median_critical_eps` of the points ``ok`` (the others missing) of
     ``frames`` (default all), written into ``out`` (frames, points); ``-inf`` everywhere
     without a grid. The normalised median test at ``eps`` per frame is ``out > eps``."""
@@ -146,7 +147,7 @@ def median_critical(
         return out
     sel = np.arange(n_f) if frames is None else np.asarray(frames)
 
-    def one(b: NDArray[np.intp]) -> None:
+    def one(b: IndexArray) -> None:
         # the mask goes into the compiled pass (no masked float64 copies)
         out[b] = median_critical_eps(u[b], v[b], gshape, threshold=threshold, valid=ok[b])
 
@@ -155,7 +156,7 @@ def median_critical(
 
 
 def frame_blocks(
-    fn: Callable[[NDArray[np.intp]], None], sel: NDArray[np.intp], size: int, threads: int
+    fn: Callable[[IndexArray], None], sel: IndexArray, size: int, threads: int
 ) -> None:
     """``fn(block)`` for the consecutive blocks of ``size`` of the frame indices ``sel``,
     on ``threads`` threads (numpy releases the GIL in its array loops; each block writes

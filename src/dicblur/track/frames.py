@@ -12,6 +12,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float64Array, IndexArray, UInt8Array
 from ..dic import Correlator, PointStatus, PreparedImage
 from ..dic.initial import window_spectrum
 from ..sequence import Recording
@@ -48,17 +49,17 @@ class Tracked:
     """Raw per-frame results of the correlation loop, in frame order."""
 
     frames: list[int]
-    u: list[NDArray[np.float64]]
-    v: list[NDArray[np.float64]]
-    zncc: list[NDArray[np.float64]]
-    status: list[NDArray[np.uint8]]
+    u: list[Float64Array]
+    v: list[Float64Array]
+    zncc: list[Float64Array]
+    status: list[UInt8Array]
     fallback: list[bool]
 
 
 def _extrapolate(
-    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
-    grid: tuple[tuple[int, int], NDArray[np.intp]] | None = None,
-) -> NDArray[np.float64] | None:
+    hist: list[tuple[Float64Array, Float64Array]],
+    grid: tuple[tuple[int, int], IndexArray] | None = None,
+) -> Float64Array | None:
     """Guess (n, 2) for the next frame from up to the last three fields: the last field
     plus the increment of the linear (two fields) or quadratic (three) extrapolation,
     that increment averaged over each point's 3 x 3 neighbours when ``grid`` (the grid
@@ -78,9 +79,7 @@ def _extrapolate(
     return g
 
 
-def _rigid_shift(
-    spectrum: NDArray[np.complex64], img: NDArray[np.float64]
-) -> tuple[float, float, float]:
+def _rigid_shift(spectrum: NDArray[np.complex64], img: Float64Array) -> tuple[float, float, float]:
     """Sub-pixel rigid shift ``(u, v)`` (px) of ``img`` against the reference whose
     :func:`~dicblur.dic.initial.window_spectrum` is ``spectrum``, and the peak height:
     the phase correlation of :func:`~dicblur.dic.initial.global_shift` with a parabola
@@ -121,8 +120,8 @@ SEEDS_ENOUGH = 64
 
 
 def seed_correlator(
-    reference: NDArray[np.float64], corr: Correlator, opts: dict[str, Any]
-) -> tuple[Correlator, NDArray[np.intp]] | None:
+    reference: Float64Array, corr: Correlator, opts: dict[str, Any]
+) -> tuple[Correlator, IndexArray] | None:
     """A Correlator on every :data:`SEED_EVERY`-th POI of ``corr`` (its reference image
     ``reference``; on large grids every k-th, k <= :data:`SEED_EVERY_MAX`, keeping at
     least :data:`SEEDS_ENOUGH` seeds), or None when there are too few POIs for seeds to
@@ -136,9 +135,7 @@ def seed_correlator(
     return Correlator(reference, points=pts, **kw), idx
 
 
-def _start(
-    corr: Correlator, guess: NDArray[np.float64], grads: NDArray[np.float64] | None
-) -> NDArray[np.float64]:
+def _start(corr: Correlator, guess: Float64Array, grads: Float64Array | None) -> Float64Array:
     """IC-GN start of ``corr``'s points: ``guess`` (n, 2) px, with the displacement
     gradients ``grads`` (n, 4) as the affine parameters (n, 6) when both apply."""
     if grads is None or corr.shape != "affine":
@@ -148,11 +145,11 @@ def _start(
 
 
 def _seed_correction(
-    seeds: tuple[Correlator, NDArray[np.intp]] | None,
-    img: NDArray[np.float64] | PreparedImage,
-    guess: NDArray[np.float64],
-    grads: NDArray[np.float64] | None = None,
-) -> NDArray[np.float64]:
+    seeds: tuple[Correlator, IndexArray] | None,
+    img: Float64Array | PreparedImage,
+    guess: Float64Array,
+    grads: Float64Array | None = None,
+) -> Float64Array:
     """``guess`` (n, 2, relative to the seeds' reference) moved by the median error of
     the guesses at the converged seeds (unchanged when fewer than half converge); affine
     seeds start from the displacement gradients ``grads`` (n, 4) too."""
@@ -169,16 +166,16 @@ def _seed_correction(
 
 
 def frame_guess(
-    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
-    rig: list[NDArray[np.float64] | None],
-    img: NDArray[np.float64] | PreparedImage,
+    hist: list[tuple[Float64Array, Float64Array]],
+    rig: list[Float64Array | None],
+    img: Float64Array | PreparedImage,
     spectrum: NDArray[np.complex64],
-    base: NDArray[np.float64],
-    seeds: tuple[Correlator, NDArray[np.intp]] | None,
+    base: Float64Array,
+    seeds: tuple[Correlator, IndexArray] | None,
     *,
-    grid: tuple[tuple[int, int], NDArray[np.intp]] | None = None,
-    grads: NDArray[np.float64] | None = None,
-) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    grid: tuple[tuple[int, int], IndexArray] | None = None,
+    grads: Float64Array | None = None,
+) -> tuple[Float64Array | None, Float64Array | None]:
     """Initial guess (n, 2) px of the next frame ``img`` (None without history) and the
     frame's rigid shift (2,) px (None without a phase-correlation peak), from the last
     fields ``hist`` and their rigid shifts ``rig`` (``img`` as an array or the frame
@@ -222,7 +219,7 @@ def frame_guess(
     return guess, g_abs
 
 
-def poi_grid(corr: Correlator) -> tuple[tuple[int, int], NDArray[np.intp]] | None:
+def poi_grid(corr: Correlator) -> tuple[tuple[int, int], IndexArray] | None:
     """The POI grid of ``corr`` as :func:`frame_guess` takes it: ``(grid_shape,
     grid_cells)``, or None when the POIs are not on a grid."""
     cells = corr.grid_cells
@@ -232,16 +229,14 @@ def poi_grid(corr: Correlator) -> tuple[tuple[int, int], NDArray[np.intp]] | Non
 
 @dataclass(frozen=True)
 class _FrameResult:
-    u: NDArray[np.float64]
-    v: NDArray[np.float64]
-    zncc: NDArray[np.float64]
-    status: NDArray[np.uint8]
-    params: NDArray[np.float64]
+    u: Float64Array
+    v: Float64Array
+    zncc: Float64Array
+    status: UInt8Array
+    params: Float64Array
 
 
-def _fit(
-    corr: Correlator, img: NDArray[np.float64] | PreparedImage, start: NDArray[np.float64]
-) -> _FrameResult:
+def _fit(corr: Correlator, img: Float64Array | PreparedImage, start: Float64Array) -> _FrameResult:
     """IC-GN of all of ``corr``'s POIs from ``start`` (n, 2) or (n, 6): on a prefiltered
     frame by :meth:`~dicblur.dic.Correlator.refine` (no DICResult to build: ~0.3 ms less
     per frame for the seeds and the frame together), otherwise by ``correlate``."""
@@ -253,7 +248,7 @@ def _fit(
     return _FrameResult(res.u, res.v, res.zncc, res.status, res.params)
 
 
-def frame_gradients(res: _FrameResult) -> NDArray[np.float64] | None:
+def frame_gradients(res: _FrameResult) -> Float64Array | None:
     """The displacement gradients (n, 4) of an affine result for the next frame's start
     (the median of the converged points where a point did not converge), or None."""
     if res.params.shape[1] != 6:
@@ -268,10 +263,10 @@ def frame_gradients(res: _FrameResult) -> NDArray[np.float64] | None:
 
 def correlate_frame(
     corr: Correlator,
-    img: NDArray[np.float64] | PreparedImage,
-    guess: NDArray[np.float64] | None,
-    ok0: NDArray[np.bool_],
-    grads: NDArray[np.float64] | None = None,
+    img: Float64Array | PreparedImage,
+    guess: Float64Array | None,
+    ok0: BoolArray,
+    grads: Float64Array | None = None,
 ) -> tuple[_FrameResult, bool]:
     """Correlate one frame from ``guess`` (and, affine, the displacement gradients
     ``grads`` of the previous frame: IC-GN then needs about a quarter of the iterations);

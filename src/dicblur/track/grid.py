@@ -15,7 +15,8 @@ from collections.abc import Sequence
 
 import numba as nb
 import numpy as np
-from numpy.typing import NDArray
+
+from ..arrays import BoolArray, Float64Array, IndexArray
 
 __all__ = ["extrapolate_fields", "fill_with_median", "smooth_on_grid"]
 
@@ -24,9 +25,7 @@ __all__ = ["extrapolate_fields", "fill_with_median", "smooth_on_grid"]
 _DET_MIN = 1e-6
 
 
-def smooth_on_grid(
-    values: NDArray[np.float64], grid: tuple[int, int], cells: NDArray[np.intp]
-) -> NDArray[np.float64]:
+def smooth_on_grid(values: Float64Array, grid: tuple[int, int], cells: IndexArray) -> Float64Array:
     """Each point's value of the least-squares plane through the finite ``values`` of its
     3 x 3 neighbourhood on the POI grid.
 
@@ -129,9 +128,9 @@ def _smooth(values, ny, nx, cells, out):  # pragma: no cover - compiled
 
 
 def extrapolate_fields(
-    fields: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
-    grid: tuple[tuple[int, int], NDArray[np.intp]] | None,
-) -> NDArray[np.float64]:
+    fields: Sequence[tuple[Float64Array, Float64Array]],
+    grid: tuple[tuple[int, int], IndexArray] | None,
+) -> Float64Array:
     """The next field from the last one, two or three ``(u, v)`` fields (oldest first):
     the last field plus the increment of the linear (``u1 - u2``) or quadratic (``2 u1 -
     3 u2 + u3``) extrapolation, the increment smoothed by :func:`smooth_on_grid` when
@@ -196,7 +195,7 @@ def _extrapolate(u1, v1, u2, v2, u3, v3, m, ny, nx, cells, out):  # pragma: no c
         out[i, 1] = v1[i] + inc[i, 1]
 
 
-def fill_with_median(values: NDArray[np.float64], ok: NDArray[np.bool_]) -> None:
+def fill_with_median(values: Float64Array, ok: BoolArray) -> None:
     """Set, in place, the rows of ``values`` that are not ``ok`` to the column medians of
     the ``ok`` rows: ``values[~ok] = np.median(values[ok], axis=0)``, the same numbers
     (the mean of the two middle values for an even count), in one pass per column

@@ -26,13 +26,14 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, FloatArray, IndexArray
 from ..errors import InputError
 from ..threads import each
 
 __all__ = ["blur_weights", "exposure_motion"]
 
 
-def _window_average_row(tau: NDArray[np.float64], a: float, degree: int) -> NDArray[np.float64]:
+def _window_average_row(tau: Float64Array, a: float, degree: int) -> Float64Array:
     """Mean of ``t**p`` over ``[tau - a, tau + a]`` for p = 0..degree, shape (len, deg+1)."""
     p = np.arange(degree + 1)
     if a == 0:
@@ -43,8 +44,8 @@ def _window_average_row(tau: NDArray[np.float64], a: float, degree: int) -> NDAr
 
 
 def _stencil_weights(
-    n_frames: int, width: int, rows: NDArray[np.float64], a: float
-) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    n_frames: int, width: int, rows: Float64Array, a: float
+) -> tuple[IndexArray, Float64Array]:
     """Per frame: stencil start and ``rows @ A^-1``, shape (n_frames, *rows.shape).
 
     ``A`` holds the window averages of ``t**p`` (p = 0..width-1) at the stencil's frames
@@ -56,7 +57,7 @@ def _stencil_weights(
     wts = np.empty((n_frames, *rows.shape))
     # the weights depend on the frame only through its place in the stencil (start - k):
     # one inverse per place (the same numbers as one per frame), not one per frame
-    done: dict[int, NDArray[np.float64]] = {}
+    done: dict[int, Float64Array] = {}
     for k in range(n_frames):
         start = min(max(k - width // 2, 0), n_frames - width)
         starts[k] = start
@@ -67,9 +68,7 @@ def _stencil_weights(
     return starts, wts
 
 
-def _rise_weights(
-    n_frames: int, duty: float, half_window: int
-) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+def _rise_weights(n_frames: int, duty: float, half_window: int) -> tuple[IndexArray, Float64Array]:
     """Per frame: stencil start and the weights (width,) of the rise over its window."""
     if n_frames < 2:
         raise InputError(f"n_frames={n_frames}: the motion needs at least 2 frames")
@@ -83,7 +82,7 @@ def _rise_weights(
     return _stencil_weights(n_frames, width, rise, a)
 
 
-def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> NDArray[np.float64]:
+def blur_weights(n_frames: int, duty: float, *, half_window: int = 2) -> Float64Array:
     """Matrix ``M`` (n_frames, n_frames) with ``W = M @ u`` the motion during each exposure.
 
     Parameters
@@ -170,15 +169,15 @@ def exposure_motion(
 
 @nb.njit(cache=True, nogil=True)
 def _rise_rows(
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    ok: NDArray[np.bool_],
-    starts: NDArray[np.intp],
-    wts: NDArray[np.float64],
+    u: Float64Array,
+    v: Float64Array,
+    ok: BoolArray,
+    starts: IndexArray,
+    wts: Float64Array,
     f0: int,
     f1: int,
-    wu: NDArray[np.floating[Any]],
-    wv: NDArray[np.floating[Any]],
+    wu: FloatArray,
+    wv: FloatArray,
 ) -> None:
     """:func:`exposure_motion` of frames ``f0 .. f1 - 1``: the rise weights ``wts[f]`` of
     each frame's stencil (from ``starts[f]``) applied to the samples, NaN where one of them
@@ -209,9 +208,7 @@ def _rise_rows(
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(12)
 
 
-def _node_weights(
-    n_frames: int, duty: float, half_window: int
-) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+def _node_weights(n_frames: int, duty: float, half_window: int) -> tuple[IndexArray, Float64Array]:
     """Per frame: stencil start and the weights (G, width) giving the fitted position at
     the G Gauss nodes of the exposure window from the stencil's samples."""
     width = min(2 * half_window + 1, n_frames)
@@ -232,7 +229,7 @@ def exposure_skew(
     block: int | None = None,
     threads: int = 1,
     valid: ArrayLike | None = None,
-) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+) -> tuple[Float32Array, Float32Array]:
     """Third central moment of the blur kernel of every point in every frame.
 
     The fitted track of :func:`exposure_motion` gives the position at 12 Gauss nodes of
@@ -272,16 +269,16 @@ def exposure_skew(
 
 @nb.njit(cache=True, nogil=True)
 def _skew_rows(
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    ok: NDArray[np.bool_],
-    starts: NDArray[np.intp],
-    wts: NDArray[np.float64],
-    gw: NDArray[np.float64],
+    u: Float64Array,
+    v: Float64Array,
+    ok: BoolArray,
+    starts: IndexArray,
+    wts: Float64Array,
+    gw: Float64Array,
     f0: int,
     f1: int,
-    k3: NDArray[np.float32],
-    axis: NDArray[np.float32],
+    k3: Float32Array,
+    axis: Float32Array,
 ) -> None:
     """:func:`exposure_skew` of frames ``f0 .. f1 - 1``: the positions at the Gauss nodes
     (weights ``wts[f]`` (G, width) on the stencil from ``starts[f]``), centred on their

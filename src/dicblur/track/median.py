@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from ..arrays import BoolArray, Float32Array, Float64Array, IndexArray
 from ..errors import InputError
 
 __all__ = [
@@ -24,7 +25,7 @@ __all__ = [
 ]
 
 
-def _neighbours(a: NDArray[np.float64]) -> NDArray[np.float64]:
+def _neighbours(a: Float64Array) -> Float64Array:
     """The 8 neighbours of every grid node of ``a`` (..., rows, cols), shape
     (8, ..., rows, cols); NaN outside the grid."""
     rows, cols = a.shape[-2:]
@@ -47,7 +48,7 @@ _NETWORK_8 = (
 )  # fmt: skip
 
 
-def _nanmedian8(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+def _nanmedian8(x: Float64Array) -> tuple[Float64Array, IndexArray]:
     """Median over the first axis (8 values) ignoring NaN (NaN where all are), and the
     count of finite values: the middle of the sorted finite values, as ``np.nanmedian``
     (the same numbers), through a sorting network with NaN as +inf."""
@@ -66,9 +67,7 @@ def _nanmedian8(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np
     return med, count
 
 
-def _residuals(
-    a: NDArray[np.float64], eps: NDArray[np.float64] | float, min_neighbours: int
-) -> NDArray[np.float64]:
+def _residuals(a: Float64Array, eps: Float64Array | float, min_neighbours: int) -> Float64Array:
     """``r_0`` of grids ``a`` (..., rows, cols); ``eps`` broadcast against the leading axes."""
     nb = _neighbours(a)
     med, count = _nanmedian8(nb)
@@ -81,7 +80,7 @@ def _residuals(
 
 def normalized_residual(
     values: ArrayLike, grid_shape: tuple[int, int], *, eps: float = 0.1, min_neighbours: int = 3
-) -> NDArray[np.float64]:
+) -> Float64Array:
     """Normalised residual ``r_0`` of one displacement component on a grid.
 
     Parameters
@@ -103,14 +102,14 @@ def normalized_residual(
 
 
 def median_test_frames(
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
+    u: Float64Array,
+    v: Float64Array,
     grid_shape: tuple[int, int],
     *,
     eps: ArrayLike,
     threshold: float = 2.0,
     block: int = 64,
-) -> NDArray[np.bool_]:
+) -> BoolArray:
     """:func:`normalized_median_test` of every frame at once.
 
     Parameters
@@ -144,7 +143,7 @@ def median_test_frames(
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _median8(x: NDArray[np.float64], srt: NDArray[np.float64]) -> tuple[float, int]:
+def _median8(x: Float64Array, srt: Float64Array) -> tuple[float, int]:
     """:func:`_nanmedian8` of one point's 8 values ``x`` (``srt``: scratch of 8): the same
     network (unrolled on scalars, branch-free: no NaN left) and the same arithmetic, so
     the same numbers."""
@@ -194,13 +193,13 @@ def _median8(x: NDArray[np.float64], srt: NDArray[np.float64]) -> tuple[float, i
 
 @nb.njit(cache=True, nogil=True)
 def _critical_frames(
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    ok: NDArray[np.bool_],
+    u: Float64Array,
+    v: Float64Array,
+    ok: BoolArray,
     rows: int,
     cols: int,
     threshold: float,
-    out: NDArray[np.float32],
+    out: Float32Array,
 ) -> None:
     """:func:`median_critical_eps` of the frames of ``u``, ``v`` (frames, rows * cols)
     with the points ``~ok`` missing, into ``out``: one pass per point (8 neighbours, two
@@ -240,14 +239,14 @@ def _critical_frames(
 
 
 def median_critical_eps(
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
+    u: Float64Array,
+    v: Float64Array,
     grid_shape: tuple[int, int],
     *,
     threshold: float = 2.0,
     block: int = 64,
-    valid: NDArray[np.bool_] | None = None,
-) -> NDArray[np.float32]:
+    valid: BoolArray | None = None,
+) -> Float32Array:
     """The largest ``eps`` at which :func:`median_test_frames` still flags each point:
     ``max over u, v of |u_0 - u_m| / threshold - r_m`` (``r_0 > threshold`` holds exactly
     for ``eps`` below it), ``-inf`` where the point is not tested; so the flags at any
@@ -285,7 +284,7 @@ def normalized_median_test(
     *,
     eps: float = 0.1,
     threshold: float = 2.0,
-) -> NDArray[np.bool_]:
+) -> BoolArray:
     """Flag spurious vectors with the normalised median test (Westerweel & Scarano 2005).
 
     Parameters

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, IndexArray
 from ..errors import InputError
 from ..metrics import estimate_noise
 
@@ -51,7 +51,7 @@ class NoiseEstimate:
     interval: tuple[float, float] | None = None
     subsets: int = 0
 
-    def variance(self, level: NDArray[np.float64]) -> NDArray[np.float64]:
+    def variance(self, level: Float64Array) -> Float64Array:
         """Noise variance (GL**2) at grey levels ``level``."""
         lv = np.asarray(level, dtype=np.float64)
         if not self.level_dependent:
@@ -165,9 +165,7 @@ def estimate_static_noise(frames: Any, start: int, stop: int, *, bins: int = 24)
     )
 
 
-def subset_levels(
-    reference: NDArray[np.float64], centres: NDArray[np.intp], subset: int
-) -> NDArray[np.float64]:
+def subset_levels(reference: Float64Array, centres: IndexArray, subset: int) -> Float64Array:
     """Gradient-weighted grey level ``sum(g**2 I) / sum(g**2)`` of each subset (GL): the
     level at which signal-dependent noise enters its displacement error
     (:func:`dicblur.gradient_weighted_level`, per subset and for both directions)."""

@@ -11,8 +11,8 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, IndexArray
 from ..dic import MatcherSettings
 from ..errors import InputError
 from ..metrics import box_sssig, image_gradients, match_score_sigma
@@ -110,8 +110,8 @@ TOLERANCE_MAX = 1e-3
 
 
 def auto_tolerance(
-    reference: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    reference: Float64Array,
+    centres: IndexArray,
     subset: int,
     noise: NoiseEstimate | None,
 ) -> float:

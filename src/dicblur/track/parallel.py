@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float64Array, Int64Array
 from ..campaign import ChunkStore, run_tasks
 from ..campaign.cluster import check_scheduler_address
 from ..dic import Correlator, PointStatus
@@ -89,7 +90,7 @@ class CompensationChunk:
     start: PassStart
 
     @property
-    def frames(self) -> NDArray[np.int64]:
+    def frames(self) -> Int64Array:
         """The chunk's frames."""
         return self.start.frames
 
@@ -146,20 +147,20 @@ class TrackJob:
     shape: tuple[int, int]
     reference: int
     correlator: dict[str, Any]
-    ok0: NDArray[np.bool_]
+    ok0: BoolArray
     key: str
 
 
 # a worker process keeps the last job's recording and prepared Correlator (one per
 # thread: ChunkedRun(threads=N) runs chunks on N threads of this process), keyed by
 # "job key@thread id"
-_PREPARED: dict[str, tuple[Recording, Correlator, NDArray[np.float64], Any]] = {}
+_PREPARED: dict[str, tuple[Recording, Correlator, Float64Array, Any]] = {}
 # ... and the seed POIs of its Correlator (track.frames.seed_correlator)
 _SEEDS: dict[str, Any] = {}
 # in-process runs (ChunkedRun with neither workers nor scheduler): the caller's prepared
 # Correlator, reference, its spectrum and seeds by job key, which each chunk thread forks
 # (Correlator.fork) instead of preparing its own (~0.3 s per thread at 2,401 POIs)
-_SHARED: dict[str, tuple[Correlator, NDArray[np.float64], Any, Any]] = {}
+_SHARED: dict[str, tuple[Correlator, Float64Array, Any, Any]] = {}
 # recordings this module opened (closed when dropped)
 _OPENED: set[int] = set()
 # one reader at a time: a recording's frames are read by seek + read on one file handle
@@ -171,7 +172,7 @@ def _key(job: TrackJob) -> str:
     return f"{job.key}@{threading.get_ident()}"
 
 
-def _frame(rec: Recording, k: int) -> NDArray[np.float64]:
+def _frame(rec: Recording, k: int) -> Float64Array:
     with _READ:
         return rec.frame(k)
 
@@ -189,7 +190,7 @@ def thread_safe_kernels() -> bool:
         return False
 
 
-def _prepared(job: TrackJob) -> tuple[Recording, Correlator, NDArray[np.float64], Any]:
+def _prepared(job: TrackJob) -> tuple[Recording, Correlator, Float64Array, Any]:
     got = _PREPARED.get(_key(job))
     if got is not None:
         return got
@@ -278,9 +279,9 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
     base = np.zeros((n, 2))
     ones = np.ones(n, bool)
     # the serial loop's state (track.core.track): fields, rigid shifts, affine gradients
-    hist: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
-    rig: list[NDArray[np.float64] | None] = []
-    grads: NDArray[np.float64] | None = None
+    hist: list[tuple[Float64Array, Float64Array]] = []
+    rig: list[Float64Array | None] = []
+    grads: Float64Array | None = None
     done = 0  # the chunk's frames finished, in order
     warm = set(chunk.warm)
     try:
@@ -491,7 +492,7 @@ class ChunkedRun:
         *,
         reference: int,
         correlator: dict[str, Any],
-        ok0: NDArray[np.bool_],
+        ok0: BoolArray,
     ) -> TrackJob:
         """The :class:`TrackJob` of ``rec`` whose store key is ``key``."""
         # a worker re-opens a file recording from its path; in this process, or without a

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, IndexArray, Int64Array
 from ..dic import Correlator, PointStatus
 from ..errors import DicblurError
 from ..sequence import Recording
@@ -39,7 +40,7 @@ from .uncertainty import build_blur_table
 STATIC_MOTION_PX = 0.05
 
 
-def _grid_shape(rows: NDArray[np.int64], cols: NDArray[np.int64]) -> tuple[int, int] | None:
+def _grid_shape(rows: Int64Array, cols: Int64Array) -> tuple[int, int] | None:
     ur, uc = np.unique(rows), np.unique(cols)
     if ur.size * uc.size != rows.size:
         return None
@@ -54,9 +55,9 @@ def _by_runs(
     fn: Callable[..., tuple[NDArray[Any], NDArray[Any]]],
     runs: list[slice],
     n_f: int,
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    good: NDArray[np.bool_],
+    u: Float64Array,
+    v: Float64Array,
+    good: BoolArray,
     **kw: Any,
 ) -> tuple[NDArray[Any], NDArray[Any]]:
     """``fn(u, v, valid=good, **kw)`` (two (frames, points) arrays, a kinematics function
@@ -82,7 +83,7 @@ def _polar(wu: NDArray[Any], wv: NDArray[Any], threads: int) -> tuple[NDArray[An
     w = np.empty(wu.shape, np.result_type(wu, wv))
     ang = np.empty_like(w)
 
-    def one(b: NDArray[np.intp]) -> None:
+    def one(b: IndexArray) -> None:
         r = slice(int(b[0]), int(b[-1]) + 1)
         np.hypot(wu[r], wv[r], out=w[r])
         a = np.degrees(np.arctan2(wv[r], wu[r]))
@@ -129,7 +130,7 @@ def assemble(
     eps: float,
     threshold: float,
     advice: bool,
-    ref_img: NDArray[np.float64],
+    ref_img: Float64Array,
     blur_table: Callable[..., Any] = build_blur_table,
     threads: int = 1,
     compensated: bool = False,
@@ -181,7 +182,7 @@ def assemble(
         "threads": threads,
     }
 
-    def motion(good: NDArray[np.bool_]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    def motion(good: BoolArray) -> tuple[Float32Array, Float32Array]:
         if not runs:
             nan = np.full((n_f, n_p), np.nan, np.float32)
             return nan, nan.copy()
@@ -226,19 +227,19 @@ def assemble(
     # long recording), displacements stay float64
     names = ("sigma_u_noise", "sigma_v_noise", "sigma_u_blur", "sigma_v_blur")
 
-    def nan_fields() -> dict[str, NDArray[np.float32]]:
+    def nan_fields() -> dict[str, Float32Array]:
         return {k: np.full((n_f, n_p), np.nan, np.float32) for k in names}
 
-    sig: dict[str, NDArray[np.float32]] = {}
+    sig: dict[str, Float32Array] = {}
     importing: threading.Thread | None = None
     blur_dom = np.full(n_f, np.nan)
-    levels: NDArray[np.float64] | None = None  # of the subsets inside, once known
+    levels: Float64Array | None = None  # of the subsets inside, once known
     t0 = time.perf_counter()
     table: Any = None
     if noise is not None and inside.any():
         pin = np.flatnonzero(inside)
         # all points inside (the usual grid): plain slices, no fancy-indexed copies
-        cols: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin
+        cols: slice | IndexArray = slice(None) if pin.size == n_p else pin
         table = blur_table(
             ref_img,
             centres[pin],
@@ -261,10 +262,10 @@ def assemble(
 
         outs = tuple(sig[k] for k in names)
 
-        def predict(rows: NDArray[np.intp] | None = None, at: Any = None) -> None:
+        def predict(rows: IndexArray | None = None, at: Any = None) -> None:
             wa, aa = (w, ang) if at is None else at
 
-            def one(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+            def one(b: IndexArray) -> None:  # frame blocks on the threads
                 table.predict_into(wa, aa, nv, b, pin, outs)  # NaN: blur unknown
 
             frame_blocks(one, np.arange(n_f) if rows is None else rows, 128, threads)
@@ -276,7 +277,7 @@ def assemble(
         if gshape is not None:
             s_own = np.empty((n_f, n_p), np.float32)
 
-            def largest(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+            def largest(b: IndexArray) -> None:  # frame blocks on the threads
                 r = slice(int(b[0]), int(b[-1]) + 1)
                 np.fmax(
                     np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r]),
@@ -373,7 +374,7 @@ def assemble(
     n_dom = np.zeros(n_f, np.intp)
     outlier |= low_zncc
 
-    def totals(b: NDArray[np.intp]) -> None:  # frame blocks on the threads
+    def totals(b: IndexArray) -> None:  # frame blocks on the threads
         r = slice(int(b[0]), int(b[-1]) + 1)
         np.hypot(sig["sigma_u_noise"][r], sig["sigma_u_blur"][r], out=sigma_u[r])
         np.hypot(sig["sigma_v_noise"][r], sig["sigma_v_blur"][r], out=sigma_v[r])
@@ -425,7 +426,7 @@ def assemble(
         side.start()
     # the bias of an accelerating blur: the kernel's third moment from the fitted track
     # times each subset's skew coefficient (a shift common to nearly all points)
-    bias: NDArray[np.float32] | None = None
+    bias: Float32Array | None = None
     if noise is not None and inside.any() and runs:
         pin = np.flatnonzero(inside)
         # beside the advice's thread: one core each (the advice, about as long as the
@@ -434,7 +435,7 @@ def assemble(
         k3, axis = _by_runs(
             exposure_skew, runs, n_f, u, v, good, **{**kin, "threads": skew_threads}
         )
-        at: slice | NDArray[np.intp] = slice(None) if pin.size == n_p else pin  # no copies
+        at: slice | IndexArray = slice(None) if pin.size == n_p else pin  # no copies
         skew = build_skew_table(
             ref_img,
             centres[pin],
@@ -446,7 +447,7 @@ def assemble(
         )
         skew_bias = bias = np.full((n_f, n_p, 2), np.nan, np.float32)  # after the table
 
-        def one_bias(b: NDArray[np.intp]) -> None:
+        def one_bias(b: IndexArray) -> None:
             skew.bias_into(k3, axis, b, pin, skew_bias)
 
         frame_blocks(one_bias, np.arange(n_f), 128, skew_threads)

@@ -20,8 +20,9 @@ pattern has such a plateau too (the flat inside of its white speckles): below a 
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter
+
+from ..arrays import Float32Array, Float64Array, IndexArray
 
 __all__ = ["SATURATION_MIN_PIXELS", "saturated_share", "saturation_level", "top_codes"]
 
@@ -39,7 +40,7 @@ def top_codes() -> frozenset[float]:
     )
 
 
-def saturation_level(image: NDArray[np.float64]) -> float | None:
+def saturation_level(image: Float64Array) -> float | None:
     """The grey level (GL) at which ``image`` (rows, cols) is clipped, or None when its
     maximum is no top code (:func:`top_codes`) or no plateau (fewer than
     :data:`SATURATION_MIN_PIXELS` pixels there, or no more than at the next level
@@ -59,8 +60,8 @@ def saturation_level(image: NDArray[np.float64]) -> float | None:
 
 
 def saturated_share(
-    image: NDArray[np.float64], centres: NDArray[np.intp], subset: int, level: float | None
-) -> NDArray[np.float32]:
+    image: Float64Array, centres: IndexArray, subset: int, level: float | None
+) -> Float32Array:
     """Share (0-1) of the pixels at or above ``level`` in the ``subset`` px square
     around each of ``centres`` (n, 2) (row, col) of ``image``; zeros when ``level`` is
     None. Pixels outside the image count as not clipped."""

@@ -6,12 +6,11 @@ on the direction nodes of :mod:`.directions`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numba as nb
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, FloatArray, IndexArray
 from ..errors import InputError
 from .directions import (
     RESPONSE_CHUNK,
@@ -31,17 +30,17 @@ class SkewTable:
     (:func:`dicblur.models.blur_response.subset_skew_coefficients`).
     """
 
-    angles: NDArray[np.float64]
-    available: NDArray[np.bool_]
-    values: NDArray[np.float64]
+    angles: Float64Array
+    available: BoolArray
+    values: Float64Array
 
     def bias_into(
         self,
-        kappa3: NDArray[np.floating[Any]],
-        axis: NDArray[np.floating[Any]],
-        rows: NDArray[np.intp],
-        cols: NDArray[np.intp],
-        out: NDArray[np.float32],
+        kappa3: FloatArray,
+        axis: FloatArray,
+        rows: IndexArray,
+        cols: IndexArray,
+        out: Float32Array,
     ) -> None:
         """Predicted shift ``(u, v)`` (px) of kernels with third moment ``kappa3``
         (px**3) along ``axis`` (deg), both shape (frames, all points), written into
@@ -66,14 +65,14 @@ class SkewTable:
 
 @nb.njit(cache=True, nogil=True)
 def _bias_rows(
-    values: NDArray[np.float64],
+    values: Float64Array,
     phase: float,
-    node: NDArray[np.intp],
-    kappa3: NDArray[np.floating[Any]],
-    axis: NDArray[np.floating[Any]],
-    rows: NDArray[np.intp],
-    cols: NDArray[np.intp],
-    out: NDArray[np.float32],
+    node: IndexArray,
+    kappa3: FloatArray,
+    axis: FloatArray,
+    rows: IndexArray,
+    cols: IndexArray,
+    out: Float32Array,
 ) -> None:
     """:meth:`SkewTable.bias_into`: ``((1 - t) c_j0 + t c_j1) kappa3`` per frame
     ``rows[i]`` and table point ``q`` (:func:`direction_pair`)."""
@@ -89,13 +88,13 @@ def _bias_rows(
 
 
 def build_skew_table(
-    reference: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    reference: Float64Array,
+    centres: IndexArray,
     *,
     subset: int,
     shape: str,
-    axis: NDArray[np.floating[Any]],
-    kappa3: NDArray[np.floating[Any]],
+    axis: FloatArray,
+    kappa3: FloatArray,
     min_fraction: float = 0.05,
     threads: int = 1,
 ) -> SkewTable:

@@ -16,8 +16,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import Float64Array, Int64Array
 from ..blur import motion_blur
 from ..camera import Camera
 from ..sequence import Recording
@@ -51,7 +51,7 @@ class VibratingTarget:
         Frame ``k`` uses noise seed ``(seed, k)``.
     """
 
-    pattern: NDArray[np.float64]
+    pattern: Float64Array
     fps: float
     exposure: float
     amplitude: float = 10.0
@@ -67,13 +67,13 @@ class VibratingTarget:
     def _dir(self) -> tuple[float, float]:
         return direction_motion(self.angle)
 
-    def position(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    def position(self, t: Float64Array) -> Float64Array:
         """Displacement along the motion direction (px) at times ``t`` (s)."""
         ts = self.static / self.fps
         tt = np.maximum(np.asarray(t, dtype=np.float64) - ts, 0.0)
         return np.asarray(self.amplitude * (1.0 - np.cos(2 * math.pi * self.frequency * tt)))
 
-    def truth(self, frames: NDArray[np.int64]) -> tuple[NDArray[np.float64], ...]:
+    def truth(self, frames: Int64Array) -> tuple[Float64Array, ...]:
         """``(u, v, blur_u, blur_v)`` of frames (px): the window-mean displacement and the
         motion during the window."""
         t0 = np.asarray(frames, dtype=np.float64) / self.fps
@@ -86,12 +86,12 @@ class VibratingTarget:
         dy, dx = self._dir
         return mean * dx, mean * dy, rise * dx, rise * dy
 
-    def render(self, k: int) -> NDArray[np.float64]:
+    def render(self, k: int) -> Float64Array:
         """Frame ``k`` (grey levels)."""
         t0 = k / self.fps
         dy, dx = self._dir
 
-        def path(tau: NDArray[np.float64]) -> NDArray[np.float64]:
+        def path(tau: Float64Array) -> Float64Array:
             s = self.position(t0 + self.exposure * np.asarray(tau))
             return np.stack([s * dy, s * dx], axis=1)
 

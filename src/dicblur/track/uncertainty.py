@@ -28,11 +28,10 @@ is computed once for all directions.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from ..arrays import BoolArray, Float32Array, Float64Array, FloatArray, IndexArray
 from ..errors import InputError
 from ..models.blur_response import subset_blur_response
 from ..models.subset_algebra import SubsetMatcher
@@ -91,14 +90,12 @@ class BlurTable:
         :meth:`noise_variance` combines the last four.
     """
 
-    blur: NDArray[np.float64]
-    angles: NDArray[np.float64]
-    available: NDArray[np.bool_]
-    values: NDArray[np.float64]
+    blur: Float64Array
+    angles: Float64Array
+    available: BoolArray
+    values: Float64Array
 
-    def lookup(
-        self, w: NDArray[np.floating[Any]], angle: NDArray[np.floating[Any]]
-    ) -> NDArray[np.float64]:
+    def lookup(self, w: FloatArray, angle: FloatArray) -> Float64Array:
         """Interpolated ``values`` at ``w`` (px) and ``angle`` (deg), both shape (frames,
         points); returns shape (frames, points, 6) (NaN where ``w`` is NaN or beyond the
         table). Linear in ``W**2`` between the W nodes, then linear between the two
@@ -113,12 +110,12 @@ class BlurTable:
 
     def predict_into(
         self,
-        w: NDArray[np.floating[Any]],
-        angle: NDArray[np.floating[Any]],
-        variance: NDArray[np.float64],
-        rows: NDArray[np.intp],
-        cols: NDArray[np.intp],
-        out: tuple[NDArray[np.float32], ...],
+        w: FloatArray,
+        angle: FloatArray,
+        variance: Float64Array,
+        rows: IndexArray,
+        cols: IndexArray,
+        out: tuple[Float32Array, ...],
     ) -> None:
         """The four sigma parts of the frames ``rows`` written in place, from the
         interpolated values (:meth:`lookup`, without its (frames, points, 6) float64
@@ -174,17 +171,17 @@ class TableStart:
         Per direction node to compute, ``(j, first W node not kept)``.
     """
 
-    blur: NDArray[np.float64]
-    angles: NDArray[np.float64]
-    available: NDArray[np.bool_]
+    blur: Float64Array
+    angles: Float64Array
+    available: BoolArray
     have: BlurTable | None
-    values: NDArray[np.float64]
+    values: Float64Array
     todo: list[tuple[int, int]]
 
 
 def table_start(
-    blur: NDArray[np.floating[Any]],
-    angle: NDArray[np.floating[Any]],
+    blur: FloatArray,
+    angle: FloatArray,
     n_points: int,
     *,
     min_blur: float,
@@ -213,13 +210,13 @@ def table_start(
 
 
 def build_blur_table(
-    reference: NDArray[np.float64],
-    centres: NDArray[np.intp],
+    reference: Float64Array,
+    centres: IndexArray,
     *,
     subset: int,
     shape: str,
-    blur: NDArray[np.floating[Any]],
-    angle: NDArray[np.floating[Any]],
+    blur: FloatArray,
+    angle: FloatArray,
     min_blur: float = 0.5,
     complete: bool = True,
     have: BlurTable | None = None,
@@ -257,7 +254,7 @@ def build_blur_table(
     # W = 0 (no blur, no direction) is the same for every direction: computed once
     zero = None if st.have is None else st.have.values[np.flatnonzero(st.have.available)[0], :1]
 
-    def response(j: int, todo: NDArray[np.intp]) -> None:
+    def response(j: int, todo: IndexArray) -> None:
         """``(xi_u, xi_v, c_uu, c_vv, c4_uu, c4_vv)`` of every point at the W nodes
         ``todo`` of direction node ``j``, the subsets' chunks on the threads (each
         computed alone: the same values)."""

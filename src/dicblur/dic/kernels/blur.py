@@ -23,8 +23,8 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from numpy.typing import NDArray
 
+from ...arrays import Float64Array, Int64Array, UInt8Array
 from .common import (
     CONVERGED,
     DIVERGED,
@@ -59,19 +59,19 @@ class BlurImages(NamedTuple):
     """Float64 reference blurred to the length ``W0``, its spline x / y derivatives and its
     derivative with respect to the blur length, ``d f0 / dW`` (rows, cols) each."""
 
-    f: NDArray[np.float64]
-    gx: NDArray[np.float64]
-    gy: NDArray[np.float64]
-    d: NDArray[np.float64]
+    f: Float64Array
+    gx: Float64Array
+    gy: Float64Array
+    d: Float64Array
 
 
 class BlurTerms(NamedTuple):
     """Per-POI projections of the blur tangent ``D`` (n POIs, k shape parameters)."""
 
-    evec: NDArray[np.float64]  # (n, k) J_c^T D_c
-    dsum: NDArray[np.float64]  # (n,) sum D
-    bval: NDArray[np.float64]  # (n,) D_c^T fh
-    dd: NDArray[np.float64]  # (n,) D_c^T D_c
+    evec: Float64Array  # (n, k) J_c^T D_c
+    dsum: Float64Array  # (n,) sum D
+    bval: Float64Array  # (n,) D_c^T fh
+    dd: Float64Array  # (n,) D_c^T D_c
 
 
 class BlurSettings(NamedTuple):
@@ -113,12 +113,12 @@ def blur_settings(
 class BlurOutputs(NamedTuple):
     """Per-POI outputs of the joint step (n POIs, k shape parameters)."""
 
-    p: NDArray[np.float64]  # (n, k) parameters
-    lam: NDArray[np.float64]  # (n,) blur-length correction, px
-    zncc: NDArray[np.float64]  # (n,)
-    res2: NDArray[np.float64]  # (n,) normalised squared residual
-    iterations: NDArray[np.int64]  # (n,)
-    status: NDArray[np.uint8]  # (n,) PointStatus
+    p: Float64Array  # (n, k) parameters
+    lam: Float64Array  # (n,) blur-length correction, px
+    zncc: Float64Array  # (n,)
+    res2: Float64Array  # (n,) normalised squared residual
+    iterations: Int64Array  # (n,)
+    status: UInt8Array  # (n,) PointStatus
 
 
 def blur_outputs(n: int, k: int) -> BlurOutputs:

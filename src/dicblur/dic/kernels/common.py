@@ -11,8 +11,8 @@ from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
-from numpy.typing import NDArray
 
+from ...arrays import Float32Array, Float64Array, IndexArray, Int64Array, UInt8Array
 from ..status import PointStatus
 
 # The translation IC-GN's parfor runs on numba's OpenMP layer, whose GNU runtime by default
@@ -155,39 +155,39 @@ class ReferenceImages(NamedTuple):
     """Float32 reference image and its spline gradients, with zero columns on the right
     (at least the kernel's row width) so that padded row slices stay inside."""
 
-    f: NDArray[np.float32]
-    gx: NDArray[np.float32]
-    gy: NDArray[np.float32]
+    f: Float32Array
+    gx: Float32Array
+    gy: Float32Array
 
 
 class Subsets(NamedTuple):
     """Per-POI data of the prepared reference subsets (n POIs; k = 2 or 6 parameters)."""
 
-    rows: NDArray[np.int64]  # (n,) POI centre row, px
-    cols: NDArray[np.int64]  # (n,) POI centre column, px
-    hinv: NDArray[np.float64]  # (n, k, k) inverse ZNSSD Gauss-Newton Hessian
-    jsum: NDArray[np.float64]  # (n, k) sums of the raw steepest-descent images
-    avec: NDArray[np.float64]  # (n, k) their projections on the normalised subset
-    fmean: NDArray[np.float64]  # (n,) mean of the reference subset, GL
-    fnorm: NDArray[np.float64]  # (n,) norm sqrt(sum (f - fmean)^2), GL
+    rows: Int64Array  # (n,) POI centre row, px
+    cols: Int64Array  # (n,) POI centre column, px
+    hinv: Float64Array  # (n, k, k) inverse ZNSSD Gauss-Newton Hessian
+    jsum: Float64Array  # (n, k) sums of the raw steepest-descent images
+    avec: Float64Array  # (n, k) their projections on the normalised subset
+    fmean: Float64Array  # (n,) mean of the reference subset, GL
+    fnorm: Float64Array  # (n,) norm sqrt(sum (f - fmean)^2), GL
 
 
 class Packed(NamedTuple):
     """Flat reference subsets of the translation kernel, (n, ng) float32 each (or (0, ng):
     copied per call instead): ``f - fmean``, ``gx``, ``gy``."""
 
-    f: NDArray[np.float32]
-    gx: NDArray[np.float32]
-    gy: NDArray[np.float32]
+    f: Float32Array
+    gx: Float32Array
+    gy: Float32Array
 
 
 class Passes(NamedTuple):
     """POI indices of the translation kernel's two passes: ``first`` start at ``p0``; then
     ``second[m]`` starts at the result of ``source[m]`` when that converged."""
 
-    first: NDArray[np.intp]
-    second: NDArray[np.intp]
-    source: NDArray[np.intp]
+    first: IndexArray
+    second: IndexArray
+    source: IndexArray
 
 
 class Settings(NamedTuple):
@@ -232,10 +232,10 @@ def settings(
 class Outputs(NamedTuple):
     """Per-POI outputs written by a kernel (n POIs)."""
 
-    p: NDArray[np.float64]  # (n, k) parameters
-    zncc: NDArray[np.float64]  # (n,)
-    iterations: NDArray[np.int64]  # (n,)
-    status: NDArray[np.uint8]  # (n,) PointStatus
+    p: Float64Array  # (n, k) parameters
+    zncc: Float64Array  # (n,)
+    iterations: Int64Array  # (n,)
+    status: UInt8Array  # (n,) PointStatus
 
 
 def outputs(n: int, k: int) -> Outputs:

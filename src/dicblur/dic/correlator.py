@@ -269,6 +269,8 @@ class Correlator(BlurMatching):
         self._prep = prep
         self._status0 = status0
         self._ref = ref
+        #: reference spline gradients (gy, gx), for the translation lack-of-fit test
+        self._ref_grad = (gy, gx)
         # padded float32 layouts of the kernels (see kernels.icgn_translation)
         # affine row width: a multiple of 8 (one AVX2 vector of float32): subset 21 runs 3
         # vectors per row instead of 4 (per POI-iteration 17.4k -> 15.0k instructions,

@@ -11,6 +11,7 @@ import numpy as np
 from ..arrays import BoolArray, Float32Array, Float64Array, IndexArray, Int64Array, UInt8Array
 from . import kernels
 from .icgn import N_PARAMS, uv_columns
+from .lack_of_fit import LACK_OF_FIT_F, LACK_OF_FIT_SAMPLE, translation_lack_of_fit
 from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
 from .passes import IcgnPasses, scatter
@@ -535,6 +536,41 @@ class Screening(IcgnPasses):
             scatter(out, loc, r)
         return out
 
+    def _lack_of_fit(
+        self, coef: Float32Array, p: Float64Array, cand: BoolArray, suspect: BoolArray
+    ) -> BoolArray:
+        """The ``cand`` translation POIs whose residual the affine gradients explain
+        (:func:`~dicblur.dic.lack_of_fit.translation_lack_of_fit` above
+        :data:`~dicblur.dic.lack_of_fit.LACK_OF_FIT_F`): a deformation the shape cannot
+        follow, which the field's median residual hides when every subset shares it.
+
+        Tested: the ``suspect`` ones (residual above ``max_residual`` times the noise
+        variance, kept by the field's median or spread) and an even sample of
+        :data:`~dicblur.dic.lack_of_fit.LACK_OF_FIT_SAMPLE`; all of them once one of the
+        sample fails (a model error the median hides is shared by most subsets; a local one
+        stands out of the median and is a suspect)."""
+        idx = np.flatnonzero(cand)
+        flag = np.zeros(cand.shape, bool)
+        if idx.size == 0:
+            return flag
+        sample = idx[:: max(1, idx.size // LACK_OF_FIT_SAMPLE)]
+        test = np.union1d(sample, np.flatnonzero(cand & suspect))
+
+        def fails(at: IndexArray) -> BoolArray:
+            fstat = translation_lack_of_fit(
+                self._ref, self._ref_grad, coef, self.order,
+                self.rows[at], self.cols[at], self.half, p[at, 0], p[at, 1],
+            )  # fmt: skip
+            with np.errstate(invalid="ignore"):
+                return fstat > LACK_OF_FIT_F
+
+        bad = fails(test)
+        if bad[np.isin(test, sample)].any():
+            test = idx
+            bad = fails(test)
+        flag[test[bad]] = True
+        return flag
+
     def _screen(self, coef: Float32Array, res: kernels.Outputs) -> float | None:
         """Flag false convergence in ``res`` in place: ``HIGH_RESIDUAL``, then ``OUTLIER``.
 
@@ -571,6 +607,9 @@ class Screening(IcgnPasses):
                 dev = np.abs(unit[ok] - noise_var)
                 limit = max(limit, noise_var + RESIDUAL_SPREAD * MAD_SCALE * float(np.median(dev)))
             high = ok & (unit > limit)
+            if self.shape == "translation":
+                assert sigma is not None
+                high |= self._lack_of_fit(coef, p, ok & ~high, unit > self.max_residual * sigma**2)
             st[high] = PointStatus.HIGH_RESIDUAL
             ok &= ~high
         if not self.median_test or self._grid_shape is None or not ok.any():

@@ -112,6 +112,7 @@ class CorrelatorState:
     _prep: PreparedSubsets
     _status0: UInt8Array
     _ref: Float64Array
+    _ref_grad: tuple[Float64Array, Float64Array]
     _tw: int
     _w: int
     _images: kernels.ReferenceImages

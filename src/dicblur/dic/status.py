@@ -30,7 +30,9 @@ class PointStatus(IntEnum):
     #: Converged, but to a poor match (ZNCC below ``min_zncc``): not the same texture.
     LOW_CORRELATION = 5
     #: Converged, but the ZNSSD residual exceeds ``max_residual`` times the value the noise
-    #: predicts for this subset (``noise_sigma`` given): the images differ there.
+    #: predicts for this subset (``noise_sigma`` given): the images differ there; or
+    #: (translation shape) the affine gradients explain its residual, a deformation the
+    #: shape function cannot follow (:mod:`dicblur.dic.lack_of_fit`).
     HIGH_RESIDUAL = 6
     #: Converged, but inconsistent with its grid neighbours: it fails the normalised
     #: median test, or the neighbours' displacement matches its subset better (a false

@@ -1,5 +1,5 @@
-"""The translation shape under a deformation it cannot follow: the lack-of-fit test
-(dicblur.dic.lack_of_fit) flags what the field's median residual hides."""
+"""Wrong matches the field's median residual hid: the translation shape under a deformation
+it cannot follow (dicblur.dic.lack_of_fit), scattered POIs no neighbour can judge."""
 
 from __future__ import annotations
 
@@ -60,3 +60,26 @@ def test_lack_of_fit_statistic_near_one_for_noise_and_large_for_a_strain():
     assert 0.5 < np.median(shifted) < 2.0 and shifted.max() < LACK_OF_FIT_F / 5
     strained = stat(affine_warp(img, np.diag([1.0, 1.05])), np.zeros(rows.size), 0.05 * (rows - C))
     assert np.median(strained) > 3 * LACK_OF_FIT_F
+
+
+def _scattered(n=512, count=150, seed=3):
+    # sparse: most POIs have no neighbour whose subset overlaps theirs
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.integers(20, n - 20, count), rng.integers(20, n - 20, count)])
+
+
+def test_scattered_points_on_another_pattern_are_not_converged_with_the_noise_given():
+    # before: the field's median residual, made by the chance optima themselves, hid them
+    # (11 % CONVERGED at ZNCC 0.60-0.74)
+    ref, cur = _noisy(pattern(512, seed=1), pattern(512, seed=2))
+    corr = Correlator(ref, subset=21, points=_scattered(), shape="translation", noise_sigma=2.0)
+    res = corr.correlate(cur)
+    assert (res.status == PointStatus.CONVERGED).sum() == 0
+    assert (res.status == PointStatus.HIGH_RESIDUAL).sum() > 0
+
+
+def test_scattered_points_of_a_shifted_pair_stay_converged():
+    img = pattern(512, seed=1)
+    ref, cur = _noisy(img, fourier_shift(img, -0.2, 0.3))
+    corr = Correlator(ref, subset=21, points=_scattered(), shape="translation", noise_sigma=2.0)
+    assert corr.correlate(cur).converged.all()

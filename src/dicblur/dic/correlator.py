@@ -271,6 +271,8 @@ class Correlator(BlurMatching):
         self._ref = ref
         #: reference spline gradients (gy, gx), for the translation lack-of-fit test
         self._ref_grad = (gy, gx)
+        #: the current image being screened (set by correlate and refine)
+        self._screen_image: Float64Array | None = None
         # padded float32 layouts of the kernels (see kernels.icgn_translation)
         # affine row width: a multiple of 8 (one AVX2 vector of float32): subset 21 runs 3
         # vectors per row instead of 4 (per POI-iteration 17.4k -> 15.0k instructions,
@@ -491,6 +493,7 @@ class Correlator(BlurMatching):
             finally:
                 self._defer_imprecise = False
             self._run_deferred(coef, res)  # as correlate
+            self._screen_image = current.image
             self._flag(coef, res)
         return Refined(*res)
 
@@ -644,6 +647,7 @@ class Correlator(BlurMatching):
         if method == "fftcc":
             self._retry(cur, coef, gu, gv, res)
         t4 = time.perf_counter()
+        self._screen_image = cur  # the unjudged POIs' peak test searches it
         noise_var = self._flag(coef, res)
         t5 = time.perf_counter()
         self.last_timings = {

@@ -23,7 +23,7 @@ from scipy import fft as sfft
 
 from ..arrays import Float32Array, Float64Array, FloatArray, IndexArray, Int64Array
 
-__all__ = ["global_shift", "subset_fftcc", "window_spectrum"]
+__all__ = ["global_shift", "subset_fftcc", "subset_fftcc_peaks", "window_spectrum"]
 
 
 def _window(shape: tuple[int, int], window: int) -> tuple[slice, slice]:
@@ -96,7 +96,7 @@ def global_shift(
     return u, v, float(corr.flat[idx])
 
 
-def subset_fftcc(
+def subset_fftcc_peaks(
     reference: FloatArray,
     current: FloatArray,
     rows: IndexArray,
@@ -108,8 +108,11 @@ def subset_fftcc(
     search: int | None = None,
     chunk: int = 256,
     workers: int | None = None,
-) -> tuple[Int64Array, Int64Array, Float64Array]:
-    """Per-subset integer displacement by ZNCC over a +-``search`` px window.
+    exclude: int = 3,
+) -> tuple[Int64Array, Int64Array, Float64Array, Float64Array]:
+    """:func:`subset_fftcc` and the second-best ZNCC of each search window: the largest
+    outside +-``exclude`` px of the best position (how distinct the match is; no noise
+    level needed).
 
     Parameters
     ----------
@@ -131,6 +134,8 @@ def subset_fftcc(
         Integer displacements, px.
     zncc : ndarray, shape (n,)
         Peak ZNCC (NaN where the reference subset is flat).
+    second : ndarray, shape (n,)
+        Largest ZNCC farther than ``exclude`` px (either axis) from the peak.
     """
     n = len(rows)
     size = 2 * half + 1
@@ -146,6 +151,7 @@ def subset_fftcc(
     out_u = np.zeros(n, np.int64)
     out_v = np.zeros(n, np.int64)
     out_z = np.full(n, np.nan)
+    out_z2 = np.full(n, np.nan)
     npx = size * size
     for start in range(0, n, chunk):
         sl = slice(start, min(n, start + chunk))
@@ -192,4 +198,53 @@ def subset_fftcc(
         out_v[sl] = gv[sl] + dy - s
         peak = flat[np.arange(m), best]
         out_z[sl] = np.where(np.isfinite(peak) & (fnorm > 0), peak, np.nan)
-    return out_u, out_v, out_z
+        yy = np.arange(zn.shape[1])
+        near_y = np.abs(yy[None, :] - dy[:, None]) <= exclude
+        near_x = np.abs(yy[None, :] - dx[:, None]) <= exclude
+        away = np.where(near_y[:, :, None] & near_x[:, None, :], -np.inf, zn)
+        sec = away.reshape(m, -1).max(axis=1)
+        out_z2[sl] = np.where(np.isfinite(sec) & (fnorm > 0), sec, np.nan)
+    return out_u, out_v, out_z, out_z2
+
+
+def subset_fftcc(
+    reference: FloatArray,
+    current: FloatArray,
+    rows: IndexArray,
+    cols: IndexArray,
+    half: int,
+    *,
+    guess_u: FloatArray | None = None,
+    guess_v: FloatArray | None = None,
+    search: int | None = None,
+    chunk: int = 256,
+    workers: int | None = None,
+) -> tuple[Int64Array, Int64Array, Float64Array]:
+    """Per-subset integer displacement by ZNCC over a +-``search`` px window
+    (:func:`subset_fftcc_peaks` without the second peak).
+
+    Parameters
+    ----------
+    reference, current : ndarray, shape (rows, cols)
+        Images (grey levels).
+    rows, cols : ndarray of int, shape (n,)
+        POI centres (the reference subset must lie inside the image).
+    half : int
+        Subset half-width, px.
+    guess_u, guess_v : ndarray, shape (n,), optional
+        Centre of the search (rounded to integers), px; default 0.
+    search : int, optional
+        Search half-range, px; default the subset size ``2 half + 1``.
+
+    Returns
+    -------
+    u, v : ndarray of int, shape (n,)
+        Integer displacements, px.
+    zncc : ndarray, shape (n,)
+        Peak ZNCC (NaN where the reference subset is flat).
+    """
+    u, v, z, _ = subset_fftcc_peaks(
+        reference, current, rows, cols, half, guess_u=guess_u, guess_v=guess_v,
+        search=search, chunk=chunk, workers=workers,
+    )  # fmt: skip
+    return u, v, z

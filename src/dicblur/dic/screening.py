@@ -11,6 +11,7 @@ import numpy as np
 from ..arrays import BoolArray, Float32Array, Float64Array, IndexArray, Int64Array, UInt8Array
 from . import kernels
 from .icgn import N_PARAMS, uv_columns
+from .initial import subset_fftcc_peaks
 from .lack_of_fit import LACK_OF_FIT_F, LACK_OF_FIT_SAMPLE, translation_lack_of_fit
 from .noise import NoiseEstimate, residual_noise, residual_variance
 from .outliers import MEDIAN_EPS, MEDIAN_THRESHOLD, median_screen
@@ -70,6 +71,11 @@ ACCEPT_DISTANCE = 0.07
 #: retried from it, and is ``OUTLIER`` unless the retry converges there with a better fit.
 OUTLIER_DISTANCE = 0.1
 OUTLIER_SIGMAS = 4.0
+#: Peak test of the POIs no neighbour can judge: the best other integer position within
+#: +-``subset`` px of the result, farther than ``subset // 2`` px (either axis: a motion
+#: blur widens the peak), must leave at least this times the result's ZNSSD residual
+#: ``1 - zncc`` (docs/dic.md, "Support", for the measured ratios).
+PEAK_RESIDUAL_RATIO = 2.0
 #: With an estimated noise, ``HIGH_RESIDUAL`` also needs a residual variance beyond the
 #: field's median by this many robust standard deviations (1.4826 x the median absolute
 #: deviation): for noise alone that std is ``sqrt(2 / m)`` ~ 7 % of the median at subset
@@ -413,12 +419,15 @@ class Screening(IcgnPasses):
     def _unjudged_check(self, res: kernels.Outputs) -> None:
         """``HIGH_RESIDUAL`` for the converged POIs too few neighbours can judge (fewer than
         :data:`.support.MIN_VERDICTS` prepared ones: scattered explicit points), in place,
-        when their residual fails the residual test against the noise alone (``max_residual``
-        times the noise variance; no field median, which their own chance optima make: on
-        another pattern's image 11 % of such POIs came back ``CONVERGED``, ZNCC 0.60-0.74,
-        with ``noise_sigma=2``)."""
+        when the match is not distinct: the best other integer position within
+        +-``subset`` px (farther than ``subset // 2`` px) leaves less than
+        :data:`PEAK_RESIDUAL_RATIO` times its ZNSSD residual (no noise level needed); or,
+        with a noise level known, when their residual fails the residual test against the
+        noise alone (``max_residual`` times the noise variance; no field median, which
+        their own chance optima make). On another pattern's image 11 % of such POIs came
+        back ``CONVERGED`` (ZNCC 0.60-0.74) before."""
         pairs = self._support_pairs
-        if pairs is None or self.noise is None or self.max_residual is None:
+        if pairs is None:
             return
         st = res.status
         a, b, _ = pairs
@@ -427,9 +436,24 @@ class Screening(IcgnPasses):
         alone = (st == PointStatus.CONVERGED) & (count < MIN_VERDICTS)
         if not alone.any():
             return
-        m = self.subset * self.subset - res.p.shape[1] - 2
-        unit = residual_variance(res.zncc, self._prep.fnorm, m)
-        st[alone & (unit > self.max_residual * self.noise.sigma**2)] = PointStatus.HIGH_RESIDUAL
+        k = res.p.shape[1]
+        if self.noise is not None and self.max_residual is not None:
+            unit = residual_variance(res.zncc, self._prep.fnorm, self.subset**2 - k - 2)
+            high = alone & (unit > self.max_residual * self.noise.sigma**2)
+            st[high] = PointStatus.HIGH_RESIDUAL
+            alone &= ~high
+        idx = np.flatnonzero(alone)
+        if idx.size == 0 or self._screen_image is None:
+            return
+        ucol, vcol = uv_columns(k)
+        _, _, _, second = subset_fftcc_peaks(
+            self._ref, self._screen_image, self.rows[idx], self.cols[idx], self.half,
+            guess_u=res.p[idx, ucol], guess_v=res.p[idx, vcol], search=self.subset,
+            exclude=self.half, workers=1,
+        )  # fmt: skip
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = (1.0 - second) / np.maximum(1.0 - res.zncc[idx], 0.0)
+        st[idx[ratio < PEAK_RESIDUAL_RATIO]] = PointStatus.HIGH_RESIDUAL
 
     def _neighbour_check(self, coef: Float32Array, res: kernels.Outputs) -> BoolArray | None:
         """Each converged POI of the grid against ``m``, the median of the means of its

@@ -113,6 +113,7 @@ class CorrelatorState:
     _status0: UInt8Array
     _ref: Float64Array
     _ref_grad: tuple[Float64Array, Float64Array]
+    _screen_image: Float64Array | None
     _tw: int
     _w: int
     _images: kernels.ReferenceImages

@@ -40,7 +40,7 @@ __all__ = ["LACK_OF_FIT_F", "LACK_OF_FIT_SAMPLE", "translation_lack_of_fit"]
 LACK_OF_FIT_F = 100.0
 
 #: POIs of a field the screen tests first (evenly spread); the rest only when one fails.
-LACK_OF_FIT_SAMPLE = 24
+LACK_OF_FIT_SAMPLE = 8
 
 
 def translation_lack_of_fit(

@@ -109,3 +109,22 @@ def test_jpeg_folder_opens_as_its_glob_does_and_the_track_says_it_is_lossy(tmp_p
     dicblur.save_image(png / "a.png", rec.frame(0), bit_depth=8)
     dicblur.save_image(png / "b.png", rec.frame(1), bit_depth=8)
     assert "lossy" not in open_recording(png).meta
+
+
+@pytest.mark.slow
+def test_non_finite_pixels_in_chunks_on_workers_fail_the_same_points(tmp_path):
+    # workers re-open the files (their frames' NaN filled there too) and report the
+    # frames that had any; the points failed are those of the serial run
+    from dicblur.track.parallel import ChunkedRun
+
+    _float_tiffs(tmp_path, n=8, nan_at=[(5, 30, 40)])
+    kw = dict(fps=1000, exposure="0.1ms", static="0:4", step=12, subset=21, advice=False,
+              shape="translation")  # fmt: skip
+    serial = dicblur.track(open_recording(tmp_path), **kw)
+    workers = dicblur.track(
+        open_recording(tmp_path), chunks=ChunkedRun(workers=2, chunk_frames=3), **kw
+    )
+    st = workers["status"].values
+    np.testing.assert_array_equal(st == PointStatus.DIVERGED, serial["status"].values == 4)
+    assert (st[5] == PointStatus.DIVERGED).sum() == _touching(workers, 30, 40, 21).sum()
+    assert "frame 5 (f5.tif): 4 non-finite pixels" in workers.attrs["notes"]

@@ -155,7 +155,8 @@ class Recording:
             exposure=self.exposure,
             names=self.names,
             _read=filled,
-            meta=self.meta,  # the handle stays this recording's to close
+            _close=self.close,  # one handle: closing either closes it once
+            meta=self.meta,
         )
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[Float64Array]:

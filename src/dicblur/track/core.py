@@ -429,6 +429,9 @@ def track(
             list(got["fallback"]),
         )
         refs, error = [reference] * len(out.frames), got["error"]
+        # frames whose non-finite pixels a worker filled: read here too for their masks
+        counts = got.get("non_finite") or [0] * len(out.frames)
+        non_finite.read([k for k, c in zip(out.frames, counts, strict=True) if c])
     try:
         for k in order if chunks is None else ():
             if k == reference - 1:  # backwards from the reference, on the first one

@@ -45,6 +45,13 @@ class NonFinitePixels:
         with self._lock:
             self.masks[int(index)] = mask
 
+    def read(self, frames: list[int]) -> None:
+        """Read ``frames`` (those another process read, e.g. a worker of
+        :mod:`.parallel` that reported non-finite pixels in them) for their masks."""
+        for k in frames:
+            if k not in self.masks:
+                self.recording.frame(k)
+
     def touched(self, index: int, rows: Float64Array, cols: Float64Array, subset: int) -> BoolArray:
         """Points (n,) whose subset centred at (``rows``, ``cols``) (px, NaN: the centre
         unknown, taken as touched when the frame has non-finite pixels) covers a

@@ -557,6 +557,9 @@ CASES += [
         must=("--noise", "1.0, 2.0"),
         must_not=("None", "sigma"),
     ),
+    # typer reads an empty path as ".": the study was written into the current folder
+    Case("pulse-empty-out", ("pulse", "-o", "", "--trials", "10"), must=("-o=''", "empty")),
+    Case("pulse-empty-out-equals", ("pulse", "--out=", "--trials", "10"), must=("--out=''",)),
     # a value pasted from a document: the typographic minus read as "not a number" only
     Case("usage-typographic-minus", (*GENERATE, "64", "--seed", "\u22121"), must=("ASCII '-'",)),
     # a predicted sigma of 0 px and the residual screen off, exit 0

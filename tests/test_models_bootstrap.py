@@ -19,6 +19,20 @@ def _degenerate_full_fit(idx):
     return np.array([1.0, 2.0]), jac, np.full(idx.size, 0.1)
 
 
+def _fit(fit_once, ci_options):
+    """The fit result of a two-parameter test model over the 16 points of W."""
+    return make_result(
+        model="test",
+        names=("a", "b"),
+        fit_once=fit_once,
+        n=W.size,
+        data_space=np.zeros(W.size),
+        blur=W,
+        fixed={},
+        ci_options=ci_options,
+    )
+
+
 def test_a_model_no_resample_can_refit_stops_the_bootstrap_early():
     calls = []
 
@@ -28,16 +42,7 @@ def test_a_model_no_resample_can_refit_stops_the_bootstrap_early():
         calls.append(refit_from)
         raise FitError("a refit that spent its budget")
 
-    res = make_result(
-        model="test",
-        names=("a", "b"),
-        fit_once=fit_once,
-        n=W.size,
-        data_space=np.zeros(W.size),
-        blur=W,
-        fixed={},
-        ci_options=CIOptions(seed=0),
-    )
+    res = _fit(fit_once, CIOptions(seed=0))
     # it was 500 refits (n_boot), minutes for a mismatch fit crawling along its valley
     assert len(calls) == BOOT_GIVE_UP
     assert res.ci_method == "unidentified" and np.isinf(res.high).all()
@@ -53,16 +58,7 @@ def test_refits_start_from_the_fit_to_all_points_and_converged_ones_give_interva
         starts.append(np.array(refit_from))
         return np.array([1.0, 2.0]) + rng.normal(0.0, 0.01, 2), None, None
 
-    res = make_result(
-        model="test",
-        names=("a", "b"),
-        fit_once=fit_once,
-        n=W.size,
-        data_space=np.zeros(W.size),
-        blur=W,
-        fixed={},
-        ci_options=CIOptions(seed=0, n_boot=50),
-    )
+    res = _fit(fit_once, CIOptions(seed=0, n_boot=50))
     assert res.ci_method == "bootstrap" and len(starts) > 10
     assert all(np.array_equal(s, [1.0, 2.0]) for s in starts)
     assert res.low[0] < 1.0 < res.high[0] and res.high[0] - res.low[0] == pytest.approx(

@@ -16,13 +16,14 @@ import traceback
 import typing
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import click
 import typer
 import typer.core
 
-from ..errors import DicblurError
+from ..errors import DicblurError, InputError
 
 __all__ = ["app", "main", "run"]
 
@@ -293,6 +294,31 @@ def strip_units(args: Sequence[str]) -> list[str]:
     return out
 
 
+def _is_path(param: Any) -> bool:
+    """Whether an option takes a path (``Path``, ``Path | None``)."""
+    ann = getattr(getattr(param, "type_descriptor", None), "annotation", None)
+    return ann is Path or (ann is not None and Path in typing.get_args(ann))
+
+
+def refuse_empty_paths(args: Sequence[str]) -> None:
+    """An empty path option (``-o ""``) is refused: typer reads it as ``.``, so a command
+    would write into the current folder."""
+    paths = {
+        opt
+        for param in getattr(_command(args), "params", ())
+        if _is_path(param)
+        for opt in getattr(param, "opts", ())
+    }
+    for i, tok in enumerate(args):
+        opt, eq, value = tok.partition("=")
+        empty = (eq and opt in paths and not value.strip()) or (
+            tok in paths and i + 1 < len(args) and not args[i + 1].strip()
+        )
+        if empty:
+            name = opt if eq else tok
+            raise InputError(f"{name}='': an empty path; give a file or folder name")
+
+
 def _command_options(args: Sequence[str]) -> dict[str, str]:
     """{python parameter name: option as typed} of the command that ``args`` invoke."""
     cmd = _command(args)
@@ -366,6 +392,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     old_limit = os.environ.get("DICBLUR_MAX_PIXELS")
     try:
+        refuse_empty_paths(args)
         rv = app(args=strip_units(args), prog_name="dicblur", standalone_mode=False)
         return rv if isinstance(rv, int) else 0
     except DicblurError as exc:

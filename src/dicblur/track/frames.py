@@ -29,8 +29,9 @@ class ChunkRunner(Protocol):
     ``run`` returns a mapping with the lists ``frames``, ``u``, ``v``, ``zncc``,
     ``status``, ``fallback`` (one entry per frame tracked), optionally ``non_finite``
     (per frame, the non-finite pixels a worker filled: :mod:`.nan_pixels`) and ``error``
-    (the exception that stopped it, or None). With ``compensate_blur`` the runner's ``compensate`` (the
-    signature of :func:`.compensate.compensated_pass`) runs the compensated passes.
+    (the exception that stopped it, or None). With ``compensate_blur`` the runner's
+    ``compensate`` (the signature of :func:`.compensate.compensated_pass`) runs the
+    compensated passes.
     """
 
     def run(

@@ -2,7 +2,7 @@
 
 Sources (:func:`open_recording`):
 
-- a folder of TIFF/PNG/BMP images in natural order (``img2.tif`` before ``img10.tif``;
+- a folder of TIFF/PNG/BMP/JPEG images in natural order (``img2.tif`` before ``img10.tif``;
   hidden files such as macOS's ``._img2.tif`` left out), or a glob pattern
   (``"run1/*.png"``);
 - a multi-page TIFF stack (pages read one at a time by ``tifffile``);
@@ -38,9 +38,12 @@ from .arrays import Float64Array
 from .errors import ImageReadError, InputError
 from .io import load_image
 
-__all__ = ["IMAGE_SUFFIXES", "Recording", "natural_key", "open_recording"]
+__all__ = ["IMAGE_SUFFIXES", "LOSSY_SUFFIXES", "Recording", "natural_key", "open_recording"]
 
-IMAGE_SUFFIXES = (".tif", ".tiff", ".png", ".bmp")
+IMAGE_SUFFIXES = (".tif", ".tiff", ".png", ".bmp", ".jpg", ".jpeg")
+#: Lossy formats among them: read, but their compression error is no part of any noise
+#: model (``Recording.meta['lossy']`` names the format; :func:`dicblur.track` says so).
+LOSSY_SUFFIXES = {".jpg": "JPEG", ".jpeg": "JPEG"}
 
 
 def natural_key(name: str) -> tuple[Any, ...]:
@@ -117,6 +120,45 @@ class Recording:
             raise ImageReadError(f"frame {i} ({self.names[i]}): pixels are not finite")
         return out
 
+    def with_non_finite_filled(self, seen: Callable[[int, NDArray[np.bool_]], None]) -> Recording:
+        """This recording with each frame's non-finite pixels (NaN, inf: a float TIFF's
+        dead or masked pixels) replaced by the median of its finite ones, instead of the
+        frame refused; ``seen(index, mask)`` gets the mask (rows, cols) of every frame
+        that had any, so the caller can fail what they touch (:mod:`dicblur.track.nan_pixels`).
+        A frame without a finite pixel is still refused. Shares this recording's reader."""
+        read = self._read
+
+        def filled(i: int) -> NDArray[Any]:
+            arr = np.asarray(read(i))
+            if np.issubdtype(arr.dtype, np.integer):
+                return arr
+            arr = np.asarray(arr, dtype=np.float64)
+            bad = ~np.isfinite(arr)
+            if not bad.any():
+                return arr
+            if bad.ndim == 3:  # colour: a pixel is bad when one of its channels is
+                bad = bad.any(axis=-1)
+            if bad.all():
+                raise ImageReadError(f"frame {i} ({self.names[i]}): no pixel is finite")
+            arr = arr.copy()
+            arr[bad] = np.median(arr[~bad], axis=0)
+            seen(i, bad)
+            return arr
+
+        return Recording(
+            source=self.source,
+            kind=self.kind,
+            n_frames=self.n_frames,
+            shape=self.shape,
+            bit_depth=self.bit_depth,
+            fps=self.fps,
+            exposure=self.exposure,
+            names=self.names,
+            _read=filled,
+            _close=self.close,  # one handle: closing either closes it once
+            meta=self.meta,
+        )
+
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[Float64Array]:
         """Iterate over frames ``start .. stop - 1`` (one in memory at a time)."""
         for i in range(start, self.n_frames if stop is None else min(stop, self.n_frames)):
@@ -155,12 +197,15 @@ def _bits_of(dtype: np.dtype[Any]) -> int:
 def _folder(files: list[Path], source: str) -> Recording:
     if len(files) == 0:
         raise ImageReadError(
-            f"recording={source!r}: no TIFF/PNG/BMP images found; give a "
+            f"recording={source!r}: no TIFF/PNG/BMP/JPEG images found; give a "
             "folder of frames, a glob such as 'run/*.tif', a multi-page "
             "TIFF, a .cine or a .cih/.mraw recording"
         )
     first = _read_file(files[0])
     shape = (int(first.shape[0]), int(first.shape[1]))
+    lossy = sorted(
+        {LOSSY_SUFFIXES[f.suffix.lower()] for f in files if f.suffix.lower() in LOSSY_SUFFIXES}
+    )
     bits = _bits_of(first.dtype)
 
     def read(i: int) -> NDArray[Any]:
@@ -185,6 +230,7 @@ def _folder(files: list[Path], source: str) -> Recording:
         exposure=None,
         names=[f.name for f in files],
         _read=read,
+        meta={"lossy": lossy[0]} if lossy else {},
     )
 
 
@@ -193,7 +239,7 @@ def _one_format(files: list[Path], source: str) -> None:
     f1.png beside f1.tif: each would be a frame of its own, at the wrong time)."""
     counts: dict[str, int] = {}
     for f in files:
-        suffix = f.suffix.lower().replace(".tiff", ".tif")
+        suffix = f.suffix.lower().replace(".tiff", ".tif").replace(".jpeg", ".jpg")
         counts[suffix] = counts.get(suffix, 0) + 1
     if len(counts) > 1:
         found = " and ".join(f"{n} {s}" for s, n in sorted(counts.items(), key=lambda x: -x[1]))
@@ -452,7 +498,7 @@ def open_recording(source: str | os.PathLike[str]) -> Recording:
     Parameters
     ----------
     source : str or path-like
-        A folder of TIFF/PNG/BMP frames (natural sort), a glob pattern, a multi-page TIFF,
+        A folder of TIFF/PNG/BMP/JPEG frames (natural sort), a glob pattern, a multi-page TIFF,
         a single image (one frame), a Phantom ``.cine``, or a Photron ``.cih``/``.cihx``/
         ``.mraw``.
 

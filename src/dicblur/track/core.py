@@ -53,6 +53,7 @@ from .frames import (
     poi_grid,
     seed_correlator,
 )
+from .nan_pixels import NonFinitePixels
 from .noise import NoiseEstimate, estimate_static_noise
 from .options import TOLERANCE_MAX as TOLERANCE_MAX
 from .options import TOLERANCE_MIN as TOLERANCE_MIN
@@ -249,6 +250,9 @@ def track(
 
         check_strain_window(strain, points)
     rec = recording if isinstance(recording, Recording) else open_recording(recording)
+    # non-finite pixels fail the points they touch, not the track (track.nan_pixels)
+    non_finite = NonFinitePixels(rec)
+    rec = non_finite.recording
     n_total = len(rec)
     if n_total < 2:
         raise InputError(f"recording={rec.source!r}: {n_total} frame(s); tracking needs at least 2")
@@ -301,6 +305,12 @@ def track(
     noise_est: NoiseEstimate | None = None
     noise_error: BaseException | None = None
     notes: list[str] = []
+    if rec.meta.get("lossy"):
+        notes.append(
+            f"frames stored as {rec.meta['lossy']}: the lossy compression adds an error "
+            "(8 x 8 block artefacts, fine texture lost) that the noise model does not "
+            "describe, so sigma is too small by an unknown amount; record TIFF or PNG"
+        )
     if noise is not None:
         noise_est = NoiseEstimate(
             sigma=float(noise),
@@ -419,6 +429,9 @@ def track(
             list(got["fallback"]),
         )
         refs, error = [reference] * len(out.frames), got["error"]
+        # frames whose non-finite pixels a worker filled: read here too for their masks
+        counts = got.get("non_finite") or [0] * len(out.frames)
+        non_finite.read([k for k, c in zip(out.frames, counts, strict=True) if c])
     try:
         for k in order if chunks is None else ():
             if k == reference - 1:  # backwards from the reference, on the first one
@@ -508,6 +521,12 @@ def track(
             )
         except (DicblurError, KeyboardInterrupt, OSError, MemoryError) as exc:
             error = exc  # the first (plain) pass is kept
+    notes.extend(
+        non_finite.fail(
+            out.frames, out.u, out.v, out.zncc, out.status, reference=reference,
+            centres=np.stack([corr0.rows, corr0.cols], axis=1), subset=corr0.subset,
+        )
+    )  # fmt: skip
     elapsed = time.perf_counter() - t_start
     if not out.frames:
         if error is not None:

@@ -27,9 +27,11 @@ class ChunkRunner(Protocol):
     """Runs the correlation of :func:`track` in chunks (:class:`.parallel.ChunkedRun`).
 
     ``run`` returns a mapping with the lists ``frames``, ``u``, ``v``, ``zncc``,
-    ``status``, ``fallback`` (one entry per frame tracked) and ``error`` (the exception
-    that stopped it, or None). With ``compensate_blur`` the runner's ``compensate`` (the
-    signature of :func:`.compensate.compensated_pass`) runs the compensated passes.
+    ``status``, ``fallback`` (one entry per frame tracked), optionally ``non_finite``
+    (per frame, the non-finite pixels a worker filled: :mod:`.nan_pixels`) and ``error``
+    (the exception that stopped it, or None). With ``compensate_blur`` the runner's
+    ``compensate`` (the signature of :func:`.compensate.compensated_pass`) runs the
+    compensated passes.
     """
 
     def run(

@@ -163,6 +163,8 @@ _SEEDS: dict[str, Any] = {}
 _SHARED: dict[str, tuple[Correlator, Float64Array, Any, Any]] = {}
 # recordings this module opened (closed when dropped)
 _OPENED: set[int] = set()
+# per recording this module opened: frame -> its non-finite pixels (filled when read)
+_NON_FINITE: dict[int, dict[int, int]] = {}
 # one reader at a time: a recording's frames are read by seek + read on one file handle
 _READ = threading.Lock()
 _PREPARE = threading.Lock()
@@ -197,7 +199,13 @@ def _prepared(job: TrackJob) -> tuple[Recording, Correlator, Float64Array, Any]:
     with _PREPARE:
         _release(keep=job.key)
         if isinstance(job.source, str):
-            rec = open_recording(job.source)
+            # non-finite pixels filled, their count per frame kept for the chunk's result
+            # (this process's track then fails the points they touch: track.nan_pixels)
+            seen: dict[int, int] = {}
+            rec = open_recording(job.source).with_non_finite_filled(
+                lambda i, mask: seen.__setitem__(i, int(mask.sum()))
+            )
+            _NON_FINITE[id(rec)] = seen
             _OPENED.add(id(rec))
         else:
             rec = job.source
@@ -232,6 +240,7 @@ def _release(keep: str | None = None) -> None:
         _SEEDS.pop(key, None)
         if id(rec) in _OPENED and not any(v[0] is rec for v in _PREPARED.values()):
             _OPENED.discard(id(rec))
+            _NON_FINITE.pop(id(rec), None)
             rec.close()
 
 
@@ -273,7 +282,9 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
         "zncc": np.empty((m, n)),
         "status": np.empty((m, n), np.uint8),
         "fallback": np.zeros(m, bool),
+        "non_finite": np.zeros(m, np.int64),
     }
+    seen = _NON_FINITE.get(id(rec), {})
     keep = {k: i for i, k in enumerate(chunk.frames)}
     grid = poi_grid(corr)
     base = np.zeros((n, 2))
@@ -315,6 +326,7 @@ def track_chunk(job: TrackJob, chunk: Chunk) -> dict[str, NDArray[Any]]:
                 out["zncc"][i] = np.asarray(res.zncc, np.float64)
                 out["status"][i] = np.asarray(res.status, np.uint8)
                 out["fallback"][i] = bool(fb)
+                out["non_finite"][i] = seen.get(k, 0)
                 done = i + 1
     except (DicblurError, OSError) as exc:
         # even with no frame done: the run records the error and its other chunks go on
@@ -470,7 +482,9 @@ class ChunkedRun:
             progress=progress,
             threads=self.threads,
         )
-        got: dict[str, Any] = {k: [] for k in ("frames", "u", "v", "zncc", "status", "fallback")}
+        got: dict[str, Any] = {
+            k: [] for k in ("frames", "u", "v", "zncc", "status", "fallback", "non_finite")
+        }
         for c in chunks:
             res = results.get(c.index)
             if res is None:
@@ -482,6 +496,8 @@ class ChunkedRun:
                 got["zncc"].append(res["zncc"][j])
                 got["status"].append(res["status"][j])
                 got["fallback"].append(bool(res["fallback"][j]))
+                # non-finite pixels a worker filled (0: none, or a store of an earlier version)
+                got["non_finite"].append(int(res["non_finite"][j]) if "non_finite" in res else 0)
         got["error"] = error
         return got
 

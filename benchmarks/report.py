@@ -413,18 +413,23 @@ def render_test_suite(doc: Doc) -> Lines:
 
 
 def render_track_subpixel_bias(doc: Doc) -> Lines:
+    # rms error / sigma of a small vibrating target (u / v), taken apart, and the
+    # frame-mean error at sub-pixel offsets against the models' interpolation bias
     case = doc["small_case"]["png folder"]
-    u, v = case["u"], case["v"]
     cols = ("raw", "minus_bias", "minus_frame_mean", "still_frames")
-    parts = ", ".join(f"{c.replace('_', ' ')} {u[c]:.2f} / {v[c]:.2f}" for c in cols)
+    cells = [f"{case['u'][c]:.2f} / {case['v'][c]:.2f}" for c in cols]
     shifts = doc["subpixel_shifts"]
-    gap = max(abs(r["mean_error_px"] - r["predicted_interpolation_bias_px"]) for r in shifts)
     peak = max(abs(r["mean_error_px"]) for r in shifts)
-    return [
-        f"rms error / sigma (u / v) of a small vibrating target: {parts}. Frame-mean error "
-        f"at {len(shifts)} sub-pixel offsets: up to {peak:.4f} px, within {gap:.4f} px of "
-        "the models' interpolation bias (not part of sigma, docs/track.md)."
+    gap = max(abs(r["mean_error_px"] - r["predicted_interpolation_bias_px"]) for r in shifts)
+    head = [
+        "error/sigma u / v: raw",
+        "minus bias_u/v",
+        "minus frame mean",
+        "still frames",
+        "frame-mean error px (max)",
+        "its gap to the predicted bias px",
     ]
+    return table(head, [[*cells, f"{peak:.4f}", f"{gap:.4f}"]])
 
 
 def render_strain(doc: Doc) -> Lines:
@@ -607,10 +612,9 @@ def render(results: Path = RESULTS) -> str:
         "# Benchmarks",
         "",
         "The current state, generated from `benchmarks/results/*.json` by `python -m",
-        "benchmarks.report` (rerun a benchmark, then the report; never edit by hand). Each table",
-        "is one result file with its command, commit, date, machine and load; peers and baselines",
-        "ran side by side. Times are from shared 2-core machines; ratios compare. A file without",
-        "its own renderer shows its first rows (the JSON holds them all). History: git.",
+        "benchmarks.report` (never edit by hand). Each table is one result file with its",
+        "command, commit, date, machine and load; peers and baselines ran side by side, on shared",
+        "2-core machines (ratios compare). A file without its own renderer shows its first rows.",
     ]
     titles = [t for t, _ in SECTIONS] + ["Other results"]
     for title in titles:

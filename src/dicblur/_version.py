@@ -12,7 +12,7 @@ from importlib.metadata import PackageNotFoundError, version
 __all__ = ["DEPENDENCIES", "__version__", "package_versions"]
 
 # A plain assignment: setuptools reads it statically (pyproject.toml [tool.setuptools.dynamic]).
-__version__ = "0.2.1"
+__version__ = "0.2.2"
 
 #: The packages whose versions change dicblur's numbers or files (recorded in provenance).
 DEPENDENCIES = ("numpy", "scipy", "numba", "xarray", "zarr", "dask", "distributed", "matplotlib")

@@ -35,7 +35,12 @@ from ..track.kinematics import exposure_motion
 from ..track.noise import NoiseEstimate, estimate_static_noise, subset_levels
 from ..track.options import parse_frame_range, parse_rate
 from ..track.parallel import HISTORY, thread_safe_kernels
-from ..track.saturation import saturated_share, saturation_level
+from ..track.saturation import (
+    saturated_share,
+    saturation_level,
+    saturation_note,
+    too_saturated,
+)
 from ..track.uncertainty import build_blur_table
 from .camera import StereoRig
 from .matching import match_reference
@@ -459,12 +464,8 @@ def track(
         level = saturation_level(ref)
         sat[nm] = saturated_share(ref, cen, subset, level)
         if (sat[nm] > 0).any():
-            notes.append(
-                f"{int((sat[nm] > 0).sum())} of {n} points have clipped pixels (at {level:g} "
-                f"GL) in the {nm} reference subset: not valid; lower the exposure or the "
-                "lighting"
-            )
-    valid &= ~((sat["left"] > 0) | (sat["right"] > 0))[None, :]
+            notes.append(saturation_note(sat[nm], level, n, f" {nm}"))
+    valid &= ~(too_saturated(sat["left"]) | too_saturated(sat["right"]))[None, :]
     fp = ("frame", "point")
     data: dict[str, Any] = {
         "X": ("point", match.points[:, 0]),

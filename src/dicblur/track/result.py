@@ -32,7 +32,7 @@ from .flags import (
 from .frames import Tracked
 from .kinematics import exposure_motion, exposure_skew
 from .noise import NoiseEstimate, subset_levels
-from .saturation import saturated_share, saturation_level
+from .saturation import saturated_share, saturation_level, saturation_note, too_saturated
 from .skew import build_skew_table
 from .uncertainty import build_blur_table
 
@@ -359,14 +359,10 @@ def assemble(
     # subsets with clipped pixels in the reference: their sigma does not hold (saturation)
     sat_level = saturation_level(ref_img)
     saturated = saturated_share(ref_img, centres, corr.subset, sat_level)
-    clipped = saturated > 0
-    if clipped.any():
+    clipped = too_saturated(saturated)
+    if (saturated > 0).any():
         settings["saturation_level"] = sat_level
-        notes.append(
-            f"{int(clipped.sum())} of {n_p} points have clipped pixels (at {sat_level:g} GL) "
-            "in their reference subset: not valid (no noise or blur model there); lower "
-            "the exposure or the lighting, or move the subsets"
-        )
+        notes.append(saturation_note(saturated, sat_level, n_p))
     sigma_u = np.empty((n_f, n_p), np.float32)
     sigma_v = np.empty((n_f, n_p), np.float32)
     valid = np.empty((n_f, n_p), bool)

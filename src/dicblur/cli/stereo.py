@@ -166,7 +166,7 @@ def track_command(
     from ..stereo.core import track
     from ..stereo.store import write_stereo_csv
     from ..track.store import save_track
-    from .track import writable_folder
+    from .track import writable_folder, write_partial
 
     check_track_choices(fmt=fmt, shape=shape)
     dep = None if depth is None else parse_quantity(depth, "length", name="--depth")
@@ -210,12 +210,8 @@ def track_command(
         except TrackInterrupted as exc:
             # the pairs tracked before a bad frame, written before the error (as track's)
             if exc.dataset is not None:
-                save_track(exc.dataset, target)
-                if csv:
-                    write_stereo_csv(exc.dataset, out / "stereo.csv")
-                console.print(
-                    f"wrote the {exc.dataset.sizes['frame']} frames tracked before the "
-                    f"stop to {target}"
+                write_partial(
+                    exc.dataset, target, out / "stereo.csv" if csv else None, write_stereo_csv
                 )
             raise
     save_track(ds, target)

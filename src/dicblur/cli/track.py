@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -250,12 +251,8 @@ def track_command(
             )
         except TrackInterrupted as exc:
             if exc.dataset is not None:
-                save_track(exc.dataset, target)
-                if csv:
-                    write_track_csv(exc.dataset, out / "track.csv")
-                console.print(
-                    f"wrote the {exc.dataset.sizes['frame']} frames tracked "
-                    f"before the stop to {target}"
+                write_partial(
+                    exc.dataset, target, out / "track.csv" if csv else None, write_track_csv
                 )
             if isinstance(exc.__cause__, KeyboardInterrupt):
                 raise KeyboardInterrupt from exc
@@ -310,6 +307,19 @@ def track_command(
             console.print(f"note: {note}")
     for w in written:
         console.print(f"wrote {w}")
+
+
+def write_partial(
+    ds: Any, target: Path, csv_path: Path | None, write_csv: Callable[[Any, Path], Any]
+) -> None:
+    """The frames of a track stopped by a bad frame, written before its error line: the
+    store, and with ``write_csv`` the CSV when asked (``track`` and ``stereo track``)."""
+    from ..track.store import save_track
+
+    save_track(ds, target)
+    if csv_path is not None:
+        write_csv(ds, csv_path)
+    console.print(f"wrote the {ds.sizes['frame']} frames tracked before the stop to {target}")
 
 
 def writable_folder(out: Path) -> None:

@@ -10,7 +10,6 @@ import pytest
 
 import dicblur
 from dicblur.errors import InputError
-from dicblur.sequence import Recording
 from dicblur.track import (
     TrackInterrupted,
     blur_weights,
@@ -18,7 +17,7 @@ from dicblur.track import (
     normalized_median_test,
     parse_rate,
 )
-from helpers.track import track_pattern, vibrating_target
+from helpers.track import memory_recording, track_pattern, vibrating_target
 
 # shared/ sits beside the repository (conftest.REAL_DATA); a worktree sits one level lower
 _HERE = Path(__file__).resolve()
@@ -161,32 +160,17 @@ def test_blur_term_grows_with_w(tiny):
 
 
 # ---------------------------------------------------------------- bad inputs
-def _plain(frames, fps=None, exposure=None):
-    arr = [np.asarray(f, dtype=np.float64) for f in frames]
-    return Recording(
-        source="test",
-        kind="memory",
-        n_frames=len(arr),
-        shape=arr[0].shape,
-        bit_depth=8,
-        fps=fps,
-        exposure=exposure,
-        names=[f"frame {i}" for i in range(len(arr))],
-        _read=lambda i: arr[i],
-    )
-
-
 def test_missing_exposure_and_too_long():
     rng = np.random.default_rng(0)
     img = track_pattern(64)
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(4)]
     with pytest.raises(InputError, match="--exposure"):
-        dicblur.track(_plain(frames), fps=1000, noise=1.0, step=16)
+        dicblur.track(memory_recording(frames), fps=1000, noise=1.0, step=16)
     with pytest.raises(InputError, match="longer than the frame interval"):
-        dicblur.track(_plain(frames), fps=1000, exposure="2ms", noise=1.0, step=16)
+        dicblur.track(memory_recording(frames), fps=1000, exposure="2ms", noise=1.0, step=16)
     # neither --static nor --noise: estimated from the residuals, here too few subsets
     # (9 POIs) for it, said in the notes (no sigma rather than a guess)
-    ds = dicblur.track(_plain(frames), fps=1000, exposure="0.5ms", step=16, advice=False)
+    ds = dicblur.track(memory_recording(frames), fps=1000, exposure="0.5ms", step=16, advice=False)
     assert "no noise estimate" in ds.attrs["notes"] and "--static" in ds.attrs["notes"]
     assert "noise_sigma" not in ds.attrs and ds["sigma_u"].isnull().all()
 
@@ -197,7 +181,7 @@ def test_metadata_disagreement_warns():
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(4)]
     with pytest.warns(UserWarning, match="metadata says"):
         ds = dicblur.track(
-            _plain(frames, fps=1000, exposure=5e-4),
+            memory_recording(frames, fps=1000, exposure=5e-4),
             exposure="0.2ms",
             noise=1.0,
             step=16,
@@ -211,7 +195,9 @@ def test_static_range_with_motion_warns():
     img = track_pattern(80)
     frames = [np.roll(img, k // 2, axis=1) + rng.normal(0, 1, img.shape) for k in range(6)]
     with pytest.warns(UserWarning, match="the scene moves"):
-        dicblur.track(_plain(frames, fps=1000, exposure=1e-4), static="0:6", step=16, advice=False)
+        dicblur.track(
+            memory_recording(frames, fps=1000, exposure=1e-4), static="0:6", step=16, advice=False
+        )
 
 
 def test_bad_frame_keeps_what_was_tracked():
@@ -220,7 +206,9 @@ def test_bad_frame_keeps_what_was_tracked():
     frames = [img + rng.normal(0, 1, img.shape) for _ in range(6)]
     frames[4] = frames[4][:-2]
     with pytest.raises(TrackInterrupted, match="after 4 of 6 frames") as info:
-        dicblur.track(_plain(frames, fps=1000, exposure=1e-4), noise=1.0, step=16, advice=False)
+        dicblur.track(
+            memory_recording(frames, fps=1000, exposure=1e-4), noise=1.0, step=16, advice=False
+        )
     ds = info.value.dataset
     assert ds.sizes["frame"] == 4 and ds.attrs["complete"] == 0
     assert "78x80" in ds.attrs["stop_reason"]
@@ -376,8 +364,10 @@ def test_reference_update_follows_a_large_rotation():
         for a in angles
     ]
     kw = dict(noise=1.0, subset=21, step=12, roi=(34, 94, 34, 94), advice=False)
-    plain = dicblur.track(_plain(frames, fps=1000, exposure=1e-4), **kw)
-    upd = dicblur.track(_plain(frames, fps=1000, exposure=1e-4), update_reference=True, **kw)
+    plain = dicblur.track(memory_recording(frames, fps=1000, exposure=1e-4), **kw)
+    upd = dicblur.track(
+        memory_recording(frames, fps=1000, exposure=1e-4), update_reference=True, **kw
+    )
     conv_plain = (plain["status"].values[-1] == 0).mean()
     conv_upd = (upd["status"].values[-1] == 0).mean()
     assert conv_upd > 0.9 and conv_plain < 0.5

@@ -10,22 +10,11 @@ import dicblur
 from dicblur.errors import InputError
 from dicblur.sequence import Recording
 from dicblur.track.noise import estimate_static_noise
-from helpers.track import track_pattern
+from helpers.track import memory_recording, track_pattern
 
 
 def _memory(frames: list[np.ndarray], *, fps: float = 1000.0, exposure: float = 1e-4) -> Recording:
-    arr = [np.asarray(f, dtype=np.float64) for f in frames]
-    return Recording(
-        source="test",
-        kind="memory",
-        n_frames=len(arr),
-        shape=arr[0].shape,
-        bit_depth=8,
-        fps=fps,
-        exposure=exposure,
-        names=[f"frame {i}" for i in range(len(arr))],
-        _read=lambda i: arr[i],
-    )
+    return memory_recording(frames, fps=fps, exposure=exposure)
 
 
 def _noisy(n: int, size: int = 64, seed: int = 0) -> list[np.ndarray]:

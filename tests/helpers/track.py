@@ -160,3 +160,22 @@ def flag_rates(
         res[f"n_{kind}"] = int(m.sum())
     res["frames_corrupted"] = len({p[0] for p in patches if p[0] in pos})
     return res
+
+
+def memory_recording(
+    frames: list[np.ndarray], *, fps: float | None = None, exposure: float | None = None
+) -> Recording:
+    """An 8-bit in-memory :class:`Recording` of ``frames`` (each (rows, cols), GL), with
+    ``fps`` and ``exposure`` (s) as a file's header would give them (None: not given)."""
+    arr = [np.asarray(f, dtype=np.float64) for f in frames]
+    return Recording(
+        source="test",
+        kind="memory",
+        n_frames=len(arr),
+        shape=arr[0].shape,
+        bit_depth=8,
+        fps=fps,
+        exposure=exposure,
+        names=[f"frame {i}" for i in range(len(arr))],
+        _read=lambda i: arr[i],
+    )

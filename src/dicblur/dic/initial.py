@@ -108,7 +108,7 @@ def subset_fftcc_peaks(
     search: int | None = None,
     chunk: int = 256,
     workers: int | None = None,
-    exclude: int = 3,
+    exclude: int | None = 3,
 ) -> tuple[Int64Array, Int64Array, Float64Array, Float64Array]:
     """:func:`subset_fftcc` and the second-best ZNCC of each search window: the largest
     outside +-``exclude`` px of the best position (how distinct the match is; no noise
@@ -135,7 +135,8 @@ def subset_fftcc_peaks(
     zncc : ndarray, shape (n,)
         Peak ZNCC (NaN where the reference subset is flat).
     second : ndarray, shape (n,)
-        Largest ZNCC farther than ``exclude`` px (either axis) from the peak.
+        Largest ZNCC farther than ``exclude`` px (either axis) from the peak; all NaN
+        with ``exclude=None`` (not searched: :func:`subset_fftcc`).
     """
     n = len(rows)
     size = 2 * half + 1
@@ -198,6 +199,8 @@ def subset_fftcc_peaks(
         out_v[sl] = gv[sl] + dy - s
         peak = flat[np.arange(m), best]
         out_z[sl] = np.where(np.isfinite(peak) & (fnorm > 0), peak, np.nan)
+        if exclude is None:
+            continue
         yy = np.arange(zn.shape[1])
         near_y = np.abs(yy[None, :] - dy[:, None]) <= exclude
         near_x = np.abs(yy[None, :] - dx[:, None]) <= exclude
@@ -220,21 +223,9 @@ def subset_fftcc(
     chunk: int = 256,
     workers: int | None = None,
 ) -> tuple[Int64Array, Int64Array, Float64Array]:
-    """Per-subset integer displacement by ZNCC over a +-``search`` px window
-    (:func:`subset_fftcc_peaks` without the second peak).
-
-    Parameters
-    ----------
-    reference, current : ndarray, shape (rows, cols)
-        Images (grey levels).
-    rows, cols : ndarray of int, shape (n,)
-        POI centres (the reference subset must lie inside the image).
-    half : int
-        Subset half-width, px.
-    guess_u, guess_v : ndarray, shape (n,), optional
-        Centre of the search (rounded to integers), px; default 0.
-    search : int, optional
-        Search half-range, px; default the subset size ``2 half + 1``.
+    """Per-subset integer displacement by ZNCC over a +-``search`` px window:
+    :func:`subset_fftcc_peaks` (the parameters as there) without the second peak, which
+    it then does not search for (the initial guess and the retries need the best only).
 
     Returns
     -------
@@ -244,7 +235,16 @@ def subset_fftcc(
         Peak ZNCC (NaN where the reference subset is flat).
     """
     u, v, z, _ = subset_fftcc_peaks(
-        reference, current, rows, cols, half, guess_u=guess_u, guess_v=guess_v,
-        search=search, chunk=chunk, workers=workers,
-    )  # fmt: skip
+        reference,
+        current,
+        rows,
+        cols,
+        half,
+        guess_u=guess_u,
+        guess_v=guess_v,
+        search=search,
+        chunk=chunk,
+        workers=workers,
+        exclude=None,
+    )
     return u, v, z

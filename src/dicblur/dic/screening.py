@@ -447,10 +447,17 @@ class Screening(IcgnPasses):
             return
         ucol, vcol = uv_columns(k)
         _, _, _, second = subset_fftcc_peaks(
-            self._ref, self._screen_image, self.rows[idx], self.cols[idx], self.half,
-            guess_u=res.p[idx, ucol], guess_v=res.p[idx, vcol], search=self.subset,
-            exclude=self.half, workers=1,
-        )  # fmt: skip
+            self._ref,
+            self._screen_image,
+            self.rows[idx],
+            self.cols[idx],
+            self.half,
+            guess_u=res.p[idx, ucol],
+            guess_v=res.p[idx, vcol],
+            search=self.subset,
+            exclude=self.half,
+            workers=1,
+        )
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = (1.0 - second) / np.maximum(1.0 - res.zncc[idx], 0.0)
         st[idx[ratio < PEAK_RESIDUAL_RATIO]] = PointStatus.HIGH_RESIDUAL
